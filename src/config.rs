@@ -1,0 +1,351 @@
+//! Machine configuration: geometry, joint types, scales, limits and drive timing.
+//!
+//! The host reads a human TOML machine file (mm, degrees, seconds), checks it and
+//! converts it to this integer form (units in [`crate::units`]); the controller keeps
+//! and validates it. Nothing in the kinematics or the planner is hard-coded: every
+//! number comes from here. [`MachineConfig::validate`] names the offending field.
+
+use serde::{Deserialize, Serialize};
+
+/// Number of pose axes: X Y Z (linear) and A B C (rotary).
+pub const AXES: usize = 6;
+/// Most joints a machine may have (4 servo + 7 stepper channels on the board).
+pub const MAX_JOINTS: usize = 11;
+/// Stepper channels the board drives.
+pub const MAX_STEPPERS: usize = 7;
+/// Servo channels the board drives.
+pub const MAX_SERVOS: usize = 4;
+/// Axis names in pose order.
+pub const AXIS_NAMES: [char; AXES] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
+
+/// Is pose axis `i` rotary (A, B, C)?
+pub const fn axis_is_rotary(i: usize) -> bool {
+    i >= 3
+}
+
+/// Velocity and acceleration limits of one pose axis or joint.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Limits {
+    /// Maximum speed, axis units per second (nm/s or n°/s).
+    pub max_velocity: i64,
+    /// Maximum acceleration, axis units per second² (nm/s² or n°/s²).
+    pub max_accel: i64,
+}
+
+/// Timing rules of a step/direction drive, in nanoseconds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct StepTiming {
+    /// Minimum STEP high time, ns.
+    pub min_pulse_ns: u32,
+    /// Maximum STEP rate, Hz.
+    pub max_rate_hz: u32,
+    /// Minimum time from a DIR change to the next STEP rising edge, ns.
+    pub dir_setup_ns: u32,
+    /// Minimum time DIR must stay put after a STEP rising edge, ns.
+    pub dir_hold_ns: u32,
+}
+
+impl StepTiming {
+    /// Pacific Scientific 6410 microstep drive (seeds-digest C): STEP pulse ≥ 250 ns,
+    /// ≤ 2 MHz, DIR setup 50 µs, hold 0.
+    pub const PACSCI_6410: StepTiming = StepTiming {
+        min_pulse_ns: 250,
+        max_rate_hz: 2_000_000,
+        dir_setup_ns: 50_000,
+        dir_hold_ns: 0,
+    };
+
+    /// Shortest allowed time between two STEP rising edges, ns (rounded up).
+    pub const fn min_interval_ns(&self) -> u32 {
+        1_000_000_000u32.div_ceil(self.max_rate_hz)
+    }
+}
+
+/// Joint scale: `steps` motor steps (or encoder counts) per `per_units` axis units.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Scale {
+    /// Steps or counts.
+    pub steps: u32,
+    /// Axis units (nm or n°) that those steps move.
+    pub per_units: u64,
+}
+
+impl Scale {
+    /// Nearest whole step count for a joint position in axis units.
+    pub fn steps_at(&self, position: i64) -> i64 {
+        crate::units::div_round(position as i128 * self.steps as i128, self.per_units as i128)
+            as i64
+    }
+    /// Joint position in axis units of a step count (rounded to the nearest unit).
+    pub fn position_of(&self, steps: i64) -> i64 {
+        crate::units::div_round(steps as i128 * self.per_units as i128, self.steps as i128)
+            as i64
+    }
+}
+
+/// How a joint is driven.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Drive {
+    /// STEP/DIR/ENABLE drive on stepper channel `channel` (0-based).
+    Stepper {
+        /// Board stepper channel, 0..[`MAX_STEPPERS`].
+        channel: u8,
+        /// Drive timing rules.
+        timing: StepTiming,
+        /// Reverse the DIR output.
+        invert_dir: bool,
+    },
+    /// Quadrature encoder in, analog command out, on servo channel `channel` (0-based).
+    Servo {
+        /// Board servo channel, 0..[`MAX_SERVOS`].
+        channel: u8,
+        /// Proportional gain: output counts per axis unit of following error × 2^-16.
+        kp_q16: i32,
+        /// Velocity feed-forward: output counts per (axis unit per tick) × 2^-16.
+        kvff_q16: i32,
+        /// Output clamp, ± DAC counts around mid-scale.
+        out_limit: i32,
+    },
+}
+
+/// One joint: its drive, scale, travel and limits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct JointConfig {
+    /// Drive type and channel.
+    pub drive: Drive,
+    /// Steps (stepper) or encoder counts (servo) per axis units.
+    pub scale: Scale,
+    /// Rotary joint (positions in n°) rather than linear (nm).
+    pub rotary: bool,
+    /// Lowest allowed position, axis units.
+    pub min: i64,
+    /// Highest allowed position, axis units.
+    pub max: i64,
+    /// Velocity and acceleration limits, axis units.
+    pub limits: Limits,
+}
+
+/// Which kinematics the machine uses, with its parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum KinematicsConfig {
+    /// Each joint follows one pose axis: `axis_of_joint[j]` is joint j's axis index.
+    Cartesian {
+        /// Pose axis (0..6) followed by each joint.
+        axis_of_joint: [u8; MAX_JOINTS],
+    },
+}
+
+/// The whole machine.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MachineConfig {
+    /// Machine name, shown to the user.
+    pub name: heapless::String<32>,
+    /// Kinematics and geometry.
+    pub kinematics: KinematicsConfig,
+    /// Joints in order q1..qN.
+    pub joints: heapless::Vec<JointConfig, MAX_JOINTS>,
+    /// Per-axis limits of the programmed pose; a zero max_velocity marks an unused axis.
+    pub axes: [Limits; AXES],
+    /// Home pose, axis units: where the controller starts.
+    pub home: [i64; AXES],
+}
+
+/// Why a machine configuration was refused; each variant names the field.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum ConfigError {
+    /// The machine has no joints.
+    NoJoints,
+    /// `joints[joint].limits` has a non-positive speed or acceleration.
+    JointLimits {
+        /// Joint index, 0-based.
+        joint: u8,
+    },
+    /// `joints[joint].min` is not below `max`.
+    JointTravel {
+        /// Joint index, 0-based.
+        joint: u8,
+    },
+    /// `joints[joint].scale` has a zero term.
+    JointScale {
+        /// Joint index, 0-based.
+        joint: u8,
+    },
+    /// `joints[joint].drive.channel` is beyond the board, or used twice.
+    JointChannel {
+        /// Joint index, 0-based.
+        joint: u8,
+    },
+    /// `joints[joint]`: at its speed limit the drive would need more steps per second
+    /// than its timing allows.
+    StepRate {
+        /// Joint index, 0-based.
+        joint: u8,
+    },
+    /// `kinematics.axis_of_joint[joint]` names no axis, or an axis with no limits.
+    JointAxis {
+        /// Joint index, 0-based.
+        joint: u8,
+    },
+    /// `axes[axis]` has a negative limit, or a speed without an acceleration.
+    AxisLimits {
+        /// Axis index, 0-based (X=0 .. C=5).
+        axis: u8,
+    },
+    /// `home` lies outside a joint's travel.
+    HomeOutsideTravel {
+        /// Joint index, 0-based.
+        joint: u8,
+    },
+}
+
+impl MachineConfig {
+    /// Checks every field; the first problem found is returned.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        if self.joints.is_empty() {
+            return Err(ConfigError::NoJoints);
+        }
+        for (i, l) in self.axes.iter().enumerate() {
+            if l.max_velocity < 0 || l.max_accel < 0 || (l.max_velocity > 0) != (l.max_accel > 0)
+            {
+                return Err(ConfigError::AxisLimits { axis: i as u8 });
+            }
+        }
+        let mut steppers_used = 0u32;
+        let mut servos_used = 0u32;
+        for (j, jc) in self.joints.iter().enumerate() {
+            let joint = j as u8;
+            if jc.limits.max_velocity <= 0 || jc.limits.max_accel <= 0 {
+                return Err(ConfigError::JointLimits { joint });
+            }
+            if jc.min >= jc.max {
+                return Err(ConfigError::JointTravel { joint });
+            }
+            if jc.scale.steps == 0 || jc.scale.per_units == 0 {
+                return Err(ConfigError::JointScale { joint });
+            }
+            match jc.drive {
+                Drive::Stepper { channel, timing, .. } => {
+                    let bit = 1u32 << channel.min(31);
+                    if channel as usize >= MAX_STEPPERS || steppers_used & bit != 0 {
+                        return Err(ConfigError::JointChannel { joint });
+                    }
+                    steppers_used |= bit;
+                    if timing.max_rate_hz == 0 || timing.min_pulse_ns == 0 {
+                        return Err(ConfigError::StepRate { joint });
+                    }
+                    // Steps one tick may need at full speed, against what fits in the
+                    // tick after a DIR-setup window.
+                    let per_tick = jc.scale.steps as i128 * jc.limits.max_velocity as i128
+                        / (jc.scale.per_units as i128 * crate::units::TICK_HZ as i128)
+                        + 1;
+                    let window = crate::units::TICK_NS.saturating_sub(timing.dir_setup_ns);
+                    let fits = window / timing.min_interval_ns().max(2 * timing.min_pulse_ns);
+                    if per_tick > fits as i128 {
+                        return Err(ConfigError::StepRate { joint });
+                    }
+                }
+                Drive::Servo { channel, .. } => {
+                    let bit = 1u32 << channel.min(31);
+                    if channel as usize >= MAX_SERVOS || servos_used & bit != 0 {
+                        return Err(ConfigError::JointChannel { joint });
+                    }
+                    servos_used |= bit;
+                }
+            }
+        }
+        match self.kinematics {
+            KinematicsConfig::Cartesian { axis_of_joint } => {
+                for j in 0..self.joints.len() {
+                    let a = axis_of_joint[j] as usize;
+                    if a >= AXES || self.axes[a].max_velocity == 0 {
+                        return Err(ConfigError::JointAxis { joint: j as u8 });
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// A Cartesian 3-axis stepper machine (X Y Z on stepper channels 0..2, 400 steps/mm,
+    /// 200 × 300 × 100 mm travel, 100 mm/s, 1000 mm/s², PacSci 6410 drives): the
+    /// built-in default until a machine file is loaded.
+    pub fn cartesian_xyz() -> Self {
+        let mm = crate::units::NM_PER_MM;
+        let limits = Limits {
+            max_velocity: 100 * mm,
+            max_accel: 1000 * mm,
+        };
+        let travel = [(-100, 100), (-150, 150), (-80, 20)];
+        let mut joints = heapless::Vec::new();
+        for (c, (lo, hi)) in travel.iter().enumerate() {
+            let _ = joints.push(JointConfig {
+                drive: Drive::Stepper {
+                    channel: c as u8,
+                    timing: StepTiming::PACSCI_6410,
+                    invert_dir: false,
+                },
+                scale: Scale {
+                    steps: 400,
+                    per_units: mm as u64,
+                },
+                rotary: false,
+                min: lo * mm,
+                max: hi * mm,
+                limits,
+            });
+        }
+        let none = Limits {
+            max_velocity: 0,
+            max_accel: 0,
+        };
+        let mut axis_of_joint = [0u8; MAX_JOINTS];
+        axis_of_joint[..3].copy_from_slice(&[0, 1, 2]);
+        let mut name = heapless::String::new();
+        let _ = name.push_str("cartesian-xyz");
+        MachineConfig {
+            name,
+            kinematics: KinematicsConfig::Cartesian { axis_of_joint },
+            joints,
+            axes: [limits, limits, limits, none, none, none],
+            home: [0; AXES],
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_built_in_machine_is_valid() {
+        assert_eq!(MachineConfig::cartesian_xyz().validate(), Ok(()));
+    }
+
+    #[test]
+    fn a_channel_used_twice_is_refused_with_its_joint() {
+        let mut m = MachineConfig::cartesian_xyz();
+        if let Drive::Stepper { channel, .. } = &mut m.joints[2].drive {
+            *channel = 0;
+        }
+        assert_eq!(m.validate(), Err(ConfigError::JointChannel { joint: 2 }));
+    }
+
+    #[test]
+    fn a_speed_beyond_the_drive_step_rate_is_refused() {
+        let mut m = MachineConfig::cartesian_xyz();
+        m.joints[1].limits.max_velocity = 10_000 * crate::units::NM_PER_MM; // 4 MHz
+        assert_eq!(m.validate(), Err(ConfigError::StepRate { joint: 1 }));
+    }
+
+    #[test]
+    fn scale_round_trips_whole_steps() {
+        let s = Scale {
+            steps: 400,
+            per_units: 1_000_000,
+        };
+        assert_eq!(s.steps_at(10_000_000), 4000);
+        assert_eq!(s.steps_at(-1_250), -1); // -0.5 step rounds away from zero
+        assert_eq!(s.position_of(4000), 10_000_000);
+    }
+}

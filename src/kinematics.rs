@@ -1,0 +1,143 @@
+//! Kinematics: poses (X Y Z A B C) to joint positions and back.
+//!
+//! Pure integer math with no hardware or planner dependencies (the LinuxCNC habit):
+//! inverse kinematics returns the joints or a typed reason why the pose cannot be
+//! reached. Every implementation must pass the shared suite in `tests` below
+//! (`check_round_trip`). Units are those of [`crate::units`].
+
+use crate::config::{JointConfig, KinematicsConfig, MachineConfig, AXES, MAX_JOINTS};
+
+/// A pose: X Y Z in nm, A B C in n°.
+pub type Pose = [i64; AXES];
+/// Joint positions q1..qN in axis units; entries past the machine's joints are 0.
+pub type Joints = [i64; MAX_JOINTS];
+
+/// Why a pose has no joint solution.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Unreachable {
+    /// Geometrically out of reach.
+    OutOfReach,
+    /// Reachable, but joint `joint` (0-based) would leave its travel.
+    JointLimit {
+        /// Joint index.
+        joint: u8,
+    },
+}
+
+/// Maps poses to joints and back.
+pub trait Kinematics {
+    /// Joints of `pose`, without travel checks.
+    fn inverse(&self, pose: &Pose, joints: &mut Joints) -> Result<(), Unreachable>;
+    /// Pose of `joints`, starting from the nearby pose `guess`.
+    fn forward(&self, joints: &Joints, guess: &Pose, pose: &mut Pose) -> Result<(), Unreachable>;
+}
+
+/// Each joint follows one pose axis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Cartesian {
+    axis_of_joint: [u8; MAX_JOINTS],
+    joints: usize,
+}
+
+impl Kinematics for Cartesian {
+    fn inverse(&self, pose: &Pose, joints: &mut Joints) -> Result<(), Unreachable> {
+        for (q, &a) in joints.iter_mut().zip(&self.axis_of_joint).take(self.joints) {
+            *q = pose[a as usize];
+        }
+        Ok(())
+    }
+
+    fn forward(&self, joints: &Joints, guess: &Pose, pose: &mut Pose) -> Result<(), Unreachable> {
+        *pose = *guess;
+        for (q, &a) in joints.iter().zip(&self.axis_of_joint).take(self.joints) {
+            pose[a as usize] = *q;
+        }
+        Ok(())
+    }
+}
+
+/// The kinematics a machine configuration selects.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MachineKinematics {
+    /// See [`Cartesian`].
+    Cartesian(Cartesian),
+}
+
+impl MachineKinematics {
+    /// Builds the kinematics of `config`.
+    pub fn new(config: &MachineConfig) -> Self {
+        match config.kinematics {
+            KinematicsConfig::Cartesian { axis_of_joint } => Self::Cartesian(Cartesian {
+                axis_of_joint,
+                joints: config.joints.len(),
+            }),
+        }
+    }
+
+    /// Inverse kinematics followed by the travel check of every joint.
+    pub fn inverse_checked(
+        &self,
+        pose: &Pose,
+        joints_cfg: &[JointConfig],
+        joints: &mut Joints,
+    ) -> Result<(), Unreachable> {
+        self.inverse(pose, joints)?;
+        for (j, (q, c)) in joints.iter().zip(joints_cfg).enumerate() {
+            if *q < c.min || *q > c.max {
+                return Err(Unreachable::JointLimit { joint: j as u8 });
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Kinematics for MachineKinematics {
+    fn inverse(&self, pose: &Pose, joints: &mut Joints) -> Result<(), Unreachable> {
+        match self {
+            Self::Cartesian(k) => k.inverse(pose, joints),
+        }
+    }
+    fn forward(&self, joints: &Joints, guess: &Pose, pose: &mut Pose) -> Result<(), Unreachable> {
+        match self {
+            Self::Cartesian(k) => k.forward(joints, guess, pose),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The suite every kinematics must pass: forward(inverse(p)) == p.
+    fn check_round_trip(k: &dyn Kinematics, poses: &[Pose]) {
+        for p in poses {
+            let mut q = [0; MAX_JOINTS];
+            k.inverse(p, &mut q).unwrap();
+            let mut back = [0; AXES];
+            k.forward(&q, p, &mut back).unwrap();
+            assert_eq!(&back, p);
+        }
+    }
+
+    #[test]
+    fn cartesian_joints_follow_their_axes() {
+        let k = MachineKinematics::new(&MachineConfig::cartesian_xyz());
+        let mut q = [0; MAX_JOINTS];
+        k.inverse(&[1, 2, 3, 0, 0, 0], &mut q).unwrap();
+        assert_eq!(&q[..3], &[1, 2, 3]);
+        check_round_trip(&k, &[[1, 2, 3, 0, 0, 0], [-9, 8, -7, 0, 0, 0]]);
+    }
+
+    #[test]
+    fn a_pose_beyond_travel_names_its_joint() {
+        let m = MachineConfig::cartesian_xyz();
+        let k = MachineKinematics::new(&m);
+        let mut q = [0; MAX_JOINTS];
+        let far = [0, 0, 500_000_000, 0, 0, 0];
+        assert_eq!(
+            k.inverse_checked(&far, &m.joints, &mut q),
+            Err(Unreachable::JointLimit { joint: 2 })
+        );
+    }
+}
