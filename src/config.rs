@@ -70,7 +70,25 @@ pub struct Scale {
     pub per_units: u64,
 }
 
+const fn gcd(mut a: u64, mut b: u64) -> u64 {
+    while b != 0 {
+        let t = a % b;
+        a = b;
+        b = t;
+    }
+    a
+}
+
 impl Scale {
+    /// `steps` per `per_units`, reduced to lowest terms (so equal scales compare equal).
+    pub const fn new(steps: u32, per_units: u64) -> Self {
+        let g = gcd(steps as u64, per_units);
+        let g = if g == 0 { 1 } else { g };
+        Scale {
+            steps: (steps as u64 / g) as u32,
+            per_units: per_units / g,
+        }
+    }
     /// Nearest whole step count for a joint position in axis units.
     pub fn steps_at(&self, position: i64) -> i64 {
         crate::units::div_round(position as i128 * self.steps as i128, self.per_units as i128)
@@ -285,10 +303,7 @@ impl MachineConfig {
                     timing: StepTiming::PACSCI_6410,
                     invert_dir: false,
                 },
-                scale: Scale {
-                    steps: 400,
-                    per_units: mm as u64,
-                },
+                scale: Scale::new(400, mm as u64),
                 rotary: false,
                 min: lo * mm,
                 max: hi * mm,

@@ -248,6 +248,8 @@ impl Controller {
                 }
                 self.session = true;
                 self.expected_seq = seq.wrapping_add(1);
+                self.blocks_done = 0;
+                self.motion_ticks = 0;
                 self.send(&CtrlMsg::HelloAck {
                     version: PROTOCOL_VERSION,
                     queue_capacity: QUEUE_CAPACITY as u16,
@@ -365,7 +367,8 @@ impl Controller {
                     joint: u8::MAX,
                 }),
             }
-        } else if self.state == State::Running {
+        }
+        if self.state == State::Running && !self.has_work() {
             self.state = State::Idle;
         }
         self.steps.tick(&self.machine.joints, &self.joints, &mut self.trains);

@@ -1,1 +1,11 @@
-//! Host tools.
+//! # pkmc host tools
+//!
+//! `nc-send` and the simulator: the G-code front end ([`gcode`]), machine files
+//! ([`machine_file`]), the simulated controller ([`sim`]), both ends of the serial link
+//! ([`link`]) and the job runner shared by `nc-send` and the tests ([`job`]).
+
+pub mod gcode;
+pub mod job;
+pub mod link;
+pub mod machine_file;
+pub mod sim;

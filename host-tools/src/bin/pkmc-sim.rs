@@ -1,1 +1,29 @@
-fn main() {}
+//! `pkmc-sim`: the simulated controller on a pseudo-terminal, for `nc-send --port`.
+//! Prints the port to open, then serves until interrupted.
+
+use clap::Parser;
+use std::path::PathBuf;
+use serialport::SerialPort;
+use std::sync::atomic::AtomicBool;
+
+/// Serve a simulated pkmc controller on a pseudo-terminal.
+#[derive(Parser, Debug)]
+#[command(name = "pkmc-sim", version)]
+struct Args {
+    /// Machine file (TOML); default: the built-in Cartesian X Y Z stepper machine.
+    #[arg(long, value_name = "FILE.toml")]
+    machine: Option<PathBuf>,
+}
+
+fn main() -> anyhow::Result<()> {
+    let args = Args::parse();
+    let machine = match &args.machine {
+        Some(p) => pkmc_host::machine_file::load(p)?,
+        None => pkmc_host::machine_file::parse(pkmc_host::machine_file::DEFAULT_MACHINE, "built-in machine")?,
+    };
+    let mut sim = pkmc_host::sim::Simulator::new(machine)?;
+    let (mut master, slave) = serialport::TTYPort::pair()?;
+    println!("{}", slave.name().unwrap_or_default());
+    let stop = AtomicBool::new(false);
+    pkmc_host::link::serve(&mut sim, &mut master, &stop)
+}

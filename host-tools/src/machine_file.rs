@@ -1,0 +1,290 @@
+//! Machine files: the human TOML description of a machine (mm, degrees, seconds),
+//! checked and converted to the core's integer [`MachineConfig`].
+//!
+//! Every error names the file and the field (`joints[2].steps_per_unit`); TOML syntax
+//! errors carry the file's line and column. Unknown fields are refused, so a misspelt
+//! limit is never silently ignored.
+
+use anyhow::{anyhow, bail, Context, Result};
+use pkmc::config::{
+    Drive, JointConfig, KinematicsConfig, Limits, MachineConfig, Scale, StepTiming, AXES,
+    AXIS_NAMES, MAX_JOINTS,
+};
+use pkmc::units::units_per_user;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// Limits of one axis or joint, in mm or degrees and seconds.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LimitsFile {
+    /// mm/s or °/s.
+    pub max_velocity: f64,
+    /// mm/s² or °/s².
+    pub max_accel: f64,
+}
+
+/// Step/direction drive timing, ns and Hz; defaults to the Pacific Scientific 6410.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimingFile {
+    /// Minimum STEP high time, ns.
+    pub min_pulse_ns: u32,
+    /// Maximum step rate, Hz.
+    pub max_rate_hz: u32,
+    /// DIR setup before a STEP rising edge, ns.
+    pub dir_setup_ns: u32,
+    /// DIR hold after a STEP rising edge, ns.
+    pub dir_hold_ns: u32,
+}
+
+/// One joint.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JointFile {
+    /// Display name.
+    pub name: String,
+    /// Cartesian machines: the pose axis this joint follows (X Y Z A B C).
+    pub axis: Option<String>,
+    /// "stepper" or "servo".
+    pub drive: String,
+    /// Board channel of that drive type, 0-based.
+    pub channel: u8,
+    /// Rotary joint (degrees) instead of linear (mm).
+    #[serde(default)]
+    pub rotary: bool,
+    /// Steps (stepper) or encoder counts (servo) per mm or per degree.
+    pub steps_per_unit: f64,
+    /// Travel, mm or degrees.
+    pub min: f64,
+    /// Travel, mm or degrees.
+    pub max: f64,
+    /// mm/s or °/s.
+    pub max_velocity: f64,
+    /// mm/s² or °/s².
+    pub max_accel: f64,
+    /// Stepper: reverse DIR.
+    #[serde(default)]
+    pub invert_dir: bool,
+    /// Stepper timing; the PacSci 6410 when absent.
+    pub timing: Option<TimingFile>,
+    /// Servo: proportional gain, output counts per encoder count of error.
+    pub kp: Option<f64>,
+    /// Servo: velocity feed-forward, output counts per (count per tick).
+    pub kvff: Option<f64>,
+    /// Servo: output clamp, ± DAC counts.
+    pub out_limit: Option<i32>,
+}
+
+/// A machine file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MachineFile {
+    /// Machine name.
+    pub name: String,
+    /// "cartesian".
+    pub kinematics: String,
+    /// Home pose X Y Z (mm) A B C (degrees).
+    #[serde(default)]
+    pub home: [f64; AXES],
+    /// Limits per used axis, keyed by axis letter.
+    pub axes: BTreeMap<String, LimitsFile>,
+    /// Joints q1..qN.
+    pub joints: Vec<JointFile>,
+}
+
+fn positive(v: f64, field: &str) -> Result<f64> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        bail!("{field}: must be a positive number, got {v}")
+    }
+}
+
+fn to_units(v: f64, rotary: bool, field: &str) -> Result<i64> {
+    if !v.is_finite() || v.abs() > 1e9 {
+        bail!("{field}: {v} is out of range");
+    }
+    Ok((v * units_per_user(rotary) as f64).round() as i64)
+}
+
+fn axis_index(name: &str, field: &str) -> Result<usize> {
+    let mut chars = name.chars();
+    match (chars.next().map(|c| c.to_ascii_uppercase()), chars.next()) {
+        (Some(c), None) => AXIS_NAMES
+            .iter()
+            .position(|&a| a == c)
+            .ok_or_else(|| anyhow!("{field}: unknown axis {name:?} (expected one of X Y Z A B C)")),
+        _ => bail!("{field}: unknown axis {name:?} (expected one of X Y Z A B C)"),
+    }
+}
+
+impl MachineFile {
+    /// Converts to the core form and validates it.
+    pub fn to_config(&self) -> Result<MachineConfig> {
+        let mut name = heapless::String::new();
+        name.push_str(&self.name)
+            .map_err(|_| anyhow!("name: longer than 32 bytes"))?;
+        let none = Limits {
+            max_velocity: 0,
+            max_accel: 0,
+        };
+        let mut axes = [none; AXES];
+        for (key, l) in &self.axes {
+            let i = axis_index(key, &format!("axes.{key}"))?;
+            let rotary = pkmc::config::axis_is_rotary(i);
+            axes[i] = Limits {
+                max_velocity: to_units(positive(l.max_velocity, &format!("axes.{key}.max_velocity"))?, rotary, "")?,
+                max_accel: to_units(positive(l.max_accel, &format!("axes.{key}.max_accel"))?, rotary, "")?,
+            };
+        }
+        if self.joints.len() > MAX_JOINTS {
+            bail!("joints: {} joints, the board drives at most {MAX_JOINTS}", self.joints.len());
+        }
+        let mut joints = heapless::Vec::new();
+        let mut axis_of_joint = [0u8; MAX_JOINTS];
+        for (j, jf) in self.joints.iter().enumerate() {
+            let f = |s: &str| format!("joints[{j}] ({}).{s}", jf.name);
+            let per_unit = positive(jf.steps_per_unit, &f("steps_per_unit"))?;
+            // Scale as a ratio: steps per 10^6 user units, to 1e-6 step per user unit.
+            let steps = (per_unit * 1e6).round();
+            if steps > u32::MAX as f64 {
+                bail!("{}: {per_unit} is too large", f("steps_per_unit"));
+            }
+            let scale = Scale::new(steps as u32, (1_000_000 * units_per_user(jf.rotary)) as u64);
+            let drive = match jf.drive.as_str() {
+                "stepper" => Drive::Stepper {
+                    channel: jf.channel,
+                    timing: jf.timing.as_ref().map_or(StepTiming::PACSCI_6410, |t| StepTiming {
+                        min_pulse_ns: t.min_pulse_ns,
+                        max_rate_hz: t.max_rate_hz,
+                        dir_setup_ns: t.dir_setup_ns,
+                        dir_hold_ns: t.dir_hold_ns,
+                    }),
+                    invert_dir: jf.invert_dir,
+                },
+                "servo" => Drive::Servo {
+                    channel: jf.channel,
+                    kp_q16: (jf.kp.ok_or_else(|| anyhow!("{}: a servo joint needs kp", f("kp")))? * 65536.0).round() as i32,
+                    kvff_q16: (jf.kvff.unwrap_or(0.0) * 65536.0).round() as i32,
+                    out_limit: jf.out_limit.unwrap_or(2047),
+                },
+                other => bail!("{}: unknown drive {other:?} (expected \"stepper\" or \"servo\")", f("drive")),
+            };
+            if let Some(a) = &jf.axis {
+                axis_of_joint[j] = axis_index(a, &f("axis"))? as u8;
+            } else if self.kinematics == "cartesian" {
+                bail!("{}: a Cartesian joint needs the axis it follows", f("axis"));
+            }
+            let _ = joints.push(JointConfig {
+                drive,
+                scale,
+                rotary: jf.rotary,
+                min: to_units(jf.min, jf.rotary, &f("min"))?,
+                max: to_units(jf.max, jf.rotary, &f("max"))?,
+                limits: Limits {
+                    max_velocity: to_units(positive(jf.max_velocity, &f("max_velocity"))?, jf.rotary, "")?,
+                    max_accel: to_units(positive(jf.max_accel, &f("max_accel"))?, jf.rotary, "")?,
+                },
+            });
+        }
+        let kinematics = match self.kinematics.as_str() {
+            "cartesian" => KinematicsConfig::Cartesian { axis_of_joint },
+            other => bail!("kinematics: unknown kinematics {other:?} (this build knows \"cartesian\")"),
+        };
+        let mut home = [0i64; AXES];
+        for (i, h) in self.home.iter().enumerate() {
+            home[i] = to_units(*h, pkmc::config::axis_is_rotary(i), &format!("home[{i}]"))?;
+        }
+        let config = MachineConfig {
+            name,
+            kinematics,
+            joints,
+            axes,
+            home,
+        };
+        config.validate().map_err(|e| anyhow!("{}", describe(&e, self)))?;
+        pkmc::controller::Controller::new(config.clone())
+            .map_err(|e| anyhow!("{}", describe(&e, self)))?;
+        Ok(config)
+    }
+}
+
+/// Names the field a core configuration error points at.
+pub fn describe(e: &pkmc::config::ConfigError, m: &MachineFile) -> String {
+    use pkmc::config::ConfigError as E;
+    let jn = |j: &u8| {
+        let name = m.joints.get(*j as usize).map_or("?", |jf| jf.name.as_str());
+        format!("joints[{j}] ({name})")
+    };
+    match e {
+        E::NoJoints => "joints: the machine has no joints".into(),
+        E::JointLimits { joint } => format!("{}: speed and acceleration must be positive", jn(joint)),
+        E::JointTravel { joint } => format!("{}.min must be below max", jn(joint)),
+        E::JointScale { joint } => format!("{}.steps_per_unit rounds to zero", jn(joint)),
+        E::JointChannel { joint } => format!("{}.channel: beyond the board or used twice", jn(joint)),
+        E::StepRate { joint } => format!(
+            "{}.max_velocity: needs more steps per second than the drive timing allows",
+            jn(joint)
+        ),
+        E::JointAxis { joint } => format!("{}.axis: names no axis with limits in [axes]", jn(joint)),
+        E::AxisLimits { axis } => format!("axes.{}: bad limits", AXIS_NAMES[*axis as usize]),
+        E::HomeOutsideTravel { joint } => format!("home: outside the travel of {}", jn(joint)),
+        _ => format!("{e:?}"),
+    }
+}
+
+/// Reads and converts a machine file.
+pub fn load(path: &Path) -> Result<MachineConfig> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    parse(&text, &path.display().to_string())
+}
+
+/// Parses machine-file text; `origin` names it in errors.
+pub fn parse(text: &str, origin: &str) -> Result<MachineConfig> {
+    let file: MachineFile = toml::from_str(text).map_err(|e| {
+        let (line, col) = e
+            .span()
+            .map(|s| line_col(text, s.start))
+            .unwrap_or((0, 0));
+        anyhow!("{origin}:{line}:{col}: {}", e.message())
+    })?;
+    file.to_config().map_err(|e| anyhow!("{origin}: {e}"))
+}
+
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rfind('\n').map_or(before.len(), |p| before.len() - p - 1) + 1;
+    (line, col)
+}
+
+/// The built-in default machine file (Cartesian X Y Z steppers).
+pub const DEFAULT_MACHINE: &str = include_str!("../../examples/machines/cartesian-xyz.toml");
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_bundled_machine_equals_the_core_default() {
+        let m = parse(DEFAULT_MACHINE, "cartesian-xyz.toml").unwrap();
+        assert_eq!(m, MachineConfig::cartesian_xyz());
+    }
+
+    #[test]
+    fn a_misspelt_field_is_refused_with_its_location() {
+        let text = DEFAULT_MACHINE.replace("max_accel = 1000", "max_acel = 1000");
+        let e = parse(&text, "m.toml").unwrap_err().to_string();
+        assert!(e.starts_with("m.toml:"), "{e}");
+        assert!(e.contains("max_acel"), "{e}");
+    }
+
+    #[test]
+    fn a_zero_scale_names_its_joint_field() {
+        let text = DEFAULT_MACHINE.replacen("steps_per_unit = 400", "steps_per_unit = 0", 1);
+        let e = parse(&text, "m.toml").unwrap_err().to_string();
+        assert!(e.contains("joints[0] (X).steps_per_unit"), "{e}");
+    }
+}

@@ -1,0 +1,175 @@
+//! End-to-end runs: the real `nc-send` binary streams programs over a pseudo-terminal
+//! to the simulated controller, and the results are checked from outside (its JSON
+//! report, its CSV trace, its exit code).
+
+use pkmc::config::MachineConfig;
+use pkmc_host::gcode;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn nc_send(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_nc-send"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("nc-send runs")
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "not JSON ({e}): {}\nstderr: {}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        )
+    })
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("pkmc-e2e-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+/// Expected final drive positions: the program's last target, in whole steps.
+fn expected_steps(program: &str) -> Vec<i64> {
+    let m = MachineConfig::cartesian_xyz();
+    let text = std::fs::read_to_string(repo().join(program)).unwrap();
+    let blocks = gcode::compile(&text, program, m.home).unwrap();
+    let end = blocks.last().unwrap().target;
+    (0..3).map(|j| m.joints[j].scale.steps_at(end[j])).collect()
+}
+
+#[test]
+fn nc_send_streams_over_a_pty_and_the_drives_end_on_exact_steps() {
+    let out = nc_send(&["--sim", "--report", "json", "examples/square.ngc"]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let r = json(&out);
+    let steps: Vec<i64> = r["final_joint_steps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_i64().unwrap())
+        .collect();
+    assert_eq!(steps, expected_steps("examples/square.ngc"));
+    assert_eq!(steps, vec![5000, 2900, 2000]); // X12.5 Y7.25 Z5 at 400 steps/mm
+    assert_eq!(r["final_pose"]["x"], 12.5);
+    assert_eq!(r["final_pose"]["y"], 7.25);
+    assert_eq!(r["blocks_executed"], r["blocks_sent"]);
+    assert_eq!(r["drive_violations"], 0);
+    assert_eq!(r["final_state"], "Idle");
+    assert_eq!(r["alarms"].as_array().unwrap().len(), 0);
+}
+
+#[test]
+fn the_square_trace_never_exceeds_feed_or_acceleration() {
+    let trace = tmp("square.csv");
+    let out = nc_send(&["--sim", "--trace", trace.to_str().unwrap(), "examples/square.ngc"]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let m = MachineConfig::cartesian_xyz();
+    let text = std::fs::read_to_string(repo().join("examples/square.ngc")).unwrap();
+    let blocks = gcode::compile(&text, "square", m.home).unwrap();
+    // Allowed path speed per line, mm/s: the feed, or the axis limit for rapids.
+    let v_max_axis = m.axes[0].max_velocity as f64 * 1e-6;
+    let allowed = |line: u32| -> f64 {
+        let b = blocks.iter().find(|b| b.line == line).expect("line has a block");
+        match b.motion {
+            pkmc::protocol::Motion::Rapid => v_max_axis * 3f64.sqrt(),
+            pkmc::protocol::Motion::Linear => b.feed as f64 * 1e-6,
+        }
+    };
+    let a_max = m.axes[0].max_accel as f64 * 1e-6;
+    let csv = std::fs::read_to_string(&trace).unwrap();
+    let mut lines = csv.lines();
+    let header = lines.next().unwrap();
+    assert!(header.starts_with("t_s,line,x,y,z,a,b,c,q1,q2,q3"), "{header}");
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert!(rows.len() > 1000, "one row per period");
+    let t = 1e-3;
+    // One period's rounding: each axis is rounded to 1 nm, so a speed may be off by
+    // 2 nm per period and an acceleration by 4 nm per period².
+    let (dv, da) = (2e-6 * 3f64.sqrt() / t, 4e-6 * 3f64.sqrt() / (t * t));
+    let (mut prev_v, mut peak_v, mut peak_a) = ([0.0; 3], 0.0f64, 0.0f64);
+    let mut prev = [0.0, 0.0, 0.0];
+    for r in &rows {
+        let p = [r[2], r[3], r[4]];
+        let v: Vec<f64> = (0..3).map(|i| (p[i] - prev[i]) / t).collect();
+        let speed = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let acc = (0..3).map(|i| ((v[i] - prev_v[i]) / t).powi(2)).sum::<f64>().sqrt();
+        let line = r[1] as u32;
+        assert!(speed <= allowed(line) + dv, "t={} line {line}: speed {speed} mm/s", r[0]);
+        // Per axis: the axis acceleration limit; along the path, A.
+        assert!(acc <= a_max * 3f64.sqrt() + da, "t={} line {line}: accel {acc} mm/s²", r[0]);
+        for i in 0..3 {
+            assert!(((v[i] - prev_v[i]) / t).abs() <= a_max + da, "t={} axis {i} accel", r[0]);
+        }
+        peak_v = peak_v.max(speed);
+        peak_a = peak_a.max(acc);
+        prev = p;
+        prev_v = [v[0], v[1], v[2]];
+    }
+    // The moves really reach their feed (the check above is not vacuous).
+    assert!(peak_v > 19.0, "peak speed {peak_v}");
+    assert!(peak_a > 0.9 * a_max, "peak accel {peak_a}");
+    // Feedback columns (drive positions) end where the commanded joints end.
+    let last = rows.last().unwrap();
+    assert_eq!(&last[8..11], &last[11..14]);
+}
+
+#[test]
+fn a_program_with_errors_sends_nothing_and_names_each_place() {
+    let prog = tmp("bad.ngc");
+    std::fs::write(&prog, "G0 X1\nG1 X2\nG1 X3 F100 (unclosed\n").unwrap();
+    let out = nc_send(&["--sim", prog.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.ngc:2:1: G1 without a feed (F)"), "{err}");
+    assert!(err.contains("bad.ngc:3:12: comment opened here is never closed"), "{err}");
+    assert!(err.contains("nothing was sent"), "{err}");
+}
+
+#[test]
+fn a_target_beyond_travel_fails_preflight_with_its_line() {
+    let prog = tmp("far.ngc");
+    std::fs::write(&prog, "G0 X10\nG0 Z50\n").unwrap();
+    let out = nc_send(&["--sim", prog.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(3));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("far.ngc:2:"));
+}
+
+#[test]
+fn a_bad_machine_file_is_refused_naming_the_field() {
+    let m = tmp("bad-machine.toml");
+    let text = std::fs::read_to_string(repo().join("examples/machines/cartesian-xyz.toml")).unwrap();
+    std::fs::write(&m, text.replacen("channel = 1", "channel = 0", 1)).unwrap();
+    let out = nc_send(&["--sim", "--machine", m.to_str().unwrap(), "examples/square.ngc"]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("joints[1] (Y).channel"), "{err}");
+}
+
+#[test]
+fn pkmc_sim_serves_nc_send_on_a_named_port() {
+    use std::io::BufRead;
+    let mut sim = Command::new(env!("CARGO_BIN_EXE_pkmc-sim"))
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut port = String::new();
+    std::io::BufReader::new(sim.stdout.take().unwrap())
+        .read_line(&mut port)
+        .unwrap();
+    let out = nc_send(&["--port", port.trim(), "--report", "json", "examples/square.ngc"]);
+    let _ = sim.kill();
+    let _ = sim.wait();
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let r = json(&out);
+    assert_eq!(r["final_pose"]["x"], 12.5);
+    assert_eq!(r["blocks_executed"], r["blocks_sent"]);
+}
