@@ -91,13 +91,14 @@ impl Scale {
     }
     /// Nearest whole step count for a joint position in axis units.
     pub fn steps_at(&self, position: i64) -> i64 {
-        crate::units::div_round(position as i128 * self.steps as i128, self.per_units as i128)
-            as i64
+        crate::units::div_round(
+            position as i128 * self.steps as i128,
+            self.per_units as i128,
+        ) as i64
     }
     /// Joint position in axis units of a step count (rounded to the nearest unit).
     pub fn position_of(&self, steps: i64) -> i64 {
-        crate::units::div_round(steps as i128 * self.per_units as i128, self.steps as i128)
-            as i64
+        crate::units::div_round(steps as i128 * self.per_units as i128, self.steps as i128) as i64
     }
 }
 
@@ -224,8 +225,7 @@ impl MachineConfig {
             return Err(ConfigError::NoJoints);
         }
         for (i, l) in self.axes.iter().enumerate() {
-            if l.max_velocity < 0 || l.max_accel < 0 || (l.max_velocity > 0) != (l.max_accel > 0)
-            {
+            if l.max_velocity < 0 || l.max_accel < 0 || (l.max_velocity > 0) != (l.max_accel > 0) {
                 return Err(ConfigError::AxisLimits { axis: i as u8 });
             }
         }
@@ -243,7 +243,9 @@ impl MachineConfig {
                 return Err(ConfigError::JointScale { joint });
             }
             match jc.drive {
-                Drive::Stepper { channel, timing, .. } => {
+                Drive::Stepper {
+                    channel, timing, ..
+                } => {
                     let bit = 1u32 << channel.min(31);
                     if channel as usize >= MAX_STEPPERS || steppers_used & bit != 0 {
                         return Err(ConfigError::JointChannel { joint });
@@ -274,8 +276,8 @@ impl MachineConfig {
         }
         match self.kinematics {
             KinematicsConfig::Cartesian { axis_of_joint } => {
-                for j in 0..self.joints.len() {
-                    let a = axis_of_joint[j] as usize;
+                for (j, &a) in axis_of_joint.iter().enumerate().take(self.joints.len()) {
+                    let a = a as usize;
                     if a >= AXES || self.axes[a].max_velocity == 0 {
                         return Err(ConfigError::JointAxis { joint: j as u8 });
                     }

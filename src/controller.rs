@@ -371,12 +371,15 @@ impl Controller {
         if self.state == State::Running && !self.has_work() {
             self.state = State::Idle;
         }
-        self.steps.tick(&self.machine.joints, &self.joints, &mut self.trains);
+        self.steps
+            .tick(&self.machine.joints, &self.joints, &mut self.trains);
         self.out.steps = [StepTrain::default(); MAX_STEPPERS];
         for (j, jc) in self.machine.joints.iter().enumerate() {
             match jc.drive {
                 Drive::Stepper {
-                    channel, invert_dir, ..
+                    channel,
+                    invert_dir,
+                    ..
                 } => {
                     let mut t = self.trains[j];
                     t.forward ^= invert_dir;
@@ -448,11 +451,23 @@ mod tests {
     #[test]
     fn a_block_is_acknowledged_executed_and_ends_on_its_target() {
         let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
-        c.receive(&frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION }));
+        c.receive(&frame(
+            0,
+            &HostMsg::Hello {
+                version: PROTOCOL_VERSION,
+            },
+        ));
         c.receive(&frame(1, &line_to(10, 7)));
         let r = replies(&mut c);
         assert!(matches!(r[0], CtrlMsg::HelloAck { .. }));
-        assert!(matches!(r[1], CtrlMsg::Ack { seq: 1, free_slots: 63, .. }));
+        assert!(matches!(
+            r[1],
+            CtrlMsg::Ack {
+                seq: 1,
+                free_slots: 63,
+                ..
+            }
+        ));
         let inputs = Inputs::default();
         for _ in 0..10_000 {
             c.tick(&inputs);
@@ -466,35 +481,72 @@ mod tests {
     #[test]
     fn a_duplicate_block_is_acknowledged_but_not_queued_twice() {
         let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
-        c.receive(&frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION }));
+        c.receive(&frame(
+            0,
+            &HostMsg::Hello {
+                version: PROTOCOL_VERSION,
+            },
+        ));
         c.receive(&frame(1, &line_to(10, 1)));
         c.receive(&frame(1, &line_to(10, 1)));
         let r = replies(&mut c);
-        assert!(matches!(r[2], CtrlMsg::Ack { seq: 1, free_slots: 63, .. }));
+        assert!(matches!(
+            r[2],
+            CtrlMsg::Ack {
+                seq: 1,
+                free_slots: 63,
+                ..
+            }
+        ));
     }
 
     #[test]
     fn a_gap_and_a_corrupt_frame_are_refused_with_the_expected_sequence() {
         let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
-        c.receive(&frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION }));
+        c.receive(&frame(
+            0,
+            &HostMsg::Hello {
+                version: PROTOCOL_VERSION,
+            },
+        ));
         c.receive(&frame(5, &line_to(10, 1)));
         let mut bad = frame(1, &line_to(10, 1));
         bad[3] ^= 0x10;
         c.receive(&bad);
         let r = replies(&mut c);
-        assert_eq!(r[1], CtrlMsg::Nak { expected: 1, reason: NakReason::Gap });
-        assert_eq!(r[2], CtrlMsg::Nak { expected: 1, reason: NakReason::Corrupt });
+        assert_eq!(
+            r[1],
+            CtrlMsg::Nak {
+                expected: 1,
+                reason: NakReason::Gap
+            }
+        );
+        assert_eq!(
+            r[2],
+            CtrlMsg::Nak {
+                expected: 1,
+                reason: NakReason::Corrupt
+            }
+        );
         assert_eq!(c.link_stats().corrupt, 1);
     }
 
     #[test]
     fn an_unreachable_block_raises_an_alarm_naming_line_and_joint() {
         let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
-        c.receive(&frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION }));
+        c.receive(&frame(
+            0,
+            &HostMsg::Hello {
+                version: PROTOCOL_VERSION,
+            },
+        ));
         c.receive(&frame(1, &line_to(500, 42)));
         c.tick(&Inputs::default());
         assert_eq!(c.state(), State::Alarm);
-        assert_eq!(c.status().alarm, Some(Alarm::Unreachable { line: 42, joint: 0 }));
+        assert_eq!(
+            c.status().alarm,
+            Some(Alarm::Unreachable { line: 42, joint: 0 })
+        );
         assert_eq!(c.pose()[0], 0);
     }
 }

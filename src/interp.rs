@@ -66,7 +66,10 @@ impl Segment {
             return seg;
         }
         let sq = |r: core::ops::Range<usize>| -> u128 {
-            delta[r].iter().map(|d| (*d as i128 * *d as i128) as u128).sum()
+            delta[r]
+                .iter()
+                .map(|d| (*d as i128 * *d as i128) as u128)
+                .sum()
         };
         let (linear, rotary) = (sq(0..3), sq(3..6));
         // Path length in nm over XYZ, or in n° when only rotary axes move.
@@ -217,7 +220,12 @@ mod tests {
         m.axes[2].max_velocity = 10 * crate::units::NM_PER_MM; // Z: 10 mm/s
         let k = MachineKinematics::new(&m);
         // Pure Z move of 10 mm at F = 100 mm/s must take at least 1 s.
-        let seg = Segment::plan(&block([0, 0, -10_000_000, 0, 0, 0], 100_000_000), &[0; 6], &m, &k);
+        let seg = Segment::plan(
+            &block([0, 0, -10_000_000, 0, 0, 0], 100_000_000),
+            &[0; 6],
+            &m,
+            &k,
+        );
         assert!(seg.ticks() >= TICK_HZ, "{} ticks", seg.ticks());
     }
 
@@ -225,7 +233,12 @@ mod tests {
     fn an_unreachable_target_is_marked_not_moved() {
         let m = MachineConfig::cartesian_xyz();
         let k = MachineKinematics::new(&m);
-        let seg = Segment::plan(&block([0, 0, 90_000_000, 0, 0, 0], 1_000_000), &[0; 6], &m, &k);
+        let seg = Segment::plan(
+            &block([0, 0, 90_000_000, 0, 0, 0], 1_000_000),
+            &[0; 6],
+            &m,
+            &k,
+        );
         assert_eq!(seg.unreachable, Some(Unreachable::JointLimit { joint: 2 }));
     }
 }

@@ -97,7 +97,11 @@ impl StepScheduler {
             let (count, train) = plan_train(want.unsigned_abs(), start, &timing);
             lagged |= u64::from(count) < want.unsigned_abs();
             ch.forward = forward;
-            ch.emitted += if forward { count as i64 } else { -(count as i64) };
+            ch.emitted += if forward {
+                count as i64
+            } else {
+                -(count as i64)
+            };
             out[j] = StepTrain { forward, ..train };
         }
         if lagged {
@@ -143,7 +147,11 @@ mod tests {
         for k in 0..500i64 {
             q[0] = (k * 37_123) % 900_000 - 450_000; // jumps both ways
             s.tick(&m.joints, &q, &mut out);
-            total += if out[0].forward { out[0].count as i64 } else { -(out[0].count as i64) };
+            total += if out[0].forward {
+                out[0].count as i64
+            } else {
+                -(out[0].count as i64)
+            };
             assert_eq!(total, m.joints[0].scale.steps_at(q[0]));
         }
     }

@@ -69,7 +69,11 @@ pub struct Diagnostic {
 
 impl fmt::Display for Diagnostic {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}:{}:{}: {}", self.file, self.line, self.col, self.message)
+        write!(
+            f,
+            "{}:{}:{}: {}",
+            self.file, self.line, self.col, self.message
+        )
     }
 }
 
@@ -77,7 +81,10 @@ impl fmt::Display for Diagnostic {
 pub fn parse_line(text: &str) -> Result<Vec<Word>, (usize, String)> {
     let chars: Vec<char> = text.chars().collect();
     if chars.len() > MAX_LINE {
-        return Err((MAX_LINE + 1, format!("line longer than {MAX_LINE} characters")));
+        return Err((
+            MAX_LINE + 1,
+            format!("line longer than {MAX_LINE} characters"),
+        ));
     }
     let mut words = Vec::new();
     let mut i = 0;
@@ -196,7 +203,8 @@ impl Interpreter {
             match w.letter {
                 'G' => {
                     let code = w.value.as_int().ok_or((w.col, unsupported("G", w.value)))?;
-                    let mut set_motion = |m: Motion| match motion_word {
+                    let mut set_motion = |m: Motion| {
+                        match motion_word {
                         Some((_, c)) => Err((
                             w.col,
                             format!("G{code} conflicts with the motion code at column {c} (same modal group)"),
@@ -205,6 +213,7 @@ impl Interpreter {
                             motion_word = Some((m, w.col));
                             Ok(())
                         }
+                    }
                     };
                     match code {
                         0 => set_motion(Motion::Rapid)?,
@@ -212,7 +221,10 @@ impl Interpreter {
                         17 | 94 => {}
                         20 | 21 => {
                             if let Some(c) = units_word {
-                                return Err((w.col, format!("G{code} conflicts with the units code at column {c}")));
+                                return Err((
+                                    w.col,
+                                    format!("G{code} conflicts with the units code at column {c}"),
+                                ));
                             }
                             units_word = Some(w.col);
                             self.units = if code == 20 { Units::Inch } else { Units::Mm };
@@ -241,7 +253,10 @@ impl Interpreter {
                 letter => match pkmc::config::AXIS_NAMES.iter().position(|&a| a == letter) {
                     Some(i) => {
                         if let Some((_, c)) = axes[i] {
-                            return Err((w.col, format!("{letter} given twice (first at column {c})")));
+                            return Err((
+                                w.col,
+                                format!("{letter} given twice (first at column {c})"),
+                            ));
                         }
                         axes[i] = Some((w.value, w.col));
                     }
@@ -257,11 +272,15 @@ impl Interpreter {
             return Ok(None);
         };
         if self.ended {
-            return Err((axis_col, "motion after the end of the program (M2/M30)".into()));
+            return Err((
+                axis_col,
+                "motion after the end of the program (M2/M30)".into(),
+            ));
         }
-        let motion = self
-            .motion
-            .ok_or((axis_col, "coordinates without a motion mode (G0 or G1)".to_string()))?;
+        let motion = self.motion.ok_or((
+            axis_col,
+            "coordinates without a motion mode (G0 or G1)".to_string(),
+        ))?;
         let mut target = self.pose;
         for (i, a) in axes.iter().enumerate() {
             if let Some((v, _)) = a {
@@ -272,17 +291,30 @@ impl Interpreter {
                 } else {
                     v.times(NM_PER_MM as i128)
                 };
-                let units = i64::try_from(units)
-                    .map_err(|_| (axis_col, format!("{} value {} out of range", pkmc::config::AXIS_NAMES[i], v.as_f64())))?;
-                target[i] = if self.absolute { units } else { target[i].saturating_add(units) };
+                let units = i64::try_from(units).map_err(|_| {
+                    (
+                        axis_col,
+                        format!(
+                            "{} value {} out of range",
+                            pkmc::config::AXIS_NAMES[i],
+                            v.as_f64()
+                        ),
+                    )
+                })?;
+                target[i] = if self.absolute {
+                    units
+                } else {
+                    target[i].saturating_add(units)
+                };
             }
         }
         let feed = match motion {
             Motion::Rapid => 0,
             Motion::Linear => {
-                let f = self
-                    .feed
-                    .ok_or((motion_word.map_or(axis_col, |(_, c)| c), "G1 without a feed (F)".to_string()))?;
+                let f = self.feed.ok_or((
+                    motion_word.map_or(axis_col, |(_, c)| c),
+                    "G1 without a feed (F)".to_string(),
+                ))?;
                 let linear_moves = (0..3).any(|i| target[i] != self.pose[i]);
                 // nm/s from mm/min (or in/min); rotary-only moves: µ°/s from °/min.
                 let per_unit = if self.units == Units::Inch && linear_moves {
@@ -290,7 +322,9 @@ impl Interpreter {
                 } else {
                     NM_PER_MM as i128
                 };
-                i64::try_from(f.times_ratio(per_unit, 60)).unwrap_or(i64::MAX).max(1)
+                i64::try_from(f.times_ratio(per_unit, 60))
+                    .unwrap_or(i64::MAX)
+                    .max(1)
             }
         };
         self.pose = target;
@@ -308,7 +342,11 @@ fn unsupported(letter: &str, v: Decimal) -> String {
 }
 
 /// Parses and interprets a whole program; returns its blocks, or every error found.
-pub fn compile(source: &str, file: &str, start: [i64; AXES]) -> Result<Vec<Block>, Vec<Diagnostic>> {
+pub fn compile(
+    source: &str,
+    file: &str,
+    start: [i64; AXES],
+) -> Result<Vec<Block>, Vec<Diagnostic>> {
     let mut interp = Interpreter::new(start);
     let mut blocks = Vec::new();
     let mut errors = Vec::new();

@@ -6,12 +6,12 @@ use crate::gcode;
 use crate::link::{serve, ClientStats, JobEnd, Link};
 use crate::sim::{Simulator, Violation};
 use anyhow::{anyhow, Context, Result};
-use serialport::SerialPort;
 use pkmc::config::{axis_is_rotary, MachineConfig, AXIS_NAMES};
 use pkmc::kinematics::MachineKinematics;
 use pkmc::protocol::{Block, State, Status};
 use pkmc::units::{to_user, TICK_NS};
 use serde::Serialize;
+use serialport::SerialPort;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -52,21 +52,37 @@ impl Failure {
 /// Reads and compiles a program for `machine`; checks every block end against the
 /// machine's reach.
 pub fn compile_program(path: &Path, machine: &MachineConfig) -> Result<Vec<Block>, Failure> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| Failure::new(exit::BAD_INPUT, format!("{}: cannot read: {e}", path.display())))?;
+    let bytes = std::fs::read(path).map_err(|e| {
+        Failure::new(
+            exit::BAD_INPUT,
+            format!("{}: cannot read: {e}", path.display()),
+        )
+    })?;
     let name = path.display().to_string();
     let text = String::from_utf8(bytes).map_err(|e| {
         let at = e.utf8_error().valid_up_to();
         let before = &e.as_bytes()[..at];
         let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
-        let col = at - before.iter().rposition(|&b| b == b'\n').map_or(0, |p| p + 1) + 1;
-        Failure::new(exit::BAD_INPUT, format!("{name}:{line}:{col}: not text (invalid UTF-8)"))
+        let col = at
+            - before
+                .iter()
+                .rposition(|&b| b == b'\n')
+                .map_or(0, |p| p + 1)
+            + 1;
+        Failure::new(
+            exit::BAD_INPUT,
+            format!("{name}:{line}:{col}: not text (invalid UTF-8)"),
+        )
     })?;
     let blocks = gcode::compile(&text, &name, machine.home).map_err(|errs| {
         let lines: Vec<String> = errs.iter().map(|d| d.to_string()).collect();
         Failure::new(
             exit::BAD_INPUT,
-            format!("{}\n{} error(s); nothing was sent", lines.join("\n"), errs.len()),
+            format!(
+                "{}\n{} error(s); nothing was sent",
+                lines.join("\n"),
+                errs.len()
+            ),
         )
     })?;
     let kin = MachineKinematics::new(machine);
@@ -75,7 +91,10 @@ pub fn compile_program(path: &Path, machine: &MachineConfig) -> Result<Vec<Block
         if let Err(e) = kin.inverse_checked(&b.target, &machine.joints, &mut q) {
             return Err(Failure::new(
                 exit::PREFLIGHT,
-                format!("{name}:{}: target out of the machine's reach ({e:?}); nothing was sent", b.line),
+                format!(
+                    "{name}:{}: target out of the machine's reach ({e:?}); nothing was sent",
+                    b.line
+                ),
             ));
         }
     }
@@ -111,10 +130,12 @@ impl SimServer {
     pub fn start(machine: MachineConfig, trace: Option<&Path>) -> Result<Self> {
         let mut sim = Simulator::new(machine)?;
         if let Some(p) = trace {
-            let f = std::fs::File::create(p).with_context(|| format!("{}: cannot create", p.display()))?;
+            let f = std::fs::File::create(p)
+                .with_context(|| format!("{}: cannot create", p.display()))?;
             sim.trace_to(Box::new(std::io::BufWriter::new(f)))?;
         }
-        let (mut master, slave) = serialport::TTYPort::pair().context("cannot create a pseudo-terminal")?;
+        let (mut master, slave) =
+            serialport::TTYPort::pair().context("cannot create a pseudo-terminal")?;
         let port_path = slave
             .name()
             .ok_or_else(|| anyhow!("the pseudo-terminal has no name"))?;
@@ -201,7 +222,12 @@ impl Report {
         link: ClientStats,
     ) -> Self {
         let final_pose = (0..6)
-            .map(|i| (AXIS_NAMES[i].to_ascii_lowercase().to_string(), to_user(status.pose[i], axis_is_rotary(i))))
+            .map(|i| {
+                (
+                    AXIS_NAMES[i].to_ascii_lowercase().to_string(),
+                    to_user(status.pose[i], axis_is_rotary(i)),
+                )
+            })
             .collect();
         let final_joints = machine
             .joints
@@ -251,7 +277,10 @@ pub fn run(
     let server = match target {
         Target::Sim => Some(SimServer::start(machine.clone(), trace).map_err(link_err)?),
         Target::Port(_) if trace.is_some() => {
-            return Err(Failure::new(exit::BAD_INPUT, "--trace needs --sim (a board does not stream every period)"))
+            return Err(Failure::new(
+                exit::BAD_INPUT,
+                "--trace needs --sim (a board does not stream every period)",
+            ))
         }
         Target::Port(_) => None,
     };
@@ -271,7 +300,15 @@ pub fn run(
         None => None,
     };
     let (end, status, stats) = outcome.map_err(link_err)?;
-    let report = Report::new(machine, program, blocks.len(), &end, &status, sim.as_ref(), stats);
+    let report = Report::new(
+        machine,
+        program,
+        blocks.len(),
+        &end,
+        &status,
+        sim.as_ref(),
+        stats,
+    );
     let code = match end {
         JobEnd::Alarm => exit::ALARM,
         JobEnd::Done if sim.as_ref().is_some_and(|s| s.violation_count > 0) => exit::ALARM,

@@ -29,7 +29,10 @@ pub const LINK_TIMEOUT: Duration = Duration::from_secs(5);
 pub const POLL_EVERY: Duration = Duration::from_millis(20);
 
 fn is_timeout(e: &std::io::Error) -> bool {
-    matches!(e.kind(), ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted)
+    matches!(
+        e.kind(),
+        ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
+    )
 }
 
 /// Serves `sim` on `port` until `stop` is set. Simulated time advances while the
@@ -107,7 +110,12 @@ impl Link {
             stats: ClientStats::default(),
         };
         for _attempt in 0..5 {
-            link.send(0, &HostMsg::Hello { version: PROTOCOL_VERSION })?;
+            link.send(
+                0,
+                &HostMsg::Hello {
+                    version: PROTOCOL_VERSION,
+                },
+            )?;
             let until = Instant::now() + Duration::from_millis(500);
             while Instant::now() < until {
                 for msg in link.pump()? {
@@ -134,7 +142,8 @@ impl Link {
 
     fn send(&mut self, seq: u16, msg: &HostMsg) -> Result<()> {
         let mut frame = [0u8; MAX_FRAME];
-        let n = encode_frame(seq, msg, &mut frame).map_err(|e| anyhow!("cannot frame {msg:?}: {e:?}"))?;
+        let n = encode_frame(seq, msg, &mut frame)
+            .map_err(|e| anyhow!("cannot frame {msg:?}: {e:?}"))?;
         self.port.write_all(&frame[..n])?;
         self.stats.frames_sent += 1;
         Ok(())
@@ -191,7 +200,11 @@ impl Link {
 
     /// Streams `blocks` and waits until they have all executed. `progress` is called
     /// with every status received.
-    pub fn run_job(&mut self, blocks: &[Block], mut progress: impl FnMut(&Status)) -> Result<JobEnd> {
+    pub fn run_job(
+        &mut self,
+        blocks: &[Block],
+        mut progress: impl FnMut(&Status),
+    ) -> Result<JobEnd> {
         let base = self.next_seq;
         let total = blocks.len();
         let (mut sent, mut acked) = (0usize, 0usize);
@@ -210,7 +223,9 @@ impl Link {
             }
             for m in msgs {
                 match m {
-                    CtrlMsg::Ack { seq, free_slots, .. } => {
+                    CtrlMsg::Ack {
+                        seq, free_slots, ..
+                    } => {
                         let done = index_of(seq).wrapping_add(1);
                         if done <= total && done >= acked {
                             acked = done;

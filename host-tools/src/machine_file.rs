@@ -135,12 +135,23 @@ impl MachineFile {
             let i = axis_index(key, &format!("axes.{key}"))?;
             let rotary = pkmc::config::axis_is_rotary(i);
             axes[i] = Limits {
-                max_velocity: to_units(positive(l.max_velocity, &format!("axes.{key}.max_velocity"))?, rotary, "")?,
-                max_accel: to_units(positive(l.max_accel, &format!("axes.{key}.max_accel"))?, rotary, "")?,
+                max_velocity: to_units(
+                    positive(l.max_velocity, &format!("axes.{key}.max_velocity"))?,
+                    rotary,
+                    "",
+                )?,
+                max_accel: to_units(
+                    positive(l.max_accel, &format!("axes.{key}.max_accel"))?,
+                    rotary,
+                    "",
+                )?,
             };
         }
         if self.joints.len() > MAX_JOINTS {
-            bail!("joints: {} joints, the board drives at most {MAX_JOINTS}", self.joints.len());
+            bail!(
+                "joints: {} joints, the board drives at most {MAX_JOINTS}",
+                self.joints.len()
+            );
         }
         let mut joints = heapless::Vec::new();
         let mut axis_of_joint = [0u8; MAX_JOINTS];
@@ -156,21 +167,31 @@ impl MachineFile {
             let drive = match jf.drive.as_str() {
                 "stepper" => Drive::Stepper {
                     channel: jf.channel,
-                    timing: jf.timing.as_ref().map_or(StepTiming::PACSCI_6410, |t| StepTiming {
-                        min_pulse_ns: t.min_pulse_ns,
-                        max_rate_hz: t.max_rate_hz,
-                        dir_setup_ns: t.dir_setup_ns,
-                        dir_hold_ns: t.dir_hold_ns,
-                    }),
+                    timing: jf
+                        .timing
+                        .as_ref()
+                        .map_or(StepTiming::PACSCI_6410, |t| StepTiming {
+                            min_pulse_ns: t.min_pulse_ns,
+                            max_rate_hz: t.max_rate_hz,
+                            dir_setup_ns: t.dir_setup_ns,
+                            dir_hold_ns: t.dir_hold_ns,
+                        }),
                     invert_dir: jf.invert_dir,
                 },
                 "servo" => Drive::Servo {
                     channel: jf.channel,
-                    kp_q16: (jf.kp.ok_or_else(|| anyhow!("{}: a servo joint needs kp", f("kp")))? * 65536.0).round() as i32,
+                    kp_q16: (jf
+                        .kp
+                        .ok_or_else(|| anyhow!("{}: a servo joint needs kp", f("kp")))?
+                        * 65536.0)
+                        .round() as i32,
                     kvff_q16: (jf.kvff.unwrap_or(0.0) * 65536.0).round() as i32,
                     out_limit: jf.out_limit.unwrap_or(2047),
                 },
-                other => bail!("{}: unknown drive {other:?} (expected \"stepper\" or \"servo\")", f("drive")),
+                other => bail!(
+                    "{}: unknown drive {other:?} (expected \"stepper\" or \"servo\")",
+                    f("drive")
+                ),
             };
             if let Some(a) = &jf.axis {
                 axis_of_joint[j] = axis_index(a, &f("axis"))? as u8;
@@ -184,14 +205,20 @@ impl MachineFile {
                 min: to_units(jf.min, jf.rotary, &f("min"))?,
                 max: to_units(jf.max, jf.rotary, &f("max"))?,
                 limits: Limits {
-                    max_velocity: to_units(positive(jf.max_velocity, &f("max_velocity"))?, jf.rotary, "")?,
+                    max_velocity: to_units(
+                        positive(jf.max_velocity, &f("max_velocity"))?,
+                        jf.rotary,
+                        "",
+                    )?,
                     max_accel: to_units(positive(jf.max_accel, &f("max_accel"))?, jf.rotary, "")?,
                 },
             });
         }
         let kinematics = match self.kinematics.as_str() {
             "cartesian" => KinematicsConfig::Cartesian { axis_of_joint },
-            other => bail!("kinematics: unknown kinematics {other:?} (this build knows \"cartesian\")"),
+            other => {
+                bail!("kinematics: unknown kinematics {other:?} (this build knows \"cartesian\")")
+            }
         };
         let mut home = [0i64; AXES];
         for (i, h) in self.home.iter().enumerate() {
@@ -204,7 +231,9 @@ impl MachineFile {
             axes,
             home,
         };
-        config.validate().map_err(|e| anyhow!("{}", describe(&e, self)))?;
+        config
+            .validate()
+            .map_err(|e| anyhow!("{}", describe(&e, self)))?;
         pkmc::controller::Controller::new(config.clone())
             .map_err(|e| anyhow!("{}", describe(&e, self)))?;
         Ok(config)
@@ -220,15 +249,21 @@ pub fn describe(e: &pkmc::config::ConfigError, m: &MachineFile) -> String {
     };
     match e {
         E::NoJoints => "joints: the machine has no joints".into(),
-        E::JointLimits { joint } => format!("{}: speed and acceleration must be positive", jn(joint)),
+        E::JointLimits { joint } => {
+            format!("{}: speed and acceleration must be positive", jn(joint))
+        }
         E::JointTravel { joint } => format!("{}.min must be below max", jn(joint)),
         E::JointScale { joint } => format!("{}.steps_per_unit rounds to zero", jn(joint)),
-        E::JointChannel { joint } => format!("{}.channel: beyond the board or used twice", jn(joint)),
+        E::JointChannel { joint } => {
+            format!("{}.channel: beyond the board or used twice", jn(joint))
+        }
         E::StepRate { joint } => format!(
             "{}.max_velocity: needs more steps per second than the drive timing allows",
             jn(joint)
         ),
-        E::JointAxis { joint } => format!("{}.axis: names no axis with limits in [axes]", jn(joint)),
+        E::JointAxis { joint } => {
+            format!("{}.axis: names no axis with limits in [axes]", jn(joint))
+        }
         E::AxisLimits { axis } => format!("axes.{}: bad limits", AXIS_NAMES[*axis as usize]),
         E::HomeOutsideTravel { joint } => format!("home: outside the travel of {}", jn(joint)),
         _ => format!("{e:?}"),
@@ -237,17 +272,15 @@ pub fn describe(e: &pkmc::config::ConfigError, m: &MachineFile) -> String {
 
 /// Reads and converts a machine file.
 pub fn load(path: &Path) -> Result<MachineConfig> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
     parse(&text, &path.display().to_string())
 }
 
 /// Parses machine-file text; `origin` names it in errors.
 pub fn parse(text: &str, origin: &str) -> Result<MachineConfig> {
     let file: MachineFile = toml::from_str(text).map_err(|e| {
-        let (line, col) = e
-            .span()
-            .map(|s| line_col(text, s.start))
-            .unwrap_or((0, 0));
+        let (line, col) = e.span().map(|s| line_col(text, s.start)).unwrap_or((0, 0));
         anyhow!("{origin}:{line}:{col}: {}", e.message())
     })?;
     file.to_config().map_err(|e| anyhow!("{origin}: {e}"))
@@ -256,7 +289,10 @@ pub fn parse(text: &str, origin: &str) -> Result<MachineConfig> {
 fn line_col(text: &str, offset: usize) -> (usize, usize) {
     let before = &text[..offset.min(text.len())];
     let line = before.matches('\n').count() + 1;
-    let col = before.rfind('\n').map_or(before.len(), |p| before.len() - p - 1) + 1;
+    let col = before
+        .rfind('\n')
+        .map_or(before.len(), |p| before.len() - p - 1)
+        + 1;
     (line, col)
 }
 

@@ -265,11 +265,19 @@ impl Simulator {
         let jc = self.ctrl.machine().joints.get(j)?;
         match jc.drive {
             Drive::Stepper {
-                channel, invert_dir, ..
-            } => self.steppers[channel as usize]
-                .as_ref()
-                .map(|d| if invert_dir { -d.position } else { d.position }),
-            Drive::Servo { channel, .. } => self.servos[channel as usize].as_ref().map(|p| p.counts()),
+                channel,
+                invert_dir,
+                ..
+            } => self.steppers[channel as usize].as_ref().map(|d| {
+                if invert_dir {
+                    -d.position
+                } else {
+                    d.position
+                }
+            }),
+            Drive::Servo { channel, .. } => {
+                self.servos[channel as usize].as_ref().map(|p| p.counts())
+            }
         }
     }
 
@@ -306,10 +314,11 @@ impl Simulator {
             }
         }
         self.ticks += 1;
-        if self.trace.is_some() {
+        if let Some(mut out) = self.trace.take() {
             let row = self.trace_row();
-            let t = self.trace.as_mut().expect("checked");
-            write_row(t.as_mut(), &row)?;
+            let written = write_row(out.as_mut(), &row);
+            self.trace = Some(out);
+            written?;
         }
         Ok(())
     }

@@ -47,7 +47,12 @@ fn expected_steps(program: &str) -> Vec<i64> {
 #[test]
 fn nc_send_streams_over_a_pty_and_the_drives_end_on_exact_steps() {
     let out = nc_send(&["--sim", "--report", "json", "examples/square.ngc"]);
-    assert_eq!(out.status.code(), Some(0), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let r = json(&out);
     let steps: Vec<i64> = r["final_joint_steps"]
         .as_array()
@@ -68,15 +73,28 @@ fn nc_send_streams_over_a_pty_and_the_drives_end_on_exact_steps() {
 #[test]
 fn the_square_trace_never_exceeds_feed_or_acceleration() {
     let trace = tmp("square.csv");
-    let out = nc_send(&["--sim", "--trace", trace.to_str().unwrap(), "examples/square.ngc"]);
-    assert_eq!(out.status.code(), Some(0), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let out = nc_send(&[
+        "--sim",
+        "--trace",
+        trace.to_str().unwrap(),
+        "examples/square.ngc",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let m = MachineConfig::cartesian_xyz();
     let text = std::fs::read_to_string(repo().join("examples/square.ngc")).unwrap();
     let blocks = gcode::compile(&text, "square", m.home).unwrap();
     // Allowed path speed per line, mm/s: the feed, or the axis limit for rapids.
     let v_max_axis = m.axes[0].max_velocity as f64 * 1e-6;
     let allowed = |line: u32| -> f64 {
-        let b = blocks.iter().find(|b| b.line == line).expect("line has a block");
+        let b = blocks
+            .iter()
+            .find(|b| b.line == line)
+            .expect("line has a block");
         match b.motion {
             pkmc::protocol::Motion::Rapid => v_max_axis * 3f64.sqrt(),
             pkmc::protocol::Motion::Linear => b.feed as f64 * 1e-6,
@@ -86,7 +104,10 @@ fn the_square_trace_never_exceeds_feed_or_acceleration() {
     let csv = std::fs::read_to_string(&trace).unwrap();
     let mut lines = csv.lines();
     let header = lines.next().unwrap();
-    assert!(header.starts_with("t_s,line,x,y,z,a,b,c,q1,q2,q3"), "{header}");
+    assert!(
+        header.starts_with("t_s,line,x,y,z,a,b,c,q1,q2,q3"),
+        "{header}"
+    );
     let rows: Vec<Vec<f64>> = lines
         .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
         .collect();
@@ -101,13 +122,28 @@ fn the_square_trace_never_exceeds_feed_or_acceleration() {
         let p = [r[2], r[3], r[4]];
         let v: Vec<f64> = (0..3).map(|i| (p[i] - prev[i]) / t).collect();
         let speed = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-        let acc = (0..3).map(|i| ((v[i] - prev_v[i]) / t).powi(2)).sum::<f64>().sqrt();
+        let acc = (0..3)
+            .map(|i| ((v[i] - prev_v[i]) / t).powi(2))
+            .sum::<f64>()
+            .sqrt();
         let line = r[1] as u32;
-        assert!(speed <= allowed(line) + dv, "t={} line {line}: speed {speed} mm/s", r[0]);
+        assert!(
+            speed <= allowed(line) + dv,
+            "t={} line {line}: speed {speed} mm/s",
+            r[0]
+        );
         // Per axis: the axis acceleration limit; along the path, A.
-        assert!(acc <= a_max * 3f64.sqrt() + da, "t={} line {line}: accel {acc} mm/s²", r[0]);
+        assert!(
+            acc <= a_max * 3f64.sqrt() + da,
+            "t={} line {line}: accel {acc} mm/s²",
+            r[0]
+        );
         for i in 0..3 {
-            assert!(((v[i] - prev_v[i]) / t).abs() <= a_max + da, "t={} axis {i} accel", r[0]);
+            assert!(
+                ((v[i] - prev_v[i]) / t).abs() <= a_max + da,
+                "t={} axis {i} accel",
+                r[0]
+            );
         }
         peak_v = peak_v.max(speed);
         peak_a = peak_a.max(acc);
@@ -130,7 +166,10 @@ fn a_program_with_errors_sends_nothing_and_names_each_place() {
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("bad.ngc:2:1: G1 without a feed (F)"), "{err}");
-    assert!(err.contains("bad.ngc:3:12: comment opened here is never closed"), "{err}");
+    assert!(
+        err.contains("bad.ngc:3:12: comment opened here is never closed"),
+        "{err}"
+    );
     assert!(err.contains("nothing was sent"), "{err}");
 }
 
@@ -146,9 +185,15 @@ fn a_target_beyond_travel_fails_preflight_with_its_line() {
 #[test]
 fn a_bad_machine_file_is_refused_naming_the_field() {
     let m = tmp("bad-machine.toml");
-    let text = std::fs::read_to_string(repo().join("examples/machines/cartesian-xyz.toml")).unwrap();
+    let text =
+        std::fs::read_to_string(repo().join("examples/machines/cartesian-xyz.toml")).unwrap();
     std::fs::write(&m, text.replacen("channel = 1", "channel = 0", 1)).unwrap();
-    let out = nc_send(&["--sim", "--machine", m.to_str().unwrap(), "examples/square.ngc"]);
+    let out = nc_send(&[
+        "--sim",
+        "--machine",
+        m.to_str().unwrap(),
+        "examples/square.ngc",
+    ]);
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("joints[1] (Y).channel"), "{err}");
@@ -165,10 +210,21 @@ fn pkmc_sim_serves_nc_send_on_a_named_port() {
     std::io::BufReader::new(sim.stdout.take().unwrap())
         .read_line(&mut port)
         .unwrap();
-    let out = nc_send(&["--port", port.trim(), "--report", "json", "examples/square.ngc"]);
+    let out = nc_send(&[
+        "--port",
+        port.trim(),
+        "--report",
+        "json",
+        "examples/square.ngc",
+    ]);
     let _ = sim.kill();
     let _ = sim.wait();
-    assert_eq!(out.status.code(), Some(0), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let r = json(&out);
     assert_eq!(r["final_pose"]["x"], 12.5);
     assert_eq!(r["blocks_executed"], r["blocks_sent"]);

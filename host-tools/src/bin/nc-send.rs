@@ -43,7 +43,10 @@ fn main() {
 fn run(args: &Args) -> Result<i32, job::Failure> {
     let machine = match &args.machine {
         Some(p) => pkmc_host::machine_file::load(p),
-        None => pkmc_host::machine_file::parse(pkmc_host::machine_file::DEFAULT_MACHINE, "built-in machine"),
+        None => pkmc_host::machine_file::parse(
+            pkmc_host::machine_file::DEFAULT_MACHINE,
+            "built-in machine",
+        ),
     }
     .map_err(|e| job::Failure {
         code: exit::BAD_INPUT,
@@ -55,31 +58,48 @@ fn run(args: &Args) -> Result<i32, job::Failure> {
         (None, false) => {
             return Err(job::Failure {
                 code: exit::BAD_INPUT,
-                message: "no controller given: use --port DEV for a board or --sim for the simulator".into(),
+                message:
+                    "no controller given: use --port DEV for a board or --sim for the simulator"
+                        .into(),
             })
         }
     };
     let quiet = args.report.is_some();
     let mut last_line = 0;
-    let (report, code) = job::run(&machine, &args.program, target, args.trace.as_deref(), |s| {
-        if !quiet && s.line != last_line {
-            last_line = s.line;
-            eprint!("\rline {:>6}  {:?}   ", s.line, s.state);
-        }
-    })?;
+    let (report, code) = job::run(
+        &machine,
+        &args.program,
+        target,
+        args.trace.as_deref(),
+        |s| {
+            if !quiet && s.line != last_line {
+                last_line = s.line;
+                eprint!("\rline {:>6}  {:?}   ", s.line, s.state);
+            }
+        },
+    )?;
     if !quiet {
         eprintln!();
     }
     let mut out = std::io::stdout().lock();
     if quiet {
-        let _ = writeln!(out, "{}", serde_json::to_string_pretty(&report).unwrap_or_default());
+        let _ = writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(&report).unwrap_or_default()
+        );
     } else {
         let p = &report.final_pose;
         let _ = writeln!(
             out,
             "{}: {} on {} — {} of {} blocks in {:.3} s, state {}",
-            report.program, report.result, report.machine, report.blocks_executed, report.blocks_sent,
-            report.run_time_s, report.final_state
+            report.program,
+            report.result,
+            report.machine,
+            report.blocks_executed,
+            report.blocks_sent,
+            report.run_time_s,
+            report.final_state
         );
         let _ = writeln!(
             out,
@@ -87,7 +107,11 @@ fn run(args: &Args) -> Result<i32, job::Failure> {
             p["x"], p["y"], p["z"], p["a"], p["b"], p["c"]
         );
         if let Some(steps) = &report.final_joint_steps {
-            let _ = writeln!(out, "drive positions (steps): {steps:?}; timing violations: {}", report.drive_violations.unwrap_or(0));
+            let _ = writeln!(
+                out,
+                "drive positions (steps): {steps:?}; timing violations: {}",
+                report.drive_violations.unwrap_or(0)
+            );
         }
         for a in &report.alarms {
             let _ = writeln!(out, "ALARM: {a}");

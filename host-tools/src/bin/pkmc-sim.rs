@@ -2,8 +2,8 @@
 //! Prints the port to open, then serves until interrupted.
 
 use clap::Parser;
-use std::path::PathBuf;
 use serialport::SerialPort;
+use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
 /// Serve a simulated pkmc controller on a pseudo-terminal.
@@ -19,7 +19,10 @@ fn main() -> anyhow::Result<()> {
     let args = Args::parse();
     let machine = match &args.machine {
         Some(p) => pkmc_host::machine_file::load(p)?,
-        None => pkmc_host::machine_file::parse(pkmc_host::machine_file::DEFAULT_MACHINE, "built-in machine")?,
+        None => pkmc_host::machine_file::parse(
+            pkmc_host::machine_file::DEFAULT_MACHINE,
+            "built-in machine",
+        )?,
     };
     let mut sim = pkmc_host::sim::Simulator::new(machine)?;
     let (mut master, slave) = serialport::TTYPort::pair()?;

@@ -1,0 +1,110 @@
+//! The core controller driven purely through its byte interface and ticks, as the
+//! firmware and the simulator drive it: random programs arrive in random-sized chunks
+//! between ticks, and the machine must end exactly on the last target, in whole steps,
+//! having never moved faster than its limits.
+
+use pkmc::config::{MachineConfig, AXES};
+use pkmc::controller::{Controller, Inputs};
+use pkmc::protocol::{
+    decode_frame, encode_frame, Block, CtrlMsg, FrameReader, HostMsg, Motion, Pushed, State,
+    MAX_BODY, MAX_FRAME, PROTOCOL_VERSION,
+};
+use pkmc::units::TICK_HZ;
+use proptest::prelude::*;
+
+fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
+    let mut f = [0u8; MAX_FRAME];
+    let n = encode_frame(seq, msg, &mut f).unwrap();
+    f[..n].to_vec()
+}
+
+fn drain(c: &mut Controller, reader: &mut FrameReader, out: &mut Vec<CtrlMsg>) {
+    let mut buf = [0u8; 512];
+    loop {
+        let n = c.transmit(&mut buf);
+        if n == 0 {
+            return;
+        }
+        for &b in &buf[..n] {
+            if let Pushed::Frame(f) = reader.push(b) {
+                let mut body = [0u8; MAX_BODY];
+                out.push(decode_frame::<CtrlMsg>(f, &mut body).unwrap().1);
+            }
+        }
+    }
+}
+
+fn target_strategy() -> impl Strategy<Value = ([i64; 3], i64, bool)> {
+    (
+        -100_000_000i64..=100_000_000,
+        -150_000_000i64..=150_000_000,
+        -80_000_000i64..=20_000_000,
+        1_000_000i64..=150_000_000, // 1..150 mm/s (above the axis limit too)
+        any::<bool>(),
+    )
+        .prop_map(|(x, y, z, f, rapid)| ([x, y, z], f, rapid))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+    #[test]
+    fn random_programs_end_on_exact_steps_within_limits(
+        moves in prop::collection::vec(target_strategy(), 1..12),
+        chunk in 1usize..64,
+    ) {
+        let m = MachineConfig::cartesian_xyz();
+        let mut c = Controller::new(m.clone()).unwrap();
+        let mut bytes = frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION });
+        for (i, (t, f, rapid)) in moves.iter().enumerate() {
+            let mut target = [0i64; AXES];
+            target[..3].copy_from_slice(t);
+            let b = Block {
+                line: i as u32 + 1,
+                motion: if *rapid { Motion::Rapid } else { Motion::Linear },
+                target,
+                feed: *f,
+            };
+            bytes.extend(frame(i as u16 + 1, &HostMsg::Block(b)));
+        }
+        let (mut reader, mut replies) = (FrameReader::new(), Vec::new());
+        let inputs = Inputs::default();
+        let mut prev = *c.pose();
+        let v_max = m.axes[0].max_velocity as f64 / TICK_HZ as f64 + 2.0; // nm per tick
+        let mut fed = 0;
+        for _ in 0..20_000_000 {
+            if fed < bytes.len() {
+                let end = (fed + chunk).min(bytes.len());
+                c.receive(&bytes[fed..end]);
+                fed = end;
+            }
+            c.tick(&inputs);
+            drain(&mut c, &mut reader, &mut replies);
+            for i in 0..3 {
+                prop_assert!(((c.pose()[i] - prev[i]) as f64).abs() <= v_max);
+            }
+            prev = *c.pose();
+            if fed == bytes.len() && c.state() == State::Idle && !c.has_work() {
+                break;
+            }
+        }
+        let last = moves.last().unwrap().0;
+        prop_assert_eq!(&c.pose()[..3], &last[..]);
+        for j in 0..3 {
+            prop_assert_eq!(c.steps_emitted(j), m.joints[j].scale.steps_at(last[j]));
+        }
+        prop_assert_eq!(c.status().blocks_done as usize, moves.len());
+        let acks = replies.iter().filter(|r| matches!(r, CtrlMsg::Ack { .. })).count();
+        prop_assert_eq!(acks, moves.len());
+    }
+}
+
+#[test]
+fn a_controller_at_rest_emits_no_steps_and_stays_idle() {
+    let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
+    for _ in 0..1000 {
+        let out = c.tick(&Inputs::default());
+        assert!(out.steps.iter().all(|t| t.count == 0));
+    }
+    assert_eq!(c.state(), State::Idle);
+    assert_eq!(c.pose(), &[0; AXES]);
+}
