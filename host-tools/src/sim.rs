@@ -165,9 +165,9 @@ impl ServoPlant {
     }
 }
 
-/// Simulated servo plant parameters used for every servo joint: 20 000 counts/s per
-/// DAC count, τ = 20 ms.
-pub const SERVO_GAIN: f64 = 20_000.0;
+/// Simulated servo plant used for every servo joint: 100 counts/s per DAC count (so
+/// ±2047 counts is ±204 700 counts/s), velocity time constant τ = 20 ms.
+pub const SERVO_GAIN: f64 = 100.0;
 /// See [`SERVO_GAIN`].
 pub const SERVO_TAU_S: f64 = 0.02;
 

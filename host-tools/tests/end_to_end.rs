@@ -229,3 +229,40 @@ fn pkmc_sim_serves_nc_send_on_a_named_port() {
     assert_eq!(r["final_pose"]["x"], 12.5);
     assert_eq!(r["blocks_executed"], r["blocks_sent"]);
 }
+
+#[test]
+fn servo_joints_follow_the_square_and_settle_on_target() {
+    let trace = tmp("servo.csv");
+    let out = nc_send(&[
+        "--sim",
+        "--machine",
+        "examples/machines/cartesian-servo.toml",
+        "--report",
+        "json",
+        "--trace",
+        trace.to_str().unwrap(),
+        "examples/square.ngc",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let r = json(&out);
+    let steps: Vec<i64> = r["final_joint_steps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_i64().unwrap())
+        .collect();
+    // X and Y are encoder counts (1000/mm) of a plant that settles within a few counts;
+    // Z is a stepper and exact.
+    assert!((steps[0] - 12_500).abs() <= 5, "X at {} counts", steps[0]);
+    assert!((steps[1] - 7_250).abs() <= 5, "Y at {} counts", steps[1]);
+    assert_eq!(steps[2], 2000);
+    // Following error stays small along the whole path (columns q1, q2 vs fb1, fb2).
+    let csv = std::fs::read_to_string(&trace).unwrap();
+    let mut worst = 0.0f64;
+    for l in csv.lines().skip(1) {
+        let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+        worst = worst.max((v[8] - v[11]).abs()).max((v[9] - v[12]).abs());
+    }
+    assert!(worst < 0.5, "worst following error {worst} mm");
+    assert!(worst > 0.0, "the plant is simulated, not copied from the command");
+}
