@@ -7,24 +7,25 @@
 //! firmware calls `tick` from its timer interrupt; the simulator calls it with
 //! simulated time; both run exactly this code.
 //!
-//! States: `Idle` (queue empty, not moving) → `Running` (executing blocks) → `Idle`;
-//! any fault → `Alarm`, in which nothing moves. Blocks are planned when they are
-//! queued, so the buffered motion time is known exactly; each block starts and ends at
-//! rest (look-ahead comes with the planner work).
+//! States: `Idle` (nothing to do) ⇄ `Running` (executing) ⇄ `Hold` (feed hold, pause or
+//! tool change: decelerating on the path or stopped on it, resumed by `Resume`); any
+//! fault → `Alarm`, in which nothing moves until `AlarmReset`. Blocks are planned as
+//! they are queued ([`crate::planner`]); control commands bypass the queue.
 
 use crate::config::{ConfigError, Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS, MAX_STEPPERS};
-use crate::interp::{Interpolator, Segment};
-use crate::kinematics::{Joints, Kinematics, MachineKinematics, Pose, Unreachable};
+use crate::interp::{Event, Executor};
+use crate::kinematics::{Joints, MachineKinematics, Unreachable};
+use crate::planner::{Planner, PushError};
 use crate::protocol::{
-    decode_frame, encode_frame, Alarm, CtrlMsg, FrameReader, HostMsg, NakReason, Pushed, State,
-    Status, MAX_BODY, MAX_FRAME, PROTOCOL_VERSION,
+    decode_frame, encode_frame, Alarm, AlarmCause, Aux, Block, Control, CtrlMsg, FrameReader,
+    HostMsg, Motion, NakReason, Pushed, State, Status, MAX_BODY, MAX_FRAME, NO_JOINT,
+    PROTOCOL_VERSION,
 };
 use crate::servo::ServoLoop;
 use crate::stepper::{StepScheduler, StepTrain};
 use crate::units::TICK_HZ;
 
-/// Blocks the controller buffers.
-pub const QUEUE_CAPACITY: usize = 64;
+pub use crate::planner::QUEUE_CAPACITY;
 /// Bytes of outgoing frames buffered between two `transmit` calls.
 pub const TX_CAPACITY: usize = 2048;
 /// Ticks between two unsolicited status messages (50 ms at 1 kHz).
@@ -66,23 +67,29 @@ pub struct Controller {
     tx_seq: u16,
     session: bool,
     expected_seq: u16,
-    queue: heapless::Deque<Segment, QUEUE_CAPACITY>,
-    queued_end: Pose,
-    queued_ticks: u64,
-    interp: Interpolator,
-    pose: Pose,
+    last_control: Option<u16>,
+    planner: Planner,
+    exec: Executor,
     joints: Joints,
     steps: StepScheduler,
     servos: [ServoLoop; MAX_SERVOS],
     trains: [StepTrain; MAX_JOINTS],
     state: State,
     alarm: Option<Alarm>,
-    line: u32,
-    blocks_done: u32,
+    abort_pending: bool,
+    spindle: Aux,
     motion_ticks: u64,
     since_status: u32,
     out: Outputs,
     stats: LinkStats,
+}
+
+fn alarm_of(why: Unreachable, line: u32) -> Alarm {
+    let (cause, joint) = match why {
+        Unreachable::JointLimit { joint } => (AlarmCause::JointLimit, joint),
+        _ => (AlarmCause::Unreachable, NO_JOINT),
+    };
+    Alarm { cause, joint, line }
 }
 
 impl Controller {
@@ -112,19 +119,17 @@ impl Controller {
             tx_seq: 0,
             session: false,
             expected_seq: 0,
-            queue: heapless::Deque::new(),
-            queued_end: pose,
-            queued_ticks: 0,
-            interp: Interpolator::new(),
-            pose,
+            last_control: None,
+            planner: Planner::new(pose),
+            exec: Executor::new(pose),
             joints,
             steps,
             servos,
             trains: [StepTrain::default(); MAX_JOINTS],
             state: State::Idle,
             alarm: None,
-            line: 0,
-            blocks_done: 0,
+            abort_pending: false,
+            spindle: Aux::SpindleOff,
             motion_ticks: 0,
             since_status: 0,
             out: Outputs::default(),
@@ -141,8 +146,8 @@ impl Controller {
         self.state
     }
     /// Commanded pose, axis units.
-    pub fn pose(&self) -> &Pose {
-        &self.pose
+    pub fn pose(&self) -> &[i64; crate::config::AXES] {
+        &self.exec.pose
     }
     /// Commanded joint positions, axis units.
     pub fn joints(&self) -> &Joints {
@@ -154,15 +159,23 @@ impl Controller {
     }
     /// NC line of the executing or last executed block.
     pub fn line(&self) -> u32 {
-        self.line
+        self.exec.line
+    }
+    /// Spindle state last commanded.
+    pub fn spindle(&self) -> Aux {
+        self.spindle
     }
     /// Link counters.
     pub fn link_stats(&self) -> LinkStats {
         self.stats
     }
-    /// Is motion executing or queued?
+    /// Is motion executing or queued (time must advance for it)?
     pub fn has_work(&self) -> bool {
-        self.interp.busy() || !self.queue.is_empty()
+        match self.state {
+            State::Alarm | State::EStop => false,
+            State::Hold => !self.exec.stopped(),
+            _ => self.exec.busy() || !self.planner.is_empty(),
+        }
     }
 
     /// Feeds bytes received from the link.
@@ -223,18 +236,14 @@ impl Controller {
     }
 
     fn buffered_ms(&self) -> u32 {
-        let ticks = self.queued_ticks + self.interp.remaining_ticks() as u64;
-        (ticks * 1000 / TICK_HZ as u64).min(u32::MAX as u64) as u32
-    }
-
-    fn free_slots(&self) -> u16 {
-        (QUEUE_CAPACITY - self.queue.len()) as u16
+        let ticks = self.planner.buffered_ticks() + self.exec.remaining_ticks();
+        (ticks * 1000.0 / TICK_HZ as f32).min(u32::MAX as f32) as u32
     }
 
     fn ack(&mut self, seq: u16) {
         self.send(&CtrlMsg::Ack {
             seq,
-            free_slots: self.free_slots(),
+            free_slots: self.planner.free() as u16,
             buffered_ms: self.buffered_ms(),
         });
     }
@@ -248,7 +257,8 @@ impl Controller {
                 }
                 self.session = true;
                 self.expected_seq = seq.wrapping_add(1);
-                self.blocks_done = 0;
+                self.last_control = None;
+                self.exec.completed = 0;
                 self.motion_ticks = 0;
                 self.send(&CtrlMsg::HelloAck {
                     version: PROTOCOL_VERSION,
@@ -259,12 +269,12 @@ impl Controller {
                 let s = self.status();
                 self.send(&CtrlMsg::Status(s));
             }
-            HostMsg::Abort => {
-                self.interp.stop();
-                self.queue.clear();
-                self.queued_ticks = 0;
-                self.queued_end = self.pose;
-                self.state = State::Idle;
+            HostMsg::Control { id, cmd } => {
+                if self.last_control != Some(id) {
+                    self.last_control = Some(id);
+                    self.control(cmd);
+                }
+                self.send(&CtrlMsg::ControlAck { id });
             }
             HostMsg::Block(block) => {
                 if !self.session {
@@ -281,33 +291,102 @@ impl Controller {
                     self.nak(NakReason::Gap);
                     return;
                 }
-                if self.queue.is_full() {
-                    self.nak(NakReason::QueueFull);
+                if matches!(self.state, State::Alarm | State::EStop) {
+                    // Accepted and dropped: the job is over until the alarm is reset.
+                    self.expected_seq = seq.wrapping_add(1);
+                    self.ack(seq);
                     return;
                 }
-                let seg = Segment::plan(&block, &self.queued_end, &self.machine, &self.kin);
-                if seg.unreachable.is_none() {
-                    self.queued_end = block.target;
+                match self.planner.push(&block, &self.machine, &self.kin) {
+                    Ok(()) => {
+                        self.expected_seq = seq.wrapping_add(1);
+                        self.ack(seq);
+                    }
+                    Err(PushError::Full) => self.nak(NakReason::QueueFull),
+                    Err(PushError::Geometry(_)) => self.nak(NakReason::BadBlock),
                 }
-                self.queued_ticks += seg.ticks() as u64;
-                let _ = self.queue.push_back(seg);
-                self.expected_seq = seq.wrapping_add(1);
-                self.ack(seq);
             }
         }
+    }
+
+    fn control(&mut self, cmd: Control) {
+        match cmd {
+            Control::Hold => {
+                if matches!(self.state, State::Running | State::Idle) {
+                    self.planner.hold = true;
+                    self.exec.replan(&mut self.planner);
+                    self.state = State::Hold;
+                }
+            }
+            Control::Resume => {
+                if self.state == State::Hold && !self.abort_pending {
+                    self.planner.hold = false;
+                    self.exec.paused = false;
+                    self.exec.replan(&mut self.planner);
+                    self.state = State::Running;
+                }
+            }
+            Control::Abort => {
+                if matches!(self.state, State::Running | State::Hold | State::Idle) {
+                    self.planner.hold = true;
+                    self.abort_pending = true;
+                    self.exec.replan(&mut self.planner);
+                    self.state = State::Hold;
+                }
+            }
+            Control::AlarmReset => {
+                if self.state == State::Alarm {
+                    self.alarm = None;
+                    self.state = State::Idle;
+                }
+            }
+            Control::FeedOverride(p) => {
+                self.planner.feed_override = p.clamp(1, 200);
+                self.exec.replan(&mut self.planner);
+            }
+            Control::Jog {
+                axis,
+                distance,
+                feed,
+            } => {
+                if self.state == State::Idle && !self.has_work() && (axis as usize) < 6 {
+                    let mut target = self.exec.pose;
+                    target[axis as usize] = target[axis as usize].saturating_add(distance);
+                    self.push_motion(Motion::Linear, target, feed.max(1));
+                }
+            }
+            Control::Home => {
+                if self.state == State::Idle && !self.has_work() {
+                    self.push_motion(Motion::Rapid, self.machine.home, 0);
+                }
+            }
+        }
+    }
+
+    fn push_motion(&mut self, motion: Motion, target: [i64; 6], feed: i64) {
+        let b = Block {
+            line: 0,
+            motion,
+            target,
+            feed,
+            tolerance_nm: 0,
+        };
+        let _ = self.planner.push(&b, &self.machine, &self.kin);
     }
 
     /// A status snapshot.
     pub fn status(&self) -> Status {
         Status {
             state: self.state,
-            line: self.line,
-            blocks_done: self.blocks_done,
+            line: self.exec.line,
+            blocks_done: self.exec.completed,
             motion_ticks: self.motion_ticks,
-            pose: self.pose,
+            pose: self.exec.pose,
             joints: self.joints,
+            speed: ((self.exec.speed as i128 * TICK_HZ as i128) >> 32) as i64,
             buffered_ms: self.buffered_ms(),
-            free_slots: self.free_slots(),
+            free_slots: self.planner.free() as u16,
+            feed_override: self.planner.feed_override,
             alarm: self.alarm,
         }
     }
@@ -315,61 +394,52 @@ impl Controller {
     fn raise(&mut self, alarm: Alarm) {
         self.alarm = Some(alarm);
         self.state = State::Alarm;
-        self.interp.stop();
-        self.queue.clear();
-        self.queued_ticks = 0;
-        self.queued_end = self.pose;
-    }
-
-    /// Starts the next queued segment, if any; completes zero-length ones at once.
-    fn start_next(&mut self) {
-        while !self.interp.busy() {
-            let Some(seg) = self.queue.pop_front() else {
-                return;
-            };
-            self.queued_ticks -= seg.ticks() as u64;
-            self.line = seg.line;
-            if let Some(why) = seg.unreachable {
-                let joint = match why {
-                    Unreachable::JointLimit { joint } => joint,
-                    _ => u8::MAX,
-                };
-                self.raise(Alarm::Unreachable {
-                    line: seg.line,
-                    joint,
-                });
-                return;
-            }
-            if seg.ticks() == 0 {
-                self.blocks_done += 1;
-                continue;
-            }
-            self.interp.start(seg);
-        }
+        self.exec.stop();
+        self.planner.hold = false;
+        self.abort_pending = false;
+        self.planner.clear(self.exec.pose);
     }
 
     /// Advances one interpolation period.
     pub fn tick(&mut self, inputs: &Inputs) -> &Outputs {
-        if self.state != State::Alarm {
-            self.start_next();
-        }
-        if self.interp.busy() {
-            self.state = State::Running;
-            self.motion_ticks += 1;
-            if self.interp.tick(&mut self.pose) {
-                self.blocks_done += 1;
+        if !matches!(self.state, State::Alarm | State::EStop) {
+            let moving = self.exec.busy() || !self.planner.is_empty();
+            if moving {
+                self.motion_ticks += 1;
+                if self.state == State::Idle {
+                    self.state = State::Running;
+                }
             }
-            let mut joints = self.joints;
-            match self.kin.inverse(&self.pose, &mut joints) {
-                Ok(()) => self.joints = joints,
-                Err(_) => self.raise(Alarm::Unreachable {
-                    line: self.line,
-                    joint: u8::MAX,
-                }),
+            match self.exec.tick(&mut self.planner) {
+                Some(Event::Unreachable { line, why }) => self.raise(alarm_of(why, line)),
+                Some(Event::Aux { aux, .. }) => match aux {
+                    Aux::Pause(_) | Aux::ToolChange(_) => self.state = State::Hold,
+                    Aux::SpindleOff | Aux::SpindleCw(_) | Aux::SpindleCcw(_) => self.spindle = aux,
+                    _ => {}
+                },
+                None => {}
             }
-        }
-        if self.state == State::Running && !self.has_work() {
-            self.state = State::Idle;
+            if self.state != State::Alarm {
+                let mut joints = self.joints;
+                match self
+                    .kin
+                    .inverse_checked(&self.exec.pose, &self.machine.joints, &mut joints)
+                {
+                    Ok(()) => self.joints = joints,
+                    Err(why) => self.raise(alarm_of(why, self.exec.line)),
+                }
+            }
+            if self.state == State::Hold && self.abort_pending && self.exec.stopped() {
+                self.exec.stop();
+                self.planner.clear(self.exec.pose);
+                self.planner.hold = false;
+                self.abort_pending = false;
+                self.exec.paused = false;
+                self.state = State::Idle;
+            }
+            if self.state == State::Running && !self.exec.busy() && self.planner.is_empty() {
+                self.state = State::Idle;
+            }
         }
         self.steps
             .tick(&self.machine.joints, &self.joints, &mut self.trains);
@@ -403,7 +473,7 @@ impl Controller {
                 }
             }
         }
-        self.out.enable = self.state != State::Alarm;
+        self.out.enable = !matches!(self.state, State::Alarm | State::EStop);
         self.since_status += 1;
         if self.session && self.since_status >= STATUS_EVERY_TICKS {
             self.since_status = 0;
@@ -417,7 +487,6 @@ impl Controller {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::protocol::{Block, Motion};
 
     fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
         let mut f = [0u8; MAX_FRAME];
@@ -445,11 +514,11 @@ mod tests {
             motion: Motion::Linear,
             target: [x_mm * 1_000_000, 0, 0, 0, 0, 0],
             feed: 50_000_000,
+            tolerance_nm: u32::MAX,
         })
     }
 
-    #[test]
-    fn a_block_is_acknowledged_executed_and_ends_on_its_target() {
+    fn session() -> Controller {
         let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
         c.receive(&frame(
             0,
@@ -457,6 +526,18 @@ mod tests {
                 version: PROTOCOL_VERSION,
             },
         ));
+        c
+    }
+
+    fn run(c: &mut Controller, ticks: usize) {
+        for _ in 0..ticks {
+            c.tick(&Inputs::default());
+        }
+    }
+
+    #[test]
+    fn a_block_is_acknowledged_executed_and_ends_on_its_target() {
+        let mut c = session();
         c.receive(&frame(1, &line_to(10, 7)));
         let r = replies(&mut c);
         assert!(matches!(r[0], CtrlMsg::HelloAck { .. }));
@@ -468,10 +549,7 @@ mod tests {
                 ..
             }
         ));
-        let inputs = Inputs::default();
-        for _ in 0..10_000 {
-            c.tick(&inputs);
-        }
+        run(&mut c, 10_000);
         assert_eq!(c.state(), State::Idle);
         assert_eq!(c.pose()[0], 10_000_000);
         assert_eq!(c.steps_emitted(0), 4000);
@@ -480,13 +558,7 @@ mod tests {
 
     #[test]
     fn a_duplicate_block_is_acknowledged_but_not_queued_twice() {
-        let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
-        c.receive(&frame(
-            0,
-            &HostMsg::Hello {
-                version: PROTOCOL_VERSION,
-            },
-        ));
+        let mut c = session();
         c.receive(&frame(1, &line_to(10, 1)));
         c.receive(&frame(1, &line_to(10, 1)));
         let r = replies(&mut c);
@@ -502,13 +574,7 @@ mod tests {
 
     #[test]
     fn a_gap_and_a_corrupt_frame_are_refused_with_the_expected_sequence() {
-        let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
-        c.receive(&frame(
-            0,
-            &HostMsg::Hello {
-                version: PROTOCOL_VERSION,
-            },
-        ));
+        let mut c = session();
         c.receive(&frame(5, &line_to(10, 1)));
         let mut bad = frame(1, &line_to(10, 1));
         bad[3] ^= 0x10;
@@ -533,20 +599,84 @@ mod tests {
 
     #[test]
     fn an_unreachable_block_raises_an_alarm_naming_line_and_joint() {
-        let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
-        c.receive(&frame(
-            0,
-            &HostMsg::Hello {
-                version: PROTOCOL_VERSION,
-            },
-        ));
-        c.receive(&frame(1, &line_to(500, 42)));
-        c.tick(&Inputs::default());
+        let mut c = session();
+        c.receive(&frame(1, &line_to(50, 41)));
+        c.receive(&frame(2, &line_to(500, 42)));
+        run(&mut c, 5000);
         assert_eq!(c.state(), State::Alarm);
         assert_eq!(
             c.status().alarm,
-            Some(Alarm::Unreachable { line: 42, joint: 0 })
+            Some(Alarm {
+                cause: AlarmCause::JointLimit,
+                joint: 0,
+                line: 42
+            })
         );
-        assert_eq!(c.pose()[0], 0);
+        // It stopped at rest at the end of the reachable block.
+        assert_eq!(c.pose()[0], 50_000_000);
+    }
+
+    #[test]
+    fn a_feed_hold_stops_on_the_path_within_the_braking_distance_and_resumes() {
+        let mut c = session();
+        c.receive(&frame(1, &line_to(80, 1)));
+        run(&mut c, 1000); // at 50 mm/s by now
+        let v = c.status().speed as f64 / 1e6; // mm/s
+        let at = c.pose()[0];
+        c.receive(&frame(
+            0,
+            &HostMsg::Control {
+                id: 1,
+                cmd: Control::Hold,
+            },
+        ));
+        run(&mut c, 500);
+        assert_eq!(c.state(), State::Hold);
+        assert_eq!(c.status().speed, 0);
+        let stop = (c.pose()[0] - at) as f64 / 1e6;
+        let limit = v * v / (2.0 * 1000.0) + v * 1e-3;
+        assert!(
+            stop <= limit + 1e-6,
+            "stopped after {stop} mm, limit {limit}"
+        );
+        assert_eq!(c.pose()[1], 0, "on the path");
+        let held = *c.pose();
+        run(&mut c, 500);
+        assert_eq!(c.pose(), &held, "a hold keeps its position");
+        c.receive(&frame(
+            0,
+            &HostMsg::Control {
+                id: 2,
+                cmd: Control::Resume,
+            },
+        ));
+        run(&mut c, 5000);
+        assert_eq!(c.state(), State::Idle);
+        assert_eq!(c.pose()[0], 80_000_000);
+    }
+
+    #[test]
+    fn a_repeated_control_id_is_acknowledged_but_acted_on_once() {
+        let mut c = session();
+        c.receive(&frame(
+            0,
+            &HostMsg::Control {
+                id: 9,
+                cmd: Control::FeedOverride(50),
+            },
+        ));
+        c.receive(&frame(
+            0,
+            &HostMsg::Control {
+                id: 9,
+                cmd: Control::FeedOverride(150),
+            },
+        ));
+        assert_eq!(c.status().feed_override, 50);
+        let acks = replies(&mut c)
+            .iter()
+            .filter(|m| matches!(m, CtrlMsg::ControlAck { id: 9 }))
+            .count();
+        assert_eq!(acks, 2);
     }
 }

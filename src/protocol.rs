@@ -12,22 +12,80 @@ use crate::config::{AXES, MAX_JOINTS};
 use serde::{Deserialize, Serialize};
 
 /// Protocol version, exchanged in the handshake; both sides must agree.
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
 /// Largest unencoded frame body (sequence number, message and CRC), bytes.
 pub const MAX_BODY: usize = 240;
 /// Largest encoded frame including its delimiter, bytes.
 pub const MAX_FRAME: usize = crate::cobs::max_encoded_len(MAX_BODY) + 1;
 
-/// Kind of motion of a block.
+/// Arc plane: the in-plane axes are XY, ZX or YZ and the helix axis Z, Y or X.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Plane {
+    /// G17.
+    Xy,
+    /// G18.
+    Zx,
+    /// G19.
+    Yz,
+}
+
+impl Plane {
+    /// Pose indices of the first and second in-plane axes and of the helix axis.
+    pub const fn axes(self) -> (usize, usize, usize) {
+        match self {
+            Plane::Xy => (0, 1, 2),
+            Plane::Zx => (2, 0, 1),
+            Plane::Yz => (1, 2, 0),
+        }
+    }
+}
+
+/// Auxiliary functions executed in program order (they wait for motion before them).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Aux {
+    /// Spindle off (M5).
+    SpindleOff,
+    /// Spindle clockwise at rpm (M3).
+    SpindleCw(u32),
+    /// Spindle counter-clockwise at rpm (M4).
+    SpindleCcw(u32),
+    /// Mist coolant (M7).
+    Mist,
+    /// Flood coolant (M8).
+    Flood,
+    /// Coolant off (M9).
+    CoolantOff,
+    /// Tool change to tool n (M6); the controller holds until resumed.
+    ToolChange(u32),
+    /// Program pause (M0, or M1 when `true`); the controller holds until resumed.
+    Pause(bool),
+}
+
+/// What a block does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Motion {
     /// Rapid positioning at the machine's limits (G0).
     Rapid,
-    /// Straight feed move at the block's feed (G1).
+    /// Straight feed move (G1).
     Linear,
+    /// Circular or helical feed move (G2/G3) about `center` in `plane`.
+    Arc {
+        /// Centre, in-plane coordinates (first, second axis of the plane), nm.
+        center: [i64; 2],
+        /// Plane.
+        plane: Plane,
+        /// G2 (clockwise seen from the positive helix axis).
+        clockwise: bool,
+        /// Extra full turns (P − 1).
+        turns: u16,
+    },
+    /// Dwell (G4), ms; `target` must equal the current pose.
+    Dwell(u32),
+    /// Auxiliary function; `target` must equal the current pose.
+    Aux(Aux),
 }
 
-/// One canonical motion block, in absolute machine pose (axis units, see
+/// One canonical block, in absolute workpiece pose (axis units, see
 /// [`crate::units`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Block {
@@ -37,9 +95,39 @@ pub struct Block {
     pub motion: Motion,
     /// End pose X Y Z (nm) A B C (n°).
     pub target: [i64; AXES],
-    /// Path feed, nm/s along XYZ (or n°/s when only rotary axes move); ignored for
-    /// rapids.
+    /// Path feed, nm/s along XYZ (or µ°/s when only rotary axes move); ignored for
+    /// rapids, dwells and auxiliary functions.
     pub feed: i64,
+    /// Largest deviation allowed when blending into the next block, nm (G64 P);
+    /// 0 stops exactly at the block's end (G61), `u32::MAX` blends as the limits allow.
+    pub tolerance_nm: u32,
+}
+
+/// Commands that bypass the block queue. Each is idempotent.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Control {
+    /// Feed hold: decelerate on the path and stop; position kept.
+    Hold,
+    /// Resume after a hold, a pause or a tool change.
+    Resume,
+    /// Stop (decelerating on the path) and drop the queue.
+    Abort,
+    /// Clear an alarm once its cause is gone; the controller stays still.
+    AlarmReset,
+    /// Feed override, percent (1..=200).
+    FeedOverride(u16),
+    /// Jog one pose axis (0..6) by `distance` axis units at `feed` units/s; only when
+    /// idle.
+    Jog {
+        /// Pose axis index.
+        axis: u8,
+        /// Signed distance, nm or n°.
+        distance: i64,
+        /// Speed, units/s.
+        feed: i64,
+    },
+    /// Home the machine: go to the configured home pose.
+    Home,
 }
 
 /// Messages from the host to the controller.
@@ -50,12 +138,19 @@ pub enum HostMsg {
         /// The host's [`PROTOCOL_VERSION`].
         version: u16,
     },
-    /// Queues a motion block.
+    /// Queues a motion block (sequenced).
     Block(Block),
     /// Asks for a [`Status`] now (bypasses the queue).
     StatusRequest,
-    /// Stops motion and drops the queue (bypasses the queue).
-    Abort,
+    /// A control command (bypasses the queue); answered by `ControlAck { id }`. The
+    /// host resends it with the same `id` until acknowledged; a repeated `id` is
+    /// acknowledged again but not acted on twice.
+    Control {
+        /// Host-chosen identifier.
+        id: u16,
+        /// The command.
+        cmd: Control,
+    },
 }
 
 /// Controller state.
@@ -65,24 +160,59 @@ pub enum State {
     Idle,
     /// Executing blocks.
     Running,
+    /// Feed hold, pause or tool change: stopping or stopped on the path.
+    Hold,
+    /// Homing.
+    Homing,
     /// Stopped by a fault; see the alarm.
     Alarm,
+    /// Emergency stop input active.
+    EStop,
 }
 
-/// Why the controller raised an alarm.
+/// What raised an alarm.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[non_exhaustive]
-pub enum Alarm {
-    /// A block's pose is outside the machine's reach (joint index, or 255 for none).
-    Unreachable {
-        /// NC line of the block.
-        line: u32,
-        /// Joint whose limit the pose breaks, if one.
-        joint: u8,
-    },
+pub enum AlarmCause {
+    /// A pose outside the machine's reach.
+    Unreachable,
+    /// A joint would leave its travel.
+    JointLimit,
+    /// A pose too near a singularity.
+    Singularity,
     /// The host aborted the job.
     Aborted,
+    /// Emergency stop.
+    EStop,
+    /// A limit switch tripped.
+    LimitSwitch,
+    /// A soft limit would be crossed.
+    SoftLimit,
+    /// A drive reported a fault.
+    DriveFault,
+    /// Following error beyond its limit.
+    FollowingError,
+    /// The link went silent while moving.
+    LinkLoss,
+    /// The firmware watchdog fired.
+    Watchdog,
+    /// Host and controller disagree about the machine.
+    MachineMismatch,
 }
+
+/// An alarm: its cause, the joint concerned (`NO_JOINT` if none) and the NC line.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Alarm {
+    /// Cause.
+    pub cause: AlarmCause,
+    /// Joint index (0-based), or [`NO_JOINT`].
+    pub joint: u8,
+    /// NC line executing when it was raised (0 for none).
+    pub line: u32,
+}
+
+/// `Alarm::joint` when no joint is concerned.
+pub const NO_JOINT: u8 = u8::MAX;
 
 /// Why a frame was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -98,6 +228,8 @@ pub enum NakReason {
     Version,
     /// The message came before the handshake.
     NoSession,
+    /// The block is malformed (e.g. an arc whose end is off its circle).
+    BadBlock,
 }
 
 /// Periodic and requested controller status.
@@ -115,10 +247,14 @@ pub struct Status {
     pub pose: [i64; AXES],
     /// Commanded joint positions, axis units.
     pub joints: [i64; MAX_JOINTS],
+    /// Path speed now, nm/s (µ°/s for rotary-only moves).
+    pub speed: i64,
     /// Motion buffered in the queue and the executing block, ms.
     pub buffered_ms: u32,
     /// Free block-queue slots.
     pub free_slots: u16,
+    /// Feed override, percent.
+    pub feed_override: u16,
     /// Active alarm, if any.
     pub alarm: Option<Alarm>,
 }
@@ -133,7 +269,7 @@ pub enum CtrlMsg {
         /// Block-queue capacity (initial credits).
         queue_capacity: u16,
     },
-    /// Every host message up to and including `seq` was accepted.
+    /// Every block up to and including `seq` was accepted.
     Ack {
         /// Highest accepted sequence number.
         seq: u16,
@@ -148,6 +284,11 @@ pub enum CtrlMsg {
         expected: u16,
         /// Why.
         reason: NakReason,
+    },
+    /// A control command was received (and acted on, the first time).
+    ControlAck {
+        /// The command's id.
+        id: u16,
     },
     /// Controller status.
     Status(Status),
@@ -275,9 +416,15 @@ mod tests {
     fn sample_block() -> HostMsg {
         HostMsg::Block(Block {
             line: 12,
-            motion: Motion::Linear,
+            motion: Motion::Arc {
+                center: [i64::MIN, i64::MAX],
+                plane: Plane::Zx,
+                clockwise: true,
+                turns: u16::MAX,
+            },
             target: [10_000_000, -5, i64::MAX, i64::MIN, 0, 1],
             feed: 16_666_666,
+            tolerance_nm: u32::MAX,
         })
     }
 
@@ -306,11 +453,14 @@ mod tests {
             motion_ticks: u64::MAX,
             pose: [i64::MIN; AXES],
             joints: [i64::MIN; MAX_JOINTS],
+            speed: i64::MIN,
             buffered_ms: u32::MAX,
             free_slots: u16::MAX,
-            alarm: Some(Alarm::Unreachable {
-                line: u32::MAX,
+            feed_override: u16::MAX,
+            alarm: Some(Alarm {
+                cause: AlarmCause::FollowingError,
                 joint: 255,
+                line: u32::MAX,
             }),
         });
         let mut frame = [0u8; MAX_FRAME];

@@ -1,7 +1,7 @@
 //! The core controller driven purely through its byte interface and ticks, as the
 //! firmware and the simulator drive it: random programs arrive in random-sized chunks
 //! between ticks, and the machine must end exactly on the last target, in whole steps,
-//! having never moved faster than its limits.
+//! having never moved faster or accelerated harder than its limits on any axis.
 
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::controller::{Controller, Inputs};
@@ -63,13 +63,17 @@ proptest! {
                 motion: if *rapid { Motion::Rapid } else { Motion::Linear },
                 target,
                 feed: *f,
+                tolerance_nm: if i % 3 == 0 { 0 } else { u32::MAX },
             };
             bytes.extend(frame(i as u16 + 1, &HostMsg::Block(b)));
         }
         let (mut reader, mut replies) = (FrameReader::new(), Vec::new());
         let inputs = Inputs::default();
         let mut prev = *c.pose();
+        let mut prev_v = [0i64; 3];
         let v_max = m.axes[0].max_velocity as f64 / TICK_HZ as f64 + 2.0; // nm per tick
+        // nm per tick², plus two nanometres of rounding per sample.
+        let a_max = m.axes[0].max_accel as f64 / (TICK_HZ as f64 * TICK_HZ as f64) + 4.0;
         let mut fed = 0;
         for _ in 0..20_000_000 {
             if fed < bytes.len() {
@@ -80,7 +84,10 @@ proptest! {
             c.tick(&inputs);
             drain(&mut c, &mut reader, &mut replies);
             for i in 0..3 {
-                prop_assert!(((c.pose()[i] - prev[i]) as f64).abs() <= v_max);
+                let v = c.pose()[i] - prev[i];
+                prop_assert!((v as f64).abs() <= v_max, "axis {} speed {} nm/tick", i, v);
+                prop_assert!(((v - prev_v[i]) as f64).abs() <= a_max, "axis {} accel {} nm/tick²", i, v - prev_v[i]);
+                prev_v[i] = v;
             }
             prev = *c.pose();
             if fed == bytes.len() && c.state() == State::Idle && !c.has_work() {

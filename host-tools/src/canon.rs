@@ -9,28 +9,8 @@
 
 use pkmc::config::AXES;
 
-/// Arc plane (G17, G18, G19). The in-plane axes are, in order: XY, ZX, YZ; the third
-/// axis is the helix axis (Z, Y, X).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Plane {
-    /// G17: X then Y; helix along Z.
-    Xy,
-    /// G18: Z then X; helix along Y.
-    Zx,
-    /// G19: Y then Z; helix along X.
-    Yz,
-}
-
-impl Plane {
-    /// Pose indices of the two in-plane axes (first, second) and the helix axis.
-    pub const fn axes(self) -> (usize, usize, usize) {
-        match self {
-            Plane::Xy => (0, 1, 2),
-            Plane::Zx => (2, 0, 1),
-            Plane::Yz => (1, 2, 0),
-        }
-    }
-}
+/// Arc plane (G17, G18, G19): the protocol's own type, so the two cannot drift.
+pub use pkmc::protocol::Plane;
 
 /// Feed of a feed move.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -189,9 +169,9 @@ impl Canon {
     /// End pose of a motion command.
     pub fn target(&self) -> Option<&[i64; AXES]> {
         match self {
-            Canon::Rapid { target, .. } | Canon::Linear { target, .. } | Canon::Arc { target, .. } => {
-                Some(target)
-            }
+            Canon::Rapid { target, .. }
+            | Canon::Linear { target, .. }
+            | Canon::Arc { target, .. } => Some(target),
             _ => None,
         }
     }

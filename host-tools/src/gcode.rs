@@ -309,7 +309,7 @@ impl Interpreter {
             }
         }
         let feed = match motion {
-            Motion::Rapid => 0,
+            Motion::Rapid | Motion::Arc { .. } | Motion::Dwell(_) | Motion::Aux(_) => 0,
             Motion::Linear => {
                 let f = self.feed.ok_or((
                     motion_word.map_or(axis_col, |(_, c)| c),
@@ -333,6 +333,7 @@ impl Interpreter {
             motion,
             target,
             feed,
+            tolerance_nm: u32::MAX,
         }))
     }
 }

@@ -256,7 +256,7 @@ impl Link {
                             return Ok(JobEnd::Alarm);
                         }
                     }
-                    CtrlMsg::HelloAck { .. } => {}
+                    CtrlMsg::HelloAck { .. } | CtrlMsg::ControlAck { .. } => {}
                 }
             }
             let silent = last_heard.elapsed();

@@ -97,7 +97,7 @@ fn the_square_trace_never_exceeds_feed_or_acceleration() {
             .expect("line has a block");
         match b.motion {
             pkmc::protocol::Motion::Rapid => v_max_axis * 3f64.sqrt(),
-            pkmc::protocol::Motion::Linear => b.feed as f64 * 1e-6,
+            _ => b.feed as f64 * 1e-6,
         }
     };
     let a_max = m.axes[0].max_accel as f64 * 1e-6;
@@ -243,7 +243,12 @@ fn servo_joints_follow_the_square_and_settle_on_target() {
         trace.to_str().unwrap(),
         "examples/square.ngc",
     ]);
-    assert_eq!(out.status.code(), Some(0), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let r = json(&out);
     let steps: Vec<i64> = r["final_joint_steps"]
         .as_array()
@@ -264,5 +269,8 @@ fn servo_joints_follow_the_square_and_settle_on_target() {
         worst = worst.max((v[8] - v[11]).abs()).max((v[9] - v[12]).abs());
     }
     assert!(worst < 0.5, "worst following error {worst} mm");
-    assert!(worst > 0.0, "the plant is simulated, not copied from the command");
+    assert!(
+        worst > 0.0,
+        "the plant is simulated, not copied from the command"
+    );
 }

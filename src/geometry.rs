@@ -1,0 +1,353 @@
+//! Path geometry of a block: where the tool is after `s` nanometres along it.
+//!
+//! Straight moves: pose = start + u·s with the direction u = Δ/S stored per axis in
+//! Q2.62, so a pose is exact to well below a nanometre and the end (s = S) is snapped
+//! to the programmed target. Arcs and helices follow the true circle, never chords:
+//! the angle advances linearly with s (turns Q64), the radius moves linearly from the
+//! start radius to the end radius (an end within tolerance of the circle makes a gentle
+//! spiral, as LinuxCNC does), and the helix axis and A B C move linearly with s. The
+//! in-plane position is centre + r·(cos φ, sin φ) with [`crate::fixed::sin_cos`].
+//!
+//! Path length S is measured over X Y Z (arc: sqrt((r̄·|sweep|)² + helix²)); a move of
+//! rotary axes only is measured in n° instead.
+
+use crate::config::AXES;
+use crate::protocol::{Block, Motion, Plane};
+
+/// Shape of a path.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Shape {
+    /// Straight line; `unit[i]` = Δᵢ/S in Q2.62.
+    Line {
+        /// Direction per axis, Q2.62.
+        unit: [i64; AXES],
+    },
+    /// Arc or helix.
+    Arc {
+        /// Plane.
+        plane: Plane,
+        /// Centre (first, second in-plane axis), nm.
+        center: [i64; 2],
+        /// Start radius, nm.
+        r0: i64,
+        /// End radius minus start radius, nm.
+        dr: i64,
+        /// Start angle, turns Q64 (wrapping).
+        phi0: u64,
+        /// Signed sweep, turns Q64 (more than one turn for multi-turn arcs).
+        sweep: i128,
+        /// Per-axis direction of the linear part (helix axis and A B C), Q2.62;
+        /// in-plane entries are 0.
+        unit: [i64; AXES],
+    },
+    /// No motion (dwell, auxiliary function, zero-length move).
+    Point,
+}
+
+/// A block's geometry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Path {
+    /// Start pose.
+    pub start: [i64; AXES],
+    /// End pose (exact).
+    pub end: [i64; AXES],
+    /// Length, nm (or n° for rotary-only moves).
+    pub length: i64,
+    /// Measured over rotary axes (rotary-only move).
+    pub rotary_only: bool,
+    /// Shape.
+    pub shape: Shape,
+}
+
+const Q62: f64 = 4_611_686_018_427_387_904.0;
+const TURN_Q64: f64 = 18_446_744_073_709_551_616.0;
+
+/// `x` modulo `m`, in [0, m).
+fn wrap(x: f64, m: f64) -> f64 {
+    x - libm::floor(x / m) * m
+}
+
+fn unit_q62(d: i64, length: f64) -> i64 {
+    if length <= 0.0 {
+        0
+    } else {
+        libm::round(d as f64 / length * Q62) as i64
+    }
+}
+
+/// Why a block's geometry is refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GeometryError {
+    /// Start and end radius differ by more than the controller accepts.
+    ArcEndOffCircle,
+    /// An arc with zero radius.
+    ArcWithoutRadius,
+}
+
+/// Largest start/end radius difference accepted for an arc, nm (the host checks its
+/// own, tighter, tolerance; this only guards the controller).
+pub const ARC_RADIUS_SLACK_NM: i64 = 50_000;
+
+impl Path {
+    /// Geometry of `block` starting at `start`.
+    pub fn new(block: &Block, start: &[i64; AXES]) -> Result<Path, GeometryError> {
+        let end = match block.motion {
+            Motion::Dwell(_) | Motion::Aux(_) => *start,
+            _ => block.target,
+        };
+        let mut delta = [0i64; AXES];
+        for (d, (e, s)) in delta.iter_mut().zip(end.iter().zip(start)) {
+            *d = e.wrapping_sub(*s);
+        }
+        let sq = |r: core::ops::Range<usize>| -> f64 {
+            delta[r].iter().map(|d| (*d as f64) * (*d as f64)).sum()
+        };
+        let point = Path {
+            start: *start,
+            end,
+            length: 0,
+            rotary_only: false,
+            shape: Shape::Point,
+        };
+        match block.motion {
+            Motion::Dwell(_) | Motion::Aux(_) => Ok(point),
+            Motion::Rapid | Motion::Linear => {
+                let (lin, rot) = (sq(0..3), sq(3..6));
+                let (length, rotary_only) = if lin > 0.0 {
+                    (libm::sqrt(lin), false)
+                } else {
+                    (libm::sqrt(rot), true)
+                };
+                if length < 0.5 {
+                    return Ok(point);
+                }
+                let mut unit = [0i64; AXES];
+                for (u, d) in unit.iter_mut().zip(&delta) {
+                    *u = unit_q62(*d, length);
+                }
+                Ok(Path {
+                    length: libm::round(length) as i64,
+                    rotary_only,
+                    shape: Shape::Line { unit },
+                    ..point
+                })
+            }
+            Motion::Arc {
+                center,
+                plane,
+                clockwise,
+                turns,
+            } => {
+                let (i, j, k) = plane.axes();
+                let (sx, sy) = ((start[i] - center[0]) as f64, (start[j] - center[1]) as f64);
+                let (ex, ey) = ((end[i] - center[0]) as f64, (end[j] - center[1]) as f64);
+                let (r0, r1) = (libm::sqrt(sx * sx + sy * sy), libm::sqrt(ex * ex + ey * ey));
+                if r0 < 0.5 || r1 < 0.5 {
+                    return Err(GeometryError::ArcWithoutRadius);
+                }
+                if (r1 - r0).abs() > ARC_RADIUS_SLACK_NM as f64 {
+                    return Err(GeometryError::ArcEndOffCircle);
+                }
+                let a0 = libm::atan2(sy, sx);
+                let a1 = libm::atan2(ey, ex);
+                let tau = core::f64::consts::TAU;
+                // Counter-clockwise sweep in (0, 2π] (a full circle when the ends meet).
+                let mut ccw = wrap(a1 - a0, tau);
+                let mut cw = wrap(a0 - a1, tau);
+                if ccw < 1e-12 {
+                    ccw = tau;
+                }
+                if cw < 1e-12 {
+                    cw = tau;
+                }
+                let sweep_rad = if clockwise {
+                    -(cw + tau * turns as f64)
+                } else {
+                    ccw + tau * turns as f64
+                };
+                let planar = sweep_rad.abs() * (r0 + r1) / 2.0;
+                let mut lin = delta;
+                lin[i] = 0;
+                lin[j] = 0;
+                let helix = (lin[k] as f64).abs();
+                let length = libm::sqrt(planar * planar + helix * helix);
+                let mut unit = [0i64; AXES];
+                for (u, d) in unit.iter_mut().zip(&lin) {
+                    *u = unit_q62(*d, length);
+                }
+                let turn_of = |rad: f64| rad / tau * TURN_Q64;
+                Ok(Path {
+                    length: libm::round(length) as i64,
+                    rotary_only: false,
+                    shape: Shape::Arc {
+                        plane,
+                        center,
+                        r0: libm::round(r0) as i64,
+                        dr: libm::round(r1 - r0) as i64,
+                        phi0: turn_of(wrap(a0, tau)) as u64,
+                        sweep: turn_of(sweep_rad) as i128,
+                        unit,
+                    },
+                    ..point
+                })
+            }
+        }
+    }
+
+    /// Pose after `s` (nm Q16) along the path; `s ≥ length` gives the exact end.
+    pub fn pose_at(&self, s: i64, pose: &mut [i64; AXES]) {
+        if s >= self.length << 16 || self.length == 0 {
+            *pose = self.end;
+            return;
+        }
+        let s = s.max(0);
+        let linear = |unit: &[i64; AXES], pose: &mut [i64; AXES]| {
+            for (p, (st, u)) in pose.iter_mut().zip(self.start.iter().zip(unit)) {
+                // (u Q62 × s Q16) >> 78, rounded.
+                let d = ((*u as i128 * s as i128) + (1i128 << 77)) >> 78;
+                *p = st + d as i64;
+            }
+        };
+        match self.shape {
+            Shape::Point => *pose = self.end,
+            Shape::Line { unit } => linear(&unit, pose),
+            Shape::Arc {
+                plane,
+                center,
+                r0,
+                dr,
+                phi0,
+                sweep,
+                unit,
+            } => {
+                linear(&unit, pose);
+                let len = (self.length as i128) << 16;
+                let s = s as i128;
+                let phi = phi0.wrapping_add((sweep * s / len) as u64);
+                let r = r0 + (dr as i128 * s / len) as i64;
+                let (sin, cos) = crate::fixed::sin_cos((phi >> 32) as u32);
+                let (i, j, _) = plane.axes();
+                pose[i] = center[0] + ((r as i128 * cos as i128 + (1 << 29)) >> 30) as i64;
+                pose[j] = center[1] + ((r as i128 * sin as i128 + (1 << 29)) >> 30) as i64;
+            }
+        }
+    }
+
+    /// Unit tangent at `s` (nm Q16), in `f32` per axis (per nm of path).
+    pub fn tangent_at(&self, s: i64) -> [f32; AXES] {
+        let mut t = [0f32; AXES];
+        match self.shape {
+            Shape::Point => {}
+            Shape::Line { unit } => {
+                for (t, u) in t.iter_mut().zip(&unit) {
+                    *t = (*u as f64 / Q62) as f32;
+                }
+            }
+            Shape::Arc {
+                plane,
+                phi0,
+                sweep,
+                r0,
+                dr,
+                unit,
+                ..
+            } => {
+                for (t, u) in t.iter_mut().zip(&unit) {
+                    *t = (*u as f64 / Q62) as f32;
+                }
+                let f = (s.max(0) as f64 / 65_536.0) / (self.length.max(1) as f64);
+                let tau = core::f64::consts::TAU;
+                let sweep_rad = sweep as f64 / TURN_Q64 * tau;
+                let phi = phi0 as f64 / TURN_Q64 * tau + sweep_rad * f;
+                let r = r0 as f64 + dr as f64 * f;
+                // d(position)/ds in plane: r·dφ/ds·(−sin, cos) (radius drift ignored).
+                let dphi_ds = sweep_rad / self.length.max(1) as f64;
+                let (i, j, _) = plane.axes();
+                t[i] = (-r * dphi_ds * libm::sin(phi)) as f32;
+                t[j] = (r * dphi_ds * libm::cos(phi)) as f32;
+            }
+        }
+        t
+    }
+
+    /// Smallest radius of curvature, nm (`None` for straight paths).
+    pub fn radius(&self) -> Option<i64> {
+        match self.shape {
+            Shape::Arc { r0, dr, .. } => Some(r0.min(r0 + dr)),
+            _ => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn arc(target: [i64; AXES], center: [i64; 2], clockwise: bool, turns: u16) -> Block {
+        Block {
+            line: 1,
+            motion: Motion::Arc {
+                center,
+                plane: Plane::Xy,
+                clockwise,
+                turns,
+            },
+            target,
+            feed: 1,
+            tolerance_nm: 0,
+        }
+    }
+
+    #[test]
+    fn a_quarter_circle_stays_on_the_circle_and_ends_exactly() {
+        let r = 10_000_000;
+        let b = arc([0, r, 0, 0, 0, 0], [0, 0], false, 0);
+        let p = Path::new(&b, &[r, 0, 0, 0, 0, 0]).unwrap();
+        let quarter = core::f64::consts::FRAC_PI_2 * r as f64;
+        assert!((p.length as f64 - quarter).abs() < 1.0);
+        let mut pose = [0; AXES];
+        for k in 0..=1000 {
+            let s = (p.length << 16) / 1000 * k;
+            p.pose_at(s, &mut pose);
+            let rad = ((pose[0] as f64).powi(2) + (pose[1] as f64).powi(2)).sqrt();
+            assert!(
+                (rad - r as f64).abs() < 1.0,
+                "off the circle by {} nm",
+                rad - r as f64
+            );
+        }
+        p.pose_at(p.length << 16, &mut pose);
+        assert_eq!(pose, [0, r, 0, 0, 0, 0]);
+    }
+
+    #[test]
+    fn a_full_helix_with_an_extra_turn_has_the_length_of_two_turns() {
+        let r = 5_000_000;
+        let b = arc([r, 0, -2_000_000, 0, 0, 0], [0, 0], true, 1);
+        let p = Path::new(&b, &[r, 0, 0, 0, 0, 0]).unwrap();
+        let planar = 2.0 * core::f64::consts::TAU * r as f64;
+        let want = (planar * planar + 4e12).sqrt();
+        assert!((p.length as f64 - want).abs() < 1.0);
+        // Halfway: one full turn done (back at angle 0), halfway down.
+        let mut pose = [0; AXES];
+        p.pose_at(p.length << 15, &mut pose);
+        assert!((pose[0] - r).abs() <= 1 && pose[1].abs() <= 1, "{pose:?}");
+        assert!((pose[2] + 1_000_000).abs() <= 1);
+    }
+
+    #[test]
+    fn a_straight_line_lands_within_a_nanometre_of_every_fraction() {
+        let b = Block {
+            line: 1,
+            motion: Motion::Linear,
+            target: [123_456_789, -98_765_432, 5, 0, 0, 0],
+            feed: 1,
+            tolerance_nm: 0,
+        };
+        let p = Path::new(&b, &[0; AXES]).unwrap();
+        let mut pose = [0; AXES];
+        p.pose_at(p.length << 15, &mut pose);
+        assert!((pose[0] - 61_728_394).abs() <= 1, "{pose:?}");
+        assert!((pose[1] + 49_382_716).abs() <= 1, "{pose:?}");
+    }
+}

@@ -1,0 +1,522 @@
+//! Look-ahead planner: the queue of blocks waiting to execute and the speeds at which
+//! each is entered.
+//!
+//! Each queued block carries its geometry ([`Path`]), its requested feed, its hard
+//! speed and acceleration limits (from every pose axis and every joint, through the
+//! kinematics, sampled along the block, and from curvature on arcs) and a hard limit
+//! on its entry speed from the corner with the previous block. Speeds are in nm/tick
+//! (`f32`), accelerations in nm/tick².
+//!
+//! Passes, run after every change (grbl's scheme, with its invariants stated):
+//! * **Reverse pass**, last block to first. Invariant after it: every block can
+//!   decelerate from its entry speed to the next block's entry speed within its length
+//!   (entryᵢ² ≤ entryᵢ₊₁² + 2·aᵢ·Sᵢ), the block after the last is entered at 0 — so
+//!   the buffered path always ends in a complete stop — and no entry exceeds its
+//!   corner limit or the speed caps of the blocks on either side.
+//! * **Forward pass**, first block to last, starting from the first block's fixed
+//!   entry (the exit speed the executing block was profiled for, or 0 at rest).
+//!   Invariant after it: every block can also reach its successor's entry by
+//!   accelerating (entryᵢ₊₁² ≤ entryᵢ² + 2·aᵢ·Sᵢ) and cannot be forced to enter
+//!   slower than it can decelerate to (entryᵢ₊₁² ≥ entryᵢ² − 2·aᵢ·Sᵢ; this lower bound
+//!   only binds after a feed-override drop or a hold, whose caps are soft).
+//!
+//! Corner limit (the discrete-time rule, stricter than grbl's junction deviation): the
+//! path passes through the programmed corner, so the velocity turns from u₁ to u₂ within
+//! one tick, and the tick that turns may also carry the blocks' own acceleration. The
+//! acceleration budget of each axis and joint is therefore split at a blended corner:
+//! the two blocks meeting there are profiled with half of their acceleration, and the
+//! turn may change each axis's or joint's speed by at most aᵢ·T/2, hence
+//! v ≤ minᵢ aᵢ·T / (2·|Δuᵢ|). Together never more than aᵢ. G61 (tolerance 0) stops
+//! exactly at the corner.
+
+use crate::config::{MachineConfig, AXES, MAX_JOINTS};
+use crate::geometry::{GeometryError, Path};
+use crate::kinematics::{Kinematics, MachineKinematics, Unreachable};
+use crate::protocol::{Aux, Block, Motion};
+use crate::units::TICK_HZ;
+
+/// Blocks of look-ahead the controller buffers.
+pub const QUEUE_CAPACITY: usize = 64;
+
+/// Points sampled along a block for its speed limits.
+pub const LIMIT_SAMPLES: usize = 5;
+
+/// What a queued block does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// Motion at the machine's limits.
+    Rapid,
+    /// Motion at the programmed feed.
+    Feed,
+    /// Wait this many ticks at rest.
+    Dwell(u32),
+    /// Auxiliary function, executed at rest.
+    Aux(Aux),
+    /// The block cannot be executed (its target is out of reach); reaching it raises
+    /// an alarm.
+    Unreachable(Unreachable),
+}
+
+/// A block in the planner queue.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanBlock {
+    /// NC line.
+    pub line: u32,
+    /// Kind.
+    pub kind: Kind,
+    /// Geometry.
+    pub path: Path,
+    /// Requested feed, nm/tick (∞ for rapids).
+    pub feed: f32,
+    /// Hard speed limit, nm/tick.
+    pub v_limit: f32,
+    /// Acceleration used by the profile, nm/tick²: half of `accel_full` when a corner
+    /// at either end is blended.
+    pub accel: f32,
+    /// Acceleration the limits allow along the block, nm/tick².
+    pub accel_full: f32,
+    /// Hard limit on the entry speed from the corner with the previous block, nm/tick.
+    pub corner: f32,
+    /// Planned entry speed, nm/tick.
+    pub entry: f32,
+}
+
+impl PlanBlock {
+    /// Length in nm as `f32`.
+    pub fn length(&self) -> f32 {
+        self.path.length as f32
+    }
+}
+
+/// The planner.
+#[derive(Clone, Debug)]
+pub struct Planner {
+    queue: heapless::Deque<PlanBlock, QUEUE_CAPACITY>,
+    /// End pose of the last block pushed (where the next one starts).
+    pub end: [i64; AXES],
+    end_tangent: [f32; AXES],
+    end_stops: bool,
+    /// Feed override, percent.
+    pub feed_override: u16,
+    /// Feed hold: every soft cap is 0.
+    pub hold: bool,
+    /// Entry speed of the first queued block, fixed by the executing block's profile.
+    pub first_entry: f32,
+}
+
+fn per_tick(v: i64) -> f32 {
+    v as f32 / TICK_HZ as f32
+}
+
+fn per_tick2(a: i64) -> f32 {
+    a as f32 / (TICK_HZ as f32 * TICK_HZ as f32)
+}
+
+impl Planner {
+    /// An empty planner at `pose`.
+    pub fn new(pose: [i64; AXES]) -> Self {
+        Self {
+            queue: heapless::Deque::new(),
+            end: pose,
+            end_tangent: [0.0; AXES],
+            end_stops: true,
+            feed_override: 100,
+            hold: false,
+            first_entry: 0.0,
+        }
+    }
+
+    fn at(&self, i: usize) -> &PlanBlock {
+        self.queue.get(i).expect("index within the queue")
+    }
+
+    fn at_mut(&mut self, i: usize) -> &mut PlanBlock {
+        self.queue.get_mut(i).expect("index within the queue")
+    }
+
+    /// Queued blocks.
+    pub fn len(&self) -> usize {
+        self.queue.len()
+    }
+    /// No block queued?
+    pub fn is_empty(&self) -> bool {
+        self.queue.is_empty()
+    }
+    /// Free slots.
+    pub fn free(&self) -> usize {
+        QUEUE_CAPACITY - self.queue.len()
+    }
+    /// The next block, if any.
+    pub fn front(&self) -> Option<&PlanBlock> {
+        self.queue.front()
+    }
+    /// Takes the next block.
+    pub fn pop(&mut self) -> Option<PlanBlock> {
+        self.queue.pop_front()
+    }
+    /// Iterates the queue, front first.
+    pub fn iter(&self) -> impl Iterator<Item = &PlanBlock> {
+        self.queue.iter()
+    }
+
+    /// Drops every queued block; the next block starts at `pose`, at rest.
+    pub fn clear(&mut self, pose: [i64; AXES]) {
+        self.queue.clear();
+        self.end = pose;
+        self.end_stops = true;
+        self.first_entry = 0.0;
+    }
+
+    /// Soft speed cap of a block (feed × override, 0 in a hold), nm/tick.
+    pub fn cap(&self, b: &PlanBlock) -> f32 {
+        if self.hold {
+            return 0.0;
+        }
+        match b.kind {
+            Kind::Rapid => b.v_limit,
+            Kind::Feed => (b.feed * self.feed_override as f32 / 100.0).min(b.v_limit),
+            _ => 0.0,
+        }
+    }
+
+    /// Plans `block` and appends it. Fails when the queue is full or the geometry is
+    /// malformed; an unreachable target is queued as such (it stops the machine there).
+    pub fn push(
+        &mut self,
+        block: &Block,
+        machine: &MachineConfig,
+        kin: &MachineKinematics,
+    ) -> Result<(), PushError> {
+        if self.queue.is_full() {
+            return Err(PushError::Full);
+        }
+        let path = Path::new(block, &self.end).map_err(PushError::Geometry)?;
+        let mut kind = match block.motion {
+            Motion::Rapid => Kind::Rapid,
+            Motion::Linear | Motion::Arc { .. } => Kind::Feed,
+            Motion::Dwell(ms) => Kind::Dwell(((ms as u64 * TICK_HZ as u64).div_ceil(1000)) as u32),
+            Motion::Aux(a) => Kind::Aux(a),
+        };
+        if path.length == 0 && matches!(kind, Kind::Rapid | Kind::Feed) {
+            kind = Kind::Dwell(0);
+        }
+        let (v_limit, accel) = match kind {
+            Kind::Rapid | Kind::Feed => match limits_along(&path, machine, kin) {
+                Ok(l) => l,
+                Err(e) => {
+                    kind = Kind::Unreachable(e);
+                    (0.0, 1.0)
+                }
+            },
+            _ => (0.0, 1.0),
+        };
+        let feed = match kind {
+            Kind::Feed if path.rotary_only => per_tick(block.feed.saturating_mul(1000)),
+            Kind::Feed => per_tick(block.feed),
+            _ => f32::INFINITY,
+        };
+        let start_tangent = path.tangent_at(0);
+        let moving = matches!(kind, Kind::Rapid | Kind::Feed);
+        let corner = if self.end_stops || !moving {
+            0.0
+        } else {
+            corner_limit(&self.end_tangent, &start_tangent, &self.end, machine, kin)
+        };
+        let blended = corner > 0.0;
+        if blended {
+            // Both blocks at a blended corner keep half of each axis's acceleration for
+            // the turn (see the module doc).
+            if let Some(prev) = self.queue.back_mut() {
+                prev.accel = prev.accel_full / 2.0;
+            }
+        }
+        let accel = accel.max(1e-9);
+        let b = PlanBlock {
+            line: block.line,
+            kind,
+            path,
+            feed,
+            v_limit,
+            accel: if blended { accel / 2.0 } else { accel },
+            accel_full: accel,
+            corner,
+            entry: 0.0,
+        };
+        self.end = path.end;
+        self.end_tangent = path.tangent_at(path.length << 16);
+        self.end_stops = !moving || block.tolerance_nm == 0;
+        let _ = self.queue.push_back(b);
+        self.replan();
+        Ok(())
+    }
+
+    /// Largest entry speed allowed for block `i` (corner, its cap, the previous cap).
+    fn entry_limit(&self, i: usize) -> f32 {
+        let b = self.at(i);
+        let prev_cap = if i == 0 {
+            f32::INFINITY
+        } else {
+            self.cap(self.at(i - 1))
+        };
+        b.corner.min(self.cap(b)).min(prev_cap)
+    }
+
+    /// Runs the reverse and forward passes over the queue.
+    pub fn replan(&mut self) {
+        self.reverse_pass();
+        self.forward_pass();
+    }
+
+    fn reverse_pass(&mut self) {
+        let mut next_entry = 0.0f32;
+        for i in (0..self.queue.len()).rev() {
+            let limit = self.entry_limit(i);
+            let b = self.at_mut(i);
+            let reach = libm::sqrtf(next_entry * next_entry + 2.0 * b.accel * b.length());
+            b.entry = limit.min(reach);
+            next_entry = b.entry;
+        }
+    }
+
+    fn forward_pass(&mut self) {
+        let n = self.queue.len();
+        if n == 0 {
+            return;
+        }
+        self.at_mut(0).entry = self.first_entry;
+        for i in 0..n - 1 {
+            let (e, a, len) = {
+                let b = self.at(i);
+                (b.entry, b.accel, b.length())
+            };
+            let hi = libm::sqrtf(e * e + 2.0 * a * len);
+            let lo = libm::sqrtf((e * e - 2.0 * a * len).max(0.0));
+            let nb = self.at_mut(i + 1);
+            nb.entry = nb.entry.min(hi).max(lo);
+        }
+    }
+
+    /// Entry speed the reverse pass allows for the first queued block (what the
+    /// executing block may aim to leave at); 0 when nothing is queued.
+    pub fn first_entry_target(&mut self) -> f32 {
+        self.reverse_pass();
+        let target = self.queue.front().map_or(0.0, |b| b.entry);
+        self.forward_pass();
+        target
+    }
+
+    /// Total time of the queued motion at the planned speeds, ticks (an estimate that
+    /// ignores the acceleration phases' shape; used for flow control).
+    pub fn buffered_ticks(&self) -> f32 {
+        let mut t = 0.0;
+        for (i, b) in self.queue.iter().enumerate() {
+            t += match b.kind {
+                Kind::Dwell(n) => n as f32,
+                Kind::Rapid | Kind::Feed => {
+                    let exit = self.queue.get(i + 1).map_or(0.0, |n| n.entry);
+                    let v = self.cap(b).max(b.entry).max(exit);
+                    let v_mean = ((b.entry + exit) / 2.0 + v) / 2.0;
+                    if v_mean > 0.0 {
+                        b.length() / v_mean
+                    } else {
+                        0.0
+                    }
+                }
+                _ => 0.0,
+            };
+        }
+        t
+    }
+}
+
+/// Why a block was not queued.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PushError {
+    /// No free slot.
+    Full,
+    /// Malformed geometry.
+    Geometry(GeometryError),
+}
+
+/// Joint rates per unit of path along `tangent` at `pose`: (IK(p + h·t) − IK(p)) / h.
+fn joint_rates(
+    pose: &[i64; AXES],
+    tangent: &[f32; AXES],
+    kin: &MachineKinematics,
+    n: usize,
+) -> Result<[f32; MAX_JOINTS], Unreachable> {
+    const H: f32 = 10_000.0; // 10 µm (or 10 µ°) step
+    let mut ahead = *pose;
+    for (a, t) in ahead.iter_mut().zip(tangent) {
+        *a += libm::roundf(t * H) as i64;
+    }
+    let (mut q0, mut q1) = ([0i64; MAX_JOINTS], [0i64; MAX_JOINTS]);
+    kin.inverse(pose, &mut q0)?;
+    kin.inverse(&ahead, &mut q1)?;
+    let mut r = [0f32; MAX_JOINTS];
+    for j in 0..n {
+        r[j] = (q1[j] - q0[j]) as f32 / H;
+    }
+    Ok(r)
+}
+
+/// Speed (nm/tick) and acceleration (nm/tick²) limits of a path, from every axis and
+/// joint at [`LIMIT_SAMPLES`] points, and from curvature on arcs. Fails when a sampled
+/// pose is out of reach or outside a joint's travel.
+fn limits_along(
+    path: &Path,
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+) -> Result<(f32, f32), Unreachable> {
+    let (mut v, mut a) = (f32::INFINITY, f32::INFINITY);
+    let mut clamp = |rate: f32, max_v: i64, max_a: i64| {
+        let r = rate.abs();
+        if r > 1e-12 {
+            v = v.min(per_tick(max_v) / r);
+            a = a.min(per_tick2(max_a) / r);
+        }
+    };
+    let n = machine.joints.len();
+    let mut q = [0i64; MAX_JOINTS];
+    for k in 0..LIMIT_SAMPLES {
+        let s = ((path.length as i128) << 16) * k as i128 / (LIMIT_SAMPLES as i128 - 1);
+        let mut pose = [0i64; AXES];
+        path.pose_at(s as i64, &mut pose);
+        kin.inverse_checked(&pose, &machine.joints, &mut q)?;
+        let t = path.tangent_at(s as i64);
+        for (rate, l) in t.iter().zip(&machine.axes) {
+            clamp(*rate, l.max_velocity, l.max_accel);
+        }
+        let rates = joint_rates(&pose, &t, kin, n)?;
+        for (rate, jc) in rates.iter().zip(&machine.joints) {
+            clamp(*rate, jc.limits.max_velocity, jc.limits.max_accel);
+        }
+    }
+    if let Some(r) = path.radius() {
+        // Half the acceleration for the tangential profile, half for the centripetal
+        // v²/r: an axis then never sees more than a.
+        a /= 2.0;
+        v = v.min(libm::sqrtf(a * r as f32));
+    }
+    Ok((v, a))
+}
+
+/// Corner limit between tangents `u1` and `u2` at `pose` (nm/tick): every axis and
+/// joint changes speed by at most half its acceleration × one tick.
+fn corner_limit(
+    u1: &[f32; AXES],
+    u2: &[f32; AXES],
+    pose: &[i64; AXES],
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+) -> f32 {
+    let mut v = f32::INFINITY;
+    let mut du = [0f32; AXES];
+    for i in 0..AXES {
+        du[i] = u2[i] - u1[i];
+        let d = du[i].abs();
+        if d > 1e-9 && machine.axes[i].max_accel > 0 {
+            v = v.min(per_tick2(machine.axes[i].max_accel) / (2.0 * d));
+        }
+    }
+    let n = machine.joints.len();
+    match (joint_rates(pose, u1, kin, n), joint_rates(pose, u2, kin, n)) {
+        (Ok(r1), Ok(r2)) => {
+            for (j, jc) in machine.joints.iter().enumerate() {
+                let d = (r2[j] - r1[j]).abs();
+                if d > 1e-9 {
+                    v = v.min(per_tick2(jc.limits.max_accel) / (2.0 * d));
+                }
+            }
+            v
+        }
+        _ => 0.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(x: i64, y: i64, feed_mm_s: i64, tol: u32) -> Block {
+        Block {
+            line: 1,
+            motion: Motion::Linear,
+            target: [x, y, 0, 0, 0, 0],
+            feed: feed_mm_s * 1_000_000,
+            tolerance_nm: tol,
+        }
+    }
+
+    fn planner_with(blocks: &[Block]) -> Planner {
+        let m = MachineConfig::cartesian_xyz();
+        let k = MachineKinematics::new(&m);
+        let mut p = Planner::new([0; AXES]);
+        for b in blocks {
+            p.push(b, &m, &k).unwrap();
+        }
+        p
+    }
+
+    #[test]
+    fn the_last_block_always_plans_to_stop() {
+        let p = planner_with(&[
+            line(50_000_000, 0, 50, u32::MAX),
+            line(100_000_000, 0, 50, u32::MAX),
+        ]);
+        let last = p.iter().last().unwrap();
+        // It can stop within its own length from its entry speed.
+        assert!(last.entry * last.entry <= 2.0 * last.accel * last.length() * 1.0001);
+        // Collinear blocks are joined at full speed (50 mm/s = 50 000 nm/tick).
+        assert!((last.entry - 50_000.0).abs() < 1.0, "{}", last.entry);
+    }
+
+    #[test]
+    fn exact_stop_mode_stops_at_every_corner() {
+        let p = planner_with(&[line(50_000_000, 0, 50, 0), line(100_000_000, 0, 50, 0)]);
+        assert_eq!(p.iter().last().unwrap().entry, 0.0);
+    }
+
+    #[test]
+    fn a_right_angle_corner_is_taken_at_half_a_times_t() {
+        let p = planner_with(&[
+            line(50_000_000, 0, 50, u32::MAX),
+            line(50_000_000, 50_000_000, 50, u32::MAX),
+        ]);
+        let e = p.iter().last().unwrap().entry;
+        assert!((e - 500.0).abs() < 1.0, "{e}");
+    }
+
+    #[test]
+    fn a_ten_degree_corner_is_taken_at_the_axis_acceleration_budget() {
+        let (c, s) = (10f64.to_radians().cos(), 10f64.to_radians().sin());
+        let p = planner_with(&[
+            line(50_000_000, 0, 50, u32::MAX),
+            line(
+                50_000_000 + (50e6 * c) as i64,
+                (50e6 * s) as i64,
+                50,
+                u32::MAX,
+            ),
+        ]);
+        // a = 1000 nm/tick² per axis; |Δu_y| = sin 10°: v = 1000 / (2 sin 10°).
+        let want = 1000.0 / (2.0 * s);
+        let e = p.iter().last().unwrap().entry as f64;
+        assert!((e - want).abs() < want * 0.01, "{e} vs {want}");
+    }
+
+    #[test]
+    fn a_hold_caps_every_block_at_zero() {
+        let mut p = planner_with(&[
+            line(50_000_000, 0, 50, u32::MAX),
+            line(100_000_000, 0, 50, u32::MAX),
+        ]);
+        p.hold = true;
+        p.first_entry = 30_000.0;
+        p.replan();
+        let e = p.iter().last().unwrap().entry;
+        // Entered at 30 000 nm/tick, the first block (50 mm) can only slow to
+        // sqrt(30000² − 2·1000·5e7) < 0 → 0.
+        assert_eq!(e, 0.0);
+    }
+}
