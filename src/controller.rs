@@ -355,6 +355,11 @@ impl Controller {
                     self.push_motion(Motion::Linear, target, feed.max(1));
                 }
             }
+            Control::Stop => self.raise(Alarm {
+                cause: AlarmCause::Aborted,
+                joint: NO_JOINT,
+                line: self.exec.line,
+            }),
             Control::Home => {
                 if self.state == State::Idle && !self.has_work() {
                     self.push_motion(Motion::Rapid, self.machine.home, 0);

@@ -128,6 +128,9 @@ pub enum Control {
     },
     /// Home the machine: go to the configured home pose.
     Home,
+    /// Immediate stop: motion ends now, without deceleration, and the controller
+    /// enters `Alarm` (cause `Aborted`), position kept.
+    Stop,
 }
 
 /// Messages from the host to the controller.
