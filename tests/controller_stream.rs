@@ -96,8 +96,8 @@ proptest! {
         }
         let last = moves.last().unwrap().0;
         prop_assert_eq!(&c.pose()[..3], &last[..]);
-        for j in 0..3 {
-            prop_assert_eq!(c.steps_emitted(j), m.joints[j].scale.steps_at(last[j]));
+        for (j, (jc, q)) in m.joints.iter().zip(&last).enumerate() {
+            prop_assert_eq!(c.steps_emitted(j), jc.scale.steps_at(*q));
         }
         prop_assert_eq!(c.status().blocks_done as usize, moves.len());
         let acks = replies.iter().filter(|r| matches!(r, CtrlMsg::Ack { .. })).count();
