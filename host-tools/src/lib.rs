@@ -4,6 +4,7 @@
 //! ([`machine_file`]), the simulated controller ([`sim`]), both ends of the serial link
 //! ([`link`]) and the job runner shared by `nc-send` and the tests ([`job`]).
 
+pub mod blocks;
 pub mod canon;
 pub mod gcode;
 pub mod job;

@@ -1,0 +1,219 @@
+//! Canonical commands to protocol blocks: what is streamed to the controller.
+//!
+//! Motion keeps its geometry (lines, native arcs); G93 inverse-time feeds become path
+//! speeds from the block's exact length (measured with the core's own geometry, so host
+//! and controller agree); the path mode (G61/G64 P) becomes each block's blending
+//! tolerance; spindle, coolant, tool changes and pauses become auxiliary blocks that
+//! execute in order. Operator messages stay on the host, keyed by NC line, and are
+//! shown when that line starts executing.
+
+use crate::canon::{Canon, Coolant, Feed, PathMode, Spindle};
+use pkmc::config::AXES;
+use pkmc::geometry::Path;
+use pkmc::protocol::{Aux, Block, Motion};
+use std::collections::BTreeMap;
+
+/// A program ready to stream.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Program {
+    /// Blocks in order.
+    pub blocks: Vec<Block>,
+    /// `(MSG, …)` texts by NC line.
+    pub messages: BTreeMap<u32, String>,
+}
+
+/// Blending tolerance streamed for G64 without P: as fast as the limits allow.
+pub const BLEND_ANY: u32 = u32::MAX;
+
+/// Converts canonical commands starting at `start` (axis units).
+pub fn from_canon(commands: &[Canon], start: [i64; AXES]) -> Program {
+    let mut program = Program::default();
+    let mut pose = start;
+    // LinuxCNC starts in G64 (blending) unless told otherwise.
+    let mut tolerance = BLEND_ANY;
+    let aux = |line: u32, aux: Aux, pose: [i64; AXES]| Block {
+        line,
+        motion: Motion::Aux(aux),
+        target: pose,
+        feed: 0,
+        tolerance_nm: 0,
+    };
+    for c in commands {
+        let block = match c {
+            Canon::Rapid { line, target } => Some(Block {
+                line: *line,
+                motion: Motion::Rapid,
+                target: *target,
+                feed: 0,
+                tolerance_nm: tolerance,
+            }),
+            Canon::Linear { line, target, feed } => Some(feed_block(
+                *line,
+                Motion::Linear,
+                *target,
+                *feed,
+                tolerance,
+                &pose,
+            )),
+            Canon::Arc {
+                line,
+                target,
+                center,
+                plane,
+                clockwise,
+                turns,
+                feed,
+            } => Some(feed_block(
+                *line,
+                Motion::Arc {
+                    center: *center,
+                    plane: *plane,
+                    clockwise: *clockwise,
+                    turns: (*turns).min(u16::MAX as u32) as u16,
+                },
+                *target,
+                *feed,
+                tolerance,
+                &pose,
+            )),
+            Canon::Dwell { line, ms } => Some(Block {
+                line: *line,
+                motion: Motion::Dwell(*ms),
+                target: pose,
+                feed: 0,
+                tolerance_nm: 0,
+            }),
+            Canon::PathMode { mode, .. } => {
+                tolerance = match mode {
+                    PathMode::ExactStop => 0,
+                    PathMode::Blend(None) => BLEND_ANY,
+                    PathMode::Blend(Some(p)) => (*p).clamp(1, u32::MAX as i64 - 1) as u32,
+                };
+                None
+            }
+            Canon::Spindle { line, state } => Some(aux(
+                *line,
+                match state {
+                    Spindle::Off => Aux::SpindleOff,
+                    Spindle::Clockwise(r) => Aux::SpindleCw(*r),
+                    Spindle::CounterClockwise(r) => Aux::SpindleCcw(*r),
+                },
+                pose,
+            )),
+            Canon::Coolant { line, state } => Some(aux(
+                *line,
+                match state {
+                    Coolant::Mist => Aux::Mist,
+                    Coolant::Flood => Aux::Flood,
+                    Coolant::Off => Aux::CoolantOff,
+                },
+                pose,
+            )),
+            Canon::ToolChange { line, tool } => Some(aux(*line, Aux::ToolChange(*tool), pose)),
+            Canon::Pause { line, optional } => Some(aux(*line, Aux::Pause(*optional), pose)),
+            Canon::Message { line, text } => {
+                program.messages.insert(*line, text.clone());
+                None
+            }
+            Canon::End { .. } => None,
+        };
+        if let Some(b) = block {
+            if matches!(
+                b.motion,
+                Motion::Rapid | Motion::Linear | Motion::Arc { .. }
+            ) {
+                pose = b.target;
+            }
+            program.blocks.push(b);
+        }
+    }
+    program
+}
+
+/// A feed move; inverse-time feeds become path speeds over the block's exact length.
+fn feed_block(
+    line: u32,
+    motion: Motion,
+    target: [i64; AXES],
+    feed: Feed,
+    tolerance: u32,
+    from: &[i64; AXES],
+) -> Block {
+    let mut b = Block {
+        line,
+        motion,
+        target,
+        feed: 0,
+        tolerance_nm: tolerance,
+    };
+    b.feed = match feed {
+        Feed::PerSecond(v) => v.max(1),
+        Feed::InverseTime(us) => {
+            let length = Path::new(&b, from).map_or(0, |p| p.length) as i128;
+            // units/s = length / (us · 1e-6); rotary-only moves are streamed in µ°/s.
+            let rotary_only = (0..3).all(|i| target[i] == from[i]);
+            let per_s = length * 1_000_000 / (us.max(1) as i128);
+            let per_s = if rotary_only { per_s / 1000 } else { per_s };
+            per_s.clamp(1, i64::MAX as i128) as i64
+        }
+    };
+    b
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pkmc::protocol::Plane;
+
+    #[test]
+    fn inverse_time_feed_becomes_the_speed_that_takes_that_long() {
+        // 10 mm in 0.5 s (G93 F120): 20 mm/s.
+        let c = [Canon::Linear {
+            line: 3,
+            target: [10_000_000, 0, 0, 0, 0, 0],
+            feed: Feed::InverseTime(500_000),
+        }];
+        let p = from_canon(&c, [0; AXES]);
+        assert_eq!(p.blocks[0].feed, 20_000_000);
+    }
+
+    #[test]
+    fn path_mode_sets_the_tolerance_of_later_blocks_and_aux_blocks_stop() {
+        let t = [1_000_000, 0, 0, 0, 0, 0];
+        let c = [
+            Canon::PathMode {
+                line: 1,
+                mode: PathMode::Blend(Some(50_000)),
+            },
+            Canon::Rapid { line: 2, target: t },
+            Canon::Spindle {
+                line: 3,
+                state: Spindle::Clockwise(1200),
+            },
+            Canon::PathMode {
+                line: 4,
+                mode: PathMode::ExactStop,
+            },
+            Canon::Arc {
+                line: 5,
+                target: [-1_000_000, 0, 0, 0, 0, 0],
+                center: [0, 0],
+                plane: Plane::Xy,
+                clockwise: false,
+                turns: 0,
+                feed: Feed::PerSecond(5_000_000),
+            },
+            Canon::Message {
+                line: 6,
+                text: "check the clamp".into(),
+            },
+        ];
+        let p = from_canon(&c, [0; AXES]);
+        assert_eq!(p.blocks.len(), 3);
+        assert_eq!(p.blocks[0].tolerance_nm, 50_000);
+        assert_eq!(p.blocks[1].motion, Motion::Aux(Aux::SpindleCw(1200)));
+        assert_eq!(p.blocks[1].target, t, "aux blocks stay where the tool is");
+        assert_eq!(p.blocks[2].tolerance_nm, 0);
+        assert_eq!(p.messages[&6], "check the clamp");
+    }
+}
