@@ -36,6 +36,11 @@ pub enum Shape {
         phi0: u64,
         /// Signed sweep, turns Q64 (more than one turn for multi-turn arcs).
         sweep: i128,
+        /// Angle per path distance: sweep·2¹⁶ / length, so that φ(s) = φ₀ + (k·s) ≫ 32
+        /// for s in nm Q16 (no division per tick).
+        phi_rate: i128,
+        /// Radius change per path distance: (dr·2¹⁶) / length, used as (k·s) ≫ 32.
+        r_rate: i64,
         /// Per-axis direction of the linear part (helix axis and A B C), Q2.62;
         /// in-plane entries are 0.
         unit: [i64; AXES],
@@ -176,6 +181,9 @@ impl Path {
                     *u = unit_q62(*d, length);
                 }
                 let turn_of = |rad: f64| rad / tau * TURN_Q64;
+                let len = (libm::round(length) as i64).max(1);
+                let sweep = turn_of(sweep_rad) as i128;
+                let dr = libm::round(r1 - r0) as i64;
                 Ok(Path {
                     length: libm::round(length) as i64,
                     rotary_only: false,
@@ -183,9 +191,11 @@ impl Path {
                         plane,
                         center,
                         r0: libm::round(r0) as i64,
-                        dr: libm::round(r1 - r0) as i64,
+                        dr,
                         phi0: turn_of(wrap(a0, tau)) as u64,
-                        sweep: turn_of(sweep_rad) as i128,
+                        sweep,
+                        phi_rate: (sweep << 16) / len as i128,
+                        r_rate: (((dr as i128) << 16) / len as i128) as i64,
                         unit,
                     },
                     ..point
@@ -203,9 +213,12 @@ impl Path {
         let s = s.max(0);
         let linear = |unit: &[i64; AXES], pose: &mut [i64; AXES]| {
             for (p, (st, u)) in pose.iter_mut().zip(self.start.iter().zip(unit)) {
-                // (u Q62 × s Q16) >> 78, rounded.
-                let d = ((*u as i128 * s as i128) + (1i128 << 77)) >> 78;
-                *p = st + d as i64;
+                // (u Q62 × s Q16) >> 78, rounded; axes that do not move cost nothing.
+                *p = if *u == 0 {
+                    *st
+                } else {
+                    st + (((*u as i128 * s as i128) + (1i128 << 77)) >> 78) as i64
+                };
             }
         };
         match self.shape {
@@ -215,16 +228,16 @@ impl Path {
                 plane,
                 center,
                 r0,
-                dr,
                 phi0,
-                sweep,
+                phi_rate,
+                r_rate,
                 unit,
+                ..
             } => {
                 linear(&unit, pose);
-                let len = (self.length as i128) << 16;
                 let s = s as i128;
-                let phi = phi0.wrapping_add((sweep * s / len) as u64);
-                let r = r0 + (dr as i128 * s / len) as i64;
+                let phi = phi0.wrapping_add(((phi_rate * s) >> 32) as u64);
+                let r = r0 + ((r_rate as i128 * s) >> 32) as i64;
                 let (sin, cos) = crate::fixed::sin_cos((phi >> 32) as u32);
                 let (i, j, _) = plane.axes();
                 pose[i] = center[0] + ((r as i128 * cos as i128 + (1 << 29)) >> 30) as i64;

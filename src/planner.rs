@@ -24,10 +24,12 @@
 //! path passes through the programmed corner, so the velocity turns from u₁ to u₂ within
 //! one tick, and the tick that turns may also carry the blocks' own acceleration. The
 //! acceleration budget of each axis and joint is therefore split at a blended corner:
-//! the two blocks meeting there are profiled with half of their acceleration, and the
-//! turn may change each axis's or joint's speed by at most aᵢ·T/2, hence
-//! v ≤ minᵢ aᵢ·T / (2·|Δuᵢ|). Together never more than aᵢ. G61 (tolerance 0) stops
-//! exactly at the corner.
+//! a share ρ ≤ ½ goes to the turn, which may change each axis's or joint's speed by at
+//! most ρ·aᵢ·T (v ≤ ρ·minᵢ aᵢ·T/|Δuᵢ|), and the two blocks meeting there are profiled
+//! with (1 − ρ) of their acceleration. Together never more than aᵢ. ρ is chosen per
+//! corner as the share the turn needs at the programmed speed (so a gentle polyline
+//! keeps almost all of its acceleration), capped at ½. G61 (tolerance 0) stops exactly
+//! at the corner.
 
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
 use crate::geometry::{GeometryError, Path};
@@ -75,6 +77,8 @@ pub struct PlanBlock {
     pub accel: f32,
     /// Acceleration the limits allow along the block, nm/tick².
     pub accel_full: f32,
+    /// Share of the acceleration reserved for the turn at the block's start.
+    pub rho_in: f32,
     /// Hard limit on the entry speed from the corner with the previous block, nm/tick.
     pub corner: f32,
     /// Planned entry speed, nm/tick.
@@ -217,28 +221,39 @@ impl Planner {
         };
         let start_tangent = path.tangent_at(0);
         let moving = matches!(kind, Kind::Rapid | Kind::Feed);
-        let corner = if self.end_stops || !moving {
-            0.0
+        let accel = accel.max(1e-9);
+        let need = if self.end_stops || !moving {
+            None
         } else {
-            corner_limit(&self.end_tangent, &start_tangent, &self.end, machine, kin)
+            corner_need(&self.end_tangent, &start_tangent, &self.end, machine, kin)
         };
-        let blended = corner > 0.0;
-        if blended {
-            // Both blocks at a blended corner keep half of each axis's acceleration for
-            // the turn (see the module doc).
+        // Split each axis's acceleration at a blended corner: a share ρ for the turn,
+        // the rest for the two blocks' profiles (see the module doc). ρ is what the
+        // turn needs at the speed both blocks ask for, at most one half.
+        let (corner, rho) = match need {
+            None => (0.0, 0.0),
+            Some(n) if n <= 0.0 => (f32::INFINITY, 0.0),
+            Some(n) => {
+                let prev_v = self.queue.back().map_or(0.0, |p| p.feed.min(p.v_limit));
+                let want = prev_v.min(feed.min(v_limit));
+                let rho = (want * n * 1.0001).clamp(0.0, 0.5);
+                (rho / n, rho)
+            }
+        };
+        if rho > 0.0 {
             if let Some(prev) = self.queue.back_mut() {
-                prev.accel = prev.accel_full / 2.0;
+                prev.accel = prev.accel_full * (1.0 - rho.max(prev.rho_in));
             }
         }
-        let accel = accel.max(1e-9);
         let b = PlanBlock {
             line: block.line,
             kind,
             path,
             feed,
             v_limit,
-            accel: if blended { accel / 2.0 } else { accel },
+            accel: accel * (1.0 - rho),
             accel_full: accel,
+            rho_in: rho,
             corner,
             entry: 0.0,
         };
@@ -401,37 +416,34 @@ fn limits_along(
     Ok((v, a))
 }
 
-/// Corner limit between tangents `u1` and `u2` at `pose` (nm/tick): every axis and
-/// joint changes speed by at most half its acceleration × one tick.
-fn corner_limit(
+/// What turning from `u1` to `u2` at `pose` costs: the largest |Δuᵢ| / aᵢ over every
+/// axis and joint (ticks per nm/tick), so that a corner taken at speed v uses the
+/// share v·need of the tightest acceleration budget in one tick. `None` when the
+/// kinematics cannot be evaluated there (the corner is then a stop).
+fn corner_need(
     u1: &[f32; AXES],
     u2: &[f32; AXES],
     pose: &[i64; AXES],
     machine: &MachineConfig,
     kin: &MachineKinematics,
-) -> f32 {
-    let mut v = f32::INFINITY;
-    let mut du = [0f32; AXES];
+) -> Option<f32> {
+    let mut need = 0.0f32;
     for i in 0..AXES {
-        du[i] = u2[i] - u1[i];
-        let d = du[i].abs();
+        let d = (u2[i] - u1[i]).abs();
         if d > 1e-9 && machine.axes[i].max_accel > 0 {
-            v = v.min(per_tick2(machine.axes[i].max_accel) / (2.0 * d));
+            need = need.max(d / per_tick2(machine.axes[i].max_accel));
         }
     }
     let n = machine.joints.len();
-    match (joint_rates(pose, u1, kin, n), joint_rates(pose, u2, kin, n)) {
-        (Ok(r1), Ok(r2)) => {
-            for (j, jc) in machine.joints.iter().enumerate() {
-                let d = (r2[j] - r1[j]).abs();
-                if d > 1e-9 {
-                    v = v.min(per_tick2(jc.limits.max_accel) / (2.0 * d));
-                }
-            }
-            v
+    let r1 = joint_rates(pose, u1, kin, n).ok()?;
+    let r2 = joint_rates(pose, u2, kin, n).ok()?;
+    for (j, jc) in machine.joints.iter().enumerate() {
+        let d = (r2[j] - r1[j]).abs();
+        if d > 1e-9 {
+            need = need.max(d / per_tick2(jc.limits.max_accel));
         }
-        _ => 0.0,
     }
+    Some(need)
 }
 
 #[cfg(test)]

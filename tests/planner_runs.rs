@@ -1,0 +1,147 @@
+//! Whole runs through the planner and interpolator, checked from the outside: dense
+//! micro-segment programs keep their feed, and arcs follow the true circle.
+
+use pkmc::config::{MachineConfig, AXES};
+use pkmc::controller::{Controller, Inputs};
+use pkmc::protocol::{
+    encode_frame, Block, HostMsg, Motion, Plane, State, MAX_FRAME, PROTOCOL_VERSION,
+};
+use pkmc::units::{NM_PER_MM, TICK_HZ};
+
+fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
+    let mut f = [0u8; MAX_FRAME];
+    let n = encode_frame(seq, msg, &mut f).unwrap();
+    f[..n].to_vec()
+}
+
+/// Streams `blocks` as fast as the queue accepts them and runs to the end; returns the
+/// pose after every tick.
+fn run(machine: MachineConfig, blocks: &[Block]) -> (Controller, Vec<[i64; AXES]>) {
+    let mut c = Controller::new(machine).unwrap();
+    c.receive(&frame(
+        0,
+        &HostMsg::Hello {
+            version: PROTOCOL_VERSION,
+        },
+    ));
+    let mut next = 0;
+    let mut poses = Vec::new();
+    let mut sink = [0u8; 4096];
+    for _ in 0..10_000_000 {
+        // Keep the queue topped up, as nc-send does.
+        while next < blocks.len() && c.status().free_slots > 0 {
+            c.receive(&frame(next as u16 + 1, &HostMsg::Block(blocks[next])));
+            next += 1;
+        }
+        c.tick(&Inputs::default());
+        while c.transmit(&mut sink) > 0 {}
+        poses.push(*c.pose());
+        if next == blocks.len() && c.state() == State::Idle {
+            break;
+        }
+    }
+    (c, poses)
+}
+
+fn fast_machine(accel_mm_s2: i64) -> MachineConfig {
+    let mut m = MachineConfig::cartesian_xyz();
+    for a in m.axes.iter_mut().take(3) {
+        a.max_accel = accel_mm_s2 * NM_PER_MM;
+    }
+    for j in m.joints.iter_mut() {
+        j.limits.max_accel = accel_mm_s2 * NM_PER_MM;
+    }
+    m
+}
+
+#[test]
+fn micro_segments_at_f6000_run_at_full_feed() {
+    // A quarter circle of radius 80 mm as 0.05 mm chords, at F6000 (100 mm/s). With
+    // a = 3000 mm/s², stopping from 100 mm/s takes 1.7 mm: within the 64-block
+    // look-ahead (3.2 mm), so nothing but the ends should slow it down.
+    let (r, seg, feed) = (80.0f64, 0.05f64, 100.0f64);
+    let n = (r * std::f64::consts::FRAC_PI_2 / seg).round() as usize;
+    let mut blocks = Vec::new();
+    let mut length = 0.0;
+    let mut prev = (r, 0.0);
+    for k in 1..=n {
+        let a = std::f64::consts::FRAC_PI_2 * k as f64 / n as f64;
+        let p = (r * a.cos(), r * a.sin());
+        length += ((p.0 - prev.0).powi(2) + (p.1 - prev.1).powi(2)).sqrt();
+        prev = p;
+        blocks.push(Block {
+            line: k as u32,
+            motion: Motion::Linear,
+            target: [
+                (p.0 * 1e6).round() as i64 - 80_000_000,
+                (p.1 * 1e6).round() as i64,
+                0,
+                0,
+                0,
+                0,
+            ],
+            feed: (feed * 1e6) as i64,
+            tolerance_nm: u32::MAX,
+        });
+    }
+    let accel = 3000.0;
+    let (c, poses) = run(fast_machine(accel as i64), &blocks);
+    let t = c.status().motion_ticks as f64 / TICK_HZ as f64;
+    let ideal = length / feed + feed / accel;
+    eprintln!(
+        "{n} segments, {length:.3} mm: {t:.3} s against {ideal:.3} s ({:.4}×)",
+        t / ideal
+    );
+    assert!(t <= 1.05 * ideal, "ran {t} s, bound {}", 1.05 * ideal);
+    // Full feed was reached and held.
+    let peak = poses
+        .windows(2)
+        .map(|w| {
+            (((w[1][0] - w[0][0]) as f64).powi(2) + ((w[1][1] - w[0][1]) as f64).powi(2)).sqrt()
+        })
+        .fold(0.0, f64::max);
+    assert!(
+        peak * 1e-6 * TICK_HZ as f64 >= 0.99 * feed,
+        "peak {peak} nm/tick"
+    );
+    assert_eq!(c.pose()[..2], blocks.last().unwrap().target[..2]);
+}
+
+#[test]
+fn a_native_arc_never_leaves_its_circle() {
+    // G2 full circle of radius 30 mm about (0, 0) from (30, 0), plus a helix turn.
+    let r = 30_000_000i64;
+    let arc = |target: [i64; AXES], turns: u16| Block {
+        line: 1,
+        motion: Motion::Arc {
+            center: [0, 0],
+            plane: Plane::Xy,
+            clockwise: true,
+            turns,
+        },
+        target,
+        feed: 40 * NM_PER_MM,
+        tolerance_nm: u32::MAX,
+    };
+    let lead_in = Block {
+        line: 0,
+        motion: Motion::Rapid,
+        target: [r, 0, 0, 0, 0, 0],
+        feed: 0,
+        tolerance_nm: 0,
+    };
+    let blocks = [lead_in, arc([r, 0, -5_000_000, 0, 0, 0], 1)];
+    let (c, poses) = run(MachineConfig::cartesian_xyz(), &blocks);
+    let mut worst = 0.0f64;
+    let mut on_arc = 0;
+    for p in &poses {
+        if p[2] < 0 {
+            on_arc += 1;
+            let rad = ((p[0] as f64).powi(2) + (p[1] as f64).powi(2)).sqrt();
+            worst = worst.max((rad - r as f64).abs());
+        }
+    }
+    assert!(on_arc > 1000);
+    assert!(worst <= 1.5, "left the circle by {worst} nm");
+    assert_eq!(c.pose(), &[r, 0, -5_000_000, 0, 0, 0]);
+}
