@@ -1,0 +1,289 @@
+//! Canned drilling cycles, expanded on the host into rapids, feeds and dwells: G73
+//! (chip-breaking peck), G81 (drill), G82 (drill, dwell), G83 (peck), G85 (bore, feed
+//! out), G89 (bore, dwell, feed out).
+//!
+//! In the plane in force (G17: holes at X Y, the cycle axis is Z; G18: Z X and Y; G19:
+//! Y Z and X), as LinuxCNC:
+//! - R (retract plane) and the cycle-axis word (hole bottom) are required on the first
+//!   line of a cycle and remembered while the same cycle stays in force, as are P
+//!   (dwell, seconds) and Q (peck, > 0). In G90 they are positions; in G91 R is measured
+//!   from the cycle axis' level before the first cycle line and the bottom from R.
+//! - Before the first hole, if the tool is below R it rises to R. Each of the L repeats
+//!   (G91: the hole position advances by X Y, or by `@`/`^` in polar terms, each time)
+//!   rapids to the hole at the current level, down to R, then drills; it retracts to R
+//!   (G99) or to the level before the cycle (G98) when that is higher.
+//! - G73/G83 feed down by Q at a time; G83 rapids out to R between pecks and back down to
+//!   0.254 mm (0.010 in) above the last depth, G73 only backs off by that much.
+//! - The cycle runs in exact-stop mode: if blending is in force, a `PathMode` exact
+//!   stop precedes the moves and the blending mode is restored after them.
+//! - A B C may not move; inverse-time feed (G93) is refused; a feed (F) is required.
+//!
+//! Invariants: one line expands into at most [`MAX_CYCLE_REPEATS`] holes of at most
+//! [`MAX_PECKS`] pecks; every position stays within [`super::MAX_AXIS_UNITS`].
+//!
+//! Source: LinuxCNC G-code reference (canned cycles) and its interpreter's
+//! `interp_cycles.cc` (`convert_cycle_xy`, `CYCLE_MACRO`, `convert_cycle_g83`).
+
+use super::interp::{check_range, fail, whole_in, Cycle, Interp, LineError, Motion, Res};
+use super::lexer::Words;
+use super::{arcs, MAX_CYCLE_REPEATS, MAX_PECKS};
+use crate::canon::{Canon, Feed, PathMode, Plane};
+use pkmc::config::{AXES, AXIS_NAMES};
+
+/// How far above the last depth G83 rapids back down, and G73 backs off, nm
+/// (LinuxCNC's 0.010 in, also used in mm programs as 0.254 mm).
+pub const PECK_CLEARANCE_NM: i64 = 254_000;
+
+impl Interp<'_> {
+    /// Runs canned cycle `kind` for one line; `previous` is the motion mode before it.
+    pub(crate) fn cycle(
+        &mut self,
+        w: &Words,
+        kind: Cycle,
+        previous: Motion,
+        line: u32,
+        col: u32,
+        out: &mut Vec<Canon>,
+    ) -> Res<()> {
+        let name = kind.name();
+        if self.inverse_time {
+            return fail(
+                col,
+                format!("{name} cannot run in inverse-time feed mode (G93)"),
+            );
+        }
+        let Some(rate) = self.feed else {
+            return fail(col, format!("{name} without a feed (F)"));
+        };
+        let feed = Feed::PerSecond(rate.linear);
+        for l in [b'A', b'B', b'C'] {
+            if let Some(x) = w.get(l) {
+                return fail(
+                    x.col,
+                    format!("{} cannot move in a canned cycle", l as char),
+                );
+            }
+        }
+        let same = previous == Motion::Cycle(kind);
+        let (ia, ib, ic) = self.plane.axes();
+        let cc_letter = AXIS_NAMES[ic];
+        let r_val = match w.get(b'R') {
+            Some(r) => self.length(r)?,
+            None if same => self.cycle.r,
+            None => return fail(col, format!("{name} needs R (retract plane)")),
+        };
+        let z_val = match w.get(cc_letter as u8) {
+            Some(z) => self.length(z)?,
+            None if same => self.cycle.z,
+            None => return fail(col, format!("{name} needs {cc_letter} (hole bottom)")),
+        };
+        let repeats = match w.get(b'L') {
+            Some(l) => whole_in(l, 1, MAX_CYCLE_REPEATS, "repeats L")?,
+            None => 1,
+        };
+        let p_ms = match (kind, w.get(b'P')) {
+            (Cycle::G82 | Cycle::G89, Some(p)) => {
+                if p.num.is_negative() {
+                    return fail(p.col, format!("negative dwell time P{}", p.num));
+                }
+                p.num
+                    .scaled(1000, 1)
+                    .and_then(|v| u32::try_from(v).ok())
+                    .ok_or_else(|| LineError {
+                        col: p.col,
+                        message: format!("dwell time P{} s out of range", p.num),
+                    })?
+            }
+            (Cycle::G82 | Cycle::G89, None) if !same => {
+                return fail(col, format!("{name} needs P (dwell time, seconds)"))
+            }
+            _ => self.cycle.p_ms,
+        };
+        let q = match (kind, w.get(b'Q')) {
+            (Cycle::G73 | Cycle::G83, Some(q)) => {
+                let v = self.length(q)?;
+                if v <= 0 {
+                    return fail(q.col, format!("peck depth Q{} must be above zero", q.num));
+                }
+                v
+            }
+            (Cycle::G73 | Cycle::G83, None) if !same => {
+                return fail(col, format!("{name} needs Q (peck depth)"))
+            }
+            _ => self.cycle.q,
+        };
+
+        let current = self.pos[ic];
+        let initial = *self.cycle.initial_level.get_or_insert(current);
+        let (r, bottom) = if self.absolute {
+            (r_val + self.off[ic], z_val + self.off[ic])
+        } else {
+            (r_val + initial, r_val + initial + z_val)
+        };
+        let r = check_range(r, ic, col)?;
+        let bottom = check_range(bottom, ic, col)?;
+        if r < bottom {
+            return fail(
+                col,
+                format!(
+                    "{name}: the retract plane R is below the hole bottom {cc_letter} \
+                     ({} mm under it)",
+                    arcs::mm((bottom - r) as f64)
+                ),
+            );
+        }
+        if matches!(kind, Cycle::G73 | Cycle::G83) && (r - bottom) / q.max(1) > MAX_PECKS {
+            return fail(
+                col,
+                format!("{name} would peck more than {MAX_PECKS} times per hole"),
+            );
+        }
+
+        // Hole positions: absolute once, or increments per repeat.
+        let polar = w.polar_radius.is_some() || w.polar_angle.is_some();
+        let (mut aa, mut bb) = (self.pos[ia], self.pos[ib]);
+        let (mut inc_a, mut inc_b) = (0, 0);
+        let mut polar_step = None;
+        if self.absolute {
+            if polar {
+                let (x, y) = self.polar(w, self.pos[0] - self.off[0], self.pos[1] - self.off[1])?;
+                aa = check_range(x + self.off[0], 0, col)?;
+                bb = check_range(y + self.off[1], 1, col)?;
+            } else {
+                if let Some(x) = w.get(AXIS_NAMES[ia] as u8) {
+                    aa = check_range(self.length(x)? + self.off[ia], ia, x.col)?;
+                }
+                if let Some(y) = w.get(AXIS_NAMES[ib] as u8) {
+                    bb = check_range(self.length(y)? + self.off[ib], ib, y.col)?;
+                }
+            }
+        } else if polar {
+            if self.plane != Plane::Xy {
+                return fail(col, "polar coordinates (@ ^) need the XY plane (G17)");
+            }
+            if let Some(xy) = w.get(b'X').or(w.get(b'Y')) {
+                return fail(xy.col, "polar coordinates (@ ^) and X or Y on one line");
+            }
+            let dr = match w.polar_radius {
+                Some(r) => self.length(r)? as f64,
+                None => 0.0,
+            };
+            let dt = w.polar_angle.map_or(0.0, |a| a.num.to_f64().to_radians());
+            polar_step = Some((dr, dt));
+        } else {
+            if let Some(x) = w.get(AXIS_NAMES[ia] as u8) {
+                inc_a = self.length(x)?;
+            }
+            if let Some(y) = w.get(AXIS_NAMES[ib] as u8) {
+                inc_b = self.length(y)?;
+            }
+        }
+
+        let restore = self.path != PathMode::ExactStop;
+        if restore {
+            out.push(Canon::PathMode {
+                line,
+                mode: PathMode::ExactStop,
+            });
+        }
+        let mut level = current;
+        let mut old = initial;
+        if old < r {
+            let t = self.at(ia, ib, ic, self.pos[ia], self.pos[ib], r);
+            self.rapid(line, t, out);
+            old = r;
+            level = r;
+        }
+        let clear = if self.retract_to_r { r } else { old };
+        for rep in 0..repeats {
+            aa = check_range(aa + inc_a, ia, col)?;
+            bb = check_range(bb + inc_b, ib, col)?;
+            if let Some((dr, dt)) = polar_step {
+                let (x, y) = ((aa - self.off[0]) as f64, (bb - self.off[1]) as f64);
+                if x == 0.0 && y == 0.0 {
+                    return fail(
+                        col,
+                        "incremental polar motion (G91 @ ^) is undefined at the origin",
+                    );
+                }
+                let radius = x.hypot(y) + dr;
+                let theta = y.atan2(x) + dt;
+                aa = self.round_at(radius * theta.cos(), 0, col)? + self.off[0];
+                bb = self.round_at(radius * theta.sin(), 1, col)? + self.off[1];
+                aa = check_range(aa, 0, col)?;
+                bb = check_range(bb, 1, col)?;
+            }
+            if rep == 0 && level > r {
+                self.rapid(line, self.at(ia, ib, ic, aa, bb, level), out);
+                self.rapid(line, self.at(ia, ib, ic, aa, bb, r), out);
+            } else {
+                self.rapid(line, self.at(ia, ib, ic, aa, bb, clear), out);
+                if clear > r {
+                    self.rapid(line, self.at(ia, ib, ic, aa, bb, r), out);
+                }
+            }
+            let feed_to = |s: &mut Self, depth: i64, out: &mut Vec<Canon>| {
+                let target = s.at(ia, ib, ic, aa, bb, depth);
+                out.push(Canon::Linear { line, target, feed });
+                s.pos = target;
+            };
+            match kind {
+                Cycle::G81 => feed_to(self, bottom, out),
+                Cycle::G82 => {
+                    feed_to(self, bottom, out);
+                    out.push(Canon::Dwell { line, ms: p_ms });
+                }
+                Cycle::G85 => {
+                    feed_to(self, bottom, out);
+                    feed_to(self, r, out);
+                }
+                Cycle::G89 => {
+                    feed_to(self, bottom, out);
+                    out.push(Canon::Dwell { line, ms: p_ms });
+                    feed_to(self, r, out);
+                }
+                Cycle::G73 | Cycle::G83 => {
+                    let mut depth = r - q;
+                    while depth > bottom {
+                        feed_to(self, depth, out);
+                        if kind == Cycle::G83 {
+                            self.rapid(line, self.at(ia, ib, ic, aa, bb, r), out);
+                        }
+                        let back = (depth + PECK_CLEARANCE_NM).min(r);
+                        self.rapid(line, self.at(ia, ib, ic, aa, bb, back), out);
+                        depth -= q;
+                    }
+                    feed_to(self, bottom, out);
+                }
+            }
+            self.rapid(line, self.at(ia, ib, ic, aa, bb, clear), out);
+        }
+        if restore {
+            out.push(Canon::PathMode {
+                line,
+                mode: self.path,
+            });
+        }
+        self.cycle.r = r_val;
+        self.cycle.z = z_val;
+        self.cycle.p_ms = p_ms;
+        self.cycle.q = q;
+        Ok(())
+    }
+
+    /// The current pose with the hole axes at `aa`, `bb` and the cycle axis at `cc`.
+    fn at(&self, ia: usize, ib: usize, ic: usize, aa: i64, bb: i64, cc: i64) -> [i64; AXES] {
+        let mut t = self.pos;
+        t[ia] = aa;
+        t[ib] = bb;
+        t[ic] = cc;
+        t
+    }
+
+    fn round_at(&self, v: f64, i: usize, col: u32) -> Res<i64> {
+        match super::lexer::f64_to_i64(v) {
+            Some(u) => check_range(u, i, col),
+            None => fail(col, format!("{} position out of range", AXIS_NAMES[i])),
+        }
+    }
+}

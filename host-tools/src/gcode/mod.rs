@@ -1,0 +1,214 @@
+//! G-code front end: a parser and modal interpreter for the RS-274/NGC dialect that
+//! LinuxCNC and CAM post-processors produce, turning a program into canonical machining
+//! commands ([`Canon`]).
+//!
+//! The program is handled one line at a time, without a syntax tree: [`lexer`] splits a
+//! line into words and evaluates `[expressions]` and parameter reads on the fly (into a
+//! buffer reused for every line, so the hot loop allocates nothing per word), and
+//! [`interp`] applies the words to the modal state in LinuxCNC's order of execution and
+//! emits [`Canon`] commands; [`cycles`] expands canned drilling cycles into rapids, feeds
+//! and dwells, [`arcs`] computes arc centres and checks arc ends, [`params`] holds the
+//! numbered and named parameters and [`tools`] the tool table.
+//!
+//! Invariants:
+//! - Every position in the output is absolute, in axis units (nm for X Y Z, n° for
+//!   A B C), after work offsets (G54–G59.3, G92) and the tool length offset (G43).
+//! - Literal numbers convert to axis units exactly, with one rounding to the nearest unit
+//!   (`X10.0001` is 10 000 100 nm; `G20 X1` is 25 400 000 nm); values computed by
+//!   expressions are evaluated in `f64` as LinuxCNC does and rounded once.
+//! - No input makes [`compile`] panic: user numbers go through checked arithmetic, every
+//!   axis value is bounded by [`MAX_AXIS_UNITS`], lines by [`MAX_LINE`], bracket nesting
+//!   by [`MAX_NESTING`] and the commands one line may expand into by
+//!   [`MAX_CYCLE_REPEATS`] and [`MAX_PECKS`].
+//! - Every error names `file:line:col` and what is wrong; the whole program is checked
+//!   (at most one error per line, then the next line), and a program with any error
+//!   yields no commands. Legal LinuxCNC features that are not implemented are refused by
+//!   name with a message starting `unsupported: `.
+//!
+//! Source: the LinuxCNC G-code reference (overview, G codes, M codes, O codes for what is
+//! refused) and the RS-274/NGC interpreter's order of execution. The dialect as
+//! implemented is described in `docs/gcode.md`.
+
+pub mod arcs;
+mod compat;
+pub mod cycles;
+pub mod interp;
+pub mod lexer;
+pub mod params;
+pub mod tools;
+
+pub use compat::CompileWith;
+pub use tools::{Tool, ToolTable};
+
+use crate::canon::Canon;
+use pkmc::config::AXES;
+use std::fmt;
+
+/// Longest line accepted, characters (without the line break).
+pub const MAX_LINE: usize = 256;
+/// Deepest nesting of `[ ]`, unary signs and parameter indirection (`##1`) in one value.
+pub const MAX_NESTING: usize = 32;
+/// Largest magnitude of any position, offset or distance, axis units (1e17 nm is
+/// 100 000 km; 1e17 n° is 10⁸ degrees). Sums of a few such values cannot overflow `i64`.
+pub const MAX_AXIS_UNITS: i64 = 100_000_000_000_000_000;
+/// Most repeats (L) of one canned-cycle line.
+pub const MAX_CYCLE_REPEATS: i64 = 10_000;
+/// Most pecks of one G73/G83 hole.
+pub const MAX_PECKS: i64 = 10_000;
+/// Default arc tolerance, nm: how far an arc's end may lie off the circle through its
+/// start (0.002 mm).
+pub const DEFAULT_ARC_TOLERANCE_NM: i64 = 2_000;
+
+/// What the interpreter needs besides the program text.
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// Skip lines that start with `/` (the operator's block-delete switch).
+    pub block_delete: bool,
+    /// Tool lengths and diameters, for G43 and parameters #5400–#5410.
+    pub tools: ToolTable,
+    /// How far, nm, an arc's end may lie off the circle through its start (centre
+    /// format), and how much too short an R-format radius may be; default
+    /// [`DEFAULT_ARC_TOLERANCE_NM`].
+    pub arc_tolerance_nm: i64,
+    /// Pose the machine is at when the program starts (axis units, machine frame).
+    pub start: [i64; AXES],
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            block_delete: false,
+            tools: ToolTable::default(),
+            arc_tolerance_nm: DEFAULT_ARC_TOLERANCE_NM,
+            start: [0; AXES],
+        }
+    }
+}
+
+/// A located error.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Diagnostic {
+    /// File name as given.
+    pub file: String,
+    /// Line, 1-based.
+    pub line: usize,
+    /// Column, 1-based, in characters.
+    pub col: usize,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for Diagnostic {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}:{}:{}: {}",
+            self.file, self.line, self.col, self.message
+        )
+    }
+}
+
+/// Prefix of every refusal of a legal but unimplemented feature.
+pub const UNSUPPORTED: &str = "unsupported: ";
+
+/// The message refusing `feature` by name.
+pub(crate) fn unsupported(feature: &str) -> String {
+    format!("{UNSUPPORTED}{feature}")
+}
+
+/// Compiles a whole program; returns its canonical commands, or every error found.
+///
+/// `options` is normally `&Options`. Passing a start pose (`[i64; 6]`) instead selects
+/// the temporary compatibility form that returns protocol blocks (see
+/// [`CompileWith`]).
+pub fn compile<O: CompileWith>(source: &str, file: &str, options: O) -> O::Output {
+    options.compile(source, file)
+}
+
+/// Compiles a whole program with `options` into canonical commands (what
+/// [`compile`] does for `&Options`).
+pub fn compile_canon(
+    source: &str,
+    file: &str,
+    options: &Options,
+) -> Result<Vec<Canon>, Vec<Diagnostic>> {
+    let mut interp = interp::Interp::new(options);
+    let mut words = lexer::Words::default();
+    let mut out = Vec::with_capacity(source.len() / 24);
+    let mut errors = Vec::new();
+    let mut error = |line: usize, col: usize, message: String| {
+        errors.push(Diagnostic {
+            file: file.to_string(),
+            line,
+            col,
+            message,
+        })
+    };
+    // `%` demarcation: the first non-blank line may be `%`; the next `%` line ends the
+    // program and what follows is ignored.
+    let mut opening_percent: Option<usize> = None;
+    let mut seen_text = false;
+    let mut closed = false;
+    for (n, raw) in source.split('\n').enumerate() {
+        let line = n + 1;
+        let text = raw.strip_suffix('\r').unwrap_or(raw);
+        let trimmed = text.trim_matches(|c| c == ' ' || c == '\t');
+        if trimmed == "%" {
+            if !seen_text {
+                seen_text = true;
+                opening_percent = Some(line);
+                continue;
+            }
+            closed = true;
+            break;
+        }
+        if trimmed.is_empty() {
+            continue;
+        }
+        seen_text = true;
+        if text.len() > MAX_LINE && text.chars().count() > MAX_LINE {
+            error(
+                line,
+                MAX_LINE + 1,
+                format!("line longer than {MAX_LINE} characters"),
+            );
+            continue;
+        }
+        // Block delete: `/` first on the line (after blanks).
+        let mut start = text.len() - text.trim_start_matches([' ', '\t']).len();
+        if text.as_bytes().get(start) == Some(&b'/') {
+            if options.block_delete {
+                continue;
+            }
+            start += 1;
+        }
+        if let Err(e) = lexer::scan_line(text, start, &interp.params, &mut words) {
+            error(line, e.col as usize, e.message);
+            continue;
+        }
+        let nc_line = u32::try_from(line).unwrap_or(u32::MAX);
+        let before = out.len();
+        if let Err(e) = interp.execute(&mut words, nc_line, &mut out) {
+            out.truncate(before);
+            error(line, e.col as usize, e.message);
+            continue;
+        }
+        if interp.ended() {
+            break;
+        }
+    }
+    if let Some(open) = opening_percent {
+        if !closed && !interp.ended() {
+            error(
+                open,
+                1,
+                "program opened with '%' is never closed by a '%' line".into(),
+            );
+        }
+    }
+    if errors.is_empty() {
+        Ok(out)
+    } else {
+        Err(errors)
+    }
+}

@@ -1,0 +1,143 @@
+//! Numbered and named parameters.
+//!
+//! Numbered parameters #1–#5601 hold `f64` and read as 0 until set, as in LinuxCNC
+//! (which would load them from its variable file; this interpreter starts from zero
+//! every run). Named parameters (`#<name>`, and globals `#<_name>`) must be set before
+//! they are read; names are case-insensitive and blanks in them are ignored. With no
+//! subroutines there is a single scope, so local and global names behave alike.
+//!
+//! Parameters the interpreter maintains (see [`crate::gcode::interp`]), in mm for X Y Z
+//! and degrees for A B C whatever G20/G21 is in force:
+//! #5161–#5166 G28 position, #5181–#5186 G30 position (machine frame),
+//! #5210 G92 offsets active (1/0), #5211–#5216 G92 offsets, #5220 coordinate system in
+//! force (1–9), #5221 + 20·(n − 1) + axis: offsets of coordinate system n (G54 = 1 …
+//! G59.3 = 9; +9 is the rotation, always 0), #5400 tool in the spindle, #5403 its length
+//! offset in force, #5410 its diameter, #5420–#5425 the current position in program
+//! units (read-only).
+//!
+//! Invariants: every value is finite; names are stored normalised.
+
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+
+/// Numbered parameters are #1 to #`NUM_PARAMS - 1` (LinuxCNC's range).
+pub const NUM_PARAMS: usize = 5602;
+/// First parameter of the G28 position.
+pub const G28_POSITION: usize = 5161;
+/// First parameter of the G30 position.
+pub const G30_POSITION: usize = 5181;
+/// G92 offsets active.
+pub const G92_ACTIVE: usize = 5210;
+/// First G92 offset.
+pub const G92_OFFSETS: usize = 5211;
+/// Coordinate system in force, 1–9.
+pub const CURRENT_SYSTEM: usize = 5220;
+/// First parameter of coordinate system 1 (G54); system n starts 20 further per step.
+pub const SYSTEM_BASE: usize = 5221;
+/// First parameter at or above which settings are refused (read-only).
+pub const READ_ONLY_FROM: usize = 5400;
+/// Tool in the spindle.
+pub const TOOL_NUMBER: usize = 5400;
+/// Tool length offset in force (Z), mm.
+pub const TOOL_LENGTH: usize = 5403;
+/// Diameter of the tool in the spindle, mm.
+pub const TOOL_DIAMETER: usize = 5410;
+/// First parameter of the current position.
+pub const POSITION: usize = 5420;
+
+/// FNV-1a: names are short, and the table is never exposed to adversarial sizes.
+#[derive(Default)]
+struct Fnv(u64);
+
+impl Hasher for Fnv {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        let mut h = if self.0 == 0 {
+            0xcbf2_9ce4_8422_2325
+        } else {
+            self.0
+        };
+        for &b in bytes {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+        self.0 = h;
+    }
+}
+
+/// The parameter store.
+#[derive(Clone, Debug)]
+pub struct Params {
+    numbered: Vec<f64>,
+    /// Current position in the program frame, axis units (for #5420–#5425).
+    pub(crate) position: [i64; 6],
+    /// G20 in force (the unit of #5420–#5422).
+    pub(crate) inch: bool,
+    named: HashMap<Box<[u8]>, f64, BuildHasherDefault<Fnv>>,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Params {
+    /// All numbered parameters 0, no named ones; coordinate system 1 in force.
+    pub fn new() -> Self {
+        let mut numbered = vec![0.0; NUM_PARAMS];
+        numbered[CURRENT_SYSTEM] = 1.0;
+        Self {
+            numbered,
+            position: [0; 6],
+            inch: false,
+            named: HashMap::default(),
+        }
+    }
+
+    /// Value of #`n` (`n` already checked to be in 1..NUM_PARAMS; 0 otherwise).
+    #[inline]
+    pub fn numbered(&self, n: usize) -> f64 {
+        if (POSITION..POSITION + 6).contains(&n) {
+            return self.position_param(n - POSITION);
+        }
+        self.numbered.get(n).copied().unwrap_or(0.0)
+    }
+
+    #[cold]
+    fn position_param(&self, i: usize) -> f64 {
+        let v = self.position[i] as f64;
+        if i >= 3 {
+            v / 1e9
+        } else if self.inch {
+            v / 25.4e6
+        } else {
+            v / 1e6
+        }
+    }
+
+    /// Sets #`n` (ignored out of range; the lexer checks the range).
+    pub fn set_numbered(&mut self, n: usize, v: f64) {
+        if let Some(slot) = self.numbered.get_mut(n) {
+            *slot = v;
+        }
+    }
+
+    /// Value of `#<name>` (normalised name), if set.
+    #[inline]
+    pub fn named(&self, name: &[u8]) -> Option<f64> {
+        self.named.get(name).copied()
+    }
+
+    /// Sets `#<name>` (normalised name).
+    pub fn set_named(&mut self, name: &[u8], v: f64) {
+        match self.named.get_mut(name) {
+            Some(slot) => *slot = v,
+            None => {
+                self.named.insert(name.into(), v);
+            }
+        }
+    }
+}

@@ -1,0 +1,191 @@
+//! Tool table: tool number → length offset and diameter.
+//!
+//! Read from a simple LinuxCNC-style tool file, one tool per line:
+//! `T1 P1 Z12.5 D6.0 ;comment`, values in mm. `T` (required) is the tool number, `P`
+//! the pocket (ignored: there is no changer to drive), `Z` the length offset that G43
+//! applies, `D` the diameter (#5410). Offsets along other axes (`X Y A B C U V W`) are
+//! refused unless zero, since only Z length compensation is implemented; the lathe
+//! fields `I J Q` (front and back angle, orientation) are accepted and ignored. Blank
+//! lines and `;` comments are skipped.
+//!
+//! Invariants: lengths and diameters are in nm and bounded by
+//! [`super::MAX_AXIS_UNITS`]; diameters are not negative; each tool appears once.
+
+use super::lexer::{scan_line, Num, Words};
+use super::params::Params;
+use super::{Diagnostic, MAX_AXIS_UNITS, MAX_LINE};
+use pkmc::units::NM_PER_MM;
+use std::collections::BTreeMap;
+
+/// One tool.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Tool {
+    /// Length offset applied to Z by G43, nm.
+    pub length_nm: i64,
+    /// Diameter, nm.
+    pub diameter_nm: i64,
+}
+
+/// Tools by number.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ToolTable {
+    tools: BTreeMap<u32, Tool>,
+}
+
+impl ToolTable {
+    /// An empty table.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The tool numbered `n`, if the table has it.
+    pub fn get(&self, n: u32) -> Option<Tool> {
+        self.tools.get(&n).copied()
+    }
+
+    /// Adds or replaces tool `n`.
+    pub fn insert(&mut self, n: u32, tool: Tool) {
+        self.tools.insert(n, tool);
+    }
+
+    /// Number of tools.
+    pub fn len(&self) -> usize {
+        self.tools.len()
+    }
+
+    /// Does the table have no tools?
+    pub fn is_empty(&self) -> bool {
+        self.tools.is_empty()
+    }
+
+    /// Tools in number order.
+    pub fn iter(&self) -> impl Iterator<Item = (u32, Tool)> + '_ {
+        self.tools.iter().map(|(&n, &t)| (n, t))
+    }
+
+    /// Parses a tool file; `origin` names it in the diagnostic of the first error.
+    pub fn parse(text: &str, origin: &str) -> Result<ToolTable, Diagnostic> {
+        let mut table = ToolTable::new();
+        let params = Params::new();
+        let mut words = Words::default();
+        for (n, raw) in text.split('\n').enumerate() {
+            let line = n + 1;
+            let err = |col: u32, message: String| Diagnostic {
+                file: origin.to_string(),
+                line,
+                col: col as usize,
+                message,
+            };
+            let text = raw.strip_suffix('\r').unwrap_or(raw);
+            if text.chars().count() > MAX_LINE {
+                return Err(err(
+                    MAX_LINE as u32 + 1,
+                    format!("line longer than {MAX_LINE} characters"),
+                ));
+            }
+            scan_line(text, 0, &params, &mut words).map_err(|e| err(e.col, e.message))?;
+            if words.present() == 0 {
+                if let Some(g) = words.g.first().or(words.m.first()) {
+                    return Err(err(g.col, "a tool line holds T P Z D words only".into()));
+                }
+                if let Some(a) = words.assigns.first() {
+                    return Err(err(a.col, "a tool line holds T P Z D words only".into()));
+                }
+                continue;
+            }
+            if let Some(g) = words.g.first().or(words.m.first()) {
+                return Err(err(g.col, "a tool line holds T P Z D words only".into()));
+            }
+            let Some(t) = words.get(b'T') else {
+                return Err(err(1, "tool line without a tool number (T)".into()));
+            };
+            let number = t
+                .num
+                .whole()
+                .and_then(|v| u32::try_from(v).ok())
+                .ok_or_else(|| {
+                    err(
+                        t.col,
+                        format!("tool number T{} is not a whole number ≥ 0", t.num),
+                    )
+                })?;
+            if table.tools.contains_key(&number) {
+                return Err(err(t.col, format!("tool T{number} listed twice")));
+            }
+            let mm = |num: Num, col: u32, what: &str| {
+                num.scaled(NM_PER_MM, 1)
+                    .filter(|v| v.abs() <= MAX_AXIS_UNITS)
+                    .ok_or_else(|| err(col, format!("{what} {num} mm out of range")))
+            };
+            let mut tool = Tool::default();
+            for letter in b'A'..=b'Z' {
+                let Some(w) = words.get(letter) else { continue };
+                match letter {
+                    b'T' | b'P' | b'I' | b'J' | b'Q' => {}
+                    b'Z' => tool.length_nm = mm(w.num, w.col, "length Z")?,
+                    b'D' => {
+                        tool.diameter_nm = mm(w.num, w.col, "diameter D")?;
+                        if tool.diameter_nm < 0 {
+                            return Err(err(w.col, format!("negative diameter D{}", w.num)));
+                        }
+                    }
+                    b'X' | b'Y' | b'A' | b'B' | b'C' => {
+                        if !w.num.is_zero() {
+                            return Err(err(
+                                w.col,
+                                super::unsupported(&format!(
+                                    "tool offsets along {} (only Z length offsets)",
+                                    letter as char
+                                )),
+                            ));
+                        }
+                    }
+                    _ => {
+                        return Err(err(
+                            w.col,
+                            format!("unknown tool field '{}'", letter as char),
+                        ))
+                    }
+                }
+            }
+            table.tools.insert(number, tool);
+        }
+        Ok(table)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_linuxcnc_tool_file_reads_lengths_and_diameters_in_mm() {
+        let t = ToolTable::parse(
+            "T1 P1 Z12.5 D6.0 ;end mill\n\nt2 p2 z-0.0005 d.5\n",
+            "tools",
+        )
+        .unwrap();
+        assert_eq!(
+            t.get(1),
+            Some(Tool {
+                length_nm: 12_500_000,
+                diameter_nm: 6_000_000
+            })
+        );
+        assert_eq!(t.get(2).unwrap().length_nm, -500);
+        assert_eq!(t.len(), 2);
+    }
+
+    #[test]
+    fn a_tool_listed_twice_is_rejected_with_its_line() {
+        let e = ToolTable::parse("T1 Z1\nT1 Z2\n", "tools").unwrap_err();
+        assert_eq!(e.to_string(), "tools:2:1: tool T1 listed twice");
+    }
+
+    #[test]
+    fn offsets_along_x_are_refused_by_name() {
+        let e = ToolTable::parse("T3 X1 Z1\n", "tools").unwrap_err();
+        assert!(e.message.starts_with("unsupported: tool offsets along X"));
+        assert_eq!(e.col, 4);
+    }
+}
