@@ -68,6 +68,10 @@ pub struct Controller {
     session: bool,
     expected_seq: u16,
     last_control: Option<u16>,
+    machine_id: u32,
+    mismatch: bool,
+    assembler: crate::store::Assembler,
+    store_pending: bool,
     planner: Planner,
     exec: Executor,
     joints: Joints,
@@ -111,6 +115,7 @@ impl Controller {
                 servos[channel as usize] = ServoLoop::new(jc.scale.steps_at(*q));
             }
         }
+        let machine_for_id = machine.clone();
         Ok(Self {
             machine,
             kin,
@@ -120,6 +125,10 @@ impl Controller {
             session: false,
             expected_seq: 0,
             last_control: None,
+            machine_id: crate::store::identity(&machine_for_id),
+            mismatch: false,
+            assembler: crate::store::Assembler::new(),
+            store_pending: false,
             planner: Planner::new(pose),
             exec: Executor::new(pose),
             joints,
@@ -250,7 +259,7 @@ impl Controller {
 
     fn handle(&mut self, seq: u16, msg: HostMsg) {
         match msg {
-            HostMsg::Hello { version } => {
+            HostMsg::Hello { version, machine } => {
                 if version != PROTOCOL_VERSION {
                     self.nak(NakReason::Version);
                     return;
@@ -260,10 +269,44 @@ impl Controller {
                 self.last_control = None;
                 self.exec.completed = 0;
                 self.motion_ticks = 0;
+                self.mismatch = machine != self.machine_id;
+                if self.mismatch {
+                    self.raise(Alarm {
+                        cause: AlarmCause::MachineMismatch,
+                        joint: NO_JOINT,
+                        line: 0,
+                    });
+                }
                 self.send(&CtrlMsg::HelloAck {
                     version: PROTOCOL_VERSION,
                     queue_capacity: QUEUE_CAPACITY as u16,
+                    machine: self.machine_id,
                 });
+            }
+            HostMsg::Machine {
+                id,
+                offset,
+                total,
+                crc,
+                data,
+            } => {
+                let fresh = self.last_control != Some(id);
+                self.last_control = Some(id);
+                self.send(&CtrlMsg::ControlAck { id });
+                if !fresh {
+                    return;
+                }
+                if self.has_work() {
+                    self.send(&CtrlMsg::MachineRefused {
+                        error: crate::store::StoreError::Busy,
+                    });
+                    return;
+                }
+                match self.assembler.add(offset as usize, total as usize, crc, &data) {
+                    Ok(None) => {}
+                    Ok(Some(config)) => self.load_machine(config),
+                    Err(error) => self.send(&CtrlMsg::MachineRefused { error }),
+                }
             }
             HostMsg::StatusRequest => {
                 let s = self.status();
@@ -291,6 +334,10 @@ impl Controller {
                     self.nak(NakReason::Gap);
                     return;
                 }
+                if self.mismatch {
+                    self.nak(NakReason::MachineMismatch);
+                    return;
+                }
                 if matches!(self.state, State::Alarm | State::EStop) {
                     // Accepted and dropped: the job is over until the alarm is reset.
                     self.expected_seq = seq.wrapping_add(1);
@@ -309,7 +356,50 @@ impl Controller {
         }
     }
 
+    /// Adopts `config`: the controller restarts at its home pose, keeping the session.
+    fn load_machine(&mut self, config: MachineConfig) {
+        match Controller::new(config) {
+            Err(e) => self.send(&CtrlMsg::MachineRefused {
+                error: crate::store::StoreError::Invalid(e),
+            }),
+            Ok(fresh) => {
+                let link = (
+                    core::mem::take(&mut self.tx),
+                    self.tx_seq,
+                    self.expected_seq,
+                    self.last_control,
+                    self.stats,
+                );
+                *self = fresh;
+                (self.tx, self.tx_seq, self.expected_seq, self.last_control, self.stats) = link;
+                self.session = true;
+                self.store_pending = true;
+                self.send(&CtrlMsg::MachineLoaded {
+                    machine: self.machine_id,
+                });
+            }
+        }
+    }
+
+    /// Identity of the machine configuration in force.
+    pub fn machine_id(&self) -> u32 {
+        self.machine_id
+    }
+
+    /// A configuration adopted from the host that the firmware should now write to
+    /// flash; returned once.
+    pub fn take_store_request(&mut self) -> Option<&MachineConfig> {
+        if core::mem::replace(&mut self.store_pending, false) {
+            Some(&self.machine)
+        } else {
+            None
+        }
+    }
+
     fn control(&mut self, cmd: Control) {
+        if self.mismatch && !matches!(cmd, Control::Stop | Control::Abort) {
+            return;
+        }
         match cmd {
             Control::Hold => {
                 if matches!(self.state, State::Running | State::Idle) {
@@ -335,7 +425,7 @@ impl Controller {
                 }
             }
             Control::AlarmReset => {
-                if self.state == State::Alarm {
+                if self.state == State::Alarm && !self.mismatch {
                     self.alarm = None;
                     self.state = State::Idle;
                 }
@@ -523,15 +613,57 @@ mod tests {
         })
     }
 
+    fn hello(c: &Controller) -> HostMsg {
+        HostMsg::Hello {
+            version: PROTOCOL_VERSION,
+            machine: c.machine_id(),
+        }
+    }
+
     fn session() -> Controller {
         let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
-        c.receive(&frame(
-            0,
-            &HostMsg::Hello {
-                version: PROTOCOL_VERSION,
-            },
-        ));
+        c.receive(&frame(0, &hello(&c)));
         c
+    }
+
+    #[test]
+    fn a_controller_that_disagrees_about_the_machine_refuses_to_move_until_sent_it() {
+        let mut other = MachineConfig::cartesian_xyz();
+        other.joints[0].limits.max_velocity /= 2;
+        other.axes[0].max_velocity /= 2;
+        let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
+        let id = crate::store::identity(&other);
+        c.receive(&frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: id }));
+        c.receive(&frame(1, &line_to(10, 1)));
+        let r = replies(&mut c);
+        assert!(matches!(r[0], CtrlMsg::HelloAck { machine, .. } if machine != id));
+        assert_eq!(r[1], CtrlMsg::Nak { expected: 1, reason: NakReason::MachineMismatch });
+        assert_eq!(c.status().alarm.map(|a| a.cause), Some(AlarmCause::MachineMismatch));
+        // Send the machine in chunks, each twice (a resend), the first once more.
+        let mut payload = [0u8; crate::store::MAX_CONFIG_BYTES];
+        let n = crate::store::encode(&other, &mut payload).unwrap();
+        let mut chunk_id = 100;
+        for off in (0..n).step_by(crate::store::CHUNK_BYTES).chain([0]) {
+            let end = (off + crate::store::CHUNK_BYTES).min(n);
+            let msg = HostMsg::Machine {
+                id: chunk_id,
+                offset: off as u16,
+                total: n as u16,
+                crc: id,
+                data: heapless::Vec::from_slice(&payload[off..end]).unwrap(),
+            };
+            c.receive(&frame(0, &msg));
+            c.receive(&frame(0, &msg));
+            chunk_id += 1;
+        }
+        assert!(replies(&mut c).contains(&CtrlMsg::MachineLoaded { machine: id }));
+        assert_eq!(c.machine(), &other);
+        assert_eq!(c.take_store_request(), Some(&other));
+        assert_eq!(c.take_store_request(), None);
+        assert_eq!(c.state(), State::Idle);
+        c.receive(&frame(1, &line_to(10, 1)));
+        run(&mut c, 10_000);
+        assert_eq!(c.pose()[0], 10_000_000);
     }
 
     fn run(c: &mut Controller, ticks: usize) {

@@ -27,4 +27,5 @@ pub mod profile;
 pub mod protocol;
 pub mod servo;
 pub mod stepper;
+pub mod store;
 pub mod units;

@@ -140,6 +140,23 @@ pub enum HostMsg {
     Hello {
         /// The host's [`PROTOCOL_VERSION`].
         version: u16,
+        /// Identity ([`crate::store::identity`]) of the machine the host means to run;
+        /// the controller refuses to move while it differs from its own.
+        machine: u32,
+    },
+    /// One chunk of a machine configuration ([`crate::store`]); answered by
+    /// `ControlAck { id }`, then by `MachineLoaded` or `MachineRefused` once complete.
+    Machine {
+        /// Host-chosen identifier, as for controls.
+        id: u16,
+        /// Offset of this chunk in the payload, bytes.
+        offset: u16,
+        /// Payload length, bytes.
+        total: u16,
+        /// CRC-32 of the whole payload (the machine's identity).
+        crc: u32,
+        /// The chunk.
+        data: heapless::Vec<u8, { crate::store::CHUNK_BYTES }>,
     },
     /// Queues a motion block (sequenced).
     Block(Block),
@@ -233,6 +250,8 @@ pub enum NakReason {
     NoSession,
     /// The block is malformed (e.g. an arc whose end is off its circle).
     BadBlock,
+    /// Host and controller disagree about the machine: send it first.
+    MachineMismatch,
 }
 
 /// Periodic and requested controller status.
@@ -271,6 +290,19 @@ pub enum CtrlMsg {
         version: u16,
         /// Block-queue capacity (initial credits).
         queue_capacity: u16,
+        /// Identity of the controller's machine configuration.
+        machine: u32,
+    },
+    /// A machine configuration sent by the host was validated, adopted (the
+    /// controller restarts at the new machine's home pose) and stored.
+    MachineLoaded {
+        /// Its identity.
+        machine: u32,
+    },
+    /// A machine configuration sent by the host was refused.
+    MachineRefused {
+        /// Why.
+        error: crate::store::StoreError,
     },
     /// Every block up to and including `seq` was accepted.
     Ack {

@@ -54,7 +54,7 @@ proptest! {
     ) {
         let m = MachineConfig::cartesian_xyz();
         let mut c = Controller::new(m.clone()).unwrap();
-        let mut bytes = frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION });
+        let mut bytes = frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id() });
         for (i, (t, f, rapid)) in moves.iter().enumerate() {
             let mut target = [0i64; AXES];
             target[..3].copy_from_slice(t);

@@ -22,6 +22,7 @@ fn run(machine: MachineConfig, blocks: &[Block]) -> (Controller, Vec<[i64; AXES]
         0,
         &HostMsg::Hello {
             version: PROTOCOL_VERSION,
+            machine: c.machine_id(),
         },
     ));
     let mut next = 0;

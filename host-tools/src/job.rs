@@ -290,7 +290,7 @@ pub fn run(
         (None, Target::Sim) => unreachable!("the simulator was started above"),
     };
     let outcome = (|| -> Result<(JobEnd, Status, ClientStats)> {
-        let mut link = Link::connect(open_port(&path)?)?;
+        let mut link = Link::connect(open_port(&path)?, machine)?;
         let end = link.run_job(&blocks, &mut progress)?;
         let status = link.request_status()?;
         Ok((end, status, link.stats))

@@ -12,6 +12,7 @@
 
 use crate::sim::Simulator;
 use anyhow::{anyhow, bail, Result};
+use pkmc::config::MachineConfig;
 use pkmc::protocol::{
     decode_frame, encode_frame, Block, CtrlMsg, FrameReader, HostMsg, NakReason, Pushed, State,
     Status, MAX_BODY, MAX_FRAME, PROTOCOL_VERSION,
@@ -47,7 +48,10 @@ pub fn serve(sim: &mut Simulator, port: &mut dyn SerialPort, stop: &AtomicBool) 
             port.set_timeout(Duration::from_millis(if busy { 0 } else { 5 }))?;
             let want = ready.clamp(1, buf.len());
             match port.read(&mut buf[..want]) {
-                Ok(n) => sim.ctrl.receive(&buf[..n]),
+                Ok(n) => {
+                    sim.ctrl.receive(&buf[..n]);
+                    sim.persist()?;
+                }
                 Err(e) if is_timeout(&e) => {}
                 Err(e) => return Err(e.into()),
             }
@@ -95,11 +99,14 @@ pub struct Link {
     pub status: Option<Status>,
     /// Counters.
     pub stats: ClientStats,
+    next_control: u16,
 }
 
 impl Link {
-    /// Opens a session on `port`: sends `Hello` and waits for `HelloAck`.
-    pub fn connect(mut port: Box<dyn SerialPort>) -> Result<Self> {
+    /// Opens a session on `port` for `machine`: sends `Hello` and waits for
+    /// `HelloAck`; when the controller has another machine, sends it ours and waits
+    /// until it is loaded (the controller refuses to move until then).
+    pub fn connect(mut port: Box<dyn SerialPort>, machine: &MachineConfig) -> Result<Self> {
         port.set_timeout(Duration::from_millis(10))?;
         let mut link = Link {
             port,
@@ -108,12 +115,15 @@ impl Link {
             capacity: 0,
             status: None,
             stats: ClientStats::default(),
+            next_control: 1,
         };
+        let ours = pkmc::store::identity(machine);
         for _attempt in 0..5 {
             link.send(
                 0,
                 &HostMsg::Hello {
                     version: PROTOCOL_VERSION,
+                    machine: ours,
                 },
             )?;
             let until = Instant::now() + Duration::from_millis(500);
@@ -123,9 +133,13 @@ impl Link {
                         CtrlMsg::HelloAck {
                             version,
                             queue_capacity,
+                            machine: theirs,
                         } if version == PROTOCOL_VERSION => {
                             link.capacity = queue_capacity;
                             link.next_seq = 1;
+                            if theirs != ours {
+                                link.send_machine(machine)?;
+                            }
                             return Ok(link);
                         }
                         CtrlMsg::Nak {
@@ -138,6 +152,69 @@ impl Link {
             }
         }
         bail!("no answer to the handshake: is a pkmc controller on this port?")
+    }
+
+    /// Sends `machine` in chunks, each resent until acknowledged, and waits for the
+    /// controller to load it.
+    fn send_machine(&mut self, machine: &MachineConfig) -> Result<()> {
+        let mut payload = [0u8; pkmc::store::MAX_CONFIG_BYTES];
+        let n = pkmc::store::encode(machine, &mut payload)
+            .ok_or_else(|| anyhow!("the machine configuration is too large to send"))?;
+        let crc = pkmc::crc::crc32(&payload[..n]);
+        let mut early = Vec::new();
+        for off in (0..n).step_by(pkmc::store::CHUNK_BYTES) {
+            let end = (off + pkmc::store::CHUNK_BYTES).min(n);
+            let id = self.next_control;
+            self.next_control = self.next_control.wrapping_add(1);
+            let msg = HostMsg::Machine {
+                id,
+                offset: off as u16,
+                total: n as u16,
+                crc,
+                data: heapless::Vec::from_slice(&payload[off..end])
+                    .map_err(|_| anyhow!("chunk too large"))?,
+            };
+            early.extend(self.until_acked(id, &msg)?);
+        }
+        let start = Instant::now();
+        while start.elapsed() < LINK_TIMEOUT {
+            let msgs = std::mem::take(&mut early).into_iter().chain(self.pump()?);
+            for m in msgs.collect::<Vec<_>>() {
+                match m {
+                    CtrlMsg::MachineLoaded { machine } if machine == crc => return Ok(()),
+                    CtrlMsg::MachineRefused { error } => {
+                        bail!("the controller refused the machine configuration: {error:?}")
+                    }
+                    _ => {}
+                }
+            }
+        }
+        bail!("link lost: the controller did not confirm the machine configuration")
+    }
+
+    /// Sends `msg` (a control or machine chunk with `id`) until `ControlAck { id }`;
+    /// returns the other messages received meanwhile.
+    fn until_acked(&mut self, id: u16, msg: &HostMsg) -> Result<Vec<CtrlMsg>> {
+        let start = Instant::now();
+        let mut others = Vec::new();
+        while start.elapsed() < LINK_TIMEOUT {
+            self.send(0, msg)?;
+            let until = Instant::now() + Duration::from_millis(100);
+            while Instant::now() < until {
+                let mut acked = false;
+                for m in self.pump()? {
+                    if m == (CtrlMsg::ControlAck { id }) {
+                        acked = true;
+                    } else {
+                        others.push(m);
+                    }
+                }
+                if acked {
+                    return Ok(others);
+                }
+            }
+        }
+        bail!("link lost: no acknowledgement of {msg:?}")
     }
 
     fn send(&mut self, seq: u16, msg: &HostMsg) -> Result<()> {
@@ -256,7 +333,10 @@ impl Link {
                             return Ok(JobEnd::Alarm);
                         }
                     }
-                    CtrlMsg::HelloAck { .. } | CtrlMsg::ControlAck { .. } => {}
+                    CtrlMsg::HelloAck { .. }
+                    | CtrlMsg::ControlAck { .. }
+                    | CtrlMsg::MachineLoaded { .. }
+                    | CtrlMsg::MachineRefused { .. } => {}
                 }
             }
             let silent = last_heard.elapsed();

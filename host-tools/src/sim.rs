@@ -195,15 +195,59 @@ pub struct Simulator {
     /// Ticks simulated.
     pub ticks: u64,
     trace: Option<Box<dyn Write + Send>>,
+    /// Identity of the machine the drives were built for.
+    machine_id: u32,
+    /// File standing in for the controller's flash page, if any.
+    pub flash: Option<std::path::PathBuf>,
 }
 
 impl Simulator {
     /// A simulator for `machine`, at its home pose.
     pub fn new(machine: MachineConfig) -> Result<Self> {
-        let ctrl = Controller::new(machine.clone())
+        let ctrl = Controller::new(machine)
             .map_err(|e| anyhow::anyhow!("machine refused by the controller: {e:?}"))?;
-        let mut steppers: [Option<SimStepper>; MAX_STEPPERS] = Default::default();
-        let mut servos: [Option<ServoPlant>; MAX_SERVOS] = Default::default();
+        let mut sim = Self {
+            ctrl,
+            steppers: Default::default(),
+            servos: Default::default(),
+            ticks: 0,
+            trace: None,
+            machine_id: 0,
+            flash: None,
+        };
+        sim.attach_drives();
+        Ok(sim)
+    }
+
+    /// A simulator whose controller boots from the machine stored in `flash` (as the
+    /// firmware boots from its flash page), or from `fallback` when none is stored.
+    /// Machines the host loads later are written back to `flash`.
+    pub fn with_flash(flash: std::path::PathBuf, fallback: MachineConfig) -> Result<Self> {
+        let stored = std::fs::read(&flash).ok().and_then(|b| pkmc::store::read_record(&b).ok());
+        let mut sim = Self::new(stored.unwrap_or(fallback))?;
+        sim.flash = Some(flash);
+        Ok(sim)
+    }
+
+    /// Writes a machine the controller adopted to the flash file, as the firmware does.
+    pub fn persist(&mut self) -> Result<()> {
+        let (Some(path), Some(config)) = (self.flash.as_ref(), self.ctrl.take_store_request()) else {
+            return Ok(());
+        };
+        let mut rec = [0u8; pkmc::store::HEADER_BYTES + pkmc::store::MAX_CONFIG_BYTES];
+        let n = pkmc::store::record(config, &mut rec)
+            .ok_or_else(|| anyhow::anyhow!("machine configuration too large to store"))?;
+        std::fs::write(path, &rec[..n])?;
+        Ok(())
+    }
+
+    /// Builds the simulated drives for the controller's machine, standing where the
+    /// controller believes its joints are (as after power-up).
+    fn attach_drives(&mut self) {
+        let machine = self.ctrl.machine().clone();
+        self.machine_id = self.ctrl.machine_id();
+        self.steppers = Default::default();
+        self.servos = Default::default();
         for (j, jc) in machine.joints.iter().enumerate() {
             match jc.drive {
                 Drive::Stepper {
@@ -212,22 +256,16 @@ impl Simulator {
                     invert_dir,
                 } => {
                     let mut d = SimStepper::new(channel as usize, timing, !invert_dir);
-                    d.position = ctrl.steps_emitted(j) * if invert_dir { -1 } else { 1 };
-                    steppers[channel as usize] = Some(d);
+                    d.position = self.ctrl.steps_emitted(j) * if invert_dir { -1 } else { 1 };
+                    self.steppers[channel as usize] = Some(d);
                 }
                 Drive::Servo { channel, .. } => {
-                    let at = jc.scale.steps_at(ctrl.joints()[j]) as f64;
-                    servos[channel as usize] = Some(ServoPlant::new(SERVO_GAIN, SERVO_TAU_S, at));
+                    let at = jc.scale.steps_at(self.ctrl.joints()[j]) as f64;
+                    self.servos[channel as usize] =
+                        Some(ServoPlant::new(SERVO_GAIN, SERVO_TAU_S, at));
                 }
             }
         }
-        Ok(Self {
-            ctrl,
-            steppers,
-            servos,
-            ticks: 0,
-            trace: None,
-        })
     }
 
     /// Writes a CSV trace row per tick to `out` from now on (header first).
@@ -294,6 +332,10 @@ impl Simulator {
 
     /// Simulates one interpolation period.
     pub fn tick(&mut self) -> Result<()> {
+        if self.ctrl.machine_id() != self.machine_id {
+            // The host loaded another machine: the controller restarted at its home.
+            self.attach_drives();
+        }
         let mut inputs = Inputs::default();
         for (c, p) in self.servos.iter().enumerate() {
             if let Some(p) = p {

@@ -274,3 +274,51 @@ fn servo_joints_follow_the_square_and_settle_on_target() {
         "the plant is simulated, not copied from the command"
     );
 }
+
+/// Starts `pkmc-sim` with `args`; returns the child and the port it serves.
+fn spawn_sim(args: &[&str]) -> (std::process::Child, String) {
+    use std::io::BufRead;
+    let mut sim = Command::new(env!("CARGO_BIN_EXE_pkmc-sim"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut port = String::new();
+    std::io::BufReader::new(sim.stdout.take().unwrap())
+        .read_line(&mut port)
+        .unwrap();
+    (sim, port.trim().to_string())
+}
+
+#[test]
+fn nc_send_loads_its_machine_into_a_controller_that_has_another_and_it_persists() {
+    let flash = tmp("flash.bin");
+    let _ = std::fs::remove_file(&flash);
+    // The controller boots with the built-in stepper machine; the job needs servos.
+    let (mut sim, port) = spawn_sim(&["--flash", flash.to_str().unwrap()]);
+    let out = nc_send(&[
+        "--port",
+        &port,
+        "--machine",
+        "examples/machines/cartesian-servo.toml",
+        "--report",
+        "json",
+        "examples/square.ngc",
+    ]);
+    let _ = sim.kill();
+    let _ = sim.wait();
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let r = json(&out);
+    assert_eq!(r["machine"], "cartesian-servo");
+    assert_eq!(r["final_pose"]["x"], 12.5);
+    // After a "reset" (a new simulator process on the same flash), the controller
+    // comes up with the servo machine it was sent.
+    let stored = std::fs::read(&flash).expect("the machine was written to flash");
+    let m = pkmc::store::read_record(&stored).unwrap();
+    assert_eq!(m.name.as_str(), "cartesian-servo");
+    let (mut sim, port) = spawn_sim(&["--flash", flash.to_str().unwrap()]);
+    let out = nc_send(&["--port", &port, "--machine", "examples/machines/cartesian-servo.toml", "--report", "json", "examples/square.ngc"]);
+    let _ = sim.kill();
+    let _ = sim.wait();
+    assert_eq!(out.status.code(), Some(0), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+}

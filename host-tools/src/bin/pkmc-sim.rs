@@ -13,6 +13,10 @@ struct Args {
     /// Machine file (TOML); default: the built-in Cartesian X Y Z stepper machine.
     #[arg(long, value_name = "FILE.toml")]
     machine: Option<PathBuf>,
+    /// File standing in for the controller's flash: the machine stored there is loaded
+    /// at start, and a machine sent by the host is stored there.
+    #[arg(long, value_name = "FILE")]
+    flash: Option<PathBuf>,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -24,7 +28,10 @@ fn main() -> anyhow::Result<()> {
             "built-in machine",
         )?,
     };
-    let mut sim = pkmc_host::sim::Simulator::new(machine)?;
+    let mut sim = match args.flash {
+        Some(f) => pkmc_host::sim::Simulator::with_flash(f, machine)?,
+        None => pkmc_host::sim::Simulator::new(machine)?,
+    };
     let (mut master, slave) = serialport::TTYPort::pair()?;
     println!("{}", slave.name().unwrap_or_default());
     let stop = AtomicBool::new(false);
