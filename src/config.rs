@@ -152,6 +152,151 @@ pub enum KinematicsConfig {
         /// Pose axis (0..6) followed by each joint.
         axis_of_joint: [u8; MAX_JOINTS],
     },
+    /// H-4 head on four vertical rails with a rolling table (tilting about an axis
+    /// parallel to X). Joints: q1..q4 the carriage heights (linear), q5 the table angle
+    /// A (rotary). Pose: X Y Z tool tip in workpiece coordinates, C head rotation θ,
+    /// A table; B unused.
+    H4Table(H4TableGeometry),
+    /// Gough–Stewart platform with six legs; joint i is the length of leg i.
+    /// Pose: platform origin X Y Z and orientation R = Rz(C)·Ry(B)·Rx(A).
+    Hexapod(HexapodGeometry),
+}
+
+/// Largest magnitude of any geometry coordinate or length, nm (2^30 nm ≈ 1.07 m):
+/// keeps every difference of a pose and a geometry point inside 32 bits (see
+/// [`crate::kinematics`]).
+pub const GEOMETRY_MAX: i64 = 1 << 30;
+
+/// H-4 with rolling table, in nm and n° (machine frame: Z up, home plane z = 0).
+///
+/// Head point E; bar-end attachment of arm i: `P_i = E + sides[i]·bar_half·(cos θ,
+/// sin θ, 0) + attach[i]`; carriage i runs on the vertical line `rails[i]` at height
+/// `q_i = P_iz + sqrt(forearm² − ρ_i²)`, ρ_i the horizontal distance from P_i to the
+/// rail. Tool tip `T = E − (0, 0, tool_length)`. The table turns by A (right hand about
+/// +X) about the line through `table_pivot` parallel to X; a workpiece point p sits at
+/// `T = pivot + Rx(A)·(p − pivot)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct H4TableGeometry {
+    /// X Y of each vertical rail, nm.
+    pub rails: [[i64; 2]; 4],
+    /// Forearm length L, nm.
+    pub forearm: i64,
+    /// Half length d of the central bar, nm.
+    pub bar_half: i64,
+    /// Bar end each arm pair holds: −1 or +1.
+    pub sides: [i8; 4],
+    /// Attachment offsets e_i (not turned with θ), nm.
+    pub attach: [[i64; 3]; 4],
+    /// Tool tip below the head point E, nm.
+    pub tool_length: i64,
+    /// A point of the table axis, nm (its X is irrelevant).
+    pub table_pivot: [i64; 3],
+    /// Lowest forearm elevation above horizontal, n°; flatter poses are refused as too
+    /// near the singularity at ρ = L.
+    pub min_elevation: i64,
+}
+
+/// Hexapod: leg i joins base joint `base[i]` to platform joint `platform[i]`; its
+/// length is `|p + R·platform[i] − base[i]|`. All nm.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct HexapodGeometry {
+    /// Base joints a_i, machine frame, nm.
+    pub base: [[i64; 3]; 6],
+    /// Platform joints b_i, platform frame, nm.
+    pub platform: [[i64; 3]; 6],
+}
+
+/// The geometry field a [`ConfigError::Geometry`] refers to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum GeometryField {
+    /// The number or kind (linear/rotary) of the joints does not fit the kinematics.
+    Joints,
+    /// H-4 `rails`.
+    Rails,
+    /// H-4 `forearm`.
+    Forearm,
+    /// H-4 `bar_half`.
+    BarHalf,
+    /// H-4 `sides`.
+    Sides,
+    /// H-4 `attach`.
+    Attach,
+    /// H-4 `tool_length`.
+    ToolLength,
+    /// H-4 `table_pivot`.
+    TablePivot,
+    /// H-4 `min_elevation`.
+    MinElevation,
+    /// Hexapod `base`.
+    Base,
+    /// Hexapod `platform`.
+    Platform,
+}
+
+fn within(v: &[i64]) -> bool {
+    v.iter().all(|c| c.unsigned_abs() < GEOMETRY_MAX as u64)
+}
+
+/// Are `joints` exactly `n` joints with the given rotary flags (`rotary_from`.. rotary)?
+fn joint_kinds(joints: &[JointConfig], n: usize, rotary_from: usize) -> bool {
+    joints.len() == n
+        && joints
+            .iter()
+            .enumerate()
+            .all(|(j, jc)| jc.rotary == (j >= rotary_from))
+}
+
+impl H4TableGeometry {
+    /// Checks ranges and that `joints` are four linear carriages and a rotary table.
+    pub fn check(&self, joints: &[JointConfig]) -> Result<(), ConfigError> {
+        let bad = |field| Err(ConfigError::Geometry { field });
+        if !joint_kinds(joints, 5, 4) {
+            return bad(GeometryField::Joints);
+        }
+        if !self.rails.iter().all(|r| within(r)) {
+            return bad(GeometryField::Rails);
+        }
+        if self.forearm <= 0 || !within(&[self.forearm]) {
+            return bad(GeometryField::Forearm);
+        }
+        if self.bar_half <= 0 || !within(&[self.bar_half]) {
+            return bad(GeometryField::BarHalf);
+        }
+        if !self.sides.iter().all(|s| s.abs() == 1) {
+            return bad(GeometryField::Sides);
+        }
+        if !self.attach.iter().all(|a| within(a)) {
+            return bad(GeometryField::Attach);
+        }
+        if !within(&[self.tool_length]) {
+            return bad(GeometryField::ToolLength);
+        }
+        if !within(&self.table_pivot) {
+            return bad(GeometryField::TablePivot);
+        }
+        if self.min_elevation <= 0 || self.min_elevation >= 90 * crate::units::NDEG_PER_DEG {
+            return bad(GeometryField::MinElevation);
+        }
+        Ok(())
+    }
+}
+
+impl HexapodGeometry {
+    /// Checks ranges, a platform of non-zero size and that `joints` are six linear legs.
+    pub fn check(&self, joints: &[JointConfig]) -> Result<(), ConfigError> {
+        let bad = |field| Err(ConfigError::Geometry { field });
+        if !joint_kinds(joints, 6, 6) {
+            return bad(GeometryField::Joints);
+        }
+        if !self.base.iter().all(|a| within(a)) {
+            return bad(GeometryField::Base);
+        }
+        if !self.platform.iter().all(|b| within(b)) || self.platform.iter().all(|b| b == &[0; 3]) {
+            return bad(GeometryField::Platform);
+        }
+        Ok(())
+    }
 }
 
 /// The whole machine.
@@ -215,6 +360,11 @@ pub enum ConfigError {
     HomeOutsideTravel {
         /// Joint index, 0-based.
         joint: u8,
+    },
+    /// The kinematics' geometry is out of range, or does not fit the joints.
+    Geometry {
+        /// The offending field.
+        field: GeometryField,
     },
 }
 
@@ -283,6 +433,8 @@ impl MachineConfig {
                     }
                 }
             }
+            KinematicsConfig::H4Table(g) => g.check(&self.joints)?,
+            KinematicsConfig::Hexapod(g) => g.check(&self.joints)?,
         }
         Ok(())
     }
@@ -328,6 +480,154 @@ impl MachineConfig {
             home: [0; AXES],
         }
     }
+
+    /// The H-4 with rolling table (`examples/machines/h4-table.toml`): rails at
+    /// (±250, ±250) mm, forearms 550 mm, bar half-length 60 mm, attachments ±50 mm in Y,
+    /// tool 80 mm below E, table axis through (0, 0, −130) mm, forearms ≥ 25° above
+    /// horizontal. q1..q4 are servo carriages (1000 counts/mm, 150..650 mm, 500 mm/s)
+    /// on servo channels 0..3; q5 the table, a stepper on channel 0 (50 steps/°,
+    /// 0..90°, 90 °/s). Home: E at the origin, θ = 0, A = 0, so the tool tip is at
+    /// Z −80 mm and every carriage at 475.815 mm.
+    pub fn h4_table() -> Self {
+        let mm = crate::units::NM_PER_MM;
+        let deg = crate::units::NDEG_PER_DEG;
+        let mut joints = heapless::Vec::new();
+        for c in 0..4u8 {
+            let _ = joints.push(JointConfig {
+                drive: Drive::Servo {
+                    channel: c,
+                    kp_q16: 19_661,    // 0.3 DAC counts per count of error
+                    kvff_q16: 655_360, // 10 DAC counts per count per tick
+                    out_limit: 2047,
+                },
+                scale: Scale::new(1000, mm as u64),
+                rotary: false,
+                min: 150 * mm,
+                max: 650 * mm,
+                limits: Limits {
+                    max_velocity: 500 * mm,
+                    max_accel: 5000 * mm,
+                },
+            });
+        }
+        let _ = joints.push(JointConfig {
+            drive: Drive::Stepper {
+                channel: 0,
+                timing: StepTiming::PACSCI_6410,
+                invert_dir: false,
+            },
+            scale: Scale::new(50, deg as u64),
+            rotary: true,
+            min: 0,
+            max: 90 * deg,
+            limits: Limits {
+                max_velocity: 90 * deg,
+                max_accel: 900 * deg,
+            },
+        });
+        let linear = Limits {
+            max_velocity: 200 * mm,
+            max_accel: 2000 * mm,
+        };
+        let rotary = Limits {
+            max_velocity: 90 * deg,
+            max_accel: 900 * deg,
+        };
+        let none = Limits {
+            max_velocity: 0,
+            max_accel: 0,
+        };
+        let mut name = heapless::String::new();
+        let _ = name.push_str("h4-table");
+        MachineConfig {
+            name,
+            kinematics: KinematicsConfig::H4Table(H4TableGeometry {
+                rails: [
+                    [-250 * mm, 250 * mm],
+                    [-250 * mm, -250 * mm],
+                    [250 * mm, -250 * mm],
+                    [250 * mm, 250 * mm],
+                ],
+                forearm: 550 * mm,
+                bar_half: 60 * mm,
+                sides: [-1, -1, 1, 1],
+                attach: [
+                    [0, 50 * mm, 0],
+                    [0, -50 * mm, 0],
+                    [0, -50 * mm, 0],
+                    [0, 50 * mm, 0],
+                ],
+                tool_length: 80 * mm,
+                table_pivot: [0, 0, -130 * mm],
+                min_elevation: 25 * deg,
+            }),
+            joints,
+            axes: [linear, linear, linear, rotary, none, rotary],
+            home: [0, 0, -80 * mm, 0, 0, 0],
+        }
+    }
+
+    /// The thesis hexapod (`examples/machines/hexapod.toml`): base joints on a 300 mm
+    /// circle at 348°, 12°, 108°, 132°, 228°, 252°, platform joints on a 150 mm circle
+    /// at 312°, 48°, 72°, 168°, 192°, 288° (both in their z = 0 planes; coordinates
+    /// rounded to the nm as the host rounds the machine file). Six stepper legs on
+    /// channels 0..5, 400 steps/mm, 350..650 mm, 100 mm/s; home (0, 0, 450 mm) level.
+    pub fn hexapod() -> Self {
+        let mm = crate::units::NM_PER_MM;
+        let deg = crate::units::NDEG_PER_DEG;
+        let mut joints = heapless::Vec::new();
+        for c in 0..6u8 {
+            let _ = joints.push(JointConfig {
+                drive: Drive::Stepper {
+                    channel: c,
+                    timing: StepTiming::PACSCI_6410,
+                    invert_dir: false,
+                },
+                scale: Scale::new(400, mm as u64),
+                rotary: false,
+                min: 350 * mm,
+                max: 650 * mm,
+                limits: Limits {
+                    max_velocity: 100 * mm,
+                    max_accel: 1000 * mm,
+                },
+            });
+        }
+        let linear = Limits {
+            max_velocity: 100 * mm,
+            max_accel: 1000 * mm,
+        };
+        let rotary = Limits {
+            max_velocity: 30 * deg,
+            max_accel: 300 * deg,
+        };
+        let mut name = heapless::String::new();
+        let _ = name.push_str("hexapod");
+        MachineConfig {
+            name,
+            kinematics: KinematicsConfig::Hexapod(HexapodGeometry {
+                base: [
+                    [293_444_280, -62_373_507, 0],
+                    [293_444_280, 62_373_507, 0],
+                    [-92_705_098, 285_316_955, 0],
+                    [-200_739_182, 222_943_448, 0],
+                    [-200_739_182, -222_943_448, 0],
+                    [-92_705_098, -285_316_955, 0],
+                ],
+                platform: [
+                    [100_369_591, -111_471_724, 0],
+                    [100_369_591, 111_471_724, 0],
+                    [46_352_549, 142_658_477, 0],
+                    [-146_722_140, 31_186_754, 0],
+                    [-146_722_140, -31_186_754, 0],
+                    [46_352_549, -142_658_477, 0],
+                ],
+            }),
+            joints,
+            axes: [linear, linear, linear, rotary, rotary, rotary],
+            home: [0, 0, 450 * mm, 0, 0, 0],
+        }
+    }
 }
 
 #[cfg(test)]
@@ -337,6 +637,30 @@ mod tests {
     #[test]
     fn the_built_in_machine_is_valid() {
         assert_eq!(MachineConfig::cartesian_xyz().validate(), Ok(()));
+    }
+
+    #[test]
+    fn the_h4_and_hexapod_machines_are_valid() {
+        assert_eq!(MachineConfig::h4_table().validate(), Ok(()));
+        assert_eq!(MachineConfig::hexapod().validate(), Ok(()));
+    }
+
+    #[test]
+    fn a_flat_h4_forearm_limit_is_refused_with_its_field() {
+        let mut m = MachineConfig::h4_table();
+        if let KinematicsConfig::H4Table(g) = &mut m.kinematics {
+            g.min_elevation = 0;
+        }
+        let field = GeometryField::MinElevation;
+        assert_eq!(m.validate(), Err(ConfigError::Geometry { field }));
+    }
+
+    #[test]
+    fn a_hexapod_with_a_missing_leg_is_refused() {
+        let mut m = MachineConfig::hexapod();
+        m.joints.pop();
+        let field = GeometryField::Joints;
+        assert_eq!(m.validate(), Err(ConfigError::Geometry { field }));
     }
 
     #[test]

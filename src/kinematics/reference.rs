@@ -1,0 +1,156 @@
+//! `f64` reference kinematics for the tests (never on the controller): the same
+//! conventions written as directly as possible, in nm and radians, so the fixed-point
+//! code is checked against an independent formulation.
+#![allow(clippy::needless_range_loop)]
+
+use super::Pose;
+use crate::config::{H4TableGeometry, HexapodGeometry};
+
+const NDEG: f64 = 1e9;
+
+fn rad(ndeg: i64) -> f64 {
+    (ndeg as f64 / NDEG).to_radians()
+}
+
+/// Rx(a)·v.
+fn rot_x(a: f64, v: [f64; 3]) -> [f64; 3] {
+    let (s, c) = a.sin_cos();
+    [v[0], c * v[1] - s * v[2], s * v[1] + c * v[2]]
+}
+
+/// H-4 inverse in real numbers: q1..q4 (nm), q5 (n°); `None` when out of reach or
+/// flatter than the minimum elevation.
+pub fn h4_inverse(g: &H4TableGeometry, pose: &[f64; 6]) -> Option<[f64; 5]> {
+    let r = g.table_pivot.map(|c| c as f64);
+    let a = (pose[3] / NDEG).to_radians();
+    let th = (pose[5] / NDEG).to_radians();
+    let d = rot_x(a, [pose[0] - r[0], pose[1] - r[1], pose[2] - r[2]]);
+    let t = [r[0] + d[0], r[1] + d[1], r[2] + d[2]];
+    let e = [t[0], t[1], t[2] + g.tool_length as f64];
+    let l = g.forearm as f64;
+    let min_h = l * (g.min_elevation as f64 / NDEG).to_radians().sin();
+    let mut q = [0.0; 5];
+    for i in 0..4 {
+        let s = g.sides[i] as f64 * g.bar_half as f64;
+        let p = [
+            e[0] + s * th.cos() + g.attach[i][0] as f64,
+            e[1] + s * th.sin() + g.attach[i][1] as f64,
+            e[2] + g.attach[i][2] as f64,
+        ];
+        let dx = p[0] - g.rails[i][0] as f64;
+        let dy = p[1] - g.rails[i][1] as f64;
+        let h2 = l * l - dx * dx - dy * dy;
+        if h2 < min_h * min_h {
+            return None;
+        }
+        q[i] = p[2] + h2.sqrt();
+    }
+    q[4] = pose[3];
+    Some(q)
+}
+
+/// Hexapod leg lengths in real numbers, nm.
+pub fn hexapod_inverse(g: &HexapodGeometry, pose: &[f64; 6]) -> [f64; 6] {
+    let (a, b, c) = (
+        (pose[3] / NDEG).to_radians(),
+        (pose[4] / NDEG).to_radians(),
+        (pose[5] / NDEG).to_radians(),
+    );
+    let mut q = [0.0; 6];
+    for i in 0..6 {
+        let v = g.platform[i].map(|c| c as f64);
+        let v = rot_x(a, v);
+        let (sb, cb) = b.sin_cos();
+        let v = [cb * v[0] + sb * v[2], v[1], -sb * v[0] + cb * v[2]];
+        let (sc, cc) = c.sin_cos();
+        let v = [cc * v[0] - sc * v[1], sc * v[0] + cc * v[1], v[2]];
+        let w = [
+            pose[0] + v[0] - g.base[i][0] as f64,
+            pose[1] + v[1] - g.base[i][1] as f64,
+            pose[2] + v[2] - g.base[i][2] as f64,
+        ];
+        q[i] = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+    }
+    q
+}
+
+/// Solves `f(x) = target` for the unknown axes `free` of `x` by Newton's method with a
+/// central-difference Jacobian, all in `f64` (to ~1e-6 nm).
+pub fn newton<const N: usize>(
+    f: impl Fn(&[f64; 6]) -> [f64; N],
+    target: &[f64; N],
+    x: &mut [f64; 6],
+    free: [usize; N],
+) {
+    for _ in 0..50 {
+        let y = f(x);
+        let r: Vec<f64> = (0..N).map(|i| target[i] - y[i]).collect();
+        if r.iter().all(|v| v.abs() < 1e-6) {
+            return;
+        }
+        let mut jac = vec![vec![0.0; N + 1]; N];
+        for (k, &ax) in free.iter().enumerate() {
+            let h = if ax >= 3 { 1e3 } else { 1.0 };
+            let (mut xp, mut xm) = (*x, *x);
+            xp[ax] += h;
+            xm[ax] -= h;
+            let (yp, ym) = (f(&xp), f(&xm));
+            for i in 0..N {
+                jac[i][k] = (yp[i] - ym[i]) / (2.0 * h);
+            }
+        }
+        for i in 0..N {
+            jac[i][N] = r[i];
+        }
+        for k in 0..N {
+            let p = (k..N)
+                .max_by(|&a, &b| jac[a][k].abs().total_cmp(&jac[b][k].abs()))
+                .unwrap();
+            jac.swap(k, p);
+            for i in k + 1..N {
+                let m = jac[i][k] / jac[k][k];
+                for j in k..=N {
+                    jac[i][j] -= m * jac[k][j];
+                }
+            }
+        }
+        let mut dx = [0.0; N];
+        for k in (0..N).rev() {
+            let s: f64 = (k + 1..N).map(|j| jac[k][j] * dx[j]).sum();
+            dx[k] = (jac[k][N] - s) / jac[k][k];
+        }
+        for (k, &ax) in free.iter().enumerate() {
+            x[ax] += dx[k];
+        }
+        if dx.iter().all(|v| v.abs() < 1e-6) {
+            return;
+        }
+    }
+    panic!("reference Newton did not converge");
+}
+
+/// Integer pose as `f64`.
+pub fn real(p: &Pose) -> [f64; 6] {
+    p.map(|v| v as f64)
+}
+
+/// Pose with the H-4 head point E (mm), θ and A (degrees): the workpiece pose whose
+/// tool tip lies at E − tool, rounded to nm / n°.
+pub fn h4_pose_from_head(g: &H4TableGeometry, e_mm: [f64; 3], theta_deg: f64, a_deg: f64) -> Pose {
+    let r = g.table_pivot.map(|c| c as f64);
+    let t = [
+        e_mm[0] * 1e6,
+        e_mm[1] * 1e6,
+        e_mm[2] * 1e6 - g.tool_length as f64,
+    ];
+    let a = rad((a_deg * NDEG).round() as i64);
+    let d = rot_x(-a, [t[0] - r[0], t[1] - r[1], t[2] - r[2]]);
+    [
+        (r[0] + d[0]).round() as i64,
+        (r[1] + d[1]).round() as i64,
+        (r[2] + d[2]).round() as i64,
+        (a_deg * NDEG).round() as i64,
+        0,
+        (theta_deg * NDEG).round() as i64,
+    ]
+}
