@@ -1,0 +1,96 @@
+//! The public face of the G-code front end: options, diagnostics, the tool table, and
+//! the temporary block-returning form of `compile` that `job.rs` still uses.
+
+use pkmc_host::canon::{Canon, Feed};
+use pkmc_host::gcode::{compile, Diagnostic, Options, Tool, ToolTable, DEFAULT_ARC_TOLERANCE_NM};
+
+#[test]
+fn default_options_start_at_zero_with_a_two_micrometre_arc_tolerance() {
+    let o = Options::default();
+    assert_eq!(o.arc_tolerance_nm, 2_000);
+    assert_eq!(DEFAULT_ARC_TOLERANCE_NM, 2_000);
+    assert_eq!(o.start, [0; 6]);
+    assert!(!o.block_delete);
+    assert!(o.tools.is_empty());
+}
+
+#[test]
+fn diagnostics_display_as_file_line_column_message() {
+    let d = Diagnostic {
+        file: "part.ngc".into(),
+        line: 3,
+        col: 7,
+        message: "division by zero".into(),
+    };
+    assert_eq!(d.to_string(), "part.ngc:3:7: division by zero");
+}
+
+#[test]
+fn every_error_of_a_program_is_reported_and_nothing_is_produced() {
+    let e = compile(
+        "G1 X1 F1 (open\nG5 X1\nQ1\nG0 G1 X2\nG1 X1.2.3\nG0 X1",
+        "t.ngc",
+        &Options::default(),
+    )
+    .unwrap_err();
+    let at: Vec<_> = e.iter().map(|d| (d.line, d.col)).collect();
+    assert_eq!(at, vec![(1, 10), (2, 1), (3, 1), (4, 4), (5, 5)]);
+    assert!(e[3].message.contains("modal group"));
+}
+
+#[test]
+fn a_wider_arc_tolerance_accepts_a_sloppier_arc() {
+    let program = "G0 X10 Y0\nG3 X0 Y10.004 I-10 F100";
+    assert!(compile(program, "t.ngc", &Options::default()).is_err());
+    let loose = Options {
+        arc_tolerance_nm: 5_000,
+        ..Options::default()
+    };
+    let c = compile(program, "t.ngc", &loose).unwrap();
+    assert!(matches!(c[1], Canon::Arc { center: [0, 0], .. }));
+}
+
+#[test]
+fn the_start_pose_is_where_incremental_moves_begin() {
+    let o = Options {
+        start: [1_000_000, 2_000_000, 3_000_000, 0, 0, 0],
+        ..Options::default()
+    };
+    let c = compile("G91 G1 X1 F60", "t.ngc", &o).unwrap();
+    assert_eq!(
+        c[0],
+        Canon::Linear {
+            line: 1,
+            target: [2_000_000, 2_000_000, 3_000_000, 0, 0, 0],
+            feed: Feed::PerSecond(1_000_000),
+        }
+    );
+}
+
+#[test]
+fn tool_table_entries_can_be_built_in_code() {
+    let mut t = ToolTable::new();
+    t.insert(
+        4,
+        Tool {
+            length_nm: 50_000_000,
+            diameter_nm: 3_000_000,
+        },
+    );
+    let o = Options {
+        tools: t,
+        ..Options::default()
+    };
+    let c = compile("T4 M6 G43\nG0 Z0", "t.ngc", &o).unwrap();
+    assert_eq!(c.last().unwrap().target().unwrap()[2], 50_000_000);
+}
+
+#[test]
+fn a_start_pose_still_selects_the_old_block_output() {
+    use pkmc::protocol::Motion;
+    let blocks = compile("G0 X1\nG1 Y2 F600\nG2 X2 Y3 I1 J0", "t.ngc", [0; 6]).unwrap();
+    assert_eq!(blocks[0].motion, Motion::Rapid);
+    assert_eq!(blocks[1].target[1], 2_000_000);
+    assert_eq!(blocks[1].feed, 10_000_000);
+    assert!(matches!(blocks[2].motion, Motion::Arc { .. }));
+}

@@ -1,0 +1,223 @@
+//! Every program in `tests/fixtures/gcode/*.ngc` is a test: it is compiled and the
+//! result compared with its sibling `.expect` file, which holds either the canonical
+//! commands in the text form of [`listing`] (one per line) or the diagnostics, one per
+//! line as `file:line:col: message`.
+//!
+//! Conventions: a sibling `.tools` file is the tool table (LinuxCNC tool-file form); a
+//! first line `; fixture: block-delete` turns the block-delete switch on. Set
+//! `BLESS=1` to (re)write the `.expect` files from the current output, then review
+//! them. `every_fixture_file_has_a_test` fails when a fixture is not listed below.
+
+use pkmc_host::canon::{Canon, Coolant, Feed, PathMode, Plane, Spindle};
+use pkmc_host::gcode::{compile, Options, ToolTable};
+use std::fmt::Write;
+use std::path::PathBuf;
+
+fn dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/gcode")
+}
+
+/// Axis units as user units: nm as mm, n° as degrees, exactly.
+fn user(v: i64, per: u64) -> String {
+    let sign = if v < 0 { "-" } else { "" };
+    let a = v.unsigned_abs();
+    let (whole, frac) = (a / per, a % per);
+    if frac == 0 {
+        return format!("{sign}{whole}");
+    }
+    let width = per.ilog10() as usize;
+    let f = format!("{frac:0width$}");
+    format!("{sign}{whole}.{}", f.trim_end_matches('0'))
+}
+
+fn pose(t: &[i64; 6]) -> String {
+    let names = ["X", "Y", "Z", "A", "B", "C"];
+    let mut s = String::new();
+    for (i, v) in t.iter().enumerate() {
+        let per = if i < 3 { 1_000_000 } else { 1_000_000_000 };
+        let _ = write!(s, "{}{} ", names[i], user(*v, per));
+    }
+    s.pop();
+    s
+}
+
+fn feed(f: &Feed) -> String {
+    match f {
+        Feed::PerSecond(v) => format!("F{v}/s"),
+        Feed::InverseTime(us) => format!("T{us}us"),
+    }
+}
+
+/// One command as a line of text.
+fn listing(c: &Canon) -> String {
+    let body = match c {
+        Canon::Rapid { target, .. } => format!("rapid {}", pose(target)),
+        Canon::Linear {
+            target, feed: f, ..
+        } => format!("linear {} {}", pose(target), feed(f)),
+        Canon::Arc {
+            target,
+            center,
+            plane,
+            clockwise,
+            turns,
+            feed: f,
+            ..
+        } => format!(
+            "arc {} centre {} {} {} {} turns {} {}",
+            pose(target),
+            user(center[0], 1_000_000),
+            user(center[1], 1_000_000),
+            match plane {
+                Plane::Xy => "XY",
+                Plane::Zx => "ZX",
+                Plane::Yz => "YZ",
+            },
+            if *clockwise { "cw" } else { "ccw" },
+            turns,
+            feed(f)
+        ),
+        Canon::Dwell { ms, .. } => format!("dwell {ms}ms"),
+        Canon::PathMode { mode, .. } => match mode {
+            PathMode::ExactStop => "path exact-stop".into(),
+            PathMode::Blend(None) => "path blend".into(),
+            PathMode::Blend(Some(nm)) => format!("path blend {}", user(*nm, 1_000_000)),
+        },
+        Canon::Spindle { state, .. } => match state {
+            Spindle::Off => "spindle off".into(),
+            Spindle::Clockwise(r) => format!("spindle cw {r}"),
+            Spindle::CounterClockwise(r) => format!("spindle ccw {r}"),
+        },
+        Canon::Coolant { state, .. } => match state {
+            Coolant::Mist => "coolant mist".into(),
+            Coolant::Flood => "coolant flood".into(),
+            Coolant::Off => "coolant off".into(),
+        },
+        Canon::ToolChange { tool, .. } => format!("tool-change {tool}"),
+        Canon::Pause { optional, .. } => {
+            if *optional {
+                "pause optional".into()
+            } else {
+                "pause".into()
+            }
+        }
+        Canon::Message { text, .. } => format!("message {text:?}"),
+        Canon::End { .. } => "end".into(),
+    };
+    format!("{}: {body}", c.line())
+}
+
+fn check(name: &str) {
+    let path = dir().join(format!("{name}.ngc"));
+    let source = std::fs::read_to_string(&path).expect("fixture readable");
+    let mut options = Options::default();
+    if source.starts_with("; fixture: block-delete") {
+        options.block_delete = true;
+    }
+    let tools = dir().join(format!("{name}.tools"));
+    if tools.exists() {
+        let text = std::fs::read_to_string(&tools).unwrap();
+        options.tools = ToolTable::parse(&text, &format!("{name}.tools")).unwrap();
+    }
+    let file = format!("{name}.ngc");
+    let got: String = match compile(&source, &file, &options) {
+        Ok(commands) => commands.iter().map(|c| listing(c) + "\n").collect(),
+        Err(errors) => errors.iter().map(|d| format!("{d}\n")).collect(),
+    };
+    let expect_path = dir().join(format!("{name}.expect"));
+    if std::env::var_os("BLESS").is_some() {
+        std::fs::write(&expect_path, &got).unwrap();
+        return;
+    }
+    let want = std::fs::read_to_string(&expect_path)
+        .unwrap_or_else(|_| panic!("{name}.expect missing (run with BLESS=1 to create it)"));
+    assert!(
+        got == want,
+        "{name}: output differs from {name}.expect\n--- got\n{got}--- expected\n{want}"
+    );
+}
+
+macro_rules! fixtures {
+    ($($name:ident),* $(,)?) => {
+        $(
+            #[test]
+            fn $name() {
+                check(stringify!($name));
+            }
+        )*
+        const NAMES: &[&str] = &[$(stringify!($name)),*];
+    };
+}
+
+fixtures!(
+    // Features.
+    straight_moves_in_mm_convert_exactly,
+    inch_and_incremental_moves_convert_exactly,
+    spaces_case_and_comments_are_free,
+    messages_become_commands,
+    percent_lines_delimit_the_program,
+    block_delete_off_runs_slashed_lines,
+    block_delete_on_skips_slashed_lines,
+    a_matching_checksum_is_accepted,
+    arcs_with_centres_full_circles_helices_and_turns,
+    arcs_with_radii_take_the_short_or_long_way,
+    arcs_in_the_zx_and_yz_planes,
+    arc_centres_can_be_absolute,
+    dwell_and_path_modes,
+    spindle_coolant_tool_change_pauses_and_end,
+    work_offsets_from_g10_and_g54_to_g59,
+    g92_offsets_set_clear_and_restore,
+    g28_and_g30_go_home_through_the_intermediate_point,
+    g53_moves_in_machine_coordinates,
+    tool_length_offsets_from_the_tool_table,
+    parameters_and_expressions,
+    parameter_settings_take_effect_after_the_line,
+    drilling_cycles_g81_with_g98_and_g99,
+    peck_drilling_g83_and_g73,
+    dwell_and_boring_cycles_g82_g85_g89,
+    incremental_cycles_repeat_with_l,
+    polar_coordinates_absolute_and_incremental,
+    inverse_time_feeds,
+    rotary_only_moves_feed_in_degrees,
+    // Errors.
+    modal_group_conflicts_are_errors,
+    arc_ending_off_the_circle_is_rejected_with_its_line,
+    arc_without_a_centre_or_radius_is_rejected,
+    radius_arcs_cannot_be_full_circles_or_too_small,
+    feed_moves_without_a_feed_are_rejected,
+    unknown_words_and_codes_are_rejected,
+    malformed_numbers_are_rejected,
+    unclosed_comments_and_brackets_are_rejected,
+    control_characters_are_rejected_at_their_column,
+    overlong_lines_are_rejected,
+    unknown_parameters_are_rejected,
+    division_by_zero_and_domain_errors_are_rejected,
+    numbers_too_large_are_rejected,
+    unsupported_features_are_refused_by_name,
+    checksum_mismatch_is_rejected,
+    words_no_code_uses_are_rejected,
+    unclosed_percent_is_rejected,
+    canned_cycle_mistakes_are_rejected,
+    offset_and_tool_mistakes_are_rejected,
+    coordinates_without_a_motion_mode_are_rejected,
+);
+
+#[test]
+fn every_fixture_file_has_a_test() {
+    for entry in std::fs::read_dir(dir()).unwrap() {
+        let path = entry.unwrap().path();
+        let stem = path.file_stem().unwrap().to_string_lossy().into_owned();
+        let ext = path.extension().map(|e| e.to_string_lossy().into_owned());
+        assert!(
+            NAMES.contains(&stem.as_str()),
+            "fixture {} is not listed in gcode_fixtures.rs",
+            path.display()
+        );
+        if ext.as_deref() == Some("ngc") {
+            assert!(
+                dir().join(format!("{stem}.expect")).exists(),
+                "{stem}.ngc has no .expect"
+            );
+        }
+    }
+}
