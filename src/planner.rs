@@ -100,6 +100,8 @@ pub struct Planner {
     pub end: [i64; AXES],
     end_tangent: [f32; AXES],
     end_stops: bool,
+    /// Blending tolerance of the last block pushed, nm.
+    end_tolerance: u32,
     /// Feed override, percent.
     pub feed_override: u16,
     /// Feed hold: every soft cap is 0.
@@ -124,6 +126,7 @@ impl Planner {
             end: pose,
             end_tangent: [0.0; AXES],
             end_stops: true,
+            end_tolerance: 0,
             feed_override: 100,
             hold: false,
             first_entry: 0.0,
@@ -230,14 +233,26 @@ impl Planner {
         // Split each axis's acceleration at a blended corner: a share ρ for the turn,
         // the rest for the two blocks' profiles (see the module doc). ρ is what the
         // turn needs at the speed both blocks ask for, at most one half.
+        // Path tolerance (G64 P): between two tick samples the tool moves in a
+        // straight line, which cuts a corner taken at v (nm/tick) by v·|Δu|/4 at most
+        // (the corner half-way through a tick); keep that within the tolerance.
+        let du: f32 = (0..3)
+            .map(|i| (start_tangent[i] - self.end_tangent[i]).powi(2))
+            .sum::<f32>()
+            .sqrt();
+        let by_tolerance = if self.end_tolerance == u32::MAX || du < 1e-9 {
+            f32::INFINITY
+        } else {
+            4.0 * self.end_tolerance as f32 / du
+        };
         let (corner, rho) = match need {
             None => (0.0, 0.0),
-            Some(n) if n <= 0.0 => (f32::INFINITY, 0.0),
+            Some(n) if n <= 0.0 => (by_tolerance, 0.0),
             Some(n) => {
                 let prev_v = self.queue.back().map_or(0.0, |p| p.feed.min(p.v_limit));
-                let want = prev_v.min(feed.min(v_limit));
+                let want = prev_v.min(feed.min(v_limit)).min(by_tolerance);
                 let rho = (want * n * 1.0001).clamp(0.0, 0.5);
-                (rho / n, rho)
+                ((rho / n).min(by_tolerance), rho)
             }
         };
         if rho > 0.0 {
@@ -260,6 +275,7 @@ impl Planner {
         self.end = path.end;
         self.end_tangent = path.tangent_at(path.length << 16);
         self.end_stops = !moving || block.tolerance_nm == 0;
+        self.end_tolerance = block.tolerance_nm;
         let _ = self.queue.push_back(b);
         self.replan();
         Ok(())
@@ -515,6 +531,25 @@ mod tests {
         let want = 1000.0 / (2.0 * s);
         let e = p.iter().last().unwrap().entry as f64;
         assert!((e - want).abs() < want * 0.01, "{e} vs {want}");
+    }
+
+    #[test]
+    fn a_path_tolerance_bounds_the_corner_speed() {
+        // G64 P0.001 at a right angle allows 4 · 1000 nm / √2 per tick, more than the
+        // acceleration budget (500 nm/tick): the budget decides.
+        let p = planner_with(&[
+            line(50_000_000, 0, 50, 1_000),
+            line(50_000_000, 50_000_000, 50, 1_000),
+        ]);
+        let e = p.iter().last().unwrap().entry;
+        assert!((e - 500.0).abs() < 1.0, "{e}");
+        // G64 P0.0001: 400 nm / √2 per tick.
+        let p = planner_with(&[
+            line(50_000_000, 0, 50, 100),
+            line(50_000_000, 50_000_000, 50, 100),
+        ]);
+        let e = p.iter().last().unwrap().entry;
+        assert!((e - 400.0 / 2f32.sqrt()).abs() < 0.5, "{e}");
     }
 
     #[test]

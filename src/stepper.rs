@@ -37,7 +37,9 @@ pub const MAX_PULSE_NS: u32 = 2_000;
 #[derive(Clone, Copy, Debug, Default)]
 struct Channel {
     emitted: i64,
-    forward: bool,
+    /// DIR level last set; `None` until the first train, whose DIR is always treated
+    /// as a change (the drive's DIR line may be at either level after power-up).
+    forward: Option<bool>,
 }
 
 /// Step-train planner for every stepper joint of a machine.
@@ -53,7 +55,7 @@ impl StepScheduler {
     pub fn new(config: &[JointConfig], joints: &[i64; MAX_JOINTS]) -> Self {
         let mut channels = [Channel {
             emitted: 0,
-            forward: true,
+            forward: None,
         }; MAX_JOINTS];
         for (c, (jc, q)) in channels.iter_mut().zip(config.iter().zip(joints)) {
             c.emitted = jc.scale.steps_at(*q);
@@ -85,18 +87,18 @@ impl StepScheduler {
             let ch = &mut self.channels[j];
             let want = jc.scale.steps_at(joints[j]) - ch.emitted;
             if want == 0 {
-                out[j].forward = ch.forward;
+                out[j].forward = ch.forward.unwrap_or(true);
                 continue;
             }
             let forward = want > 0;
-            let start = if forward != ch.forward {
+            let start = if Some(forward) != ch.forward {
                 timing.dir_setup_ns
             } else {
                 0
             };
             let (count, train) = plan_train(want.unsigned_abs(), start, &timing);
             lagged |= u64::from(count) < want.unsigned_abs();
-            ch.forward = forward;
+            ch.forward = Some(forward);
             ch.emitted += if forward {
                 count as i64
             } else {
@@ -162,7 +164,14 @@ mod tests {
         let mut s = StepScheduler::new(&m.joints, &[0; MAX_JOINTS]);
         let mut out = [StepTrain::default(); MAX_JOINTS];
         let mut q = [0i64; MAX_JOINTS];
-        q[0] = -10_000; // 4 steps backwards: a reversal from the initial forward DIR
+        q[0] = 10_000; // the first train: DIR is set, then the setup time passes
+        s.tick(&m.joints, &q, &mut out);
+        assert!(out[0].forward);
+        assert!(out[0].first_edge_ns >= StepTiming::PACSCI_6410.dir_setup_ns);
+        q[0] = 1_010_000; // 400 steps the same way: no wait
+        s.tick(&m.joints, &q, &mut out);
+        assert!(out[0].first_edge_ns < StepTiming::PACSCI_6410.dir_setup_ns);
+        q[0] = 0; // reversal
         s.tick(&m.joints, &q, &mut out);
         assert!(!out[0].forward);
         assert!(out[0].first_edge_ns >= StepTiming::PACSCI_6410.dir_setup_ns);
@@ -179,8 +188,10 @@ mod tests {
         assert!(out[1].count < 4000);
         assert_eq!(s.lagged_ticks, 1);
         let mut sum = out[1].count;
-        s.tick(&m.joints, &q, &mut out);
-        sum += out[1].count;
+        for _ in 0..2 {
+            s.tick(&m.joints, &q, &mut out);
+            sum += out[1].count;
+        }
         assert_eq!(sum, 4000);
         assert!(out[1].interval_ns >= StepTiming::PACSCI_6410.min_interval_ns());
     }

@@ -50,13 +50,17 @@ pub enum StoreError {
 
 /// Decodes and validates a payload.
 pub fn decode(payload: &[u8]) -> Result<MachineConfig, StoreError> {
-    let config: MachineConfig = postcard::from_bytes(payload).map_err(|_| StoreError::Undecodable)?;
+    let config: MachineConfig =
+        postcard::from_bytes(payload).map_err(|_| StoreError::Undecodable)?;
     config.validate().map_err(StoreError::Invalid)?;
     Ok(config)
 }
 
 /// Writes a flash record of `config` into `out`; returns its length.
-pub fn record(config: &MachineConfig, out: &mut [u8; HEADER_BYTES + MAX_CONFIG_BYTES]) -> Option<usize> {
+pub fn record(
+    config: &MachineConfig,
+    out: &mut [u8; HEADER_BYTES + MAX_CONFIG_BYTES],
+) -> Option<usize> {
     let mut payload = [0u8; MAX_CONFIG_BYTES];
     let n = encode(config, &mut payload)?;
     out[..4].copy_from_slice(&MAGIC);
@@ -73,7 +77,9 @@ pub fn read_record(bytes: &[u8]) -> Result<MachineConfig, StoreError> {
     }
     let n = u16::from_le_bytes([bytes[4], bytes[5]]) as usize;
     let crc = u32::from_le_bytes([bytes[6], bytes[7], bytes[8], bytes[9]]);
-    let payload = bytes.get(HEADER_BYTES..HEADER_BYTES + n).ok_or(StoreError::Damaged)?;
+    let payload = bytes
+        .get(HEADER_BYTES..HEADER_BYTES + n)
+        .ok_or(StoreError::Damaged)?;
     if n > MAX_CONFIG_BYTES || crate::crc::crc32(payload) != crc {
         return Err(StoreError::Damaged);
     }
@@ -109,8 +115,18 @@ impl Assembler {
     /// Adds a chunk at `offset` of a payload of `total` bytes with CRC `crc`. Returns
     /// the decoded configuration once every chunk is in and the CRC matches, an error
     /// when the transfer is inconsistent, and `Ok(None)` while chunks are missing.
-    pub fn add(&mut self, offset: usize, total: usize, crc: u32, data: &[u8]) -> Result<Option<MachineConfig>, StoreError> {
-        if total > MAX_CONFIG_BYTES || offset % CHUNK_BYTES != 0 || offset + data.len() > total || data.len() > CHUNK_BYTES {
+    pub fn add(
+        &mut self,
+        offset: usize,
+        total: usize,
+        crc: u32,
+        data: &[u8],
+    ) -> Result<Option<MachineConfig>, StoreError> {
+        if total > MAX_CONFIG_BYTES
+            || !offset.is_multiple_of(CHUNK_BYTES)
+            || offset + data.len() > total
+            || data.len() > CHUNK_BYTES
+        {
             return Err(StoreError::Damaged);
         }
         if total != self.total || crc != self.crc {

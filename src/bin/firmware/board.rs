@@ -15,6 +15,7 @@
 //! base. Alternate functions were checked against stm32-metapac 21 (stm32-data) for
 //! the STM32G474RE; connector positions follow the NUCLEO-G474RE user manual (UM2505).
 
+use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::gpio::{AnyPin, Input, Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -174,7 +175,16 @@ pub struct Board {
     pub panel: Panel,
     /// The interpolation tick, ready to start.
     pub tick: TickTimer,
+    /// The flash, for the machine-configuration page ([`CONFIG_PAGE_OFFSET`]).
+    pub flash: Flash<'static, Blocking>,
 }
+
+/// Offset (from the start of flash) of the page that keeps the machine configuration:
+/// the last 4 KB page of the 512 KB single-bank flash; `memory.x` ends the program
+/// region before it.
+pub const CONFIG_PAGE_OFFSET: u32 = 508 * 1024;
+/// Size of that page (single-bank mode erases 4 KB pages).
+pub const CONFIG_PAGE_BYTES: u32 = 4 * 1024;
 
 /// Sets up every pin and timer of the pin map and the embassy time base.
 ///
@@ -255,6 +265,7 @@ pub fn init(p: Peripherals) -> Board {
     interrupt::USB_LP.set_priority(Priority::P2);
 
     Board {
+        flash: Flash::new_blocking(p.FLASH),
         usb,
         led: Output::new(p.PA5, Level::Low, Speed::Low),
         steppers,

@@ -60,6 +60,7 @@ mod firmware {
     use embassy_executor::Spawner;
     use embassy_futures::join::join;
     use embassy_futures::select::select;
+    use embassy_stm32::flash::{Blocking, Flash};
     use embassy_stm32::gpio::{Input, Output};
     use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
     use embassy_sync::signal::Signal;
@@ -146,14 +147,68 @@ mod firmware {
         }
     }
 
-    /// Builds the controller for the built-in machine and moves it, once, into its
-    /// static.
-    fn install_controller() {
-        let controller = match Controller::new(MachineConfig::cartesian_xyz()) {
+    /// Bytes of a stored machine record, padded to the flash write size (8 bytes).
+    const RECORD_BYTES: usize =
+        (pkmc::store::HEADER_BYTES + pkmc::store::MAX_CONFIG_BYTES).div_ceil(8) * 8;
+
+    /// Builds the controller for the machine kept in flash (the built-in Cartesian
+    /// machine when the page holds none) and moves it, once, into its static.
+    fn install_controller(flash: &mut Flash<'static, Blocking>) {
+        let mut record = [0xFFu8; RECORD_BYTES];
+        let stored = flash
+            .blocking_read(board::CONFIG_PAGE_OFFSET, &mut record)
+            .ok()
+            .and_then(|_| pkmc::store::read_record(&record).ok());
+        let machine = match stored {
+            Some(m) => {
+                info!("machine from flash: {}", m.name.as_str());
+                m
+            }
+            None => {
+                info!("no machine in flash: built-in Cartesian machine");
+                MachineConfig::cartesian_xyz()
+            }
+        };
+        let controller = match Controller::new(machine) {
             Ok(c) => CONTROLLER_CELL.init(c),
-            Err(_) => defmt::panic!("the built-in machine configuration is invalid"),
+            Err(_) => match Controller::new(MachineConfig::cartesian_xyz()) {
+                Ok(c) => CONTROLLER_CELL.init(c),
+                Err(_) => defmt::panic!("the built-in machine configuration is invalid"),
+            },
         };
         critical_section::with(|cs| CONTROLLER.borrow_ref_mut(cs).replace(controller));
+    }
+
+    /// Writes a machine the host loaded into the flash page, so the controller comes
+    /// back with it after a reset. Runs only when the controller is at rest (it loads
+    /// machines only then); erasing stalls flash reads, and so the tick, for tens of ms.
+    #[embassy_executor::task]
+    async fn store_task(mut flash: Flash<'static, Blocking>) {
+        let mut record = [0xFFu8; RECORD_BYTES];
+        loop {
+            Timer::after_millis(100).await;
+            let len = with_controller(|c| {
+                let m = c.take_store_request()?;
+                let mut rec = [0u8; pkmc::store::HEADER_BYTES + pkmc::store::MAX_CONFIG_BYTES];
+                let n = pkmc::store::record(m, &mut rec)?;
+                record.fill(0xFF);
+                record[..n].copy_from_slice(&rec[..n]);
+                Some(n)
+            })
+            .flatten();
+            let Some(n) = len else {
+                continue;
+            };
+            let end = board::CONFIG_PAGE_OFFSET + board::CONFIG_PAGE_BYTES;
+            let padded = n.div_ceil(8) * 8;
+            let written = flash
+                .blocking_erase(board::CONFIG_PAGE_OFFSET, end)
+                .and_then(|_| flash.blocking_write(board::CONFIG_PAGE_OFFSET, &record[..padded]));
+            match written {
+                Ok(()) => info!("machine stored in flash ({} bytes)", n),
+                Err(_) => warn!("could not store the machine in flash"),
+            }
+        }
     }
 
     /// Start-up: clocks, board, controller, tick, tasks.
@@ -161,8 +216,8 @@ mod firmware {
     async fn main(spawner: Spawner) {
         let p = embassy_stm32::init(board::clock_config());
         info!("pkmc firmware {}", env!("CARGO_PKG_VERSION"));
-        let board = board::init(p);
-        install_controller();
+        let mut board = board::init(p);
+        install_controller(&mut board.flash);
         critical_section::with(|cs| {
             TICK_IO.borrow_ref_mut(cs).replace(TickIo {
                 steppers: board.steppers,
@@ -180,6 +235,7 @@ mod firmware {
         spawner.spawn(unwrap!(usb_task(usb)));
         spawner.spawn(unwrap!(link_task(class)));
         spawner.spawn(unwrap!(heartbeat_task(board.led, board.panel)));
+        spawner.spawn(unwrap!(store_task(board.flash)));
     }
 
     /// Builds the USB device with one CDC-ACM function.
