@@ -183,8 +183,14 @@ impl Controller {
         match self.state {
             State::Alarm | State::EStop => false,
             State::Hold => !self.exec.stopped(),
-            _ => self.exec.busy() || !self.planner.is_empty(),
+            _ => self.exec.busy() || !self.planner.is_empty() || !self.exec.settled(),
         }
+    }
+
+    /// Jerk limitation: smooths the path motion over `window` ticks (1 = off); see
+    /// [`crate::interp`].
+    pub fn set_smoothing(&mut self, window: u32) {
+        self.exec.set_smoothing(window);
     }
 
     /// Feeds bytes received from the link.
@@ -302,7 +308,10 @@ impl Controller {
                     });
                     return;
                 }
-                match self.assembler.add(offset as usize, total as usize, crc, &data) {
+                match self
+                    .assembler
+                    .add(offset as usize, total as usize, crc, &data)
+                {
                     Ok(None) => {}
                     Ok(Some(config)) => self.load_machine(config),
                     Err(error) => self.send(&CtrlMsg::MachineRefused { error }),
@@ -371,7 +380,13 @@ impl Controller {
                     self.stats,
                 );
                 *self = fresh;
-                (self.tx, self.tx_seq, self.expected_seq, self.last_control, self.stats) = link;
+                (
+                    self.tx,
+                    self.tx_seq,
+                    self.expected_seq,
+                    self.last_control,
+                    self.stats,
+                ) = link;
                 self.session = true;
                 self.store_pending = true;
                 self.send(&CtrlMsg::MachineLoaded {
@@ -498,7 +513,7 @@ impl Controller {
     /// Advances one interpolation period.
     pub fn tick(&mut self, inputs: &Inputs) -> &Outputs {
         if !matches!(self.state, State::Alarm | State::EStop) {
-            let moving = self.exec.busy() || !self.planner.is_empty();
+            let moving = self.exec.busy() || !self.planner.is_empty() || !self.exec.settled();
             if moving {
                 self.motion_ticks += 1;
                 if self.state == State::Idle {
@@ -532,7 +547,11 @@ impl Controller {
                 self.exec.paused = false;
                 self.state = State::Idle;
             }
-            if self.state == State::Running && !self.exec.busy() && self.planner.is_empty() {
+            if self.state == State::Running
+                && !self.exec.busy()
+                && self.planner.is_empty()
+                && self.exec.settled()
+            {
                 self.state = State::Idle;
             }
         }
@@ -633,12 +652,27 @@ mod tests {
         other.axes[0].max_velocity /= 2;
         let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
         let id = crate::store::identity(&other);
-        c.receive(&frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: id }));
+        c.receive(&frame(
+            0,
+            &HostMsg::Hello {
+                version: PROTOCOL_VERSION,
+                machine: id,
+            },
+        ));
         c.receive(&frame(1, &line_to(10, 1)));
         let r = replies(&mut c);
         assert!(matches!(r[0], CtrlMsg::HelloAck { machine, .. } if machine != id));
-        assert_eq!(r[1], CtrlMsg::Nak { expected: 1, reason: NakReason::MachineMismatch });
-        assert_eq!(c.status().alarm.map(|a| a.cause), Some(AlarmCause::MachineMismatch));
+        assert_eq!(
+            r[1],
+            CtrlMsg::Nak {
+                expected: 1,
+                reason: NakReason::MachineMismatch
+            }
+        );
+        assert_eq!(
+            c.status().alarm.map(|a| a.cause),
+            Some(AlarmCause::MachineMismatch)
+        );
         // Send the machine in chunks, each twice (a resend), the first once more.
         let mut payload = [0u8; crate::store::MAX_CONFIG_BYTES];
         let n = crate::store::encode(&other, &mut payload).unwrap();

@@ -7,6 +7,15 @@
 //! block, so a program of segments shorter than one tick's travel still runs at full
 //! speed, and the block boundaries do not round to ticks.
 //!
+//! Jerk limitation (optional, per machine): the path distance s(t) of the profile is
+//! passed through a moving average of w = 2ᵏ ticks before the pose is evaluated. The
+//! geometry stays exact (only *where along the path* is smoothed, never the path), the
+//! average of a motion within speed and acceleration limits stays within them, and the
+//! acceleration now changes at most 2a/(w·T) per unit time — a jerk limit. This is the
+//! FIR "bell-shaped acceleration" of commercial controllers, applied before
+//! interpolation. The cost: every motion ends w·T/2 later on average, and dwells and
+//! auxiliary functions wait for the smoothed motion to arrive.
+//!
 //! Invariants: the executing block was profiled from the speed the previous one left
 //! at to the entry speed the planner fixed for its successor; a hold or a feed-override
 //! change re-profiles it from where it is, at the speed it has, so the stop happens on
@@ -63,6 +72,36 @@ pub struct Executor {
     pub completed: u32,
     /// Stop taking new blocks (a pause or tool change is waiting for resume).
     pub paused: bool,
+    /// Jerk limitation (see the module doc); `None` for plain trapezoids.
+    smoothing: Option<Smoothing>,
+    /// Path distance travelled since start-up by the unsmoothed profile, nm Q16
+    /// (blocks laid end to end).
+    s_raw: i64,
+    /// Where the executing block starts on that scale.
+    block_start: i64,
+}
+
+/// Most ticks of smoothing (the moving-average window).
+pub const MAX_WINDOW: usize = 32;
+/// Blocks remembered for the smoothed position to fall in.
+pub const HISTORY: usize = 48;
+
+#[derive(Clone, Debug)]
+struct Past {
+    start: i64,
+    path: crate::geometry::Path,
+    line: u32,
+}
+
+/// Moving average of the path distance over a window of 2ᵏ ticks.
+#[derive(Clone, Debug)]
+struct Smoothing {
+    log2: u32,
+    ring: [i64; MAX_WINDOW],
+    head: usize,
+    sum: i128,
+    s: i64,
+    hist: heapless::Deque<Past, HISTORY>,
 }
 
 impl Executor {
@@ -75,7 +114,35 @@ impl Executor {
             line: 0,
             completed: 0,
             paused: false,
+            smoothing: None,
+            s_raw: 0,
+            block_start: 0,
         }
+    }
+
+    /// Smooths the path distance with a moving average of `window` ticks (rounded up
+    /// to a power of two, at most [`MAX_WINDOW`]); 1 turns smoothing off.
+    pub fn set_smoothing(&mut self, window: u32) {
+        let log2 = window
+            .max(1)
+            .next_power_of_two()
+            .min(MAX_WINDOW as u32)
+            .trailing_zeros();
+        self.smoothing = (log2 > 0).then(|| Smoothing {
+            log2,
+            ring: [self.s_raw; MAX_WINDOW],
+            head: 0,
+            sum: (self.s_raw as i128) << log2,
+            s: self.s_raw,
+            hist: heapless::Deque::new(),
+        });
+    }
+
+    /// The smoothed motion has caught up with the profile (always, without smoothing).
+    pub fn settled(&self) -> bool {
+        self.smoothing
+            .as_ref()
+            .is_none_or(|f| f.s == self.s_raw && f.sum == (self.s_raw as i128) << f.log2)
     }
 
     /// Is a block executing?
@@ -85,6 +152,9 @@ impl Executor {
 
     /// At rest (nothing executing, or held still inside a block)?
     pub fn stopped(&self) -> bool {
+        if !self.settled() {
+            return false;
+        }
         match &self.active {
             None => true,
             Some(a) => self.speed == 0 && a.profile.is_none_or(|p| p.t2 == HELD && a.t >= p.t1),
@@ -107,6 +177,12 @@ impl Executor {
     pub fn stop(&mut self) {
         self.active = None;
         self.speed = 0;
+        if let Some(f) = self.smoothing.as_ref() {
+            let window = 1 << f.log2;
+            self.s_raw = 0;
+            self.block_start = 0;
+            self.set_smoothing(window);
+        }
     }
 
     fn activate(&mut self, planner: &mut Planner, b: PlanBlock) -> Option<Event> {
@@ -138,6 +214,17 @@ impl Executor {
                 );
                 planner.first_entry = got.exit as f32;
                 planner.replan();
+                self.block_start = self.s_raw;
+                if let Some(f) = self.smoothing.as_mut() {
+                    if f.hist.is_full() {
+                        f.hist.pop_front();
+                    }
+                    let _ = f.hist.push_back(Past {
+                        start: self.s_raw,
+                        path: b.path,
+                        line: b.line,
+                    });
+                }
                 self.active = Some(Active {
                     block: b,
                     profile: Some(p),
@@ -188,6 +275,14 @@ impl Executor {
                 if self.paused || planner.hold {
                     break;
                 }
+                // Dwells, auxiliary functions and faults act at rest: wait for the
+                // smoothed motion to arrive first.
+                let at_rest_kind = planner
+                    .front()
+                    .is_some_and(|b| !matches!(b.kind, Kind::Rapid | Kind::Feed));
+                if at_rest_kind && !self.settled() {
+                    break;
+                }
                 let Some(b) = planner.pop() else {
                     break;
                 };
@@ -230,7 +325,10 @@ impl Executor {
                     let d = p.duration();
                     if p.t2 != HELD && a.t >= d {
                         budget = a.t - d;
-                        self.pose = a.block.path.end;
+                        self.s_raw = self.block_start + (a.block.path.length << 16);
+                        if self.smoothing.is_none() {
+                            self.pose = a.block.path.end;
+                        }
                         self.completed += 1;
                         self.active = None;
                         if budget == 0 {
@@ -240,15 +338,49 @@ impl Executor {
                         continue;
                     }
                     let (s, v) = p.at(a.t);
-                    a.block.path.pose_at(a.s_base + s, &mut self.pose);
-                    self.speed = v;
+                    self.s_raw = self.block_start + a.s_base + s;
+                    if self.smoothing.is_none() {
+                        a.block.path.pose_at(a.s_base + s, &mut self.pose);
+                        self.speed = v;
+                    }
                     break;
                 }
             }
         }
-        if self.active.is_none() && planner.is_empty() {
+        if self.smoothing.is_some() {
+            self.smooth();
+        } else if self.active.is_none() && planner.is_empty() {
             self.speed = 0;
         }
         event
+    }
+
+    /// Moves the smoothed position one tick and evaluates the pose there.
+    fn smooth(&mut self) {
+        let Some(f) = self.smoothing.as_mut() else {
+            return;
+        };
+        let window = 1usize << f.log2;
+        f.sum += (self.s_raw - f.ring[f.head]) as i128;
+        f.ring[f.head] = self.s_raw;
+        f.head = (f.head + 1) & (window - 1);
+        let s = (f.sum >> f.log2) as i64;
+        self.speed = (s - f.s) << 16;
+        f.s = s;
+        // The oldest sample in the window bounds what can still be needed.
+        let oldest = f.ring[f.head];
+        while f.hist.len() >= 2 && f.hist.iter().nth(1).is_some_and(|p| p.start <= oldest) {
+            f.hist.pop_front();
+        }
+        if let Some(past) = f
+            .hist
+            .iter()
+            .rev()
+            .find(|p| p.start <= s)
+            .or(f.hist.front())
+        {
+            past.path.pose_at(s - past.start, &mut self.pose);
+            self.line = past.line;
+        }
     }
 }

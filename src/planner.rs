@@ -236,10 +236,14 @@ impl Planner {
         // Path tolerance (G64 P): between two tick samples the tool moves in a
         // straight line, which cuts a corner taken at v (nm/tick) by v·|Δu|/4 at most
         // (the corner half-way through a tick); keep that within the tolerance.
-        let du: f32 = (0..3)
-            .map(|i| (start_tangent[i] - self.end_tangent[i]).powi(2))
-            .sum::<f32>()
-            .sqrt();
+        let du = libm::sqrtf(
+            (0..3)
+                .map(|i| {
+                    let d = start_tangent[i] - self.end_tangent[i];
+                    d * d
+                })
+                .sum::<f32>(),
+        );
         let by_tolerance = if self.end_tolerance == u32::MAX || du < 1e-9 {
             f32::INFINITY
         } else {

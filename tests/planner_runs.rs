@@ -17,7 +17,16 @@ fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
 /// Streams `blocks` as fast as the queue accepts them and runs to the end; returns the
 /// pose after every tick.
 fn run(machine: MachineConfig, blocks: &[Block]) -> (Controller, Vec<[i64; AXES]>) {
+    run_smoothed(machine, blocks, 1)
+}
+
+fn run_smoothed(
+    machine: MachineConfig,
+    blocks: &[Block],
+    window: u32,
+) -> (Controller, Vec<[i64; AXES]>) {
     let mut c = Controller::new(machine).unwrap();
+    c.set_smoothing(window);
     c.receive(&frame(
         0,
         &HostMsg::Hello {
@@ -145,4 +154,55 @@ fn a_native_arc_never_leaves_its_circle() {
     assert!(on_arc > 1000);
     assert!(worst <= 1.5, "left the circle by {worst} nm");
     assert_eq!(c.pose(), &[r, 0, -5_000_000, 0, 0, 0]);
+}
+
+/// Second and third differences of one axis, nm per tick² and tick³.
+fn differences(poses: &[[i64; AXES]], axis: usize) -> (f64, f64) {
+    let x: Vec<f64> = poses.iter().map(|p| p[axis] as f64).collect();
+    let a: Vec<f64> = x.windows(3).map(|w| w[2] - 2.0 * w[1] + w[0]).collect();
+    let j: Vec<f64> = a.windows(2).map(|w| w[1] - w[0]).collect();
+    let max = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    (max(&a), max(&j))
+}
+
+#[test]
+fn jerk_limited_motion_bounds_jerk_and_still_ends_exactly() {
+    // Out and back along X with a dwell between: 40 mm at 100 mm/s, a = 1000 mm/s²
+    // (1000 nm/tick²). A 16-tick window bounds the jerk at 2a/16 = 125 nm/tick³
+    // (125 000 mm/s³).
+    let go = |x: i64, line: u32| Block {
+        line,
+        motion: Motion::Linear,
+        target: [x, 0, 0, 0, 0, 0],
+        feed: 100 * NM_PER_MM,
+        tolerance_nm: u32::MAX,
+    };
+    let dwell = Block {
+        line: 2,
+        motion: Motion::Dwell(100),
+        target: [40_000_000, 0, 0, 0, 0, 0],
+        feed: 0,
+        tolerance_nm: 0,
+    };
+    let blocks = [go(40_000_000, 1), dwell, go(0, 3)];
+    let (plain, p_poses) = run(MachineConfig::cartesian_xyz(), &blocks);
+    let (smooth, s_poses) = run_smoothed(MachineConfig::cartesian_xyz(), &blocks, 16);
+    let (a_plain, j_plain) = differences(&p_poses, 0);
+    let (a_smooth, j_smooth) = differences(&s_poses, 0);
+    eprintln!("plain: a {a_plain} j {j_plain}; smoothed: a {a_smooth} j {j_smooth}");
+    assert!(a_smooth <= 1000.0 + 2.0);
+    assert!(j_smooth <= 125.0 + 2.0, "jerk {j_smooth} nm/tick³");
+    assert!(
+        j_plain >= 450.0,
+        "the plain trapezoid has acceleration steps"
+    );
+    assert_eq!(smooth.pose(), plain.pose());
+    assert_eq!(smooth.pose()[0], 0);
+    // The dwell holds still for its full 100 ms after the smoothed motion arrives.
+    let still = s_poses
+        .windows(2)
+        .map(|w| w[0] == w[1] && w[0][0] == 40_000_000)
+        .filter(|b| *b)
+        .count();
+    assert!(still >= 100, "{still} ticks at rest at the turn");
 }
