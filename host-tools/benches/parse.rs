@@ -4,7 +4,9 @@
 //! from `shared/corpus/linuxcnc` beside the repository.
 //!
 //! Run: `cargo bench -p pkmc-host --bench parse`. Prints MB/s for both and the ratio
-//! (ours / theirs); skips with a message when the corpus is absent. Each figure is the
+//! (ours / theirs); skips with a message when the corpus is absent.
+//! `PARSE_BENCH_PROFILE=arcspiral.ngc` runs only our compile on that file for about
+//! three seconds, for a profiler. Each figure is the
 //! best of several timed rounds of many repetitions (at least `MIN_ROUND` each).
 
 use gcode::core::{
@@ -152,6 +154,23 @@ fn main() {
         return;
     }
     let options = Options::default();
+    if let Ok(name) = std::env::var("PARSE_BENCH_PROFILE") {
+        // For a profiler: only our compile, on one file, for about three seconds.
+        let text = std::fs::read_to_string(dir.join(&name)).expect("corpus file readable");
+        let t = Instant::now();
+        let mut n = 0u64;
+        while t.elapsed() < Duration::from_secs(3) {
+            black_box(
+                compile(black_box(&text), &name, &options)
+                    .map(|c| c.len())
+                    .ok(),
+            );
+            n += 1;
+        }
+        let mbs = (text.len() as f64 * n as f64) / t.elapsed().as_secs_f64() / 1e6;
+        println!("{name}: {n} compiles, {mbs:.1} MB/s");
+        return;
+    }
     println!(
         "{:<15} {:>9} {:>12} {:>12} {:>7}  notes",
         "file", "bytes", "ours MB/s", "gcode MB/s", "ratio"

@@ -37,7 +37,8 @@ use pkmc::units::{NDEG_PER_DEG, NM_PER_MM};
 /// nm per inch.
 pub const NM_PER_INCH: i64 = 25_400_000;
 
-/// An error on a line: column (1-based) and message.
+/// An error on a line: column (1-based, in bytes: see [`super::lexer::char_col`]) and
+/// message.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct LineError {
     /// Column, 1-based.
@@ -173,7 +174,7 @@ const M_GROUP_NAMES: [&str; M_GROUPS] = ["stopping", "tool-change", "spindle", "
 const AXIS_BITS: u32 = bit(b'X') | bit(b'Y') | bit(b'Z') | bit(b'A') | bit(b'B') | bit(b'C');
 
 /// `G28.1` from ten times the number.
-pub(crate) fn code_name(letter: char, tenths: i64) -> String {
+pub(crate) fn code_name(letter: char, tenths: i32) -> String {
     if tenths % 10 == 0 {
         format!("{letter}{}", tenths / 10)
     } else {
@@ -182,7 +183,7 @@ pub(crate) fn code_name(letter: char, tenths: i64) -> String {
 }
 
 /// The modal group of a G code, or why it is refused.
-fn g_group(tenths: i64) -> Result<usize, String> {
+fn g_group(tenths: i32) -> Result<usize, String> {
     Ok(match tenths {
         0 | 10 | 20 | 30 | 730 | 800 | 810 | 820 | 830 | 850 | 890 => MOTION,
         170 | 180 | 190 => PLANE,
@@ -226,7 +227,7 @@ fn g_group(tenths: i64) -> Result<usize, String> {
 }
 
 /// The modal group of an M code, or why it is refused.
-fn m_group(tenths: i64) -> Result<usize, String> {
+fn m_group(tenths: i32) -> Result<usize, String> {
     Ok(match tenths {
         0 | 10 | 20 | 300 => STOP,
         60 | 610 => TOOL_CHANGE,
@@ -323,8 +324,16 @@ impl<'o> Interp<'o> {
         {
             return Ok(());
         }
-        let g = group_g(&w.g)?;
-        let m = group_m(&w.m)?;
+        let g = if w.g.is_empty() {
+            [None; G_GROUPS]
+        } else {
+            group_g(&w.g)?
+        };
+        let m = if w.m.is_empty() {
+            [None; M_GROUPS]
+        } else {
+            group_m(&w.m)?
+        };
         let mut used = bit(b'N') | AXIS_BITS;
 
         if !w.messages.is_empty() {
@@ -573,7 +582,7 @@ impl<'o> Interp<'o> {
                 },
                 None => has_axes || has_polar || (ijk && matches!(self.motion, Motion::Arc { .. })),
             };
-        let motion_words = AXIS_BITS | bit(b'I') | bit(b'J') | bit(b'K');
+        let first_motion_col = w.first_motion_col.max(1);
         if nm_axes.is_some() && has_polar {
             let at = w.polar_radius.or(w.polar_angle).map_or(1, |p| p.col);
             return fail(at, "polar coordinates (@ ^) only go with motion");
@@ -594,7 +603,7 @@ impl<'o> Interp<'o> {
             }
         }
         if run {
-            let col = explicit.map_or_else(|| first_col(w, motion_words), |c| c.col);
+            let col = explicit.map_or(first_motion_col, |c| c.col);
             match self.motion {
                 Motion::None => {
                     let what = if explicit.is_some() {
@@ -602,7 +611,7 @@ impl<'o> Interp<'o> {
                     } else {
                         "coordinates without a motion mode (G0, G1, G2, G3 or a canned cycle)"
                     };
-                    return fail(first_col(w, motion_words), what);
+                    return fail(first_motion_col, what);
                 }
                 Motion::Rapid => {
                     let t = self.target(w, g53.is_some())?;
@@ -657,13 +666,17 @@ impl<'o> Interp<'o> {
                 ),
             );
         }
+        if !w.assigns.is_empty() {
+            self.apply_assigns(w)?;
+        }
+        self.update_position_params();
+        Ok(())
+    }
+
+    /// Applies the line's parameter settings, in order.
+    fn apply_assigns(&mut self, w: &mut Words) -> Res<()> {
         let mut refresh = None;
-        let assigns = if w.assigns.is_empty() {
-            None
-        } else {
-            Some(w.assigns.drain(..))
-        };
-        for a in assigns.into_iter().flatten() {
+        for a in w.assigns.drain(..) {
             match a.target {
                 ParamRef::Numbered(n) => {
                     if n >= params::READ_ONLY_FROM {
@@ -677,11 +690,10 @@ impl<'o> Interp<'o> {
                 ParamRef::Named(name) => self.params.set_named(&name, a.value),
             }
         }
-        if let Some(col) = refresh {
-            self.refresh_offsets(col)?;
+        match refresh {
+            Some(col) => self.refresh_offsets(col),
+            None => Ok(()),
         }
-        self.update_position_params();
-        Ok(())
     }
 
     /// Length word in the units in force → nm, bounded.

@@ -78,18 +78,18 @@ impl Num {
     pub fn scaled(self, num: i64, den: i64) -> Option<i64> {
         match self {
             Num::Lit { mant, scale } => {
-                let p = POW10[scale as usize];
                 if den == 1 {
-                    if num % p == 0 {
-                        return mant.checked_mul(num / p);
-                    }
                     if let Some(n) = mant.checked_mul(num) {
                         return Some(div_round_pow10(n, scale));
                     }
-                } else if let (Some(n), Some(d)) = (mant.checked_mul(num), p.checked_mul(den)) {
+                } else if let (Some(n), Some(d)) = (
+                    mant.checked_mul(num),
+                    POW10[scale as usize].checked_mul(den),
+                ) {
                     return Some(div_round_i64(n, d));
                 }
-                let q = pkmc::units::div_round(mant as i128 * num as i128, p as i128 * den as i128);
+                let p = POW10[scale as usize] as i128;
+                let q = pkmc::units::div_round(mant as i128 * num as i128, p * den as i128);
                 i64::try_from(q).ok()
             }
             Num::Real(v) => f64_to_i64(v * num as f64 / den as f64),
@@ -246,7 +246,7 @@ pub struct Word {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Code {
     /// Ten times the code number.
-    pub tenths: i64,
+    pub tenths: i32,
     /// Column of the letter, 1-based.
     pub col: u32,
 }
@@ -288,6 +288,8 @@ pub struct Words {
     pub assigns: Vec<Assign>,
     /// `(MSG, …)` texts in order.
     pub messages: Vec<String>,
+    /// Column of the first axis, I J K or polar word (0: none).
+    pub first_motion_col: u32,
 }
 
 impl Default for Words {
@@ -304,6 +306,7 @@ impl Default for Words {
             polar_angle: None,
             assigns: Vec::new(),
             messages: Vec::new(),
+            first_motion_col: 0,
         }
     }
 }
@@ -312,6 +315,17 @@ impl Default for Words {
 pub const fn bit(letter: u8) -> u32 {
     1 << (letter - b'A')
 }
+
+/// Letters of words that position a move: X Y Z A B C I J K.
+const MOTION_LETTERS: u32 = bit(b'X')
+    | bit(b'Y')
+    | bit(b'Z')
+    | bit(b'A')
+    | bit(b'B')
+    | bit(b'C')
+    | bit(b'I')
+    | bit(b'J')
+    | bit(b'K');
 
 impl Words {
     fn clear(&mut self) {
@@ -322,6 +336,7 @@ impl Words {
         self.polar_angle = None;
         self.assigns.clear();
         self.messages.clear();
+        self.first_motion_col = 0;
     }
 
     /// The word of `letter` (upper case, not G or M), if the line has one.
@@ -336,7 +351,16 @@ impl Words {
     }
 }
 
-/// A lexical error: column (1-based, characters) and message.
+/// The column in characters (1-based) of byte column `byte_col` (1-based) of `text`.
+pub fn char_col(text: &str, byte_col: u32) -> usize {
+    let i = (byte_col as usize).saturating_sub(1);
+    match text.get(..i) {
+        Some(before) if !before.is_ascii() => before.chars().count() + 1,
+        _ => i + 1,
+    }
+}
+
+/// A lexical error: column (1-based, in bytes: see [`char_col`]) and message.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct LexError {
     /// Column, 1-based.
@@ -358,7 +382,6 @@ pub fn scan_line(
         b: text.as_bytes(),
         text,
         i: start,
-        ascii: text.is_ascii(),
         params,
     };
     c.line(words)
@@ -405,19 +428,16 @@ struct Cursor<'a> {
     b: &'a [u8],
     text: &'a str,
     i: usize,
-    ascii: bool,
     params: &'a Params,
 }
 
 impl Cursor<'_> {
-    /// Column of byte `i` (1-based, in characters).
+    /// Column of byte `i`, 1-based, counted in bytes: [`char_col`] turns it into a
+    /// column in characters when a diagnostic is made (only then, to keep the hot loop
+    /// free of UTF-8 counting).
+    #[inline]
     fn col(&self, i: usize) -> u32 {
-        let n = if self.ascii {
-            i
-        } else {
-            self.text.get(..i).map_or(i, |s| s.chars().count())
-        };
-        u32::try_from(n + 1).unwrap_or(u32::MAX)
+        u32::try_from(i + 1).unwrap_or(u32::MAX)
     }
 
     fn err(&self, i: usize, message: impl Into<String>) -> LexError {
@@ -506,6 +526,9 @@ impl Cursor<'_> {
                         });
                     }
                     *slot = Some(Word { num, col });
+                    if words.first_motion_col == 0 {
+                        words.first_motion_col = col;
+                    }
                 }
                 c if c.is_ascii_alphabetic() => self.word(words)?,
                 c if c < 0x20 || c == 0x7f => return Err(self.control(self.i)),
@@ -542,6 +565,7 @@ impl Cursor<'_> {
                 let tenths = num.tenths().filter(|t| (0..=99_990).contains(t));
                 match tenths {
                     Some(tenths) => {
+                        let tenths = tenths as i32; // 0..=99_990
                         let list = if letter == b'G' {
                             &mut words.g
                         } else {
@@ -568,6 +592,9 @@ impl Cursor<'_> {
                 }
                 words.present |= b;
                 words.vals[slot] = Word { num, col };
+                if b & MOTION_LETTERS != 0 && words.first_motion_col == 0 {
+                    words.first_motion_col = col;
+                }
             }
         }
         Ok(())
@@ -715,26 +742,28 @@ impl Cursor<'_> {
             negative = s == b'-';
             self.i += 1;
         }
-        let (mut mant, mut scale, mut digits, mut point) = (0i64, 0u32, 0u32, false);
+        // At most 18 significant digits: they fit an i64 without overflow checks.
+        let (mut mant, mut scale, mut digits, mut significant, mut point) =
+            (0i64, 0u32, 0u32, 0u32, false);
         while let Some(&c) = self.b.get(self.i) {
             match c {
                 b'0'..=b'9' => {
-                    if point && scale == MAX_DECIMALS {
-                        return Err(self.err(
-                            start,
-                            format!("number with more than {MAX_DECIMALS} decimals"),
-                        ));
-                    }
-                    mant = match mant
-                        .checked_mul(10)
-                        .and_then(|m| m.checked_add(i64::from(c - b'0')))
-                    {
-                        Some(m) => m,
-                        None => return Err(self.err(start, "number with too many digits")),
-                    };
                     digits += 1;
+                    if mant != 0 || c != b'0' {
+                        significant += 1;
+                        if significant > 18 {
+                            return Err(self.err(start, "number with too many digits"));
+                        }
+                    }
+                    mant = mant * 10 + i64::from(c - b'0');
                     if point {
                         scale += 1;
+                        if scale > MAX_DECIMALS {
+                            return Err(self.err(
+                                start,
+                                format!("number with more than {MAX_DECIMALS} decimals"),
+                            ));
+                        }
                     }
                 }
                 b'.' if !point => point = true,
@@ -1225,8 +1254,9 @@ mod tests {
 
     #[test]
     fn columns_count_characters_not_bytes() {
-        let e = scan("(°) Q1 E2").unwrap_err();
-        assert_eq!(e.col, 8);
+        let text = "(°) Q1 E2";
+        let e = scan(text).unwrap_err();
+        assert_eq!(char_col(text, e.col), 8);
     }
 
     #[test]

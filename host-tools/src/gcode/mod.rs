@@ -152,8 +152,11 @@ pub fn compile_canon(
     for (n, raw) in source.split('\n').enumerate() {
         let line = n + 1;
         let text = raw.strip_suffix('\r').unwrap_or(raw);
-        let trimmed = text.trim_matches(|c| c == ' ' || c == '\t');
-        if trimmed == "%" {
+        let bytes = text.as_bytes();
+        let Some(first) = bytes.iter().position(|&b| b != b' ' && b != b'\t') else {
+            continue; // blank line
+        };
+        if bytes[first] == b'%' && bytes[first + 1..].iter().all(|&b| b == b' ' || b == b'\t') {
             if !seen_text {
                 seen_text = true;
                 opening_percent = Some(line);
@@ -161,9 +164,6 @@ pub fn compile_canon(
             }
             closed = true;
             break;
-        }
-        if trimmed.is_empty() {
-            continue;
         }
         seen_text = true;
         if text.len() > MAX_LINE && text.chars().count() > MAX_LINE {
@@ -175,22 +175,22 @@ pub fn compile_canon(
             continue;
         }
         // Block delete: `/` first on the line (after blanks).
-        let mut start = text.len() - text.trim_start_matches([' ', '\t']).len();
-        if text.as_bytes().get(start) == Some(&b'/') {
+        let mut start = first;
+        if bytes[first] == b'/' {
             if options.block_delete {
                 continue;
             }
             start += 1;
         }
         if let Err(e) = lexer::scan_line(text, start, &interp.params, &mut words) {
-            error(line, e.col as usize, e.message);
+            error(line, lexer::char_col(text, e.col), e.message);
             continue;
         }
         let nc_line = u32::try_from(line).unwrap_or(u32::MAX);
         let before = out.len();
         if let Err(e) = interp.execute(&mut words, nc_line, &mut out) {
             out.truncate(before);
-            error(line, e.col as usize, e.message);
+            error(line, lexer::char_col(text, e.col), e.message);
             continue;
         }
         if interp.ended() {

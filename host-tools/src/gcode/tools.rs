@@ -11,7 +11,7 @@
 //! Invariants: lengths and diameters are in nm and bounded by
 //! [`super::MAX_AXIS_UNITS`]; diameters are not negative; each tool appears once.
 
-use super::lexer::{scan_line, Num, Words};
+use super::lexer::{char_col, scan_line, Num, Words};
 use super::params::Params;
 use super::{Diagnostic, MAX_AXIS_UNITS, MAX_LINE};
 use pkmc::units::NM_PER_MM;
@@ -70,18 +70,20 @@ impl ToolTable {
         let mut words = Words::default();
         for (n, raw) in text.split('\n').enumerate() {
             let line = n + 1;
+            let text = raw.strip_suffix('\r').unwrap_or(raw);
             let err = |col: u32, message: String| Diagnostic {
                 file: origin.to_string(),
                 line,
-                col: col as usize,
+                col: char_col(text, col),
                 message,
             };
-            let text = raw.strip_suffix('\r').unwrap_or(raw);
             if text.chars().count() > MAX_LINE {
-                return Err(err(
-                    MAX_LINE as u32 + 1,
-                    format!("line longer than {MAX_LINE} characters"),
-                ));
+                return Err(Diagnostic {
+                    file: origin.to_string(),
+                    line,
+                    col: MAX_LINE + 1,
+                    message: format!("line longer than {MAX_LINE} characters"),
+                });
             }
             scan_line(text, 0, &params, &mut words).map_err(|e| err(e.col, e.message))?;
             if words.present() == 0 {
