@@ -619,7 +619,7 @@ impl<'o> Interp<'o> {
                 }
                 Motion::Linear => {
                     let t = self.target(w, g53.is_some())?;
-                    let feed = self.feed_for(&t, line_inverse, "G1", col)?;
+                    let feed = self.feed_for(&t, false, line_inverse, "G1", col)?;
                     out.push(Canon::Linear {
                         line,
                         target: t,
@@ -787,10 +787,11 @@ impl<'o> Interp<'o> {
         self.pos = target;
     }
 
-    /// Feed of a feed move from the current pose to `end`.
+    /// Feed of a feed move from the current pose to `end` (`arc`: along an arc).
     pub(crate) fn feed_for(
         &self,
         end: &[i64; AXES],
+        arc: bool,
         line_inverse: Option<u64>,
         code: &str,
         col: u32,
@@ -807,7 +808,8 @@ impl<'o> Interp<'o> {
         let Some(f) = self.feed else {
             return fail(col, format!("{code} without a feed (F)"));
         };
-        let linear = (0..3).any(|i| end[i] != self.pos[i]);
+        // An arc moves X Y Z even when it ends where it starts (a full circle).
+        let linear = arc || (0..3).any(|i| end[i] != self.pos[i]);
         let rotary = (3..AXES).any(|i| end[i] != self.pos[i]);
         Ok(Feed::PerSecond(if rotary && !linear {
             f.rotary
@@ -920,7 +922,7 @@ impl<'o> Interp<'o> {
             Some(p) => (whole_in(p, 1, i64::from(u32::MAX), "turns P")? - 1) as u32,
             None => 0,
         };
-        let feed = self.feed_for(&end, line_inverse, name, col)?;
+        let feed = self.feed_for(&end, true, line_inverse, name, col)?;
         out.push(Canon::Arc {
             line,
             target: end,

@@ -86,17 +86,12 @@ impl ToolTable {
                 });
             }
             scan_line(text, 0, &params, &mut words).map_err(|e| err(e.col, e.message))?;
-            if words.present() == 0 {
-                if let Some(g) = words.g.first().or(words.m.first()) {
-                    return Err(err(g.col, "a tool line holds T P Z D words only".into()));
-                }
-                if let Some(a) = words.assigns.first() {
-                    return Err(err(a.col, "a tool line holds T P Z D words only".into()));
-                }
-                continue;
+            let stray = words.g.first().or(words.m.first()).map(|c| c.col);
+            if let Some(col) = stray.or(words.assigns.first().map(|a| a.col)) {
+                return Err(err(col, "a tool line holds T P Z D words only".into()));
             }
-            if let Some(g) = words.g.first().or(words.m.first()) {
-                return Err(err(g.col, "a tool line holds T P Z D words only".into()));
+            if words.present() == 0 {
+                continue;
             }
             let Some(t) = words.get(b'T') else {
                 return Err(err(1, "tool line without a tool number (T)".into()));
@@ -182,6 +177,15 @@ mod tests {
     fn a_tool_listed_twice_is_rejected_with_its_line() {
         let e = ToolTable::parse("T1 Z1\nT1 Z2\n", "tools").unwrap_err();
         assert_eq!(e.to_string(), "tools:2:1: tool T1 listed twice");
+    }
+
+    #[test]
+    fn codes_in_a_tool_file_are_rejected() {
+        let e = ToolTable::parse("T1 Z1\nG0 X1\n", "tools").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "tools:2:1: a tool line holds T P Z D words only"
+        );
     }
 
     #[test]
