@@ -1,7 +1,8 @@
 //! Path geometry of a block: where the tool is after `s` nanometres along it.
 //!
 //! Straight moves: pose = start + u·s with the direction u = Δ/S stored per axis in
-//! Q2.62, so a pose is exact to well below a nanometre and the end (s = S) is snapped
+//! Q20.44 (a rotary axis moving with X Y Z can turn hundreds of n° per nm), so a
+//! pose is exact to well below a nanometre and the end (s = S) is snapped
 //! to the programmed target. Arcs and helices follow the true circle, never chords:
 //! the angle advances linearly with s (turns Q64), the radius moves linearly from the
 //! start radius to the end radius (an end within tolerance of the circle makes a gentle
@@ -17,9 +18,9 @@ use crate::protocol::{Block, Motion, Plane};
 /// Shape of a path.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Shape {
-    /// Straight line; `unit[i]` = Δᵢ/S in Q2.62.
+    /// Straight line; `unit[i]` = Δᵢ/S in Q20.44.
     Line {
-        /// Direction per axis, Q2.62.
+        /// Direction per axis, Q20.44.
         unit: [i64; AXES],
     },
     /// Arc or helix.
@@ -41,7 +42,7 @@ pub enum Shape {
         phi_rate: i128,
         /// Radius change per path distance: (dr·2¹⁶) / length, used as (k·s) ≫ 32.
         r_rate: i64,
-        /// Per-axis direction of the linear part (helix axis and A B C), Q2.62;
+        /// Per-axis direction of the linear part (helix axis and A B C), Q20.44;
         /// in-plane entries are 0.
         unit: [i64; AXES],
     },
@@ -64,7 +65,7 @@ pub struct Path {
     pub shape: Shape,
 }
 
-const Q62: f64 = 4_611_686_018_427_387_904.0;
+const Q44: f64 = 17_592_186_044_416.0;
 const TURN_Q64: f64 = 18_446_744_073_709_551_616.0;
 
 /// `x` modulo `m`, in [0, m).
@@ -72,11 +73,11 @@ fn wrap(x: f64, m: f64) -> f64 {
     x - libm::floor(x / m) * m
 }
 
-fn unit_q62(d: i64, length: f64) -> i64 {
+fn unit_q44(d: i64, length: f64) -> i64 {
     if length <= 0.0 {
         0
     } else {
-        libm::round(d as f64 / length * Q62) as i64
+        libm::round(d as f64 / length * Q44) as i64
     }
 }
 
@@ -128,7 +129,7 @@ impl Path {
                 }
                 let mut unit = [0i64; AXES];
                 for (u, d) in unit.iter_mut().zip(&delta) {
-                    *u = unit_q62(*d, length);
+                    *u = unit_q44(*d, length);
                 }
                 Ok(Path {
                     length: libm::round(length) as i64,
@@ -178,7 +179,7 @@ impl Path {
                 let length = libm::sqrt(planar * planar + helix * helix);
                 let mut unit = [0i64; AXES];
                 for (u, d) in unit.iter_mut().zip(&lin) {
-                    *u = unit_q62(*d, length);
+                    *u = unit_q44(*d, length);
                 }
                 let turn_of = |rad: f64| rad / tau * TURN_Q64;
                 let len = (libm::round(length) as i64).max(1);
@@ -213,11 +214,11 @@ impl Path {
         let s = s.max(0);
         let linear = |unit: &[i64; AXES], pose: &mut [i64; AXES]| {
             for (p, (st, u)) in pose.iter_mut().zip(self.start.iter().zip(unit)) {
-                // (u Q62 × s Q16) >> 78, rounded; axes that do not move cost nothing.
+                // (u Q44 × s Q16) >> 60, rounded; axes that do not move cost nothing.
                 *p = if *u == 0 {
                     *st
                 } else {
-                    st + (((*u as i128 * s as i128) + (1i128 << 77)) >> 78) as i64
+                    st + (((*u as i128 * s as i128) + (1i128 << 59)) >> 60) as i64
                 };
             }
         };
@@ -253,7 +254,7 @@ impl Path {
             Shape::Point => {}
             Shape::Line { unit } => {
                 for (t, u) in t.iter_mut().zip(&unit) {
-                    *t = (*u as f64 / Q62) as f32;
+                    *t = (*u as f64 / Q44) as f32;
                 }
             }
             Shape::Arc {
@@ -266,7 +267,7 @@ impl Path {
                 ..
             } => {
                 for (t, u) in t.iter_mut().zip(&unit) {
-                    *t = (*u as f64 / Q62) as f32;
+                    *t = (*u as f64 / Q44) as f32;
                 }
                 let f = (s.max(0) as f64 / 65_536.0) / (self.length.max(1) as f64);
                 let tau = core::f64::consts::TAU;

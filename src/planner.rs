@@ -40,6 +40,10 @@ use crate::units::TICK_HZ;
 /// Blocks of look-ahead the controller buffers.
 pub const QUEUE_CAPACITY: usize = 64;
 
+/// Factor applied to every planned limit so that single-precision rounding cannot
+/// take a joint past its own limit.
+pub const LIMIT_MARGIN: f32 = 1.0 - 4e-6;
+
 /// Points sampled along a block for its speed limits.
 pub const LIMIT_SAMPLES: usize = 5;
 
@@ -207,8 +211,15 @@ impl Planner {
         if path.length == 0 && matches!(kind, Kind::Rapid | Kind::Feed) {
             kind = Kind::Dwell(0);
         }
+        let feed = match kind {
+            Kind::Feed if path.rotary_only => per_tick(block.feed.saturating_mul(1000)),
+            Kind::Feed => per_tick(block.feed),
+            _ => f32::INFINITY,
+        };
+        // The fastest this block may be asked to go (feed override up to 200 %).
+        let requested = feed * 2.0;
         let (v_limit, accel) = match kind {
-            Kind::Rapid | Kind::Feed => match limits_along(&path, machine, kin) {
+            Kind::Rapid | Kind::Feed => match limits_along(&path, requested, machine, kin) {
                 Ok(l) => l,
                 Err(e) => {
                     kind = Kind::Unreachable(e);
@@ -216,11 +227,6 @@ impl Planner {
                 }
             },
             _ => (0.0, 1.0),
-        };
-        let feed = match kind {
-            Kind::Feed if path.rotary_only => per_tick(block.feed.saturating_mul(1000)),
-            Kind::Feed => per_tick(block.feed),
-            _ => f32::INFINITY,
         };
         let start_tangent = path.tangent_at(0);
         let moving = matches!(kind, Kind::Rapid | Kind::Feed);
@@ -395,36 +401,73 @@ fn joint_rates(
     Ok(r)
 }
 
-/// Speed (nm/tick) and acceleration (nm/tick²) limits of a path, from every axis and
-/// joint at [`LIMIT_SAMPLES`] points, and from curvature on arcs. Fails when a sampled
-/// pose is out of reach or outside a joint's travel.
+/// Speed (nm/tick) and acceleration (nm/tick²) limits of a path for a requested speed
+/// `feed` (nm/tick), from every axis and joint at [`LIMIT_SAMPLES`] points, and from
+/// curvature.
+///
+/// A joint moves at q′·v and accelerates at q′·a + q″·v² (q′, q″ its first and second
+/// derivatives along the path, by central differences of the exact inverse
+/// kinematics). Where the q″·v² term matters at the requested speed, each joint's
+/// acceleration budget is split: half for q′·a, half for q″·v² (v ≤ √(aⱼ/(2|q″|))).
+/// On arcs the pose axes get the same split against the centripetal v²/r. Fails when a
+/// sampled pose is out of reach or outside a joint's travel.
 fn limits_along(
     path: &Path,
+    feed: f32,
     machine: &MachineConfig,
     kin: &MachineKinematics,
 ) -> Result<(f32, f32), Unreachable> {
     let (mut v, mut a) = (f32::INFINITY, f32::INFINITY);
-    let mut clamp = |rate: f32, max_v: i64, max_a: i64| {
-        let r = rate.abs();
-        if r > 1e-12 {
-            v = v.min(per_tick(max_v) / r);
-            a = a.min(per_tick2(max_a) / r);
-        }
-    };
     let n = machine.joints.len();
-    let mut q = [0i64; MAX_JOINTS];
+    let len = (path.length as i64) << 16;
+    // Difference step: 0.25 mm, or a quarter of a short block (nm Q16).
+    let h = (len / 4).clamp(1 << 16, 250_000 << 16);
+    let h_nm = (h >> 16) as f32;
+    let spacing = path.length as f32 / (LIMIT_SAMPLES - 1) as f32;
+    let (mut q0, mut q1, mut q2) = ([0i64; MAX_JOINTS], [0i64; MAX_JOINTS], [0i64; MAX_JOINTS]);
+    let mut pose = [0i64; AXES];
     for k in 0..LIMIT_SAMPLES {
-        let s = ((path.length as i128) << 16) * k as i128 / (LIMIT_SAMPLES as i128 - 1);
-        let mut pose = [0i64; AXES];
-        path.pose_at(s as i64, &mut pose);
-        kin.inverse_checked(&pose, &machine.joints, &mut q)?;
-        let t = path.tangent_at(s as i64);
+        let s = (len as i128 * k as i128 / (LIMIT_SAMPLES as i128 - 1)) as i64;
+        path.pose_at(s, &mut pose);
+        kin.inverse_checked(&pose, &machine.joints, &mut q1)?;
+        let t = path.tangent_at(s);
         for (rate, l) in t.iter().zip(&machine.axes) {
-            clamp(*rate, l.max_velocity, l.max_accel);
+            let r = rate.abs();
+            if r > 1e-12 {
+                v = v.min(per_tick(l.max_velocity) / r);
+                a = a.min(per_tick2(l.max_accel) / r);
+            }
         }
-        let rates = joint_rates(&pose, &t, kin, n)?;
-        for (rate, jc) in rates.iter().zip(&machine.joints) {
-            clamp(*rate, jc.limits.max_velocity, jc.limits.max_accel);
+        // Central differences inside the block.
+        let mid = s.clamp(h.min(len / 2), (len - h).max(len / 2));
+        path.pose_at(mid - h.min(mid), &mut pose);
+        kin.inverse(&pose, &mut q0)?;
+        let mut centre = [0i64; AXES];
+        path.pose_at(mid, &mut centre);
+        let mut qc = [0i64; MAX_JOINTS];
+        kin.inverse(&centre, &mut qc)?;
+        path.pose_at(mid + h, &mut pose);
+        kin.inverse(&pose, &mut q2)?;
+        for j in 0..n {
+            let jc = &machine.joints[j];
+            let d2 = ((q2[j] - 2 * qc[j] + q0[j]) as f32 / (h_nm * h_nm)).abs();
+            // The rate may grow between samples by up to |q″| × half the spacing.
+            let d1 = ((q2[j] - q0[j]) as f32 / (2.0 * h_nm)).abs() + d2 * spacing / 2.0;
+            let (vmax, amax) = (
+                per_tick(jc.limits.max_velocity),
+                per_tick2(jc.limits.max_accel),
+            );
+            if d1 > 1e-12 {
+                v = v.min(vmax / d1);
+            }
+            let speed = feed.min(v);
+            let curved = d2 * speed * speed > 0.05 * amax;
+            if d1 > 1e-12 {
+                a = a.min(if curved { amax / (2.0 * d1) } else { amax / d1 });
+            }
+            if curved {
+                v = v.min(libm::sqrtf(amax / (2.0 * d2)));
+            }
         }
     }
     if let Some(r) = path.radius() {
@@ -433,7 +476,8 @@ fn limits_along(
         a /= 2.0;
         v = v.min(libm::sqrtf(a * r as f32));
     }
-    Ok((v, a))
+    // Single-precision planning rounds to about 10⁻⁷: stay that far inside.
+    Ok((v * LIMIT_MARGIN, a * LIMIT_MARGIN))
 }
 
 /// What turning from `u1` to `u2` at `pose` costs: the largest |Δuᵢ| / aᵢ over every

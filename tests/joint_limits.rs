@@ -1,0 +1,141 @@
+//! Planned motion on the H-4 with rolling table, checked in joint space: whatever the
+//! program, no joint moves faster or accelerates harder than its own limit (through
+//! the kinematics, beyond rounding), every block ends exactly on its target, and the
+//! motion is continuous across blocks.
+
+use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
+use pkmc::controller::{Controller, Inputs};
+use pkmc::kinematics::MachineKinematics;
+use pkmc::protocol::{encode_frame, Block, HostMsg, Motion, State, MAX_FRAME, PROTOCOL_VERSION};
+use pkmc::units::{NDEG_PER_DEG, NM_PER_MM, TICK_HZ};
+use proptest::prelude::*;
+
+fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
+    let mut f = [0u8; MAX_FRAME];
+    let n = encode_frame(seq, msg, &mut f).unwrap();
+    f[..n].to_vec()
+}
+
+/// The H-4 with joint limits tight enough that they, not the Cartesian ones, bind.
+fn h4_tight() -> MachineConfig {
+    let mut m = MachineConfig::h4_table();
+    for j in m.joints.iter_mut().take(4) {
+        j.limits.max_velocity = 60 * NM_PER_MM;
+        j.limits.max_accel = 600 * NM_PER_MM;
+    }
+    m.joints[4].limits.max_velocity = 30 * NDEG_PER_DEG;
+    m.joints[4].limits.max_accel = 300 * NDEG_PER_DEG;
+    m
+}
+
+fn pose_strategy() -> impl Strategy<Value = [i64; AXES]> {
+    (
+        -50i64..=50,
+        -50i64..=50,
+        -100i64..=-60,
+        0i64..=30,
+        -20i64..=20,
+    )
+        .prop_map(|(x, y, z, a, c)| {
+            [
+                x * NM_PER_MM,
+                y * NM_PER_MM,
+                z * NM_PER_MM,
+                a * NDEG_PER_DEG,
+                0,
+                c * NDEG_PER_DEG,
+            ]
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+    #[test]
+    fn no_joint_exceeds_its_speed_or_acceleration_and_blocks_end_exactly(
+        poses in prop::collection::vec(pose_strategy(), 1..6),
+        feeds in prop::collection::vec(5i64..=150, 6),
+        blend in any::<bool>(),
+    ) {
+        let m = h4_tight();
+        let kin = MachineKinematics::new(&m);
+        let mut q = [0i64; MAX_JOINTS];
+        for p in &poses {
+            prop_assume!(kin.inverse_checked(p, &m.joints, &mut q).is_ok());
+        }
+        let mut c = Controller::new(m.clone()).unwrap();
+        c.receive(&frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id() }));
+        for (i, p) in poses.iter().enumerate() {
+            let b = Block {
+                line: i as u32 + 1,
+                motion: if i % 2 == 0 { Motion::Linear } else { Motion::Rapid },
+                target: *p,
+                feed: feeds[i] * NM_PER_MM,
+                tolerance_nm: if blend { u32::MAX } else { 0 },
+            };
+            c.receive(&frame(i as u16 + 1, &HostMsg::Block(b)));
+        }
+        let n = m.joints.len();
+        let t = 1.0 / TICK_HZ as f64;
+        let mut history: Vec<[i64; MAX_JOINTS]> = vec![*c.joints()];
+        let mut sink = [0u8; 4096];
+        for _ in 0..200_000 {
+            c.tick(&Inputs::default());
+            while c.transmit(&mut sink) > 0 {}
+            history.push(*c.joints());
+            if c.state() != State::Running {
+                break;
+            }
+        }
+        prop_assert_eq!(c.state(), State::Idle, "alarm: {:?}", c.status().alarm);
+        prop_assert_eq!(c.pose(), poses.last().unwrap());
+        for j in 0..n {
+            let lim = m.joints[j].limits;
+            let v_max = lim.max_velocity as f64 * t * (1.0 + 1e-6) + 2.0;
+            let a_max = lim.max_accel as f64 * t * t * 1.02 + 4.0;
+            let x: Vec<f64> = history.iter().map(|h| h[j] as f64).collect();
+            for (k, w) in x.windows(3).enumerate() {
+                let (v, a) = (w[2] - w[1], w[2] - 2.0 * w[1] + w[0]);
+                prop_assert!(v.abs() <= v_max, "joint {} tick {}: speed {} > {}", j, k, v, v_max);
+                prop_assert!(a.abs() <= a_max, "joint {} tick {}: accel {} > {}", j, k, a, a_max);
+            }
+        }
+    }
+}
+
+#[test]
+fn a_joint_limit_tighter_than_the_feed_is_what_binds() {
+    // A 20 mm rise of the head at F9000 (150 mm/s): the carriages must rise as fast,
+    // but may only do 60 mm/s, so the move runs at their limit, not at F.
+    let m = h4_tight();
+    let mut c = Controller::new(m.clone()).unwrap();
+    c.receive(&frame(
+        0,
+        &HostMsg::Hello {
+            version: PROTOCOL_VERSION,
+            machine: c.machine_id(),
+        },
+    ));
+    let mut target = m.home;
+    target[2] += 20 * NM_PER_MM;
+    let b = Block {
+        line: 1,
+        motion: Motion::Linear,
+        target,
+        feed: 150 * NM_PER_MM,
+        tolerance_nm: 0,
+    };
+    c.receive(&frame(1, &HostMsg::Block(b)));
+    let mut peak = 0i64;
+    let mut last = c.joints()[0];
+    for _ in 0..5000 {
+        c.tick(&Inputs::default());
+        peak = peak.max((c.joints()[0] - last).abs());
+        last = c.joints()[0];
+    }
+    assert_eq!(c.pose(), &target);
+    let limit = m.joints[0].limits.max_velocity / TICK_HZ as i64;
+    assert!(
+        peak <= limit + 2 && peak * 100 >= limit * 95,
+        "peak {peak} nm/tick, limit {limit}"
+    );
+}
