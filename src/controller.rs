@@ -676,8 +676,8 @@ mod tests {
         // Send the machine in chunks, each twice (a resend), the first once more.
         let mut payload = [0u8; crate::store::MAX_CONFIG_BYTES];
         let n = crate::store::encode(&other, &mut payload).unwrap();
-        let mut chunk_id = 100;
-        for off in (0..n).step_by(crate::store::CHUNK_BYTES).chain([0]) {
+        let offsets = (0..n).step_by(crate::store::CHUNK_BYTES).chain([0]);
+        for (chunk_id, off) in (100..).zip(offsets) {
             let end = (off + crate::store::CHUNK_BYTES).min(n);
             let msg = HostMsg::Machine {
                 id: chunk_id,
@@ -688,7 +688,6 @@ mod tests {
             };
             c.receive(&frame(0, &msg));
             c.receive(&frame(0, &msg));
-            chunk_id += 1;
         }
         assert!(replies(&mut c).contains(&CtrlMsg::MachineLoaded { machine: id }));
         assert_eq!(c.machine(), &other);

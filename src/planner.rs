@@ -419,7 +419,7 @@ fn limits_along(
 ) -> Result<(f32, f32), Unreachable> {
     let (mut v, mut a) = (f32::INFINITY, f32::INFINITY);
     let n = machine.joints.len();
-    let len = (path.length as i64) << 16;
+    let len = path.length << 16;
     // Difference step: 0.25 mm, or a quarter of a short block (nm Q16).
     let h = (len / 4).clamp(1 << 16, 250_000 << 16);
     let h_nm = (h >> 16) as f32;
