@@ -223,7 +223,9 @@ impl Simulator {
     /// firmware boots from its flash page), or from `fallback` when none is stored.
     /// Machines the host loads later are written back to `flash`.
     pub fn with_flash(flash: std::path::PathBuf, fallback: MachineConfig) -> Result<Self> {
-        let stored = std::fs::read(&flash).ok().and_then(|b| pkmc::store::read_record(&b).ok());
+        let stored = std::fs::read(&flash)
+            .ok()
+            .and_then(|b| pkmc::store::read_record(&b).ok());
         let mut sim = Self::new(stored.unwrap_or(fallback))?;
         sim.flash = Some(flash);
         Ok(sim)
@@ -231,7 +233,8 @@ impl Simulator {
 
     /// Writes a machine the controller adopted to the flash file, as the firmware does.
     pub fn persist(&mut self) -> Result<()> {
-        let (Some(path), Some(config)) = (self.flash.as_ref(), self.ctrl.take_store_request()) else {
+        let (Some(path), Some(config)) = (self.flash.as_ref(), self.ctrl.take_store_request())
+        else {
             return Ok(());
         };
         let mut rec = [0u8; pkmc::store::HEADER_BYTES + pkmc::store::MAX_CONFIG_BYTES];
