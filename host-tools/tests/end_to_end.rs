@@ -307,7 +307,12 @@ fn nc_send_loads_its_machine_into_a_controller_that_has_another_and_it_persists(
     ]);
     let _ = sim.kill();
     let _ = sim.wait();
-    assert_eq!(out.status.code(), Some(0), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let r = json(&out);
     assert_eq!(r["machine"], "cartesian-servo");
     assert_eq!(r["final_pose"]["x"], 12.5);
@@ -317,8 +322,21 @@ fn nc_send_loads_its_machine_into_a_controller_that_has_another_and_it_persists(
     let m = pkmc::store::read_record(&stored).unwrap();
     assert_eq!(m.name.as_str(), "cartesian-servo");
     let (mut sim, port) = spawn_sim(&["--flash", flash.to_str().unwrap()]);
-    let out = nc_send(&["--port", &port, "--machine", "examples/machines/cartesian-servo.toml", "--report", "json", "examples/square.ngc"]);
+    let out = nc_send(&[
+        "--port",
+        &port,
+        "--machine",
+        "examples/machines/cartesian-servo.toml",
+        "--report",
+        "json",
+        "examples/square.ngc",
+    ]);
     let _ = sim.kill();
     let _ = sim.wait();
-    assert_eq!(out.status.code(), Some(0), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
