@@ -1,17 +1,27 @@
 //! Running a job end to end: compile the program, check it against the machine, start
-//! the simulator behind a pseudo-terminal when asked, stream over the serial port,
-//! wait for the end, and summarise. Shared by `nc-send` and the tests.
+//! the simulator behind a pseudo-terminal when asked (optionally through a faulty
+//! line, [`crate::faults`]), stream over the serial port, wait for the end, and
+//! summarise in a [`Report`]. Also the dry run of `--check` ([`check`]: the same
+//! client against the controller in this process, on the simulated clock) and the
+//! single commands (`status`, `home`, `jog`, `mdi`, `reset`). Shared by `nc-send` and
+//! the tests.
+//!
+//! Every error is a [`Failure`] carrying its exit code ([`exit`]) and a message that
+//! names where it happened (file and line, or port).
 
+use crate::faults::{FaultConfig, FaultReport, FaultyLine};
 use crate::gcode;
-use crate::link::{serve, ClientStats, JobEnd, Link};
+use crate::link::{
+    serve, ClientStats, InProcess, JobEnd, JobHooks, Link, LinkError, LinkOptions, PortTransport,
+    Transport,
+};
+use crate::plot::{lines_digest, Recorder};
 use crate::sim::{Simulator, Violation};
-use anyhow::{anyhow, Context, Result};
-use pkmc::config::{axis_is_rotary, MachineConfig, AXIS_NAMES};
+use pkmc::config::{axis_is_rotary, MachineConfig, AXES, AXIS_NAMES};
 use pkmc::kinematics::MachineKinematics;
-use pkmc::protocol::{Block, State, Status};
+use pkmc::protocol::{Alarm, Block, Control, State, Status};
 use pkmc::units::{to_user, TICK_NS};
 use serde::Serialize;
-use serialport::SerialPort;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -19,16 +29,22 @@ use std::thread::JoinHandle;
 
 /// Exit codes of `nc-send`.
 pub mod exit {
-    /// Every block executed.
+    /// Every block executed (or the command succeeded).
     pub const OK: i32 = 0;
-    /// Bad program, machine file or arguments.
+    /// Bad program, machine file or arguments; nothing was sent.
     pub const BAD_INPUT: i32 = 2;
-    /// The program leaves the machine's reach (pre-flight failure).
+    /// Pre-flight failure: the program leaves the machine's reach, or no controller was
+    /// found to send it to; nothing was sent.
     pub const PREFLIGHT: i32 = 3;
-    /// The link failed or no controller answered.
+    /// No controller found (USB discovery): same code as [`PREFLIGHT`].
+    pub const NO_CONTROLLER: i32 = PREFLIGHT;
+    /// The link failed: the port could not be opened, nothing answered, or the
+    /// controller stopped answering.
     pub const LINK: i32 = 4;
-    /// The controller raised an alarm.
+    /// The controller raised an alarm (or, in the simulator, a drive timing breach).
     pub const ALARM: i32 = 5;
+    /// The operator stopped the job (Ctrl-C or the `q` key).
+    pub const STOPPED: i32 = 6;
 }
 
 /// An error with the exit code it maps to.
@@ -41,11 +57,23 @@ pub struct Failure {
 }
 
 impl Failure {
-    fn new(code: i32, message: impl Into<String>) -> Self {
+    /// A failure with `code` and `message`.
+    pub fn new(code: i32, message: impl Into<String>) -> Self {
         Self {
             code,
             message: message.into(),
         }
+    }
+}
+
+impl From<LinkError> for Failure {
+    fn from(e: LinkError) -> Self {
+        let code = match e {
+            LinkError::BadBlock { .. } => exit::BAD_INPUT,
+            LinkError::MachineMismatch { .. } | LinkError::MachineRefused { .. } => exit::PREFLIGHT,
+            _ => exit::LINK,
+        };
+        Failure::new(code, e.to_string())
     }
 }
 
@@ -74,7 +102,19 @@ pub fn compile_program(path: &Path, machine: &MachineConfig) -> Result<Vec<Block
             format!("{name}:{line}:{col}: not text (invalid UTF-8)"),
         )
     })?;
-    let blocks = gcode::compile(&text, &name, machine.home).map_err(|errs| {
+    compile_text(&text, &name, machine, machine.home)
+}
+
+/// Compiles program text named `name` for `machine`, starting from pose `start`;
+/// checks every block end against the machine's reach. The one place where G-code
+/// becomes blocks (files through [`compile_program`], MDI lines directly).
+pub fn compile_text(
+    text: &str,
+    name: &str,
+    machine: &MachineConfig,
+    start: [i64; AXES],
+) -> Result<Vec<Block>, Failure> {
+    let blocks = gcode::compile(text, name, start).map_err(|errs| {
         let lines: Vec<String> = errs.iter().map(|d| d.to_string()).collect();
         Failure::new(
             exit::BAD_INPUT,
@@ -114,6 +154,36 @@ pub struct SimOutcome {
     pub ticks: u64,
     /// Frames the controller found corrupt.
     pub corrupt_frames: u32,
+    /// What the faulty line did, when faults were injected.
+    pub faults: Option<FaultReport>,
+    /// NC lines executed and the tool path.
+    #[serde(skip)]
+    pub recorder: Recorder,
+}
+
+fn outcome_of(sim: &Simulator, faults: Option<FaultReport>, recorder: Recorder) -> SimOutcome {
+    let n = sim.ctrl.machine().joints.len();
+    let (violation_count, violations) = sim.violations();
+    SimOutcome {
+        joint_steps: (0..n).map(|j| sim.feedback_steps(j).unwrap_or(0)).collect(),
+        violation_count,
+        violations,
+        ticks: sim.ticks,
+        corrupt_frames: sim.ctrl.link_stats().corrupt,
+        faults,
+        recorder,
+    }
+}
+
+/// How the simulator is set up.
+#[derive(Clone, Debug, Default)]
+pub struct SimSetup<'a> {
+    /// Write a CSV trace row per tick here.
+    pub trace: Option<&'a Path>,
+    /// Inject faults on the line.
+    pub faults: Option<FaultConfig>,
+    /// Keep the tool path (for plots).
+    pub record_path: bool,
 }
 
 /// A simulator serving on a pseudo-terminal in a thread.
@@ -121,37 +191,44 @@ pub struct SimServer {
     /// Path of the port a client opens.
     pub port_path: String,
     stop: Arc<AtomicBool>,
-    handle: JoinHandle<Result<SimOutcome>>,
+    handle: JoinHandle<Result<SimOutcome, String>>,
     _client_end: serialport::TTYPort,
 }
 
 impl SimServer {
-    /// Starts a simulator for `machine`, tracing to `trace` if given.
-    pub fn start(machine: MachineConfig, trace: Option<&Path>) -> Result<Self> {
-        let mut sim = Simulator::new(machine)?;
-        if let Some(p) = trace {
-            let f = std::fs::File::create(p)
-                .with_context(|| format!("{}: cannot create", p.display()))?;
-            sim.trace_to(Box::new(std::io::BufWriter::new(f)))?;
+    /// Starts a simulator for `machine` as `setup` says.
+    pub fn start(machine: MachineConfig, setup: &SimSetup<'_>) -> Result<Self, Failure> {
+        let fail = |m: String| Failure::new(exit::LINK, m);
+        let mut sim = Simulator::new(machine).map_err(|e| fail(format!("simulator: {e:#}")))?;
+        if let Some(p) = setup.trace {
+            let f = std::fs::File::create(p).map_err(|e| {
+                Failure::new(
+                    exit::BAD_INPUT,
+                    format!("{}: cannot create: {e}", p.display()),
+                )
+            })?;
+            sim.trace_to(Box::new(std::io::BufWriter::new(f)))
+                .map_err(|e| fail(format!("{}: {e:#}", p.display())))?;
         }
-        let (mut master, slave) =
-            serialport::TTYPort::pair().context("cannot create a pseudo-terminal")?;
-        let port_path = slave
-            .name()
-            .ok_or_else(|| anyhow!("the pseudo-terminal has no name"))?;
+        let (mut master, slave) = serialport::TTYPort::pair()
+            .map_err(|e| fail(format!("cannot create a pseudo-terminal: {e}")))?;
+        let port_path = serialport::SerialPort::name(&slave)
+            .ok_or_else(|| fail("the pseudo-terminal has no name".into()))?;
         let stop = Arc::new(AtomicBool::new(false));
         let stop2 = stop.clone();
-        let handle = std::thread::spawn(move || -> Result<SimOutcome> {
-            serve(&mut sim, &mut master, &stop2)?;
-            let n = sim.ctrl.machine().joints.len();
-            let (violation_count, violations) = sim.violations();
-            Ok(SimOutcome {
-                joint_steps: (0..n).map(|j| sim.feedback_steps(j).unwrap_or(0)).collect(),
-                violation_count,
-                violations,
-                ticks: sim.ticks,
-                corrupt_frames: sim.ctrl.link_stats().corrupt,
-            })
+        let faults = setup.faults;
+        let joints = sim.ctrl.machine().joints.len();
+        let mut recorder = Recorder::new(joints, setup.record_path);
+        let handle = std::thread::spawn(move || -> Result<SimOutcome, String> {
+            let mut line = faults.map(FaultyLine::new);
+            let mut on_tick = |s: &Simulator| recorder.record(s);
+            serve(&mut sim, &mut master, &stop2, line.as_mut(), &mut on_tick)
+                .map_err(|e| e.to_string())?;
+            let report = match (&line, &faults) {
+                (Some(l), Some(c)) => Some(l.report(c)),
+                _ => None,
+            };
+            Ok(outcome_of(&sim, report, recorder))
         });
         Ok(Self {
             port_path,
@@ -162,21 +239,22 @@ impl SimServer {
     }
 
     /// Stops the simulator and returns its outcome.
-    pub fn finish(self) -> Result<SimOutcome> {
+    pub fn finish(self) -> Result<SimOutcome, Failure> {
         self.stop.store(true, Ordering::Relaxed);
         self.handle
             .join()
-            .map_err(|_| anyhow!("the simulator thread panicked"))?
+            .map_err(|_| Failure::new(exit::LINK, "the simulator thread panicked"))?
+            .map_err(|e| Failure::new(exit::LINK, format!("simulator: {e}")))
     }
 }
 
-/// Opens a serial port by path, as for a board.
-pub fn open_port(path: &str) -> Result<Box<dyn serialport::SerialPort>> {
-    let port = serialport::new(path, 115_200)
-        .timeout(std::time::Duration::from_millis(10))
-        .open()
-        .with_context(|| format!("{path}: cannot open"))?;
-    Ok(port)
+/// The NC lines a simulated job executed.
+#[derive(Clone, Debug, Serialize, PartialEq, Eq)]
+pub struct LinesExecuted {
+    /// Distinct lines in execution order (consecutive repeats merged).
+    pub count: usize,
+    /// FNV-1a digest of that sequence ([`lines_digest`]).
+    pub digest: String,
 }
 
 /// The machine-readable summary of a job.
@@ -184,9 +262,9 @@ pub fn open_port(path: &str) -> Result<Box<dyn serialport::SerialPort>> {
 pub struct Report {
     /// Machine name.
     pub machine: String,
-    /// Program file.
+    /// Program file (or the MDI line).
     pub program: String,
-    /// "done" or "alarm".
+    /// "done", "alarm", "aborted" or "stopped".
     pub result: String,
     /// Controller state at the end.
     pub final_state: String,
@@ -200,21 +278,29 @@ pub struct Report {
     pub blocks_sent: usize,
     /// Blocks the controller executed.
     pub blocks_executed: u32,
-    /// Motion time on the controller, s.
+    /// Motion time on the controller, s (for `--check`, the planned run time).
     pub run_time_s: f64,
     /// Alarms, described.
     pub alarms: Vec<String>,
+    /// NC line of the alarm, if any.
+    pub alarm_line: Option<u32>,
     /// Drive timing breaches (simulator only).
     pub drive_violations: Option<u64>,
-    /// Link counters.
+    /// Link counters of the client.
     pub link: ClientStats,
+    /// Frames the (simulated) controller found corrupt.
+    pub controller_corrupt_frames: Option<u32>,
+    /// Injected faults and what became of them (`--link-faults`).
+    pub faults: Option<FaultReport>,
+    /// NC lines executed (simulator only).
+    pub lines_executed: Option<LinesExecuted>,
 }
 
 impl Report {
     /// Builds the report from the final status.
     pub fn new(
         machine: &MachineConfig,
-        program: &Path,
+        program: &str,
         blocks: usize,
         end: &JobEnd,
         status: &Status,
@@ -235,13 +321,20 @@ impl Report {
             .enumerate()
             .map(|(j, jc)| to_user(status.joints[j], jc.rotary))
             .collect();
+        let alarm = match end {
+            JobEnd::Alarm(a) => Some(*a),
+            _ => status.alarm,
+        };
         Report {
             machine: machine.name.to_string(),
-            program: program.display().to_string(),
+            program: program.to_string(),
             result: match end {
-                JobEnd::Done => "done".into(),
-                JobEnd::Alarm => "alarm".into(),
-            },
+                JobEnd::Done => "done",
+                JobEnd::Alarm(_) => "alarm",
+                JobEnd::Aborted => "aborted",
+                JobEnd::Stopped => "stopped",
+            }
+            .into(),
             final_state: format!("{:?}", status.state),
             final_pose,
             final_joints,
@@ -249,14 +342,45 @@ impl Report {
             blocks_sent: blocks,
             blocks_executed: status.blocks_done,
             run_time_s: status.motion_ticks as f64 * TICK_NS as f64 * 1e-9,
-            alarms: status.alarm.iter().map(|a| format!("{a:?}")).collect(),
+            alarms: alarm.iter().map(describe_alarm).collect(),
+            alarm_line: alarm.map(|a| a.line),
             drive_violations: sim.map(|s| s.violation_count),
             link,
+            controller_corrupt_frames: sim.map(|s| s.corrupt_frames),
+            faults: sim.and_then(|s| s.faults),
+            lines_executed: sim.map(|s| LinesExecuted {
+                count: s.recorder.lines.len(),
+                digest: lines_digest(&s.recorder.lines),
+            }),
+        }
+    }
+
+    /// The exit code this outcome implies.
+    pub fn exit_code(&self) -> i32 {
+        match self.result.as_str() {
+            "alarm" => exit::ALARM,
+            "aborted" | "stopped" => exit::STOPPED,
+            _ if self.drive_violations.unwrap_or(0) > 0 => exit::ALARM,
+            _ if self.final_state != "Idle" => exit::ALARM,
+            _ => exit::OK,
         }
     }
 }
 
+/// An alarm in words: cause, joint and NC line.
+pub fn describe_alarm(a: &Alarm) -> String {
+    let mut s = format!("{:?}", a.cause);
+    if a.joint != pkmc::protocol::NO_JOINT {
+        s += &format!(" on joint {}", a.joint as usize + 1);
+    }
+    if a.line != 0 {
+        s += &format!(" at line {}", a.line);
+    }
+    s
+}
+
 /// Where to run a job.
+#[derive(Clone, Copy, Debug)]
 pub enum Target<'a> {
     /// The built-in simulator on a pseudo-terminal.
     Sim,
@@ -264,42 +388,74 @@ pub enum Target<'a> {
     Port(&'a str),
 }
 
-/// Runs `program` on `target`; returns the report and the exit code it implies.
-pub fn run(
+/// How to run a job.
+#[derive(Clone, Debug)]
+pub struct RunOptions<'a> {
+    /// Where.
+    pub target: Target<'a>,
+    /// Simulator set-up (ignored for a port, where a trace or faults are refused).
+    pub sim: SimSetup<'a>,
+    /// Client tunables.
+    pub link: LinkOptions,
+}
+
+/// What a run produced besides the report: the simulator's outcome, for plots.
+pub struct RunResult {
+    /// The summary.
+    pub report: Report,
+    /// The simulator's side, when simulated.
+    pub sim: Option<SimOutcome>,
+}
+
+/// Starts the simulator when the target asks for it; returns it and the port to open.
+fn open_target(
     machine: &MachineConfig,
-    program: &Path,
-    target: Target<'_>,
-    trace: Option<&Path>,
-    mut progress: impl FnMut(&Status),
-) -> Result<(Report, i32), Failure> {
-    let blocks = compile_program(program, machine)?;
-    let link_err = |e: anyhow::Error| Failure::new(exit::LINK, format!("{e:#}"));
-    let server = match target {
-        Target::Sim => Some(SimServer::start(machine.clone(), trace).map_err(link_err)?),
-        Target::Port(_) if trace.is_some() => {
-            return Err(Failure::new(
-                exit::BAD_INPUT,
-                "--trace needs --sim (a board does not stream every period)",
-            ))
+    opts: &RunOptions<'_>,
+) -> Result<(Option<SimServer>, String), Failure> {
+    match opts.target {
+        Target::Sim => {
+            let s = SimServer::start(machine.clone(), &opts.sim)?;
+            let path = s.port_path.clone();
+            Ok((Some(s), path))
         }
-        Target::Port(_) => None,
-    };
-    let path = match (&server, target) {
-        (Some(s), _) => s.port_path.clone(),
-        (None, Target::Port(p)) => p.to_string(),
-        (None, Target::Sim) => unreachable!("the simulator was started above"),
-    };
-    let outcome = (|| -> Result<(JobEnd, Status, ClientStats)> {
-        let mut link = Link::connect(open_port(&path)?, machine)?;
-        let end = link.run_job(&blocks, &mut progress)?;
+        Target::Port(p) => {
+            if opts.sim.trace.is_some() {
+                return Err(Failure::new(
+                    exit::BAD_INPUT,
+                    "--trace needs --sim (a board does not stream every period)",
+                ));
+            }
+            if opts.sim.faults.is_some() {
+                return Err(Failure::new(
+                    exit::BAD_INPUT,
+                    "--link-faults needs --sim (faults are injected in the simulator)",
+                ));
+            }
+            Ok((None, p.to_string()))
+        }
+    }
+}
+
+/// Streams `blocks` (named `program`) to the target; returns the report.
+pub fn run_blocks(
+    machine: &MachineConfig,
+    program: &str,
+    blocks: &[Block],
+    opts: &RunOptions<'_>,
+    hooks: &mut dyn JobHooks,
+) -> Result<RunResult, Failure> {
+    let (server, path) = open_target(machine, opts)?;
+    let outcome = (|| -> Result<(JobEnd, Status, ClientStats), LinkError> {
+        let mut link = Link::connect(PortTransport::open(&path)?, machine, opts.link)?;
+        let end = link.run_job(blocks, hooks)?;
         let status = link.request_status()?;
         Ok((end, status, link.stats))
     })();
     let sim = match server {
-        Some(s) => Some(s.finish().map_err(link_err)?),
+        Some(s) => Some(s.finish()?),
         None => None,
     };
-    let (end, status, stats) = outcome.map_err(link_err)?;
+    let (end, status, stats) = outcome?;
     let report = Report::new(
         machine,
         program,
@@ -309,11 +465,124 @@ pub fn run(
         sim.as_ref(),
         stats,
     );
-    let code = match end {
-        JobEnd::Alarm => exit::ALARM,
-        JobEnd::Done if sim.as_ref().is_some_and(|s| s.violation_count > 0) => exit::ALARM,
-        JobEnd::Done if status.state != State::Idle => exit::ALARM,
-        JobEnd::Done => exit::OK,
-    };
-    Ok((report, code))
+    Ok(RunResult { report, sim })
+}
+
+/// Compiles and runs `program` as `opts` says.
+pub fn run(
+    machine: &MachineConfig,
+    program: &Path,
+    opts: &RunOptions<'_>,
+    hooks: &mut dyn JobHooks,
+) -> Result<RunResult, Failure> {
+    let blocks = compile_program(program, machine)?;
+    run_blocks(
+        machine,
+        &program.display().to_string(),
+        &blocks,
+        opts,
+        hooks,
+    )
+}
+
+/// Dry run: compiles `program`, pre-checks it and runs it through the controller in
+/// this process on the simulated clock (no port, nothing moves). The report's
+/// `run_time_s` is the planned run time; an alarm names its NC line.
+pub fn check(
+    machine: &MachineConfig,
+    program: &Path,
+    record_path: bool,
+    hooks: &mut dyn JobHooks,
+) -> Result<RunResult, Failure> {
+    let blocks = compile_program(program, machine)?;
+    let sim = Simulator::new(machine.clone())
+        .map_err(|e| Failure::new(exit::BAD_INPUT, format!("simulator: {e:#}")))?;
+    let recorder = std::rc::Rc::new(std::cell::RefCell::new(Recorder::new(
+        machine.joints.len(),
+        record_path,
+    )));
+    let rec = recorder.clone();
+    let io = InProcess::new(sim, Box::new(move |s| rec.borrow_mut().record(s)));
+    let mut link = Link::connect(io, machine, LinkOptions::default())?;
+    let end = link.run_job(&blocks, hooks)?;
+    let status = link.request_status()?;
+    let stats = link.stats;
+    let io = link.into_transport();
+    let recorder = recorder.replace(Recorder::default());
+    let outcome = outcome_of(&io.sim, None, recorder);
+    let report = Report::new(
+        machine,
+        &program.display().to_string(),
+        blocks.len(),
+        &end,
+        &status,
+        Some(&outcome),
+        stats,
+    );
+    Ok(RunResult {
+        report,
+        sim: Some(outcome),
+    })
+}
+
+/// A single command (`status`, `home`, `jog`, `reset`) on a live link.
+pub fn connect(
+    machine: &MachineConfig,
+    path: &str,
+    opts: LinkOptions,
+) -> Result<Link<PortTransport>, Failure> {
+    Ok(Link::connect(PortTransport::open(path)?, machine, opts)?)
+}
+
+/// Runs `f` on a link to `target` (starting the simulator if asked), then stops the
+/// simulator.
+pub fn with_link<R>(
+    machine: &MachineConfig,
+    opts: &RunOptions<'_>,
+    f: impl FnOnce(&mut Link<PortTransport>) -> Result<R, Failure>,
+) -> Result<R, Failure> {
+    let (server, path) = open_target(machine, opts)?;
+    let result = connect(machine, &path, opts.link).and_then(|mut link| f(&mut link));
+    if let Some(s) = server {
+        s.finish()?;
+    }
+    result
+}
+
+/// Compiles one MDI line from the controller's current pose and runs it on `link`.
+pub fn mdi<T: Transport>(
+    link: &mut Link<T>,
+    machine: &MachineConfig,
+    line: &str,
+    hooks: &mut dyn JobHooks,
+) -> Result<(Vec<Block>, JobEnd), Failure> {
+    let status = link.request_status()?;
+    let blocks = compile_text(line, "MDI", machine, status.pose)?;
+    let end = link.run_job(&blocks, hooks)?;
+    Ok((blocks, end))
+}
+
+/// Sends `cmd` (home or jog) and waits until the motion it starts is over.
+pub fn move_and_wait<T: Transport>(
+    link: &mut Link<T>,
+    cmd: Control,
+    hooks: &mut dyn JobHooks,
+) -> Result<JobEnd, Failure> {
+    let before = link.request_status()?;
+    if before.state != State::Idle {
+        return Err(Failure::new(
+            exit::ALARM,
+            format!(
+                "{}: the controller is {:?}{}; it moves only when idle",
+                link.transport().name(),
+                before.state,
+                before
+                    .alarm
+                    .map(|a| format!(" ({})", describe_alarm(&a)))
+                    .unwrap_or_default()
+            ),
+        ));
+    }
+    link.control(cmd)?;
+    Ok(link.wait_idle(hooks)?)
 }

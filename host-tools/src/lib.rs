@@ -6,8 +6,12 @@
 
 pub mod blocks;
 pub mod canon;
+pub mod discover;
+pub mod faults;
 pub mod gcode;
 pub mod job;
 pub mod link;
 pub mod machine_file;
+pub mod plot;
+pub mod progress;
 pub mod sim;

@@ -1,70 +1,453 @@
 //! Both ends of the serial link on the host: [`serve`] runs a [`Simulator`] behind a
-//! serial port (a pseudo-terminal), and [`Link`] is `nc-send`'s client, used unchanged
-//! for a board and for the simulator.
+//! serial port (a pseudo-terminal), optionally through a [`FaultyLine`], and [`Link`]
+//! is `nc-send`'s client, used unchanged for a board, the simulator on a
+//! pseudo-terminal, and the in-process simulator of `--check` ([`InProcess`]).
 //!
-//! Client protocol (see `pkmc::protocol`): handshake with `Hello`, then stream blocks
-//! with consecutive sequence numbers while the blocks in flight (sent, not yet
-//! acknowledged) are fewer than the free queue slots last reported. A `Nak` rewinds
-//! the stream to the sequence number the controller expects (go-back-N); silence for
-//! [`RESEND_AFTER`] with blocks in flight does the same. When every block is
-//! acknowledged, the client polls status until the controller has executed them all
-//! and is idle, or reports an alarm.
+//! Client protocol (see `pkmc::protocol`):
+//!
+//! * Handshake: `Hello` with sequence number 0 and the identity of the host's machine,
+//!   repeated until `HelloAck`; blocks then carry consecutive sequence numbers from 1
+//!   (wrapping at `u16`). When the controller's machine differs, the host sends its
+//!   machine configuration in chunks (each resent until acknowledged, like a control
+//!   command) and waits for `MachineLoaded`.
+//! * Credits: a block is sent only while the blocks in flight (sent, not yet
+//!   acknowledged) are fewer than the free queue slots last reported (by `Ack` or
+//!   `Status`) and the motion the controller reports buffered is below
+//!   [`LinkOptions::max_buffered_ms`] ([`MAX_BUFFERED_MS`] by default). A congestion
+//!   window, halved on every loss and grown again by one per acknowledgement, keeps a
+//!   noisy line from being flooded with resends.
+//! * Acknowledgement is cumulative: `Ack { seq }` and `Nak { expected }` both mean every
+//!   block before them was accepted.
+//! * Go-back-N: a `Nak` for a corrupt frame, a gap or a full queue rewinds the stream
+//!   to the block the controller expects; the `Nak`s that the blocks already in flight
+//!   behind the lost one will draw for the same reason are then ignored (counted, not
+//!   acted on). With blocks in flight and no acknowledgement for
+//!   [`LinkOptions::resend_after`], the stream rewinds to the first unacknowledged
+//!   block. The controller re-acknowledges duplicates without executing them, so a
+//!   block is never executed twice and never skipped.
+//! * `Nak` reasons that no resend can cure end the job with a typed [`LinkError`]:
+//!   `Version`, `NoSession` (the controller restarted: the blocks it had are gone) and
+//!   `BadBlock` (naming the NC line).
+//! * Control commands bypass the queue: one at a time, each with a fresh id, resent
+//!   with the same id every [`CONTROL_RESEND_AFTER`] until its `ControlAck` arrives
+//!   (the controller remembers only the last id, so two may never be outstanding).
+//! * Liveness: the controller sends status every 50 ms while moving; when nothing has
+//!   been heard for [`LinkOptions::keepalive`] the client asks for one. Silence for
+//!   [`LinkOptions::link_timeout`] is a lost link ([`LinkError::Lost`]).
+//!
+//! A job ends when every block is acknowledged and a status shows the controller idle
+//! with all of them executed, when it reports an alarm, or when the operator's abort
+//! or immediate stop (from [`JobHooks::control`]) has taken effect.
 
+use crate::faults::FaultyLine;
 use crate::sim::Simulator;
-use anyhow::{anyhow, bail, Result};
 use pkmc::config::MachineConfig;
 use pkmc::protocol::{
-    decode_frame, encode_frame, Block, CtrlMsg, FrameReader, HostMsg, NakReason, Pushed, State,
-    Status, MAX_BODY, MAX_FRAME, PROTOCOL_VERSION,
+    decode_frame, encode_frame, Alarm, Block, Control, CtrlMsg, FrameReader, HostMsg, NakReason,
+    Pushed, State, Status, MAX_BODY, MAX_FRAME, PROTOCOL_VERSION,
 };
+use serde::Serialize;
 use serialport::SerialPort;
-use std::io::{ErrorKind, Read, Write};
+use std::collections::VecDeque;
+use std::fmt;
+use std::io::{self, ErrorKind, Read, Write};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-/// Silence after which unacknowledged blocks are sent again.
-pub const RESEND_AFTER: Duration = Duration::from_millis(500);
-/// Silence after which the link is declared dead.
-pub const LINK_TIMEOUT: Duration = Duration::from_secs(5);
-/// Status polling period while waiting for the end of the job.
-pub const POLL_EVERY: Duration = Duration::from_millis(20);
+/// Default limit of motion buffered in the controller, ms: no block is sent while the
+/// controller reports this much or more.
+pub const MAX_BUFFERED_MS: u32 = 2000;
+/// Default time without an acknowledgement, blocks in flight, before resending.
+pub const RESEND_AFTER: Duration = Duration::from_millis(200);
+/// Default silence after which the link is declared lost.
+pub const LINK_TIMEOUT: Duration = Duration::from_secs(3);
+/// Default silence after which the client asks for a status.
+pub const KEEPALIVE: Duration = Duration::from_millis(100);
+/// Time after which an unacknowledged control command is sent again (same id).
+pub const CONTROL_RESEND_AFTER: Duration = Duration::from_millis(100);
+/// Time the handshake waits for `HelloAck` before sending `Hello` again.
+pub const HELLO_RESEND_AFTER: Duration = Duration::from_millis(300);
+/// Smallest congestion window, blocks.
+pub const MIN_WINDOW: usize = 2;
+/// Longest wait in one read while nothing else is due.
+const READ_WAIT: Duration = Duration::from_millis(5);
 
-fn is_timeout(e: &std::io::Error) -> bool {
+/// Tunables of the client.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LinkOptions {
+    /// Send no block while the controller reports this much motion buffered, ms.
+    pub max_buffered_ms: u32,
+    /// Resend unacknowledged blocks after this long without an acknowledgement.
+    pub resend_after: Duration,
+    /// Declare the link lost after this long without a valid frame.
+    pub link_timeout: Duration,
+    /// Ask for a status after this long without a valid frame.
+    pub keepalive: Duration,
+}
+
+impl Default for LinkOptions {
+    fn default() -> Self {
+        Self {
+            max_buffered_ms: MAX_BUFFERED_MS,
+            resend_after: RESEND_AFTER,
+            link_timeout: LINK_TIMEOUT,
+            keepalive: KEEPALIVE,
+        }
+    }
+}
+
+/// Why the link failed. Every variant names the port.
+#[derive(Debug)]
+pub enum LinkError {
+    /// The port could not be opened.
+    Open {
+        /// Port.
+        port: String,
+        /// Why.
+        source: serialport::Error,
+    },
+    /// Reading or writing the port failed.
+    Io {
+        /// Port.
+        port: String,
+        /// "read" or "write".
+        op: &'static str,
+        /// Why.
+        source: io::Error,
+    },
+    /// Nothing answered the handshake.
+    NoAnswer {
+        /// Port.
+        port: String,
+        /// How long we tried.
+        waited: Duration,
+    },
+    /// The controller speaks another protocol version.
+    Version {
+        /// Port.
+        port: String,
+        /// The controller's version, when it said.
+        theirs: Option<u16>,
+    },
+    /// The controller stopped answering.
+    Lost {
+        /// Port.
+        port: String,
+        /// Silence endured.
+        silent: Duration,
+        /// What we were doing.
+        during: &'static str,
+    },
+    /// The controller no longer knows the session (it restarted); the blocks it had
+    /// queued are gone.
+    SessionLost {
+        /// Port.
+        port: String,
+    },
+    /// The controller refused a block as malformed.
+    BadBlock {
+        /// Port.
+        port: String,
+        /// NC line of the block.
+        line: u32,
+    },
+    /// The controller refused our machine configuration.
+    MachineRefused {
+        /// Port.
+        port: String,
+        /// Why, as the controller said.
+        error: String,
+    },
+    /// The controller runs another machine than ours and refuses to move.
+    MachineMismatch {
+        /// Port.
+        port: String,
+    },
+    /// A message did not fit in a frame (a bug).
+    Frame {
+        /// Port.
+        port: String,
+        /// The message.
+        what: String,
+    },
+}
+
+impl fmt::Display for LinkError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LinkError::Open { port, source } => write!(f, "{port}: cannot open: {source}"),
+            LinkError::Io { port, op, source } => write!(f, "{port}: {op} failed: {source}"),
+            LinkError::NoAnswer { port, waited } => write!(
+                f,
+                "{port}: no answer to the handshake for {:.1} s: is a pkmc controller on this port?",
+                waited.as_secs_f64()
+            ),
+            LinkError::Version { port, theirs } => match theirs {
+                Some(v) => write!(
+                    f,
+                    "{port}: the controller speaks protocol version {v}, nc-send {PROTOCOL_VERSION}"
+                ),
+                None => write!(
+                    f,
+                    "{port}: the controller refused protocol version {PROTOCOL_VERSION}"
+                ),
+            },
+            LinkError::Lost {
+                port,
+                silent,
+                during,
+            } => write!(
+                f,
+                "{port}: link lost: no answer from the controller for {:.1} s while {during}",
+                silent.as_secs_f64()
+            ),
+            LinkError::SessionLost { port } => write!(
+                f,
+                "{port}: the controller lost the session (did it restart?); the blocks it had queued are gone"
+            ),
+            LinkError::BadBlock { port, line } => write!(
+                f,
+                "{port}: the controller refused the block of line {line} as malformed"
+            ),
+            LinkError::MachineRefused { port, error } => write!(
+                f,
+                "{port}: the controller refused the machine configuration: {error}"
+            ),
+            LinkError::MachineMismatch { port } => write!(
+                f,
+                "{port}: the controller runs another machine and refuses to move"
+            ),
+            LinkError::Frame { port, what } => write!(f, "{port}: cannot frame {what}"),
+        }
+    }
+}
+
+impl std::error::Error for LinkError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            LinkError::Open { source, .. } => Some(source),
+            LinkError::Io { source, .. } => Some(source),
+            _ => None,
+        }
+    }
+}
+
+fn is_timeout(e: &io::Error) -> bool {
     matches!(
         e.kind(),
         ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
     )
 }
 
-/// Serves `sim` on `port` until `stop` is set. Simulated time advances while the
-/// controller has motion to execute; when idle, the loop waits for bytes.
-pub fn serve(sim: &mut Simulator, port: &mut dyn SerialPort, stop: &AtomicBool) -> Result<()> {
-    let mut buf = [0u8; 4096];
-    let mut out = [0u8; pkmc::controller::TX_CAPACITY];
+/// A byte pipe to a controller.
+pub trait Transport {
+    /// Name for messages (the port's path).
+    fn name(&self) -> &str;
+    /// Writes some of `bytes`, waiting at most `wait` for room; returns how many were
+    /// taken (0 on timeout).
+    fn write_some(&mut self, bytes: &[u8], wait: Duration) -> io::Result<usize>;
+    /// Reads what has arrived, waiting at most `wait` for the first byte; 0 on timeout.
+    fn read_some(&mut self, buf: &mut [u8], wait: Duration) -> io::Result<usize>;
+}
+
+/// A serial port (a board's USB CDC port or a pseudo-terminal).
+pub struct PortTransport {
+    port: Box<dyn SerialPort>,
+    name: String,
+}
+
+impl PortTransport {
+    /// Opens the port at `path`.
+    pub fn open(path: &str) -> Result<Self, LinkError> {
+        let port = serialport::new(path, 115_200)
+            .timeout(Duration::from_millis(10))
+            .open()
+            .map_err(|source| LinkError::Open {
+                port: path.to_string(),
+                source,
+            })?;
+        Ok(Self {
+            port,
+            name: path.to_string(),
+        })
+    }
+}
+
+impl Transport for PortTransport {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn write_some(&mut self, bytes: &[u8], wait: Duration) -> io::Result<usize> {
+        self.port.set_timeout(wait)?;
+        match self.port.write(bytes) {
+            Ok(n) => Ok(n),
+            Err(e) if is_timeout(&e) => Ok(0),
+            Err(e) => Err(e),
+        }
+    }
+
+    fn read_some(&mut self, buf: &mut [u8], wait: Duration) -> io::Result<usize> {
+        self.port.set_timeout(wait)?;
+        match self.port.read(buf) {
+            Ok(n) => Ok(n),
+            Err(e) if is_timeout(&e) => Ok(0),
+            Err(e) => Err(e),
+        }
+    }
+}
+
+/// The simulator in this process, on its simulated clock, without a port: bytes
+/// written go straight into the controller; a read runs ticks until the controller
+/// has something to say or nothing left to do. Used by `nc-send --check`.
+pub struct InProcess {
+    /// The simulator.
+    pub sim: Simulator,
+    on_tick: Box<dyn FnMut(&Simulator)>,
+    out: Vec<u8>,
+}
+
+/// Most ticks one [`InProcess`] read runs before returning empty-handed.
+const IN_PROCESS_TICKS_PER_READ: u32 = 10_000;
+
+impl InProcess {
+    /// Wraps `sim`; `on_tick` sees the simulator after every tick.
+    pub fn new(sim: Simulator, on_tick: Box<dyn FnMut(&Simulator)>) -> Self {
+        Self {
+            sim,
+            on_tick,
+            out: vec![0; pkmc::controller::TX_CAPACITY],
+        }
+    }
+}
+
+impl Transport for InProcess {
+    fn name(&self) -> &str {
+        "in-process simulator"
+    }
+
+    fn write_some(&mut self, bytes: &[u8], _wait: Duration) -> io::Result<usize> {
+        self.sim.ctrl.receive(bytes);
+        Ok(bytes.len())
+    }
+
+    fn read_some(&mut self, buf: &mut [u8], _wait: Duration) -> io::Result<usize> {
+        for _ in 0..IN_PROCESS_TICKS_PER_READ {
+            let n = self.sim.ctrl.transmit(&mut self.out);
+            if n > 0 {
+                // `transmit` drained up to TX_CAPACITY; hand over what fits, keep none:
+                // callers read with buffers at least that large.
+                let m = n.min(buf.len());
+                buf[..m].copy_from_slice(&self.out[..m]);
+                return Ok(m);
+            }
+            if !self.sim.ctrl.has_work() {
+                return Ok(0);
+            }
+            self.sim.tick().map_err(io::Error::other)?;
+            (self.on_tick)(&self.sim);
+        }
+        Ok(0)
+    }
+}
+
+/// What the simulator's server loop did, besides the faults.
+#[derive(Clone, Debug, Default)]
+pub struct ServeStats {
+    /// Bytes received from the port.
+    pub bytes_in: u64,
+    /// Bytes written to the port.
+    pub bytes_out: u64,
+}
+
+/// Serves `sim` on `port` until `stop` is set, through `faults` when given; `on_tick`
+/// sees the simulator after every tick. Simulated time advances while the controller
+/// has motion to execute; when idle, the loop waits for bytes.
+pub fn serve(
+    sim: &mut Simulator,
+    port: &mut dyn SerialPort,
+    stop: &AtomicBool,
+    mut faults: Option<&mut FaultyLine>,
+    on_tick: &mut dyn FnMut(&Simulator),
+) -> Result<ServeStats, LinkError> {
+    let name = port.name().unwrap_or_else(|| "pseudo-terminal".into());
+    let io_err = |op: &'static str| {
+        let port = name.clone();
+        move |source: io::Error| LinkError::Io {
+            port: port.clone(),
+            op,
+            source,
+        }
+    };
+    let mut stats = ServeStats::default();
+    let mut buf = vec![0u8; 65536];
+    let mut out = vec![0u8; pkmc::controller::TX_CAPACITY];
+    let mut line_out: Vec<u8> = Vec::with_capacity(65536);
+    let mut pending: Vec<u8> = Vec::with_capacity(65536);
     while !stop.load(Ordering::Relaxed) {
         let busy = sim.ctrl.has_work();
-        let ready = port.bytes_to_read().unwrap_or(0) as usize;
-        if ready > 0 || !busy {
-            port.set_timeout(Duration::from_millis(if busy { 0 } else { 5 }))?;
-            let want = ready.clamp(1, buf.len());
-            match port.read(&mut buf[..want]) {
+        let ready = if busy {
+            port.bytes_to_read().unwrap_or(0) as usize
+        } else {
+            1
+        };
+        if ready > 0 {
+            let wait = if busy {
+                Duration::ZERO
+            } else {
+                Duration::from_millis(5)
+            };
+            port.set_timeout(wait)
+                .map_err(|e| io_err("read")(e.into()))?;
+            match port.read(&mut buf) {
                 Ok(n) => {
-                    sim.ctrl.receive(&buf[..n]);
-                    sim.persist()?;
+                    stats.bytes_in += n as u64;
+                    match faults.as_deref_mut() {
+                        Some(line) => {
+                            line_out.clear();
+                            line.towards_controller(&buf[..n], &mut line_out);
+                            sim.ctrl.receive(&line_out);
+                        }
+                        None => sim.ctrl.receive(&buf[..n]),
+                    }
+                    sim.persist()
+                        .map_err(|e| io_err("store the machine")(io::Error::other(e)))?;
                 }
                 Err(e) if is_timeout(&e) => {}
-                Err(e) => return Err(e.into()),
+                Err(e) => return Err(io_err("read")(e)),
             }
         }
         if sim.ctrl.has_work() {
-            sim.tick()?;
+            sim.tick()
+                .map_err(|e| io_err("simulate")(io::Error::other(e)))?;
+            on_tick(sim);
         }
-        let n = sim.ctrl.transmit(&mut out);
-        if n > 0 {
-            port.write_all(&out[..n])?;
+        loop {
+            let n = sim.ctrl.transmit(&mut out);
+            if n == 0 {
+                break;
+            }
+            match faults.as_deref_mut() {
+                Some(line) => line.towards_host(&out[..n], &mut pending),
+                None => pending.extend_from_slice(&out[..n]),
+            }
+        }
+        if !pending.is_empty() {
+            port.set_timeout(Duration::from_millis(1))
+                .map_err(|e| io_err("write")(e.into()))?;
+            match port.write(&pending) {
+                Ok(n) => {
+                    stats.bytes_out += n as u64;
+                    pending.drain(..n);
+                }
+                Err(e) if is_timeout(&e) => {}
+                Err(e) => return Err(io_err("write")(e)),
+            }
         }
     }
     sim.finish_trace()
+        .map_err(|e| io_err("write the trace")(io::Error::other(e)))?;
+    Ok(stats)
 }
 
 /// How a job ended.
@@ -73,169 +456,375 @@ pub enum JobEnd {
     /// Every block executed; the controller is idle.
     Done,
     /// The controller raised an alarm.
-    Alarm,
+    Alarm(Alarm),
+    /// The operator aborted: the controller stopped on the path and dropped its queue.
+    Aborted,
+    /// The operator stopped immediately: the controller is in alarm (`Aborted`).
+    Stopped,
+}
+
+/// Negative acknowledgements received, by reason.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct NakCounts {
+    /// Damaged frame.
+    pub corrupt: u64,
+    /// A frame went missing.
+    pub gap: u64,
+    /// Queue full.
+    pub queue_full: u64,
+    /// Version, no session, bad block or a reason this client does not know.
+    pub other: u64,
 }
 
 /// Link statistics seen by the client.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct ClientStats {
-    /// Frames sent (including resends).
+    /// Frames sent (including resends, control commands and status requests).
     pub frames_sent: u64,
-    /// Blocks sent again after a Nak or a timeout.
+    /// Bytes sent.
+    pub bytes_sent: u64,
+    /// Blocks sent for the first time.
+    pub blocks_sent: u64,
+    /// Blocks sent again after a `Nak` or a timeout.
     pub resent: u64,
-    /// Naks received.
+    /// Rewinds of the block stream (go-back-N).
+    pub rewinds: u64,
+    /// Rewinds because nothing was acknowledged in time.
+    pub timeouts: u64,
+    /// `Nak`s received (all reasons).
     pub naks: u64,
-    /// Received frames that failed to decode.
+    /// `Nak`s by reason.
+    pub nak_reasons: NakCounts,
+    /// `Nak`s ignored because a rewind already covered them.
+    pub naks_ignored: u64,
+    /// Control commands sent (first time).
+    pub controls: u64,
+    /// Control commands sent again, unacknowledged.
+    pub controls_resent: u64,
+    /// Status requests sent.
+    pub status_requests: u64,
+    /// Frames received that decoded.
+    pub frames_received: u64,
+    /// Received frames that failed to decode (damaged on the way).
     pub corrupt_received: u64,
 }
 
+/// What the job runner tells its caller, and asks it.
+pub trait JobHooks {
+    /// Every status received.
+    fn status(&mut self, _status: &Status) {}
+    /// Asked on every turn of the loop: a control command to send now (operator keys,
+    /// Ctrl-C). `Abort` and `Stop` end the job once they have taken effect.
+    fn control(&mut self, _link: &LinkView) -> Option<Control> {
+        None
+    }
+}
+
+/// Hooks that do nothing.
+pub struct NoHooks;
+impl JobHooks for NoHooks {}
+
+/// What [`JobHooks::control`] may look at.
+#[derive(Clone, Debug, Default)]
+pub struct LinkView {
+    /// Last status.
+    pub status: Option<Status>,
+    /// Blocks acknowledged so far in this job.
+    pub acked: usize,
+    /// Blocks in the job.
+    pub total: usize,
+    /// Is a control command still waiting for its acknowledgement?
+    pub control_pending: bool,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct PendingControl {
+    id: u16,
+    cmd: Control,
+    sent_at: Option<Instant>,
+}
+
 /// `nc-send`'s end of the link.
-pub struct Link {
-    port: Box<dyn SerialPort>,
+pub struct Link<T: Transport> {
+    io: T,
+    opts: LinkOptions,
     reader: FrameReader,
+    rx: Vec<u8>,
+    tx: Vec<u8>,
     next_seq: u16,
     capacity: u16,
+    last_heard: Instant,
+    last_request: Instant,
+    next_control_id: u16,
+    controls: VecDeque<Control>,
+    control: Option<PendingControl>,
+    acked_control: Option<u16>,
+    machine_answer: Option<CtrlMsg>,
     /// Last status received.
     pub status: Option<Status>,
     /// Counters.
     pub stats: ClientStats,
-    next_control: u16,
+    their_machine: u32,
 }
 
-impl Link {
-    /// Opens a session on `port` for `machine`: sends `Hello` and waits for
-    /// `HelloAck`; when the controller has another machine, sends it ours and waits
-    /// until it is loaded (the controller refuses to move until then).
-    pub fn connect(mut port: Box<dyn SerialPort>, machine: &MachineConfig) -> Result<Self> {
-        port.set_timeout(Duration::from_millis(10))?;
+impl<T: Transport> Link<T> {
+    /// Opens a session on `io` for `machine`: sends `Hello` until `HelloAck` arrives;
+    /// when the controller has another machine, sends it ours and waits until it is
+    /// loaded (the controller refuses to move until then).
+    pub fn connect(io: T, machine: &MachineConfig, opts: LinkOptions) -> Result<Self, LinkError> {
+        let mut link = Self::handshake(io, machine, opts)?;
+        if link.their_machine != pkmc::store::identity(machine) {
+            link.send_machine(machine)?;
+        }
+        Ok(link)
+    }
+
+    fn handshake(io: T, machine: &MachineConfig, opts: LinkOptions) -> Result<Self, LinkError> {
+        let ours = pkmc::store::identity(machine);
+        let now = Instant::now();
         let mut link = Link {
-            port,
+            io,
+            opts,
             reader: FrameReader::new(),
-            next_seq: 0,
+            rx: vec![0; 65536],
+            tx: Vec::with_capacity(65536),
+            next_seq: 1,
             capacity: 0,
+            last_heard: now,
+            last_request: now,
+            next_control_id: 1,
+            controls: VecDeque::new(),
+            control: None,
+            acked_control: None,
+            machine_answer: None,
             status: None,
             stats: ClientStats::default(),
-            next_control: 1,
+            their_machine: 0,
         };
-        let ours = pkmc::store::identity(machine);
-        for _attempt in 0..5 {
-            link.send(
+        let start = Instant::now();
+        while start.elapsed() < opts.link_timeout {
+            link.queue(
                 0,
                 &HostMsg::Hello {
                     version: PROTOCOL_VERSION,
                     machine: ours,
                 },
             )?;
-            let until = Instant::now() + Duration::from_millis(500);
+            link.flush()?;
+            let until = Instant::now() + HELLO_RESEND_AFTER;
             while Instant::now() < until {
-                for msg in link.pump()? {
+                for msg in link.pump(READ_WAIT)? {
                     match msg {
                         CtrlMsg::HelloAck {
                             version,
                             queue_capacity,
-                            machine: theirs,
-                        } if version == PROTOCOL_VERSION => {
-                            link.capacity = queue_capacity;
-                            link.next_seq = 1;
-                            if theirs != ours {
-                                link.send_machine(machine)?;
+                            machine,
+                        } => {
+                            if version != PROTOCOL_VERSION {
+                                return Err(LinkError::Version {
+                                    port: link.io.name().into(),
+                                    theirs: Some(version),
+                                });
                             }
+                            link.capacity = queue_capacity;
+                            link.their_machine = machine;
                             return Ok(link);
                         }
                         CtrlMsg::Nak {
                             reason: NakReason::Version,
                             ..
-                        } => bail!("the controller speaks another protocol version (ours is {PROTOCOL_VERSION})"),
+                        } => {
+                            return Err(LinkError::Version {
+                                port: link.io.name().into(),
+                                theirs: None,
+                            })
+                        }
                         _ => {}
                     }
                 }
             }
         }
-        bail!("no answer to the handshake: is a pkmc controller on this port?")
+        Err(LinkError::NoAnswer {
+            port: link.io.name().into(),
+            waited: start.elapsed(),
+        })
+    }
+
+    /// The transport (e.g. to read the in-process simulator after a check).
+    pub fn transport(&self) -> &T {
+        &self.io
+    }
+
+    /// Gives the transport back.
+    pub fn into_transport(self) -> T {
+        self.io
+    }
+
+    /// Block-queue capacity the controller announced.
+    pub fn capacity(&self) -> u16 {
+        self.capacity
+    }
+
+    fn port(&self) -> String {
+        self.io.name().to_string()
+    }
+
+    /// Appends a frame to the transmit buffer.
+    fn queue(&mut self, seq: u16, msg: &HostMsg) -> Result<(), LinkError> {
+        let mut frame = [0u8; MAX_FRAME];
+        let n = encode_frame(seq, msg, &mut frame).map_err(|e| LinkError::Frame {
+            port: self.port(),
+            what: format!("{msg:?} ({e:?})"),
+        })?;
+        self.tx.extend_from_slice(&frame[..n]);
+        self.stats.frames_sent += 1;
+        self.stats.bytes_sent += n as u64;
+        Ok(())
+    }
+
+    /// Writes what the port takes now, without blocking for long.
+    fn flush_some(&mut self) -> Result<(), LinkError> {
+        if self.tx.is_empty() {
+            return Ok(());
+        }
+        let n = self
+            .io
+            .write_some(&self.tx, Duration::from_millis(1))
+            .map_err(|source| LinkError::Io {
+                port: self.port(),
+                op: "write",
+                source,
+            })?;
+        self.tx.drain(..n);
+        Ok(())
+    }
+
+    /// Writes the whole transmit buffer (reading meanwhile, so neither side stalls).
+    fn flush(&mut self) -> Result<(), LinkError> {
+        let start = Instant::now();
+        while !self.tx.is_empty() {
+            self.flush_some()?;
+            if !self.tx.is_empty() {
+                if start.elapsed() > self.opts.link_timeout {
+                    return Err(LinkError::Lost {
+                        port: self.port(),
+                        silent: start.elapsed(),
+                        during: "writing",
+                    });
+                }
+                let msgs = self.pump(Duration::ZERO)?;
+                self.absorb(&msgs);
+            }
+        }
+        Ok(())
+    }
+
+    /// Control acknowledgements and machine answers from messages read outside a job
+    /// loop.
+    fn absorb(&mut self, msgs: &[CtrlMsg]) {
+        for m in msgs {
+            match m {
+                CtrlMsg::ControlAck { id } => self.acked_control = Some(*id),
+                CtrlMsg::MachineLoaded { .. } | CtrlMsg::MachineRefused { .. } => {
+                    self.machine_answer = Some(m.clone())
+                }
+                _ => {}
+            }
+        }
     }
 
     /// Sends `machine` in chunks, each resent until acknowledged, and waits for the
     /// controller to load it.
-    fn send_machine(&mut self, machine: &MachineConfig) -> Result<()> {
+    fn send_machine(&mut self, machine: &MachineConfig) -> Result<(), LinkError> {
         let mut payload = [0u8; pkmc::store::MAX_CONFIG_BYTES];
-        let n = pkmc::store::encode(machine, &mut payload)
-            .ok_or_else(|| anyhow!("the machine configuration is too large to send"))?;
+        let n = pkmc::store::encode(machine, &mut payload).ok_or_else(|| LinkError::Frame {
+            port: self.port(),
+            what: "the machine configuration (too large)".into(),
+        })?;
         let crc = pkmc::crc::crc32(&payload[..n]);
-        let mut early = Vec::new();
+        self.machine_answer = None;
         for off in (0..n).step_by(pkmc::store::CHUNK_BYTES) {
             let end = (off + pkmc::store::CHUNK_BYTES).min(n);
-            let id = self.next_control;
-            self.next_control = self.next_control.wrapping_add(1);
+            let id = self.fresh_control_id();
+            let data =
+                heapless::Vec::from_slice(&payload[off..end]).map_err(|_| LinkError::Frame {
+                    port: self.port(),
+                    what: "a machine chunk".into(),
+                })?;
             let msg = HostMsg::Machine {
                 id,
                 offset: off as u16,
                 total: n as u16,
                 crc,
-                data: heapless::Vec::from_slice(&payload[off..end])
-                    .map_err(|_| anyhow!("chunk too large"))?,
+                data,
             };
-            early.extend(self.until_acked(id, &msg)?);
+            self.until_acked(id, &msg, "sending the machine configuration")?;
         }
         let start = Instant::now();
-        while start.elapsed() < LINK_TIMEOUT {
-            let msgs = std::mem::take(&mut early).into_iter().chain(self.pump()?);
-            for m in msgs.collect::<Vec<_>>() {
-                match m {
-                    CtrlMsg::MachineLoaded { machine } if machine == crc => return Ok(()),
-                    CtrlMsg::MachineRefused { error } => {
-                        bail!("the controller refused the machine configuration: {error:?}")
-                    }
-                    _ => {}
+        loop {
+            match self.machine_answer.take() {
+                Some(CtrlMsg::MachineLoaded { machine }) if machine == crc => {
+                    self.their_machine = machine;
+                    return Ok(());
                 }
+                Some(CtrlMsg::MachineRefused { error }) => {
+                    return Err(LinkError::MachineRefused {
+                        port: self.port(),
+                        error: format!("{error:?}"),
+                    })
+                }
+                _ => {}
             }
+            if start.elapsed() > self.opts.link_timeout {
+                return Err(self.lost("waiting for the controller to load the machine"));
+            }
+            let msgs = self.pump(READ_WAIT)?;
+            self.absorb(&msgs);
         }
-        bail!("link lost: the controller did not confirm the machine configuration")
     }
 
-    /// Sends `msg` (a control or machine chunk with `id`) until `ControlAck { id }`;
-    /// returns the other messages received meanwhile.
-    fn until_acked(&mut self, id: u16, msg: &HostMsg) -> Result<Vec<CtrlMsg>> {
+    /// Sends `msg` (a control command or machine chunk carrying `id`) until
+    /// `ControlAck { id }` arrives.
+    fn until_acked(
+        &mut self,
+        id: u16,
+        msg: &HostMsg,
+        during: &'static str,
+    ) -> Result<(), LinkError> {
         let start = Instant::now();
-        let mut others = Vec::new();
-        while start.elapsed() < LINK_TIMEOUT {
-            self.send(0, msg)?;
-            let until = Instant::now() + Duration::from_millis(100);
+        let mut first = true;
+        loop {
+            self.queue(0, msg)?;
+            if !std::mem::take(&mut first) {
+                self.stats.controls_resent += 1;
+            }
+            self.flush()?;
+            let until = Instant::now() + CONTROL_RESEND_AFTER;
             while Instant::now() < until {
-                let mut acked = false;
-                for m in self.pump()? {
-                    if m == (CtrlMsg::ControlAck { id }) {
-                        acked = true;
-                    } else {
-                        others.push(m);
-                    }
-                }
-                if acked {
-                    return Ok(others);
+                let msgs = self.pump(READ_WAIT)?;
+                self.absorb(&msgs);
+                if self.acked_control == Some(id) {
+                    return Ok(());
                 }
             }
+            if start.elapsed() > self.opts.link_timeout {
+                return Err(self.lost(during));
+            }
         }
-        bail!("link lost: no acknowledgement of {msg:?}")
     }
 
-    fn send(&mut self, seq: u16, msg: &HostMsg) -> Result<()> {
-        let mut frame = [0u8; MAX_FRAME];
-        let n = encode_frame(seq, msg, &mut frame)
-            .map_err(|e| anyhow!("cannot frame {msg:?}: {e:?}"))?;
-        self.port.write_all(&frame[..n])?;
-        self.stats.frames_sent += 1;
-        Ok(())
-    }
-
-    /// Reads what has arrived (waiting up to the port timeout) and decodes it.
-    fn pump(&mut self) -> Result<Vec<CtrlMsg>> {
-        let mut buf = [0u8; 4096];
-        let n = match self.port.read(&mut buf) {
-            Ok(n) => n,
-            Err(e) if is_timeout(&e) => 0,
-            Err(e) => return Err(anyhow!("link read failed: {e}")),
-        };
+    /// Reads what has arrived (waiting up to `wait` for it) and decodes it.
+    fn pump(&mut self, wait: Duration) -> Result<Vec<CtrlMsg>, LinkError> {
+        let n = self
+            .io
+            .read_some(&mut self.rx, wait)
+            .map_err(|source| LinkError::Io {
+                port: self.io.name().to_string(),
+                op: "read",
+                source,
+            })?;
         let mut msgs = Vec::new();
-        for &b in &buf[..n] {
+        for &b in &self.rx[..n] {
             match self.reader.push(b) {
                 Pushed::Pending => {}
                 Pushed::Overlong => self.stats.corrupt_received += 1,
@@ -248,6 +837,10 @@ impl Link {
                 }
             }
         }
+        if !msgs.is_empty() {
+            self.last_heard = Instant::now();
+            self.stats.frames_received += msgs.len() as u64;
+        }
         for m in &msgs {
             if let CtrlMsg::Status(s) = m {
                 self.status = Some(s.clone());
@@ -256,110 +849,473 @@ impl Link {
         Ok(msgs)
     }
 
+    fn lost(&self, during: &'static str) -> LinkError {
+        LinkError::Lost {
+            port: self.port(),
+            silent: self.last_heard.elapsed(),
+            during,
+        }
+    }
+
     /// Asks for and waits for a fresh status.
-    pub fn request_status(&mut self) -> Result<Status> {
+    pub fn request_status(&mut self) -> Result<Status, LinkError> {
         let start = Instant::now();
         loop {
-            self.send(0, &HostMsg::StatusRequest)?;
-            let until = Instant::now() + Duration::from_millis(200);
+            self.queue(0, &HostMsg::StatusRequest)?;
+            self.stats.status_requests += 1;
+            self.flush()?;
+            let until = Instant::now() + self.opts.keepalive.max(Duration::from_millis(50));
             while Instant::now() < until {
-                for m in self.pump()? {
+                let msgs = self.pump(READ_WAIT)?;
+                self.absorb(&msgs);
+                for m in msgs {
                     if let CtrlMsg::Status(s) = m {
                         return Ok(s);
                     }
                 }
             }
-            if start.elapsed() > LINK_TIMEOUT {
-                bail!("link lost: no status from the controller for {LINK_TIMEOUT:?}");
+            if start.elapsed() > self.opts.link_timeout {
+                return Err(self.lost("waiting for a status"));
             }
         }
     }
 
-    /// Streams `blocks` and waits until they have all executed. `progress` is called
-    /// with every status received.
+    /// Sends one control command and waits for its acknowledgement.
+    pub fn control(&mut self, cmd: Control) -> Result<(), LinkError> {
+        let id = self.fresh_control_id();
+        self.stats.controls += 1;
+        self.until_acked(
+            id,
+            &HostMsg::Control { id, cmd },
+            "waiting for a control acknowledgement",
+        )
+    }
+
+    fn fresh_control_id(&mut self) -> u16 {
+        let id = self.next_control_id;
+        self.next_control_id = self.next_control_id.wrapping_add(1).max(1);
+        id
+    }
+
+    /// Waits until the controller is at rest: idle with an empty queue (`Done`), or in
+    /// alarm. `hooks` sees every status.
+    pub fn wait_idle(&mut self, hooks: &mut dyn JobHooks) -> Result<JobEnd, LinkError> {
+        loop {
+            let s = self.request_status()?;
+            hooks.status(&s);
+            if let Some(a) = s.alarm.filter(|_| s.state == State::Alarm) {
+                return Ok(JobEnd::Alarm(a));
+            }
+            if s.state == State::Idle
+                && s.speed == 0
+                && s.free_slots == self.capacity
+                && s.buffered_ms == 0
+            {
+                return Ok(JobEnd::Done);
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// Streams `blocks` and waits until they have all executed, the controller raises
+    /// an alarm, or the operator's abort or stop has taken effect.
     pub fn run_job(
         &mut self,
         blocks: &[Block],
-        mut progress: impl FnMut(&Status),
-    ) -> Result<JobEnd> {
-        let base = self.next_seq;
+        hooks: &mut dyn JobHooks,
+    ) -> Result<JobEnd, LinkError> {
+        let start_status = self.request_status()?;
+        hooks.status(&start_status);
+        if start_status.state == State::Alarm {
+            if let Some(a) = start_status.alarm {
+                return Ok(JobEnd::Alarm(a));
+            }
+        }
+        let mut job = JobState::new(self.next_seq, self.capacity, &start_status);
+        let result = self.job_loop(blocks, hooks, &mut job);
+        self.next_seq = job.seq_of(job.acked.max(job.high));
+        result
+    }
+
+    fn job_loop(
+        &mut self,
+        blocks: &[Block],
+        hooks: &mut dyn JobHooks,
+        job: &mut JobState,
+    ) -> Result<JobEnd, LinkError> {
         let total = blocks.len();
-        let (mut sent, mut acked) = (0usize, 0usize);
-        let mut free = self.capacity as usize;
-        let mut last_heard = Instant::now();
-        let index_of = |seq: u16| seq.wrapping_sub(base) as usize;
-        while acked < total {
-            while sent < total && sent - acked < free {
-                let seq = base.wrapping_add(sent as u16);
-                self.send(seq, &HostMsg::Block(blocks[sent]))?;
-                sent += 1;
+        loop {
+            let now = Instant::now();
+            // Operator commands.
+            let view = LinkView {
+                status: self.status.clone(),
+                acked: job.acked,
+                total,
+                control_pending: self.control.is_some() || !self.controls.is_empty(),
+            };
+            if let Some(cmd) = hooks.control(&view) {
+                self.controls.push_back(cmd);
             }
-            let msgs = self.pump()?;
-            if !msgs.is_empty() {
-                last_heard = Instant::now();
-            }
-            for m in msgs {
-                match m {
-                    CtrlMsg::Ack {
-                        seq, free_slots, ..
-                    } => {
-                        let done = index_of(seq).wrapping_add(1);
-                        if done <= total && done >= acked {
-                            acked = done;
-                            free = free_slots as usize;
-                            sent = sent.max(acked);
-                        }
+            self.service_controls(now, job)?;
+            // Blocks, within credits and the buffered-motion limit.
+            if job.ending.is_none() && self.tx.is_empty() {
+                while job.sent < total
+                    && job.sent - job.acked < job.free.min(job.window)
+                    && job.buffered_ms < self.opts.max_buffered_ms
+                {
+                    let seq = job.seq_of(job.sent);
+                    self.queue(seq, &HostMsg::Block(blocks[job.sent]))?;
+                    if job.sent < job.high {
+                        self.stats.resent += 1;
+                    } else {
+                        self.stats.blocks_sent += 1;
                     }
-                    CtrlMsg::Nak { expected, reason } => {
-                        self.stats.naks += 1;
-                        match reason {
-                            NakReason::Version | NakReason::NoSession => {
-                                bail!("the controller refused the session ({reason:?})")
-                            }
-                            NakReason::QueueFull => free = 0,
-                            NakReason::Corrupt | NakReason::Gap => {}
-                            _ => {}
-                        }
-                        let back = index_of(expected);
-                        if back <= total && back >= acked && back < sent {
-                            self.stats.resent += (sent - back) as u64;
-                            sent = back;
-                        }
+                    job.sent += 1;
+                    job.high = job.high.max(job.sent);
+                    if job.sent - job.acked == 1 {
+                        job.last_progress = now;
                     }
-                    CtrlMsg::Status(s) => {
-                        free = s.free_slots as usize;
-                        progress(&s);
-                        if s.state == State::Alarm {
-                            return Ok(JobEnd::Alarm);
-                        }
-                    }
-                    CtrlMsg::HelloAck { .. }
-                    | CtrlMsg::ControlAck { .. }
-                    | CtrlMsg::MachineLoaded { .. }
-                    | CtrlMsg::MachineRefused { .. } => {}
                 }
             }
-            let silent = last_heard.elapsed();
-            if silent > LINK_TIMEOUT {
-                bail!("link lost: no answer from the controller for {LINK_TIMEOUT:?}");
+            // Keep-alive: ask for a status when the controller has been quiet.
+            if self.last_heard.elapsed() > self.opts.keepalive
+                && self.last_request.elapsed() > self.opts.keepalive
+            {
+                self.queue(0, &HostMsg::StatusRequest)?;
+                self.stats.status_requests += 1;
+                self.last_request = now;
             }
-            if silent > RESEND_AFTER && sent > acked {
-                self.stats.resent += (sent - acked) as u64;
-                sent = acked;
-                last_heard = Instant::now() - RESEND_AFTER / 2;
+            self.flush_some()?;
+            let wait = if self.tx.is_empty() {
+                READ_WAIT
+            } else {
+                Duration::ZERO
+            };
+            for m in self.pump(wait)? {
+                if let Some(end) = self.handle(m, blocks, hooks, job)? {
+                    return Ok(end);
+                }
+            }
+            // Retransmission timeout.
+            if job.sent > job.acked && job.last_progress.elapsed() > self.opts.resend_after {
+                self.stats.timeouts += 1;
+                job.rewind_to(job.acked, &mut self.stats);
+                job.guard = None;
+                job.last_progress = Instant::now();
+            }
+            if self.last_heard.elapsed() > self.opts.link_timeout {
+                return Err(self.lost(if job.acked < total {
+                    "streaming blocks"
+                } else {
+                    "waiting for the end of the job"
+                }));
             }
         }
-        self.next_seq = base.wrapping_add(total as u16);
-        loop {
-            let s = self.request_status()?;
-            progress(&s);
-            if s.state == State::Alarm {
-                return Ok(JobEnd::Alarm);
+    }
+
+    fn service_controls(&mut self, now: Instant, job: &mut JobState) -> Result<(), LinkError> {
+        if self.control.is_none() {
+            if let Some(cmd) = self.controls.pop_front() {
+                let id = self.fresh_control_id();
+                self.control = Some(PendingControl {
+                    id,
+                    cmd,
+                    sent_at: None,
+                });
+                if matches!(cmd, Control::Abort | Control::Stop) && job.ending.is_none() {
+                    job.ending = Some(Ending {
+                        cmd,
+                        id,
+                        acked: false,
+                    });
+                }
             }
-            if s.state == State::Idle && s.blocks_done as usize >= total {
-                return Ok(JobEnd::Done);
-            }
-            std::thread::sleep(POLL_EVERY);
         }
+        if let Some(pc) = self.control.as_mut() {
+            let due = pc
+                .sent_at
+                .is_none_or(|t| now.duration_since(t) > CONTROL_RESEND_AFTER);
+            if due {
+                if pc.sent_at.is_some() {
+                    self.stats.controls_resent += 1;
+                } else {
+                    self.stats.controls += 1;
+                }
+                pc.sent_at = Some(now);
+                let (id, cmd) = (pc.id, pc.cmd);
+                self.queue(0, &HostMsg::Control { id, cmd })?;
+            }
+        }
+        Ok(())
+    }
+
+    fn handle(
+        &mut self,
+        m: CtrlMsg,
+        blocks: &[Block],
+        hooks: &mut dyn JobHooks,
+        job: &mut JobState,
+    ) -> Result<Option<JobEnd>, LinkError> {
+        let total = blocks.len();
+        match m {
+            CtrlMsg::Ack {
+                seq,
+                free_slots,
+                buffered_ms,
+            } => {
+                if let Some(done) = job.index_after(seq) {
+                    if done > job.acked {
+                        job.advance(done);
+                    }
+                    job.free = free_slots as usize;
+                    job.buffered_ms = buffered_ms;
+                }
+            }
+            CtrlMsg::Nak { expected, reason } => {
+                self.stats.naks += 1;
+                match reason {
+                    NakReason::Corrupt => self.stats.nak_reasons.corrupt += 1,
+                    NakReason::Gap => self.stats.nak_reasons.gap += 1,
+                    NakReason::QueueFull => self.stats.nak_reasons.queue_full += 1,
+                    _ => self.stats.nak_reasons.other += 1,
+                }
+                let at = job.index_at(expected);
+                if let Some(at) = at {
+                    if at > job.acked {
+                        job.advance(at);
+                    }
+                }
+                match reason {
+                    NakReason::Version => {
+                        return Err(LinkError::Version {
+                            port: self.port(),
+                            theirs: None,
+                        })
+                    }
+                    NakReason::NoSession => {
+                        return Err(LinkError::SessionLost { port: self.port() })
+                    }
+                    NakReason::MachineMismatch => {
+                        return Err(LinkError::MachineMismatch { port: self.port() })
+                    }
+                    NakReason::BadBlock => {
+                        let line = at.and_then(|i| blocks.get(i)).map_or(0, |b| b.line);
+                        return Err(LinkError::BadBlock {
+                            port: self.port(),
+                            line,
+                        });
+                    }
+                    NakReason::QueueFull => job.free = 0,
+                    _ => {}
+                }
+                if let Some(at) = at {
+                    if job.ending.is_none() && at < job.sent {
+                        match job.guard.as_mut() {
+                            Some(g) if g.at == at && g.stale_left > 0 => {
+                                g.stale_left -= 1;
+                                self.stats.naks_ignored += 1;
+                            }
+                            _ => {
+                                let stale = job.sent - at - 1;
+                                job.rewind_to(at, &mut self.stats);
+                                job.guard = Some(Guard {
+                                    at,
+                                    stale_left: stale,
+                                });
+                                job.last_progress = Instant::now();
+                            }
+                        }
+                    } else {
+                        self.stats.naks_ignored += 1;
+                    }
+                }
+            }
+            CtrlMsg::ControlAck { id } => {
+                if self.control.is_some_and(|pc| pc.id == id) {
+                    self.control = None;
+                }
+                if let Some(e) = job.ending.as_mut() {
+                    if e.id == id {
+                        e.acked = true;
+                    }
+                }
+            }
+            CtrlMsg::Status(s) => {
+                // Blocks executed were accepted: a lost final `Ack` need not be waited for.
+                let executed = s.blocks_done.wrapping_sub(job.done_before) as usize;
+                if executed > job.acked && executed <= job.high {
+                    job.advance(executed);
+                }
+                job.free = s.free_slots as usize;
+                job.buffered_ms = s.buffered_ms;
+                hooks.status(&s);
+                if s.state == State::Alarm {
+                    if job
+                        .ending
+                        .is_some_and(|e| e.acked && e.cmd == Control::Stop)
+                    {
+                        return Ok(Some(JobEnd::Stopped));
+                    }
+                    if let Some(a) = s.alarm {
+                        return Ok(Some(JobEnd::Alarm(a)));
+                    }
+                }
+                if let Some(e) = job.ending.filter(|e| e.acked) {
+                    if e.cmd == Control::Abort && s.state == State::Idle && s.speed == 0 {
+                        return Ok(Some(JobEnd::Aborted));
+                    }
+                }
+                if job.ending.is_none()
+                    && job.acked == total
+                    && s.state == State::Idle
+                    && s.blocks_done >= job.done_before.wrapping_add(total as u32)
+                {
+                    return Ok(Some(JobEnd::Done));
+                }
+            }
+            CtrlMsg::HelloAck { .. }
+            | CtrlMsg::MachineLoaded { .. }
+            | CtrlMsg::MachineRefused { .. } => {}
+        }
+        Ok(None)
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Guard {
+    /// Index the stream was rewound to.
+    at: usize,
+    /// `Nak`s for the same index still expected from frames sent before the rewind.
+    stale_left: usize,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Ending {
+    cmd: Control,
+    id: u16,
+    acked: bool,
+}
+
+/// Book-keeping of one streamed job: indices into the job's blocks.
+struct JobState {
+    base_seq: u16,
+    /// Blocks accepted (cumulatively acknowledged).
+    acked: usize,
+    /// Next block to send.
+    sent: usize,
+    /// One past the highest block ever sent.
+    high: usize,
+    free: usize,
+    buffered_ms: u32,
+    window: usize,
+    capacity: usize,
+    guard: Option<Guard>,
+    last_progress: Instant,
+    done_before: u32,
+    ending: Option<Ending>,
+}
+
+impl JobState {
+    fn new(base_seq: u16, capacity: u16, status: &Status) -> Self {
+        Self {
+            base_seq,
+            acked: 0,
+            sent: 0,
+            high: 0,
+            free: status.free_slots as usize,
+            buffered_ms: status.buffered_ms,
+            window: (capacity as usize).max(MIN_WINDOW),
+            capacity: (capacity as usize).max(MIN_WINDOW),
+            guard: None,
+            last_progress: Instant::now(),
+            done_before: status.blocks_done,
+            ending: None,
+        }
+    }
+
+    fn seq_of(&self, index: usize) -> u16 {
+        self.base_seq.wrapping_add(index as u16)
+    }
+
+    /// Index of the block with sequence number `seq`, if it is within what was sent
+    /// (or one past it).
+    fn index_at(&self, seq: u16) -> Option<usize> {
+        let d = seq.wrapping_sub(self.seq_of(self.acked)) as i16 as i64;
+        let i = self.acked as i64 + d;
+        (i >= 0 && i as usize <= self.high).then_some(i as usize)
+    }
+
+    /// Number of blocks accepted if block `seq` is the last one accepted.
+    fn index_after(&self, seq: u16) -> Option<usize> {
+        let d = seq.wrapping_sub(self.seq_of(self.acked)) as i16 as i64;
+        let n = self.acked as i64 + d + 1;
+        (n >= 0 && n as usize <= self.high).then_some(n as usize)
+    }
+
+    fn advance(&mut self, acked: usize) {
+        let k = acked - self.acked;
+        self.acked = acked;
+        self.sent = self.sent.max(acked);
+        self.window = (self.window + k.min(4)).min(self.capacity);
+        self.last_progress = Instant::now();
+        if self.guard.is_some_and(|g| g.at < acked) {
+            self.guard = None;
+        }
+    }
+
+    fn rewind_to(&mut self, at: usize, stats: &mut ClientStats) {
+        if at >= self.sent {
+            return;
+        }
+        stats.rewinds += 1;
+        self.sent = at;
+        self.window = (self.window / 2).max(MIN_WINDOW);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn status() -> Status {
+        Status {
+            state: State::Idle,
+            line: 0,
+            blocks_done: 0,
+            motion_ticks: 0,
+            pose: [0; 6],
+            joints: [0; pkmc::config::MAX_JOINTS],
+            speed: 0,
+            buffered_ms: 0,
+            free_slots: 64,
+            feed_override: 100,
+            alarm: None,
+        }
+    }
+
+    #[test]
+    fn sequence_numbers_map_to_block_indices_across_the_wrap() {
+        let mut job = JobState::new(u16::MAX - 2, 64, &status());
+        job.high = 8;
+        job.advance(5);
+        assert_eq!(job.seq_of(5), 2);
+        assert_eq!(job.index_at(2), Some(5));
+        assert_eq!(job.index_after(2), Some(6));
+        assert_eq!(job.index_after(u16::MAX), Some(3));
+        assert_eq!(job.index_at(9), None, "beyond what was sent");
+    }
+
+    #[test]
+    fn a_rewind_halves_the_window_and_acknowledgements_grow_it_back() {
+        let mut job = JobState::new(1, 64, &status());
+        let mut stats = ClientStats::default();
+        job.sent = 40;
+        job.high = 40;
+        job.rewind_to(10, &mut stats);
+        assert_eq!((job.sent, job.window, stats.rewinds), (10, 32, 1));
+        job.advance(2);
+        assert_eq!(job.window, 34, "grown by the blocks acknowledged");
+        job.advance(12);
+        assert_eq!(job.window, 38, "by at most four per acknowledgement");
     }
 }

@@ -1,120 +1,429 @@
 //! `nc-send`: parse a G-code program, stream it to a pkmc controller (a board on a
-//! serial port, or the built-in simulator), wait for the end and summarise.
+//! serial port, found by its USB identity when no port is given, or the built-in
+//! simulator), wait for the end and summarise; or run one command (`status`, `home`,
+//! `jog`, `mdi`, `reset`). Exit codes: see `pkmc_host::job::exit` and docs/nc-send.md.
 
-use clap::Parser;
-use pkmc_host::job::{self, exit, Target};
+use clap::{Parser, Subcommand};
+use pkmc::config::{axis_is_rotary, MachineConfig, AXIS_NAMES};
+use pkmc::protocol::{Control, Status};
+use pkmc::units::to_user;
+use pkmc_host::faults::FaultConfig;
+use pkmc_host::job::{self, exit, Failure, Report, RunOptions, SimSetup, Target};
+use pkmc_host::link::{JobEnd, LinkOptions};
+use pkmc_host::progress::{Interrupts, Operator, Progress, RawKeys, Style};
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 /// Stream a G-code program to a pkmc motion controller.
 #[derive(Parser, Debug)]
 #[command(name = "nc-send", version)]
 struct Args {
     /// Run on the built-in simulated controller (over a pseudo-terminal).
-    #[arg(long, conflicts_with = "port")]
+    #[arg(long, global = true, conflicts_with = "port")]
     sim: bool,
-    /// Serial port of the controller board.
-    #[arg(long, value_name = "DEV")]
+    /// Serial port of the controller board; default: the board found on USB
+    /// (VID 0x1209, PID 0x0001).
+    #[arg(long, global = true, value_name = "DEV")]
     port: Option<String>,
     /// Machine file (TOML); default: the built-in Cartesian X Y Z stepper machine.
-    #[arg(long, value_name = "FILE.toml")]
+    #[arg(long, global = true, value_name = "FILE.toml")]
     machine: Option<PathBuf>,
-    /// Print the summary as JSON on stdout.
-    #[arg(long, value_name = "FORMAT", value_parser = ["json"])]
+    /// Print the summary as JSON on stdout (and no progress).
+    #[arg(long, global = true, value_name = "FORMAT", value_parser = ["json"])]
     report: Option<String>,
+    /// Simulator only: corrupt, drop or duplicate each byte on the line with this
+    /// probability, both directions (e.g. 0.01).
+    #[arg(long, global = true, value_name = "RATE", value_parser = parse_rate)]
+    link_faults: Option<f64>,
+    /// Seed of the fault generator.
+    #[arg(long, global = true, default_value_t = 1)]
+    seed: u64,
+    /// Send no block while the controller has this much motion buffered, ms.
+    #[arg(long, global = true, value_name = "MS", default_value_t = pkmc_host::link::MAX_BUFFERED_MS)]
+    max_buffered_ms: u32,
+    /// Declare the link lost after this many seconds without an answer.
+    #[arg(long, global = true, value_name = "S", default_value_t = 3.0)]
+    link_timeout: f64,
+    /// Simulator only, for tests: cut the line after this many bytes to the host.
+    #[arg(long, global = true, hide = true, value_name = "BYTES")]
+    link_cut_after: Option<u64>,
+    /// Dry run: compile, pre-check and plan the program on the controller core in
+    /// this process (simulated clock, no port, nothing moves).
+    #[arg(long)]
+    check: bool,
+    /// After a --sim or --check run, plot the tool path (top, front and side views),
+    /// path speed and joints over time (.svg or .png).
+    #[arg(long, value_name = "FILE.svg|FILE.png")]
+    plot: Option<PathBuf>,
     /// Write one CSV row per interpolation period (simulator only).
     #[arg(long, value_name = "FILE.csv")]
     trace: Option<PathBuf>,
     /// The G-code program.
-    program: PathBuf,
+    program: Option<PathBuf>,
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Print the controller's status once.
+    Status,
+    /// Home the machine and wait until it is there.
+    Home,
+    /// Move one axis by a distance and wait until it stops.
+    #[command(allow_negative_numbers = true)]
+    Jog {
+        /// Axis: X Y Z A B C.
+        axis: String,
+        /// Distance, mm (X Y Z) or degrees (A B C); negative moves backwards.
+        distance: f64,
+        /// Feed, mm/min (degrees/min for A B C).
+        #[arg(long, default_value_t = 600.0)]
+        feed: f64,
+    },
+    /// Run one line of G-code from where the machine stands (e.g. "G1 X10 F500").
+    Mdi {
+        /// The line.
+        line: String,
+    },
+    /// Clear an alarm once its cause is gone.
+    Reset,
+}
+
+fn parse_rate(s: &str) -> Result<f64, String> {
+    let r: f64 = s.parse().map_err(|e| format!("{s}: {e}"))?;
+    if (0.0..=1.0).contains(&r) {
+        Ok(r)
+    } else {
+        Err(format!("{s}: a rate is between 0 and 1"))
+    }
 }
 
 fn main() {
     let args = Args::parse();
-    std::process::exit(match run(&args) {
+    let code = match run(&args) {
         Ok(code) => code,
         Err(f) => {
             eprintln!("nc-send: {}", f.message);
             f.code
         }
-    });
+    };
+    std::process::exit(code);
 }
 
-fn run(args: &Args) -> Result<i32, job::Failure> {
-    let machine = match &args.machine {
+fn bad(message: impl Into<String>) -> Failure {
+    Failure::new(exit::BAD_INPUT, message)
+}
+
+fn load_machine(args: &Args) -> Result<MachineConfig, Failure> {
+    match &args.machine {
         Some(p) => pkmc_host::machine_file::load(p),
         None => pkmc_host::machine_file::parse(
             pkmc_host::machine_file::DEFAULT_MACHINE,
             "built-in machine",
         ),
     }
-    .map_err(|e| job::Failure {
-        code: exit::BAD_INPUT,
-        message: format!("{e:#}"),
-    })?;
-    let target = match (&args.port, args.sim) {
-        (Some(p), _) => Target::Port(p),
-        (None, true) => Target::Sim,
-        (None, false) => {
-            return Err(job::Failure {
-                code: exit::BAD_INPUT,
-                message:
-                    "no controller given: use --port DEV for a board or --sim for the simulator"
-                        .into(),
-            })
-        }
-    };
-    let quiet = args.report.is_some();
-    let mut last_line = 0;
-    let (report, code) = job::run(
-        &machine,
-        &args.program,
-        target,
-        args.trace.as_deref(),
-        |s| {
-            if !quiet && s.line != last_line {
-                last_line = s.line;
-                eprint!("\rline {:>6}  {:?}   ", s.line, s.state);
-            }
-        },
-    )?;
-    if !quiet {
-        eprintln!();
+    .map_err(|e| bad(format!("{e:#}")))
+}
+
+/// The port or simulator to use; finds the board on USB when neither is given.
+fn target(args: &Args, found: &mut Option<String>) -> Result<(), Failure> {
+    if args.sim || args.port.is_some() {
+        return Ok(());
     }
+    let board = pkmc_host::discover::find()
+        .map_err(|e| Failure::new(exit::NO_CONTROLLER, e.to_string()))?;
+    *found = Some(board.port);
+    Ok(())
+}
+
+fn run(args: &Args) -> Result<i32, Failure> {
+    let machine = load_machine(args)?;
+    let quiet = args.report.is_some();
+    if args.check && (args.sim || args.port.is_some()) {
+        return Err(bad("--check runs in-process: leave out --sim and --port"));
+    }
+    if args.command.is_some() && (args.program.is_some() || args.check || args.plot.is_some()) {
+        return Err(bad(
+            "a command (status, home, jog, mdi, reset) takes no program, --check or --plot",
+        ));
+    }
+    if let Some(p) = &args.plot {
+        if !(args.sim || args.check) {
+            return Err(bad("--plot needs --sim or --check (the path is simulated)"));
+        }
+        pkmc_host::plot::format_of(p).map_err(bad)?;
+    }
+    let mut found = None;
+    if !args.check {
+        target(args, &mut found)?;
+    }
+    let faults = args.link_faults.map(|rate| FaultConfig {
+        cut_after_bytes: args.link_cut_after,
+        ..FaultConfig::new(rate, args.seed)
+    });
+    let faults = faults.or(args.link_cut_after.map(|n| FaultConfig {
+        cut_after_bytes: Some(n),
+        ..FaultConfig::new(0.0, args.seed)
+    }));
+    if args.link_timeout.is_nan() || args.link_timeout <= 0.0 {
+        return Err(bad("--link-timeout must be positive"));
+    }
+    let link = LinkOptions {
+        max_buffered_ms: args.max_buffered_ms,
+        link_timeout: Duration::from_secs_f64(args.link_timeout),
+        ..LinkOptions::default()
+    };
+    let target = match (&args.port, &found) {
+        (Some(p), _) | (None, Some(p)) => Target::Port(p),
+        (None, None) => Target::Sim,
+    };
+    let opts = RunOptions {
+        target,
+        sim: SimSetup {
+            trace: args.trace.as_deref(),
+            faults,
+            record_path: args.plot.is_some(),
+        },
+        link,
+    };
+    let interrupts = Interrupts::install().map_err(|e| Failure::new(exit::LINK, e))?;
+    match &args.command {
+        Some(cmd) => command(args, cmd, &machine, &opts, interrupts),
+        None => {
+            let program = args
+                .program
+                .as_deref()
+                .ok_or_else(|| bad("no program given (nc-send --help lists the commands)"))?;
+            run_program(args, program, &machine, &opts, interrupts, quiet)
+        }
+    }
+}
+
+fn run_program(
+    args: &Args,
+    program: &Path,
+    machine: &MachineConfig,
+    opts: &RunOptions<'_>,
+    interrupts: Interrupts,
+    quiet: bool,
+) -> Result<i32, Failure> {
+    let blocks = job::compile_program(program, machine)?;
+    let style = Style::for_stderr(quiet);
+    let keys = if quiet || args.check {
+        None
+    } else {
+        RawKeys::start()
+    };
+    if keys.is_some() && style != Style::Quiet {
+        eprintln!("keys: h/space hold, r resume, q stop, +/- feed override");
+    }
+    let mut op = Operator::new(Progress::new(style, blocks.len()), interrupts, keys);
+    let result = if args.check {
+        job::check(machine, program, args.plot.is_some(), &mut op)
+    } else {
+        job::run_blocks(
+            machine,
+            &program.display().to_string(),
+            &blocks,
+            opts,
+            &mut op,
+        )
+    };
+    op.progress.finish();
+    drop(op);
+    let result = result?;
+    if let (Some(p), Some(sim)) = (&args.plot, &result.sim) {
+        pkmc_host::plot::draw(p, &sim.recorder, machine)
+            .map_err(|e| Failure::new(exit::BAD_INPUT, e))?;
+    }
+    print_report(&result.report, quiet, args.check);
+    Ok(result.report.exit_code())
+}
+
+fn print_report(report: &Report, json: bool, check: bool) {
     let mut out = std::io::stdout().lock();
-    if quiet {
+    if json {
         let _ = writeln!(
             out,
             "{}",
-            serde_json::to_string_pretty(&report).unwrap_or_default()
+            serde_json::to_string_pretty(report).unwrap_or_default()
+        );
+        return;
+    }
+    let p = &report.final_pose;
+    let what = if check { "checked" } else { "ran" };
+    let _ = writeln!(
+        out,
+        "{}: {} ({what}) on {} — {} of {} blocks in {:.3} s{}, state {}",
+        report.program,
+        report.result,
+        report.machine,
+        report.blocks_executed,
+        report.blocks_sent,
+        report.run_time_s,
+        if check { " planned" } else { "" },
+        report.final_state
+    );
+    let _ = writeln!(
+        out,
+        "final pose X {:.4} Y {:.4} Z {:.4} A {:.4} B {:.4} C {:.4}",
+        p["x"], p["y"], p["z"], p["a"], p["b"], p["c"]
+    );
+    if let Some(steps) = &report.final_joint_steps {
+        let _ = writeln!(
+            out,
+            "drive positions (steps): {steps:?}; timing violations: {}",
+            report.drive_violations.unwrap_or(0)
+        );
+    }
+    if let Some(f) = &report.faults {
+        let (a, b) = (&f.to_controller, &f.to_host);
+        let _ = writeln!(
+            out,
+            "line faults at {}: corrupted {} dropped {} duplicated {} bytes; frames damaged {}, undetected {}; \
+             {} Naks, {} blocks resent",
+            f.rate,
+            a.corrupted + b.corrupted,
+            a.dropped + b.dropped,
+            a.duplicated + b.duplicated,
+            a.frames_damaged + b.frames_damaged,
+            a.undetected + b.undetected,
+            report.link.naks,
+            report.link.resent
+        );
+    }
+    for a in &report.alarms {
+        let _ = writeln!(out, "ALARM: {a}");
+    }
+}
+
+fn axis_index(name: &str) -> Result<usize, Failure> {
+    let upper = name.to_ascii_uppercase();
+    AXIS_NAMES
+        .iter()
+        .position(|a| upper == a.to_string())
+        .ok_or_else(|| bad(format!("jog: unknown axis {name:?} (X Y Z A B C)")))
+}
+
+fn pose_text(s: &Status) -> String {
+    (0..6)
+        .map(|i| {
+            format!(
+                "{} {:.4}",
+                AXIS_NAMES[i],
+                to_user(s.pose[i], axis_is_rotary(i))
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+fn status_json(s: &Status, machine: &MachineConfig, result: &str) -> serde_json::Value {
+    let pose: serde_json::Map<String, serde_json::Value> = (0..6)
+        .map(|i| {
+            (
+                AXIS_NAMES[i].to_ascii_lowercase().to_string(),
+                to_user(s.pose[i], axis_is_rotary(i)).into(),
+            )
+        })
+        .collect();
+    let joints: Vec<f64> = machine
+        .joints
+        .iter()
+        .enumerate()
+        .map(|(j, jc)| to_user(s.joints[j], jc.rotary))
+        .collect();
+    serde_json::json!({
+        "result": result,
+        "state": format!("{:?}", s.state),
+        "line": s.line,
+        "pose": pose,
+        "joints": joints,
+        "feed_mm_min": s.speed as f64 * 60.0 / 1e6,
+        "feed_override": s.feed_override,
+        "buffered_ms": s.buffered_ms,
+        "free_slots": s.free_slots,
+        "alarm": s.alarm.map(|a| job::describe_alarm(&a)),
+    })
+}
+
+fn command(
+    args: &Args,
+    cmd: &Command,
+    machine: &MachineConfig,
+    opts: &RunOptions<'_>,
+    interrupts: Interrupts,
+) -> Result<i32, Failure> {
+    let quiet = args.report.is_some();
+    let mut op = Operator::new(Progress::new(Style::Quiet, 0), interrupts, None);
+    let (status, result, code, extra) = job::with_link(machine, opts, |link| {
+        let (end, extra) = match cmd {
+            Command::Status => (JobEnd::Done, None),
+            Command::Reset => {
+                link.control(Control::AlarmReset)?;
+                (JobEnd::Done, None)
+            }
+            Command::Home => (job::move_and_wait(link, Control::Home, &mut op)?, None),
+            Command::Jog {
+                axis,
+                distance,
+                feed,
+            } => {
+                let i = axis_index(axis)?;
+                let rotary = axis_is_rotary(i);
+                let scale = pkmc::units::units_per_user(rotary) as f64;
+                if feed.is_nan() || *feed <= 0.0 {
+                    return Err(bad("jog: --feed must be positive"));
+                }
+                let cmd = Control::Jog {
+                    axis: i as u8,
+                    distance: (distance * scale).round() as i64,
+                    feed: (feed / 60.0 * scale).round() as i64,
+                };
+                (job::move_and_wait(link, cmd, &mut op)?, None)
+            }
+            Command::Mdi { line } => {
+                let (blocks, end) = job::mdi(link, machine, line, &mut op)?;
+                (end, Some(blocks.len()))
+            }
+        };
+        let status = link.request_status()?;
+        let (result, code) = match &end {
+            JobEnd::Done if matches!(cmd, Command::Reset) && status.alarm.is_some() => {
+                ("alarm", exit::ALARM)
+            }
+            JobEnd::Done => ("done", exit::OK),
+            JobEnd::Alarm(_) => ("alarm", exit::ALARM),
+            JobEnd::Aborted => ("aborted", exit::STOPPED),
+            JobEnd::Stopped => ("stopped", exit::STOPPED),
+        };
+        Ok((status, result, code, extra))
+    })?;
+    let mut out = std::io::stdout().lock();
+    if quiet {
+        let mut v = status_json(&status, machine, result);
+        if let Some(n) = extra {
+            v["blocks_sent"] = n.into();
+        }
+        let _ = writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(&v).unwrap_or_default()
         );
     } else {
-        let p = &report.final_pose;
         let _ = writeln!(
             out,
-            "{}: {} on {} — {} of {} blocks in {:.3} s, state {}",
-            report.program,
-            report.result,
-            report.machine,
-            report.blocks_executed,
-            report.blocks_sent,
-            report.run_time_s,
-            report.final_state
+            "{:?}, line {}, {}, feed {:.0} mm/min, override {}%",
+            status.state,
+            status.line,
+            pose_text(&status),
+            status.speed as f64 * 60.0 / 1e6,
+            status.feed_override
         );
-        let _ = writeln!(
-            out,
-            "final pose X {:.4} Y {:.4} Z {:.4} A {:.4} B {:.4} C {:.4}",
-            p["x"], p["y"], p["z"], p["a"], p["b"], p["c"]
-        );
-        if let Some(steps) = &report.final_joint_steps {
-            let _ = writeln!(
-                out,
-                "drive positions (steps): {steps:?}; timing violations: {}",
-                report.drive_violations.unwrap_or(0)
-            );
-        }
-        for a in &report.alarms {
-            let _ = writeln!(out, "ALARM: {a}");
+        if let Some(a) = status.alarm {
+            let _ = writeln!(out, "ALARM: {}", job::describe_alarm(&a));
         }
     }
     Ok(code)

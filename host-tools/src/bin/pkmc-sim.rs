@@ -1,7 +1,9 @@
 //! `pkmc-sim`: the simulated controller on a pseudo-terminal, for `nc-send --port`.
-//! Prints the port to open, then serves until interrupted.
+//! Prints the port to open, then serves until interrupted. `--link-faults RATE`
+//! puts the faulty line of `pkmc_host::faults` between the port and the controller.
 
 use clap::Parser;
+use pkmc_host::faults::{FaultConfig, FaultyLine};
 use serialport::SerialPort;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
@@ -17,6 +19,22 @@ struct Args {
     /// at start, and a machine sent by the host is stored there.
     #[arg(long, value_name = "FILE")]
     flash: Option<PathBuf>,
+    /// Corrupt, drop or duplicate each byte on the line with this probability (both
+    /// directions).
+    #[arg(long, value_name = "RATE", value_parser = parse_rate)]
+    link_faults: Option<f64>,
+    /// Seed of the fault generator.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+fn parse_rate(s: &str) -> Result<f64, String> {
+    let r: f64 = s.parse().map_err(|e| format!("{s}: {e}"))?;
+    if (0.0..=1.0).contains(&r) {
+        Ok(r)
+    } else {
+        Err(format!("{s}: a rate is between 0 and 1"))
+    }
 }
 
 fn main() -> anyhow::Result<()> {
@@ -35,5 +53,9 @@ fn main() -> anyhow::Result<()> {
     let (mut master, slave) = serialport::TTYPort::pair()?;
     println!("{}", slave.name().unwrap_or_default());
     let stop = AtomicBool::new(false);
-    pkmc_host::link::serve(&mut sim, &mut master, &stop)
+    let mut line = args
+        .link_faults
+        .map(|rate| FaultyLine::new(FaultConfig::new(rate, args.seed)));
+    pkmc_host::link::serve(&mut sim, &mut master, &stop, line.as_mut(), &mut |_| {})?;
+    Ok(())
 }

@@ -1,0 +1,147 @@
+//! The link on a faulty line, end to end: `nc-send --sim --link-faults` corrupts, drops
+//! and duplicates bytes between the pseudo-terminal and the simulated controller, and
+//! the job must end exactly as on a clean line, with no damaged frame accepted and no
+//! block lost or executed twice.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn nc_send(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_nc-send"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("nc-send runs")
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "not JSON ({e}): {}\nstderr: {}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        )
+    })
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("pkmc-link-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+/// A spiral of `n` short feed moves, each on its own numbered line, long enough (a few
+/// ms each) that every line shows in the simulator's per-tick record.
+fn spiral(n: usize) -> String {
+    let mut p = String::from("G21 G90\nG0 X20 Y10 Z2\nG1 F1200\n");
+    for i in 0..n {
+        let a = i as f64 * 0.1;
+        let r = 10.0 + i as f64 * 0.01;
+        p += &format!(
+            "X{:.3} Y{:.3} Z{:.3}\n",
+            20.0 + r * a.cos(),
+            20.0 + r * a.sin(),
+            2.0 + (i % 7) as f64 * 0.1
+        );
+    }
+    p + "M2\n"
+}
+
+fn run(program: &Path, extra: &[&str]) -> serde_json::Value {
+    let mut args = vec!["--sim", "--report", "json"];
+    args.extend_from_slice(extra);
+    args.push(program.to_str().unwrap());
+    let out = nc_send(&args);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    json(&out)
+}
+
+#[test]
+fn a_job_on_a_line_with_one_percent_faults_ends_exactly_as_on_a_clean_line() {
+    let program = tmp("spiral.ngc");
+    std::fs::write(&program, spiral(400)).unwrap();
+    let clean = run(&program, &[]);
+    let faulty = run(&program, &["--link-faults", "0.01", "--seed", "7"]);
+
+    // Same final state.
+    for key in [
+        "result",
+        "final_state",
+        "final_pose",
+        "final_joints",
+        "final_joint_steps",
+        "blocks_sent",
+        "blocks_executed",
+        "drive_violations",
+    ] {
+        assert_eq!(clean[key], faulty[key], "{key} differs");
+    }
+    assert_eq!(faulty["drive_violations"], 0);
+    // No block lost or executed twice: every block once, the NC lines in order.
+    let blocks = faulty["blocks_sent"].as_u64().unwrap();
+    assert_eq!(faulty["blocks_executed"].as_u64(), Some(blocks));
+    assert_eq!(faulty["lines_executed"]["count"].as_u64(), Some(blocks));
+    assert_eq!(clean["lines_executed"], faulty["lines_executed"]);
+
+    // The faults really happened, in both directions, of every kind.
+    let f = &faulty["faults"];
+    for dir in ["to_controller", "to_host"] {
+        for kind in ["corrupted", "dropped", "duplicated", "frames_damaged"] {
+            assert!(f[dir][kind].as_u64().unwrap() > 0, "{dir}.{kind}: {f}");
+        }
+        // Every damaged frame was detected: each frame a receiver accepted is
+        // byte-identical to one its sender sent.
+        assert_eq!(f[dir]["undetected"], 0, "{dir}: {f}");
+    }
+    // The client saw Naks and resent blocks; the controller counted corrupt frames.
+    let link = &faulty["link"];
+    assert!(link["naks"].as_u64().unwrap() > 0, "{link}");
+    assert!(link["resent"].as_u64().unwrap() > 0, "{link}");
+    assert!(link["corrupt_received"].as_u64().unwrap() > 0, "{link}");
+    assert!(faulty["controller_corrupt_frames"].as_u64().unwrap() > 0);
+    // The clean run needed none of that.
+    assert_eq!(clean["link"]["naks"], 0);
+    assert_eq!(clean["link"]["resent"], 0);
+    assert_eq!(clean["faults"], serde_json::Value::Null);
+}
+
+#[test]
+fn a_program_of_executed_lines_matches_the_program_in_order() {
+    let program = tmp("short.ngc");
+    std::fs::write(&program, spiral(30)).unwrap();
+    let r = run(&program, &["--link-faults", "0.02", "--seed", "11"]);
+    // 30 feed moves plus the rapid, on lines 2 and 4..=33.
+    let mut lines: Vec<u32> = vec![2];
+    lines.extend(4..34);
+    let expected = pkmc_host::plot::lines_digest(&lines);
+    assert_eq!(r["lines_executed"]["digest"], expected.as_str(), "{r}");
+}
+
+#[test]
+fn a_line_that_goes_dead_mid_job_is_reported_as_link_loss() {
+    let program = tmp("cut.ngc");
+    std::fs::write(&program, spiral(200)).unwrap();
+    let out = nc_send(&[
+        "--sim",
+        "--link-cut-after",
+        "3000",
+        "--link-timeout",
+        "1",
+        program.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(4));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("link lost: no answer from the controller for"),
+        "{err}"
+    );
+}
