@@ -12,6 +12,7 @@ pub mod gcode;
 pub mod job;
 pub mod link;
 pub mod machine_file;
+pub mod preflight;
 pub mod plot;
 pub mod progress;
 pub mod sim;
