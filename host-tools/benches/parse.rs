@@ -7,7 +7,7 @@
 //! (ours / theirs); skips with a message when the corpus is absent.
 //! `PARSE_BENCH_PROFILE=arcspiral.ngc` runs only our compile on that file for about
 //! three seconds, for a profiler. Each figure is the
-//! best of several timed rounds of many repetitions (at least `MIN_ROUND` each).
+//! best of several timed rounds (interleaved between the two parsers) of many repetitions (at least `MIN_ROUND` each).
 
 use gcode::core::{
     BlockVisitor, CommandVisitor, ControlFlow, Diagnostics, Number, ProgramVisitor, Span,
@@ -21,7 +21,7 @@ use std::time::{Duration, Instant};
 /// Shortest timed round.
 const MIN_ROUND: Duration = Duration::from_millis(300);
 /// Rounds per measurement (the best is kept).
-const ROUNDS: usize = 5;
+const ROUNDS: usize = 7;
 /// The programs compared.
 const FILES: [&str; 2] = ["arcspiral.ngc", "3D_Chips.ngc"];
 

@@ -697,12 +697,14 @@ impl<'o> Interp<'o> {
     }
 
     /// Length word in the units in force → nm, bounded.
+    #[inline]
     pub(crate) fn length(&self, w: Word) -> Res<i64> {
         let per = if self.inch { NM_PER_INCH } else { NM_PER_MM };
         bounded(w.num.scaled(per, 1), w)
     }
 
     /// Axis word `i` → axis units (nm, or n° for A B C), bounded.
+    #[inline]
     pub(crate) fn axis_value(&self, i: usize, w: Word) -> Res<i64> {
         if i >= 3 {
             bounded(w.num.scaled(NDEG_PER_DEG, 1), w)
@@ -1115,6 +1117,7 @@ fn to_user(v: i64, i: usize) -> f64 {
 }
 
 /// Rounds an `f64` position to axis units, bounded.
+#[inline]
 fn pkmc_round(v: f64, col: u32) -> Res<i64> {
     match super::lexer::f64_to_i64(v) {
         Some(u) if u.abs() <= MAX_AXIS_UNITS => Ok(u),
@@ -1122,6 +1125,7 @@ fn pkmc_round(v: f64, col: u32) -> Res<i64> {
     }
 }
 
+#[inline]
 fn bounded(v: Option<i64>, w: Word) -> Res<i64> {
     match v {
         Some(u) if u.abs() <= MAX_AXIS_UNITS => Ok(u),
@@ -1130,6 +1134,7 @@ fn bounded(v: Option<i64>, w: Word) -> Res<i64> {
 }
 
 /// A position for axis `i` inside the bounds.
+#[inline]
 pub(crate) fn check_range(v: i64, i: usize, col: u32) -> Res<i64> {
     if v.abs() <= MAX_AXIS_UNITS {
         Ok(v)

@@ -66,6 +66,7 @@ pub enum Num {
 
 impl Num {
     /// The value as `f64`.
+    #[inline]
     pub fn to_f64(self) -> f64 {
         match self {
             Num::Lit { mant, scale } => mant as f64 / POW10[scale as usize] as f64,
@@ -75,6 +76,7 @@ impl Num {
 
     /// `self × num / den` rounded to the nearest integer (ties away from zero), or
     /// `None` when that does not fit an `i64`. `den > 0`.
+    #[inline]
     pub fn scaled(self, num: i64, den: i64) -> Option<i64> {
         match self {
             Num::Lit { mant, scale } => {
@@ -215,6 +217,7 @@ fn div_round_pow10(n: i64, scale: u32) -> i64 {
 
 /// Rounds a finite `f64` to the nearest `i64` (ties away from zero), or `None` when it
 /// is not finite or out of range.
+#[inline]
 pub(crate) fn f64_to_i64(v: f64) -> Option<i64> {
     // 2^63 is exactly representable; everything strictly inside converts. Rounding by
     // hand avoids a libm call on baseline x86-64.
@@ -742,38 +745,34 @@ impl Cursor<'_> {
             negative = s == b'-';
             self.i += 1;
         }
-        // At most 18 significant digits: they fit an i64 without overflow checks.
-        let (mut mant, mut scale, mut digits, mut significant, mut point) =
-            (0i64, 0u32, 0u32, 0u32, false);
-        while let Some(&c) = self.b.get(self.i) {
-            match c {
-                b'0'..=b'9' => {
-                    digits += 1;
-                    if mant != 0 || c != b'0' {
-                        significant += 1;
-                        if significant > 18 {
-                            return Err(self.err(start, "number with too many digits"));
-                        }
-                    }
-                    mant = mant * 10 + i64::from(c - b'0');
-                    if point {
-                        scale += 1;
-                        if scale > MAX_DECIMALS {
-                            return Err(self.err(
-                                start,
-                                format!("number with more than {MAX_DECIMALS} decimals"),
-                            ));
-                        }
-                    }
+        // The mantissa stays below 10^18 (18 significant digits), so it never overflows.
+        const MANT_LIMIT: i64 = 99_999_999_999_999_999;
+        let (mut mant, mut digits, mut point_at) = (0i64, 0u32, None);
+        loop {
+            while let Some(&c @ b'0'..=b'9') = self.b.get(self.i) {
+                if mant > MANT_LIMIT {
+                    return Err(self.err(start, "number with too many digits"));
                 }
-                b'.' if !point => point = true,
-                b'.' => {
+                mant = mant * 10 + i64::from(c - b'0');
+                digits += 1;
+                self.i += 1;
+            }
+            match self.b.get(self.i) {
+                Some(b'.') if point_at.is_none() => point_at = Some(digits),
+                Some(b'.') => {
                     return Err(self.err(col_at.min(start), "malformed number (two decimal points)"))
                 }
-                b' ' | b'\t' => {}
+                Some(b' ' | b'\t') => {}
                 _ => break,
             }
             self.i += 1;
+        }
+        let scale = point_at.map_or(0, |p| digits - p);
+        if scale > MAX_DECIMALS {
+            return Err(self.err(
+                start,
+                format!("number with more than {MAX_DECIMALS} decimals"),
+            ));
         }
         if digits == 0 {
             return Err(self.err(start, "malformed number (no digits)"));
