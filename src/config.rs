@@ -127,6 +127,196 @@ pub enum Drive {
     },
 }
 
+/// Gains, limits and output stage of one servo channel's position loop, run every
+/// servo period by [`crate::servo::ServoAxis`] (PID on the following error plus velocity
+/// and acceleration feed-forward, LinuxCNC `pid` style).
+///
+/// "Command units" (c.u.) are the amplifier's input unit, chosen per machine (volts,
+/// or the identified model's "command pulses"); [`dac_per_unit`](Self::dac_per_unit)
+/// turns them into DAC counts. Gains are `f32` because the loop runs in single
+/// precision on the Cortex-M4F FPU (see [`crate::servo`]); equality compares bits.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+pub struct ServoGains {
+    /// Proportional gain, c.u. per encoder count of following error.
+    pub kp: f32,
+    /// Integral gain, c.u. per (count · s).
+    pub ki: f32,
+    /// Derivative gain, c.u. per (count/s) of error rate.
+    pub kd: f32,
+    /// Velocity feed-forward, c.u. per (count/s) of commanded velocity.
+    pub kvff: f32,
+    /// Acceleration feed-forward, c.u. per (count/s²) of commanded acceleration.
+    pub kaff: f32,
+    /// Output clamp, ± c.u.
+    pub max_output: f32,
+    /// Integrator clamp, ± c.u.
+    pub max_integral: f32,
+    /// DAC counts per c.u.; negative reverses the output.
+    pub dac_per_unit: f32,
+    /// DAC counts added to mid-scale (amplifier offset trim).
+    pub dac_offset: i16,
+    /// Following-error limit at the joint's maximum speed, counts (LinuxCNC `FERROR`).
+    pub ferror: u32,
+    /// Following-error limit at standstill, counts (LinuxCNC `MIN_FERROR`).
+    pub min_ferror: u32,
+}
+
+impl ServoGains {
+    /// An unused channel: no gain, no output.
+    pub const NONE: ServoGains = ServoGains {
+        kp: 0.0,
+        ki: 0.0,
+        kd: 0.0,
+        kvff: 0.0,
+        kaff: 0.0,
+        max_output: 0.0,
+        max_integral: 0.0,
+        dac_per_unit: 1.0,
+        dac_offset: 0,
+        ferror: 0,
+        min_ferror: 0,
+    };
+
+    fn bits(&self) -> [u32; 11] {
+        [
+            self.kp.to_bits(),
+            self.ki.to_bits(),
+            self.kd.to_bits(),
+            self.kvff.to_bits(),
+            self.kaff.to_bits(),
+            self.max_output.to_bits(),
+            self.max_integral.to_bits(),
+            self.dac_per_unit.to_bits(),
+            self.dac_offset as u32,
+            self.ferror,
+            self.min_ferror,
+        ]
+    }
+
+    /// Are the gains usable: finite, non-negative limits, a non-zero DAC scale and
+    /// `min_ferror <= ferror`? ([`ServoGains::NONE`] is: an idle loop whose output
+    /// stays at zero; `ferror == 0` turns the following-error check off.)
+    pub fn is_valid(&self) -> bool {
+        let finite = [
+            self.kp,
+            self.ki,
+            self.kd,
+            self.kvff,
+            self.kaff,
+            self.max_output,
+            self.max_integral,
+            self.dac_per_unit,
+        ]
+        .iter()
+        .all(|v| v.is_finite());
+        finite
+            && self.max_output >= 0.0
+            && self.max_integral >= 0.0
+            && self.dac_per_unit != 0.0
+            && self.min_ferror <= self.ferror
+    }
+}
+
+impl PartialEq for ServoGains {
+    fn eq(&self, other: &Self) -> bool {
+        self.bits() == other.bits()
+    }
+}
+impl Eq for ServoGains {}
+
+/// How the servo loops of the linear Cartesian axes are coordinated ([`crate::contour`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ContourMode {
+    /// Each axis on its own (the per-axis feed-forward still applies).
+    Uncoupled,
+    /// Cross-coupled control (Koren 1980; Koren and Lo 1991): the estimated contour
+    /// error through a PI, distributed to the axes' commands by the direction cosines.
+    CrossCoupled,
+    /// Cross-coupling pre-compensation method (report B, §3.5): cross-coupled control
+    /// plus the contour error fed back as an offset of every axis' reference, on top of
+    /// the per-axis velocity pre-compensation (feed-forward).
+    Ccpm,
+}
+
+/// Contour-control settings. Contour errors are in mm (the coupled axes are X Y Z).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+pub struct ContourConfig {
+    /// Which scheme.
+    pub mode: ContourMode,
+    /// Cross-coupled proportional gain, c.u. per mm of contour error.
+    pub kp: f32,
+    /// Cross-coupled integral gain, c.u. per (mm · s).
+    pub ki: f32,
+    /// Cross-coupled integrator clamp, ± c.u. per axis.
+    pub max_integral: f32,
+    /// CCPM reference pre-compensation rate, 1/s: the reference offset grows by
+    /// `kr · ε · dt` each servo period.
+    pub kr: f32,
+    /// CCPM reference offset clamp, ± mm per axis.
+    pub max_offset: f32,
+}
+
+impl ContourConfig {
+    /// No coupling.
+    pub const UNCOUPLED: ContourConfig = ContourConfig {
+        mode: ContourMode::Uncoupled,
+        kp: 0.0,
+        ki: 0.0,
+        max_integral: 0.0,
+        kr: 0.0,
+        max_offset: 0.0,
+    };
+
+    fn bits(&self) -> [u32; 5] {
+        [
+            self.kp.to_bits(),
+            self.ki.to_bits(),
+            self.max_integral.to_bits(),
+            self.kr.to_bits(),
+            self.max_offset.to_bits(),
+        ]
+    }
+
+    /// Are the gains finite and the clamps non-negative?
+    pub fn is_valid(&self) -> bool {
+        [
+            self.kp,
+            self.ki,
+            self.max_integral,
+            self.kr,
+            self.max_offset,
+        ]
+        .iter()
+        .all(|v| v.is_finite())
+            && self.max_integral >= 0.0
+            && self.max_offset >= 0.0
+    }
+}
+
+impl PartialEq for ContourConfig {
+    fn eq(&self, other: &Self) -> bool {
+        self.mode == other.mode && self.bits() == other.bits()
+    }
+}
+impl Eq for ContourConfig {}
+
+/// Servo settings of the machine: the loop of each servo channel and their coupling.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ServoConfig {
+    /// Loop of each servo channel, indexed by `Drive::Servo::channel`.
+    pub gains: [ServoGains; MAX_SERVOS],
+    /// Coupling of the channels that drive the X, Y and Z axes.
+    pub contour: ContourConfig,
+}
+
+impl ServoConfig {
+    /// No servo channels in use.
+    pub const NONE: ServoConfig = ServoConfig {
+        gains: [ServoGains::NONE; MAX_SERVOS],
+        contour: ContourConfig::UNCOUPLED,
+    };
+}
+
 /// One joint: its drive, scale, travel and limits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct JointConfig {
@@ -312,6 +502,8 @@ pub struct MachineConfig {
     pub axes: [Limits; AXES],
     /// Home pose, axis units: where the controller starts.
     pub home: [i64; AXES],
+    /// Servo loops and contour control ([`ServoConfig::NONE`] without servo joints).
+    pub servo: ServoConfig,
 }
 
 /// Why a machine configuration was refused; each variant names the field.
@@ -366,6 +558,14 @@ pub enum ConfigError {
         /// The offending field.
         field: GeometryField,
     },
+    /// `servo.gains[channel]` of a channel in use is not finite, has a negative limit,
+    /// a zero DAC scale or `min_ferror > ferror`.
+    ServoGains {
+        /// Servo channel, 0-based.
+        channel: u8,
+    },
+    /// `servo.contour` has a bad gain, or couples axes of a non-Cartesian machine.
+    Contour,
 }
 
 impl MachineConfig {
@@ -421,6 +621,9 @@ impl MachineConfig {
                         return Err(ConfigError::JointChannel { joint });
                     }
                     servos_used |= bit;
+                    if !self.servo.gains[channel as usize].is_valid() {
+                        return Err(ConfigError::ServoGains { channel });
+                    }
                 }
             }
         }
@@ -435,6 +638,11 @@ impl MachineConfig {
             }
             KinematicsConfig::H4Table(g) => g.check(&self.joints)?,
             KinematicsConfig::Hexapod(g) => g.check(&self.joints)?,
+        }
+        let contour = &self.servo.contour;
+        let cartesian = matches!(self.kinematics, KinematicsConfig::Cartesian { .. });
+        if !contour.is_valid() || (contour.mode != ContourMode::Uncoupled && !cartesian) {
+            return Err(ConfigError::Contour);
         }
         Ok(())
     }
@@ -478,6 +686,7 @@ impl MachineConfig {
             joints,
             axes: [limits, limits, limits, none, none, none],
             home: [0; AXES],
+            servo: ServoConfig::NONE,
         }
     }
 
@@ -564,6 +773,7 @@ impl MachineConfig {
             joints,
             axes: [linear, linear, linear, rotary, none, rotary],
             home: [0, 0, -80 * mm, 0, 0, 0],
+            servo: ServoConfig::NONE,
         }
     }
 
@@ -626,6 +836,7 @@ impl MachineConfig {
             joints,
             axes: [linear, linear, linear, rotary, rotary, rotary],
             home: [0, 0, 450 * mm, 0, 0, 0],
+            servo: ServoConfig::NONE,
         }
     }
 }

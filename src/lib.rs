@@ -16,6 +16,7 @@
 
 pub mod cobs;
 pub mod config;
+pub mod contour;
 pub mod controller;
 pub mod crc;
 pub mod fixed;

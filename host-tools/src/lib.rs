@@ -6,12 +6,14 @@
 
 pub mod blocks;
 pub mod canon;
+pub mod contour_study;
 pub mod discover;
 pub mod faults;
 pub mod gcode;
 pub mod job;
 pub mod link;
 pub mod machine_file;
+pub mod plant;
 pub mod preflight;
 pub mod plot;
 pub mod progress;

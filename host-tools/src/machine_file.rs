@@ -7,8 +7,8 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use pkmc::config::{
-    Drive, JointConfig, KinematicsConfig, Limits, MachineConfig, Scale, StepTiming, AXES,
-    AXIS_NAMES, MAX_JOINTS,
+    Drive, JointConfig, KinematicsConfig, Limits, MachineConfig, Scale, ServoConfig, ServoGains,
+    StepTiming, AXES, AXIS_NAMES, MAX_JOINTS,
 };
 use pkmc::units::units_per_user;
 use serde::Deserialize;
@@ -75,6 +75,90 @@ pub struct JointFile {
     pub kvff: Option<f64>,
     /// Servo: output clamp, ± DAC counts.
     pub out_limit: Option<i32>,
+    /// Servo: the 10 kHz loop's gains ([`pkmc::servo`]); the loop idles without them.
+    pub servo: Option<ServoFile>,
+    /// Servo: the plant's transfer function, for simulation ([`crate::plant`]).
+    pub plant: Option<crate::plant::PlantFile>,
+}
+
+/// A servo joint's `servo = { ... }` table: [`pkmc::config::ServoGains`] in file units
+/// (c.u. = the amplifier's command unit, counts = encoder counts).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ServoFile {
+    /// c.u. per count of following error.
+    pub kp: f32,
+    /// c.u. per (count · s).
+    #[serde(default)]
+    pub ki: f32,
+    /// c.u. per (count/s).
+    #[serde(default)]
+    pub kd: f32,
+    /// Velocity feed-forward, c.u. per (count/s).
+    #[serde(default)]
+    pub kvff: f32,
+    /// Acceleration feed-forward, c.u. per (count/s²).
+    #[serde(default)]
+    pub kaff: f32,
+    /// Output clamp, ± c.u.
+    pub max_output: f32,
+    /// Integrator clamp, ± c.u. (defaults to `max_output`).
+    pub max_integral: Option<f32>,
+    /// DAC counts per c.u. (negative reverses).
+    pub dac_per_unit: f32,
+    /// DAC offset trim, counts.
+    #[serde(default)]
+    pub dac_offset: i16,
+    /// Following-error limit at full speed, mm or degrees.
+    pub ferror: f64,
+    /// Following-error limit at standstill, mm or degrees.
+    pub min_ferror: f64,
+}
+
+/// The `[contour]` table: [`pkmc::config::ContourConfig`].
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContourFile {
+    /// "uncoupled", "cross-coupled" or "ccpm".
+    pub mode: String,
+    /// Cross-coupled P gain, c.u. per mm of contour error.
+    #[serde(default)]
+    pub kp: f32,
+    /// Cross-coupled I gain, c.u. per (mm · s).
+    #[serde(default)]
+    pub ki: f32,
+    /// Cross-coupled integrator clamp, ± c.u.
+    #[serde(default)]
+    pub max_integral: f32,
+    /// CCPM reference pre-compensation rate, 1/s.
+    #[serde(default)]
+    pub kr: f32,
+    /// CCPM reference offset clamp, ± mm.
+    #[serde(default)]
+    pub max_offset: f32,
+}
+
+impl ContourFile {
+    /// The core form.
+    pub fn to_config(&self) -> Result<pkmc::config::ContourConfig> {
+        use pkmc::config::ContourMode;
+        let mode = match self.mode.as_str() {
+            "uncoupled" => ContourMode::Uncoupled,
+            "cross-coupled" => ContourMode::CrossCoupled,
+            "ccpm" => ContourMode::Ccpm,
+            other => bail!(
+                "contour.mode: unknown mode {other:?} (expected \"uncoupled\", \"cross-coupled\" or \"ccpm\")"
+            ),
+        };
+        Ok(pkmc::config::ContourConfig {
+            mode,
+            kp: self.kp,
+            ki: self.ki,
+            max_integral: self.max_integral,
+            kr: self.kr,
+            max_offset: self.max_offset,
+        })
+    }
 }
 
 /// A machine file.
@@ -92,6 +176,8 @@ pub struct MachineFile {
     pub axes: BTreeMap<String, LimitsFile>,
     /// Joints q1..qN.
     pub joints: Vec<JointFile>,
+    /// Contour control of the servo axes; uncoupled when absent.
+    pub contour: Option<ContourFile>,
 }
 
 fn positive(v: f64, field: &str) -> Result<f64> {
@@ -154,6 +240,10 @@ impl MachineFile {
             );
         }
         let mut joints = heapless::Vec::new();
+        let mut servo = ServoConfig::NONE;
+        if let Some(c) = &self.contour {
+            servo.contour = c.to_config()?;
+        }
         let mut axis_of_joint = [0u8; MAX_JOINTS];
         for (j, jf) in self.joints.iter().enumerate() {
             let f = |s: &str| format!("joints[{j}] ({}).{s}", jf.name);
@@ -182,6 +272,7 @@ impl MachineFile {
                     channel: jf.channel,
                     kp_q16: (jf
                         .kp
+                        .or(jf.servo.as_ref().map(|s| (s.kp * s.dac_per_unit) as f64))
                         .ok_or_else(|| anyhow!("{}: a servo joint needs kp", f("kp")))?
                         * 65536.0)
                         .round() as i32,
@@ -197,6 +288,25 @@ impl MachineFile {
                 axis_of_joint[j] = axis_index(a, &f("axis"))? as u8;
             } else if self.kinematics == "cartesian" {
                 bail!("{}: a Cartesian joint needs the axis it follows", f("axis"));
+            }
+            if let (Drive::Servo { channel, .. }, Some(sf)) = (drive, &jf.servo) {
+                let counts = per_unit; // counts per mm or degree
+                let gains = ServoGains {
+                    kp: sf.kp,
+                    ki: sf.ki,
+                    kd: sf.kd,
+                    kvff: sf.kvff,
+                    kaff: sf.kaff,
+                    max_output: sf.max_output,
+                    max_integral: sf.max_integral.unwrap_or(sf.max_output),
+                    dac_per_unit: sf.dac_per_unit,
+                    dac_offset: sf.dac_offset,
+                    ferror: (sf.ferror * counts).round().clamp(0.0, u32::MAX as f64) as u32,
+                    min_ferror: (sf.min_ferror * counts).round().clamp(0.0, u32::MAX as f64) as u32,
+                };
+                if let Some(g) = servo.gains.get_mut(channel as usize) {
+                    *g = gains;
+                }
             }
             let _ = joints.push(JointConfig {
                 drive,
@@ -230,6 +340,7 @@ impl MachineFile {
             joints,
             axes,
             home,
+            servo,
         };
         config
             .validate()
@@ -266,6 +377,13 @@ pub fn describe(e: &pkmc::config::ConfigError, m: &MachineFile) -> String {
         }
         E::AxisLimits { axis } => format!("axes.{}: bad limits", AXIS_NAMES[*axis as usize]),
         E::HomeOutsideTravel { joint } => format!("home: outside the travel of {}", jn(joint)),
+        E::ServoGains { channel } => format!(
+            "servo channel {channel}: gains must be finite, limits non-negative, \
+             dac_per_unit non-zero and min_ferror <= ferror"
+        ),
+        E::Contour => "contour: gains must be finite, clamps non-negative, and coupling needs a \
+             Cartesian machine"
+            .into(),
         _ => format!("{e:?}"),
     }
 }
