@@ -18,8 +18,8 @@
 //!   stop precedes the moves and the blending mode is restored after them.
 //! - A B C may not move; inverse-time feed (G93) is refused; a feed (F) is required.
 //!
-//! Invariants: one line expands into at most [`MAX_CYCLE_REPEATS`] holes of at most
-//! [`MAX_PECKS`] pecks; every position stays within [`super::MAX_AXIS_UNITS`].
+//! Invariants: one line expands into at most [`MAX_CYCLE_REPEATS`] holes and at most
+//! [`MAX_PECKS`] pecks in all; every position stays within [`super::MAX_AXIS_UNITS`].
 //!
 //! Source: LinuxCNC G-code reference (canned cycles) and its interpreter's
 //! `interp_cycles.cc` (`convert_cycle_xy`, `CYCLE_MACRO`, `convert_cycle_g83`).
@@ -132,10 +132,12 @@ impl Interp<'_> {
                 ),
             );
         }
-        if matches!(kind, Cycle::G73 | Cycle::G83) && (r - bottom) / q.max(1) > MAX_PECKS {
+        if matches!(kind, Cycle::G73 | Cycle::G83)
+            && ((r - bottom) / q.max(1)).saturating_mul(repeats) > MAX_PECKS
+        {
             return fail(
                 col,
-                format!("{name} would peck more than {MAX_PECKS} times per hole"),
+                format!("{name} would peck more than {MAX_PECKS} times on one line"),
             );
         }
 

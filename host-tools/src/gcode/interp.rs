@@ -1202,7 +1202,6 @@ fn group_g(codes: &[Code]) -> Res<[Option<Code>; G_GROUPS]> {
             message: m,
         })?;
         if let Some(first) = g[group] {
-            let first: Code = first;
             return fail(
                 c.col,
                 format!(
@@ -1228,7 +1227,6 @@ fn group_m(codes: &[Code]) -> Res<[Option<Code>; M_GROUPS]> {
             message: msg,
         })?;
         if let Some(first) = m[group] {
-            let first: Code = first;
             let mist_and_flood =
                 group == COOLANT && matches!((first.tenths, c.tenths), (70, 80) | (80, 70));
             if !mist_and_flood {

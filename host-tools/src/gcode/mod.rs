@@ -51,9 +51,9 @@ pub const MAX_NESTING: usize = 32;
 /// Largest magnitude of any position, offset or distance, axis units (1e17 nm is
 /// 100 000 km; 1e17 n° is 10⁸ degrees). Sums of a few such values cannot overflow `i64`.
 pub const MAX_AXIS_UNITS: i64 = 100_000_000_000_000_000;
-/// Most repeats (L) of one canned-cycle line.
-pub const MAX_CYCLE_REPEATS: i64 = 10_000;
-/// Most pecks of one G73/G83 hole.
+/// Most repeats (L) of one canned-cycle line (bounds what one line expands into).
+pub const MAX_CYCLE_REPEATS: i64 = 1_000;
+/// Most pecks one G73/G83 line expands into, over all its repeats.
 pub const MAX_PECKS: i64 = 10_000;
 /// Default arc tolerance, nm: how far an arc's end may lie off the circle through its
 /// start (0.002 mm).
