@@ -1195,7 +1195,7 @@ fn first_col(w: &Words, mask: u32) -> u32 {
 
 /// G codes by modal group; conflicts and refusals are errors.
 fn group_g(codes: &[Code]) -> Res<[Option<Code>; G_GROUPS]> {
-    let mut g = [None; G_GROUPS];
+    let mut g: [Option<Code>; G_GROUPS] = [None; G_GROUPS];
     for &c in codes {
         let group = g_group(c.tenths).map_err(|m| LineError {
             col: c.col,
@@ -1220,7 +1220,7 @@ fn group_g(codes: &[Code]) -> Res<[Option<Code>; G_GROUPS]> {
 
 /// M codes by modal group (M7 and M8 may share a line).
 fn group_m(codes: &[Code]) -> Res<[Option<Code>; M_GROUPS]> {
-    let mut m = [None; M_GROUPS];
+    let mut m: [Option<Code>; M_GROUPS] = [None; M_GROUPS];
     for &c in codes {
         let group = m_group(c.tenths).map_err(|msg| LineError {
             col: c.col,
