@@ -410,6 +410,42 @@ impl StudyMachine {
     }
 }
 
+/// Loop figures of one axis's PID on a plant, from its frequency response with the
+/// servo's 1.5-period delay (hold plus computation): the peak sensitivity max|1/(1+L)|
+/// and the highest gain crossover, rad/s.
+pub fn loop_figures(tf: &TransferFunction, kp: f64, ki: f64, kd: f64) -> (f64, f64) {
+    let delay = 1.5 / SERVO_HZ as f64;
+    let (mut peak, mut crossover) = (0.0f64, 0.0f64);
+    let mut above = false;
+    for i in 0..=4000 {
+        let w = 10f64.powf(-1.0 + 5.3 * i as f64 / 4000.0);
+        let g = tf.at(w);
+        let (cr, ci) = (kp, kd * w - ki / w);
+        let (lr, li) = (cr * g.re - ci * g.im, cr * g.im + ci * g.re);
+        let (dc, ds) = ((w * delay).cos(), -(w * delay).sin());
+        let (lr, li) = (lr * dc - li * ds, lr * ds + li * dc);
+        let one_plus = ((1.0 + lr).powi(2) + li * li).sqrt();
+        peak = peak.max(1.0 / one_plus);
+        let over = (lr * lr + li * li).sqrt() > 1.0;
+        if above && !over {
+            crossover = w;
+        }
+        above = over;
+    }
+    (peak, crossover)
+}
+
+impl StudyMachine {
+    /// [`loop_figures`] of pose axis `axis` on its model and on its mismatched plant.
+    pub fn axis_figures(&self, axis: usize, m: Mismatch) -> [(f64, f64); 2] {
+        let (c, _, _, cpm, _, tf) = self.models.iter().find(|x| x.1 == axis).unwrap();
+        let g = &self.config.servo.gains[*c];
+        let k = |v: f32| v as f64 * cpm;
+        let f = |t: &TransferFunction| loop_figures(t, k(g.kp), k(g.ki), k(g.kd));
+        [f(tf), f(&tf.perturbed(m))]
+    }
+}
+
 /// The bundled study machine file.
 pub const SEED_B: &str = include_str!("../../examples/machines/seed-b.toml");
 

@@ -3,7 +3,7 @@
 
 use anyhow::Result;
 use clap::Parser;
-use pkmc_host::contour_study::{Conditions, Disturbance, Scheme, StudyMachine, SEED_B};
+use pkmc_host::contour_study::{Conditions, Disturbance, RunResult, Scheme, StudyMachine, SEED_B};
 use pkmc_host::machine_file::MachineFile;
 use pkmc_host::plant::Mismatch;
 use std::path::PathBuf;
@@ -32,6 +32,9 @@ struct Args {
     /// Cutting force: frequency, Hz.
     #[arg(long)]
     force_hz: Option<f64>,
+    /// Draws the contour error over time of the four controllers (PNG).
+    #[arg(long)]
+    plot: Option<PathBuf>,
     /// Writes every run's trace as CSV (t, contour error and X Y Z tracking errors, mm).
     #[arg(long)]
     csv: Option<PathBuf>,
@@ -65,6 +68,13 @@ fn main() -> Result<()> {
         c.lead_in_s = l;
     }
     println!("conditions: {c:?}");
+    for (axis, name) in ["X", "Y", "Z"].iter().enumerate() {
+        let [nominal, off] = machine.axis_figures(axis, c.mismatch[axis]);
+        println!(
+            "axis {name}: peak |S| {:.2} (model) {:.2} (plant); crossover {:.1} / {:.1} rad/s",
+            nominal.0, off.0, nominal.1, off.1
+        );
+    }
     let results: Vec<_> = Scheme::ALL.iter().map(|s| machine.run(*s, &c)).collect();
     let base = results[0].max_mm;
     println!("| controller | max contour error (um) | RMS (um) | max at (s) | max / uncoupled | max tracking (um) | saturated periods |");
@@ -84,6 +94,9 @@ fn main() -> Result<()> {
                 .map(|t| format!(" TRIP {t:?}"))
                 .unwrap_or_default()
         );
+    }
+    if let Some(path) = &args.plot {
+        plot(path, &results, &c)?;
     }
     if let Some(path) = &args.csv {
         use std::io::Write;
@@ -106,5 +119,88 @@ fn main() -> Result<()> {
             writeln!(f)?;
         }
     }
+    Ok(())
+}
+
+fn plot(path: &std::path::Path, results: &[RunResult], c: &Conditions) -> Result<()> {
+    use plotters::prelude::*;
+    let _ = plotters::style::register_font(
+        "sans-serif",
+        plotters::style::FontStyle::Normal,
+        dejavu::sans::regular(),
+    );
+    let fail = |e: String| anyhow::anyhow!("{}: cannot draw: {e}", path.display());
+    let root = BitMapBackend::new(path, (1400, 1000)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
+    let (top, bottom) = root.split_vertically(500);
+    let colours = [RED, BLUE, RGBColor(0, 150, 0), BLACK];
+    let end = c.duration_s;
+    let worst = results.iter().map(|r| r.max_mm * 1e3).fold(1.0, f64::max);
+    let caption = format!(
+        "Contour error on report B's helix, seed-b plants {} / cutting force {} + {} sin(2pi {} t) c.u.",
+        "10 % off", c.disturbance.mean, c.disturbance.amplitude, c.disturbance.freq_hz
+    );
+    {
+        let mut chart = ChartBuilder::on(&top)
+            .caption(&caption, ("sans-serif", 22))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..end, 0.0..worst * 1.05)
+            .map_err(|e| fail(e.to_string()))?;
+        chart
+            .configure_mesh()
+            .x_desc("t (s)")
+            .y_desc("contour error (um)")
+            .draw()
+            .map_err(|e| fail(e.to_string()))?;
+        for (r, col) in results.iter().zip(colours) {
+            chart
+                .draw_series(LineSeries::new(
+                    r.trace.iter().map(|(t, e)| (*t, e * 1e3)),
+                    col.stroke_width(1),
+                ))
+                .map_err(|e| fail(e.to_string()))?
+                .label(format!(
+                    "{}: max {:.2} um, RMS {:.2} um",
+                    r.scheme.name(),
+                    r.max_mm * 1e3,
+                    r.rms_mm * 1e3
+                ))
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], col.stroke_width(3)));
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 18))
+            .draw()
+            .map_err(|e| fail(e.to_string()))?;
+    }
+    {
+        let mut chart = ChartBuilder::on(&bottom)
+            .caption("same, logarithmic scale", ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..end, (0.01..worst * 2.0).log_scale())
+            .map_err(|e| fail(e.to_string()))?;
+        chart
+            .configure_mesh()
+            .x_desc("t (s)")
+            .y_desc("contour error (um)")
+            .draw()
+            .map_err(|e| fail(e.to_string()))?;
+        for (r, col) in results.iter().zip(colours) {
+            chart
+                .draw_series(LineSeries::new(
+                    r.trace.iter().map(|(t, e)| (*t, (e * 1e3).max(0.01))),
+                    col.stroke_width(1),
+                ))
+                .map_err(|e| fail(e.to_string()))?;
+        }
+    }
+    root.present().map_err(|e| fail(e.to_string()))?;
     Ok(())
 }
