@@ -504,6 +504,22 @@ pub struct MachineConfig {
     pub home: [i64; AXES],
     /// Servo loops and contour control ([`ServoConfig::NONE`] without servo joints).
     pub servo: ServoConfig,
+    /// Speed-profile shape.
+    pub motion: MotionConfig,
+}
+
+/// Shape of the speed profiles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MotionConfig {
+    /// Jerk limitation: the path distance is averaged over this many ticks (a power
+    /// of two, at most [`crate::interp::MAX_WINDOW`]); 1 gives plain trapezoids. With
+    /// a window of w ticks every axis's and joint's jerk stays below 2·aᵢ/(w·T).
+    pub smoothing_ticks: u8,
+}
+
+impl MotionConfig {
+    /// Trapezoidal profiles (no jerk limitation).
+    pub const TRAPEZOID: MotionConfig = MotionConfig { smoothing_ticks: 1 };
 }
 
 /// Why a machine configuration was refused; each variant names the field.
@@ -512,6 +528,8 @@ pub struct MachineConfig {
 pub enum ConfigError {
     /// The machine has no joints.
     NoJoints,
+    /// `motion.smoothing_ticks` is not a power of two up to the largest window.
+    Smoothing,
     /// `joints[joint].limits` has a non-positive speed or acceleration.
     JointLimits {
         /// Joint index, 0-based.
@@ -573,6 +591,10 @@ impl MachineConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         if self.joints.is_empty() {
             return Err(ConfigError::NoJoints);
+        }
+        let w = self.motion.smoothing_ticks as usize;
+        if !w.is_power_of_two() || w > crate::interp::MAX_WINDOW {
+            return Err(ConfigError::Smoothing);
         }
         for (i, l) in self.axes.iter().enumerate() {
             if l.max_velocity < 0 || l.max_accel < 0 || (l.max_velocity > 0) != (l.max_accel > 0) {
@@ -687,6 +709,7 @@ impl MachineConfig {
             axes: [limits, limits, limits, none, none, none],
             home: [0; AXES],
             servo: ServoConfig::NONE,
+            motion: MotionConfig::TRAPEZOID,
         }
     }
 
@@ -774,6 +797,7 @@ impl MachineConfig {
             axes: [linear, linear, linear, rotary, none, rotary],
             home: [0, 0, -80 * mm, 0, 0, 0],
             servo: ServoConfig::NONE,
+            motion: MotionConfig::TRAPEZOID,
         }
     }
 
@@ -837,6 +861,7 @@ impl MachineConfig {
             axes: [linear, linear, linear, rotary, rotary, rotary],
             home: [0, 0, 450 * mm, 0, 0, 0],
             servo: ServoConfig::NONE,
+            motion: MotionConfig::TRAPEZOID,
         }
     }
 }

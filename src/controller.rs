@@ -109,6 +109,8 @@ impl Controller {
                 _ => ConfigError::HomeOutsideTravel { joint: 0 },
             })?;
         let steps = StepScheduler::new(&machine.joints, &joints);
+        let mut exec = Executor::new(pose);
+        exec.set_smoothing(machine.motion.smoothing_ticks as u32);
         let mut servos = [ServoLoop::new(0); MAX_SERVOS];
         for (jc, q) in machine.joints.iter().zip(&joints) {
             if let Drive::Servo { channel, .. } = jc.drive {
@@ -130,7 +132,7 @@ impl Controller {
             assembler: crate::store::Assembler::new(),
             store_pending: false,
             planner: Planner::new(pose),
-            exec: Executor::new(pose),
+            exec,
             joints,
             steps,
             servos,

@@ -178,6 +178,54 @@ pub struct MachineFile {
     pub joints: Vec<JointFile>,
     /// Contour control of the servo axes; uncoupled when absent.
     pub contour: Option<ContourFile>,
+    /// Speed-profile shape; trapezoidal when absent.
+    pub motion: Option<MotionFile>,
+}
+
+/// `[motion]`: the shape of the speed profiles.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MotionFile {
+    /// "trapezoid" or "jerk-limited".
+    pub profile: String,
+    /// Jerk limit for "jerk-limited", mm/s³ (°/s³ for rotary axes and joints).
+    pub jerk: Option<f64>,
+}
+
+impl MotionFile {
+    /// The core form: the smoothing window that keeps every axis's and joint's jerk
+    /// within `jerk` (2·a/(w·T) ≤ J), as a power of two of ticks.
+    pub fn to_config(
+        &self,
+        axes: &[LimitsFile],
+        joints: &[JointFile],
+    ) -> Result<pkmc::config::MotionConfig> {
+        match self.profile.as_str() {
+            "trapezoid" => Ok(pkmc::config::MotionConfig::TRAPEZOID),
+            "jerk-limited" => {
+                let jerk = positive(
+                    self.jerk.ok_or_else(|| anyhow!("motion.jerk: \"jerk-limited\" needs a jerk limit"))?,
+                    "motion.jerk",
+                )?;
+                let a_max = axes
+                    .iter()
+                    .map(|l| l.max_accel)
+                    .chain(joints.iter().map(|j| j.max_accel))
+                    .fold(0.0f64, f64::max);
+                let ticks = (2.0 * a_max / jerk * pkmc::units::TICK_HZ as f64).ceil().max(1.0);
+                let max = pkmc::interp::MAX_WINDOW as f64;
+                if ticks > max {
+                    bail!(
+                        "motion.jerk: {jerk} is too low for accelerations of {a_max}: it needs {ticks} ticks of smoothing, at most {max} are available (raise the jerk or lower the accelerations)"
+                    );
+                }
+                Ok(pkmc::config::MotionConfig {
+                    smoothing_ticks: (ticks as u32).next_power_of_two() as u8,
+                })
+            }
+            other => bail!("motion.profile: unknown profile {other:?} (expected \"trapezoid\" or \"jerk-limited\")"),
+        }
+    }
 }
 
 fn positive(v: f64, field: &str) -> Result<f64> {
@@ -334,6 +382,13 @@ impl MachineFile {
         for (i, h) in self.home.iter().enumerate() {
             home[i] = to_units(*h, pkmc::config::axis_is_rotary(i), &format!("home[{i}]"))?;
         }
+        let motion = match &self.motion {
+            Some(m) => m.to_config(
+                &self.axes.values().cloned().collect::<Vec<_>>(),
+                &self.joints,
+            )?,
+            None => pkmc::config::MotionConfig::TRAPEZOID,
+        };
         let config = MachineConfig {
             name,
             kinematics,
@@ -341,6 +396,7 @@ impl MachineFile {
             axes,
             home,
             servo,
+            motion,
         };
         config
             .validate()
@@ -360,6 +416,7 @@ pub fn describe(e: &pkmc::config::ConfigError, m: &MachineFile) -> String {
     };
     match e {
         E::NoJoints => "joints: the machine has no joints".into(),
+        E::Smoothing => "motion: the smoothing window must be a power of two up to 32 ticks".into(),
         E::JointLimits { joint } => {
             format!("{}: speed and acceleration must be positive", jn(joint))
         }
@@ -440,5 +497,18 @@ mod tests {
         let text = DEFAULT_MACHINE.replacen("steps_per_unit = 400", "steps_per_unit = 0", 1);
         let e = parse(&text, "m.toml").unwrap_err().to_string();
         assert!(e.contains("joints[0] (X).steps_per_unit"), "{e}");
+    }
+
+    #[test]
+    fn a_jerk_limit_becomes_a_smoothing_window_and_a_too_low_one_is_refused() {
+        let text =
+            format!("{DEFAULT_MACHINE}\n[motion]\nprofile = \"jerk-limited\"\njerk = 125000\n");
+        let m = parse(&text, "m.toml").unwrap();
+        // 2 · 1000 mm/s² / 125 000 mm/s³ = 16 ms: 16 ticks.
+        assert_eq!(m.motion.smoothing_ticks, 16);
+        let text =
+            format!("{DEFAULT_MACHINE}\n[motion]\nprofile = \"jerk-limited\"\njerk = 1000\n");
+        let e = parse(&text, "m.toml").unwrap_err().to_string();
+        assert!(e.contains("motion.jerk"), "{e}");
     }
 }
