@@ -637,18 +637,6 @@ impl<'o> Interp<'o> {
                 }
             }
         }
-        if let Some(c) = m[STOP] {
-            match c.tenths {
-                0 | 10 => out.push(Canon::Pause {
-                    line,
-                    optional: c.tenths == 10,
-                }),
-                _ => {
-                    out.push(Canon::End { line });
-                    self.ended = true;
-                }
-            }
-        }
         if nonmodal.is_some_and(|c| c.tenths == 100) {
             used |= bit(b'L') | bit(b'P') | bit(b'R');
         }
@@ -668,6 +656,19 @@ impl<'o> Interp<'o> {
         }
         if !w.assigns.is_empty() {
             self.apply_assigns(w)?;
+        }
+        // Stops last: after the line's motion, and only once nothing on it can fail.
+        if let Some(c) = m[STOP] {
+            match c.tenths {
+                0 | 10 => out.push(Canon::Pause {
+                    line,
+                    optional: c.tenths == 10,
+                }),
+                _ => {
+                    out.push(Canon::End { line });
+                    self.ended = true;
+                }
+            }
         }
         self.update_position_params();
         Ok(())
