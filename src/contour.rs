@@ -52,8 +52,8 @@
 use crate::config::{ContourConfig, ContourMode, Drive, KinematicsConfig, MachineConfig};
 use crate::config::{ServoGains, MAX_SERVOS};
 use crate::servo::{
-    following_error, AmpIo, Coupling, ServoAxis, ServoOutput, Setpoint, SetpointInterpolator, Trip,
-    DAC_MID, SERVO_PERIOD_S, SETPOINT_FRAC_BITS,
+    clamp_sym, following_error, AmpIo, Coupling, ServoAxis, ServoOutput, Setpoint,
+    SetpointInterpolator, Trip, DAC_MID, SERVO_PERIOD_S, SETPOINT_FRAC_BITS,
 };
 
 /// Slowest path speed at which the contour error is estimated, mm/s.
@@ -188,8 +188,7 @@ impl ContourLoop {
             return out;
         }
         for i in 0..MAX_SERVOS {
-            self.integral[i] =
-                (self.integral[i] + self.ki_t * eps[i]).clamp(-c.max_integral, c.max_integral);
+            self.integral[i] = clamp_sym(self.integral[i] + self.ki_t * eps[i], c.max_integral);
         }
         frame.project(&mut self.integral);
         for i in 0..MAX_SERVOS {
@@ -197,8 +196,7 @@ impl ContourLoop {
         }
         if c.mode == ContourMode::Ccpm {
             for i in 0..MAX_SERVOS {
-                self.offset[i] =
-                    (self.offset[i] + self.kr_t * eps[i]).clamp(-c.max_offset, c.max_offset);
+                self.offset[i] = clamp_sym(self.offset[i] + self.kr_t * eps[i], c.max_offset);
             }
             frame.project(&mut self.offset);
             out.reference = self.offset;

@@ -269,6 +269,18 @@ pub fn following_error(target_q16: i64, feedback: i64) -> (i32, f32) {
     (whole, whole as f32 + frac)
 }
 
+/// `x` limited to ±`limit` (`limit` ≥ 0). Unlike `f32::clamp` it has no panic path
+/// (that one asserts its bounds are ordered), so the loop stays panic-free.
+pub fn clamp_sym(x: f32, limit: f32) -> f32 {
+    if x > limit {
+        limit
+    } else if x < -limit {
+        -limit
+    } else {
+        x
+    }
+}
+
 /// Rounds to nearest, ties away from zero, saturating (one VCVT on the M4F).
 fn round_i32(v: f32) -> i32 {
     if v >= 0.0 {
@@ -392,14 +404,14 @@ impl ServoAxis {
             + c.kvff * target.velocity
             + c.kaff * target.accel
             + coupling.command;
-        let candidate = (self.integral + c.ki_t * error).clamp(-c.max_integral, c.max_integral);
+        let candidate = clamp_sym(self.integral + c.ki_t * error, c.max_integral);
         let u = base + candidate;
         let winding = (u > c.max_output && error > 0.0) || (u < -c.max_output && error < 0.0);
         if !winding {
             self.integral = candidate;
         }
         let u = base + self.integral;
-        let command = u.clamp(-c.max_output, c.max_output);
+        let command = clamp_sym(u, c.max_output);
         let dac = (c.dac_zero + round_i32(command * c.dac_per_unit)).clamp(0, DAC_MAX);
         ServoOutput {
             dac: dac as u16,
