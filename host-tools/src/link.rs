@@ -328,6 +328,9 @@ impl Transport for InProcess {
 
     fn write_some(&mut self, bytes: &[u8], _wait: Duration) -> io::Result<usize> {
         self.sim.ctrl.receive(bytes);
+        if settle(&mut self.sim).map_err(io::Error::other)? {
+            (self.on_tick)(&self.sim);
+        }
         Ok(bytes.len())
     }
 
@@ -349,6 +352,18 @@ impl Transport for InProcess {
         }
         Ok(0)
     }
+}
+
+/// Runs one tick when the controller is held at rest, so that a command that takes
+/// effect on the next tick (an `Abort` finishing a hold) does: the simulator otherwise
+/// ticks only while [`pkmc::controller::Controller::has_work`], which is false for a
+/// held, stopped controller even with an abort pending. Returns whether it ticked.
+fn settle(sim: &mut Simulator) -> anyhow::Result<bool> {
+    if sim.ctrl.state() == State::Hold && !sim.ctrl.has_work() {
+        sim.tick()?;
+        return Ok(true);
+    }
+    Ok(false)
 }
 
 /// What the simulator's server loop did, besides the faults.
@@ -412,6 +427,9 @@ pub fn serve(
                     }
                     sim.persist()
                         .map_err(|e| io_err("store the machine")(io::Error::other(e)))?;
+                    if settle(sim).map_err(|e| io_err("simulate")(io::Error::other(e)))? {
+                        on_tick(sim);
+                    }
                 }
                 Err(e) if is_timeout(&e) => {}
                 Err(e) => return Err(io_err("read")(e)),
@@ -1022,7 +1040,13 @@ impl<T: Transport> Link<T> {
                     cmd,
                     sent_at: None,
                 });
-                if matches!(cmd, Control::Abort | Control::Stop) && job.ending.is_none() {
+                // An immediate stop overrides a controlled one still under way.
+                let ends = match cmd {
+                    Control::Stop => true,
+                    Control::Abort => job.ending.is_none(),
+                    _ => false,
+                };
+                if ends {
                     job.ending = Some(Ending {
                         cmd,
                         id,

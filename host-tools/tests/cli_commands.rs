@@ -1,0 +1,318 @@
+//! `nc-send`'s commands and options, run as a user would: against `pkmc-sim` on its
+//! pseudo-terminal (the controller keeps its state between commands) or with `--sim`
+//! and `--check`, checked from outside (exit code, JSON on stdout, files written).
+
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::Duration;
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn nc_send(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_nc-send"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("nc-send runs")
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "not JSON ({e}): {}\nstderr: {}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        )
+    })
+}
+
+fn ok(out: &Output) -> serde_json::Value {
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "stdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    json(out)
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("pkmc-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+/// `pkmc-sim` on a pseudo-terminal, killed when dropped.
+struct Sim {
+    child: Child,
+    port: String,
+}
+
+impl Sim {
+    fn start(args: &[&str]) -> Self {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_pkmc-sim"))
+            .args(args)
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut port = String::new();
+        std::io::BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut port)
+            .unwrap();
+        Sim {
+            child,
+            port: port.trim().to_string(),
+        }
+    }
+
+    fn send(&self, args: &[&str]) -> Output {
+        let mut all = vec!["--port", self.port.as_str(), "--report", "json"];
+        all.extend_from_slice(args);
+        nc_send(&all)
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+#[test]
+fn status_jog_home_mdi_and_reset_act_on_a_running_controller() {
+    let sim = Sim::start(&[]);
+    let s = ok(&sim.send(&["status"]));
+    assert_eq!(s["state"], "Idle");
+    let home_x = s["pose"]["x"].as_f64().unwrap();
+
+    let j = ok(&sim.send(&["jog", "X", "5", "--feed", "1200"]));
+    assert_eq!(j["result"], "done");
+    assert_eq!(j["pose"]["x"].as_f64().unwrap(), home_x + 5.0);
+    let j = ok(&sim.send(&["jog", "y", "-2.5"]));
+    assert_eq!(j["state"], "Idle");
+    let after_jogs = j["pose"].clone();
+
+    let s = ok(&sim.send(&["status"]));
+    assert_eq!(
+        s["pose"], after_jogs,
+        "the controller keeps its pose between sessions"
+    );
+
+    let m = ok(&sim.send(&["mdi", "G1 X10 Y12 F600"]));
+    assert_eq!(m["result"], "done");
+    assert_eq!(m["blocks_sent"], 1);
+    assert_eq!(m["pose"]["x"], 10.0);
+    assert_eq!(m["pose"]["y"], 12.0);
+    // MDI starts from where the machine stands: a relative move adds to it.
+    let m = ok(&sim.send(&["mdi", "G91 G1 X-1 F600"]));
+    assert_eq!(m["pose"]["x"], 9.0);
+
+    let h = ok(&sim.send(&["home"]));
+    assert_eq!(h["pose"]["x"].as_f64().unwrap(), home_x);
+
+    let r = ok(&sim.send(&["reset"]));
+    assert_eq!(r["state"], "Idle");
+    assert_eq!(r["alarm"], serde_json::Value::Null);
+}
+
+#[test]
+fn a_bad_mdi_line_or_axis_is_refused_before_anything_moves() {
+    let sim = Sim::start(&[]);
+    let out = sim.send(&["mdi", "G1 X10"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("MDI:1:"));
+    let out = sim.send(&["jog", "Q", "1"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown axis"));
+}
+
+#[test]
+fn commands_also_run_on_the_built_in_simulator() {
+    let s = ok(&nc_send(&["--sim", "--report", "json", "status"]));
+    assert_eq!(s["state"], "Idle");
+    let j = ok(&nc_send(&["--sim", "--report", "json", "jog", "Z", "1"]));
+    assert_eq!(j["result"], "done");
+}
+
+#[test]
+fn check_plans_the_job_without_a_port_and_agrees_with_the_simulator() {
+    let sim = ok(&nc_send(&[
+        "--sim",
+        "--report",
+        "json",
+        "examples/square.ngc",
+    ]));
+    let check = ok(&nc_send(&[
+        "--check",
+        "--report",
+        "json",
+        "examples/square.ngc",
+    ]));
+    assert_eq!(check["result"], "done");
+    assert_eq!(check["blocks_executed"], sim["blocks_executed"]);
+    assert_eq!(check["final_joint_steps"], sim["final_joint_steps"]);
+    assert_eq!(check["run_time_s"], sim["run_time_s"]);
+    assert!(check["run_time_s"].as_f64().unwrap() > 1.0);
+    // Without --report, a readable summary says it was only checked.
+    let out = nc_send(&["--check", "examples/square.ngc"]);
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("done (checked)"), "{text}");
+    assert!(text.contains("planned"), "{text}");
+}
+
+#[test]
+fn check_reports_a_program_error_with_its_line() {
+    let prog = tmp("far.ngc");
+    std::fs::write(&prog, "G0 X10\nG0 Z500\n").unwrap();
+    let out = nc_send(&["--check", prog.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(3));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("far.ngc:2:"));
+}
+
+#[test]
+fn plots_are_written_as_svg_and_png() {
+    let svg = tmp("square.svg");
+    let png = tmp("square.png");
+    ok(&nc_send(&[
+        "--sim",
+        "--report",
+        "json",
+        "--plot",
+        svg.to_str().unwrap(),
+        "examples/square.ngc",
+    ]));
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(text.starts_with("<svg"), "{}", &text[..100.min(text.len())]);
+    for title in [
+        "top (XY)",
+        "front (XZ)",
+        "side (YZ)",
+        "path speed",
+        "joints",
+    ] {
+        assert!(text.contains(title), "no {title} in the SVG");
+    }
+    ok(&nc_send(&[
+        "--check",
+        "--report",
+        "json",
+        "--plot",
+        png.to_str().unwrap(),
+        "examples/square.ngc",
+    ]));
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    assert!(
+        bytes.len() > 10_000,
+        "a real picture, {} bytes",
+        bytes.len()
+    );
+}
+
+#[test]
+fn a_plot_needs_a_simulated_run_and_a_known_format() {
+    let out = nc_send(&[
+        "--port",
+        "/dev/null",
+        "--plot",
+        "x.svg",
+        "examples/square.ngc",
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let out = nc_send(&["--sim", "--plot", "x.jpg", "examples/square.ngc"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains(".svg or .png"));
+}
+
+#[test]
+fn without_port_or_sim_the_board_is_looked_for_on_usb() {
+    // No board is attached to a test machine.
+    let out = nc_send(&["examples/square.ngc"]);
+    assert_eq!(out.status.code(), Some(3));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no pkmc controller found"), "{err}");
+    assert!(err.contains("1209:0001"), "{err}");
+}
+
+#[test]
+fn a_port_that_does_not_exist_is_a_link_failure_naming_it() {
+    let out = nc_send(&["--port", "/dev/pkmc-nowhere", "examples/square.ngc"]);
+    assert_eq!(out.status.code(), Some(4));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/dev/pkmc-nowhere: cannot open"));
+}
+
+#[test]
+fn nc_send_runs_a_job_through_pkmc_sim_on_a_faulty_line() {
+    let sim = Sim::start(&["--link-faults", "0.01", "--seed", "5"]);
+    let r = ok(&sim.send(&["examples/square.ngc"]));
+    assert_eq!(r["result"], "done");
+    assert_eq!(r["final_pose"]["x"], 12.5);
+    assert_eq!(r["blocks_executed"], r["blocks_sent"]);
+}
+
+/// A job that moves slowly enough (simulated time) to be interrupted.
+fn slow_program() -> PathBuf {
+    let prog = tmp("slow.ngc");
+    std::fs::write(&prog, "G1 X100 F0.5\nG1 X0\n").unwrap();
+    prog
+}
+
+fn interrupt_after(child: &Child, delay: Duration) {
+    std::thread::sleep(delay);
+    // SAFETY: sends SIGINT to our own child process.
+    unsafe {
+        libc::kill(child.id() as libc::pid_t, libc::SIGINT);
+    }
+}
+
+fn spawn_job(prog: &Path) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_nc-send"))
+        .args(["--sim", "--report", "json", prog.to_str().unwrap()])
+        .current_dir(repo())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+#[test]
+fn ctrl_c_holds_then_aborts_the_job() {
+    let child = spawn_job(&slow_program());
+    interrupt_after(&child, Duration::from_millis(700));
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(6),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = json(&out);
+    assert_eq!(r["result"], "aborted");
+    assert_eq!(r["final_state"], "Idle");
+    let x = r["final_pose"]["x"].as_f64().unwrap();
+    assert!(x > 0.0 && x < 100.0, "stopped on the way, at X {x}");
+    assert!(r["blocks_executed"].as_u64().unwrap() < 2);
+}
+
+#[test]
+fn a_second_ctrl_c_stops_at_once() {
+    let child = spawn_job(&slow_program());
+    interrupt_after(&child, Duration::from_millis(700));
+    interrupt_after(&child, Duration::from_millis(1));
+    let out = child.wait_with_output().unwrap();
+    let r = json(&out);
+    assert_eq!(out.status.code(), Some(6));
+    // Either the hold had already brought it to rest and the abort ended the job, or
+    // the immediate stop did (the controller is then in alarm).
+    let result = r["result"].as_str().unwrap();
+    assert!(result == "stopped" || result == "aborted", "{r}");
+    if result == "stopped" {
+        assert_eq!(r["final_state"], "Alarm");
+    }
+}
