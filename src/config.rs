@@ -882,6 +882,16 @@ mod tests {
     }
 
     #[test]
+    fn the_h4_and_hexapod_machines_fit_the_configuration_store() {
+        let mut buf = [0u8; crate::store::MAX_CONFIG_BYTES];
+        for m in [MachineConfig::h4_table(), MachineConfig::hexapod()] {
+            let n = crate::store::encode(&m, &mut buf).expect("fits");
+            let back: MachineConfig = postcard::from_bytes(&buf[..n]).unwrap();
+            assert_eq!(back, m);
+        }
+    }
+
+    #[test]
     fn a_flat_h4_forearm_limit_is_refused_with_its_field() {
         let mut m = MachineConfig::h4_table();
         if let KinematicsConfig::H4Table(g) = &mut m.kinematics {

@@ -7,8 +7,8 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use pkmc::config::{
-    Drive, JointConfig, KinematicsConfig, Limits, MachineConfig, Scale, ServoConfig, ServoGains,
-    StepTiming, AXES, AXIS_NAMES, MAX_JOINTS,
+    Drive, GeometryField, H4TableGeometry, HexapodGeometry, JointConfig, KinematicsConfig, Limits,
+    MachineConfig, Scale, ServoConfig, ServoGains, StepTiming, AXES, AXIS_NAMES, MAX_JOINTS,
 };
 use pkmc::units::units_per_user;
 use serde::Deserialize;
@@ -161,17 +161,64 @@ impl ContourFile {
     }
 }
 
+/// `[h4_table]`: geometry of the H-4 with rolling table, mm and degrees (conventions:
+/// [`H4TableGeometry`]).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct H4TableFile {
+    /// X Y of each vertical rail.
+    pub rails: [[f64; 2]; 4],
+    /// Forearm length L.
+    pub forearm: f64,
+    /// Half length d of the central bar.
+    pub bar_half: f64,
+    /// Bar end each arm holds: -1 or +1.
+    pub sides: [i8; 4],
+    /// Attachment offsets e_i (not turned with C).
+    pub attach: [[f64; 3]; 4],
+    /// Tool tip below the head point E.
+    pub tool_length: f64,
+    /// A point of the table axis (parallel to X).
+    pub table_pivot: [f64; 3],
+    /// Lowest forearm elevation above horizontal, degrees.
+    pub min_elevation: f64,
+}
+
+/// `[hexapod]`: joint positions in mm, each set either as coordinates (`base`,
+/// `platform`) or as a radius and six angles in degrees in the z = 0 plane
+/// (`base_radius` + `base_angles`, `platform_radius` + `platform_angles`).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HexapodFile {
+    /// Base joints a_i, machine frame.
+    pub base: Option<[[f64; 3]; 6]>,
+    /// Radius of the base joints' circle.
+    pub base_radius: Option<f64>,
+    /// Angles of the base joints on their circle, degrees.
+    pub base_angles: Option<[f64; 6]>,
+    /// Platform joints b_i, platform frame.
+    pub platform: Option<[[f64; 3]; 6]>,
+    /// Radius of the platform joints' circle.
+    pub platform_radius: Option<f64>,
+    /// Angles of the platform joints on their circle, degrees.
+    pub platform_angles: Option<[f64; 6]>,
+}
+
 /// A machine file.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MachineFile {
     /// Machine name.
     pub name: String,
-    /// "cartesian".
+    /// "cartesian", "h4-table" or "hexapod".
     pub kinematics: String,
     /// Home pose X Y Z (mm) A B C (degrees).
     #[serde(default)]
     pub home: [f64; AXES],
+    /// Geometry for `kinematics = "h4-table"`.
+    pub h4_table: Option<H4TableFile>,
+    /// Geometry for `kinematics = "hexapod"`.
+    pub hexapod: Option<HexapodFile>,
     /// Limits per used axis, keyed by axis letter.
     pub axes: BTreeMap<String, LimitsFile>,
     /// Joints q1..qN.
@@ -225,6 +272,78 @@ impl MotionFile {
             }
             other => bail!("motion.profile: unknown profile {other:?} (expected \"trapezoid\" or \"jerk-limited\")"),
         }
+    }
+}
+
+fn mm_points<const N: usize, const D: usize>(
+    v: &[[f64; D]; N],
+    field: &str,
+) -> Result<[[i64; D]; N]> {
+    let mut out = [[0; D]; N];
+    for (i, p) in v.iter().enumerate() {
+        for (k, c) in p.iter().enumerate() {
+            out[i][k] = to_units(*c, false, &format!("{field}[{i}][{k}]"))?;
+        }
+    }
+    Ok(out)
+}
+
+impl H4TableFile {
+    fn to_geometry(&self) -> Result<H4TableGeometry> {
+        let f = |s: &str| format!("h4_table.{s}");
+        Ok(H4TableGeometry {
+            rails: mm_points(&self.rails, &f("rails"))?,
+            forearm: to_units(positive(self.forearm, &f("forearm"))?, false, &f("forearm"))?,
+            bar_half: to_units(
+                positive(self.bar_half, &f("bar_half"))?,
+                false,
+                &f("bar_half"),
+            )?,
+            sides: self.sides,
+            attach: mm_points(&self.attach, &f("attach"))?,
+            tool_length: to_units(self.tool_length, false, &f("tool_length"))?,
+            table_pivot: mm_points(&[self.table_pivot], &f("table_pivot"))?[0],
+            min_elevation: to_units(self.min_elevation, true, &f("min_elevation"))?,
+        })
+    }
+}
+
+/// One set of hexapod joints from coordinates or from a radius and angles.
+fn hexapod_joints(
+    points: &Option<[[f64; 3]; 6]>,
+    radius: Option<f64>,
+    angles: &Option<[f64; 6]>,
+    name: &str,
+) -> Result<[[i64; 3]; 6]> {
+    match (points, radius, angles) {
+        (Some(p), None, None) => mm_points(p, &format!("hexapod.{name}")),
+        (None, Some(r), Some(a)) => {
+            let r = positive(r, &format!("hexapod.{name}_radius"))?;
+            let mut p = [[0.0; 3]; 6];
+            for (pi, deg) in p.iter_mut().zip(a) {
+                let t = deg.to_radians();
+                *pi = [r * t.cos(), r * t.sin(), 0.0];
+            }
+            mm_points(&p, &format!("hexapod.{name}_angles"))
+        }
+        _ => bail!(
+            "hexapod.{name}: give either {name} = [[x, y, z], ...] (six joints) or \
+             {name}_radius and {name}_angles"
+        ),
+    }
+}
+
+impl HexapodFile {
+    fn to_geometry(&self) -> Result<HexapodGeometry> {
+        Ok(HexapodGeometry {
+            base: hexapod_joints(&self.base, self.base_radius, &self.base_angles, "base")?,
+            platform: hexapod_joints(
+                &self.platform,
+                self.platform_radius,
+                &self.platform_angles,
+                "platform",
+            )?,
+        })
     }
 }
 
@@ -333,6 +452,9 @@ impl MachineFile {
                 ),
             };
             if let Some(a) = &jf.axis {
+                if self.kinematics != "cartesian" {
+                    bail!("{}: only Cartesian joints follow a pose axis", f("axis"));
+                }
                 axis_of_joint[j] = axis_index(a, &f("axis"))? as u8;
             } else if self.kinematics == "cartesian" {
                 bail!("{}: a Cartesian joint needs the axis it follows", f("axis"));
@@ -372,11 +494,34 @@ impl MachineFile {
                 },
             });
         }
+        if self.h4_table.is_some() && self.kinematics != "h4-table" {
+            bail!("h4_table: only for kinematics = \"h4-table\"");
+        }
+        if self.hexapod.is_some() && self.kinematics != "hexapod" {
+            bail!("hexapod: only for kinematics = \"hexapod\"");
+        }
         let kinematics = match self.kinematics.as_str() {
             "cartesian" => KinematicsConfig::Cartesian { axis_of_joint },
-            other => {
-                bail!("kinematics: unknown kinematics {other:?} (this build knows \"cartesian\")")
-            }
+            "h4-table" => KinematicsConfig::H4Table(
+                self.h4_table
+                    .as_ref()
+                    .ok_or_else(|| {
+                        anyhow!("h4_table: kinematics = \"h4-table\" needs an [h4_table] section")
+                    })?
+                    .to_geometry()?,
+            ),
+            "hexapod" => KinematicsConfig::Hexapod(
+                self.hexapod
+                    .as_ref()
+                    .ok_or_else(|| {
+                        anyhow!("hexapod: kinematics = \"hexapod\" needs a [hexapod] section")
+                    })?
+                    .to_geometry()?,
+            ),
+            other => bail!(
+                "kinematics: unknown kinematics {other:?} (this build knows \"cartesian\", \
+                 \"h4-table\" and \"hexapod\")"
+            ),
         };
         let mut home = [0i64; AXES];
         for (i, h) in self.home.iter().enumerate() {
@@ -441,6 +586,33 @@ pub fn describe(e: &pkmc::config::ConfigError, m: &MachineFile) -> String {
         E::Contour => "contour: gains must be finite, clamps non-negative, and coupling needs a \
              Cartesian machine"
             .into(),
+        E::Geometry { field } => {
+            let (name, what) = match field {
+                GeometryField::Joints => (
+                    "joints",
+                    "the h4-table needs q1..q4 linear and q5 rotary (5 joints), the hexapod \
+                     six linear legs",
+                ),
+                GeometryField::Rails => ("h4_table.rails", "out of range (±1073 mm)"),
+                GeometryField::Forearm => ("h4_table.forearm", "out of range (0..1073 mm)"),
+                GeometryField::BarHalf => ("h4_table.bar_half", "out of range (0..1073 mm)"),
+                GeometryField::Sides => ("h4_table.sides", "each must be -1 or +1"),
+                GeometryField::Attach => ("h4_table.attach", "out of range (±1073 mm)"),
+                GeometryField::ToolLength => ("h4_table.tool_length", "out of range (±1073 mm)"),
+                GeometryField::TablePivot => ("h4_table.table_pivot", "out of range (±1073 mm)"),
+                GeometryField::MinElevation => (
+                    "h4_table.min_elevation",
+                    "must lie between 0 and 90 degrees",
+                ),
+                GeometryField::Base => ("hexapod.base", "out of range (±537 mm)"),
+                GeometryField::Platform => (
+                    "hexapod.platform",
+                    "a joint farther than 268 mm from the platform origin, or all at it",
+                ),
+                _ => ("kinematics", "bad geometry"),
+            };
+            format!("{name}: {what}")
+        }
         _ => format!("{e:?}"),
     }
 }
@@ -474,6 +646,12 @@ fn line_col(text: &str, offset: usize) -> (usize, usize) {
 /// The built-in default machine file (Cartesian X Y Z steppers).
 pub const DEFAULT_MACHINE: &str = include_str!("../../examples/machines/cartesian-xyz.toml");
 
+/// The H-4 with rolling table machine file.
+pub const H4_TABLE_MACHINE: &str = include_str!("../../examples/machines/h4-table.toml");
+
+/// The hexapod machine file.
+pub const HEXAPOD_MACHINE: &str = include_str!("../../examples/machines/hexapod.toml");
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -482,6 +660,42 @@ mod tests {
     fn the_bundled_machine_equals_the_core_default() {
         let m = parse(DEFAULT_MACHINE, "cartesian-xyz.toml").unwrap();
         assert_eq!(m, MachineConfig::cartesian_xyz());
+    }
+
+    #[test]
+    fn the_bundled_h4_and_hexapod_equal_the_core_machines() {
+        let m = parse(H4_TABLE_MACHINE, "h4-table.toml").unwrap();
+        assert_eq!(m, MachineConfig::h4_table());
+        let m = parse(HEXAPOD_MACHINE, "hexapod.toml").unwrap();
+        assert_eq!(m, MachineConfig::hexapod());
+    }
+
+    #[test]
+    fn hexapod_joints_as_coordinates_equal_radius_and_angles() {
+        let text = HEXAPOD_MACHINE.replace(
+            "base_radius = 300\nbase_angles = [348, 12, 108, 132, 228, 252]",
+            "base = [[293.44428, -62.373507, 0], [293.44428, 62.373507, 0], \
+             [-92.705098, 285.316955, 0], [-200.739182, 222.943448, 0], \
+             [-200.739182, -222.943448, 0], [-92.705098, -285.316955, 0]]",
+        );
+        assert_ne!(text, HEXAPOD_MACHINE);
+        assert_eq!(parse(&text, "m.toml").unwrap(), MachineConfig::hexapod());
+    }
+
+    #[test]
+    fn bad_geometry_names_its_field() {
+        let text = H4_TABLE_MACHINE.replace("min_elevation = 25", "min_elevation = 95");
+        let e = parse(&text, "m.toml").unwrap_err().to_string();
+        assert!(e.contains("h4_table.min_elevation"), "{e}");
+        let text = H4_TABLE_MACHINE.replace("forearm = 550", "forearm = -550");
+        let e = parse(&text, "m.toml").unwrap_err().to_string();
+        assert!(e.contains("h4_table.forearm"), "{e}");
+        let text = HEXAPOD_MACHINE.replace("platform_radius = 150\n", "");
+        let e = parse(&text, "m.toml").unwrap_err().to_string();
+        assert!(e.contains("hexapod.platform"), "{e}");
+        let text = H4_TABLE_MACHINE.replace("rotary = true", "rotary = false");
+        let e = parse(&text, "m.toml").unwrap_err().to_string();
+        assert!(e.contains("joints:"), "{e}");
     }
 
     #[test]
