@@ -387,7 +387,8 @@ pub struct H4TableGeometry {
 }
 
 /// Hexapod: leg i joins base joint `base[i]` to platform joint `platform[i]`; its
-/// length is `|p + R·platform[i] − base[i]|`. All nm.
+/// length is `|p + R·platform[i] − base[i]|`. All nm; base coordinates below 537 mm,
+/// platform joints within 268 mm of the platform origin (the fixed-point range).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct HexapodGeometry {
     /// Base joints a_i, machine frame, nm.
@@ -479,10 +480,26 @@ impl HexapodGeometry {
         if !joint_kinds(joints, 6, 6) {
             return bad(GeometryField::Joints);
         }
-        if !self.base.iter().all(|a| within(a)) {
+        // Fixed-point ranges of the kinematics (crate::kinematics::hexapod): base
+        // coordinates below 2^29 nm (537 mm), platform joints within 2^28 nm (268 mm)
+        // of the platform origin.
+        let base_max = 1u64 << 29;
+        if !self
+            .base
+            .iter()
+            .flatten()
+            .all(|c| c.unsigned_abs() < base_max)
+        {
             return bad(GeometryField::Base);
         }
-        if !self.platform.iter().all(|b| within(b)) || self.platform.iter().all(|b| b == &[0; 3]) {
+        let radius_sq = |b: &[i64; 3]| {
+            b.iter()
+                .map(|c| c.unsigned_abs().min(1 << 31).pow(2))
+                .sum::<u64>()
+        };
+        if !self.platform.iter().all(|b| radius_sq(b) < 1 << 56)
+            || self.platform.iter().all(|b| b == &[0; 3])
+        {
             return bad(GeometryField::Platform);
         }
         Ok(())

@@ -5,42 +5,52 @@
 //! coordinates (nm), C = head rotation θ, A = table angle (n°), B unused (forward keeps
 //! the guess's B). Joints q1..q4 carriage heights (nm), q5 = A (n°).
 //!
-//! Inverse, per call: sin/cos of A and θ (Q30, [`fixed::sincos`]); the table map
-//! T = r + Rx(A)(p − r) as 32 × 32-bit products summed in 64 bits and rounded once to
-//! quarter nanometres (qn); E = T + (0, 0, tool); per arm the horizontal offsets dx, dy
-//! from the rail (qn, exact sums of rounded terms), N = (4L)² − dx² − dy² exact in
-//! `u64` (qn²), then q = P_z + √N with the correctly rounded integer root, rounded to
-//! nm. Out of reach when ρ > L; too near the singularity when the forearm is flatter
-//! than `min_elevation` (N below (4L·sin e)², the test done on the exact N).
+//! Inverse, per call: sin/cos of A and θ (Q31, [`fixed::sincos`]); Rx(A)(p − r) as
+//! 32 × 32-bit products summed in 64 bits and rounded once to half nanometres (hn);
+//! the bar ends d·(cos θ, sin θ) likewise; per arm the horizontal offsets dx, dy of the
+//! bar end from the rail (hn, 32-bit sums with per-arm constants that fold in the table
+//! axis, the attachment and the rail), ρ² = dx² + dy² exact in 64 bits, N = (2L)² − ρ²,
+//! q = P_z + √N with the integer root of [`fixed::isqrt`], rounded to nm. Out of reach
+//! when ρ > L; too near the singularity when the forearm is flatter than
+//! `min_elevation` (ρ² above (2L)²·cos² e, tested on the exact ρ²). The 32-bit sums
+//! cannot overflow because poses beyond |X| ≤ 2^30 nm − |attachment − rail| − d, or
+//! farther than (2^30 nm − |offsets| − d)/√2 from the table axis in Y or Z, are refused
+//! as out of reach first (763 mm and 575 mm for the default machine, both far beyond
+//! every arm's reach).
 //!
 //! Error budget (each joint, against exact arithmetic on the same integer pose):
-//! sin/cos ≤ 1.0e-9 each, times |p − r| ≤ 0.25 m and d = 60 mm: ≤ 0.36 nm on T,
-//! ≤ 0.06 nm on the bar term; quarter-nm roundings ≤ 0.125 nm per term: horizontal
-//! error |δP_h| ≤ 0.75 nm, vertical ≤ 0.5 nm. The joint gains ρ/h = cot(elevation)
-//! ≤ cot 25° = 2.14 on the horizontal part, so ≤ 1.6 + 0.5 + 0.125 (root) + 0.5 (final
-//! rounding) ≈ 2.7 nm worst case; measured: see `docs/performance.md` (≤ 5 nm
-//! required).
+//! sin/cos ≤ 7.0e-10 each, times |p − r| ≤ 0.25 m: ≤ 0.25 nm on each component of E,
+//! and ≤ 0.06 nm on the bar term (d = 60 mm); hn roundings ≤ 0.25 nm per term, so the
+//! horizontal error |δP_h| ≤ 0.9 nm and the vertical ≤ 0.5 nm. The joint gains
+//! ρ/h = cot(elevation) ≤ cot 25° = 2.14 on the horizontal part: ≤ 1.9 + 0.5 + 0.26
+//! (root) + 0.5 (final rounding) ≈ 3.2 nm worst case, typically far less; measured
+//! 1.39 nm over 100 000 poses (`docs/performance.md`; ≤ 5 nm required).
 //!
 //! Forward: A = q5; X Y Z C by Newton from the guess. Each iteration evaluates the
-//! fixed-point inverse above (so the residual is exact to the qn), builds the 4 × 4
+//! fixed-point inverse above (so the residual is exact to the hn), builds the 4 × 4
 //! analytic Jacobian in `f32` from the same intermediate values (rows
 //! (−dx/h, −dy/h, 1)·Rx(A) for X Y Z and the bar lever term for θ, scaled to nm at the
-//! lever d), solves it with partial pivoting and applies the rounded step. It stops
-//! after the first step of at most 1 nm on X Y Z and at most the rotation moving a bar
-//! end by 1 nm on C: 3 iterations from the pose of the previous 1 ms period.
+//! lever d), solves it with partial pivoting and applies the rounded step, and stops
+//! after a step of at most [`FINAL_STEP`]: 2 iterations from the pose of the previous
+//! 1 ms period.
 
-use super::fixed::{self, i64_to_f32, isqrt_round, round_f32, shr_round, sincos, NDEG_PER_RAD};
+use super::fixed::{i64_to_f32, isqrt, round_f32, sincos, NDEG_PER_RAD, ONE_Q31};
 use super::solve::solve;
 use super::{Joints, Pose, Unreachable, FINAL_STEP, MAX_ITERATIONS};
-use crate::config::{H4TableGeometry, GEOMETRY_MAX};
+use crate::config::H4TableGeometry;
 
-/// Sub-nanometre bits of the intermediate positions: quarter nanometres.
-const SUB: u32 = 2;
+/// Sub-nanometre bits of the intermediate positions: half nanometres.
+const SUB: u32 = 1;
+/// Fraction bits of a Q31 × nm product, less [`SUB`]: the shift back to hn.
+const TO_HN: u32 = 31 - SUB;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Arm {
-    /// Attachment minus rail in X and Y, attachment Z; qn.
-    offset: [i64; 3],
+    /// X: attachment minus rail; Y: table axis plus attachment minus rail; hn.
+    offset: [i32; 2],
+    /// Table axis Z plus tool length plus attachment Z, hn, plus the final rounding's
+    /// half.
+    z: i32,
     /// Bar end: +1 or −1.
     side: i8,
 }
@@ -52,59 +62,65 @@ pub struct H4Table {
     bar_half: i32,
     /// Table axis Y Z, nm.
     pivot: [i64; 2],
-    /// Table axis Y and Z + tool length, qn.
-    pivot_q: [i64; 2],
-    /// Forearm length, qn.
-    reach: u64,
-    /// (4L)², qn².
+    /// (2L)², hn².
     reach_sq: u64,
-    /// Smallest N = (4L)² − ρ² allowed: (4L·sin(min elevation))².
-    near_sq: u64,
+    /// Largest ρ² allowed, hn²: (2L)² − (2L·sin(min elevation))².
+    rho_sq_max: u64,
+    /// Largest |X| taken, nm.
+    x_max: u64,
+    /// Largest |Y − pivot Y|, |Z − pivot Z| taken, nm.
+    yz_max: u64,
 }
 
 /// Per-arm values the forward kinematics' Jacobian is built from.
 struct ArmState {
-    dx: i64,
-    dy: i64,
+    dx: i32,
+    dy: i32,
     h: u64,
-    /// Unrounded joint, qn.
+    /// Unrounded joint, hn.
     q: i64,
-}
-
-fn in_range(v: i64) -> bool {
-    v.unsigned_abs() < GEOMETRY_MAX as u64
 }
 
 impl H4Table {
     /// Precomputes `g` (validated by [`crate::config::MachineConfig::validate`]).
     pub fn new(g: &H4TableGeometry) -> Self {
+        let [_, py, pz] = g.table_pivot;
         let arm = |i: usize| Arm {
             offset: [
-                (g.attach[i][0] - g.rails[i][0]) << SUB,
-                (g.attach[i][1] - g.rails[i][1]) << SUB,
-                g.attach[i][2] << SUB,
+                ((g.attach[i][0] - g.rails[i][0]) << SUB) as i32,
+                ((py + g.attach[i][1] - g.rails[i][1]) << SUB) as i32,
             ],
+            z: (((pz + g.tool_length + g.attach[i][2]) << SUB) + 1) as i32,
             side: g.sides[i],
         };
+        let arms = [arm(0), arm(1), arm(2), arm(3)];
         let reach = (g.forearm << SUB) as u64;
         let (s, _) = sincos(g.min_elevation);
-        let near = shr_round(reach as i64 * s as i64, 30) as u64;
+        let near = (reach * s as u64 + (1 << 30)) >> 31;
+        // Pose range keeping every per-arm sum inside 32 bits (hn): |X| + |offset X| + d
+        // and √2·max(|Y − pivot Y|, |Z − pivot Z|) + |offset Y or Z| + d below 2^30 nm.
+        let room = |o: fn(&Arm) -> i32| {
+            let worst = arms
+                .iter()
+                .map(|a| (o(a).unsigned_abs() / 2 + 1) as u64)
+                .max();
+            ((1u64 << 30) - 64).saturating_sub(worst.unwrap_or(0) + g.bar_half as u64)
+        };
+        let x_room = room(|a| a.offset[0]);
+        let yz_room = room(|a| a.offset[1]).min(room(|a| a.z));
         Self {
-            arms: [arm(0), arm(1), arm(2), arm(3)],
+            arms,
             bar_half: g.bar_half as i32,
-            pivot: [g.table_pivot[1], g.table_pivot[2]],
-            pivot_q: [
-                g.table_pivot[1] << SUB,
-                (g.table_pivot[2] + g.tool_length) << SUB,
-            ],
-            reach,
+            pivot: [py, pz],
             reach_sq: reach * reach,
-            near_sq: near * near,
+            rho_sq_max: reach * reach - near * near,
+            x_max: x_room,
+            yz_max: (yz_room * 46_340) >> 16, // / √2
         }
     }
 
     /// The inverse kinematics, reporting each arm's intermediate values to `arm`;
-    /// returns (sin A, cos A, sin θ, cos θ), Q30.
+    /// returns (sin A, cos A, sin θ, cos θ), Q31.
     #[inline(always)]
     fn eval(
         &self,
@@ -113,42 +129,48 @@ impl H4Table {
         mut arm: impl FnMut(usize, ArmState),
     ) -> Result<[i32; 4], Unreachable> {
         let [x, y, z, a, _, theta] = *pose;
-        if !(in_range(x) && in_range(y) && in_range(z)) {
+        let (py, pz) = (y.wrapping_sub(self.pivot[0]), z.wrapping_sub(self.pivot[1]));
+        if x.unsigned_abs() > self.x_max
+            || py.unsigned_abs() > self.yz_max
+            || pz.unsigned_abs() > self.yz_max
+        {
             return Err(Unreachable::OutOfReach);
         }
         let (sa, ca) = sincos(a);
         let (st, ct) = sincos(theta);
-        // Table: T = r + Rx(A)(p − r); both terms < 2^31 nm, products nm·2^30.
-        let py = (y - self.pivot[0]) as i32 as i64;
-        let pz = (z - self.pivot[1]) as i32 as i64;
-        let ty = ca as i64 * py - sa as i64 * pz;
-        let tz = sa as i64 * py + ca as i64 * pz;
-        // Head point E, qn.
-        let ex = x << SUB;
-        let ey = self.pivot_q[0] + shr_round(ty, 30 - SUB);
-        let ez = self.pivot_q[1] + shr_round(tz, 30 - SUB);
-        let dc = shr_round(self.bar_half as i64 * ct as i64, 30 - SUB);
-        let ds = shr_round(self.bar_half as i64 * st as i64, 30 - SUB);
+        // Rx(A)(p − r) and the bar ends d·(cos θ, sin θ), hn; the products are nm·2^31.
+        // Within the pose range every sum below fits in 32 bits.
+        let (py, pz) = (py as i32 as i64, pz as i32 as i64);
+        let half = 1i64 << (TO_HN - 1);
+        let ey = ((ca as i64 * py - sa as i64 * pz + half) >> TO_HN) as i32;
+        let ez = ((sa as i64 * py + ca as i64 * pz + half) >> TO_HN) as i32;
+        let ex = (x << SUB) as i32;
+        let dc = ((self.bar_half as i64 * ct as i64 + half) >> TO_HN) as i32;
+        let ds = ((self.bar_half as i64 * st as i64 + half) >> TO_HN) as i32;
         for (i, (q, m)) in joints.iter_mut().zip(&self.arms).enumerate() {
             let (bx, by) = if m.side > 0 { (dc, ds) } else { (-dc, -ds) };
-            let dx = ex + bx + m.offset[0];
-            let dy = ey + by + m.offset[1];
-            let (ax, ay) = (dx.unsigned_abs(), dy.unsigned_abs());
-            if ax > self.reach || ay > self.reach {
-                return Err(Unreachable::OutOfReach);
+            let dx = ex.wrapping_add(m.offset[0]).wrapping_add(bx);
+            let dy = ey.wrapping_add(m.offset[1]).wrapping_add(by);
+            let rho_sq = (dx as i64 * dx as i64) as u64 + (dy as i64 * dy as i64) as u64;
+            if rho_sq > self.rho_sq_max {
+                return Err(if rho_sq > self.reach_sq {
+                    Unreachable::OutOfReach
+                } else {
+                    Unreachable::Singular
+                });
             }
-            let n = self
-                .reach_sq
-                .checked_sub(ax * ax)
-                .and_then(|n| n.checked_sub(ay * ay))
-                .ok_or(Unreachable::OutOfReach)?;
-            if n < self.near_sq {
-                return Err(Unreachable::Singular);
-            }
-            let h = isqrt_round(n);
-            let qq = ez + m.offset[2] + h as i64;
-            *q = shr_round(qq, SUB);
-            arm(i, ArmState { dx, dy, h, q: qq });
+            let h = isqrt(self.reach_sq - rho_sq);
+            let qq = ez.wrapping_add(m.z) as i64 + h as i64;
+            *q = qq >> SUB;
+            arm(
+                i,
+                ArmState {
+                    dx,
+                    dy,
+                    h,
+                    q: qq - 1,
+                },
+            );
         }
         joints[4] = a;
         Ok([sa, ca, st, ct])
@@ -169,17 +191,17 @@ impl H4Table {
         let mut p = *guess;
         p[3] = joints[4];
         let ndeg_per_nm = NDEG_PER_RAD as f32 / self.bar_half as f32;
-        let one = fixed::ONE_Q30 as f32;
         for it in 1..=MAX_ITERATIONS {
             let mut q = [0; super::MAX_JOINTS];
             let mut g = [[0.0f32; 2]; 4];
             let mut r = [0.0f32; 4];
             let trig = self.eval(&p, &mut q, |i, s| {
                 let h = i64_to_f32(s.h as i64);
-                g[i] = [-i64_to_f32(s.dx) / h, -i64_to_f32(s.dy) / h];
-                r[i] = i64_to_f32(joints[i].wrapping_shl(SUB).wrapping_sub(s.q)) * 0.25;
+                g[i] = [-(s.dx as f32) / h, -(s.dy as f32) / h];
+                let target = joints[i].wrapping_shl(SUB);
+                r[i] = i64_to_f32(target.wrapping_sub(s.q)) * 0.5;
             })?;
-            let [sa, ca, st, ct] = trig.map(|v| v as f32 / one);
+            let [sa, ca, st, ct] = trig.map(|v| v as f32 / ONE_Q31);
             let mut jac = [[0.0f32; 4]; 4];
             for ((row, [gx, gy]), arm) in jac.iter_mut().zip(g).zip(&self.arms) {
                 // ∂q/∂E = (gx, gy, 1); ∂E/∂p = Rx(A); ∂q/∂(dθ) per nm at the bar end.
@@ -297,6 +319,81 @@ mod tests {
         assert_eq!(k.inverse(&far, &mut q), Err(Unreachable::OutOfReach));
         let absurd = [i64::MAX, 0, 0, 0, 0, 0];
         assert_eq!(k.inverse(&absurd, &mut q), Err(Unreachable::OutOfReach));
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(20_000))]
+        /// Workpiece poses over the box in every table angle: some leave the machine's
+        /// reach; the fixed point must agree with the reference on which.
+        #[test]
+        fn reach_agrees_with_the_reference_over_the_workpiece_box(
+            x in -100_000_000i64..100_000_000, y in -100_000_000i64..100_000_000,
+            z in -130_000_000i64..-30_000_000, theta in -45_000_000_000i64..45_000_000_000,
+            a in 0i64..90_000_000_000,
+        ) {
+            let g = geometry();
+            let k = H4Table::new(&g);
+            let p = [x, y, z, a, 0, theta];
+            let mut q = [0; MAX_JOINTS];
+            match (re::h4_inverse(&g, &real(&p)), k.inverse(&p, &mut q)) {
+                (Some(want), Ok(())) => {
+                    for i in 0..4 {
+                        prop_assert!((q[i] as f64 - want[i]).abs() <= 5.0);
+                    }
+                }
+                (None, Err(_)) => {}
+                (want, got) => {
+                    // Only within a hair of the 25° limit may they disagree.
+                    let mut near = g;
+                    near.min_elevation -= 1_000;
+                    let loose = re::h4_inverse(&near, &real(&p)).is_some();
+                    near.min_elevation += 2_000;
+                    let tight = re::h4_inverse(&near, &real(&p)).is_some();
+                    prop_assert!(loose != tight, "{p:?}: {want:?} vs {got:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn poses_beyond_the_fixed_point_range_are_out_of_reach_without_overflow() {
+        let g = geometry();
+        let k = H4Table::new(&g);
+        let (xm, yzm) = (k.x_max as i64, k.yz_max as i64);
+        assert!(xm > 700_000_000 && yzm > 550_000_000, "{xm} {yzm}");
+        let (py, pz) = (g.table_pivot[1], g.table_pivot[2]);
+        let mut q = [0; MAX_JOINTS];
+        for (x, y, z) in [
+            (xm, py, pz),
+            (-xm, py + yzm, pz - yzm),
+            (0, py - yzm, pz + yzm),
+        ] {
+            for angle in [0, 45_000_000_000, -135_000_000_000, 90_000_000_000] {
+                // At the range limit: computed without overflow (and out of reach).
+                let r = k.inverse(&[x, y, z, angle, 0, angle], &mut q);
+                assert!(r.is_err());
+            }
+        }
+        for p in [
+            [xm + 1, 0, 0, 0, 0, 0],
+            [0, py + yzm + 1, pz, 0, 0, 0],
+            [0, py, pz - yzm - 1, 0, 0, 0],
+        ] {
+            assert_eq!(k.inverse(&p, &mut q), Err(Unreachable::OutOfReach));
+        }
+    }
+
+    #[test]
+    fn whole_turns_of_the_angles_change_nothing() {
+        let g = geometry();
+        let k = H4Table::new(&g);
+        let p = re::h4_pose_from_head(&g, [20.0, -30.0, 10.0], 30.0, 40.0);
+        let (mut q1, mut q2) = ([0; MAX_JOINTS], [0; MAX_JOINTS]);
+        k.inverse(&p, &mut q1).unwrap();
+        let turns = 3 * 360 * 1_000_000_000;
+        k.inverse(&[p[0], p[1], p[2], p[3], 0, p[5] - turns], &mut q2)
+            .unwrap();
+        assert_eq!(q1, q2);
     }
 
     /// Runs forward kinematics from a guess one 1 ms period of motion away (200 mm/s in

@@ -4,46 +4,50 @@
 //! Geometry: [`HexapodGeometry`]. Pose X Y Z = platform origin (nm), A B C (n°) with
 //! R = Rz(C)·Ry(B)·Rx(A); joint i = |p + R·b_i − a_i| (nm).
 //!
-//! Inverse, per call: three sin/cos pairs (Q30, [`fixed::sincos`]); the nine entries of
-//! R as Q30, each from 32 × 32-bit products summed in 64 bits and rounded once; per leg
-//! R·b_i summed in 64 bits (Q30·nm) and rounded once to half nanometres (hn); the leg
-//! vector v = 2p + R·b − 2a (hn, exact integers) with each component below 2^31 hn
-//! (1.07 m, else out of reach), |v|² exact in `u64`, the correctly rounded integer root
-//! and a final rounding to nm. The inverse has no reach test beyond that range: the
+//! Inverse, per call: three sin/cos pairs (Q31, [`fixed::sincos`]); the nine entries of
+//! R as Q31 (one or two `SMMULR` products each); per leg and axis the component
+//! v = 2(p − a_i) + R·(4b_i)/2^32 in half nanometres (hn), all in 32 bits: the
+//! platform joints are stored in quarter nanometres, so each term is one `SMMLAR`
+//! rounding to the hn. |v|² is exact in `u64`, then the integer root of
+//! [`fixed::isqrt`] and a final rounding to nm. 32 bits suffice because the pose is
+//! refused beyond |X|, |Y|, |Z| ≤ 2^30 nm − max|a| − max|b| (623 mm for the thesis
+//! machine; the configuration keeps |a| < 537 mm and |b| < 268 mm): then every
+//! partial sum stays below 2^31 hn. Within that the inverse has no reach test: the
 //! joints' travel bounds the workspace (`inverse_checked`), and forward kinematics
 //! reports singular poses.
 //!
 //! Error budget (each leg, against exact arithmetic on the same integer pose): each R
-//! entry ≤ 3 · 1.0e-9 (sin/cos errors and product roundings), times |b| = 150 mm:
-//! ≤ 0.45 nm per term of R·b, ≤ 0.25 nm hn rounding per component; the leg length
-//! moves by at most |δv| ≤ 1.0 nm, plus 0.25 nm root and 0.5 nm final rounding:
-//! ≈ 1.8 nm worst case; measured: see `docs/performance.md` (≤ 5 nm required).
+//! entry ≤ 2.4e-9 (two sin/cos errors of 7.0e-10 and the Q31 roundings), times
+//! |b| = 150 mm: ≤ 0.36 nm per term of R·b, plus 0.25 nm rounding per term; the leg
+//! length moves by at most |δv|, the sum of those over the three terms of the three
+//! components (worst case ≈ 3 nm, in practice the errors do not align), plus 0.25 nm
+//! root and 0.5 nm final rounding; measured 1.39 nm over 100 000 poses
+//! (`docs/performance.md`; ≤ 5 nm required).
 //!
 //! Forward: Newton from the guess on all six axes. Each iteration evaluates the
 //! fixed-point inverse (exact residual to the hn), builds the 6 × 6 Jacobian in `f32`
 //! (row i: the leg direction n_i and (R·b_i × n_i)·u_k for the rotation axes
 //! u_A = R·x̂, u_B = Rz(C)·ŷ, u_C = ẑ, divided by the lever |b|max so all columns are
-//! nm), solves with partial pivoting and applies the rounded step; it stops after the
-//! first step of at most 1 nm on X Y Z and at most the rotation moving a platform joint
-//! by 1 nm on A B C.
+//! nm), solves with partial pivoting, applies the rounded step and stops after a step of
+//! at most [`FINAL_STEP`]: 2 iterations from the pose of the previous 1 ms period.
 
-use super::fixed::{self, i64_to_f32, isqrt_round, round_f32, shr_round, sincos, NDEG_PER_RAD};
+use super::fixed::{self, i64_to_f32, isqrt, mulhr, round_f32, sincos, NDEG_PER_RAD};
 use super::solve::solve;
 use super::{Joints, Pose, Unreachable, FINAL_STEP, MAX_ITERATIONS};
-use crate::config::{HexapodGeometry, GEOMETRY_MAX};
+use crate::config::HexapodGeometry;
 
 /// Sub-nanometre bits of the leg vectors: half nanometres.
 const SUB: u32 = 1;
-/// Largest leg-vector component, hn.
-const V_MAX: u64 = 1 << 31;
 
 /// Hexapod, precomputed from [`HexapodGeometry`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Hexapod {
     /// Base joints, hn.
-    base: [[i64; 3]; 6],
-    /// Platform joints, nm.
+    base: [[i32; 3]; 6],
+    /// Platform joints, quarter nm.
     platform: [[i32; 3]; 6],
+    /// Largest |X|, |Y|, |Z| taken, nm.
+    p_max: u64,
     /// Largest |b_i|, nm: the lever the angles are scaled by.
     lever: i64,
 }
@@ -51,21 +55,23 @@ pub struct Hexapod {
 /// Per-leg values the forward kinematics' Jacobian is built from.
 struct LegState {
     /// Leg vector, hn.
-    v: [i64; 3],
-    /// R·b, nm·2^30.
-    rb: [i64; 3],
+    v: [i32; 3],
     /// Unrounded length, hn.
     len: u64,
 }
 
-fn in_range(v: i64) -> bool {
-    v.unsigned_abs() < GEOMETRY_MAX as u64
+/// A Q30 value (|v| ≤ 1 + rounding) to Q31, saturated.
+#[inline(always)]
+fn q31(v: i32) -> i32 {
+    v.clamp(-(1 << 30), (1 << 30) - 1) << 1
 }
 
-/// Rounded Q30 product of two Q30 values.
+/// One leg-vector component, hn: `base + Σ_j r_j·b_j / 2^32` (b in quarter nm).
 #[inline(always)]
-fn mul30(a: i32, b: i32) -> i32 {
-    shr_round(a as i64 * b as i64, 30) as i32
+fn component(base: i32, r: &[i32; 3], b: &[i32; 3]) -> i32 {
+    base.wrapping_add(mulhr(r[0], b[0]))
+        .wrapping_add(mulhr(r[1], b[1]))
+        .wrapping_add(mulhr(r[2], b[2]))
 }
 
 impl Hexapod {
@@ -74,17 +80,25 @@ impl Hexapod {
         let mut lever = 1;
         for b in &g.platform {
             let sq: u64 = b.iter().map(|c| c.unsigned_abs().pow(2)).sum();
-            lever = lever.max(isqrt_round(sq) as i64);
+            lever = lever.max(isqrt(sq) as i64 + 1);
         }
+        let a_max = g
+            .base
+            .iter()
+            .flatten()
+            .map(|c| c.unsigned_abs())
+            .max()
+            .unwrap_or(0);
         Self {
-            base: g.base.map(|a| a.map(|c| c << SUB)),
-            platform: g.platform.map(|b| b.map(|c| c as i32)),
+            base: g.base.map(|a| a.map(|c| (c << SUB) as i32)),
+            platform: g.platform.map(|b| b.map(|c| (c << 2) as i32)),
+            p_max: (1u64 << 30) - 16 - a_max - lever as u64,
             lever,
         }
     }
 
     /// The inverse kinematics, reporting each leg's intermediate values to `leg`;
-    /// returns R and (sin C, cos C), Q30.
+    /// returns R and (sin C, cos C), Q31.
     #[inline(always)]
     fn eval(
         &self,
@@ -93,47 +107,54 @@ impl Hexapod {
         mut leg: impl FnMut(usize, LegState),
     ) -> Result<([[i32; 3]; 3], [i32; 2]), Unreachable> {
         let [x, y, z, a, b, c] = *pose;
-        if !(in_range(x) && in_range(y) && in_range(z)) {
+        if x.unsigned_abs() > self.p_max
+            || y.unsigned_abs() > self.p_max
+            || z.unsigned_abs() > self.p_max
+        {
             return Err(Unreachable::OutOfReach);
         }
         let (sa, ca) = sincos(a);
         let (sb, cb) = sincos(b);
         let (sc, cc) = sincos(c);
-        let p2 = |u: i32, v: i32, w: i32, t: i32| {
-            shr_round(u as i64 * v as i64 + w as i64 * t as i64, 30) as i32
-        };
-        let sbsa = mul30(sb, sa);
-        let sbca = mul30(sb, ca);
+        // Q31 × Q31 → Q30 in one SMMULR, back to Q31.
+        let sbsa = mulhr(sb, sa) << 1;
+        let sbca = mulhr(sb, ca) << 1;
         let r = [
-            [mul30(cc, cb), p2(cc, sbsa, -sc, ca), p2(cc, sbca, sc, sa)],
-            [mul30(sc, cb), p2(sc, sbsa, cc, ca), p2(sc, sbca, -cc, sa)],
-            [-sb, mul30(cb, sa), mul30(cb, ca)],
+            [
+                mulhr(cc, cb) << 1,
+                q31(mulhr(cc, sbsa) - mulhr(sc, ca)),
+                q31(mulhr(cc, sbca) + mulhr(sc, sa)),
+            ],
+            [
+                mulhr(sc, cb) << 1,
+                q31(mulhr(sc, sbsa) + mulhr(cc, ca)),
+                q31(mulhr(sc, sbca) - mulhr(cc, sa)),
+            ],
+            [-sb, mulhr(cb, sa) << 1, mulhr(cb, ca) << 1],
         ];
-        let p = [x << SUB, y << SUB, z << SUB];
-        for (i, ((q, bi), ai)) in joints
+        let (px, py, pz) = ((x << SUB) as i32, (y << SUB) as i32, (z << SUB) as i32);
+        for (i, (q, (ai, bi))) in joints
             .iter_mut()
-            .zip(&self.platform)
-            .zip(&self.base)
+            .zip(self.base.iter().zip(&self.platform))
             .enumerate()
         {
-            let mut v = [0i64; 3];
-            let mut rb = [0i64; 3];
-            let mut sq = 0u64;
-            for k in 0..3 {
-                let w = r[k][0] as i64 * bi[0] as i64
-                    + r[k][1] as i64 * bi[1] as i64
-                    + r[k][2] as i64 * bi[2] as i64;
-                rb[k] = w;
-                v[k] = p[k] + shr_round(w, 30 - SUB) - ai[k];
-                let m = v[k].unsigned_abs();
-                if m >= V_MAX {
-                    return Err(Unreachable::OutOfReach);
-                }
-                sq += m * m;
-            }
-            let len = isqrt_round(sq);
-            *q = shr_round(len as i64, SUB);
-            leg(i, LegState { v, rb, len });
+            // Written out (no arrays or iterators) so that it compiles to straight
+            // SMMLAR chains at opt-level "s".
+            let v0 = component(px - ai[0], &r[0], bi);
+            let v1 = component(py - ai[1], &r[1], bi);
+            let v2 = component(pz - ai[2], &r[2], bi);
+            let sq = ((v0 as i64 * v0 as i64) as u64)
+                .wrapping_add((v1 as i64 * v1 as i64) as u64)
+                .wrapping_add((v2 as i64 * v2 as i64) as u64);
+            let len = isqrt(sq);
+            *q = ((len + 1) >> SUB) as i64;
+            leg(
+                i,
+                LegState {
+                    v: [v0, v1, v2],
+                    len,
+                },
+            );
         }
         Ok((r, [sc, cc]))
     }
@@ -153,31 +174,31 @@ impl Hexapod {
         let mut p = *guess;
         let lever = self.lever as f32;
         let ndeg_per_nm = NDEG_PER_RAD as f32 / lever;
-        let one = fixed::ONE_Q30 as f32;
         for it in 1..=MAX_ITERATIONS {
             let mut q = [0; super::MAX_JOINTS];
             let mut rows = [[0.0f32; 6]; 6];
             let mut res = [0.0f32; 6];
             let (rq, [sc, cc]) = self.eval(&p, &mut q, |i, s| {
                 let inv = 1.0 / i64_to_f32(s.len as i64);
-                let n = s.v.map(|c| i64_to_f32(c) * inv);
-                let rb = s.rb.map(|c| i64_to_f32(c) / (one * lever));
-                // m = (R·b × n) / lever; row = (n, m·u_A, m·u_B, m·u_C).
-                rows[i][..3].copy_from_slice(&n);
-                rows[i][3..].copy_from_slice(&[
-                    rb[1] * n[2] - rb[2] * n[1],
-                    rb[2] * n[0] - rb[0] * n[2],
-                    rb[0] * n[1] - rb[1] * n[0],
-                ]);
+                rows[i][..3].copy_from_slice(&s.v.map(|c| c as f32 * inv));
                 let t = joints[i].wrapping_shl(SUB).wrapping_sub(s.len as i64);
                 res[i] = i64_to_f32(t) * 0.5;
             })?;
-            // Column A: m·(R x̂); B: m·(Rz(C) ŷ) = m·(−sin C, cos C, 0); C: m·ẑ.
-            let (sc, cc) = (sc as f32 / one, cc as f32 / one);
-            let ua = [rq[0][0], rq[1][0], rq[2][0]].map(|v| v as f32 / one);
-            for row in rows.iter_mut() {
-                let m = [row[3], row[4], row[5]];
-                row[3] = m[0] * ua[0] + m[1] * ua[1] + m[2] * ua[2];
+            let rf = rq.map(|row| row.map(|v| v as f32 / fixed::ONE_Q31));
+            let (sc, cc) = (sc as f32 / fixed::ONE_Q31, cc as f32 / fixed::ONE_Q31);
+            for (row, b) in rows.iter_mut().zip(&self.platform) {
+                // R·b / lever (b is stored in quarter nm), then m = (R·b × n); row =
+                // (n, m·u_A, m·u_B, m·u_C) with u_A = R x̂, u_B = Rz(C) ŷ =
+                // (−sin C, cos C, 0), u_C = ẑ.
+                let bf = b.map(|c| c as f32 / (4.0 * lever));
+                let rb = rf.map(|r| r[0] * bf[0] + r[1] * bf[1] + r[2] * bf[2]);
+                let n = [row[0], row[1], row[2]];
+                let m = [
+                    rb[1] * n[2] - rb[2] * n[1],
+                    rb[2] * n[0] - rb[0] * n[2],
+                    rb[0] * n[1] - rb[1] * n[0],
+                ];
+                row[3] = m[0] * rf[0][0] + m[1] * rf[1][0] + m[2] * rf[2][0];
                 row[4] = m[1] * cc - m[0] * sc;
                 row[5] = m[2];
             }
@@ -277,6 +298,32 @@ mod tests {
         ) {
             let g = geometry();
             prop_assert!(ik_error(&g, &Hexapod::new(&g), &[x, y, z, a, b, c]) <= 5.0);
+        }
+    }
+
+    #[test]
+    fn poses_at_the_fixed_point_range_are_exact_and_beyond_it_out_of_reach() {
+        let g = geometry();
+        let k = Hexapod::new(&g);
+        let m = k.p_max as i64;
+        assert!(m > 600_000_000, "{m}");
+        let deg = 1_000_000_000;
+        let mut worst = 0.0f64;
+        for p in [
+            [m, m, m, 180 * deg, 90 * deg, -180 * deg],
+            [-m, m, -m, 45 * deg, -30 * deg, 120 * deg],
+            [0, -m, m, -90 * deg, 0, 7 * deg],
+        ] {
+            worst = worst.max(ik_error(&g, &k, &p));
+        }
+        assert!(worst <= 5.0, "{worst}");
+        let mut q = [0; MAX_JOINTS];
+        for p in [
+            [m + 1, 0, 0, 0, 0, 0],
+            [0, -m - 1, 0, 0, 0, 0],
+            [0, 0, i64::MIN, 0, 0, 0],
+        ] {
+            assert_eq!(k.inverse(&p, &mut q), Err(Unreachable::OutOfReach));
         }
     }
 

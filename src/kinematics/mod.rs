@@ -8,12 +8,14 @@
 //! Machines: [`Cartesian`], the H-4 with rolling table ([`h4::H4Table`]) and the
 //! hexapod ([`hexapod::Hexapod`]); their geometry comes from
 //! [`crate::config::KinematicsConfig`], nothing is hard-coded here. The parallel
-//! machines' inverse kinematics is fixed point ([`fixed`]: Q30 sin/cos, exact 64-bit
-//! sums of squares, correctly rounded integer square roots) with an error budget of a
-//! few nm stated in each module and checked against an `f64` reference by the property
-//! tests below (≤ 5 nm per joint). Their forward kinematics is Newton's method: the
-//! residual from the exact fixed-point inverse, the step from the analytic Jacobian
-//! solved in `f32` with partial pivoting ([`solve`]), at most [`MAX_ITERATIONS`].
+//! machines' inverse kinematics is fixed point ([`fixed`]: Q31 sin/cos, positions in
+//! half nanometres, exact 64-bit sums of squares, integer square roots to ±0.51) with
+//! an error budget stated in each module and checked against an `f64` reference by the
+//! tests in `h4` and `hexapod` (≤ 5 nm per joint required; ≤ 1.4 nm measured). Their
+//! forward kinematics is Newton's method: the residual from the exact fixed-point
+//! inverse, the step from the analytic Jacobian solved in `f32` with partial pivoting
+//! ([`solve`]), at most [`MAX_ITERATIONS`]. Cortex-M4 instruction counts and how they
+//! are measured: `docs/performance.md` (`python3 .ci/m4count.py`).
 //!
 //! Invariants: no allocation, no panics, no unbounded loops, no `f64` (the MCU's FPU is
 //! single precision); results are bit-identical on the MCU and the host.
