@@ -1,0 +1,11 @@
+//! The G-code front end: any text must compile to blocks or to diagnostics, never
+//! panic.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = pkmc_host::gcode::compile(text, "fuzz.ngc", [0; 6]);
+    }
+});
