@@ -18,7 +18,6 @@ use crate::link::{
 use crate::plot::{lines_digest, Recorder};
 use crate::sim::{Simulator, Violation};
 use pkmc::config::{axis_is_rotary, MachineConfig, AXES, AXIS_NAMES};
-use pkmc::kinematics::MachineKinematics;
 use pkmc::protocol::{Alarm, Block, Control, State, Status};
 use pkmc::units::{to_user, TICK_NS};
 use serde::Serialize;
@@ -114,7 +113,11 @@ pub fn compile_text(
     machine: &MachineConfig,
     start: [i64; AXES],
 ) -> Result<Vec<Block>, Failure> {
-    let blocks = gcode::compile(text, name, start).map_err(|errs| {
+    let options = gcode::Options {
+        start,
+        ..gcode::Options::default()
+    };
+    let canon = gcode::compile_canon(text, name, &options).map_err(|errs| {
         let lines: Vec<String> = errs.iter().map(|d| d.to_string()).collect();
         Failure::new(
             exit::BAD_INPUT,
@@ -125,20 +128,29 @@ pub fn compile_text(
             ),
         )
     })?;
-    let kin = MachineKinematics::new(machine);
-    let mut q = [0; pkmc::config::MAX_JOINTS];
-    for b in &blocks {
-        if let Err(e) = kin.inverse_checked(&b.target, &machine.joints, &mut q) {
-            return Err(Failure::new(
-                exit::PREFLIGHT,
+    let program = crate::blocks::from_canon(&canon, start);
+    let report = crate::preflight::check(&program.blocks, machine, start);
+    if !report.findings.is_empty() {
+        let lines: Vec<String> = report
+            .findings
+            .iter()
+            .map(|f| {
                 format!(
-                    "{name}:{}: target out of the machine's reach ({e:?}); nothing was sent",
-                    b.line
-                ),
-            ));
-        }
+                    "{name}:{}: {} (at X{} Y{} Z{} A{} B{} C{})",
+                    f.line, f.what, f.at[0], f.at[1], f.at[2], f.at[3], f.at[4], f.at[5]
+                )
+            })
+            .collect();
+        return Err(Failure::new(
+            exit::PREFLIGHT,
+            format!(
+                "{}\n{} pre-flight problem(s); nothing was sent",
+                lines.join("\n"),
+                report.findings.len()
+            ),
+        ));
     }
-    Ok(blocks)
+    Ok(program.blocks)
 }
 
 /// What the simulator side reports after a job.

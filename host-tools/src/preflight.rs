@@ -76,6 +76,9 @@ fn user_pose(p: &[i64; AXES]) -> [String; AXES] {
 }
 
 /// Smallest and largest eigenvalues of a symmetric matrix (Jacobi rotations).
+// Index loops: the rotations read and write a[k][p] and a[p][k] pairwise, which
+// iterators would only obscure.
+#[allow(clippy::needless_range_loop)]
 fn eigen_range(mut a: Vec<Vec<f64>>) -> (f64, f64) {
     let n = a.len();
     for _sweep in 0..50 {
@@ -169,15 +172,15 @@ pub fn margin(pose: &[i64; AXES], machine: &MachineConfig, kin: &MachineKinemati
     Some(s_min.min(if s_max > 0.0 { 1.0 / s_max } else { 0.0 }))
 }
 
-/// Checks `blocks` (starting at the machine's home pose) against `machine`.
-pub fn check(blocks: &[Block], machine: &MachineConfig) -> Preflight {
+/// Checks `blocks`, starting at `start`, against `machine`.
+pub fn check(blocks: &[Block], machine: &MachineConfig, start: [i64; AXES]) -> Preflight {
     let kin = MachineKinematics::new(machine);
     let mut out = Preflight {
         blocks: blocks.len(),
         ..Preflight::default()
     };
     let mut seen = BTreeSet::new();
-    let mut from = machine.home;
+    let mut from = start;
     let mut q = [0i64; MAX_JOINTS];
     for b in blocks {
         let path = match Path::new(b, &from) {
@@ -246,7 +249,7 @@ mod tests {
             to([0, 0, 0, 0, 0, 0], 4),
             to([150_000_000, 0, 0, 0, 0, 0], 7),
         ];
-        let p = check(&blocks, &m);
+        let p = check(&blocks, &m, m.home);
         let lines: Vec<u32> = p.findings.iter().map(|f| f.line).collect();
         // Line 3 rises past Z's travel (and line 4 comes back from there).
         assert_eq!(lines, vec![3, 4, 7], "{:?}", p.findings);
@@ -256,7 +259,7 @@ mod tests {
     #[test]
     fn a_cartesian_machine_has_unit_margin_and_the_h4_less_near_its_edge() {
         let m = MachineConfig::cartesian_xyz();
-        let p = check(&[to([10_000_000, 0, 0, 0, 0, 0], 1)], &m);
+        let p = check(&[to([10_000_000, 0, 0, 0, 0, 0], 1)], &m, m.home);
         let (margin, _) = p.min_margin.unwrap();
         assert!((margin - 1.0).abs() < 1e-3, "{margin}");
         let h4 = MachineConfig::h4_table();
