@@ -177,6 +177,23 @@ pub fn isqrt(n: u64) -> u64 {
     x0 + (u64_to_f32(d0) / (s + s) + 0.5) as u32 as u64 // 0/0 = NaN → 0 for n = 0
 }
 
+/// `u128` to `f32` without a library call (relative error ≤ 2^-22).
+#[inline]
+pub fn u128_to_f32(v: u128) -> f32 {
+    u64_to_f32((v >> 64) as u64) * 18_446_744_073_709_551_616.0 + u64_to_f32(v as u64)
+}
+
+/// `√n` within 0.6 for n < 2^74, as [`isqrt`] but with 128-bit residuals: for the
+/// forward kinematics' fine residuals (in 1/16 nm), not the hot path.
+#[inline]
+pub fn isqrt_wide(n: u128) -> u64 {
+    let v = u128_to_f32(n);
+    let s = sqrt_f32(v);
+    let x0 = (s * (1.0 - 1.0 / 1_048_576.0)) as u64;
+    let d0 = n.wrapping_sub(x0 as u128 * x0 as u128);
+    x0 + (u128_to_f32(d0) / (s + s) + 0.5) as u64
+}
+
 /// Correctly rounded single-precision square root of `v` ≥ 0: `VSQRT.F32`.
 ///
 /// Rust's `asm!` offers no register class for a single-precision-only FPU, so the value
@@ -367,6 +384,18 @@ mod tests {
             worst = worst.max((r as f64 - (n as f64).sqrt()).abs());
         }
         assert!(worst < 0.51, "{worst}");
+    }
+
+    #[test]
+    fn the_wide_square_root_is_within_0_6_below_2_74() {
+        let mut seed = 3;
+        for _ in 0..100_000 {
+            let n = ((lcg(&mut seed) as u128) << 64 | lcg(&mut seed) as u128)
+                >> (54 + lcg(&mut seed) % 60);
+            let r = isqrt_wide(n) as f64;
+            let want = (n as f64).sqrt();
+            assert!((r - want).abs() <= 0.6 + want * 1e-15, "{n}: {r} vs {want}");
+        }
     }
 
     #[test]

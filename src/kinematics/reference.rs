@@ -154,3 +154,51 @@ pub fn h4_pose_from_head(g: &H4TableGeometry, e_mm: [f64; 3], theta_deg: f64, a_
         (theta_deg * NDEG).round() as i64,
     ]
 }
+
+/// Forward-kinematics statistics over many cases.
+#[derive(Default)]
+pub struct FkStats {
+    /// Cases by iterations used.
+    pub hist: [u32; 9],
+    /// Largest X Y Z error against the `f64` solution for the same joints, nm.
+    pub lin: f64,
+    /// Largest angle error against the `f64` solution, n°.
+    pub ang: f64,
+    /// Largest X Y Z difference from the pose the joints came from, nm.
+    pub round_trip: i64,
+    /// Largest X Y Z difference from the answer started at that pose (Newton's fixed
+    /// point of the same equations), nm.
+    pub conv_lin: i64,
+    /// Largest angle difference from that answer, n°.
+    pub conv_ang: i64,
+}
+
+impl FkStats {
+    /// Adds a case: `out` from the previous period's guess, `at` from the true pose `p`,
+    /// `want` the `f64` solution; `angles` the pose axes the machine turns.
+    pub fn add(
+        &mut self,
+        it: u8,
+        out: &Pose,
+        at: &Pose,
+        p: &Pose,
+        want: &[f64; 6],
+        angles: &[usize],
+    ) {
+        self.hist[it as usize] += 1;
+        for i in 0..3 {
+            self.lin = self.lin.max((out[i] as f64 - want[i]).abs());
+            self.round_trip = self.round_trip.max((out[i] - p[i]).abs());
+            self.conv_lin = self.conv_lin.max((out[i] - at[i]).abs());
+        }
+        for &i in angles {
+            self.ang = self.ang.max((out[i] as f64 - want[i]).abs());
+            self.conv_ang = self.conv_ang.max((out[i] - at[i]).abs());
+        }
+    }
+
+    /// Largest iteration count seen.
+    pub fn max_iterations(&self) -> usize {
+        self.hist.iter().rposition(|&n| n > 0).unwrap_or(0)
+    }
+}
