@@ -40,13 +40,14 @@ TARGET_DIR = os.path.join(CRATE, "target")
 ELF = os.path.join(TARGET_DIR, TARGET, "release", "pkmc-m4count")
 
 # Instruction budgets per call (docs/performance.md).
-BUDGETS = {"h4_ik": 600, "hexapod_ik": 1000}
+BUDGETS = {"h4_ik": 600, "hexapod_ik": 1000, "servo_ccpm_4axes": 2000}
 
 FLASH, FLASH_SIZE = 0x0800_0000, 0x8_0000
 RAM, RAM_SIZE = 0x2000_0000, 0x2_0000
 RET = FLASH + FLASH_SIZE - 0x100  # return address: a `b .` placed at the end of flash
 KIN = RAM + 0x1000  # MachineKinematics (1024 bytes reserved)
 ARG = RAM + 0x2000  # argument buffers
+BANK = RAM + 0x3000  # ServoBank (2048 bytes reserved)
 STACK_TOP = RAM + RAM_SIZE
 MAX_STEPS = 2_000_000  # a runaway run stops here
 
@@ -207,6 +208,15 @@ def main():
             _, n = m4.call("bench_isqrt", pose_a, out_a)
             check("isqrt", struct.unpack("<Q", m4.uc.mem_read(out_a, 8))[0], vals[1], c)
             record("isqrt", n)
+        elif kind == "servo":
+            if vals[0] == 0:
+                _, n = m4.call("bench_servo_init", BANK)
+                record("servo_init", n)
+            m4.write_i64(pose_a, vals[1:5])
+            _, n = m4.call("bench_servo_ccpm_4axes", BANK, pose_a, out_a)
+            dac = list(struct.unpack("<4H", m4.uc.mem_read(out_a, 8)))
+            check("DAC codes", dac, vals[5:9], c)
+            record("servo_ccpm_4axes", n)
 
     failed = False
     print(f"{'function':28} {'cases':>5} {'min':>6} {'mean':>7} {'max':>6} {'budget':>7}")

@@ -9,11 +9,13 @@
 //!
 //! Line formats (integers separated by spaces):
 //! `ik M p0..p5 rc q0..q10`, `fk M q0..q10 g0..g5 rc p0..p5`, `sincos a s c`,
-//! `isqrt n r`; M = 0 for the H-4 with rolling table, 1 for the hexapod; rc = 0 or
-//! the iteration count, negative for an `Unreachable` reason.
+//! `isqrt n r`, `servo k f0..f3 d0..d3`; M = 0 for the H-4 with rolling table, 1 for
+//! the hexapod; rc = 0 or the iteration count, negative for an `Unreachable` reason;
+//! servo: period k of a tick, encoder feedback f, DAC codes d.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 use pkmc::config::MachineConfig;
+use pkmc::contour::{PeriodInputs, ServoBank};
 use pkmc::kinematics::fixed::{isqrt, sincos};
 use pkmc::kinematics::{Joints, Kinematics, MachineKinematics, Pose, Unreachable};
 
@@ -107,6 +109,105 @@ pub unsafe extern "C" fn bench_sincos(angle: *const i64, out: *mut [i32; 2]) {
 pub unsafe extern "C" fn bench_isqrt(n: *const u64, out: *mut u64) {
     // SAFETY: the caller passes valid pointers.
     unsafe { *out = isqrt(*n) }
+}
+
+/// Bytes the emulator reserves for one [`ServoBank`].
+pub const BANK_BYTES: usize = 2048;
+const _: () = assert!(core::mem::size_of::<ServoBank>() <= BANK_BYTES);
+
+/// Four servo channels: X, Y, Z coupled by CCPM with `seed-b`'s gains (docs/contour.md),
+/// a fourth (rotary A) uncoupled; 1 µm per count.
+fn servo_machine() -> MachineConfig {
+    use pkmc::config::{ContourConfig, ContourMode, Drive, KinematicsConfig, Scale, ServoGains};
+    let mut m = MachineConfig::cartesian_xyz();
+    let g = ServoGains {
+        kp: 0.1,
+        ki: 1.6,
+        kd: 3.0e-4,
+        kvff: 5.4632e-3,
+        kaff: -8.6924e-5,
+        max_output: 200.0,
+        max_integral: 200.0,
+        dac_per_unit: 10.0,
+        dac_offset: 0,
+        ferror: 2000,
+        min_ferror: 1000,
+    };
+    for (c, j) in m.joints.iter_mut().enumerate() {
+        j.drive = Drive::Servo {
+            channel: c as u8,
+            kp_q16: 0,
+            kvff_q16: 0,
+            out_limit: 2047,
+        };
+        j.scale = Scale::new(1000, 1_000_000);
+    }
+    let mut a = m.joints[0];
+    a.rotary = true;
+    a.drive = Drive::Servo {
+        channel: 3,
+        kp_q16: 0,
+        kvff_q16: 0,
+        out_limit: 2047,
+    };
+    let _ = m.joints.push(a);
+    if let KinematicsConfig::Cartesian { axis_of_joint } = &mut m.kinematics {
+        axis_of_joint[3] = 3;
+    }
+    m.servo.gains = [g; 4];
+    m.servo.contour = ContourConfig {
+        mode: ContourMode::Ccpm,
+        kp: 200.0,
+        ki: 1000.0,
+        max_integral: 50.0,
+        kr: 20.0,
+        max_offset: 0.5,
+    };
+    m
+}
+
+/// A servo bank at rest with one tick's targets loaded (not timed).
+fn servo_bank() -> ServoBank {
+    let mut bank = ServoBank::new(&servo_machine(), &[0, 0, 260_000, 0]);
+    bank.load_tick(&[
+        (10 << 16) + 123,
+        (3 << 16) + 77,
+        (260_003 << 16) + 5,
+        2 << 16,
+    ]);
+    bank
+}
+
+/// Builds the servo bank into `out` (not timed).
+///
+/// # Safety
+/// `out` must be valid for writing [`BANK_BYTES`] bytes, 8-aligned.
+#[no_mangle]
+pub unsafe extern "C" fn bench_servo_init(out: *mut ServoBank) {
+    // SAFETY: the caller provides room and alignment.
+    unsafe { out.write(servo_bank()) }
+}
+
+/// One 10 kHz servo period of the four channels with CCPM, given the encoder
+/// feedback; the DAC codes into `dac`.
+///
+/// # Safety
+/// Valid, aligned pointers.
+#[no_mangle]
+pub unsafe extern "C" fn bench_servo_ccpm_4axes(
+    bank: *mut ServoBank,
+    feedback: *const [i64; 4],
+    dac: *mut [u16; 4],
+) {
+    // SAFETY: the caller passes valid pointers.
+    unsafe {
+        let inputs = PeriodInputs {
+            feedback: *feedback,
+            fault: [false; 4],
+            enable: true,
+        };
+        *dac = (*bank).period(&inputs).dac;
+    }
 }
 
 #[cfg(target_os = "none")]
@@ -254,6 +355,19 @@ mod host {
         }
         for n in values {
             println!("isqrt {n} {}", isqrt(n));
+        }
+        let mut bank = servo_bank();
+        for k in 0..10i64 {
+            let f = [k, -k / 2, 260_000 + k / 3, 0];
+            let d = bank
+                .period(&PeriodInputs {
+                    feedback: f,
+                    fault: [false; 4],
+                    enable: true,
+                })
+                .dac;
+            let d = d.map(i64::from);
+            println!("servo {k} {} {}", line(&[&f]), line(&[&d]));
         }
     }
 }
