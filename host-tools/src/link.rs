@@ -12,8 +12,11 @@
 //!   command) and waits for `MachineLoaded`.
 //! * Credits: a block is sent only while the blocks in flight (sent, not yet
 //!   acknowledged) are fewer than the free queue slots last reported (by `Ack` or
-//!   `Status`) and the motion the controller reports buffered is below
-//!   [`LinkOptions::max_buffered_ms`] ([`MAX_BUFFERED_MS`] by default). A congestion
+//!   `Status`) and the motion the controller reports buffered, plus the estimated
+//!   motion of the blocks in flight ([`estimate_ms`]), is below
+//!   [`LinkOptions::max_buffered_ms`] ([`MAX_BUFFERED_MS`] by default); a block is
+//!   always sent when nothing is in flight and the controller is below the limit, so a
+//!   single block longer than the limit cannot stall the stream. A congestion
 //!   window, halved on every loss and grown again by one per acknowledgement, keeps a
 //!   noisy line from being flooded with resends.
 //! * Acknowledgement is cumulative: `Ack { seq }` and `Nak { expected }` both mean every
@@ -43,8 +46,8 @@ use crate::faults::FaultyLine;
 use crate::sim::Simulator;
 use pkmc::config::MachineConfig;
 use pkmc::protocol::{
-    decode_frame, encode_frame, Alarm, Block, Control, CtrlMsg, FrameReader, HostMsg, NakReason,
-    Pushed, State, Status, MAX_BODY, MAX_FRAME, PROTOCOL_VERSION,
+    decode_frame, encode_frame, Alarm, Block, Control, CtrlMsg, FrameReader, HostMsg, Motion,
+    NakReason, Pushed, State, Status, MAX_BODY, MAX_FRAME, PROTOCOL_VERSION,
 };
 use serde::Serialize;
 use serialport::SerialPort;
@@ -366,6 +369,60 @@ fn settle(sim: &mut Simulator) -> anyhow::Result<bool> {
     Ok(false)
 }
 
+/// Estimated duration of `b` starting from pose `from`, ms, at its feed (rapids at
+/// the slowest axis's `axis_vmax`, units/s), ignoring acceleration: a lower bound
+/// of what the controller will report buffered for it. Dwells count their time,
+/// auxiliary functions nothing.
+pub fn estimate_ms(from: &[i64; 6], b: &Block, axis_vmax: &[i64; 6]) -> f64 {
+    let d: Vec<f64> = (0..6).map(|i| (b.target[i] - from[i]) as f64).collect();
+    let linear = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let rotary = (d[3] * d[3] + d[4] * d[4] + d[5] * d[5]).sqrt();
+    let at_feed = |len: f64| {
+        if b.feed > 0 {
+            len / b.feed as f64 * 1000.0
+        } else {
+            0.0
+        }
+    };
+    match b.motion {
+        Motion::Rapid => (0..6)
+            .filter(|&i| axis_vmax[i] > 0)
+            .map(|i| d[i].abs() / axis_vmax[i] as f64 * 1000.0)
+            .fold(0.0, f64::max),
+        Motion::Linear => at_feed(if linear > 0.0 { linear } else { rotary }),
+        Motion::Arc {
+            center,
+            plane,
+            clockwise,
+            turns,
+        } => {
+            let (a, c, h) = plane.axes();
+            let (sa, sc) = (
+                from[a] as f64 - center[0] as f64,
+                from[c] as f64 - center[1] as f64,
+            );
+            let (ea, ec) = (
+                b.target[a] as f64 - center[0] as f64,
+                b.target[c] as f64 - center[1] as f64,
+            );
+            let r = (sa * sa + sc * sc).sqrt();
+            let tau = std::f64::consts::TAU;
+            let mut sweep = (ec.atan2(ea) - sc.atan2(sa)).rem_euclid(tau);
+            if clockwise {
+                sweep = (tau - sweep).rem_euclid(tau);
+            }
+            if sweep == 0.0 {
+                sweep = tau;
+            }
+            sweep += tau * turns as f64;
+            let along = r * sweep;
+            at_feed((along * along + d[h] * d[h]).sqrt())
+        }
+        Motion::Dwell(ms) => ms as f64,
+        Motion::Aux(_) => 0.0,
+    }
+}
+
 /// What the simulator's server loop did, besides the faults.
 #[derive(Clone, Debug, Default)]
 pub struct ServeStats {
@@ -583,6 +640,7 @@ pub struct Link<T: Transport> {
     /// Counters.
     pub stats: ClientStats,
     their_machine: u32,
+    axis_vmax: [i64; 6],
 }
 
 impl<T: Transport> Link<T> {
@@ -618,6 +676,7 @@ impl<T: Transport> Link<T> {
             status: None,
             stats: ClientStats::default(),
             their_machine: 0,
+            axis_vmax: core::array::from_fn(|i| machine.axes[i].max_velocity),
         };
         let start = Instant::now();
         while start.elapsed() < opts.link_timeout {
@@ -950,6 +1009,18 @@ impl<T: Transport> Link<T> {
             }
         }
         let mut job = JobState::new(self.next_seq, self.capacity, &start_status);
+        // Cumulative estimated motion, ms: `planned_ms[i]` covers blocks before `i`.
+        let mut from = start_status.pose;
+        job.planned_ms = Vec::with_capacity(blocks.len() + 1);
+        job.planned_ms.push(0.0);
+        for b in blocks {
+            let total = job.planned_ms.last().copied().unwrap_or(0.0);
+            job.planned_ms
+                .push(total + estimate_ms(&from, b, &self.axis_vmax));
+            if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
+                from = b.target;
+            }
+        }
         let result = self.job_loop(blocks, hooks, &mut job);
         self.next_seq = job.seq_of(job.acked.max(job.high));
         result
@@ -980,6 +1051,9 @@ impl<T: Transport> Link<T> {
                 while job.sent < total
                     && job.sent - job.acked < job.free.min(job.window)
                     && job.buffered_ms < self.opts.max_buffered_ms
+                    && (job.sent == job.acked
+                        || job.buffered_ms as f64 + job.in_flight_ms()
+                            < self.opts.max_buffered_ms as f64)
                 {
                     let seq = job.seq_of(job.sent);
                     self.queue(seq, &HostMsg::Block(blocks[job.sent]))?;
@@ -1237,6 +1311,7 @@ struct JobState {
     last_progress: Instant,
     done_before: u32,
     ending: Option<Ending>,
+    planned_ms: Vec<f64>,
 }
 
 impl JobState {
@@ -1254,6 +1329,18 @@ impl JobState {
             last_progress: Instant::now(),
             done_before: status.blocks_done,
             ending: None,
+            planned_ms: Vec::new(),
+        }
+    }
+
+    /// Estimated motion of the blocks in flight, ms.
+    fn in_flight_ms(&self) -> f64 {
+        match (
+            self.planned_ms.get(self.sent),
+            self.planned_ms.get(self.acked),
+        ) {
+            (Some(s), Some(a)) => s - a,
+            _ => 0.0,
         }
     }
 
@@ -1315,6 +1402,60 @@ mod tests {
             feed_override: 100,
             alarm: None,
         }
+    }
+
+    fn block(motion: Motion, target: [i64; 6], feed_mm_s: i64) -> Block {
+        Block {
+            line: 1,
+            motion,
+            target,
+            feed: feed_mm_s * 1_000_000,
+            tolerance_nm: 0,
+        }
+    }
+
+    #[test]
+    fn motion_estimates_follow_feed_rapid_limits_arcs_and_dwells() {
+        let vmax = [100_000_000; 6];
+        let at = [0; 6];
+        let mm = 1_000_000;
+        let line = block(Motion::Linear, [30 * mm, 40 * mm, 0, 0, 0, 0], 10);
+        assert!((estimate_ms(&at, &line, &vmax) - 5000.0).abs() < 1e-6);
+        let rapid = block(Motion::Rapid, [50 * mm, 10 * mm, 0, 0, 0, 0], 0);
+        assert!((estimate_ms(&at, &rapid, &vmax) - 500.0).abs() < 1e-6);
+        // A half circle of radius 10 mm at 10 mm/s: 10π mm in π s.
+        let half = block(
+            Motion::Arc {
+                center: [10 * mm, 0],
+                plane: pkmc::protocol::Plane::Xy,
+                clockwise: true,
+                turns: 0,
+            },
+            [20 * mm, 0, 0, 0, 0, 0],
+            10,
+        );
+        let ms = estimate_ms(&at, &half, &vmax);
+        assert!((ms - std::f64::consts::PI * 1000.0).abs() < 1e-3, "{ms}");
+        // The other way round with one extra turn: three half circles.
+        let long = block(
+            Motion::Arc {
+                center: [10 * mm, 0],
+                plane: pkmc::protocol::Plane::Xy,
+                clockwise: false,
+                turns: 1,
+            },
+            [20 * mm, 0, 0, 0, 0, 0],
+            10,
+        );
+        let ms = estimate_ms(&at, &long, &vmax);
+        assert!(
+            (ms - 3.0 * std::f64::consts::PI * 1000.0).abs() < 1e-3,
+            "{ms}"
+        );
+        assert_eq!(
+            estimate_ms(&at, &block(Motion::Dwell(250), at, 0), &vmax),
+            250.0
+        );
     }
 
     #[test]

@@ -156,8 +156,25 @@ fn check_plans_the_job_without_a_port_and_agrees_with_the_simulator() {
     assert_eq!(check["result"], "done");
     assert_eq!(check["blocks_executed"], sim["blocks_executed"]);
     assert_eq!(check["final_joint_steps"], sim["final_joint_steps"]);
-    assert_eq!(check["run_time_s"], sim["run_time_s"]);
-    assert!(check["run_time_s"].as_f64().unwrap() > 1.0);
+    // The simulator's clock runs free while the host reacts in real time, so its
+    // motion time can differ a little from the planned one (a late block means a
+    // different blend); the check itself is deterministic.
+    let (planned, ran) = (
+        check["run_time_s"].as_f64().unwrap(),
+        sim["run_time_s"].as_f64().unwrap(),
+    );
+    assert!(planned > 1.0);
+    assert!(
+        (planned - ran).abs() < 0.03 * planned,
+        "{planned} s vs {ran} s"
+    );
+    let again = ok(&nc_send(&[
+        "--check",
+        "--report",
+        "json",
+        "examples/square.ngc",
+    ]));
+    assert_eq!(again["run_time_s"], check["run_time_s"]);
     // Without --report, a readable summary says it was only checked.
     let out = nc_send(&["--check", "examples/square.ngc"]);
     assert_eq!(out.status.code(), Some(0));
