@@ -40,7 +40,7 @@ TARGET_DIR = os.path.join(CRATE, "target")
 ELF = os.path.join(TARGET_DIR, TARGET, "release", "pkmc-m4count")
 
 # Instruction budgets per call (docs/performance.md).
-BUDGETS = {"h4_ik": 600, "hexapod_ik": 1000, "servo_ccpm_4axes": 2000}
+BUDGETS = {"h4_ik": 600, "hexapod_ik": 1000, "servo_ccpm_4axes": 2000, "h4_period": 1500}
 
 FLASH, FLASH_SIZE = 0x0800_0000, 0x8_0000
 RAM, RAM_SIZE = 0x2000_0000, 0x2_0000
@@ -48,6 +48,8 @@ RET = FLASH + FLASH_SIZE - 0x100  # return address: a `b .` placed at the end of
 KIN = RAM + 0x1000  # MachineKinematics (1024 bytes reserved)
 ARG = RAM + 0x2000  # argument buffers
 BANK = RAM + 0x3000  # ServoBank (2048 bytes reserved)
+PERIOD = RAM + 0x4000  # Period (64 KiB reserved: up to RAM + 0x14000)
+PERIOD_WARMUP, PERIOD_CHUNK = 1600, 200  # as perf/m4count/src/main.rs
 STACK_TOP = RAM + RAM_SIZE
 MAX_STEPS = 2_000_000  # a runaway run stops here
 
@@ -217,6 +219,17 @@ def main():
             dac = list(struct.unpack("<4H", m4.uc.mem_read(out_a, 8)))
             check("DAC codes", dac, vals[5:9], c)
             record("servo_ccpm_4axes", n)
+        elif kind == "period":
+            if vals[0] == 0:
+                _, n = m4.call("bench_period_init", PERIOD)
+                record("h4_period_init", n)
+                for _ in range(PERIOD_WARMUP // PERIOD_CHUNK):
+                    m4.call("bench_period_advance", PERIOD, PERIOD_CHUNK)
+            m4.write_i64(joints_a, [0] * 11)
+            got, n = m4.call("bench_period", PERIOD, joints_a)
+            check("period result", got, vals[1], c)
+            check("period joints", m4.read_i64(joints_a, 11), vals[2:13], c)
+            record("h4_period", n)
 
     failed = False
     print(f"{'function':28} {'cases':>5} {'min':>6} {'mean':>7} {'max':>6} {'budget':>7}")

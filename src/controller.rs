@@ -91,6 +91,7 @@ pub struct Controller {
 fn alarm_of(why: Unreachable, line: u32) -> Alarm {
     let (cause, joint) = match why {
         Unreachable::JointLimit { joint } => (AlarmCause::JointLimit, joint),
+        Unreachable::Singular => (AlarmCause::Singularity, NO_JOINT),
         _ => (AlarmCause::Unreachable, NO_JOINT),
     };
     Alarm { cause, joint, line }

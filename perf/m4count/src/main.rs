@@ -210,6 +210,106 @@ pub unsafe extern "C" fn bench_servo_ccpm_4axes(
     }
 }
 
+/// One whole interpolation period on the H-4 with rolling table: the look-ahead
+/// executor (profile and exact arc), then the table transform and inverse kinematics
+/// of the new pose.
+pub struct Period {
+    machine: MachineConfig,
+    kin: MachineKinematics,
+    planner: pkmc::planner::Planner,
+    exec: pkmc::interp::Executor,
+}
+
+/// Bytes the emulator reserves for one [`Period`].
+pub const PERIOD_BYTES: usize = 64 * 1024;
+const _: () = assert!(core::mem::size_of::<Period>() <= PERIOD_BYTES);
+/// Ticks run before the measured ones: the head is then on the arc, at its feed.
+pub const PERIOD_WARMUP: u32 = 1600;
+/// Ticks per warm-up call (keeps each emulated call short).
+pub const PERIOD_CHUNK: u32 = 200;
+
+/// A helical arc at a 30° table angle: a line from home to the arc start (turning the
+/// table), then a full clockwise circle of 30 mm radius, both at 40 mm/s.
+fn period_blocks(home: Pose) -> [pkmc::protocol::Block; 2] {
+    use pkmc::protocol::{Block, Motion, Plane};
+    let mut start = home;
+    start[0] += 30_000_000;
+    start[3] = 30_000_000_000;
+    let line = Block {
+        line: 1,
+        motion: Motion::Linear,
+        target: start,
+        feed: 40_000_000,
+        tolerance_nm: u32::MAX,
+    };
+    let mut end = start;
+    end[2] -= 2_000_000;
+    let arc = Block {
+        line: 2,
+        motion: Motion::Arc {
+            center: [home[0], home[1]],
+            plane: Plane::Xy,
+            clockwise: true,
+            turns: 0,
+        },
+        target: end,
+        feed: 40_000_000,
+        tolerance_nm: u32::MAX,
+    };
+    [line, arc]
+}
+
+/// Builds the period benchmark in place (not timed).
+///
+/// # Safety
+/// `out` must be valid for writing [`PERIOD_BYTES`] bytes, 8-aligned.
+#[no_mangle]
+pub unsafe extern "C" fn bench_period_init(out: *mut Period) {
+    let machine = MachineConfig::h4_table();
+    let home = machine.home;
+    // SAFETY: the caller provides room; fields are written one at a time so that no
+    // whole `Period` is ever built on the stack.
+    unsafe {
+        core::ptr::addr_of_mut!((*out).kin).write(MachineKinematics::new(&machine));
+        core::ptr::addr_of_mut!((*out).planner).write(pkmc::planner::Planner::new(home));
+        core::ptr::addr_of_mut!((*out).exec).write(pkmc::interp::Executor::new(home));
+        core::ptr::addr_of_mut!((*out).machine).write(machine);
+        let p = &mut *out;
+        for b in period_blocks(home) {
+            let _ = p.planner.push(&b, &p.machine, &p.kin);
+        }
+    }
+}
+
+/// Runs `n` periods without measuring them (warm-up).
+///
+/// # Safety
+/// `p` from [`bench_period_init`].
+#[no_mangle]
+pub unsafe extern "C" fn bench_period_advance(p: *mut Period, n: u32) {
+    // SAFETY: the caller passes a built benchmark.
+    let p = unsafe { &mut *p };
+    for _ in 0..n {
+        p.exec.tick(&mut p.planner);
+    }
+}
+
+/// One interpolation period: profile, arc, table and inverse kinematics; the joints
+/// into `joints`.
+///
+/// # Safety
+/// `p` from [`bench_period_init`]; `joints` valid.
+#[no_mangle]
+pub unsafe extern "C" fn bench_period(p: *mut Period, joints: *mut Joints) -> i32 {
+    // SAFETY: the caller passes valid pointers.
+    let (p, joints) = unsafe { (&mut *p, &mut *joints) };
+    p.exec.tick(&mut p.planner);
+    match p.kin.inverse(&p.exec.pose, joints) {
+        Ok(()) => 0,
+        Err(e) => code(e),
+    }
+}
+
 #[cfg(target_os = "none")]
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo) -> ! {
@@ -368,6 +468,26 @@ mod host {
                 .dac;
             let d = d.map(i64::from);
             println!("servo {k} {} {}", line(&[&f]), line(&[&d]));
+        }
+        // Interpolation periods on the arc, after the warm-up.
+        let machine = MachineConfig::h4_table();
+        let kin = MachineKinematics::new(&machine);
+        let mut planner = pkmc::planner::Planner::new(machine.home);
+        let mut exec = pkmc::interp::Executor::new(machine.home);
+        for b in period_blocks(machine.home) {
+            let _ = planner.push(&b, &machine, &kin);
+        }
+        for _ in 0..PERIOD_WARMUP {
+            exec.tick(&mut planner);
+        }
+        for k in 0..20i64 {
+            exec.tick(&mut planner);
+            let mut q: Joints = [0; MAX_JOINTS];
+            let rc = match kin.inverse(&exec.pose, &mut q) {
+                Ok(()) => 0,
+                Err(e) => code(e) as i64,
+            };
+            println!("period {k} {rc} {}", line(&[&q]));
         }
     }
 }
