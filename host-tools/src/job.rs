@@ -498,20 +498,31 @@ pub fn run(
 }
 
 /// Dry run: compiles `program`, pre-checks it and runs it through the controller in
-/// this process on the simulated clock (no port, nothing moves). The report's
+/// this process on the simulated clock (no port, nothing moves), tracing to
+/// `setup.trace` and keeping the path when `setup.record_path`. The report's
 /// `run_time_s` is the planned run time; an alarm names its NC line.
 pub fn check(
     machine: &MachineConfig,
     program: &Path,
-    record_path: bool,
+    setup: &SimSetup<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
     let blocks = compile_program(program, machine)?;
-    let sim = Simulator::new(machine.clone())
+    let mut sim = Simulator::new(machine.clone())
         .map_err(|e| Failure::new(exit::BAD_INPUT, format!("simulator: {e:#}")))?;
+    if let Some(p) = setup.trace {
+        let f = std::fs::File::create(p).map_err(|e| {
+            Failure::new(
+                exit::BAD_INPUT,
+                format!("{}: cannot create: {e}", p.display()),
+            )
+        })?;
+        sim.trace_to(Box::new(std::io::BufWriter::new(f)))
+            .map_err(|e| Failure::new(exit::BAD_INPUT, format!("{}: {e:#}", p.display())))?;
+    }
     let recorder = std::rc::Rc::new(std::cell::RefCell::new(Recorder::new(
         machine.joints.len(),
-        record_path,
+        setup.record_path,
     )));
     let rec = recorder.clone();
     let io = InProcess::new(sim, Box::new(move |s| rec.borrow_mut().record(s)));
@@ -519,7 +530,12 @@ pub fn check(
     let end = link.run_job(&blocks, hooks)?;
     let status = link.request_status()?;
     let stats = link.stats;
-    let io = link.into_transport();
+    let mut io = link.into_transport();
+    if let Some(p) = setup.trace {
+        io.sim
+            .finish_trace()
+            .map_err(|e| Failure::new(exit::BAD_INPUT, format!("{}: {e:#}", p.display())))?;
+    }
     let recorder = recorder.replace(Recorder::default());
     let outcome = outcome_of(&io.sim, None, recorder);
     let report = Report::new(

@@ -56,7 +56,7 @@ struct Args {
     /// path speed and joints over time (.svg or .png).
     #[arg(long, value_name = "FILE.svg|FILE.png")]
     plot: Option<PathBuf>,
-    /// Write one CSV row per interpolation period (simulator only).
+    /// Write one CSV row per interpolation period (--sim or --check only).
     #[arg(long, value_name = "FILE.csv")]
     trace: Option<PathBuf>,
     /// The G-code program.
@@ -221,7 +221,7 @@ fn run_program(
     }
     let mut op = Operator::new(Progress::new(style, blocks.len()), interrupts, keys);
     let result = if args.check {
-        job::check(machine, program, args.plot.is_some(), &mut op)
+        job::check(machine, program, &opts.sim, &mut op)
     } else {
         job::run_blocks(
             machine,
