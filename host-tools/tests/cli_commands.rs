@@ -288,7 +288,29 @@ fn slow_program() -> PathBuf {
     prog
 }
 
+/// Waits until `child` catches SIGINT (its handler is installed), as Linux reports
+/// in `/proc/PID/status`, so that the test's signal is not the default, fatal one.
+fn wait_for_handler(child: &Child) {
+    let path = format!("/proc/{}/status", child.id());
+    for _ in 0..1000 {
+        let caught = std::fs::read_to_string(&path)
+            .ok()
+            .and_then(|s| {
+                s.lines()
+                    .find_map(|l| l.strip_prefix("SigCgt:"))
+                    .and_then(|m| u64::from_str_radix(m.trim(), 16).ok())
+            })
+            .unwrap_or(0);
+        if caught & (1 << (libc::SIGINT - 1)) != 0 {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    panic!("nc-send never installed its Ctrl-C handler");
+}
+
 fn interrupt_after(child: &Child, delay: Duration) {
+    wait_for_handler(child);
     std::thread::sleep(delay);
     // SAFETY: sends SIGINT to our own child process.
     unsafe {
@@ -321,7 +343,7 @@ fn ctrl_c_holds_then_aborts_the_job() {
     assert_eq!(r["result"], "aborted");
     assert_eq!(r["final_state"], "Idle");
     let x = r["final_pose"]["x"].as_f64().unwrap();
-    assert!(x > 0.0 && x < 100.0, "stopped on the way, at X {x}");
+    assert!((0.0..100.0).contains(&x), "stopped on the way, at X {x}");
     assert!(r["blocks_executed"].as_u64().unwrap() < 2);
 }
 
