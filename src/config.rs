@@ -530,7 +530,7 @@ pub struct MachineConfig {
 pub struct MotionConfig {
     /// Jerk limitation: the path distance is averaged over this many ticks (a power
     /// of two, at most [`crate::interp::MAX_WINDOW`]); 1 gives plain trapezoids. With
-    /// a window of w ticks every axis's and joint's jerk stays below 2·aᵢ/(w·T).
+    /// a window of w ticks every axis's and joint's jerk stays below 3·aᵢ/(w·T).
     pub smoothing_ticks: u8,
 }
 

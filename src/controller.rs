@@ -112,6 +112,8 @@ impl Controller {
         let steps = StepScheduler::new(&machine.joints, &joints);
         let mut exec = Executor::new(pose);
         exec.set_smoothing(machine.motion.smoothing_ticks as u32);
+        let mut planner = Planner::new(pose);
+        planner.smoothing = machine.motion.smoothing_ticks as u32;
         let mut servos = [ServoLoop::new(0); MAX_SERVOS];
         for (jc, q) in machine.joints.iter().zip(&joints) {
             if let Drive::Servo { channel, .. } = jc.drive {
@@ -132,7 +134,7 @@ impl Controller {
             mismatch: false,
             assembler: crate::store::Assembler::new(),
             store_pending: false,
-            planner: Planner::new(pose),
+            planner,
             exec,
             joints,
             steps,
@@ -194,6 +196,7 @@ impl Controller {
     /// [`crate::interp`].
     pub fn set_smoothing(&mut self, window: u32) {
         self.exec.set_smoothing(window);
+        self.planner.smoothing = window.max(1).next_power_of_two();
     }
 
     /// Feeds bytes received from the link.

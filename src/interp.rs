@@ -13,7 +13,12 @@
 //! average of a motion within speed and acceleration limits stays within them, and the
 //! acceleration now changes at most 2a/(w·T) per unit time — a jerk limit. This is the
 //! FIR "bell-shaped acceleration" of commercial controllers, applied before
-//! interpolation. The cost: every motion ends w·T/2 later on average, and dwells and
+//! interpolation. A blended corner still turns within one tick; the planner keeps each
+//! axis's speed change there within aᵢ·T/w (allowing for the smoothed speed exceeding
+//! the profile's by up to a·w·T/2 around the corner), so the jerk stays within
+//! 3aᵢ/(w·T) everywhere (the machine file picks w from the jerk limit on that basis).
+//! Where a corner cannot be blended so, the profile stops there and the next block
+//! waits until the smoothed motion has stopped too. The cost: every motion ends w·T/2 later on average, and dwells and
 //! auxiliary functions wait for the smoothed motion to arrive.
 //!
 //! Invariants: the executing block was profiled from the speed the previous one left
@@ -275,11 +280,11 @@ impl Executor {
                 if self.paused || planner.hold {
                     break;
                 }
-                // Dwells, auxiliary functions and faults act at rest: wait for the
-                // smoothed motion to arrive first.
-                let at_rest_kind = planner
-                    .front()
-                    .is_some_and(|b| !matches!(b.kind, Kind::Rapid | Kind::Feed));
+                // Dwells, auxiliary functions, faults and blocks entered from rest (a
+                // stop at a corner) act at rest: let the smoothed motion arrive first.
+                let at_rest_kind = planner.front().is_some_and(|b| {
+                    !matches!(b.kind, Kind::Rapid | Kind::Feed) || b.corner == 0.0
+                });
                 if at_rest_kind && !self.settled() {
                     break;
                 }

@@ -112,6 +112,8 @@ pub struct Planner {
     pub hold: bool,
     /// Entry speed of the first queued block, fixed by the executing block's profile.
     pub first_entry: f32,
+    /// Jerk-limitation window, ticks (1: none); see [`crate::interp`].
+    pub smoothing: u32,
 }
 
 fn per_tick(v: i64) -> f32 {
@@ -134,6 +136,7 @@ impl Planner {
             feed_override: 100,
             hold: false,
             first_entry: 0.0,
+            smoothing: 1,
         }
     }
 
@@ -259,10 +262,23 @@ impl Planner {
             None => (0.0, 0.0),
             Some(n) if n <= 0.0 => (by_tolerance, 0.0),
             Some(n) => {
+                // With jerk limitation over w ticks the smoothed motion passes the
+                // corner up to a·w·T/2 faster than the profile does, and its one-tick
+                // turn must stay within aᵢ·T/w per axis (a third of the jerk budget, see
+                // [`crate::interp`]); a corner that cannot is a stop, which the executor
+                // lets the smoothing settle into before turning.
+                let w = self.smoothing.max(1) as f32;
+                let a_near = self.queue.back().map_or(0.0, |p| p.accel_full).max(accel);
+                let by_jerk = (1.0 / (w * n) - a_near * w / 2.0).max(0.0);
+                let limit = by_tolerance.min(if self.smoothing > 1 {
+                    by_jerk
+                } else {
+                    f32::INFINITY
+                });
                 let prev_v = self.queue.back().map_or(0.0, |p| p.feed.min(p.v_limit));
-                let want = prev_v.min(feed.min(v_limit)).min(by_tolerance);
+                let want = prev_v.min(feed.min(v_limit)).min(limit);
                 let rho = (want * n * 1.0001).clamp(0.0, 0.5);
-                ((rho / n).min(by_tolerance), rho)
+                ((rho / n).min(limit), rho)
             }
         };
         if rho > 0.0 {

@@ -115,3 +115,52 @@ fn a_controller_at_rest_emits_no_steps_and_stays_idle() {
     assert_eq!(c.state(), State::Idle);
     assert_eq!(c.pose(), &[0; AXES]);
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(16))]
+    #[test]
+    fn jerk_limited_programs_keep_every_axis_within_its_jerk(
+        moves in prop::collection::vec(target_strategy(), 1..8),
+        window_log2 in 1u32..=5,
+    ) {
+        let m = MachineConfig::cartesian_xyz();
+        let w = 1u32 << window_log2;
+        let mut c = Controller::new(m.clone()).unwrap();
+        c.set_smoothing(w);
+        let mut bytes = frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id() });
+        for (i, (t, f, rapid)) in moves.iter().enumerate() {
+            let mut target = [0i64; AXES];
+            target[..3].copy_from_slice(t);
+            let b = Block {
+                line: i as u32 + 1,
+                motion: if *rapid { Motion::Rapid } else { Motion::Linear },
+                target,
+                feed: *f,
+                tolerance_nm: u32::MAX,
+            };
+            bytes.extend(frame(i as u16 + 1, &HostMsg::Block(b)));
+        }
+        c.receive(&bytes);
+        let mut poses = vec![*c.pose()];
+        let (mut reader, mut replies) = (FrameReader::new(), Vec::new());
+        for _ in 0..2_000_000 {
+            c.tick(&Inputs::default());
+            drain(&mut c, &mut reader, &mut replies);
+            poses.push(*c.pose());
+            if c.state() == State::Idle {
+                break;
+            }
+        }
+        prop_assert_eq!(&c.pose()[..3], &moves.last().unwrap().0[..]);
+        let a = m.axes[0].max_accel as f64 / (TICK_HZ as f64 * TICK_HZ as f64);
+        // 3a/w per tick³, plus rounding of the 1 nm positions (8 nm in a third difference).
+        let j_max = 3.0 * a / w as f64 + 8.0;
+        for i in 0..3 {
+            let x: Vec<f64> = poses.iter().map(|p| p[i] as f64).collect();
+            for (k, d) in x.windows(4).enumerate() {
+                let j = d[3] - 3.0 * d[2] + 3.0 * d[1] - d[0];
+                prop_assert!(j.abs() <= j_max, "axis {} tick {}: jerk {} > {} nm/tick³", i, k, j, j_max);
+            }
+        }
+    }
+}

@@ -241,7 +241,7 @@ pub struct MotionFile {
 
 impl MotionFile {
     /// The core form: the smoothing window that keeps every axis's and joint's jerk
-    /// within `jerk` (2·a/(w·T) ≤ J), as a power of two of ticks.
+    /// within `jerk` (3·a/(w·T) ≤ J, see `pkmc::interp`), as a power of two of ticks.
     pub fn to_config(
         &self,
         axes: &[LimitsFile],
@@ -259,7 +259,7 @@ impl MotionFile {
                     .map(|l| l.max_accel)
                     .chain(joints.iter().map(|j| j.max_accel))
                     .fold(0.0f64, f64::max);
-                let ticks = (2.0 * a_max / jerk * pkmc::units::TICK_HZ as f64).ceil().max(1.0);
+                let ticks = (3.0 * a_max / jerk * pkmc::units::TICK_HZ as f64).ceil().max(1.0);
                 let max = pkmc::interp::MAX_WINDOW as f64;
                 if ticks > max {
                     bail!(
@@ -716,9 +716,9 @@ mod tests {
     #[test]
     fn a_jerk_limit_becomes_a_smoothing_window_and_a_too_low_one_is_refused() {
         let text =
-            format!("{DEFAULT_MACHINE}\n[motion]\nprofile = \"jerk-limited\"\njerk = 125000\n");
+            format!("{DEFAULT_MACHINE}\n[motion]\nprofile = \"jerk-limited\"\njerk = 200000\n");
         let m = parse(&text, "m.toml").unwrap();
-        // 2 · 1000 mm/s² / 125 000 mm/s³ = 16 ms: 16 ticks.
+        // 3 · 1000 mm/s² / 200 000 mm/s³ = 15 ms: 16 ticks (a power of two).
         assert_eq!(m.motion.smoothing_ticks, 16);
         let text =
             format!("{DEFAULT_MACHINE}\n[motion]\nprofile = \"jerk-limited\"\njerk = 1000\n");
