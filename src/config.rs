@@ -15,6 +15,11 @@ pub const MAX_JOINTS: usize = 11;
 pub const MAX_STEPPERS: usize = 7;
 /// Servo channels the board drives.
 pub const MAX_SERVOS: usize = 4;
+/// Most steps the reference board (NUCLEO-G474RE, `docs/wiring.md`) emits on each
+/// stepper channel in one tick: channels 0–2 on TIM1/TIM8/TIM20 (16-bit repetition
+/// counters), 3–5 on TIM15/TIM16/TIM17 (8-bit), channel 6 (HRTIM1) not driven yet. A
+/// machine needing more is refused rather than losing steps.
+pub const BOARD_STEPS_PER_TICK: [u32; MAX_STEPPERS] = [65_536, 65_536, 65_536, 256, 256, 256, 0];
 /// Axis names in pose order.
 pub const AXIS_NAMES: [char; AXES] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
 
@@ -547,6 +552,11 @@ pub enum ConfigError {
     NoJoints,
     /// `motion.smoothing_ticks` is not a power of two up to the largest window.
     Smoothing,
+    /// `joints[joint]` needs more steps per tick than its board channel can emit.
+    BoardChannel {
+        /// Joint index, 0-based.
+        joint: u8,
+    },
     /// `joints[joint].limits` has a non-positive speed or acceleration.
     JointLimits {
         /// Joint index, 0-based.
@@ -652,6 +662,10 @@ impl MachineConfig {
                     let fits = window / timing.min_interval_ns().max(2 * timing.min_pulse_ns);
                     if per_tick > fits as i128 {
                         return Err(ConfigError::StepRate { joint });
+                    }
+                    // What the board's timer on this channel can emit in one tick.
+                    if per_tick > BOARD_STEPS_PER_TICK[channel as usize] as i128 {
+                        return Err(ConfigError::BoardChannel { joint });
                     }
                 }
                 Drive::Servo { channel, .. } => {
@@ -940,6 +954,20 @@ mod tests {
         let mut m = MachineConfig::cartesian_xyz();
         m.joints[1].limits.max_velocity = 10_000 * crate::units::NM_PER_MM; // 4 MHz
         assert_eq!(m.validate(), Err(ConfigError::StepRate { joint: 1 }));
+    }
+
+    #[test]
+    fn a_joint_on_a_channel_the_board_cannot_drive_fast_enough_is_refused() {
+        let mut m = MachineConfig::cartesian_xyz();
+        if let Drive::Stepper { channel, .. } = &mut m.joints[2].drive {
+            *channel = 6;
+        }
+        assert_eq!(m.validate(), Err(ConfigError::BoardChannel { joint: 2 }));
+        // Channel 3 takes 256 steps per tick: 100 mm/s at 400 steps/mm needs 41.
+        if let Drive::Stepper { channel, .. } = &mut m.joints[2].drive {
+            *channel = 3;
+        }
+        assert_eq!(m.validate(), Ok(()));
     }
 
     #[test]
