@@ -340,3 +340,29 @@ fn nc_send_loads_its_machine_into_a_controller_that_has_another_and_it_persists(
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+#[test]
+fn an_h4_job_ends_with_exact_table_steps_and_no_drive_timing_violation() {
+    let out = nc_send(&[
+        "--sim",
+        "--machine",
+        "examples/machines/h4-table.toml",
+        "--report",
+        "json",
+        "examples/h4-table-tilt.ngc",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = json(&out);
+    assert_eq!(r["drive_violations"], 0);
+    assert_eq!(r["final_pose"]["a"], 30.0);
+    // q5 is the table's stepper: 30° at the machine file's scale, in whole steps.
+    let m = pkmc_host::machine_file::load(&repo().join("examples/machines/h4-table.toml")).unwrap();
+    let want = m.joints[4].scale.steps_at(30 * pkmc::units::NDEG_PER_DEG);
+    assert_eq!(r["final_joint_steps"][4].as_i64(), Some(want));
+    assert_eq!(r["blocks_executed"], r["blocks_sent"]);
+}
