@@ -976,19 +976,41 @@ impl<T: Transport> Link<T> {
 
     /// Waits until the controller is at rest: idle with an empty queue (`Done`), or in
     /// alarm. `hooks` sees every status.
+    /// The operator's controls from `hooks` are sent on the way; after an `Abort` the
+    /// end is `Aborted`, after a `Stop` it is `Stopped`.
     pub fn wait_idle(&mut self, hooks: &mut dyn JobHooks) -> Result<JobEnd, LinkError> {
+        let mut ended_by = None;
         loop {
             let s = self.request_status()?;
             hooks.status(&s);
-            if let Some(a) = s.alarm.filter(|_| s.state == State::Alarm) {
-                return Ok(JobEnd::Alarm(a));
+            let view = LinkView {
+                status: Some(s.clone()),
+                ..LinkView::default()
+            };
+            if let Some(cmd) = hooks.control(&view) {
+                self.control(cmd)?;
+                if matches!(cmd, Control::Abort | Control::Stop) {
+                    ended_by = Some(cmd);
+                }
+                continue;
+            }
+            if s.state == State::Alarm {
+                if ended_by == Some(Control::Stop) {
+                    return Ok(JobEnd::Stopped);
+                }
+                if let Some(a) = s.alarm {
+                    return Ok(JobEnd::Alarm(a));
+                }
             }
             if s.state == State::Idle
                 && s.speed == 0
                 && s.free_slots == self.capacity
                 && s.buffered_ms == 0
             {
-                return Ok(JobEnd::Done);
+                return Ok(match ended_by {
+                    Some(_) => JobEnd::Aborted,
+                    None => JobEnd::Done,
+                });
             }
             std::thread::sleep(Duration::from_millis(10));
         }

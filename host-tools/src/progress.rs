@@ -74,7 +74,8 @@ pub fn clock(secs: f64) -> String {
 }
 
 impl Progress {
-    /// Progress of a job of `total` blocks shown in `style`.
+    /// Progress of a job of `total` blocks shown in `style`; with `total` 0 (a single
+    /// command) only messages are shown.
     pub fn new(style: Style, total: usize) -> Self {
         Self {
             style,
@@ -135,6 +136,9 @@ impl Progress {
             self.baseline = Some(s.blocks_done);
         }
         self.last = Some(s.clone());
+        if self.total == 0 {
+            return;
+        }
         let every = match self.style {
             Style::Quiet => return,
             Style::Bar => BAR_EVERY,
@@ -173,14 +177,14 @@ impl Progress {
         }
         let _ = writeln!(err, "{message}");
         drop(err);
-        if self.style == Style::Bar {
+        if self.style == Style::Bar && self.total > 0 {
             self.draw();
         }
     }
 
     /// Draws the final state and ends the bar's line.
     pub fn finish(&mut self) {
-        if self.style == Style::Quiet || self.last.is_none() {
+        if self.style == Style::Quiet || self.last.is_none() || self.total == 0 {
             return;
         }
         self.draw();

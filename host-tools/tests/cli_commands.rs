@@ -348,6 +348,31 @@ fn ctrl_c_holds_then_aborts_the_job() {
 }
 
 #[test]
+fn ctrl_c_stops_a_jog_under_control() {
+    let child = Command::new(env!("CARGO_BIN_EXE_nc-send"))
+        .args([
+            "--sim", "--report", "json", "jog", "X", "50", "--feed", "0.5",
+        ])
+        .current_dir(repo())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    interrupt_after(&child, Duration::from_millis(300));
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(6),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = json(&out);
+    assert_eq!(r["result"], "aborted");
+    assert_eq!(r["state"], "Idle");
+    assert!(r["pose"]["x"].as_f64().unwrap() < 50.0);
+}
+
+#[test]
 fn a_second_ctrl_c_stops_at_once() {
     let child = spawn_job(&slow_program());
     interrupt_after(&child, Duration::from_millis(700));

@@ -357,7 +357,7 @@ fn command(
     interrupts: Interrupts,
 ) -> Result<i32, Failure> {
     let quiet = args.report.is_some();
-    let mut op = Operator::new(Progress::new(Style::Quiet, 0), interrupts, None);
+    let mut op = Operator::new(Progress::new(Style::for_stderr(quiet), 0), interrupts, None);
     let (status, result, code, extra) = job::with_link(machine, opts, |link| {
         let (end, extra) = match cmd {
             Command::Status => (JobEnd::Done, None),
