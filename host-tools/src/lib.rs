@@ -14,7 +14,7 @@ pub mod job;
 pub mod link;
 pub mod machine_file;
 pub mod plant;
-pub mod preflight;
 pub mod plot;
+pub mod preflight;
 pub mod progress;
 pub mod sim;
