@@ -7,7 +7,8 @@
 //! the angle advances linearly with s (turns Q64), the radius moves linearly from the
 //! start radius to the end radius (an end within tolerance of the circle makes a gentle
 //! spiral, as LinuxCNC does), and the helix axis and A B C move linearly with s. The
-//! in-plane position is centre + r·(cos φ, sin φ) with [`crate::fixed::sin_cos`].
+//! in-plane position is centre + r·(cos φ, sin φ) with the kinematics' fixed-point
+//! [`crate::kinematics::fixed::sincos`] (Q31, within 7·10⁻¹⁰).
 //!
 //! Path length S is measured over X Y Z (arc: sqrt((r̄·|sweep|)² + helix²)); a move of
 //! rotary axes only is measured in n° instead.
@@ -239,10 +240,13 @@ impl Path {
                 let s = s as i128;
                 let phi = phi0.wrapping_add(((phi_rate * s) >> 32) as u64);
                 let r = r0 + ((r_rate as i128 * s) >> 32) as i64;
-                let (sin, cos) = crate::fixed::sin_cos((phi >> 32) as u32);
+                // The angle as a signed fraction of a turn, then in n° within ±180°
+                // (the sine's fast path).
+                let turn = (phi as i64 as i128 * 360_000_000_000) >> 64;
+                let (sin, cos) = crate::kinematics::fixed::sincos(turn as i64);
                 let (i, j, _) = plane.axes();
-                pose[i] = center[0] + ((r as i128 * cos as i128 + (1 << 29)) >> 30) as i64;
-                pose[j] = center[1] + ((r as i128 * sin as i128 + (1 << 29)) >> 30) as i64;
+                pose[i] = center[0] + ((r as i128 * cos as i128 + (1 << 30)) >> 31) as i64;
+                pose[j] = center[1] + ((r as i128 * sin as i128 + (1 << 30)) >> 31) as i64;
             }
         }
     }

@@ -19,7 +19,6 @@ pub mod config;
 pub mod contour;
 pub mod controller;
 pub mod crc;
-pub mod fixed;
 pub mod geometry;
 pub mod interp;
 pub mod kinematics;
