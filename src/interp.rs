@@ -354,7 +354,7 @@ impl Executor {
         }
         if self.smoothing.is_some() {
             self.smooth();
-        } else if self.active.is_none() && planner.is_empty() {
+        } else if self.active.is_none() {
             self.speed = 0;
         }
         event

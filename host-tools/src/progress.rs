@@ -298,6 +298,11 @@ pub struct Operator {
     stage: Stage,
     handled: usize,
     announced_pause: bool,
+    /// Resume program pauses (M0, M1, M6) by itself: no operator to press resume
+    /// (simulation and dry runs).
+    pub auto_resume: bool,
+    user_hold: bool,
+    resume_due: bool,
 }
 
 impl Operator {
@@ -310,6 +315,9 @@ impl Operator {
             stage: Stage::Running,
             handled: 0,
             announced_pause: false,
+            auto_resume: false,
+            user_hold: false,
+            resume_due: false,
         }
     }
 
@@ -323,11 +331,13 @@ impl Operator {
         match key {
             b'h' | b'H' | b' ' => {
                 self.progress.say("hold (r resumes)");
+                self.user_hold = true;
                 Some(Control::Hold)
             }
             b'r' | b'R' => {
                 self.progress.say("resume");
                 self.announced_pause = false;
+                self.user_hold = false;
                 Some(Control::Resume)
             }
             b'q' | b'Q' => {
@@ -350,7 +360,13 @@ impl JobHooks for Operator {
             && !self.announced_pause
         {
             self.announced_pause = true;
-            if self.keys.is_some() {
+            if self.auto_resume && !self.user_hold {
+                self.resume_due = true;
+                self.progress.say(&format!(
+                    "program pause or tool change at line {}: resumed automatically (no operator in a simulation)",
+                    s.line
+                ));
+            } else if self.keys.is_some() {
                 self.progress
                     .say("held (pause, tool change or hold): press r to resume");
             } else {
@@ -382,6 +398,11 @@ impl JobHooks for Operator {
                     return Some(Control::Abort);
                 }
             }
+        }
+        if self.resume_due && self.stage == Stage::Running && !view.control_pending {
+            self.resume_due = false;
+            self.announced_pause = false;
+            return Some(Control::Resume);
         }
         if self.stage == Stage::Running && !view.control_pending {
             if let Some(k) = self.keys.as_ref().and_then(|k| k.key()) {

@@ -220,6 +220,7 @@ fn run_program(
         eprintln!("keys: h/space hold, r resume, q stop, +/- feed override");
     }
     let mut op = Operator::new(Progress::new(style, blocks.len()), interrupts, keys);
+    op.auto_resume = args.check || matches!(opts.target, Target::Sim);
     let result = if args.check {
         job::check(machine, program, &opts.sim, &mut op)
     } else {
