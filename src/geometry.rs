@@ -265,6 +265,7 @@ impl Path {
                 plane,
                 phi0,
                 sweep,
+                phi_rate,
                 r0,
                 dr,
                 unit,
@@ -273,16 +274,20 @@ impl Path {
                 for (t, u) in t.iter_mut().zip(&unit) {
                     *t = (*u as f64 / Q44) as f32;
                 }
-                let f = (s.max(0) as f64 / 65_536.0) / (self.length.max(1) as f64);
-                let tau = core::f64::consts::TAU;
-                let sweep_rad = sweep as f64 / TURN_Q64 * tau;
-                let phi = phi0 as f64 / TURN_Q64 * tau + sweep_rad * f;
+                let s = s.max(0);
+                let f = (s as f64 / 65_536.0) / (self.length.max(1) as f64);
+                let sweep_rad = sweep as f64 / TURN_Q64 * core::f64::consts::TAU;
                 let r = r0 as f64 + dr as f64 * f;
-                // d(position)/ds in plane: r·dφ/ds·(−sin, cos) (radius drift ignored).
+                // d(position)/ds in plane: r·dφ/ds·(−sin, cos) (radius drift ignored),
+                // with the angle found as in `pose_at`.
                 let dphi_ds = sweep_rad / self.length.max(1) as f64;
+                let phi = phi0.wrapping_add(((phi_rate * s as i128) >> 32) as u64);
+                let turn = (phi as i64 as i128 * 360_000_000_000) >> 64;
+                let (sin, cos) = crate::kinematics::fixed::sincos(turn as i64);
+                let q31 = 2_147_483_648.0;
                 let (i, j, _) = plane.axes();
-                t[i] = (-r * dphi_ds * libm::sin(phi)) as f32;
-                t[j] = (r * dphi_ds * libm::cos(phi)) as f32;
+                t[i] = (-r * dphi_ds * (sin as f64 / q31)) as f32;
+                t[j] = (r * dphi_ds * (cos as f64 / q31)) as f32;
             }
         }
         t

@@ -277,7 +277,8 @@ impl Planner {
                 });
                 let prev_v = self.queue.back().map_or(0.0, |p| p.feed.min(p.v_limit));
                 let want = prev_v.min(feed.min(v_limit)).min(limit);
-                let rho = (want * n * 1.0001).clamp(0.0, 0.5);
+                // (max/min rather than clamp: no panic path, no float formatting on the MCU)
+                let rho = (want * n * 1.0001).max(0.0).min(0.5);
                 ((rho / n).min(limit), rho)
             }
         };
