@@ -277,7 +277,9 @@ impl Planner {
                 });
                 let prev_v = self.queue.back().map_or(0.0, |p| p.feed.min(p.v_limit));
                 let want = prev_v.min(feed.min(v_limit)).min(limit);
-                // (max/min rather than clamp: no panic path, no float formatting on the MCU)
+                // max/min rather than clamp: clamp's panic message formats floats, which
+                // costs the firmware kilobytes of formatting code.
+                #[allow(clippy::manual_clamp)]
                 let rho = (want * n * 1.0001).max(0.0).min(0.5);
                 ((rho / n).min(limit), rho)
             }

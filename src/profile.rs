@@ -105,7 +105,11 @@ impl Profile {
         // Exit speed the block can reach at all from v0 over its length.
         let reach_hi = libm::sqrt(v0 * v0 + 2.0 * a * length);
         let reach_lo = libm::sqrt((v0 * v0 - 2.0 * a * length).max(0.0));
-        v1 = v1.min(v_max).max(reach_lo).min(reach_hi);
+        // max/min rather than clamp: see `Planner::push`.
+        #[allow(clippy::manual_clamp)]
+        {
+            v1 = v1.min(v_max).max(reach_lo).min(reach_hi);
+        }
         let hold = v_max <= 0.0 && v1 <= 0.0 && v0 * v0 < 2.0 * a * length;
         let (vc, a1, t1, t2, t3);
         if hold {
