@@ -306,6 +306,21 @@ pub struct Report {
     pub faults: Option<FaultReport>,
     /// NC lines executed (simulator only).
     pub lines_executed: Option<LinesExecuted>,
+    /// Pre-flight (`--check`): poses sampled along the path and the smallest
+    /// singularity margin met, with its NC line (see [`crate::preflight`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub preflight: Option<PreflightSummary>,
+}
+
+/// What `--check` reports of the pre-flight.
+#[derive(Clone, Debug, Serialize)]
+pub struct PreflightSummary {
+    /// Poses checked through the kinematics.
+    pub samples: usize,
+    /// Smallest singularity margin met (1 for a Cartesian machine, 0 at a singularity).
+    pub min_singularity_margin: Option<f64>,
+    /// NC line where it was met.
+    pub min_margin_line: Option<u32>,
 }
 
 impl Report {
@@ -364,6 +379,7 @@ impl Report {
                 count: s.recorder.lines.len(),
                 digest: lines_digest(&s.recorder.lines),
             }),
+            preflight: None,
         }
     }
 
@@ -508,6 +524,7 @@ pub fn check(
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
     let blocks = compile_program(program, machine)?;
+    let pre = crate::preflight::check(&blocks, machine, machine.home);
     let mut sim = Simulator::new(machine.clone())
         .map_err(|e| Failure::new(exit::BAD_INPUT, format!("simulator: {e:#}")))?;
     if let Some(p) = setup.trace {
@@ -538,7 +555,7 @@ pub fn check(
     }
     let recorder = recorder.replace(Recorder::default());
     let outcome = outcome_of(&io.sim, None, recorder);
-    let report = Report::new(
+    let mut report = Report::new(
         machine,
         &program.display().to_string(),
         blocks.len(),
@@ -547,6 +564,11 @@ pub fn check(
         Some(&outcome),
         stats,
     );
+    report.preflight = Some(PreflightSummary {
+        samples: pre.samples,
+        min_singularity_margin: pre.min_margin.map(|(m, _)| m),
+        min_margin_line: pre.min_margin.map(|(_, l)| l),
+    });
     Ok(RunResult {
         report,
         sim: Some(outcome),

@@ -272,6 +272,17 @@ fn print_report(report: &Report, json: bool, check: bool) {
         "final pose X {:.4} Y {:.4} Z {:.4} A {:.4} B {:.4} C {:.4}",
         p["x"], p["y"], p["z"], p["a"], p["b"], p["c"]
     );
+    if let Some(pre) = &report.preflight {
+        let margin = match (pre.min_singularity_margin, pre.min_margin_line) {
+            (Some(m), Some(l)) => format!("smallest singularity margin {m:.4} (line {l})"),
+            _ => "no singularity margin computed".into(),
+        };
+        let _ = writeln!(
+            out,
+            "pre-flight: {} poses checked through the kinematics, all reachable; {margin}",
+            pre.samples
+        );
+    }
     if let Some(steps) = &report.final_joint_steps {
         let _ = writeln!(
             out,
