@@ -187,7 +187,8 @@ impl Controller {
     pub fn has_work(&self) -> bool {
         match self.state {
             State::Alarm | State::EStop => false,
-            State::Hold => !self.exec.stopped(),
+            // An abort completes on the next tick once stopped: that tick is work.
+            State::Hold => !self.exec.stopped() || self.abort_pending,
             _ => self.exec.busy() || !self.planner.is_empty() || !self.exec.settled(),
         }
     }
