@@ -2,86 +2,12 @@
 //! pseudo-terminal (the controller keeps its state between commands) or with `--sim`
 //! and `--check`, checked from outside (exit code, JSON on stdout, files written).
 
-use std::io::BufRead;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn nc_send(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_nc-send"))
-        .args(args)
-        .current_dir(repo())
-        .output()
-        .expect("nc-send runs")
-}
-
-fn json(out: &Output) -> serde_json::Value {
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
-        panic!(
-            "not JSON ({e}): {}\nstderr: {}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        )
-    })
-}
-
-fn ok(out: &Output) -> serde_json::Value {
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "stdout: {}\nstderr: {}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    json(out)
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("pkmc-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
-
-/// `pkmc-sim` on a pseudo-terminal, killed when dropped.
-struct Sim {
-    child: Child,
-    port: String,
-}
-
-impl Sim {
-    fn start(args: &[&str]) -> Self {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_pkmc-sim"))
-            .args(args)
-            .stdout(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let mut port = String::new();
-        std::io::BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut port)
-            .unwrap();
-        Sim {
-            child,
-            port: port.trim().to_string(),
-        }
-    }
-
-    fn send(&self, args: &[&str]) -> Output {
-        let mut all = vec!["--port", self.port.as_str(), "--report", "json"];
-        all.extend_from_slice(args);
-        nc_send(&all)
-    }
-}
-
-impl Drop for Sim {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
+mod common;
+use common::{json, nc_send, ok, repo, tmp, Sim};
 
 #[test]
 fn status_jog_home_mdi_and_reset_act_on_a_running_controller() {

@@ -4,36 +4,9 @@
 
 use pkmc::config::MachineConfig;
 use pkmc_host::gcode;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn nc_send(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_nc-send"))
-        .args(args)
-        .current_dir(repo())
-        .output()
-        .expect("nc-send runs")
-}
-
-fn json(out: &Output) -> serde_json::Value {
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
-        panic!(
-            "not JSON ({e}): {}\nstderr: {}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        )
-    })
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("pkmc-e2e-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
+mod common;
+use common::{json, nc_send, ok, repo, tmp, Sim};
 
 /// Expected final drive positions: the program's last target, in whole steps.
 fn expected_steps(program: &str) -> Vec<i64> {
@@ -201,31 +174,8 @@ fn a_bad_machine_file_is_refused_naming_the_field() {
 
 #[test]
 fn pkmc_sim_serves_nc_send_on_a_named_port() {
-    use std::io::BufRead;
-    let mut sim = Command::new(env!("CARGO_BIN_EXE_pkmc-sim"))
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut port = String::new();
-    std::io::BufReader::new(sim.stdout.take().unwrap())
-        .read_line(&mut port)
-        .unwrap();
-    let out = nc_send(&[
-        "--port",
-        port.trim(),
-        "--report",
-        "json",
-        "examples/square.ngc",
-    ]);
-    let _ = sim.kill();
-    let _ = sim.wait();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "stderr: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let r = json(&out);
+    let sim = Sim::start(&[]);
+    let r = ok(&sim.send(&["examples/square.ngc"]));
     assert_eq!(r["final_pose"]["x"], 12.5);
     assert_eq!(r["blocks_executed"], r["blocks_sent"]);
 }
@@ -275,45 +225,18 @@ fn servo_joints_follow_the_square_and_settle_on_target() {
     );
 }
 
-/// Starts `pkmc-sim` with `args`; returns the child and the port it serves.
-fn spawn_sim(args: &[&str]) -> (std::process::Child, String) {
-    use std::io::BufRead;
-    let mut sim = Command::new(env!("CARGO_BIN_EXE_pkmc-sim"))
-        .args(args)
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut port = String::new();
-    std::io::BufReader::new(sim.stdout.take().unwrap())
-        .read_line(&mut port)
-        .unwrap();
-    (sim, port.trim().to_string())
-}
-
 #[test]
 fn nc_send_loads_its_machine_into_a_controller_that_has_another_and_it_persists() {
     let flash = tmp("flash.bin");
     let _ = std::fs::remove_file(&flash);
-    // The controller boots with the built-in stepper machine; the job needs servos.
-    let (mut sim, port) = spawn_sim(&["--flash", flash.to_str().unwrap()]);
-    let out = nc_send(&[
-        "--port",
-        &port,
+    let flash_arg = ["--flash", flash.to_str().unwrap()];
+    let job = [
         "--machine",
         "examples/machines/cartesian-servo.toml",
-        "--report",
-        "json",
         "examples/square.ngc",
-    ]);
-    let _ = sim.kill();
-    let _ = sim.wait();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "stderr: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let r = json(&out);
+    ];
+    // The controller boots with the built-in stepper machine; the job needs servos.
+    let r = ok(&Sim::start(&flash_arg).send(&job));
     assert_eq!(r["machine"], "cartesian-servo");
     assert_eq!(r["final_pose"]["x"], 12.5);
     // After a "reset" (a new simulator process on the same flash), the controller
@@ -321,24 +244,7 @@ fn nc_send_loads_its_machine_into_a_controller_that_has_another_and_it_persists(
     let stored = std::fs::read(&flash).expect("the machine was written to flash");
     let m = pkmc::store::read_record(&stored).unwrap();
     assert_eq!(m.name.as_str(), "cartesian-servo");
-    let (mut sim, port) = spawn_sim(&["--flash", flash.to_str().unwrap()]);
-    let out = nc_send(&[
-        "--port",
-        &port,
-        "--machine",
-        "examples/machines/cartesian-servo.toml",
-        "--report",
-        "json",
-        "examples/square.ngc",
-    ]);
-    let _ = sim.kill();
-    let _ = sim.wait();
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "stderr: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    ok(&Sim::start(&flash_arg).send(&job));
 }
 
 #[test]

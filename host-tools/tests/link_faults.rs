@@ -3,36 +3,10 @@
 //! the job must end exactly as on a clean line, with no damaged frame accepted and no
 //! block lost or executed twice.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
-fn repo() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn nc_send(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_nc-send"))
-        .args(args)
-        .current_dir(repo())
-        .output()
-        .expect("nc-send runs")
-}
-
-fn json(out: &Output) -> serde_json::Value {
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
-        panic!(
-            "not JSON ({e}): {}\nstderr: {}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        )
-    })
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("pkmc-link-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
+mod common;
+use common::{json, nc_send, tmp};
 
 /// A spiral of `n` short feed moves, each on its own numbered line, long enough (a few
 /// ms each) that every line shows in the simulator's per-tick record.

@@ -1,0 +1,93 @@
+//! What the end-to-end test files share: running `nc-send` and `pkmc-sim` as a user
+//! would, reading their JSON reports, and a scratch folder per test process.
+
+// Each test file uses its own subset of these helpers.
+#![allow(dead_code)]
+
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+
+/// The repository root (examples and machine files are named from there).
+pub fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// Runs `nc-send` with `args` from the repository root.
+pub fn nc_send(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_nc-send"))
+        .args(args)
+        .current_dir(repo())
+        .output()
+        .expect("nc-send runs")
+}
+
+/// The JSON report on stdout.
+pub fn json(out: &Output) -> serde_json::Value {
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!(
+            "not JSON ({e}): {}\nstderr: {}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        )
+    })
+}
+
+/// The JSON report of a run that must have exited 0.
+pub fn ok(out: &Output) -> serde_json::Value {
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "stdout: {}\nstderr: {}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    json(out)
+}
+
+/// A path in this test process's scratch folder.
+pub fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("pkmc-tests-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+/// `pkmc-sim` on a pseudo-terminal, killed when dropped.
+pub struct Sim {
+    child: Child,
+    /// The port it serves.
+    pub port: String,
+}
+
+impl Sim {
+    /// Starts `pkmc-sim` with `args` and reads the port it prints.
+    pub fn start(args: &[&str]) -> Self {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_pkmc-sim"))
+            .args(args)
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut port = String::new();
+        std::io::BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut port)
+            .unwrap();
+        Sim {
+            child,
+            port: port.trim().to_string(),
+        }
+    }
+
+    /// Runs `nc-send --port PORT --report json` with `args`.
+    pub fn send(&self, args: &[&str]) -> Output {
+        let mut all = vec!["--port", self.port.as_str(), "--report", "json"];
+        all.extend_from_slice(args);
+        nc_send(&all)
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
