@@ -217,8 +217,7 @@ impl Executor {
                     target as f64,
                     b.accel as f64,
                 );
-                planner.first_entry = got.exit as f32;
-                planner.replan();
+                planner.set_first_entry(got.exit as f32);
                 self.block_start = self.s_raw;
                 if let Some(f) = self.smoothing.as_mut() {
                     if f.hist.is_full() {
@@ -267,8 +266,7 @@ impl Executor {
         );
         a.profile = Some(np);
         a.t = 0;
-        planner.first_entry = got.exit as f32;
-        planner.replan();
+        planner.set_first_entry(got.exit as f32);
     }
 
     /// Advances one tick; returns an event when one stops execution at rest.

@@ -357,12 +357,19 @@ impl Planner {
     }
 
     /// Entry speed the reverse pass allows for the first queued block (what the
-    /// executing block may aim to leave at); 0 when nothing is queued.
+    /// executing block may aim to leave at); 0 when nothing is queued. Leaves the
+    /// forward pass to [`Self::set_first_entry`], which must follow.
     pub fn first_entry_target(&mut self) -> f32 {
         self.reverse_pass();
-        let target = self.queue.front().map_or(0.0, |b| b.entry);
+        self.queue.front().map_or(0.0, |b| b.entry)
+    }
+
+    /// Fixes the first queued block's entry speed (the exit the executing block was
+    /// profiled for) and runs the forward pass from it; the reverse pass of
+    /// [`Self::first_entry_target`] still holds, as it does not depend on it.
+    pub fn set_first_entry(&mut self, entry: f32) {
+        self.first_entry = entry;
         self.forward_pass();
-        target
     }
 
     /// Total time of the queued motion at the planned speeds, ticks (an estimate that
