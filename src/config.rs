@@ -119,16 +119,11 @@ pub enum Drive {
         /// Reverse the DIR output.
         invert_dir: bool,
     },
-    /// Quadrature encoder in, analog command out, on servo channel `channel` (0-based).
+    /// Quadrature encoder in, analog command out, on servo channel `channel` (0-based);
+    /// its loop's gains are `MachineConfig::servo.gains[channel]`.
     Servo {
         /// Board servo channel, 0..[`MAX_SERVOS`].
         channel: u8,
-        /// Proportional gain: output counts per axis unit of following error × 2^-16.
-        kp_q16: i32,
-        /// Velocity feed-forward: output counts per (axis unit per tick) × 2^-16.
-        kvff_q16: i32,
-        /// Output clamp, ± DAC counts around mid-scale.
-        out_limit: i32,
     },
 }
 
@@ -180,6 +175,25 @@ impl ServoGains {
         dac_offset: 0,
         ferror: 0,
         min_ferror: 0,
+    };
+
+    /// Gains for the simulator's default servo plant (`G(s) = K / (s·(τs + 1))` with
+    /// K = 300 counts/s per DAC count, τ = 20 ms; c.u. = DAC counts): velocity and
+    /// acceleration feed-forward from the model's inverse (1/K, τ/K), a P+I loop
+    /// crossing over near 30 rad/s, following error 2 000 counts at full speed and 200
+    /// at rest.
+    pub const DEFAULT_PLANT: ServoGains = ServoGains {
+        kp: 0.1,
+        ki: 1.0,
+        kd: 0.0,
+        kvff: 1.0 / 300.0,
+        kaff: 0.02 / 300.0,
+        max_output: 2047.0,
+        max_integral: 500.0,
+        dac_per_unit: 1.0,
+        dac_offset: 0,
+        ferror: 2000,
+        min_ferror: 200,
     };
 
     fn bits(&self) -> [u32; 11] {
@@ -337,6 +351,39 @@ pub struct JointConfig {
     pub max: i64,
     /// Velocity and acceleration limits, axis units.
     pub limits: Limits,
+    /// How the joint finds its position after a reset ([`Homing::NONE`]: it does not).
+    pub homing: Homing,
+}
+
+/// Homing of one joint by [`crate::homing`]: search for the home switch, back off it
+/// slowly until it releases, then (optionally) go on to the encoder's index pulse.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Homing {
+    /// Joint position where the home switch releases on the way back (or, with
+    /// `use_index`, of the first index pulse after it), axis units.
+    pub switch_at: i64,
+    /// Search speed towards the switch, axis units/s; its sign is the direction, zero
+    /// means the joint has no home switch.
+    pub search_velocity: i64,
+    /// Speed backing off the switch (and on to the index), axis units/s, > 0.
+    pub latch_velocity: i64,
+    /// After the switch, latch on the encoder's index pulse (servo joints only).
+    pub use_index: bool,
+}
+
+impl Homing {
+    /// No home switch: the joint keeps the position it is believed to have.
+    pub const NONE: Homing = Homing {
+        switch_at: 0,
+        search_velocity: 0,
+        latch_velocity: 0,
+        use_index: false,
+    };
+
+    /// Does the joint home on a switch?
+    pub const fn enabled(&self) -> bool {
+        self.search_velocity != 0
+    }
 }
 
 /// Which kinematics the machine uses, with its parameters.
@@ -611,6 +658,12 @@ pub enum ConfigError {
     },
     /// `servo.contour` has a bad gain, or couples axes of a non-Cartesian machine.
     Contour,
+    /// `joints[joint].homing`: the switch lies outside the travel, a speed is above
+    /// the joint's limit, the latch speed is not positive, or `use_index` on a stepper.
+    Homing {
+        /// Joint index, 0-based.
+        joint: u8,
+    },
 }
 
 impl MachineConfig {
@@ -640,6 +693,17 @@ impl MachineConfig {
             }
             if jc.scale.steps == 0 || jc.scale.per_units == 0 {
                 return Err(ConfigError::JointScale { joint });
+            }
+            let h = &jc.homing;
+            if h.enabled()
+                && (h.switch_at < jc.min
+                    || h.switch_at > jc.max
+                    || h.search_velocity.unsigned_abs() > jc.limits.max_velocity as u64
+                    || h.latch_velocity <= 0
+                    || h.latch_velocity > jc.limits.max_velocity
+                    || (h.use_index && matches!(jc.drive, Drive::Stepper { .. })))
+            {
+                return Err(ConfigError::Homing { joint });
             }
             match jc.drive {
                 Drive::Stepper {
@@ -723,6 +787,12 @@ impl MachineConfig {
                 min: lo * mm,
                 max: hi * mm,
                 limits,
+                homing: Homing {
+                    switch_at: hi * mm,
+                    search_velocity: 20 * mm,
+                    latch_velocity: mm,
+                    use_index: false,
+                },
             });
         }
         let none = Limits {
@@ -757,12 +827,7 @@ impl MachineConfig {
         let mut joints = heapless::Vec::new();
         for c in 0..4u8 {
             let _ = joints.push(JointConfig {
-                drive: Drive::Servo {
-                    channel: c,
-                    kp_q16: 19_661,    // 0.3 DAC counts per count of error
-                    kvff_q16: 655_360, // 10 DAC counts per count per tick
-                    out_limit: 2047,
-                },
+                drive: Drive::Servo { channel: c },
                 scale: Scale::new(1000, mm as u64),
                 rotary: false,
                 min: 150 * mm,
@@ -770,6 +835,12 @@ impl MachineConfig {
                 limits: Limits {
                     max_velocity: 500 * mm,
                     max_accel: 5000 * mm,
+                },
+                homing: Homing {
+                    switch_at: 640 * mm,
+                    search_velocity: 50 * mm,
+                    latch_velocity: 2 * mm,
+                    use_index: true,
                 },
             });
         }
@@ -786,6 +857,12 @@ impl MachineConfig {
             limits: Limits {
                 max_velocity: 90 * deg,
                 max_accel: 900 * deg,
+            },
+            homing: Homing {
+                switch_at: 0,
+                search_velocity: -10 * deg,
+                latch_velocity: deg,
+                use_index: false,
             },
         });
         let linear = Limits {
@@ -827,7 +904,10 @@ impl MachineConfig {
             joints,
             axes: [linear, linear, linear, rotary, none, rotary],
             home: [0, 0, -80 * mm, 0, 0, 0],
-            servo: ServoConfig::NONE,
+            servo: ServoConfig {
+                gains: [ServoGains::DEFAULT_PLANT; MAX_SERVOS],
+                contour: ContourConfig::UNCOUPLED,
+            },
             motion: MotionConfig::TRAPEZOID,
         }
     }
@@ -855,6 +935,12 @@ impl MachineConfig {
                 limits: Limits {
                     max_velocity: 100 * mm,
                     max_accel: 1000 * mm,
+                },
+                homing: Homing {
+                    switch_at: 640 * mm,
+                    search_velocity: 20 * mm,
+                    latch_velocity: mm,
+                    use_index: false,
                 },
             });
         }

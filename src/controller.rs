@@ -3,25 +3,46 @@
 //! [`Controller::receive`] takes bytes from the link, [`Controller::transmit`] hands
 //! back bytes for it, and [`Controller::tick`] advances motion by one period T
 //! ([`crate::units::TICK_NS`]) given the inputs read from the hardware, returning the
-//! outputs to apply (step trains per stepper channel, commands per servo channel). The
-//! firmware calls `tick` from its timer interrupt; the simulator calls it with
-//! simulated time; both run exactly this code.
+//! outputs to apply (step trains per stepper channel, targets per servo channel for
+//! the 10 kHz loops of [`crate::contour::ServoBank`]). The firmware calls `tick` from
+//! its timer interrupt; the simulator calls it with simulated time; both run exactly
+//! this code.
 //!
-//! States: `Idle` (nothing to do) ⇄ `Running` (executing) ⇄ `Hold` (feed hold, pause or
-//! tool change: decelerating on the path or stopped on it, resumed by `Resume`); any
-//! fault → `Alarm`, in which nothing moves until `AlarmReset`. Blocks are planned as
-//! they are queued ([`crate::planner`]); control commands bypass the queue.
+//! States: after a reset (or a new machine) the controller is locked in `Alarm`
+//! (cause `Unhomed`): it moves once homed (`Home`, state `Homing`, [`crate::homing`])
+//! or unlocked (`AlarmReset`). `Idle` (nothing to do) ⇄ `Running` (executing) ⇄ `Hold`
+//! (feed hold, pause or tool change: decelerating on the path or stopped on it,
+//! resumed by `Resume`). Faults:
+//!
+//! | fault | raised when | alarm names |
+//! |---|---|---|
+//! | e-stop input | active (level) | state `EStop`, cause `EStop` |
+//! | limit switch | a joint's switch becomes active (not while that joint homes) | `LimitSwitch`, joint |
+//! | drive fault | a stepper drive's fault input, or a servo amplifier's | `DriveFault`, joint |
+//! | following error | a servo loop trips ([`crate::servo`]) | `FollowingError`, joint |
+//! | link loss | no valid frame for [`LINK_LOSS_TICKS`] while moving | `LinkLoss` |
+//! | joint travel | a block would take a joint outside its travel | `JointLimit`, joint |
+//!
+//! Every alarm carries the NC line executing. On a fault the motion stops on the path
+//! at the planned deceleration (as a feed hold does, so the stop distance is at most
+//! v²/2a plus one period and the position is kept: no step is lost, the pose is where
+//! the drives are), then the queue is dropped; nothing moves until `AlarmReset`, which
+//! is refused while an e-stop or a drive fault is still active. The drives stay
+//! enabled in `Alarm` (holding position) and are disabled in `EStop` once stopped; a
+//! tripped servo loop disables its own amplifier. Blocks are planned as they are
+//! queued ([`crate::planner`]); control commands bypass the queue.
 
 use crate::config::{ConfigError, Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS, MAX_STEPPERS};
+use crate::homing::{HomeEvent, HomeInputs, Homer};
 use crate::interp::{Event, Executor};
-use crate::kinematics::{Joints, MachineKinematics, Unreachable};
+use crate::kinematics::{Joints, Kinematics, MachineKinematics, Unreachable};
 use crate::planner::{Planner, PushError};
 use crate::protocol::{
     decode_frame, encode_frame, Alarm, AlarmCause, Aux, Block, Control, CtrlMsg, FrameReader,
     HostMsg, Motion, NakReason, Pushed, State, Status, MAX_BODY, MAX_FRAME, NO_JOINT,
     PROTOCOL_VERSION,
 };
-use crate::servo::ServoLoop;
+use crate::servo::{target_q16, Trip, SETPOINT_FRAC_BITS};
 use crate::stepper::{StepScheduler, StepTrain};
 use crate::units::TICK_HZ;
 
@@ -30,12 +51,28 @@ pub use crate::planner::QUEUE_CAPACITY;
 pub const TX_CAPACITY: usize = 2048;
 /// Ticks between two unsolicited status messages (50 ms at 1 kHz).
 pub const STATUS_EVERY_TICKS: u32 = 50;
+/// Ticks without a valid frame from the host, while moving, after which the link is
+/// lost (1 s at 1 kHz; the host asks for a status at least every 100 ms).
+pub const LINK_LOSS_TICKS: u32 = 1000;
 
 /// What the hardware reports each tick.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Inputs {
-    /// Encoder position of each servo channel, counts.
+    /// Encoder position of each servo channel, counts (extended beyond 16 bits).
     pub encoder_counts: [i64; MAX_SERVOS],
+    /// Encoder count latched by the hardware at an index pulse since the last tick.
+    pub index: [Option<i64>; MAX_SERVOS],
+    /// Emergency stop input active.
+    pub estop: bool,
+    /// Limit switch of each joint (bit j), active when tripped.
+    pub limit: u16,
+    /// Home switch of each joint (bit j), active.
+    pub home: u16,
+    /// Fault input of each joint's drive (bit j), active: stepper drives and servo
+    /// amplifiers alike (the servo loops also see their amplifier's line).
+    pub drive_fault: u16,
+    /// Trip latched by each servo channel's loop ([`crate::contour::ServoBank`]).
+    pub servo_trip: [Option<Trip>; MAX_SERVOS],
 }
 
 /// What the hardware must do this tick.
@@ -43,10 +80,16 @@ pub struct Inputs {
 pub struct Outputs {
     /// Step train of each stepper channel; `forward` already includes DIR inversion.
     pub steps: [StepTrain; MAX_STEPPERS],
-    /// Command of each servo channel, signed DAC counts around mid-scale.
-    pub servo_command: [i32; MAX_SERVOS],
-    /// Drives enabled.
+    /// Target of each servo channel at the end of this tick, counts × 2^16: load into
+    /// [`crate::contour::ServoBank::load_tick`].
+    pub servo_target: [i64; MAX_SERVOS],
+    /// Stepper drives enabled.
     pub enable: bool,
+    /// Servo amplifiers enabled (the loops' `enable`).
+    pub servo_enable: bool,
+    /// The servo loops must restart, clearing their trips, standing at their present
+    /// feedback (which `servo_target` now equals): rebuild the bank from it.
+    pub servo_reset: bool,
 }
 
 /// Link counters, for diagnostics.
@@ -75,15 +118,28 @@ pub struct Controller {
     planner: Planner,
     exec: Executor,
     joints: Joints,
+    /// Steps or counts of each joint's actuator at joint position zero (homing).
+    offset: [i64; MAX_JOINTS],
     steps: StepScheduler,
-    servos: [ServoLoop; MAX_SERVOS],
     trains: [StepTrain; MAX_JOINTS],
+    homer: Homer,
+    /// Joint of each servo channel.
+    servo_joint: [u8; MAX_SERVOS],
     state: State,
     alarm: Option<Alarm>,
+    /// Locked after a reset: neither homed nor unlocked.
+    locked: bool,
+    homed: bool,
+    /// In `Alarm`/`EStop`, still decelerating on the path.
+    stopping: bool,
+    /// Servo joints must be resynchronised to their feedback on the next tick.
+    resync: bool,
     abort_pending: bool,
     spindle: Aux,
     motion_ticks: u64,
     since_status: u32,
+    silent_ticks: u32,
+    last: Inputs,
     out: Outputs,
     stats: LinkStats,
 }
@@ -95,6 +151,11 @@ fn alarm_of(why: Unreachable, line: u32) -> Alarm {
         _ => (AlarmCause::Unreachable, NO_JOINT),
     };
     Alarm { cause, joint, line }
+}
+
+/// Lowest set bit of `bits` among the first `n`.
+fn first_bit(bits: u16, n: usize) -> Option<usize> {
+    (0..n).find(|j| bits & (1 << j) != 0)
 }
 
 impl Controller {
@@ -114,14 +175,14 @@ impl Controller {
         exec.set_smoothing(machine.motion.smoothing_ticks as u32);
         let mut planner = Planner::new(pose);
         planner.smoothing = machine.motion.smoothing_ticks as u32;
-        let mut servos = [ServoLoop::new(0); MAX_SERVOS];
-        for (jc, q) in machine.joints.iter().zip(&joints) {
-            if let Drive::Servo { channel, .. } = jc.drive {
-                servos[channel as usize] = ServoLoop::new(jc.scale.steps_at(*q));
+        let mut servo_joint = [NO_JOINT; MAX_SERVOS];
+        for (j, jc) in machine.joints.iter().enumerate() {
+            if let Drive::Servo { channel } = jc.drive {
+                servo_joint[channel as usize] = j as u8;
             }
         }
         let machine_for_id = machine.clone();
-        Ok(Self {
+        let mut c = Self {
             machine,
             kin,
             reader: FrameReader::new(),
@@ -137,18 +198,63 @@ impl Controller {
             planner,
             exec,
             joints,
+            offset: [0; MAX_JOINTS],
             steps,
-            servos,
             trains: [StepTrain::default(); MAX_JOINTS],
-            state: State::Idle,
-            alarm: None,
+            homer: Homer::default(),
+            servo_joint,
+            state: State::Alarm,
+            alarm: Some(Alarm {
+                cause: AlarmCause::Unhomed,
+                joint: NO_JOINT,
+                line: 0,
+            }),
+            locked: true,
+            homed: false,
+            stopping: false,
+            resync: false,
             abort_pending: false,
             spindle: Aux::SpindleOff,
             motion_ticks: 0,
             since_status: 0,
+            silent_ticks: 0,
+            last: Inputs::default(),
             out: Outputs::default(),
             stats: LinkStats::default(),
-        })
+        };
+        c.update_servo_targets();
+        Ok(c)
+    }
+
+    /// Unlocks a controller locked after a reset, at the position it believes it is at
+    /// (what `AlarmReset` does to the `Unhomed` alarm).
+    pub fn unlock(&mut self) {
+        if self.alarm.map(|a| a.cause) == Some(AlarmCause::Unhomed) {
+            self.locked = false;
+            self.alarm = None;
+            self.state = State::Idle;
+        }
+    }
+
+    /// Raises an alarm found at start-up (the firmware: a watchdog reset); the
+    /// controller stays locked.
+    pub fn raise_at_start(&mut self, cause: AlarmCause) {
+        self.alarm = Some(Alarm {
+            cause,
+            joint: NO_JOINT,
+            line: 0,
+        });
+        self.state = State::Alarm;
+    }
+
+    /// Has every joint with a home switch been homed since the reset?
+    pub fn homed(&self) -> bool {
+        self.homed
+    }
+
+    /// Actuator position (steps or counts) at joint position zero, per joint.
+    pub fn joint_offsets(&self) -> &[i64; MAX_JOINTS] {
+        &self.offset
     }
 
     /// The machine configuration in force.
@@ -186,7 +292,8 @@ impl Controller {
     /// Is motion executing or queued (time must advance for it)?
     pub fn has_work(&self) -> bool {
         match self.state {
-            State::Alarm | State::EStop => false,
+            State::Alarm | State::EStop => self.stopping || self.resync,
+            State::Homing => true,
             // An abort completes on the next tick once stopped: that tick is work.
             State::Hold => !self.exec.stopped() || self.abort_pending,
             _ => self.exec.busy() || !self.planner.is_empty() || !self.exec.settled(),
@@ -210,7 +317,10 @@ impl Controller {
                 Pushed::Frame(f) => decode_frame::<HostMsg>(f, &mut body).ok(),
             };
             match decoded {
-                Some((seq, msg)) => self.handle(seq, msg),
+                Some((seq, msg)) => {
+                    self.silent_ticks = 0;
+                    self.handle(seq, msg)
+                }
                 None => {
                     self.stats.corrupt += 1;
                     self.nak(NakReason::Corrupt);
@@ -444,14 +554,18 @@ impl Controller {
                     self.abort_pending = true;
                     self.exec.replan(&mut self.planner);
                     self.state = State::Hold;
+                } else if self.state == State::Homing {
+                    self.homer.cancel();
+                    self.locked = true;
+                    self.state = State::Alarm;
+                    self.alarm = Some(Alarm {
+                        cause: AlarmCause::Unhomed,
+                        joint: NO_JOINT,
+                        line: 0,
+                    });
                 }
             }
-            Control::AlarmReset => {
-                if self.state == State::Alarm && !self.mismatch {
-                    self.alarm = None;
-                    self.state = State::Idle;
-                }
-            }
+            Control::AlarmReset => self.reset_alarm(),
             Control::FeedOverride(p) => {
                 self.planner.feed_override = p.clamp(1, 200);
                 self.exec.replan(&mut self.planner);
@@ -462,22 +576,104 @@ impl Controller {
                 feed,
             } => {
                 if self.state == State::Idle && !self.has_work() && (axis as usize) < 6 {
-                    let mut target = self.exec.pose;
-                    target[axis as usize] = target[axis as usize].saturating_add(distance);
-                    self.push_motion(Motion::Linear, target, feed.max(1));
+                    let target = self.jog_target(axis as usize, distance);
+                    if target != self.exec.pose {
+                        self.push_motion(Motion::Linear, target, feed.max(1));
+                    }
                 }
             }
-            Control::Stop => self.raise(Alarm {
-                cause: AlarmCause::Aborted,
-                joint: NO_JOINT,
-                line: self.exec.line,
-            }),
-            Control::Home => {
-                if self.state == State::Idle && !self.has_work() {
-                    self.push_motion(Motion::Rapid, self.machine.home, 0);
+            Control::Stop => {
+                if self.state == State::Homing {
+                    self.homer.cancel();
+                    self.locked = true;
                 }
+                self.raise(Alarm {
+                    cause: AlarmCause::Aborted,
+                    joint: NO_JOINT,
+                    line: self.exec.line,
+                })
+            }
+            Control::Home => self.home(),
+        }
+    }
+
+    /// `AlarmReset`: refused while the cause is still there (e-stop or a drive fault
+    /// active) or the motion is still stopping.
+    fn reset_alarm(&mut self) {
+        if !matches!(self.state, State::Alarm | State::EStop) || self.mismatch || self.stopping {
+            return;
+        }
+        let n = self.machine.joints.len();
+        if self.last.estop || first_bit(self.last.drive_fault, n).is_some() {
+            return;
+        }
+        let servo_tripped = self.last.servo_trip.iter().any(Option::is_some);
+        let cause = self.alarm.map(|a| a.cause);
+        if cause == Some(AlarmCause::Unhomed) {
+            self.unlock();
+            return;
+        }
+        if servo_tripped || cause == Some(AlarmCause::FollowingError) {
+            // The loops restart where the joints are: resynchronise on the next tick.
+            self.resync = true;
+        }
+        if self.locked {
+            self.alarm = Some(Alarm {
+                cause: AlarmCause::Unhomed,
+                joint: NO_JOINT,
+                line: 0,
+            });
+            self.state = State::Alarm;
+        } else {
+            self.alarm = None;
+            self.state = State::Idle;
+        }
+    }
+
+    /// `Home`: the homing cycle on a machine with home switches, else a rapid move to
+    /// the home pose (only when unlocked).
+    fn home(&mut self) {
+        let switches = self.machine.joints.iter().any(|j| j.homing.enabled());
+        let locked = self.alarm.map(|a| a.cause) == Some(AlarmCause::Unhomed);
+        if switches && (locked || (self.state == State::Idle && !self.has_work())) {
+            self.alarm = None;
+            self.state = State::Homing;
+            self.homed = false;
+            self.homer.start(&self.machine.joints);
+        } else if !switches && self.state == State::Idle && !self.has_work() {
+            self.push_motion(Motion::Rapid, self.machine.home, 0);
+        }
+    }
+
+    /// The pose a jog of `distance` along `axis` reaches, shortened so that every
+    /// joint stays inside its travel (the soft limits).
+    fn jog_target(&self, axis: usize, distance: i64) -> [i64; crate::config::AXES] {
+        let from = self.exec.pose;
+        let at = |d: i64| {
+            let mut t = from;
+            t[axis] = t[axis].saturating_add(d);
+            t
+        };
+        let ok = |d: i64| {
+            let mut q = [0; MAX_JOINTS];
+            self.kin
+                .inverse_checked(&at(d), &self.machine.joints, &mut q)
+                .is_ok()
+        };
+        if ok(distance) {
+            return at(distance);
+        }
+        // Largest reachable distance by bisection (to the unit).
+        let (mut lo, mut hi) = (0i64, distance);
+        while (hi - lo).abs() > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if ok(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
             }
         }
+        at(lo)
     }
 
     fn push_motion(&mut self, motion: Motion, target: [i64; 6], feed: i64) {
@@ -505,96 +701,305 @@ impl Controller {
             free_slots: self.planner.free() as u16,
             feed_override: self.planner.feed_override,
             alarm: self.alarm,
+            homed: self.homed,
         }
     }
 
+    /// An alarm that ends motion at once (the motion has already stopped, or must).
     fn raise(&mut self, alarm: Alarm) {
         self.alarm = Some(alarm);
         self.state = State::Alarm;
         self.exec.stop();
         self.planner.hold = false;
         self.abort_pending = false;
+        self.stopping = false;
         self.planner.clear(self.exec.pose);
+    }
+
+    /// A fault: the first alarm is kept (an e-stop replaces any other), motion stops
+    /// on the path at the planned deceleration, homing stops at once.
+    fn fault(&mut self, alarm: Alarm, estop: bool) {
+        match self.state {
+            State::EStop => return,
+            State::Alarm if !estop => return,
+            _ => {}
+        }
+        let homing = self.state == State::Homing;
+        self.state = if estop { State::EStop } else { State::Alarm };
+        if self.alarm.is_none() || estop {
+            self.alarm = Some(alarm);
+        }
+        self.abort_pending = false;
+        if homing {
+            self.homer.cancel();
+            self.locked = true;
+            self.homed = false;
+            return;
+        }
+        if self.stopping {
+            return;
+        }
+        if self.exec.stopped() {
+            self.exec.stop();
+            self.planner.hold = false;
+            self.planner.clear(self.exec.pose);
+        } else {
+            self.planner.hold = true;
+            self.exec.replan(&mut self.planner);
+            self.stopping = true;
+        }
+    }
+
+    /// Reads the safety inputs and raises what they say.
+    fn check_inputs(&mut self, inputs: &Inputs) {
+        let n = self.machine.joints.len();
+        let line = self.exec.line;
+        let at = |cause, joint: Option<usize>| Alarm {
+            cause,
+            joint: joint.map_or(NO_JOINT, |j| j as u8),
+            line,
+        };
+        if inputs.estop {
+            self.fault(at(AlarmCause::EStop, None), true);
+        }
+        if let Some(j) = first_bit(inputs.drive_fault, n) {
+            self.fault(at(AlarmCause::DriveFault, Some(j)), false);
+        }
+        for (c, trip) in inputs.servo_trip.iter().enumerate() {
+            let joint = self.servo_joint[c] as usize;
+            match trip {
+                Some(Trip::AmplifierFault) => {
+                    self.fault(at(AlarmCause::DriveFault, Some(joint)), false)
+                }
+                Some(_) => self.fault(at(AlarmCause::FollowingError, Some(joint)), false),
+                None => {}
+            }
+        }
+        let mut rising = inputs.limit & !self.last.limit;
+        if self.state == State::Homing {
+            // Shared home/limit switches: a homing joint's limit is its home switch.
+            for (j, jc) in self.machine.joints.iter().enumerate() {
+                if jc.homing.enabled() {
+                    rising &= !(1 << j);
+                }
+            }
+        }
+        if let Some(j) = first_bit(rising, n) {
+            self.fault(at(AlarmCause::LimitSwitch, Some(j)), false);
+        }
+        if self.session {
+            self.silent_ticks = self.silent_ticks.saturating_add(1);
+        }
+        let moving = match self.state {
+            State::Running | State::Homing => true,
+            State::Hold => !self.exec.stopped(),
+            _ => false,
+        };
+        if moving && self.silent_ticks >= LINK_LOSS_TICKS {
+            self.fault(at(AlarmCause::LinkLoss, None), false);
+        }
+        self.last = *inputs;
+    }
+
+    /// One tick of path motion (also the stop after a fault).
+    fn motion_tick(&mut self) {
+        let moving = self.exec.busy() || !self.planner.is_empty() || !self.exec.settled();
+        if moving {
+            self.motion_ticks += 1;
+            if self.state == State::Idle {
+                self.state = State::Running;
+            }
+        }
+        match self.exec.tick(&mut self.planner) {
+            Some(Event::Unreachable { line, why }) => self.raise(alarm_of(why, line)),
+            Some(Event::Aux { aux, .. }) => match aux {
+                Aux::Pause(_) | Aux::ToolChange(_) if !self.stopping => self.state = State::Hold,
+                Aux::SpindleOff | Aux::SpindleCw(_) | Aux::SpindleCcw(_) => self.spindle = aux,
+                _ => {}
+            },
+            None => {}
+        }
+        let mut joints = self.joints;
+        match self
+            .kin
+            .inverse_checked(&self.exec.pose, &self.machine.joints, &mut joints)
+        {
+            Ok(()) => self.joints = joints,
+            Err(why) => self.raise(alarm_of(why, self.exec.line)),
+        }
+        if self.stopping && self.exec.stopped() {
+            self.exec.stop();
+            self.planner.clear(self.exec.pose);
+            self.planner.hold = false;
+            self.exec.paused = false;
+            self.stopping = false;
+        }
+        if self.state == State::Hold && self.abort_pending && self.exec.stopped() {
+            self.exec.stop();
+            self.planner.clear(self.exec.pose);
+            self.planner.hold = false;
+            self.abort_pending = false;
+            self.exec.paused = false;
+            self.state = State::Idle;
+        }
+        if self.state == State::Running
+            && !self.exec.busy()
+            && self.planner.is_empty()
+            && self.exec.settled()
+        {
+            self.state = State::Idle;
+        }
+    }
+
+    /// Actuator reference of joint `j` (steps or encoder counts) for the position
+    /// `q`, counts × 2^16.
+    fn actuator_q16(&self, j: usize, q: i64) -> i64 {
+        target_q16(&self.machine.joints[j].scale, q) + (self.offset[j] << SETPOINT_FRAC_BITS)
+    }
+
+    /// Re-bases joint `j`: the actuator reading `reference` (steps or counts) is the
+    /// joint position `at`. The actuator's command stays where it is; the joint's
+    /// believed position moves.
+    fn rebase(&mut self, j: usize, reference: i64, at: i64, moved: i64) {
+        let scale = self.machine.joints[j].scale;
+        let before = self.joints[j] - moved;
+        let command = scale.steps_at(before) + self.offset[j];
+        self.offset[j] = reference - scale.steps_at(at);
+        self.steps.offset[j] = self.offset[j];
+        self.joints[j] = scale.position_of(command - self.offset[j]) + moved;
+    }
+
+    fn home_tick(&mut self, inputs: &Inputs) {
+        self.motion_ticks += 1;
+        let mut targets = [0; MAX_JOINTS];
+        if let Err(why) =
+            self.kin
+                .inverse_checked(&self.machine.home, &self.machine.joints, &mut targets)
+        {
+            self.raise(alarm_of(why, 0));
+            return;
+        }
+        let before = self.joints;
+        let hin = HomeInputs {
+            home: inputs.home,
+            index: inputs.index,
+        };
+        let event = self
+            .homer
+            .tick(&self.machine.joints, &targets, &hin, &mut self.joints);
+        match event {
+            Some(HomeEvent::Latched { joint, index }) => {
+                let jc = self.machine.joints[joint];
+                let reference = match (jc.drive, index) {
+                    (_, Some(count)) => count,
+                    (Drive::Servo { channel }, None) => inputs.encoder_counts[channel as usize],
+                    (Drive::Stepper { .. }, None) => self.steps.steps(joint),
+                };
+                let moved = self.joints[joint] - before[joint];
+                self.rebase(joint, reference, jc.homing.switch_at, moved);
+            }
+            Some(HomeEvent::Failed { joint }) => {
+                self.locked = true;
+                self.raise(Alarm {
+                    cause: AlarmCause::HomingFailed,
+                    joint: joint as u8,
+                    line: 0,
+                });
+            }
+            Some(HomeEvent::Finished) => {
+                let completed = self.exec.completed;
+                let window = self.machine.motion.smoothing_ticks as u32;
+                self.exec = Executor::new(self.machine.home);
+                self.exec.set_smoothing(window);
+                self.exec.completed = completed;
+                self.planner.clear(self.machine.home);
+                self.homed = true;
+                self.locked = false;
+                self.state = State::Idle;
+            }
+            None => {}
+        }
+    }
+
+    /// After a servo trip is reset: the servo joints take their feedback as their
+    /// position and the pose follows by the forward kinematics.
+    fn resync_servos(&mut self, inputs: &Inputs) {
+        self.resync = false;
+        let mut joints = self.joints;
+        for (j, jc) in self.machine.joints.iter().enumerate() {
+            if let Drive::Servo { channel } = jc.drive {
+                joints[j] = jc
+                    .scale
+                    .position_of(inputs.encoder_counts[channel as usize] - self.offset[j]);
+            }
+        }
+        let mut pose = self.exec.pose;
+        match self.kin.forward(&joints, &self.exec.pose, &mut pose) {
+            Ok(()) => {
+                self.joints = joints;
+                let completed = self.exec.completed;
+                let line = self.exec.line;
+                self.exec = Executor::new(pose);
+                self.exec
+                    .set_smoothing(self.machine.motion.smoothing_ticks as u32);
+                self.exec.completed = completed;
+                self.exec.line = line;
+                self.planner.clear(pose);
+                self.out.servo_reset = true;
+            }
+            Err(_) => {
+                self.joints = joints;
+                self.locked = true;
+                self.homed = false;
+                self.out.servo_reset = true;
+                self.raise(Alarm {
+                    cause: AlarmCause::Unhomed,
+                    joint: NO_JOINT,
+                    line: 0,
+                });
+            }
+        }
+    }
+
+    fn update_servo_targets(&mut self) {
+        for (j, jc) in self.machine.joints.iter().enumerate() {
+            if let Drive::Servo { channel } = jc.drive {
+                self.out.servo_target[channel as usize] = self.actuator_q16(j, self.joints[j]);
+            }
+        }
     }
 
     /// Advances one interpolation period.
     pub fn tick(&mut self, inputs: &Inputs) -> &Outputs {
-        if !matches!(self.state, State::Alarm | State::EStop) {
-            let moving = self.exec.busy() || !self.planner.is_empty() || !self.exec.settled();
-            if moving {
-                self.motion_ticks += 1;
-                if self.state == State::Idle {
-                    self.state = State::Running;
-                }
-            }
-            match self.exec.tick(&mut self.planner) {
-                Some(Event::Unreachable { line, why }) => self.raise(alarm_of(why, line)),
-                Some(Event::Aux { aux, .. }) => match aux {
-                    Aux::Pause(_) | Aux::ToolChange(_) => self.state = State::Hold,
-                    Aux::SpindleOff | Aux::SpindleCw(_) | Aux::SpindleCcw(_) => self.spindle = aux,
-                    _ => {}
-                },
-                None => {}
-            }
-            if self.state != State::Alarm {
-                let mut joints = self.joints;
-                match self
-                    .kin
-                    .inverse_checked(&self.exec.pose, &self.machine.joints, &mut joints)
-                {
-                    Ok(()) => self.joints = joints,
-                    Err(why) => self.raise(alarm_of(why, self.exec.line)),
-                }
-            }
-            if self.state == State::Hold && self.abort_pending && self.exec.stopped() {
-                self.exec.stop();
-                self.planner.clear(self.exec.pose);
-                self.planner.hold = false;
-                self.abort_pending = false;
-                self.exec.paused = false;
-                self.state = State::Idle;
-            }
-            if self.state == State::Running
-                && !self.exec.busy()
-                && self.planner.is_empty()
-                && self.exec.settled()
-            {
-                self.state = State::Idle;
-            }
+        self.out.servo_reset = false;
+        self.check_inputs(inputs);
+        if self.resync {
+            self.resync_servos(inputs);
+        }
+        match self.state {
+            State::Homing => self.home_tick(inputs),
+            State::Alarm | State::EStop if !self.stopping => {}
+            _ => self.motion_tick(),
         }
         self.steps
             .tick(&self.machine.joints, &self.joints, &mut self.trains);
         self.out.steps = [StepTrain::default(); MAX_STEPPERS];
         for (j, jc) in self.machine.joints.iter().enumerate() {
-            match jc.drive {
-                Drive::Stepper {
-                    channel,
-                    invert_dir,
-                    ..
-                } => {
-                    let mut t = self.trains[j];
-                    t.forward ^= invert_dir;
-                    self.out.steps[channel as usize] = t;
-                }
-                Drive::Servo {
-                    channel,
-                    kp_q16,
-                    kvff_q16,
-                    out_limit,
-                } => {
-                    let c = channel as usize;
-                    let target = jc.scale.steps_at(self.joints[j]);
-                    self.out.servo_command[c] = self.servos[c].update(
-                        target,
-                        inputs.encoder_counts[c],
-                        kp_q16,
-                        kvff_q16,
-                        out_limit,
-                    );
-                }
+            if let Drive::Stepper {
+                channel,
+                invert_dir,
+                ..
+            } = jc.drive
+            {
+                let mut t = self.trains[j];
+                t.forward ^= invert_dir;
+                self.out.steps[channel as usize] = t;
             }
         }
-        self.out.enable = !matches!(self.state, State::Alarm | State::EStop);
+        self.update_servo_targets();
+        let powered = self.state != State::EStop || self.stopping;
+        self.out.enable = powered;
+        self.out.servo_enable = powered;
         self.since_status += 1;
         if self.session && self.since_status >= STATUS_EVERY_TICKS {
             self.since_status = 0;
@@ -648,6 +1053,7 @@ mod tests {
 
     fn session() -> Controller {
         let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
+        c.unlock();
         c.receive(&frame(0, &hello(&c)));
         c
     }
@@ -700,14 +1106,21 @@ mod tests {
         assert_eq!(c.machine(), &other);
         assert_eq!(c.take_store_request(), Some(&other));
         assert_eq!(c.take_store_request(), None);
+        // A new machine: locked until homed or unlocked.
+        assert_eq!(c.status().alarm.map(|a| a.cause), Some(AlarmCause::Unhomed));
+        c.unlock();
         assert_eq!(c.state(), State::Idle);
         c.receive(&frame(1, &line_to(10, 1)));
         run(&mut c, 10_000);
         assert_eq!(c.pose()[0], 10_000_000);
     }
 
+    /// Runs `ticks` periods, the host asking for a status every 100 ms as nc-send does.
     fn run(c: &mut Controller, ticks: usize) {
-        for _ in 0..ticks {
+        for t in 0..ticks {
+            if t % 100 == 0 {
+                c.receive(&frame(0, &HostMsg::StatusRequest));
+            }
             c.tick(&Inputs::default());
         }
     }

@@ -20,6 +20,7 @@ pub mod contour;
 pub mod controller;
 pub mod crc;
 pub mod geometry;
+pub mod homing;
 pub mod interp;
 pub mod kinematics;
 pub mod planner;

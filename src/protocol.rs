@@ -12,7 +12,7 @@ use crate::config::{AXES, MAX_JOINTS};
 use serde::{Deserialize, Serialize};
 
 /// Protocol version, exchanged in the handshake; both sides must agree.
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 /// Largest unencoded frame body (sequence number, message and CRC), bytes.
 pub const MAX_BODY: usize = 240;
 /// Largest encoded frame including its delimiter, bytes.
@@ -112,7 +112,8 @@ pub enum Control {
     Resume,
     /// Stop (decelerating on the path) and drop the queue.
     Abort,
-    /// Clear an alarm once its cause is gone; the controller stays still.
+    /// Clear an alarm once its cause is gone; the controller stays still. Clearing
+    /// `Unhomed` unlocks the controller at the position it believes it is at.
     AlarmReset,
     /// Feed override, percent (1..=200).
     FeedOverride(u16),
@@ -126,7 +127,10 @@ pub enum Control {
         /// Speed, units/s.
         feed: i64,
     },
-    /// Home the machine: go to the configured home pose.
+    /// Home the machine: every joint with a home switch searches it (then its encoder
+    /// index where configured), and all joints go to the home pose ([`crate::homing`]).
+    /// On a machine without home switches: go to the home pose. Allowed when idle or
+    /// locked after a reset (alarm `Unhomed`).
     Home,
     /// Immediate stop: motion ends now, without deceleration, and the controller
     /// enters `Alarm` (cause `Aborted`), position kept.
@@ -196,7 +200,8 @@ pub enum State {
 pub enum AlarmCause {
     /// A pose outside the machine's reach.
     Unreachable,
-    /// A joint would leave its travel.
+    /// A joint would leave its travel (the joints' soft limits: jogs stop at them,
+    /// program motion that would cross them raises this).
     JointLimit,
     /// A pose too near a singularity.
     Singularity,
@@ -206,8 +211,6 @@ pub enum AlarmCause {
     EStop,
     /// A limit switch tripped.
     LimitSwitch,
-    /// A soft limit would be crossed.
-    SoftLimit,
     /// A drive reported a fault.
     DriveFault,
     /// Following error beyond its limit.
@@ -218,6 +221,11 @@ pub enum AlarmCause {
     Watchdog,
     /// Host and controller disagree about the machine.
     MachineMismatch,
+    /// After a reset or a new machine: the controller does not know where the joints
+    /// are; it moves again once homed (`Home`) or unlocked (`AlarmReset`).
+    Unhomed,
+    /// Homing found no switch (or no index pulse) within the joint's travel.
+    HomingFailed,
 }
 
 /// An alarm: its cause, the joint concerned (`NO_JOINT` if none) and the NC line.
@@ -279,6 +287,8 @@ pub struct Status {
     pub feed_override: u16,
     /// Active alarm, if any.
     pub alarm: Option<Alarm>,
+    /// Every joint with a home switch has been homed since the last reset.
+    pub homed: bool,
 }
 
 /// Messages from the controller to the host.
@@ -497,6 +507,7 @@ mod tests {
                 joint: 255,
                 line: u32::MAX,
             }),
+            homed: true,
         });
         let mut frame = [0u8; MAX_FRAME];
         assert!(encode_frame(u16::MAX, &s, &mut frame).is_ok());

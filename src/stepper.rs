@@ -48,6 +48,9 @@ pub struct StepScheduler {
     channels: [Channel; MAX_JOINTS],
     /// Ticks in which some joint could not emit all the steps it needed.
     pub lagged_ticks: u32,
+    /// Steps added to each joint's position in steps (set by homing: the drive's step
+    /// count where the joint position is zero).
+    pub offset: [i64; MAX_JOINTS],
 }
 
 impl StepScheduler {
@@ -63,6 +66,7 @@ impl StepScheduler {
         Self {
             channels,
             lagged_ticks: 0,
+            offset: [0; MAX_JOINTS],
         }
     }
 
@@ -85,7 +89,7 @@ impl StepScheduler {
                 continue;
             };
             let ch = &mut self.channels[j];
-            let want = jc.scale.steps_at(joints[j]) - ch.emitted;
+            let want = jc.scale.steps_at(joints[j]) + self.offset[j] - ch.emitted;
             if want == 0 {
                 out[j].forward = ch.forward.unwrap_or(true);
                 continue;

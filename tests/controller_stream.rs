@@ -54,6 +54,7 @@ proptest! {
     ) {
         let m = MachineConfig::cartesian_xyz();
         let mut c = Controller::new(m.clone()).unwrap();
+    c.unlock();
         let mut bytes = frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id() });
         for (i, (t, f, rapid)) in moves.iter().enumerate() {
             let mut target = [0i64; AXES];
@@ -75,7 +76,11 @@ proptest! {
         // nm per tick², plus two nanometres of rounding per sample.
         let a_max = m.axes[0].max_accel as f64 / (TICK_HZ as f64 * TICK_HZ as f64) + 4.0;
         let mut fed = 0;
-        for _ in 0..20_000_000 {
+        for tick_no in 0..20_000_000 {
+            // The host's keepalive (nc-send asks for a status every 100 ms).
+            if tick_no % 100 == 0 && fed == bytes.len() {
+                c.receive(&frame(0, &HostMsg::StatusRequest));
+            }
             if fed < bytes.len() {
                 let end = (fed + chunk).min(bytes.len());
                 c.receive(&bytes[fed..end]);
@@ -108,7 +113,12 @@ proptest! {
 #[test]
 fn a_controller_at_rest_emits_no_steps_and_stays_idle() {
     let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
-    for _ in 0..1000 {
+    c.unlock();
+    for tick_no in 0..1000 {
+        // The host's keepalive (nc-send asks for a status every 100 ms).
+        if tick_no % 100 == 0 {
+            c.receive(&frame(0, &HostMsg::StatusRequest));
+        }
         let out = c.tick(&Inputs::default());
         assert!(out.steps.iter().all(|t| t.count == 0));
     }
@@ -126,6 +136,7 @@ proptest! {
         let m = MachineConfig::cartesian_xyz();
         let w = 1u32 << window_log2;
         let mut c = Controller::new(m.clone()).unwrap();
+    c.unlock();
         c.set_smoothing(w);
         let mut bytes = frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id() });
         for (i, (t, f, rapid)) in moves.iter().enumerate() {
@@ -143,7 +154,11 @@ proptest! {
         c.receive(&bytes);
         let mut poses = vec![*c.pose()];
         let (mut reader, mut replies) = (FrameReader::new(), Vec::new());
-        for _ in 0..2_000_000 {
+        for tick_no in 0..2_000_000 {
+            // The host's keepalive (nc-send asks for a status every 100 ms).
+            if tick_no % 100 == 0 {
+                c.receive(&frame(0, &HostMsg::StatusRequest));
+            }
             c.tick(&Inputs::default());
             drain(&mut c, &mut reader, &mut replies);
             poses.push(*c.pose());

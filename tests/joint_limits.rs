@@ -63,6 +63,7 @@ proptest! {
             prop_assume!(kin.inverse_checked(p, &m.joints, &mut q).is_ok());
         }
         let mut c = Controller::new(m.clone()).unwrap();
+    c.unlock();
         c.receive(&frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id() }));
         for (i, p) in poses.iter().enumerate() {
             let b = Block {
@@ -78,7 +79,11 @@ proptest! {
         let t = 1.0 / TICK_HZ as f64;
         let mut history: Vec<[i64; MAX_JOINTS]> = vec![*c.joints()];
         let mut sink = [0u8; 4096];
-        for _ in 0..200_000 {
+        for tick_no in 0..200_000 {
+            // The host's keepalive (nc-send asks for a status every 100 ms).
+            if tick_no % 100 == 0 {
+                c.receive(&frame(0, &HostMsg::StatusRequest));
+            }
             c.tick(&Inputs::default());
             while c.transmit(&mut sink) > 0 {}
             history.push(*c.joints());
@@ -108,6 +113,7 @@ fn a_joint_limit_tighter_than_the_feed_is_what_binds() {
     // but may only do 60 mm/s, so the move runs at their limit, not at F.
     let m = h4_tight();
     let mut c = Controller::new(m.clone()).unwrap();
+    c.unlock();
     c.receive(&frame(
         0,
         &HostMsg::Hello {
@@ -127,7 +133,11 @@ fn a_joint_limit_tighter_than_the_feed_is_what_binds() {
     c.receive(&frame(1, &HostMsg::Block(b)));
     let mut peak = 0i64;
     let mut last = c.joints()[0];
-    for _ in 0..5000 {
+    for tick_no in 0..5000 {
+        // The host's keepalive (nc-send asks for a status every 100 ms).
+        if tick_no % 100 == 0 {
+            c.receive(&frame(0, &HostMsg::StatusRequest));
+        }
         c.tick(&Inputs::default());
         peak = peak.max((c.joints()[0] - last).abs());
         last = c.joints()[0];

@@ -26,6 +26,7 @@ fn run_smoothed(
     window: u32,
 ) -> (Controller, Vec<[i64; AXES]>) {
     let mut c = Controller::new(machine).unwrap();
+    c.unlock();
     c.set_smoothing(window);
     c.receive(&frame(
         0,
@@ -37,7 +38,11 @@ fn run_smoothed(
     let mut next = 0;
     let mut poses = Vec::new();
     let mut sink = [0u8; 4096];
-    for _ in 0..10_000_000 {
+    for tick_no in 0..10_000_000 {
+        // The host's keepalive (nc-send asks for a status every 100 ms).
+        if tick_no % 100 == 0 {
+            c.receive(&frame(0, &HostMsg::StatusRequest));
+        }
         // Keep the queue topped up, as nc-send does.
         while next < blocks.len() && c.status().free_slots > 0 {
             c.receive(&frame(next as u16 + 1, &HostMsg::Block(blocks[next])));
