@@ -134,11 +134,14 @@ pub struct Controller {
     stopping: bool,
     /// Servo joints must be resynchronised to their feedback on the next tick.
     resync: bool,
+    /// No tick yet: the servo encoders' readings are adopted as the joints' positions.
+    fresh: bool,
     abort_pending: bool,
     spindle: Aux,
     motion_ticks: u64,
     since_status: u32,
     silent_ticks: u32,
+    link_watch: bool,
     last: Inputs,
     out: Outputs,
     stats: LinkStats,
@@ -213,11 +216,13 @@ impl Controller {
             homed: false,
             stopping: false,
             resync: false,
+            fresh: true,
             abort_pending: false,
             spindle: Aux::SpindleOff,
             motion_ticks: 0,
             since_status: 0,
             silent_ticks: 0,
+            link_watch: true,
             last: Inputs::default(),
             out: Outputs::default(),
             stats: LinkStats::default(),
@@ -245,6 +250,17 @@ impl Controller {
             line: 0,
         });
         self.state = State::Alarm;
+    }
+
+    /// Ticks since the last valid frame from the host.
+    pub fn link_silence_ticks(&self) -> u32 {
+        self.silent_ticks
+    }
+
+    /// Turns the link-loss watch off (or on): only for a controller fed in the same
+    /// process as its host, where there is no link to lose (`nc-send --check`).
+    pub fn set_link_watch(&mut self, on: bool) {
+        self.link_watch = on;
     }
 
     /// Has every joint with a home switch been homed since the reset?
@@ -795,7 +811,7 @@ impl Controller {
             State::Hold => !self.exec.stopped(),
             _ => false,
         };
-        if moving && self.silent_ticks >= LINK_LOSS_TICKS {
+        if self.link_watch && moving && self.silent_ticks >= LINK_LOSS_TICKS {
             self.fault(at(AlarmCause::LinkLoss, None), false);
         }
         self.last = *inputs;
@@ -972,6 +988,18 @@ impl Controller {
     /// Advances one interpolation period.
     pub fn tick(&mut self, inputs: &Inputs) -> &Outputs {
         self.out.servo_reset = false;
+        if self.fresh {
+            // Power-up: an encoder counter reads whatever it reads; the joint is where
+            // the controller believes (home pose) until homed.
+            self.fresh = false;
+            for (j, jc) in self.machine.joints.iter().enumerate() {
+                if let Drive::Servo { channel } = jc.drive {
+                    self.offset[j] =
+                        inputs.encoder_counts[channel as usize] - jc.scale.steps_at(self.joints[j]);
+                }
+            }
+            self.out.servo_reset = true;
+        }
         self.check_inputs(inputs);
         if self.resync {
             self.resync_servos(inputs);

@@ -17,7 +17,7 @@ use crate::link::{
 };
 use crate::plot::{lines_digest, Recorder};
 use crate::sim::{Simulator, Violation};
-use pkmc::config::{axis_is_rotary, MachineConfig, AXES, AXIS_NAMES};
+use pkmc::config::{axis_is_rotary, MachineConfig, AXES, AXIS_NAMES, MAX_JOINTS};
 use pkmc::protocol::{Alarm, Block, Control, State, Status};
 use pkmc::units::{to_user, TICK_NS};
 use serde::Serialize;
@@ -168,6 +168,9 @@ pub struct SimOutcome {
     pub corrupt_frames: u32,
     /// What the faulty line did, when faults were injected.
     pub faults: Option<FaultReport>,
+    /// Simulated time when the controller first entered `Alarm` or `EStop` (not the
+    /// lock after reset), s.
+    pub alarm_time_s: Option<f64>,
     /// NC lines executed and the tool path.
     #[serde(skip)]
     pub recorder: Recorder,
@@ -183,6 +186,7 @@ fn outcome_of(sim: &Simulator, faults: Option<FaultReport>, recorder: Recorder) 
         ticks: sim.ticks,
         corrupt_frames: sim.ctrl.link_stats().corrupt,
         faults,
+        alarm_time_s: sim.alarm_tick.map(|t| t as f64 * TICK_NS as f64 * 1e-9),
         recorder,
     }
 }
@@ -196,6 +200,12 @@ pub struct SimSetup<'a> {
     pub faults: Option<FaultConfig>,
     /// Keep the tool path (for plots).
     pub record_path: bool,
+    /// Plant of each joint from the machine file (servo joints; `None`: the default).
+    pub plants: Vec<Option<crate::plant::PlantFile>>,
+    /// Faults to inject ([`crate::sim::Injection`]).
+    pub inject: Vec<crate::sim::Injection>,
+    /// `--check` only: home before the dry run (else it unlocks).
+    pub home_first: bool,
 }
 
 /// A simulator serving on a pseudo-terminal in a thread.
@@ -211,7 +221,10 @@ impl SimServer {
     /// Starts a simulator for `machine` as `setup` says.
     pub fn start(machine: MachineConfig, setup: &SimSetup<'_>) -> Result<Self, Failure> {
         let fail = |m: String| Failure::new(exit::LINK, m);
-        let mut sim = Simulator::new(machine).map_err(|e| fail(format!("simulator: {e:#}")))?;
+        let mut sim = Simulator::with_plants(machine, setup.plants.clone(), [0; MAX_JOINTS])
+            .map_err(|e| fail(format!("simulator: {e:#}")))?;
+        sim.inject(&setup.inject)
+            .map_err(|e| Failure::new(exit::BAD_INPUT, format!("{e:#}")))?;
         if let Some(p) = setup.trace {
             let f = std::fs::File::create(p).map_err(|e| {
                 Failure::new(
@@ -296,6 +309,12 @@ pub struct Report {
     pub alarms: Vec<String>,
     /// NC line of the alarm, if any.
     pub alarm_line: Option<u32>,
+    /// Cause of the alarm, if any (`EStop`, `LimitSwitch`, `DriveFault`, …).
+    pub alarm_cause: Option<String>,
+    /// Joint the alarm names, 1-based, if any.
+    pub alarm_joint: Option<u8>,
+    /// Simulated time the alarm was raised, s (simulator only).
+    pub alarm_time_s: Option<f64>,
     /// Drive timing breaches (simulator only).
     pub drive_violations: Option<u64>,
     /// Link counters of the client.
@@ -371,6 +390,11 @@ impl Report {
             run_time_s: status.motion_ticks as f64 * TICK_NS as f64 * 1e-9,
             alarms: alarm.iter().map(describe_alarm).collect(),
             alarm_line: alarm.map(|a| a.line),
+            alarm_cause: alarm.map(|a| format!("{:?}", a.cause)),
+            alarm_joint: alarm
+                .filter(|a| a.joint != pkmc::protocol::NO_JOINT)
+                .map(|a| a.joint + 1),
+            alarm_time_s: sim.and_then(|s| s.alarm_time_s),
             drive_violations: sim.map(|s| s.violation_count),
             link,
             controller_corrupt_frames: sim.map(|s| s.corrupt_frames),
@@ -425,6 +449,8 @@ pub struct RunOptions<'a> {
     pub sim: SimSetup<'a>,
     /// Client tunables.
     pub link: LinkOptions,
+    /// Home the machine before the job.
+    pub home: bool,
 }
 
 /// What a run produced besides the report: the simulator's outcome, for plots.
@@ -473,8 +499,13 @@ pub fn run_blocks(
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
     let (server, path) = open_target(machine, opts)?;
-    let outcome = (|| -> Result<(JobEnd, Status, ClientStats), LinkError> {
+    let outcome = (|| -> Result<(JobEnd, Status, ClientStats), Failure> {
         let mut link = Link::connect(PortTransport::open(&path)?, machine, opts.link)?;
+        let sim = matches!(opts.target, Target::Sim);
+        if let Some(end) = prepare(&mut link, opts.home, sim, hooks)? {
+            let status = link.request_status()?;
+            return Ok((end, status, link.stats));
+        }
         let end = link.run_job(blocks, hooks)?;
         let status = link.request_status()?;
         Ok((end, status, link.stats))
@@ -525,7 +556,7 @@ pub fn check(
 ) -> Result<RunResult, Failure> {
     let blocks = compile_program(program, machine)?;
     let pre = crate::preflight::check(&blocks, machine, machine.home);
-    let mut sim = Simulator::new(machine.clone())
+    let mut sim = Simulator::with_plants(machine.clone(), setup.plants.clone(), [0; MAX_JOINTS])
         .map_err(|e| Failure::new(exit::BAD_INPUT, format!("simulator: {e:#}")))?;
     if let Some(p) = setup.trace {
         let f = std::fs::File::create(p).map_err(|e| {
@@ -544,7 +575,10 @@ pub fn check(
     let rec = recorder.clone();
     let io = InProcess::new(sim, Box::new(move |s| rec.borrow_mut().record(s)));
     let mut link = Link::connect(io, machine, LinkOptions::default())?;
-    let end = link.run_job(&blocks, hooks)?;
+    let end = match prepare(&mut link, setup.home_first, true, hooks)? {
+        Some(end) => end,
+        None => link.run_job(&blocks, hooks)?,
+    };
     let status = link.request_status()?;
     let stats = link.stats;
     let mut io = link.into_transport();
@@ -573,6 +607,55 @@ pub fn check(
         report,
         sim: Some(outcome),
     })
+}
+
+/// Before a job or a move: with `home`, homes the machine and waits until it is
+/// there; otherwise a controller locked after a reset (alarm `Unhomed`) is unlocked
+/// where it stands on the simulator (`sim`), and is an error naming the fix on a
+/// board. Returns how the job ended if homing ended it (an alarm).
+pub fn prepare<T: Transport>(
+    link: &mut Link<T>,
+    home: bool,
+    sim: bool,
+    hooks: &mut dyn JobHooks,
+) -> Result<Option<JobEnd>, Failure> {
+    let s = link.request_status()?;
+    let locked = s.alarm.map(|a| a.cause) == Some(pkmc::protocol::AlarmCause::Unhomed);
+    if home {
+        if !locked && s.state != State::Idle {
+            return Err(Failure::new(
+                exit::ALARM,
+                format!(
+                    "{}: cannot home: the controller is {:?}{}",
+                    link.transport().name(),
+                    s.state,
+                    s.alarm
+                        .map(|a| format!(" ({})", describe_alarm(&a)))
+                        .unwrap_or_default()
+                ),
+            ));
+        }
+        link.control(Control::Home)?;
+        return match link.wait_idle(hooks)? {
+            JobEnd::Done => Ok(None),
+            end => Ok(Some(end)),
+        };
+    }
+    if locked {
+        if !sim {
+            return Err(Failure::new(
+                exit::ALARM,
+                format!(
+                    "{}: the controller is locked after a reset (it does not know where the \
+                     machine is): home it (--home, or `nc-send home`) or unlock it where it \
+                     stands (`nc-send reset`)",
+                    link.transport().name()
+                ),
+            ));
+        }
+        link.control(Control::AlarmReset)?;
+    }
+    Ok(None)
 }
 
 /// A single command (`status`, `home`, `jog`, `reset`) on a live link.
@@ -619,7 +702,8 @@ pub fn move_and_wait<T: Transport>(
     hooks: &mut dyn JobHooks,
 ) -> Result<JobEnd, Failure> {
     let before = link.request_status()?;
-    if before.state != State::Idle {
+    let locked = before.alarm.map(|a| a.cause) == Some(pkmc::protocol::AlarmCause::Unhomed);
+    if before.state != State::Idle && !(cmd == Control::Home && locked) {
         return Err(Failure::new(
             exit::ALARM,
             format!(

@@ -34,9 +34,11 @@
 //! * Control commands bypass the queue: one at a time, each with a fresh id, resent
 //!   with the same id every [`CONTROL_RESEND_AFTER`] until its `ControlAck` arrives
 //!   (the controller remembers only the last id, so two may never be outstanding).
-//! * Liveness: the controller sends status every 50 ms while moving; when nothing has
-//!   been heard for [`LinkOptions::keepalive`] the client asks for one. Silence for
-//!   [`LinkOptions::link_timeout`] is a lost link ([`LinkError::Lost`]).
+//! * Liveness: the controller sends status every 50 ms while moving; the client asks
+//!   for one every [`LinkOptions::keepalive`], which is also its heartbeat: the
+//!   controller stops on the path and raises `LinkLoss` after
+//!   [`pkmc::controller::LINK_LOSS_TICKS`] (1 s) without a valid frame while moving.
+//!   Silence for [`LinkOptions::link_timeout`] is a lost link ([`LinkError::Lost`]).
 //!
 //! A job ends when every block is acknowledged and a status shows the controller idle
 //! with all of them executed, when it reports an alarm, or when the operator's abort
@@ -315,7 +317,10 @@ const IN_PROCESS_TICKS_PER_READ: u32 = 10_000;
 
 impl InProcess {
     /// Wraps `sim`; `on_tick` sees the simulator after every tick.
-    pub fn new(sim: Simulator, on_tick: Box<dyn FnMut(&Simulator)>) -> Self {
+    /// The controller's link-loss watch is turned off: host and controller share the
+    /// process and the simulated clock runs far ahead of the host's heartbeat.
+    pub fn new(mut sim: Simulator, on_tick: Box<dyn FnMut(&Simulator)>) -> Self {
+        sim.ctrl.set_link_watch(false);
         Self {
             sim,
             on_tick,
@@ -347,7 +352,7 @@ impl Transport for InProcess {
                 buf[..m].copy_from_slice(&self.out[..m]);
                 return Ok(m);
             }
-            if !self.sim.ctrl.has_work() {
+            if !self.sim.busy() {
                 return Ok(0);
             }
             self.sim.tick().map_err(io::Error::other)?;
@@ -456,8 +461,22 @@ pub fn serve(
     let mut out = vec![0u8; pkmc::controller::TX_CAPACITY];
     let mut line_out: Vec<u8> = Vec::with_capacity(65536);
     let mut pending: Vec<u8> = Vec::with_capacity(65536);
+    // Wall time of the last bytes delivered to the controller, and the end of an
+    // injected link cut.
+    let mut delivered = Instant::now();
+    let mut cut_until: Option<Instant> = None;
+    let loss_wall = Duration::from_millis(pkmc::controller::LINK_LOSS_TICKS as u64);
     while !stop.load(Ordering::Relaxed) {
-        let busy = sim.ctrl.has_work();
+        if sim.take_link_cut() {
+            cut_until = Some(Instant::now() + crate::sim::LINK_CUT);
+        }
+        let cut = cut_until.is_some_and(|t| Instant::now() < t);
+        // Simulated time runs ahead of the host's wall clock; it may pass the
+        // controller's link-loss limit only when the host has really been silent
+        // that long (or the line is cut).
+        let starved = sim.ctrl.link_silence_ticks() + 1 >= pkmc::controller::LINK_LOSS_TICKS
+            && delivered.elapsed() < loss_wall;
+        let busy = sim.busy() && !starved;
         let ready = if busy {
             port.bytes_to_read().unwrap_or(0) as usize
         } else {
@@ -472,8 +491,12 @@ pub fn serve(
             port.set_timeout(wait)
                 .map_err(|e| io_err("read")(e.into()))?;
             match port.read(&mut buf) {
+                Ok(_) if cut => {}
                 Ok(n) => {
                     stats.bytes_in += n as u64;
+                    if n > 0 {
+                        delivered = Instant::now();
+                    }
                     match faults.as_deref_mut() {
                         Some(line) => {
                             line_out.clear();
@@ -492,7 +515,7 @@ pub fn serve(
                 Err(e) => return Err(io_err("read")(e)),
             }
         }
-        if sim.ctrl.has_work() {
+        if busy {
             sim.tick()
                 .map_err(|e| io_err("simulate")(io::Error::other(e)))?;
             on_tick(sim);
@@ -501,6 +524,9 @@ pub fn serve(
             let n = sim.ctrl.transmit(&mut out);
             if n == 0 {
                 break;
+            }
+            if cut {
+                continue;
             }
             match faults.as_deref_mut() {
                 Some(line) => line.towards_host(&out[..n], &mut pending),
@@ -994,7 +1020,7 @@ impl<T: Transport> Link<T> {
                 }
                 continue;
             }
-            if s.state == State::Alarm {
+            if matches!(s.state, State::Alarm | State::EStop) && s.speed == 0 {
                 if ended_by == Some(Control::Stop) {
                     return Ok(JobEnd::Stopped);
                 }
@@ -1025,7 +1051,7 @@ impl<T: Transport> Link<T> {
     ) -> Result<JobEnd, LinkError> {
         let start_status = self.request_status()?;
         hooks.status(&start_status);
-        if start_status.state == State::Alarm {
+        if matches!(start_status.state, State::Alarm | State::EStop) {
             if let Some(a) = start_status.alarm {
                 return Ok(JobEnd::Alarm(a));
             }
@@ -1091,10 +1117,10 @@ impl<T: Transport> Link<T> {
                     }
                 }
             }
-            // Keep-alive: ask for a status when the controller has been quiet.
-            if self.last_heard.elapsed() > self.opts.keepalive
-                && self.last_request.elapsed() > self.opts.keepalive
-            {
+            // Heartbeat: a status request every `keepalive`, so the controller hears
+            // the host (it stops after 1 s of silence while moving) and the host hears
+            // the controller.
+            if self.last_request.elapsed() > self.opts.keepalive {
                 self.queue(0, &HostMsg::StatusRequest)?;
                 self.stats.status_requests += 1;
                 self.last_request = now;
@@ -1269,7 +1295,8 @@ impl<T: Transport> Link<T> {
                 job.free = s.free_slots as usize;
                 job.buffered_ms = s.buffered_ms;
                 hooks.status(&s);
-                if s.state == State::Alarm {
+                // A fault stops on the path first: the job ends once at rest.
+                if matches!(s.state, State::Alarm | State::EStop) && s.speed == 0 {
                     if job
                         .ending
                         .is_some_and(|e| e.acked && e.cmd == Control::Stop)
@@ -1423,6 +1450,7 @@ mod tests {
             free_slots: 64,
             feed_override: 100,
             alarm: None,
+            homed: false,
         }
     }
 

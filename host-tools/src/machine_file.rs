@@ -7,8 +7,9 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use pkmc::config::{
-    Drive, GeometryField, H4TableGeometry, HexapodGeometry, JointConfig, KinematicsConfig, Limits,
-    MachineConfig, Scale, ServoConfig, ServoGains, StepTiming, AXES, AXIS_NAMES, MAX_JOINTS,
+    Drive, GeometryField, H4TableGeometry, HexapodGeometry, Homing, JointConfig, KinematicsConfig,
+    Limits, MachineConfig, Scale, ServoConfig, ServoGains, StepTiming, AXES, AXIS_NAMES,
+    MAX_JOINTS,
 };
 use pkmc::units::units_per_user;
 use serde::Deserialize;
@@ -69,14 +70,10 @@ pub struct JointFile {
     pub invert_dir: bool,
     /// Stepper timing; the PacSci 6410 when absent.
     pub timing: Option<TimingFile>,
-    /// Servo: proportional gain, output counts per encoder count of error.
-    pub kp: Option<f64>,
-    /// Servo: velocity feed-forward, output counts per (count per tick).
-    pub kvff: Option<f64>,
-    /// Servo: output clamp, ± DAC counts.
-    pub out_limit: Option<i32>,
-    /// Servo: the 10 kHz loop's gains ([`pkmc::servo`]); the loop idles without them.
+    /// Servo: the 10 kHz loop's gains ([`pkmc::servo`]); required for a servo joint.
     pub servo: Option<ServoFile>,
+    /// Homing on a switch ([`pkmc::homing`]); without it the joint is not homed.
+    pub homing: Option<HomingFile>,
     /// Servo: the plant's transfer function, for simulation ([`crate::plant`]).
     pub plant: Option<crate::plant::PlantFile>,
 }
@@ -113,6 +110,22 @@ pub struct ServoFile {
     pub ferror: f64,
     /// Following-error limit at standstill, mm or degrees.
     pub min_ferror: f64,
+}
+
+/// A joint's `homing = { ... }` table: [`pkmc::config::Homing`] in file units.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HomingFile {
+    /// Where the switch releases on the way back (or the index pulse after it), mm or
+    /// degrees.
+    pub switch_at: f64,
+    /// Speed towards the switch, mm/s or °/s; the sign is the direction.
+    pub search_velocity: f64,
+    /// Speed backing off the switch, mm/s or °/s (> 0).
+    pub latch_velocity: f64,
+    /// Latch on the encoder's index pulse after the switch (servo joints).
+    #[serde(default)]
+    pub use_index: bool,
 }
 
 /// The `[contour]` table: [`pkmc::config::ContourConfig`].
@@ -435,17 +448,18 @@ impl MachineFile {
                         }),
                     invert_dir: jf.invert_dir,
                 },
-                "servo" => Drive::Servo {
-                    channel: jf.channel,
-                    kp_q16: (jf
-                        .kp
-                        .or(jf.servo.as_ref().map(|s| (s.kp * s.dac_per_unit) as f64))
-                        .ok_or_else(|| anyhow!("{}: a servo joint needs kp", f("kp")))?
-                        * 65536.0)
-                        .round() as i32,
-                    kvff_q16: (jf.kvff.unwrap_or(0.0) * 65536.0).round() as i32,
-                    out_limit: jf.out_limit.unwrap_or(2047),
-                },
+                "servo" => {
+                    if jf.servo.is_none() {
+                        bail!(
+                            "{}: a servo joint needs its loop's gains: servo = {{ kp = .., \
+                             max_output = .., dac_per_unit = .., ferror = .., min_ferror = .. }}",
+                            f("servo")
+                        );
+                    }
+                    Drive::Servo {
+                        channel: jf.channel,
+                    }
+                }
                 other => bail!(
                     "{}: unknown drive {other:?} (expected \"stepper\" or \"servo\")",
                     f("drive")
@@ -491,6 +505,23 @@ impl MachineFile {
                         "",
                     )?,
                     max_accel: to_units(positive(jf.max_accel, &f("max_accel"))?, jf.rotary, "")?,
+                },
+                homing: match &jf.homing {
+                    None => Homing::NONE,
+                    Some(h) => Homing {
+                        switch_at: to_units(h.switch_at, jf.rotary, &f("homing.switch_at"))?,
+                        search_velocity: to_units(
+                            h.search_velocity,
+                            jf.rotary,
+                            &f("homing.search_velocity"),
+                        )?,
+                        latch_velocity: to_units(
+                            h.latch_velocity,
+                            jf.rotary,
+                            &f("homing.latch_velocity"),
+                        )?,
+                        use_index: h.use_index,
+                    },
                 },
             });
         }
@@ -587,6 +618,11 @@ pub fn describe(e: &pkmc::config::ConfigError, m: &MachineFile) -> String {
             "servo channel {channel}: gains must be finite, limits non-negative, \
              dac_per_unit non-zero and min_ferror <= ferror"
         ),
+        E::Homing { joint } => format!(
+            "{}.homing: switch_at must lie in the travel, speeds within max_velocity, \
+             latch_velocity > 0, and use_index only on a servo joint",
+            jn(joint)
+        ),
         E::Contour => "contour: gains must be finite, clamps non-negative, and coupling needs a \
              Cartesian machine"
             .into(),
@@ -626,6 +662,16 @@ pub fn load(path: &Path) -> Result<MachineConfig> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("{}: cannot read", path.display()))?;
     parse(&text, &path.display().to_string())
+}
+
+/// The simulator's plant of each joint in the machine file at `path` (`None` for a
+/// joint without one).
+pub fn load_plants(path: &Path) -> Result<Vec<Option<crate::plant::PlantFile>>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let file: MachineFile =
+        toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), e.message()))?;
+    Ok(file.joints.into_iter().map(|j| j.plant).collect())
 }
 
 /// Parses machine-file text; `origin` names it in errors.

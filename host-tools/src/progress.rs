@@ -430,6 +430,7 @@ mod tests {
             free_slots: 0,
             feed_override: 100,
             alarm: None,
+            homed: false,
         }
     }
 

@@ -12,11 +12,15 @@
 //! Time advances only through [`Simulator::tick`], one interpolation period at a time,
 //! so runs are deterministic however fast the host computer is.
 
-use anyhow::Result;
+use crate::plant::{DiscretePlant, PlantFile, TransferFunction};
+use anyhow::{bail, Result};
 use pkmc::config::{Drive, MachineConfig, StepTiming, MAX_JOINTS, MAX_SERVOS, MAX_STEPPERS};
+use pkmc::contour::{PeriodInputs, PeriodOutputs, ServoBank};
 use pkmc::controller::{Controller, Inputs};
+use pkmc::protocol::State;
+use pkmc::servo::{DAC_MID, SERVO_HZ, SERVO_PER_TICK};
 use pkmc::stepper::StepTrain;
-use pkmc::units::{to_user, TICK_NS};
+use pkmc::units::{to_user, units_per_user, TICK_NS};
 use serde::Serialize;
 use std::io::Write;
 
@@ -125,51 +129,206 @@ impl SimStepper {
     }
 }
 
-/// Second-order servo plant, in encoder counts: G(s) = K / (s·(τ·s + 1)).
+/// A simulated servo joint: amplifier and mechanics as a transfer function from the
+/// amplifier's command to the joint's displacement ([`crate::plant`]), stepped at the
+/// servo rate, read back through a quadrature encoder (whole counts, 16-bit hardware
+/// counter extended as the firmware does) with index marks.
 #[derive(Clone, Debug)]
-pub struct ServoPlant {
-    /// Steady-state speed per unit command, counts/s per DAC count.
-    pub gain: f64,
-    /// Velocity time constant, s.
-    pub tau_s: f64,
-    velocity: f64,
-    /// Position, counts.
-    pub position: f64,
+pub struct SimServo {
+    plant: DiscretePlant,
+    /// Command units per DAC count above mid-scale.
+    input_per_count: f64,
+    /// Encoder counts per user unit (mm or degree).
+    counts_per_user: f64,
+    /// Counts the encoder reads at true joint position zero.
+    zero: i64,
+    /// True position at power-up, counts from `zero`.
+    start: f64,
+    /// Frozen (a jammed axis) at this many counts from `zero`.
+    jammed: Option<f64>,
+    /// Encoder reading now, counts.
+    counts: i64,
+    /// Index marks at these counts (from `zero`) plus multiples of `index_pitch`.
+    index_at: Option<(i64, i64)>,
 }
 
-impl ServoPlant {
-    /// A plant at rest at `position` counts.
-    pub fn new(gain: f64, tau_s: f64, position: f64) -> Self {
-        Self {
-            gain,
-            tau_s,
-            velocity: 0.0,
-            position,
+/// Default plant of a servo joint whose machine file gives none: the amplifier and
+/// motor as G(s) = K / (s·(τs + 1)), K = 300 encoder counts/s per DAC count, τ = 20 ms
+/// (the model [`pkmc::config::ServoGains::DEFAULT_PLANT`] is tuned for).
+pub const DEFAULT_PLANT_GAIN: f64 = 300.0;
+/// See [`DEFAULT_PLANT_GAIN`].
+pub const DEFAULT_PLANT_TAU_S: f64 = 0.02;
+/// Spacing of a simulated encoder's index marks, user units (mm or degrees); one mark
+/// sits exactly at the joint's `homing.switch_at`.
+pub const INDEX_PITCH: f64 = 5.0;
+/// How far beyond the index mark (towards the switch) a simulated home switch of a
+/// joint homing on its index releases, user units.
+pub const SWITCH_BEFORE_INDEX: f64 = 0.3;
+/// How far beyond a joint's travel its simulated limit switches trip, user units.
+pub const LIMIT_BEYOND_TRAVEL: f64 = 3.0;
+
+impl SimServo {
+    /// The plant of joint `jc` from `file` (or the default), at rest at true
+    /// position `at` (axis units), its encoder reading `reading` there.
+    pub fn new(
+        jc: &pkmc::config::JointConfig,
+        file: Option<&PlantFile>,
+        at: i64,
+        reading: i64,
+    ) -> Result<Self> {
+        let counts_per_user =
+            jc.scale.steps as f64 / jc.scale.per_units as f64 * units_per_user(jc.rotary) as f64;
+        let (tf, input_per_count) = match file {
+            Some(f) => (TransferFunction::new(&f.num, &f.den)?, f.input_per_count),
+            None => (
+                TransferFunction::new(
+                    &[DEFAULT_PLANT_GAIN / counts_per_user],
+                    &[DEFAULT_PLANT_TAU_S, 1.0, 0.0],
+                )?,
+                1.0,
+            ),
+        };
+        let start = jc.scale.steps_at(at);
+        let zero = reading - start;
+        let index_at = (jc.homing.use_index).then(|| {
+            (
+                jc.scale.steps_at(jc.homing.switch_at),
+                (INDEX_PITCH * counts_per_user).round() as i64,
+            )
+        });
+        Ok(Self {
+            plant: tf.discretize(1.0 / SERVO_HZ as f64),
+            input_per_count,
+            counts_per_user,
+            zero,
+            start: start as f64,
+            jammed: None,
+            counts: reading,
+            index_at,
+        })
+    }
+
+    /// True position, counts from the joint's zero (fractional).
+    fn true_counts(&self, u: f64) -> f64 {
+        match self.jammed {
+            Some(at) => at,
+            None => self.start + self.plant.output(u) * self.counts_per_user,
         }
     }
 
-    /// Integrates one tick under `command`.
-    pub fn step(&mut self, command: i32, dt_s: f64) {
-        const SUB: u32 = 10;
-        let h = dt_s / SUB as f64;
-        for _ in 0..SUB {
-            let accel = (self.gain * command as f64 - self.velocity) / self.tau_s;
-            self.velocity += accel * h;
-            self.position += self.velocity * h;
+    /// One servo period under DAC code `dac` (amplifier enabled or not); returns the
+    /// count of an index mark crossed, if any.
+    pub fn period(&mut self, dac: u16, enabled: bool) -> Option<i64> {
+        let u = if enabled {
+            (dac as i32 - DAC_MID) as f64 * self.input_per_count
+        } else {
+            0.0
+        };
+        let before = self.counts - self.zero;
+        if self.jammed.is_none() {
+            self.plant.step(u);
         }
+        let now = self.true_counts(0.0).round() as i64;
+        self.counts = now + self.zero;
+        let (first, pitch) = self.index_at?;
+        if pitch <= 0 || now == before {
+            return None;
+        }
+        let (lo, hi) = (before.min(now), before.max(now));
+        // The mark k with first + k·pitch in (lo, hi] (or [lo, hi) moving down).
+        let k = (hi - first).div_euclid(pitch);
+        let mark = first + k * pitch;
+        let crossed = if now > before {
+            mark > lo && mark <= hi
+        } else {
+            mark >= lo && mark < hi
+        };
+        crossed.then_some(mark + self.zero)
     }
 
-    /// Encoder reading, whole counts.
+    /// Encoder reading, counts.
     pub fn counts(&self) -> i64 {
-        self.position.round() as i64
+        self.counts
+    }
+
+    /// True position, counts from the joint's zero.
+    pub fn position(&self) -> i64 {
+        self.counts - self.zero
+    }
+
+    /// Jams the axis where it is (an injected following error).
+    pub fn jam(&mut self) {
+        self.jammed = Some((self.counts - self.zero) as f64);
     }
 }
 
-/// Simulated servo plant used for every servo joint: 100 counts/s per DAC count (so
-/// ±2047 counts is ±204 700 counts/s), velocity time constant τ = 20 ms.
-pub const SERVO_GAIN: f64 = 100.0;
-/// See [`SERVO_GAIN`].
-pub const SERVO_TAU_S: f64 = 0.02;
+/// A fault injected into the simulator (`nc-send --inject KIND[:JOINT]@SECONDS`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Injection {
+    /// What.
+    pub kind: FaultKind,
+    /// Joint concerned (limit switch, drive fault, following error), 0-based.
+    pub joint: Option<usize>,
+    /// Simulated time, s.
+    pub at_s: f64,
+}
+
+/// Kinds of injectable faults.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FaultKind {
+    /// The e-stop input becomes active and stays so.
+    EStop,
+    /// A joint's limit switch trips and stays tripped.
+    Limit,
+    /// A joint's drive (or servo amplifier) reports a fault and goes on reporting it.
+    DriveFault,
+    /// A servo joint jams: it stops moving, so its following error grows.
+    FollowingError,
+    /// The line goes dead both ways for [`LINK_CUT`] (wall time).
+    LinkLoss,
+}
+
+/// How long an injected link loss lasts: longer than the controller's limit
+/// ([`pkmc::controller::LINK_LOSS_TICKS`], 1 s), shorter than the time after which
+/// nc-send gives the link up (3 s), so the host hears the alarm afterwards.
+pub const LINK_CUT: std::time::Duration = std::time::Duration::from_millis(1500);
+
+impl std::str::FromStr for Injection {
+    type Err = String;
+    fn from_str(text: &str) -> Result<Self, String> {
+        let bad = |why: &str| {
+            format!("--inject {text:?}: {why} (KIND[:JOINT]@SECONDS, KIND one of estop, limit, drive-fault, following-error, link-loss)")
+        };
+        let (what, at) = text.split_once('@').ok_or_else(|| bad("no @SECONDS"))?;
+        let at_s: f64 = at
+            .parse()
+            .ok()
+            .filter(|t: &f64| t.is_finite() && *t >= 0.0)
+            .ok_or_else(|| bad("SECONDS must be a non-negative number"))?;
+        let (kind, joint) = match what.split_once(':') {
+            Some((k, j)) => (
+                k,
+                Some(
+                    j.parse::<usize>()
+                        .map_err(|_| bad("JOINT must be a joint index (0-based)"))?,
+                ),
+            ),
+            None => (what, None),
+        };
+        let kind = match kind {
+            "estop" | "e-stop" => FaultKind::EStop,
+            "limit" => FaultKind::Limit,
+            "drive-fault" => FaultKind::DriveFault,
+            "following-error" => FaultKind::FollowingError,
+            "link-loss" => FaultKind::LinkLoss,
+            other => return Err(bad(&format!("unknown fault {other:?}"))),
+        };
+        if joint.is_some() && matches!(kind, FaultKind::EStop | FaultKind::LinkLoss) {
+            return Err(bad("this fault names no joint"));
+        }
+        Ok(Injection { kind, joint, at_s })
+    }
+}
 
 /// One trace row, in user units.
 #[derive(Clone, Debug, PartialEq)]
@@ -191,9 +350,27 @@ pub struct Simulator {
     /// The controller under simulation.
     pub ctrl: Controller,
     steppers: [Option<SimStepper>; MAX_STEPPERS],
-    servos: [Option<ServoPlant>; MAX_SERVOS],
+    servos: [Option<SimServo>; MAX_SERVOS],
+    bank: Option<ServoBank>,
+    bank_out: PeriodOutputs,
+    /// Plant of each joint, from the machine file ([`DEFAULT_PLANT_GAIN`] when absent).
+    plants: Vec<Option<PlantFile>>,
+    /// True position minus believed position of each joint at power-up, axis units.
+    power_up_offset: [i64; MAX_JOINTS],
+    injections: Vec<Injection>,
+    /// Inputs forced by the injections so far.
+    forced: Inputs,
+    /// Index marks crossed during the last tick, per servo channel.
+    index: [Option<i64>; MAX_SERVOS],
+    /// The controller's last outputs.
+    last_out: pkmc::controller::Outputs,
+    /// First tick at which the controller was in `Alarm` or `EStop` (not the lock
+    /// after reset).
+    pub alarm_tick: Option<u64>,
     /// Ticks simulated.
     pub ticks: u64,
+    /// Ticks since the controller last had work (servo settling runs on).
+    idle_ticks: u64,
     trace: Option<Box<dyn Write + Send>>,
     /// Identity of the machine the drives were built for.
     machine_id: u32,
@@ -201,22 +378,102 @@ pub struct Simulator {
     pub flash: Option<std::path::PathBuf>,
 }
 
+/// Ticks the simulator goes on running after the controller's work is done, while a
+/// servo joint is still settling (more than one count from its target).
+pub const SETTLE_TICKS: u64 = 2000;
+
 impl Simulator {
-    /// A simulator for `machine`, at its home pose.
+    /// A simulator for `machine`, its joints standing where the controller believes
+    /// (its home pose), servo joints with the default plant.
     pub fn new(machine: MachineConfig) -> Result<Self> {
+        Self::with_plants(machine, Vec::new(), [0; MAX_JOINTS])
+    }
+
+    /// A simulator for `machine` with the plants of its servo joints (indexed by joint;
+    /// missing entries take the default) and the joints' true positions at power-up
+    /// differing from the believed ones by `power_up_offset` (axis units).
+    pub fn with_plants(
+        machine: MachineConfig,
+        plants: Vec<Option<PlantFile>>,
+        power_up_offset: [i64; MAX_JOINTS],
+    ) -> Result<Self> {
         let ctrl = Controller::new(machine)
             .map_err(|e| anyhow::anyhow!("machine refused by the controller: {e:?}"))?;
         let mut sim = Self {
             ctrl,
             steppers: Default::default(),
             servos: Default::default(),
+            bank: None,
+            bank_out: PeriodOutputs::default(),
+            plants,
+            power_up_offset,
+            injections: Vec::new(),
+            forced: Inputs::default(),
+            index: [None; MAX_SERVOS],
+            last_out: pkmc::controller::Outputs::default(),
+            alarm_tick: None,
             ticks: 0,
+            idle_ticks: 0,
             trace: None,
             machine_id: 0,
             flash: None,
         };
-        sim.attach_drives();
+        sim.attach_drives()?;
         Ok(sim)
+    }
+
+    /// Injects faults at their times; refuses one that cannot happen on this machine.
+    pub fn inject(&mut self, injections: &[Injection]) -> Result<()> {
+        let m = self.ctrl.machine();
+        for i in injections {
+            let joint = i.joint.unwrap_or_else(|| match i.kind {
+                FaultKind::FollowingError => m
+                    .joints
+                    .iter()
+                    .position(|j| matches!(j.drive, Drive::Servo { .. }))
+                    .unwrap_or(0),
+                _ => 0,
+            });
+            let Some(jc) = m.joints.get(joint) else {
+                bail!(
+                    "--inject: joint {joint} does not exist ({} has {} joints, 0-based)",
+                    m.name,
+                    m.joints.len()
+                );
+            };
+            if i.kind == FaultKind::FollowingError && !matches!(jc.drive, Drive::Servo { .. }) {
+                bail!(
+                    "--inject following-error: joint {joint} of {} is a stepper: no encoder, \
+                     no following error (name a servo joint: following-error:J@SECONDS)",
+                    m.name
+                );
+            }
+            self.injections.push(Injection {
+                joint: Some(joint),
+                ..*i
+            });
+        }
+        Ok(())
+    }
+
+    /// Simulated time, s.
+    pub fn time_s(&self) -> f64 {
+        self.ticks as f64 * TICK_NS as f64 * 1e-9
+    }
+
+    /// Is an injected link cut due (its start time reached)? Returns the injection's
+    /// start time the first time only.
+    pub fn take_link_cut(&mut self) -> bool {
+        let now = self.time_s();
+        if let Some(k) = self
+            .injections
+            .iter()
+            .position(|i| i.kind == FaultKind::LinkLoss && i.at_s <= now)
+        {
+            self.injections.remove(k);
+            return true;
+        }
+        false
     }
 
     /// A simulator whose controller boots from the machine stored in `flash` (as the
@@ -245,13 +502,15 @@ impl Simulator {
     }
 
     /// Builds the simulated drives for the controller's machine, standing where the
-    /// controller believes its joints are (as after power-up).
-    fn attach_drives(&mut self) {
+    /// controller believes its joints are plus the power-up offsets (as after
+    /// power-up: encoder counters read zero, step counts are positions).
+    fn attach_drives(&mut self) -> Result<()> {
         let machine = self.ctrl.machine().clone();
         self.machine_id = self.ctrl.machine_id();
         self.steppers = Default::default();
         self.servos = Default::default();
         for (j, jc) in machine.joints.iter().enumerate() {
+            let truth = self.ctrl.joints()[j] + self.power_up_offset[j];
             match jc.drive {
                 Drive::Stepper {
                     channel,
@@ -259,16 +518,33 @@ impl Simulator {
                     invert_dir,
                 } => {
                     let mut d = SimStepper::new(channel as usize, timing, !invert_dir);
-                    d.position = self.ctrl.steps_emitted(j) * if invert_dir { -1 } else { 1 };
+                    d.position = jc.scale.steps_at(truth) * if invert_dir { -1 } else { 1 };
                     self.steppers[channel as usize] = Some(d);
                 }
-                Drive::Servo { channel, .. } => {
-                    let at = jc.scale.steps_at(self.ctrl.joints()[j]) as f64;
-                    self.servos[channel as usize] =
-                        Some(ServoPlant::new(SERVO_GAIN, SERVO_TAU_S, at));
+                Drive::Servo { channel } => {
+                    let plant = self.plants.get(j).and_then(Option::as_ref);
+                    self.servos[channel as usize] = Some(SimServo::new(jc, plant, truth, 0)?);
                 }
             }
         }
+        let counts = self.encoder_counts();
+        self.bank = self
+            .servos
+            .iter()
+            .any(Option::is_some)
+            .then(|| ServoBank::new(&machine, &counts));
+        self.bank_out = PeriodOutputs::default();
+        Ok(())
+    }
+
+    fn encoder_counts(&self) -> [i64; MAX_SERVOS] {
+        let mut c = [0; MAX_SERVOS];
+        for (c, s) in c.iter_mut().zip(&self.servos) {
+            if let Some(s) = s {
+                *c = s.counts();
+            }
+        }
+        c
     }
 
     /// Writes a CSV trace row per tick to `out` from now on (header first).
@@ -301,7 +577,8 @@ impl Simulator {
             .unwrap_or(0)
     }
 
-    /// Position of joint `j` in drive steps or encoder counts.
+    /// True position of joint `j` in drive steps or encoder counts (from the joint's
+    /// zero).
     pub fn feedback_steps(&self, j: usize) -> Option<i64> {
         let jc = self.ctrl.machine().joints.get(j)?;
         match jc.drive {
@@ -316,9 +593,9 @@ impl Simulator {
                     d.position
                 }
             }),
-            Drive::Servo { channel, .. } => {
-                self.servos[channel as usize].as_ref().map(|p| p.counts())
-            }
+            Drive::Servo { channel } => self.servos[channel as usize]
+                .as_ref()
+                .map(SimServo::position),
         }
     }
 
@@ -333,32 +610,160 @@ impl Simulator {
         (count, all)
     }
 
+    /// Does simulated time need to advance: the controller has work, or a servo joint
+    /// is still settling on its target (for at most [`SETTLE_TICKS`] after the work)?
+    pub fn busy(&self) -> bool {
+        if self.ctrl.has_work() {
+            return true;
+        }
+        if self.idle_ticks >= SETTLE_TICKS {
+            return false;
+        }
+        self.servos.iter().enumerate().any(|(c, s)| {
+            s.as_ref().is_some_and(|s| {
+                let target = self.last_out.servo_target[c] >> pkmc::servo::SETPOINT_FRAC_BITS;
+                (s.counts() - target).abs() > 1
+            }) && self.bank_out.trip[c].is_none()
+                && self.last_out.servo_enable
+        })
+    }
+
+    /// The switches as the joints' true positions set them: home switches (bits),
+    /// limit switches (bits).
+    fn switches(&self) -> (u16, u16) {
+        let m = self.ctrl.machine();
+        let (mut home, mut limit) = (0u16, 0u16);
+        for (j, jc) in m.joints.iter().enumerate() {
+            let Some(steps) = self.feedback_steps(j) else {
+                continue;
+            };
+            let user = units_per_user(jc.rotary) as f64;
+            let h = jc.homing;
+            if h.enabled() {
+                let dir = h.search_velocity.signum();
+                let edge = if h.use_index {
+                    h.switch_at + dir * (SWITCH_BEFORE_INDEX * user).round() as i64
+                } else {
+                    h.switch_at
+                };
+                let e = jc.scale.steps_at(edge);
+                if (dir > 0 && steps > e) || (dir < 0 && steps < e) {
+                    home |= 1 << j;
+                }
+            }
+            let p = jc.scale.position_of(steps);
+            let beyond = (LIMIT_BEYOND_TRAVEL * user).round() as i64;
+            if p > jc.max + beyond || p < jc.min - beyond {
+                limit |= 1 << j;
+            }
+        }
+        (home, limit)
+    }
+
+    fn apply_injections(&mut self) {
+        let now = self.time_s();
+        let mut k = 0;
+        while k < self.injections.len() {
+            let i = self.injections[k];
+            if i.kind == FaultKind::LinkLoss || i.at_s > now {
+                k += 1;
+                continue;
+            }
+            self.injections.remove(k);
+            let j = i.joint.unwrap_or(0);
+            match i.kind {
+                FaultKind::EStop => self.forced.estop = true,
+                FaultKind::Limit => self.forced.limit |= 1 << j,
+                FaultKind::DriveFault => self.forced.drive_fault |= 1 << j,
+                FaultKind::FollowingError => {
+                    if let Drive::Servo { channel } = self.ctrl.machine().joints[j].drive {
+                        if let Some(s) = self.servos[channel as usize].as_mut() {
+                            s.jam();
+                        }
+                    }
+                }
+                FaultKind::LinkLoss => {}
+            }
+        }
+    }
+
     /// Simulates one interpolation period.
     pub fn tick(&mut self) -> Result<()> {
         if self.ctrl.machine_id() != self.machine_id {
             // The host loaded another machine: the controller restarted at its home.
-            self.attach_drives();
+            self.attach_drives()?;
         }
-        let mut inputs = Inputs::default();
-        for (c, p) in self.servos.iter().enumerate() {
-            if let Some(p) = p {
-                inputs.encoder_counts[c] = p.counts();
-            }
-        }
+        self.apply_injections();
+        let (home, limit) = self.switches();
+        let inputs = Inputs {
+            encoder_counts: self.encoder_counts(),
+            index: std::mem::take(&mut self.index),
+            estop: self.forced.estop,
+            limit: limit | self.forced.limit,
+            home,
+            drive_fault: self.forced.drive_fault,
+            servo_trip: self.bank_out.trip,
+        };
         let out = *self.ctrl.tick(&inputs);
+        self.last_out = out;
         let t0 = self.ticks * TICK_NS as u64;
         for (d, train) in self.steppers.iter_mut().zip(&out.steps) {
             if let Some(d) = d {
                 d.apply(t0, train);
             }
         }
-        let dt = TICK_NS as f64 * 1e-9;
-        for (p, cmd) in self.servos.iter_mut().zip(&out.servo_command) {
-            if let Some(p) = p {
-                p.step(*cmd, dt);
+        if let Some(bank) = self.bank.as_mut() {
+            let machine = self.ctrl.machine();
+            if out.servo_reset {
+                let mut counts = [0; MAX_SERVOS];
+                for (c, s) in counts.iter_mut().zip(&self.servos) {
+                    if let Some(s) = s {
+                        *c = s.counts();
+                    }
+                }
+                *bank = ServoBank::new(machine, &counts);
+            }
+            bank.load_tick(&out.servo_target);
+            let mut fault = [false; MAX_SERVOS];
+            for (j, jc) in machine.joints.iter().enumerate() {
+                if let Drive::Servo { channel } = jc.drive {
+                    fault[channel as usize] = self.forced.drive_fault & (1 << j) != 0;
+                }
+            }
+            for _ in 0..SERVO_PER_TICK {
+                let mut feedback = [0; MAX_SERVOS];
+                for (f, s) in feedback.iter_mut().zip(&self.servos) {
+                    if let Some(s) = s {
+                        *f = s.counts();
+                    }
+                }
+                self.bank_out = bank.period(&PeriodInputs {
+                    feedback,
+                    fault,
+                    enable: out.servo_enable,
+                });
+                for (c, s) in self.servos.iter_mut().enumerate() {
+                    if let Some(s) = s {
+                        let mark = s.period(self.bank_out.dac[c], self.bank_out.enable[c]);
+                        if self.index[c].is_none() {
+                            self.index[c] = mark;
+                        }
+                    }
+                }
             }
         }
         self.ticks += 1;
+        self.idle_ticks = if self.ctrl.has_work() {
+            0
+        } else {
+            self.idle_ticks + 1
+        };
+        let alarmed = matches!(self.ctrl.state(), State::Alarm | State::EStop)
+            && self.ctrl.status().alarm.map(|a| a.cause)
+                != Some(pkmc::protocol::AlarmCause::Unhomed);
+        if alarmed && self.alarm_tick.is_none() {
+            self.alarm_tick = Some(self.ticks);
+        }
         if let Some(mut out) = self.trace.take() {
             let row = self.trace_row();
             let written = write_row(out.as_mut(), &row);
@@ -415,12 +820,39 @@ mod tests {
     }
 
     #[test]
-    fn the_servo_plant_settles_at_the_commanded_speed() {
-        let mut p = ServoPlant::new(100.0, 0.01, 0.0);
-        for _ in 0..1000 {
-            p.step(10, 0.001);
-        }
-        // After 1 s at 1000 counts/s with a 10 ms lag: about 990 counts.
-        assert!((p.position - 990.0).abs() < 2.0, "{}", p.position);
+    fn injections_parse_and_bad_ones_say_why() {
+        let i: Injection = "limit:2@1.5".parse().unwrap();
+        assert_eq!(
+            i,
+            Injection {
+                kind: FaultKind::Limit,
+                joint: Some(2),
+                at_s: 1.5
+            }
+        );
+        assert_eq!(
+            "estop@0".parse::<Injection>().unwrap().kind,
+            FaultKind::EStop
+        );
+        let e = "smoke@1".parse::<Injection>().unwrap_err();
+        assert!(e.contains("unknown fault \"smoke\""), "{e}");
+        assert!("estop:1@1".parse::<Injection>().is_err());
+        assert!("limit@-1".parse::<Injection>().is_err());
+        assert!("limit"
+            .parse::<Injection>()
+            .unwrap_err()
+            .contains("no @SECONDS"));
+    }
+
+    #[test]
+    fn a_following_error_cannot_be_injected_into_a_stepper() {
+        let mut sim = Simulator::new(MachineConfig::cartesian_xyz()).unwrap();
+        let e = sim
+            .inject(&["following-error:1@1".parse().unwrap()])
+            .unwrap_err();
+        assert!(
+            format!("{e}").contains("joint 1 of cartesian-xyz is a stepper"),
+            "{e}"
+        );
     }
 }

@@ -12,9 +12,22 @@ use common::{json, nc_send, ok, repo, tmp, Sim};
 #[test]
 fn status_jog_home_mdi_and_reset_act_on_a_running_controller() {
     let sim = Sim::start(&[]);
-    let s = ok(&sim.send(&["status"]));
-    assert_eq!(s["state"], "Idle");
-    let home_x = s["pose"]["x"].as_f64().unwrap();
+    // After its reset the controller is locked: it does not know where the machine is.
+    let out = sim.send(&["status"]);
+    let s = json(&out);
+    assert_eq!(s["state"], "Alarm");
+    assert_eq!(s["alarm"], "Unhomed");
+    let out = sim.send(&["jog", "X", "5"]);
+    assert_eq!(
+        out.status.code(),
+        Some(5),
+        "a locked controller does not jog"
+    );
+    // Homing finds the switches and ends at the home pose.
+    let h = ok(&sim.send(&["home"]));
+    assert_eq!(h["state"], "Idle");
+    let home_x = h["pose"]["x"].as_f64().unwrap();
+    assert_eq!(home_x, 0.0);
 
     let j = ok(&sim.send(&["jog", "X", "5", "--feed", "1200"]));
     assert_eq!(j["result"], "done");
@@ -59,8 +72,13 @@ fn a_bad_mdi_line_or_axis_is_refused_before_anything_moves() {
 
 #[test]
 fn commands_also_run_on_the_built_in_simulator() {
-    let s = ok(&nc_send(&["--sim", "--report", "json", "status"]));
-    assert_eq!(s["state"], "Idle");
+    let out = nc_send(&["--sim", "--report", "json", "status"]);
+    assert_eq!(
+        json(&out)["alarm"],
+        "Unhomed",
+        "a fresh controller is locked"
+    );
+    // A move on the simulator unlocks it where it stands first.
     let j = ok(&nc_send(&["--sim", "--report", "json", "jog", "Z", "1"]));
     assert_eq!(j["result"], "done");
 }
@@ -201,7 +219,7 @@ fn a_port_that_does_not_exist_is_a_link_failure_naming_it() {
 #[test]
 fn nc_send_runs_a_job_through_pkmc_sim_on_a_faulty_line() {
     let sim = Sim::start(&["--link-faults", "0.01", "--seed", "5"]);
-    let r = ok(&sim.send(&["examples/square.ngc"]));
+    let r = ok(&sim.send(&["--home", "examples/square.ngc"]));
     assert_eq!(r["result"], "done");
     assert_eq!(r["final_pose"]["x"], 12.5);
     assert_eq!(r["blocks_executed"], r["blocks_sent"]);

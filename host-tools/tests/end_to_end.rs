@@ -175,7 +175,8 @@ fn a_bad_machine_file_is_refused_naming_the_field() {
 #[test]
 fn pkmc_sim_serves_nc_send_on_a_named_port() {
     let sim = Sim::start(&[]);
-    let r = ok(&sim.send(&["examples/square.ngc"]));
+    // pkmc-sim comes up locked, as a board after reset: home it first.
+    let r = ok(&sim.send(&["--home", "examples/square.ngc"]));
     assert_eq!(r["final_pose"]["x"], 12.5);
     assert_eq!(r["blocks_executed"], r["blocks_sent"]);
 }
@@ -233,6 +234,7 @@ fn nc_send_loads_its_machine_into_a_controller_that_has_another_and_it_persists(
     let job = [
         "--machine",
         "examples/machines/cartesian-servo.toml",
+        "--home",
         "examples/square.ngc",
     ];
     // The controller boots with the built-in stepper machine; the job needs servos.

@@ -16,7 +16,8 @@ fn machine() -> MachineConfig {
 
 fn link(opts: LinkOptions) -> Link<InProcess> {
     let m = machine();
-    let sim = Simulator::new(m.clone()).unwrap();
+    let mut sim = Simulator::new(m.clone()).unwrap();
+    sim.ctrl.unlock();
     Link::connect(InProcess::new(sim, Box::new(|_| {})), &m, opts).unwrap()
 }
 

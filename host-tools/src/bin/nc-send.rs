@@ -48,6 +48,16 @@ struct Args {
     /// Simulator only, for tests: cut the line after this many bytes to the host.
     #[arg(long, global = true, hide = true, value_name = "BYTES")]
     link_cut_after: Option<u64>,
+    /// Simulator only: inject a fault at a simulated time, KIND[:JOINT]@SECONDS with
+    /// KIND one of estop, limit, drive-fault, following-error, link-loss (JOINT
+    /// 0-based; default the first joint, the first servo joint for following-error).
+    /// May be given more than once.
+    #[arg(long, global = true, value_name = "FAULT@SECONDS")]
+    inject: Vec<pkmc_host::sim::Injection>,
+    /// Home the machine before the program (a controller is locked after a reset
+    /// until homed or unlocked; the simulator is unlocked where it stands otherwise).
+    #[arg(long)]
+    home: bool,
     /// Dry run: compile, pre-check and plan the program on the controller core in
     /// this process (simulated clock, no port, nothing moves).
     #[arg(long)]
@@ -179,14 +189,27 @@ fn run(args: &Args) -> Result<i32, Failure> {
         (Some(p), _) | (None, Some(p)) => Target::Port(p),
         (None, None) => Target::Sim,
     };
+    if !args.inject.is_empty() && !args.sim {
+        return Err(bad(
+            "--inject needs --sim (faults are injected into the simulated machine)",
+        ));
+    }
+    let plants = match &args.machine {
+        Some(p) => pkmc_host::machine_file::load_plants(p).map_err(|e| bad(format!("{e:#}")))?,
+        None => Vec::new(),
+    };
     let opts = RunOptions {
         target,
         sim: SimSetup {
             trace: args.trace.as_deref(),
             faults,
             record_path: args.plot.is_some(),
+            plants,
+            inject: args.inject.clone(),
+            home_first: args.home,
         },
         link,
+        home: args.home,
     };
     let interrupts = Interrupts::install().map_err(|e| Failure::new(exit::LINK, e))?;
     match &args.command {
@@ -371,6 +394,11 @@ fn command(
     let quiet = args.report.is_some();
     let mut op = Operator::new(Progress::new(Style::for_stderr(quiet), 0), interrupts, None);
     let (status, result, code, extra) = job::with_link(machine, opts, |link| {
+        let moves = matches!(cmd, Command::Jog { .. } | Command::Mdi { .. });
+        if moves && matches!(opts.target, Target::Sim) {
+            // A fresh simulator is locked after its reset: unlock it where it stands.
+            job::prepare(link, false, true, &mut op)?;
+        }
         let (end, extra) = match cmd {
             Command::Status => (JobEnd::Done, None),
             Command::Reset => {
@@ -378,6 +406,7 @@ fn command(
                 (JobEnd::Done, None)
             }
             Command::Home => (job::move_and_wait(link, Control::Home, &mut op)?, None),
+
             Command::Jog {
                 axis,
                 distance,
