@@ -423,39 +423,6 @@ impl ServoAxis {
     }
 }
 
-/// Skeleton loop kept for [`crate::controller`] until it moves to [`ServoAxis`] at
-/// [`SERVO_HZ`]: proportional control plus velocity feed-forward once per tick,
-/// output = clamp((kp·e + kvff·Δtarget) / 2^16, ±limit).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct ServoLoop {
-    last_target: i64,
-}
-
-impl ServoLoop {
-    /// A loop whose previous target is `target` counts.
-    pub const fn new(target: i64) -> Self {
-        Self {
-            last_target: target,
-        }
-    }
-
-    /// One update: returns the signed command, in DAC counts around mid-scale.
-    pub fn update(
-        &mut self,
-        target: i64,
-        feedback: i64,
-        kp_q16: i32,
-        kvff_q16: i32,
-        limit: i32,
-    ) -> i32 {
-        let error = (target - feedback) as i128;
-        let velocity = (target - self.last_target) as i128;
-        self.last_target = target;
-        let u = (kp_q16 as i128 * error + kvff_q16 as i128 * velocity) >> 16;
-        u.clamp(-(limit as i128), limit as i128) as i32
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -674,13 +641,5 @@ mod tests {
         let out = a.update(&sp, 0, ON, c);
         // 10 (ff) + 1 (command) + 0.5·4 (P) + 10·4·1e-4 (I) + the earlier I (0).
         assert!((out.command - 13.004).abs() < 1e-3, "{out:?}");
-    }
-
-    #[test]
-    fn the_skeleton_loop_pushes_toward_the_target_and_is_clamped() {
-        let mut s = ServoLoop::new(0);
-        assert!(s.update(100, 0, 1 << 16, 0, 1000) > 0);
-        assert_eq!(s.update(1_000_000, 0, 1 << 16, 0, 1000), 1000);
-        assert_eq!(s.update(-1_000_000, 0, 1 << 16, 0, 1000), -1000);
     }
 }

@@ -134,22 +134,12 @@ fn servo_machine() -> MachineConfig {
         min_ferror: 1000,
     };
     for (c, j) in m.joints.iter_mut().enumerate() {
-        j.drive = Drive::Servo {
-            channel: c as u8,
-            kp_q16: 0,
-            kvff_q16: 0,
-            out_limit: 2047,
-        };
+        j.drive = Drive::Servo { channel: c as u8 };
         j.scale = Scale::new(1000, 1_000_000);
     }
     let mut a = m.joints[0];
     a.rotary = true;
-    a.drive = Drive::Servo {
-        channel: 3,
-        kp_q16: 0,
-        kvff_q16: 0,
-        out_limit: 2047,
-    };
+    a.drive = Drive::Servo { channel: 3 };
     let _ = m.joints.push(a);
     if let KinematicsConfig::Cartesian { axis_of_joint } = &mut m.kinematics {
         axis_of_joint[3] = 3;
