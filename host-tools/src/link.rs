@@ -546,6 +546,13 @@ pub fn serve(
             }
         }
     }
+    // The host is done: servo joints still settling on their last targets finish
+    // doing so (the controller itself has nothing left to do).
+    while !sim.ctrl.has_work() && sim.busy() {
+        sim.tick()
+            .map_err(|e| io_err("simulate")(io::Error::other(e)))?;
+        on_tick(sim);
+    }
     sim.finish_trace()
         .map_err(|e| io_err("write the trace")(io::Error::other(e)))?;
     Ok(stats)

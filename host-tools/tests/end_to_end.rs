@@ -273,4 +273,17 @@ fn an_h4_job_ends_with_exact_table_steps_and_no_drive_timing_violation() {
     let want = m.joints[4].scale.steps_at(30 * pkmc::units::NDEG_PER_DEG);
     assert_eq!(r["final_joint_steps"][4].as_i64(), Some(want));
     assert_eq!(r["blocks_executed"], r["blocks_sent"]);
+    // q1..q4 are servo carriages (10 kHz loops on the simulated plants): they settle
+    // within two encoder counts of their commanded positions (one DAC step moves the
+    // plant 300 counts/s: the loop holds to about a count either side).
+    for j in 0..4 {
+        let q = r["final_joints"][j].as_f64().unwrap();
+        let counts = r["final_joint_steps"][j].as_i64().unwrap();
+        let want = (q * 1000.0).round() as i64;
+        assert!(
+            (counts - want).abs() <= 2,
+            "q{}: encoder at {counts}, commanded {want} counts",
+            j + 1
+        );
+    }
 }
