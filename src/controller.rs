@@ -1297,4 +1297,178 @@ mod tests {
             .count();
         assert_eq!(acks, 2);
     }
+
+    fn run_with(c: &mut Controller, ticks: usize, inputs: &Inputs) {
+        for t in 0..ticks {
+            if t % 100 == 0 {
+                c.receive(&frame(0, &HostMsg::StatusRequest));
+            }
+            c.tick(inputs);
+        }
+    }
+
+    fn control(c: &mut Controller, id: u16, cmd: Control) {
+        c.receive(&frame(0, &HostMsg::Control { id, cmd }));
+    }
+
+    #[test]
+    fn after_reset_nothing_moves_until_unlocked() {
+        let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
+        c.receive(&frame(0, &hello(&c)));
+        assert_eq!(c.state(), State::Alarm);
+        assert_eq!(c.status().alarm.map(|a| a.cause), Some(AlarmCause::Unhomed));
+        c.receive(&frame(1, &line_to(10, 1)));
+        control(
+            &mut c,
+            1,
+            Control::Jog {
+                axis: 0,
+                distance: 1_000_000,
+                feed: 10_000_000,
+            },
+        );
+        run(&mut c, 2000);
+        assert_eq!(
+            c.pose()[0],
+            0,
+            "locked: neither the block nor the jog moved"
+        );
+        control(&mut c, 2, Control::AlarmReset);
+        assert_eq!(c.state(), State::Idle);
+        assert!(!c.homed(), "unlocked, not homed");
+    }
+
+    #[test]
+    fn an_estop_stops_on_the_path_disables_the_drives_and_holds_until_released() {
+        let mut c = session();
+        c.receive(&frame(1, &line_to(80, 3)));
+        run(&mut c, 1000);
+        let v = c.status().speed as f64 / 1e6;
+        let at = c.pose()[0];
+        let pressed = Inputs {
+            estop: true,
+            ..Inputs::default()
+        };
+        run_with(&mut c, 500, &pressed);
+        assert_eq!(c.state(), State::EStop);
+        assert_eq!(
+            c.status().alarm,
+            Some(Alarm {
+                cause: AlarmCause::EStop,
+                joint: NO_JOINT,
+                line: 3
+            })
+        );
+        let stop = (c.pose()[0] - at) as f64 / 1e6;
+        assert!(stop <= v * v / 2000.0 + v * 1e-3 + 1e-6, "{stop} mm");
+        assert!(!c.tick(&pressed).enable, "drives off once stopped");
+        let held = *c.pose();
+        // Reset is refused while the e-stop is pressed; once released it is accepted
+        // and the controller stays where it stopped.
+        control(&mut c, 1, Control::AlarmReset);
+        assert_eq!(c.state(), State::EStop);
+        run(&mut c, 10);
+        control(&mut c, 2, Control::AlarmReset);
+        assert_eq!(c.state(), State::Idle);
+        run(&mut c, 100);
+        assert_eq!(c.pose(), &held);
+        assert_eq!(
+            c.steps_emitted(0),
+            c.machine().joints[0].scale.steps_at(held[0])
+        );
+    }
+
+    #[test]
+    fn a_limit_switch_alarms_on_its_edge_naming_the_joint() {
+        let mut c = session();
+        c.receive(&frame(1, &line_to(80, 9)));
+        run(&mut c, 300);
+        let tripped = Inputs {
+            limit: 0b100,
+            ..Inputs::default()
+        };
+        run_with(&mut c, 500, &tripped);
+        assert_eq!(
+            c.status().alarm,
+            Some(Alarm {
+                cause: AlarmCause::LimitSwitch,
+                joint: 2,
+                line: 9
+            })
+        );
+        // Reset is allowed with the switch still active (to move off it) and the
+        // still-active switch does not alarm again.
+        control(&mut c, 1, Control::AlarmReset);
+        run_with(&mut c, 10, &tripped);
+        assert_eq!(c.state(), State::Idle);
+    }
+
+    #[test]
+    fn jogs_stop_at_the_soft_limits() {
+        let mut c = session();
+        control(
+            &mut c,
+            1,
+            Control::Jog {
+                axis: 0,
+                distance: 500_000_000,
+                feed: 100_000_000,
+            },
+        );
+        run(&mut c, 10_000);
+        assert_eq!(c.state(), State::Idle);
+        assert_eq!(c.pose()[0], c.machine().joints[0].max);
+    }
+
+    #[test]
+    fn silence_from_the_host_while_moving_stops_the_machine_on_the_path() {
+        let mut c = session();
+        c.receive(&frame(1, &line_to(80, 4)));
+        for _ in 0..LINK_LOSS_TICKS - 1 {
+            c.tick(&Inputs::default());
+        }
+        assert_eq!(c.state(), State::Running);
+        c.tick(&Inputs::default());
+        assert_eq!(
+            c.status().alarm,
+            Some(Alarm {
+                cause: AlarmCause::LinkLoss,
+                joint: NO_JOINT,
+                line: 4
+            })
+        );
+        assert!(c.has_work(), "still stopping on the path");
+        for _ in 0..1000 {
+            c.tick(&Inputs::default());
+        }
+        assert!(!c.has_work());
+        assert_eq!(c.status().speed, 0);
+    }
+
+    #[test]
+    fn a_servo_trip_names_the_joint_of_its_channel() {
+        let mut c = Controller::new(MachineConfig::h4_table()).unwrap();
+        c.unlock();
+        c.receive(&frame(0, &hello(&c)));
+        let trip = Inputs {
+            servo_trip: [
+                None,
+                None,
+                Some(Trip::FollowingError {
+                    error: 5000,
+                    limit: 2000,
+                }),
+                None,
+            ],
+            ..Inputs::default()
+        };
+        c.tick(&trip);
+        assert_eq!(
+            c.status().alarm.map(|a| (a.cause, a.joint)),
+            Some((AlarmCause::FollowingError, 2))
+        );
+        // After the reset the loops restart from their feedback.
+        control(&mut c, 1, Control::AlarmReset);
+        assert!(c.tick(&Inputs::default()).servo_reset);
+    }
 }
