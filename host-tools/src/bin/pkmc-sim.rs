@@ -1,6 +1,7 @@
 //! `pkmc-sim`: the simulated controller on a pseudo-terminal, for `nc-send --port`.
 //! Prints the port to open, then serves until interrupted. `--link-faults RATE`
-//! puts the faulty line of `pkmc_host::faults` between the port and the controller.
+//! puts the faulty line of `pkmc_host::faults` between the port and the controller;
+//! `--inject FAULT@SECONDS` injects a fault into the simulated machine (docs/safety.md).
 
 use clap::Parser;
 use pkmc_host::faults::{FaultConfig, FaultyLine};
@@ -26,6 +27,9 @@ struct Args {
     /// Seed of the fault generator.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Inject a fault at a simulated time, KIND[:JOINT]@SECONDS (as `nc-send --inject`).
+    #[arg(long, value_name = "FAULT@SECONDS")]
+    inject: Vec<pkmc_host::sim::Injection>,
 }
 
 fn parse_rate(s: &str) -> Result<f64, String> {
@@ -46,10 +50,17 @@ fn main() -> anyhow::Result<()> {
             "built-in machine",
         )?,
     };
+    let plants = match &args.machine {
+        Some(p) => pkmc_host::machine_file::load_plants(p)?,
+        None => Vec::new(),
+    };
     let mut sim = match args.flash {
         Some(f) => pkmc_host::sim::Simulator::with_flash(f, machine)?,
-        None => pkmc_host::sim::Simulator::new(machine)?,
+        None => {
+            pkmc_host::sim::Simulator::with_plants(machine, plants, [0; pkmc::config::MAX_JOINTS])?
+        }
     };
+    sim.inject(&args.inject)?;
     let (mut master, slave) = serialport::TTYPort::pair()?;
     println!("{}", slave.name().unwrap_or_default());
     let stop = AtomicBool::new(false);
