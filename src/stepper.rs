@@ -7,6 +7,13 @@
 //! high `pulse_ns`. When the direction changes, DIR switches at the start of the tick
 //! and the train is confined to the part of the tick after the drive's DIR-setup time.
 //!
+//! Every train's first edge comes no later than one interval minus a pulse after the
+//! tick starts (`first_edge_ns + pulse_ns <= interval_ns`), so timer hardware can
+//! produce it by presetting its counter (`src/bin/firmware/steppers.rs`). A reversal
+//! whose train could not keep that (many steps right after the DIR-setup time)
+//! announces the direction instead: that tick carries a train of no steps with the new
+//! DIR, and its steps move to the next tick, a full period after the DIR change.
+//!
 //! Invariants: the steps emitted always sum to what the positions demand. A train never
 //! breaks the drive's timing ([`crate::config::StepTiming`]): if a tick would need more
 //! steps than fit, the excess is carried to the next tick (never dropped) and counted
@@ -101,8 +108,16 @@ impl StepScheduler {
                 0
             };
             let (count, train) = plan_train(want.unsigned_abs(), start, &timing);
-            lagged |= u64::from(count) < want.unsigned_abs();
             ch.forward = Some(forward);
+            if train.first_edge_ns + train.pulse_ns > train.interval_ns {
+                // Announce DIR now, step from the next tick (see the module docs).
+                out[j] = StepTrain {
+                    forward,
+                    ..StepTrain::default()
+                };
+                continue;
+            }
+            lagged |= u64::from(count) < want.unsigned_abs();
             ch.emitted += if forward {
                 count as i64
             } else {
@@ -153,32 +168,78 @@ mod tests {
         for k in 0..500i64 {
             q[0] = (k * 37_123) % 900_000 - 450_000; // jumps both ways
             s.tick(&m.joints, &q, &mut out);
+            let t = out[0];
+            assert!(
+                t.count == 0 || t.first_edge_ns + t.pulse_ns <= t.interval_ns,
+                "{t:?}: the first edge must fit a counter preset"
+            );
             total += if out[0].forward {
                 out[0].count as i64
             } else {
                 -(out[0].count as i64)
             };
-            assert_eq!(total, m.joints[0].scale.steps_at(q[0]));
+            // Within one tick of carried steps (a reversal announced ahead).
+            let lag = (total - m.joints[0].scale.steps_at(q[0])).abs();
+            assert!(lag <= 400 * 2, "{lag} steps behind");
         }
+        // Standing still, everything is emitted.
+        for _ in 0..3 {
+            s.tick(&m.joints, &q, &mut out);
+            total += if out[0].forward {
+                out[0].count as i64
+            } else {
+                -(out[0].count as i64)
+            };
+        }
+        assert_eq!(total, m.joints[0].scale.steps_at(q[0]));
     }
 
     #[test]
-    fn a_reversal_waits_for_the_dir_setup_time() {
+    fn a_fast_reversal_announces_its_direction_a_tick_ahead() {
         let m = MachineConfig::cartesian_xyz();
         let mut s = StepScheduler::new(&m.joints, &[0; MAX_JOINTS]);
         let mut out = [StepTrain::default(); MAX_JOINTS];
         let mut q = [0i64; MAX_JOINTS];
-        q[0] = 10_000; // the first train: DIR is set, then the setup time passes
+        q[0] = 100_000; // 40 steps forward, the first train: DIR first
         s.tick(&m.joints, &q, &mut out);
-        assert!(out[0].forward);
+        assert_eq!((out[0].count, out[0].forward), (0, true));
+        s.tick(&m.joints, &q, &mut out);
+        assert_eq!(out[0].count, 40);
+        assert!(out[0].first_edge_ns + out[0].pulse_ns <= out[0].interval_ns);
+        q[0] = 97_500; // a slow reversal (one step back): within the same tick
+        s.tick(&m.joints, &q, &mut out);
+        assert_eq!((out[0].count, out[0].forward), (1, false), "{:?}", out[0]);
         assert!(out[0].first_edge_ns >= StepTiming::PACSCI_6410.dir_setup_ns);
-        q[0] = 1_010_000; // 400 steps the same way: no wait
+        q[0] = 200_000; // a fast one (41 steps forward): DIR now, steps next tick
         s.tick(&m.joints, &q, &mut out);
-        assert!(out[0].first_edge_ns < StepTiming::PACSCI_6410.dir_setup_ns);
-        q[0] = 0; // reversal
+        assert_eq!((out[0].count, out[0].forward), (0, true));
         s.tick(&m.joints, &q, &mut out);
-        assert!(!out[0].forward);
-        assert!(out[0].first_edge_ns >= StepTiming::PACSCI_6410.dir_setup_ns);
+        assert_eq!(out[0].count, 41);
+        assert_eq!(s.steps(0), 80);
+    }
+
+    #[test]
+    fn every_step_after_a_dir_change_waits_for_the_dir_setup_time() {
+        let m = MachineConfig::cartesian_xyz();
+        let setup = StepTiming::PACSCI_6410.dir_setup_ns as u64;
+        let mut s = StepScheduler::new(&m.joints, &[0; MAX_JOINTS]);
+        let mut out = [StepTrain::default(); MAX_JOINTS];
+        let mut q = [0i64; MAX_JOINTS];
+        let mut dir: Option<(bool, u64)> = None; // level, time of the last change
+        for k in 0..400u64 {
+            // Back and forth at varying speeds: 1 to 60 steps per tick.
+            let step = 2_500 * (1 + (k % 60) as i64);
+            q[0] += if (k / 7) % 2 == 0 { step } else { -step };
+            s.tick(&m.joints, &q, &mut out);
+            let t0 = k * TICK_NS as u64;
+            if dir.map(|d| d.0) != Some(out[0].forward) {
+                dir = Some((out[0].forward, t0));
+            }
+            if out[0].count > 0 {
+                let first = t0 + out[0].first_edge_ns as u64;
+                assert!(first - dir.unwrap().1 >= setup, "tick {k}: {:?}", out[0]);
+            }
+        }
     }
 
     #[test]
@@ -189,14 +250,18 @@ mod tests {
         let mut q = [0i64; MAX_JOINTS];
         q[1] = 10_000_000; // 4000 steps in one tick: more than 2 MHz allows
         s.tick(&m.joints, &q, &mut out);
+        assert_eq!(out[1].count, 0, "the first train announces DIR");
+        s.tick(&m.joints, &q, &mut out);
         assert!(out[1].count < 4000);
         assert_eq!(s.lagged_ticks, 1);
         let mut sum = out[1].count;
-        for _ in 0..2 {
+        for _ in 0..3 {
             s.tick(&m.joints, &q, &mut out);
             sum += out[1].count;
+            if out[1].count > 0 {
+                assert!(out[1].interval_ns >= StepTiming::PACSCI_6410.min_interval_ns());
+            }
         }
         assert_eq!(sum, 4000);
-        assert!(out[1].interval_ns >= StepTiming::PACSCI_6410.min_interval_ns());
     }
 }
