@@ -381,6 +381,7 @@ fn status_json(s: &Status, machine: &MachineConfig, result: &str) -> serde_json:
         "buffered_ms": s.buffered_ms,
         "free_slots": s.free_slots,
         "alarm": s.alarm.map(|a| job::describe_alarm(&a)),
+        "homed": s.homed,
     })
 }
 
