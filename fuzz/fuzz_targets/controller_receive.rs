@@ -5,7 +5,9 @@
 //! * raw bytes straight into `receive` (garbage, partial frames, stray delimiters),
 //! * a postcard `HostMsg` decoded from the following bytes, framed correctly with the
 //!   next sequence number (blocks, controls and status requests with any values), or
-//! * a run of interpolation ticks, draining the transmit buffer as the firmware does.
+//! * a run of interpolation ticks, draining the transmit buffer as the firmware does,
+//!   or
+//! * new safety inputs for the ticks (e-stop, limit, home and drive-fault lines).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
@@ -21,6 +23,9 @@ fn framed(seq: u16, msg: &HostMsg) -> Option<Vec<u8>> {
 
 fuzz_target!(|data: &[u8]| {
     let mut c = Controller::new(MachineConfig::cartesian_xyz()).expect("built-in machine");
+    // Unlocked, so that blocks move (a locked controller drops them).
+    c.unlock();
+    let mut inputs = Inputs::default();
     let hello = HostMsg::Hello {
         version: PROTOCOL_VERSION,
         machine: c.machine_id(),
@@ -44,7 +49,7 @@ fuzz_target!(|data: &[u8]| {
         } else {
             &tail[1 + len..]
         };
-        match op % 4 {
+        match op % 5 {
             0 => c.receive(chunk),
             1 => {
                 if let Ok(msg) = postcard::from_bytes::<HostMsg>(chunk) {
@@ -58,8 +63,16 @@ fuzz_target!(|data: &[u8]| {
             }
             2 => {
                 for _ in 0..(len as u32 + 1) * 8 {
-                    c.tick(&Inputs::default());
+                    c.tick(&inputs);
                 }
+            }
+            3 => {
+                // Safety inputs from the chunk: e-stop, limit, home and drive-fault bits.
+                let b = |i: usize| chunk.get(i).copied().unwrap_or(0);
+                inputs.estop = b(0) & 1 != 0;
+                inputs.limit = u16::from(b(1)) & 0b111;
+                inputs.home = u16::from(b(2)) & 0b111;
+                inputs.drive_fault = u16::from(b(3)) & 0b111;
             }
             _ => {
                 let _ = c.transmit(&mut out);
@@ -72,7 +85,7 @@ fuzz_target!(|data: &[u8]| {
         if !c.has_work() {
             break;
         }
-        c.tick(&Inputs::default());
+        c.tick(&inputs);
         let _ = c.transmit(&mut out);
     }
 });
