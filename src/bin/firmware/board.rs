@@ -2,24 +2,50 @@
 //!
 //! Everything hardware-specific lives here: the clock tree, the complete pin map (as
 //! typed embassy pins, so a pin without the named alternate function does not compile),
-//! the timers the firmware programs directly through the PAC, and the interrupt
-//! handlers and priorities. The rest of the firmware receives ready-made handles from
-//! [`init`]. `docs/wiring.md` is the same map as a wiring table; keep them in step.
+//! the timers, converters and watchdog the firmware programs directly through the PAC,
+//! and the interrupt handlers and priorities. The rest of the firmware receives
+//! ready-made handles from [`init`]. `docs/wiring.md` is the same map as a wiring
+//! table; keep them in step.
 //!
 //! Invariants: the STM32G474RE in LQFP64 has 38 GPIOs left once SWD (PA13/PA14), the
 //! ST-LINK virtual COM port (PA2/PA3), the HSE and LSE crystals (PF0/PF1, PC14/PC15),
 //! BOOT0 (PB8), the user button (PC13), the LED (PA5) and USB (PA11/PA12) are set
 //! aside, and this map uses all 38. Timer use: TIM1, TIM8, TIM20, TIM15, TIM16, TIM17
 //! STEP trains (stepper channels 0-5); HRTIM1 reserved for stepper channel 6; TIM2,
-//! TIM3, TIM4, TIM5 encoders; TIM7 the 1 kHz interpolation tick; TIM6 the embassy time
-//! base. Alternate functions were checked against stm32-metapac 21 (stm32-data) for
-//! the STM32G474RE; connector positions follow the NUCLEO-G474RE user manual (UM2505).
+//! TIM3, TIM4, TIM5 encoders; TIM7 the 10 kHz servo period, which also paces the 1 kHz
+//! interpolation tick (run on the otherwise unused `UCPD1` vector); TIM6 the embassy
+//! time base; the IWDG watches both interrupts. Alternate functions were checked
+//! against stm32-metapac 21 (stm32-data) for the STM32G474RE; connector positions
+//! follow the NUCLEO-G474RE user manual (UM2505).
+//!
+//! Interrupt priorities (lower number = more urgent):
+//!
+//! | priority | interrupt | work |
+//! |---|---|---|
+//! | 0 | `TIM7_DAC` | servo period, 10 kHz: encoders, loops, DACs; pends the tick every 10th |
+//! | 1 | `UCPD1` (software) | interpolation tick, 1 kHz: step trains, switches, controller |
+//! | 2 | `USB_LP` | USB device |
+//! | 3 | `TIM6_DAC` | embassy time base |
+//!
+//! Why a software-pended tick rather than a second timer: no timer is free (see above),
+//! and pending the tick from the servo interrupt makes it run exactly every
+//! [`pkmc::servo::SERVO_PER_TICK`]th servo period, so the servo loops load each tick's
+//! targets at a fixed phase. The servo interrupt is the most urgent so that the tick
+//! (tens to hundreds of µs of planning and kinematics) never delays a servo period;
+//! the controller and the tick's data are shared with thread-mode tasks under a
+//! priority-ceiling lock at [`TICK_PRIORITY`] ([`crate::shared`]), which masks the
+//! tick, USB and the time base but never the servo interrupt. Global critical
+//! sections (embassy's drivers, the time driver, defmt, the servo/tick exchange) do
+//! mask it, and are all short.
 
 use embassy_stm32::flash::{Blocking, Flash};
-use embassy_stm32::gpio::{AnyPin, Input, Level, Output, OutputType, Pull, Speed};
+use embassy_stm32::gpio::{AnyPin, Flex, Input, Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::pac;
+use embassy_stm32::pac::dac::vals::Mode as DacMode;
+use embassy_stm32::pac::iwdg::vals::{Key, Pr};
+use embassy_stm32::pac::opamp::vals::{VmSel, VpSel};
 use embassy_stm32::peripherals::{
     self, DAC1, DAC2, DAC3, DAC4, OPAMP3, OPAMP4, PA4, PA6, PB1, PB12,
 };
@@ -32,7 +58,8 @@ use embassy_stm32::timer::{
 };
 use embassy_stm32::usb::{self, Driver};
 use embassy_stm32::{bind_interrupts, Config, Peri, Peripherals};
-use pkmc::units::TICK_HZ;
+use pkmc::config::MAX_SERVOS;
+use pkmc::servo::{DAC_MID, SERVO_HZ};
 
 use crate::encoders::Encoders;
 use crate::steppers::{StepChannel, StepTimer, Steppers, REP_ADVANCED, REP_COMPACT};
@@ -52,8 +79,8 @@ pub const USB_SERIAL: &str = "pkmc-g474-0001";
 /// Level of the e-stop input while the e-stop is active. The NC contact pulls PA10 to
 /// GND; pressing it (or a broken wire) lets the pull-up take the pin high.
 pub const ESTOP_ACTIVE: Level = Level::High;
-/// Level of a limit input while its switch is open (limit reached): NC switches to GND
-/// with pull-ups, min and max switches of a joint in series.
+/// Level of a limit/home input while its switch is open (limit or home reached): NC
+/// switches to GND with pull-ups, all switches of a joint in series.
 pub const LIMIT_ACTIVE: Level = Level::High;
 /// Level of the shared servo-fault input while an amplifier reports a fault:
 /// open-collector fault outputs, wired together, pulled up on the board.
@@ -73,13 +100,22 @@ bind_interrupts!(
 /// The USB driver type.
 pub type UsbDriver = Driver<'static, peripherals::USB>;
 
-/// The 1 kHz interpolation tick timer (basic timer TIM7, IRQ `TIM7_DAC`).
-const TICK_TIMER: pac::timer::TimBasic = pac::TIM7;
+/// The servo-period timer (basic timer TIM7, IRQ `TIM7_DAC`), at [`SERVO_HZ`].
+const SERVO_TIMER: pac::timer::TimBasic = pac::TIM7;
 /// The embassy time base (basic timer TIM6, IRQ `TIM6_DAC`), read by
 /// [`crate::time_driver`].
 pub const TIME_BASE: pac::timer::TimBasic = pac::TIM6;
 /// Counting rate of both basic timers, Hz.
 pub const BASIC_TIMER_COUNT_HZ: u32 = 1_000_000;
+
+/// Priority of the servo-period interrupt: the most urgent.
+const SERVO_PRIORITY: Priority = Priority::P0;
+/// Priority of the interpolation tick; also the ceiling of [`crate::shared::TickShared`].
+pub const TICK_PRIORITY: Priority = Priority::P1;
+/// The tick's interrupt: the NVIC line of the USB Type-C/PD controller UCPD1, which the
+/// board does not use (its CC pins PB4/PB6 are STEP4 and ENC2 A), pended by software.
+const TICK_IRQ: interrupt::Interrupt = interrupt::UCPD1;
+const _: () = assert!((SERVO_PRIORITY as u8) < (TICK_PRIORITY as u8));
 
 /// Clock tree: HSE 24 MHz crystal (X3) → PLL (÷6 × 85 ÷ 2) → 170 MHz SYSCLK in range-1
 /// boost mode; AHB, APB1 and APB2 undivided (timer kernels at 170 MHz); USB from
@@ -110,53 +146,94 @@ pub fn clock_config() -> Config {
     config
 }
 
-/// Inputs and outputs watched or held by the heartbeat task, not by the tick.
-pub struct Panel {
-    /// Limit inputs of stepper channels 0..6 (min and max in series), then one shared
-    /// by all servo channels.
-    pub limits: [Input<'static>; 8],
-    /// Shared servo amplifier fault input.
-    pub servo_fault: Input<'static>,
-    /// Servo amplifier enable, held inactive: the servo output path is not written yet.
-    _servo_enable: Output<'static>,
-    /// The analog command pins and their converters, reserved for the servo outputs.
-    _servo_analog: ServoAnalog,
+/// The switch inputs, sampled by the tick.
+pub struct Switches {
+    /// E-stop input (PA10), see [`ESTOP_ACTIVE`].
+    estop: Input<'static>,
+    /// Limit/home inputs 0..8: input k is joint k's shared home/limit switch.
+    limits: [Input<'static>; 8],
 }
 
-/// Reserved servo command outputs: DAC1_OUT1 on PA4, DAC2_OUT1 on PA6, DAC3_CH2
-/// through OPAMP3 (follower) on PB1, DAC4_CH1 through OPAMP4 (follower) on PB12. Held,
-/// not configured: the pins stay in their reset (analog, high-impedance) state.
-pub struct ServoAnalog {
-    _dacs: (
-        Peri<'static, DAC1>,
-        Peri<'static, DAC2>,
-        Peri<'static, DAC3>,
-        Peri<'static, DAC4>,
-    ),
-    _opamps: (Peri<'static, OPAMP3>, Peri<'static, OPAMP4>),
-    _pins: (
-        Peri<'static, PA4>,
-        Peri<'static, PA6>,
-        Peri<'static, PB1>,
-        Peri<'static, PB12>,
-    ),
+impl Switches {
+    /// The raw e-stop input: true = active.
+    pub fn estop(&self) -> bool {
+        self.estop.get_level() == ESTOP_ACTIVE
+    }
+
+    /// The raw limit/home inputs: bit k = input k active.
+    pub fn limits(&self) -> u16 {
+        let mut bits = 0;
+        for (k, input) in self.limits.iter().enumerate() {
+            if input.get_level() == LIMIT_ACTIVE {
+                bits |= 1 << k;
+            }
+        }
+        bits
+    }
 }
 
-/// The 1 kHz tick timer, configured and waiting for [`TickTimer::start`].
-pub struct TickTimer {
+/// The servo channels' hardware, driven by the servo interrupt: encoders, analog
+/// command outputs, the shared amplifier enable and the shared fault input.
+pub struct ServoIo {
+    /// Quadrature encoder counters of the servo channels.
+    pub encoders: Encoders,
+    /// DAC of each servo channel and its channel index: DAC1 ch1 (PA4), DAC2 ch1
+    /// (PA6), DAC3 ch2 (→ OPAMP3 → PB1), DAC4 ch1 (→ OPAMP4 → PB12).
+    dacs: [(pac::dac::Dac, usize); MAX_SERVOS],
+    /// SERVO_EN (PB5): enables every amplifier.
+    enable: Output<'static>,
+    /// SERVO_FAULT (PB11): open-collector fault outputs of every amplifier, wired
+    /// together.
+    fault: Input<'static>,
+}
+
+impl ServoIo {
+    /// The raw shared fault input: true = some amplifier reports a fault.
+    pub fn fault(&self) -> bool {
+        self.fault.get_level() == SERVO_FAULT_ACTIVE
+    }
+
+    /// Writes the DAC codes (12-bit, right-aligned; the DACs convert at once, no
+    /// trigger) and the shared enable: the enable goes off before new codes and on
+    /// after them.
+    pub fn write(&mut self, codes: &[u16; MAX_SERVOS], enable: bool) {
+        if !enable {
+            self.enable.set_level(opposite(SERVO_ENABLE_ACTIVE));
+        }
+        for ((dac, channel), &code) in self.dacs.iter().zip(codes) {
+            dac.dhr12r(*channel).write(|w| w.set_dhr(code));
+        }
+        if enable {
+            self.enable.set_level(SERVO_ENABLE_ACTIVE);
+        }
+    }
+}
+
+/// The servo-period timer, configured and waiting for [`ServoTimer::start`].
+pub struct ServoTimer {
     _private: (),
 }
 
-impl TickTimer {
-    /// Starts the interpolation tick: from now on `TIM7_DAC` fires every
-    /// 1 / [`TICK_HZ`] s at priority 1 (above USB and the time base).
+impl ServoTimer {
+    /// Starts the servo period: from now on `TIM7_DAC` fires every 1 / [`SERVO_HZ`] s at
+    /// priority 0 and the tick can be pended on its vector at priority 1.
     pub fn start(self) {
-        TICK_TIMER.cr1().modify(|w| w.set_cen(true));
-        interrupt::TIM7_DAC.set_priority(Priority::P1);
-        // SAFETY: the handler below only takes critical sections; no priority-based
-        // locking relies on this interrupt staying masked.
-        unsafe { interrupt::TIM7_DAC.enable() };
+        TICK_IRQ.set_priority(TICK_PRIORITY);
+        interrupt::TIM7_DAC.set_priority(SERVO_PRIORITY);
+        // SAFETY: both handlers below take only critical sections and the
+        // priority-ceiling lock of `crate::shared`, whose ceiling is the tick's own
+        // priority; the servo handler never takes that lock.
+        unsafe {
+            TICK_IRQ.enable();
+            interrupt::TIM7_DAC.enable();
+        }
+        SERVO_TIMER.cr1().modify(|w| w.set_cen(true));
     }
+}
+
+/// Pends the interpolation tick (it runs once the servo interrupt returns).
+pub fn pend_tick() {
+    TICK_IRQ.pend();
 }
 
 /// Everything [`init`] hands to the rest of the firmware.
@@ -167,14 +244,12 @@ pub struct Board {
     pub led: Output<'static>,
     /// STEP/DIR channels and the shared stepper ENABLE.
     pub steppers: Steppers,
-    /// Quadrature encoder counters of the servo channels.
-    pub encoders: Encoders,
-    /// E-stop input (PA10), see [`ESTOP_ACTIVE`].
-    pub estop: Input<'static>,
-    /// Limits, fault and the held servo outputs.
-    pub panel: Panel,
-    /// The interpolation tick, ready to start.
-    pub tick: TickTimer,
+    /// E-stop and limit/home inputs.
+    pub switches: Switches,
+    /// Encoders, analog outputs, enable and fault of the servo channels.
+    pub servo: ServoIo,
+    /// The servo period (and with it the tick), ready to start.
+    pub timer: ServoTimer,
     /// The flash, for the machine-configuration page ([`CONFIG_PAGE_OFFSET`]).
     pub flash: Flash<'static, Blocking>,
 }
@@ -186,12 +261,15 @@ pub const CONFIG_PAGE_OFFSET: u32 = 508 * 1024;
 /// Size of that page (single-bank mode erases 4 KB pages).
 pub const CONFIG_PAGE_BYTES: u32 = 4 * 1024;
 
-/// Sets up every pin and timer of the pin map and the embassy time base.
+/// Sets up every pin, timer and converter of the pin map, the embassy time base and
+/// the watchdog.
 ///
 /// Call once, right after `embassy_stm32::init`, before anything uses embassy-time.
+/// The watchdog runs from here on: start the servo timer within [`WATCHDOG_MS`].
 pub fn init(p: Peripherals) -> Board {
+    start_watchdog();
     start_time_base(p.TIM6);
-    let tick = configure_tick(p.TIM7);
+    let timer = configure_servo_timer(p.TIM7);
 
     // Stepper channels: STEP on a timer channel, DIR a GPIO (low = reverse).
     let dir = |pin: Peri<'static, AnyPin>| Output::new(pin, Level::Low, Speed::Low);
@@ -239,9 +317,28 @@ pub fn init(p: Peripherals) -> Board {
         encoder(p.TIM4, p.PB6, p.PB7),  // servo 2: TIM4 CH1/CH2, AF2
         encoder(p.TIM5, p.PB2, p.PC12), // servo 3: TIM5 CH1 AF2 / CH2 AF1
     ]);
+    // Amplifiers disabled before their command outputs come up (at zero command).
+    let servo_enable = Output::new(p.PB5, opposite(SERVO_ENABLE_ACTIVE), Speed::Low);
+    start_servo_outputs(
+        (p.DAC1, p.DAC2, p.DAC3, p.DAC4),
+        (p.OPAMP3, p.OPAMP4),
+        (p.PA4, p.PA6, p.PB1, p.PB12),
+    );
+    let servo = ServoIo {
+        encoders,
+        dacs: [
+            (pac::DAC1, 0),
+            (pac::DAC2, 0),
+            (pac::DAC3, 1),
+            (pac::DAC4, 0),
+        ],
+        enable: servo_enable,
+        fault: Input::new(p.PB11, Pull::Up),
+    };
 
     let input = |pin: Peri<'static, AnyPin>| Input::new(pin, Pull::Up);
-    let panel = Panel {
+    let switches = Switches {
+        estop: Input::new(p.PA10, Pull::Up),
         limits: [
             input(p.PC10.into()),
             input(p.PC11.into()),
@@ -252,13 +349,6 @@ pub fn init(p: Peripherals) -> Board {
             input(p.PB10.into()),
             input(p.PB3.into()),
         ],
-        servo_fault: Input::new(p.PB11, Pull::Up),
-        _servo_enable: Output::new(p.PB5, opposite(SERVO_ENABLE_ACTIVE), Speed::Low),
-        _servo_analog: ServoAnalog {
-            _dacs: (p.DAC1, p.DAC2, p.DAC3, p.DAC4),
-            _opamps: (p.OPAMP3, p.OPAMP4),
-            _pins: (p.PA4, p.PA6, p.PB1, p.PB12),
-        },
     };
 
     let usb = Driver::new(p.USB, Irqs, p.PA12, p.PA11);
@@ -269,11 +359,149 @@ pub fn init(p: Peripherals) -> Board {
         usb,
         led: Output::new(p.PA5, Level::Low, Speed::Low),
         steppers,
-        encoders,
-        estop: Input::new(p.PA10, Pull::Up),
-        panel,
-        tick,
+        switches,
+        servo,
+        timer,
     }
+}
+
+/// DAC_MCR.HFSEL for the 170 MHz AHB clock of [`clock_config`]: 0b10, "AHB clock
+/// above 160 MHz" (RM0440, DAC mode control register).
+const DAC_HFSEL: u8 = 0b10;
+/// Polls of DAC_SR.DACRDY before giving up waiting: far beyond the DAC's wake-up time
+/// (a few µs; one poll is at least a few cycles at 170 MHz).
+const DAC_READY_POLLS: u32 = 10_000;
+
+/// Brings up the four analog command outputs at mid-scale (zero command):
+/// DAC1 ch1 → PA4 and DAC2 ch1 → PA6 through the DACs' own output buffers; DAC3 ch2
+/// and DAC4 ch1 (internal-only converters, unbuffered) into OPAMP3 and OPAMP4 as
+/// voltage followers (VINP = their DAC, VINM = their output) driving PB1 and PB12.
+/// Register level: the servo interrupt then writes one data register per channel.
+fn start_servo_outputs(
+    _dacs: (
+        Peri<'static, DAC1>,
+        Peri<'static, DAC2>,
+        Peri<'static, DAC3>,
+        Peri<'static, DAC4>,
+    ),
+    _opamps: (Peri<'static, OPAMP3>, Peri<'static, OPAMP4>),
+    pins: (
+        Peri<'static, PA4>,
+        Peri<'static, PA6>,
+        Peri<'static, PB1>,
+        Peri<'static, PB12>,
+    ),
+) {
+    // Analog mode (their reset state, made explicit); the pins stay ours for good.
+    fn analog(mut pin: Flex<'static>) {
+        pin.set_as_analog();
+        core::mem::forget(pin);
+    }
+    analog(Flex::new(pins.0));
+    analog(Flex::new(pins.1));
+    analog(Flex::new(pins.2));
+    analog(Flex::new(pins.3));
+
+    pac::RCC.ahb2enr().modify(|w| {
+        w.set_dac1en(true);
+        w.set_dac2en(true);
+        w.set_dac3en(true);
+        w.set_dac4en(true);
+    });
+    // The OPAMP registers are clocked with SYSCFG (RCC_APB2ENR.SYSCFGEN).
+    pac::RCC.apb2enr().modify(|w| w.set_syscfgen(true));
+    // Read back: the clocks are on before the first register access.
+    let _ = pac::RCC.ahb2enr().read();
+    let _ = pac::RCC.apb2enr().read();
+
+    let channels = [
+        (pac::DAC1, 0, DacMode::NORMAL_EXT_BUFEN),
+        (pac::DAC2, 0, DacMode::NORMAL_EXT_BUFEN),
+        (pac::DAC3, 1, DacMode::NORMAL_INT_BUFDIS),
+        (pac::DAC4, 0, DacMode::NORMAL_INT_BUFDIS),
+    ];
+    for (dac, ch, mode) in channels {
+        // Mode and HFSEL are written with the channel disabled; data before enabling,
+        // so the output comes up at mid-scale. No trigger: DHR → DOR at once.
+        dac.mcr().modify(|w| {
+            w.set_hfsel(DAC_HFSEL);
+            w.set_mode(ch, mode);
+        });
+        dac.dhr12r(ch).write(|w| w.set_dhr(DAC_MID as u16));
+        dac.cr().modify(|w| w.set_en(ch, true));
+    }
+    for (dac, ch, _) in channels {
+        let mut polls = 0;
+        while !dac.sr().read().dacrdy(ch) && polls < DAC_READY_POLLS {
+            polls += 1;
+        }
+        // Again, now that the channel is on, in case the write to a disabled channel
+        // did not reach its output register.
+        dac.dhr12r(ch).write(|w| w.set_dhr(DAC_MID as u16));
+    }
+    for opamp in [pac::OPAMP3, pac::OPAMP4] {
+        opamp.csr().write(|w| {
+            // VINP3: OPAMP3's is DAC3_CH2, OPAMP4's DAC4_CH1 (the PAC names the value
+            // after OPAMP1's, DAC3_CH1).
+            w.set_vp_sel(VpSel::DAC3_CH1);
+            w.set_vm_sel(VmSel::OUTPUT);
+            w.set_opaintoen(false); // output to the VOUT pin
+            w.set_opahsm(false);
+            w.set_opampen(true);
+        });
+    }
+}
+
+/// IWDG prescaler: LSI ÷ 8, 4 kHz at the nominal 32 kHz (0.25 ms per count).
+const WATCHDOG_PRESCALER: Pr = Pr::DIVIDE_BY8;
+/// IWDG reload value: 200 counts (RLR + 1) = 50 ms at the nominal LSI.
+const WATCHDOG_RELOAD: u16 = 199;
+/// The watchdog timeout at the nominal 32 kHz LSI, ms.
+///
+/// Why 50 ms: it must outlast a flash page erase, during which the CPU stalls on
+/// every flash fetch (code and vectors are in flash: nothing runs, neither interrupt
+/// refreshes it). The figures designed for: a page erase takes about 22 ms typical
+/// and 40 ms at most (STM32G4 flash characteristics, RM0440 / DS12288; the 40 ms
+/// maximum is the one that counts). The store task refreshes the watchdog right before
+/// it erases, and the tick refreshes it again within about a millisecond of the stall
+/// ending, so the timeout must exceed 40 ms + 1 ms even with the fastest LSI. Taking
+/// the LSI spread as about ±6 % (29.5–34 kHz over voltage and temperature), the
+/// timeout is 47 ms at 34 kHz, 6 ms above that, and 54 ms at 29.5 kHz. Anything that
+/// stalls the servo interrupt or the tick for longer resets the chip.
+pub const WATCHDOG_MS: u32 = 50;
+const _: () = assert!((WATCHDOG_RELOAD as u32 + 1) * 8 * 1000 / 32_000 == WATCHDOG_MS);
+
+/// Was the last reset caused by the independent watchdog? Reads RCC_CSR.IWDGRSTF and
+/// then clears every reset flag (RMVF), so the answer is about this reset only. Call
+/// once, first thing at start-up.
+pub fn take_watchdog_reset() -> bool {
+    let watchdog = pac::RCC.csr().read().iwdgrstf();
+    pac::RCC.csr().modify(|w| w.set_rmvf(true));
+    watchdog
+}
+
+/// Starts the independent watchdog (LSI, [`WATCHDOG_MS`]); it cannot be stopped again
+/// (RM0440, IWDG). It is frozen while a debugger halts the core.
+fn start_watchdog() {
+    pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
+    let iwdg = pac::IWDG;
+    iwdg.kr().write(|w| w.set_key(Key::START));
+    iwdg.kr().write(|w| w.set_key(Key::ENABLE));
+    iwdg.pr().write(|w| w.set_pr(WATCHDOG_PRESCALER));
+    iwdg.rlr().write(|w| w.set_rl(WATCHDOG_RELOAD));
+    // The new values reach the LSI domain within a few LSI periods (SR clears); the
+    // refresh below then loads the new reload value. Bounded: the default timeout
+    // (512 ms) covers the wait anyway.
+    let mut polls = 0u32;
+    while iwdg.sr().read().0 != 0 && polls < 1_000_000 {
+        polls += 1;
+    }
+    feed_watchdog();
+}
+
+/// Refreshes the independent watchdog.
+pub fn feed_watchdog() {
+    pac::IWDG.kr().write(|w| w.set_key(Key::RESET));
 }
 
 /// The other logic level.
@@ -361,19 +589,25 @@ fn start_time_base(tim: Peri<'static, peripherals::TIM6>) {
     unsafe { interrupt::TIM6_DAC.enable() };
 }
 
-/// Prepares TIM7 as the interpolation tick, stopped.
-fn configure_tick(tim: Peri<'static, peripherals::TIM7>) -> TickTimer {
+/// Prepares TIM7 as the servo-period timer ([`SERVO_HZ`]), stopped.
+fn configure_servo_timer(tim: Peri<'static, peripherals::TIM7>) -> ServoTimer {
     let timer = LowLevelTimer::new(tim);
     let clock = timer.get_clock_frequency();
     core::mem::forget(timer);
-    configure_basic(TICK_TIMER, clock, TICK_HZ, false);
-    TickTimer { _private: () }
+    configure_basic(SERVO_TIMER, clock, SERVO_HZ, false);
+    ServoTimer { _private: () }
 }
 
-/// The interpolation tick interrupt.
+/// The servo-period interrupt.
 #[interrupt]
 fn TIM7_DAC() {
-    TICK_TIMER.sr().write(|w| w.set_uif(false));
+    SERVO_TIMER.sr().write(|w| w.set_uif(false));
+    crate::on_servo_period();
+}
+
+/// The interpolation tick, pended by [`pend_tick`].
+#[interrupt]
+fn UCPD1() {
     crate::on_tick();
 }
 

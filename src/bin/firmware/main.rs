@@ -1,18 +1,22 @@
 //! pkmc firmware for the STM32G474RE (NUCLEO-G474RE), and its host-side launcher.
 //!
 //! One file, two builds. For the MCU (`target_os = "none"`) it is the embassy
-//! firmware: a [`Controller`] for the built-in machine in a static, advanced by a
-//! 1 kHz hardware timer interrupt that applies the previous tick's outputs (step
-//! trains in timer hardware, DIR, ENABLE), reads the encoders and computes the next
-//! tick; a USB CDC-ACM link feeding the controller's `receive` and draining its
+//! firmware: a 10 kHz servo interrupt running every servo channel's loop
+//! ([`servo_period`]: encoders in, DAC commands and amplifier enable out), which paces
+//! a 1 kHz interpolation tick: the tick applies the previous tick's stepper outputs
+//! (step trains in timer hardware, DIR, ENABLE), samples and debounces the e-stop and
+//! limit/home switches ([`debounce`]), advances a [`Controller`] kept in a static and
+//! posts its servo targets to the servo loops, and refreshes the independent
+//! watchdog; a USB CDC-ACM link feeding the controller's `receive` and draining its
 //! `transmit`; a heartbeat LED. For the host it is a launcher that re-runs cargo for
 //! the MCU target, so `cargo run --release` at the repository root builds, flashes and
 //! runs the firmware through the probe-rs runner of `.cargo/config.toml`.
 //!
 //! Invariants: the controller is built once and moved once into its static before the
-//! tick starts; afterwards it is touched only inside critical sections, by the tick
-//! interrupt and by the link task. Only `board.rs` names pins, timers and interrupts.
-//! Pin map: `docs/wiring.md`.
+//! servo timer starts; afterwards it is touched only under the tick's priority-ceiling
+//! lock ([`shared`]), by the tick interrupt and by the tasks, never by the servo
+//! interrupt. Only `board.rs` names pins, timers and interrupts. Pin map:
+//! `docs/wiring.md`.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 /// Host-side launcher: runs `cargo run --release -p pkmc --bin firmware --target
@@ -41,7 +45,13 @@ fn main() {
 #[cfg(target_os = "none")]
 mod board;
 #[cfg(target_os = "none")]
+mod debounce;
+#[cfg(target_os = "none")]
 mod encoders;
+#[cfg(target_os = "none")]
+mod servo_period;
+#[cfg(target_os = "none")]
+mod shared;
 #[cfg(target_os = "none")]
 mod steppers;
 #[cfg(target_os = "none")]
@@ -49,33 +59,35 @@ mod time_driver;
 
 #[cfg(target_os = "none")]
 pub use firmware::on_tick;
+#[cfg(target_os = "none")]
+pub use servo_period::on_servo_period;
 
 /// The MCU side: statics, the tick and the tasks.
 #[cfg(target_os = "none")]
 mod firmware {
-    use core::cell::RefCell;
-
-    use critical_section::{CriticalSection, Mutex};
     use defmt::{info, unwrap, warn};
     use embassy_executor::Spawner;
     use embassy_futures::join::join;
     use embassy_futures::select::select;
     use embassy_stm32::flash::{Blocking, Flash};
-    use embassy_stm32::gpio::{Input, Output};
+    use embassy_stm32::gpio::Output;
     use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
     use embassy_sync::signal::Signal;
     use embassy_time::{Duration, Ticker, Timer};
     use embassy_usb::class::cdc_acm::{self, CdcAcmClass, Sender};
     use embassy_usb::driver::EndpointError;
     use embassy_usb::{Builder, UsbDevice};
-    use pkmc::config::MachineConfig;
+    use pkmc::config::{Drive, MachineConfig, MAX_SERVOS};
+    use pkmc::contour::ServoBank;
     use pkmc::controller::{Controller, Inputs, Outputs};
-    use pkmc::protocol::State;
+    use pkmc::protocol::{AlarmCause, State};
     use static_cell::StaticCell;
     use {defmt_rtt as _, panic_probe as _};
 
-    use crate::board::{self, Panel, UsbDriver};
-    use crate::encoders::Encoders;
+    use crate::board::{self, Switches, UsbDriver};
+    use crate::debounce::{self, Debounced, Debouncer};
+    use crate::servo_period::{self, Command};
+    use crate::shared::TickShared;
     use crate::steppers::{StepStats, Steppers};
 
     /// USB full-speed bulk packet size, bytes.
@@ -85,66 +97,116 @@ mod firmware {
     const TX_POLL: Duration = Duration::from_millis(5);
     /// Seconds between two diagnostic log lines of the heartbeat task.
     const LOG_EVERY_S: u32 = 10;
+    /// Limit/home inputs on the board: input k is joint k's shared home/limit switch.
+    const SWITCH_INPUTS: usize = 8;
 
     /// Where the controller lives (in .bss: no 12 KB initial image in flash).
     static CONTROLLER_CELL: StaticCell<Controller> = StaticCell::new();
     /// The controller. `None` only during start-up.
-    static CONTROLLER: Mutex<RefCell<Option<&'static mut Controller>>> =
-        Mutex::new(RefCell::new(None));
-    /// What the tick interrupt drives. `None` only during start-up.
-    static TICK_IO: Mutex<RefCell<Option<TickIo>>> = Mutex::new(RefCell::new(None));
+    static CONTROLLER: TickShared<Option<&'static mut Controller>> = TickShared::new(None);
+    /// Where the tick's I/O lives (in .bss, like the controller).
+    static TICK_IO_CELL: StaticCell<TickIo> = StaticCell::new();
+    /// What the tick drives and reads. `None` only during start-up.
+    static TICK_IO: TickShared<Option<&'static mut TickIo>> = TickShared::new(None);
 
-    /// The hardware of the tick and the outputs it applies next.
+    /// The tick's hardware, input filters and the outputs it applies next.
     struct TickIo {
         /// STEP/DIR/ENABLE outputs.
         steppers: Steppers,
-        /// Servo encoder counters.
-        encoders: Encoders,
-        /// E-stop input.
-        estop: Input<'static>,
-        /// Inputs handed to the controller (fields the firmware does not read keep their
-        /// defaults).
-        inputs: Inputs,
+        /// E-stop and limit/home inputs.
+        switches: Switches,
+        /// E-stop filter ([`debounce::ESTOP`]).
+        estop: Debouncer,
+        /// Limit/home filters ([`debounce::SWITCH`]), input k = joint k.
+        limits: Debounced<SWITCH_INPUTS>,
+        /// Debounced states handed to the controller by the last tick (diagnostics).
+        last_estop: bool,
+        last_limits: u16,
         /// Outputs computed by the previous tick, applied at the start of the next.
         pending: Outputs,
+        /// Servo periods counted at the last watchdog refresh.
+        fed_at: u32,
         /// Ticks run since start-up.
         ticks: u32,
     }
 
-    /// Runs `f` on the controller inside a critical section.
+    /// Runs `f` on the controller under the tick's lock.
     fn with_controller<R>(f: impl FnOnce(&mut Controller) -> R) -> Option<R> {
-        critical_section::with(|cs| CONTROLLER.borrow_ref_mut(cs).as_deref_mut().map(f))
+        CONTROLLER.lock(|c| c.as_deref_mut().map(f)).flatten()
     }
 
-    /// One interpolation tick; called by the tick timer's interrupt handler.
-    ///
-    /// First applies the outputs computed one tick ago (so step trains start a short,
-    /// fixed time after the tick edge), then reads the encoders and advances the
-    /// controller. The e-stop input disables the drives and holds back step trains
-    /// (the core's `Inputs` has no e-stop field yet, so the controller does not know).
-    pub fn on_tick() {
-        critical_section::with(|cs| {
-            let Ok(mut io) = TICK_IO.borrow(cs).try_borrow_mut() else {
-                return;
-            };
-            let Some(io) = io.as_mut() else {
-                return;
-            };
-            let estop = io.estop.get_level() == board::ESTOP_ACTIVE;
-            io.steppers.apply(&io.pending, !estop);
-            io.inputs.encoder_counts = io.encoders.read();
-            tick_controller(cs, &io.inputs, &mut io.pending);
-            io.ticks = io.ticks.wrapping_add(1);
-        });
-    }
-
-    /// Advances the controller one tick and stores its outputs in `pending`.
-    fn tick_controller(cs: CriticalSection, inputs: &Inputs, pending: &mut Outputs) {
-        if let Ok(mut controller) = CONTROLLER.borrow(cs).try_borrow_mut() {
-            if let Some(controller) = controller.as_deref_mut() {
-                *pending = *controller.tick(inputs);
+    /// Bit j set for every joint of `machine` driven by a servo channel.
+    fn servo_joints(machine: &MachineConfig) -> u16 {
+        let mut bits = 0;
+        for (j, joint) in machine.joints.iter().enumerate() {
+            if matches!(joint.drive, Drive::Servo { .. }) {
+                bits |= 1 << j;
             }
         }
+        bits
+    }
+
+    /// One interpolation tick; called by the tick interrupt, which the servo interrupt
+    /// pends at every tick edge.
+    ///
+    /// First applies the stepper outputs computed one tick ago (so step trains start a
+    /// short, fixed time after the tick edge), then samples and debounces the switches,
+    /// builds the controller's inputs from them and from the servo interrupt's snapshot
+    /// of the edge, advances the controller, and posts its servo targets (with a rebuilt
+    /// bank when it asks for a servo reset) for the next edge. Last, it refreshes the
+    /// watchdog if the servo interrupt has run since the previous refresh: a stalled
+    /// servo interrupt (which also stops pending the tick) or a stalled tick both let
+    /// the watchdog reset the chip.
+    pub fn on_tick() {
+        let snapshot = servo_period::snapshot();
+        TICK_IO.lock(|io| {
+            let Some(io) = io.as_deref_mut() else {
+                return;
+            };
+            io.steppers.apply(&io.pending);
+            io.last_estop = io.estop.sample(io.switches.estop());
+            io.last_limits = io.limits.sample(io.switches.limits());
+            let ticked = CONTROLLER
+                .lock(|c| {
+                    let c = c.as_deref_mut()?;
+                    // The update keeps this building when the core adds an input.
+                    #[allow(clippy::needless_update)]
+                    let inputs = Inputs {
+                        encoder_counts: snapshot.counts,
+                        // No index inputs on this board (no pin left): never latched.
+                        index: [None; MAX_SERVOS],
+                        estop: io.last_estop,
+                        // Shared home/limit switches: one input per joint, both roles.
+                        limit: io.last_limits,
+                        home: io.last_limits,
+                        // One fault line for every amplifier: every servo joint's fault.
+                        drive_fault: if snapshot.fault {
+                            servo_joints(c.machine())
+                        } else {
+                            0
+                        },
+                        servo_trip: snapshot.trips,
+                        ..Inputs::default()
+                    };
+                    io.pending = *c.tick(&inputs);
+                    let out = &io.pending;
+                    servo_period::post(Command {
+                        bank: out
+                            .servo_reset
+                            .then(|| ServoBank::new(c.machine(), &snapshot.counts)),
+                        targets: out.servo_target,
+                        enable: out.servo_enable,
+                    });
+                    Some(())
+                })
+                .flatten()
+                .is_some();
+            if ticked && snapshot.periods != io.fed_at {
+                board::feed_watchdog();
+                io.fed_at = snapshot.periods;
+            }
+            io.ticks = io.ticks.wrapping_add(1);
+        });
     }
 
     /// Bytes of a stored machine record, padded to the flash write size (8 bytes).
@@ -152,8 +214,9 @@ mod firmware {
         (pkmc::store::HEADER_BYTES + pkmc::store::MAX_CONFIG_BYTES).div_ceil(8) * 8;
 
     /// Builds the controller for the machine kept in flash (the built-in Cartesian
-    /// machine when the page holds none) and moves it, once, into its static.
-    fn install_controller(flash: &mut Flash<'static, Blocking>) {
+    /// machine when the page holds none) and moves it, once, into its static. After a
+    /// watchdog reset it starts with the `Watchdog` alarm.
+    fn install_controller(flash: &mut Flash<'static, Blocking>, watchdog_reset: bool) {
         let mut record = [0xFFu8; RECORD_BYTES];
         let stored = flash
             .blocking_read(board::CONFIG_PAGE_OFFSET, &mut record)
@@ -176,12 +239,22 @@ mod firmware {
                 Err(_) => defmt::panic!("the built-in machine configuration is invalid"),
             },
         };
-        critical_section::with(|cs| CONTROLLER.borrow_ref_mut(cs).replace(controller));
+        if watchdog_reset {
+            controller.raise_at_start(AlarmCause::Watchdog);
+        }
+        CONTROLLER.lock(|c| c.replace(controller));
     }
 
     /// Writes a machine the host loaded into the flash page, so the controller comes
     /// back with it after a reset. Runs only when the controller is at rest (it loads
-    /// machines only then); erasing stalls flash reads, and so the tick, for tens of ms.
+    /// machines only then).
+    ///
+    /// The page erase stalls every flash fetch, so nothing runs for its duration (up to
+    /// 40 ms): the servo loops freeze with their last DAC codes and enable held, the
+    /// tick and USB wait. The watchdog is refreshed right before it, so the erase has
+    /// the whole watchdog timeout ([`board::WATCHDOG_MS`]); the tick refreshes it again
+    /// within about a millisecond after. Each 8-byte write stalls only for its own
+    /// programming time (under 0.1 ms), between which everything runs.
     #[embassy_executor::task]
     async fn store_task(mut flash: Flash<'static, Blocking>) {
         let mut record = [0xFFu8; RECORD_BYTES];
@@ -201,6 +274,7 @@ mod firmware {
             };
             let end = board::CONFIG_PAGE_OFFSET + board::CONFIG_PAGE_BYTES;
             let padded = n.div_ceil(8) * 8;
+            board::feed_watchdog();
             let written = flash
                 .blocking_erase(board::CONFIG_PAGE_OFFSET, end)
                 .and_then(|_| flash.blocking_write(board::CONFIG_PAGE_OFFSET, &record[..padded]));
@@ -211,30 +285,51 @@ mod firmware {
         }
     }
 
-    /// Start-up: clocks, board, controller, tick, tasks.
+    /// Start-up: reset cause, clocks, board (the watchdog starts there), controller,
+    /// servo loops and tick, tasks.
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
+        let watchdog_reset = board::take_watchdog_reset();
         let p = embassy_stm32::init(board::clock_config());
         info!("pkmc firmware {}", env!("CARGO_PKG_VERSION"));
+        if watchdog_reset {
+            warn!("reset by the watchdog");
+        }
         let mut board = board::init(p);
-        install_controller(&mut board.flash);
-        critical_section::with(|cs| {
-            TICK_IO.borrow_ref_mut(cs).replace(TickIo {
-                steppers: board.steppers,
-                encoders: board.encoders,
-                estop: board.estop,
-                inputs: Inputs::default(),
-                pending: Outputs::default(),
-                ticks: 0,
-            });
+        install_controller(&mut board.flash, watchdog_reset);
+        // The loops start standing at the encoders, disabled; the first tick asks for a
+        // servo reset and enables them as the controller says.
+        let counts = board.servo.encoders.read();
+        let bank = with_controller(|c| ServoBank::new(c.machine(), &counts));
+        let Some(bank) = bank else {
+            defmt::panic!("no controller");
+        };
+        servo_period::install(board.servo, bank);
+        let tick_io = TICK_IO_CELL.init(TickIo {
+            steppers: board.steppers,
+            switches: board.switches,
+            estop: debounce::ESTOP,
+            limits: Debounced::new(debounce::SWITCH),
+            last_estop: false,
+            last_limits: 0,
+            pending: Outputs::default(),
+            fed_at: 0,
+            ticks: 0,
         });
-        board.tick.start();
-        info!("tick running at {} Hz", pkmc::units::TICK_HZ);
+        TICK_IO.lock(|io| io.replace(tick_io));
+        board::feed_watchdog();
+        board.timer.start();
+        info!(
+            "servo at {} Hz, tick at {} Hz, watchdog {} ms",
+            pkmc::servo::SERVO_HZ,
+            pkmc::units::TICK_HZ,
+            board::WATCHDOG_MS
+        );
 
         let (usb, class) = usb_device(board.usb);
         spawner.spawn(unwrap!(usb_task(usb)));
         spawner.spawn(unwrap!(link_task(class)));
-        spawner.spawn(unwrap!(heartbeat_task(board.led, board.panel)));
+        spawner.spawn(unwrap!(heartbeat_task(board.led)));
         spawner.spawn(unwrap!(store_task(board.flash)));
     }
 
@@ -329,11 +424,10 @@ mod firmware {
         Ok(())
     }
 
-    /// Blinks LD2 (1 Hz idle, 4 Hz running, 10 Hz in any other state), holds the
-    /// panel's outputs and logs diagnostics and active panel inputs every
-    /// [`LOG_EVERY_S`] seconds.
+    /// Blinks LD2 (1 Hz idle, 4 Hz running, 10 Hz in any other state) and logs
+    /// diagnostics every [`LOG_EVERY_S`] seconds.
     #[embassy_executor::task]
-    async fn heartbeat_task(mut led: Output<'static>, panel: Panel) {
+    async fn heartbeat_task(mut led: Output<'static>) {
         let mut elapsed_ms = 0u32;
         loop {
             let state = with_controller(|c| c.state()).unwrap_or(State::Alarm);
@@ -347,36 +441,35 @@ mod firmware {
             elapsed_ms += half_period_ms as u32;
             if elapsed_ms >= LOG_EVERY_S * 1000 {
                 elapsed_ms = 0;
-                log_diagnostics(state, &panel);
+                log_diagnostics(state);
             }
         }
     }
 
-    /// Logs controller, link and step-output counters and any active panel input.
-    fn log_diagnostics(state: State, panel: &Panel) {
-        let (stats, ticks) = critical_section::with(|cs| {
-            TICK_IO
-                .borrow_ref(cs)
-                .as_ref()
-                .map(|io| (io.steppers.stats(), io.ticks))
-                .unwrap_or((StepStats::default(), 0))
-        });
+    /// Logs controller, link, servo and step-output counters and the active inputs.
+    fn log_diagnostics(state: State) {
+        let (stats, ticks, estop, limits) = TICK_IO
+            .lock(|io| {
+                io.as_deref()
+                    .map(|io| (io.steppers.stats(), io.ticks, io.last_estop, io.last_limits))
+            })
+            .flatten()
+            .unwrap_or((StepStats::default(), 0, false, 0));
         let link = with_controller(|c| c.link_stats()).unwrap_or_default();
         info!(
-            "state {} ticks {} link corrupt {} tx_dropped {} steps {}",
+            "state {} ticks {} link corrupt {} tx_dropped {} steps {} servo {}",
             state_name(state),
             ticks,
             link.corrupt,
             link.tx_dropped,
-            stats
+            stats,
+            servo_period::stats()
         );
-        for (i, limit) in panel.limits.iter().enumerate() {
-            if limit.get_level() == board::LIMIT_ACTIVE {
-                warn!("limit input {} active", i);
-            }
-        }
-        if panel.servo_fault.get_level() == board::SERVO_FAULT_ACTIVE {
-            warn!("servo fault input active");
+        if estop || limits != 0 {
+            warn!(
+                "inputs active: e-stop {} limit/home {=u16:#b}",
+                estop, limits
+            );
         }
     }
 

@@ -16,13 +16,14 @@
 //!
 //! The tick interrupt calls [`Steppers::apply`] at its very start with the outputs the
 //! controller computed one tick earlier, so trains start a fixed, short latency after
-//! each tick edge. The interrupt waits (bounded) for a train still running — possible
+//! each tick edge (the servo interrupt of the tick edge, then the tick's entry). The interrupt waits (bounded) for a train still running — possible
 //! only if the previous tick interrupt was itself delayed — before reprogramming.
 //!
 //! Approximations, counted in [`StepStats`]: (1) the first edge can be delayed by at
-//! most one interval − pulse (the counter preset range); a train after a DIR change
-//! whose planned first edge lies further out starts its first edge at that bound
-//! instead (`late_first_edges`, shortening the DIR-setup time seen by the drive);
+//! most one interval − pulse (the counter preset range); a train whose planned first
+//! edge lies further out starts its first edge at that bound instead
+//! (`late_first_edges`, shortening the DIR-setup time seen by the drive; the core
+//! plans every train to fit, so this is counted in case);
 //! (2) a channel takes at most its repetition-counter capacity per tick (65 536, or 256
 //! on TIM15/16/17), the excess is not emitted (`capped_steps`); (3) channel 6 has no
 //! timer yet (HRTIM1 is reserved for it) and emits nothing (`unsupported_steps`).
@@ -66,7 +67,8 @@ pub struct StepStats {
     pub capped_steps: u32,
     /// Steps asked of a channel without a timer, not emitted.
     pub unsupported_steps: u32,
-    /// Steps not emitted because the drives were disabled (e-stop).
+    /// Steps asked while the controller had the drives disabled, not emitted (the core
+    /// does not do this; counted in case it ever does).
     pub suppressed_steps: u32,
 }
 
@@ -231,10 +233,12 @@ impl Steppers {
         }
     }
 
-    /// Applies one tick's outputs: ENABLE, then DIR, then the step trains. With
-    /// `permitted` false (e-stop) the drives are disabled and no step is started.
-    pub fn apply(&mut self, out: &Outputs, permitted: bool) {
-        let enabled = out.enable && permitted;
+    /// Applies one tick's outputs: ENABLE (`out.enable`), then DIR, then the step
+    /// trains. The core decides about enabling (it keeps the drives enabled through a
+    /// controlled stop and disables them at rest in `EStop`); a train asked of
+    /// disabled drives is not started.
+    pub fn apply(&mut self, out: &Outputs) {
+        let enabled = out.enable;
         self.enable.set_level(if enabled {
             self.enable_active
         } else {
