@@ -839,8 +839,8 @@ impl MachineConfig {
                 homing: Homing {
                     switch_at: 640 * mm,
                     search_velocity: 50 * mm,
-                    latch_velocity: 2 * mm,
-                    use_index: true,
+                    latch_velocity: mm,
+                    use_index: false,
                 },
             });
         }
