@@ -837,7 +837,7 @@ impl MachineConfig {
                     max_accel: 5000 * mm,
                 },
                 homing: Homing {
-                    switch_at: 640 * mm,
+                    switch_at: 650 * mm,
                     search_velocity: 50 * mm,
                     latch_velocity: mm,
                     use_index: false,
@@ -937,7 +937,7 @@ impl MachineConfig {
                     max_accel: 1000 * mm,
                 },
                 homing: Homing {
-                    switch_at: 640 * mm,
+                    switch_at: 650 * mm,
                     search_velocity: 20 * mm,
                     latch_velocity: mm,
                     use_index: false,
