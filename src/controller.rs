@@ -307,6 +307,9 @@ impl Controller {
     }
     /// Is motion executing or queued (time must advance for it)?
     pub fn has_work(&self) -> bool {
+        if self.resync {
+            return true;
+        }
         match self.state {
             State::Alarm | State::EStop => self.stopping || self.resync,
             State::Homing => true,
@@ -781,7 +784,14 @@ impl Controller {
         if let Some(j) = first_bit(inputs.drive_fault, n) {
             self.fault(at(AlarmCause::DriveFault, Some(j)), false);
         }
-        for (c, trip) in inputs.servo_trip.iter().enumerate() {
+        // A reset restarts the loops this tick: their trips until then are the ones
+        // just cleared.
+        let trips = if self.resync {
+            [None; MAX_SERVOS]
+        } else {
+            inputs.servo_trip
+        };
+        for (c, trip) in trips.iter().enumerate() {
             let joint = self.servo_joint[c] as usize;
             match trip {
                 Some(Trip::AmplifierFault) => {
@@ -1467,8 +1477,11 @@ mod tests {
             c.status().alarm.map(|a| (a.cause, a.joint)),
             Some((AlarmCause::FollowingError, 2))
         );
-        // After the reset the loops restart from their feedback.
+        // After the reset the loops restart from their feedback; the trip the bank
+        // still reports in that tick is the one cleared.
         control(&mut c, 1, Control::AlarmReset);
-        assert!(c.tick(&Inputs::default()).servo_reset);
+        assert!(c.tick(&trip).servo_reset);
+        assert_eq!(c.state(), State::Idle);
+        assert!(c.status().alarm.is_none());
     }
 }
