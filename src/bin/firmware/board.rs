@@ -11,12 +11,15 @@
 //! ST-LINK virtual COM port (PA2/PA3), the HSE and LSE crystals (PF0/PF1, PC14/PC15),
 //! BOOT0 (PB8), the user button (PC13), the LED (PA5) and USB (PA11/PA12) are set
 //! aside, and this map uses all 38. Timer use: TIM1, TIM8, TIM20, TIM15, TIM16, TIM17
-//! STEP trains (stepper channels 0-5); HRTIM1 reserved for stepper channel 6; TIM2,
-//! TIM3, TIM4, TIM5 encoders; TIM7 the 10 kHz servo period, which also paces the 1 kHz
-//! interpolation tick (run on the otherwise unused `UCPD1` vector); TIM6 the embassy
-//! time base; the IWDG watches both interrupts. Alternate functions were checked
+//! STEP trains (stepper channels 0-5); HRTIM1 timer A the STEP train of stepper channel
+//! 6; TIM2, TIM3, TIM4, TIM5 encoders; TIM7 the 10 kHz servo period, which also paces
+//! the 1 kHz interpolation tick (run on the otherwise unused `UCPD1` vector); TIM6 the
+//! embassy time base; the IWDG watches both interrupts. Alternate functions were checked
 //! against stm32-metapac 21 (stm32-data) for the STM32G474RE; connector positions
-//! follow the NUCLEO-G474RE user manual (UM2505).
+//! follow the NUCLEO-G474RE user manual (UM2505). One pin is not typed by its
+//! function: PA9 (HRTIM1_CHA2, AF13), because embassy-stm32's HRTIM pin traits come
+//! with its `stm32-hrtim` feature, which this build does not enable; the pin is fixed
+//! by type and its AF number by [`HRTIM1_CHA2_AF`].
 //!
 //! Interrupt priorities (lower number = more urgent):
 //!
@@ -37,9 +40,15 @@
 //! tick, USB and the time base but never the servo interrupt. Global critical
 //! sections (embassy's drivers, the time driver, defmt, the servo/tick exchange) do
 //! mask it, and are all short.
+//!
+//! The step trains need no interrupt of their own: every STEP timer, HRTIM1 included,
+//! ends its train in hardware (`crate::steppers`), so nothing has to outrank the servo
+//! interrupt. An interrupt could not end an HRTIM train exactly anyway: the servo
+//! interrupt runs inside a global critical section, which holds off every other
+//! interrupt, whatever its priority, for its whole run.
 
 use embassy_stm32::flash::{Blocking, Flash};
-use embassy_stm32::gpio::{AnyPin, Flex, Input, Level, Output, OutputType, Pull, Speed};
+use embassy_stm32::gpio::{AfType, AnyPin, Flex, Input, Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::pac;
@@ -47,7 +56,7 @@ use embassy_stm32::pac::dac::vals::Mode as DacMode;
 use embassy_stm32::pac::iwdg::vals::{Key, Pr};
 use embassy_stm32::pac::opamp::vals::{VmSel, VpSel};
 use embassy_stm32::peripherals::{
-    self, DAC1, DAC2, DAC3, DAC4, OPAMP3, OPAMP4, PA4, PA6, PB1, PB12,
+    self, DAC1, DAC2, DAC3, DAC4, HRTIM1, OPAMP3, OPAMP4, PA4, PA6, PA9, PB1, PB12, RCC,
 };
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::Timer as LowLevelTimer;
@@ -62,7 +71,9 @@ use pkmc::config::MAX_SERVOS;
 use pkmc::servo::{DAC_MID, SERVO_HZ};
 
 use crate::encoders::Encoders;
-use crate::steppers::{StepChannel, StepTimer, Steppers, REP_ADVANCED, REP_COMPACT};
+use crate::steppers::{
+    HrStepTimer, StepChannel, StepOutput, StepTimer, Steppers, REP_ADVANCED, REP_COMPACT,
+};
 
 /// USB vendor ID: pid.codes, the open-source vendor ID.
 pub const USB_VID: u16 = 0x1209;
@@ -276,40 +287,39 @@ pub fn init(p: Peripherals) -> Board {
     let channels = [
         // 0: TIM1_CH1 on PA8 (AF6).
         StepChannel::new(
-            Some(step_timer::<_, Ch1>(p.TIM1, p.PA8, REP_ADVANCED)),
+            step_timer::<_, Ch1>(p.TIM1, p.PA8, REP_ADVANCED),
             dir(p.PC0.into()),
         ),
         // 1: TIM8_CH4 on PC9 (AF4).
         StepChannel::new(
-            Some(step_timer::<_, Ch4>(p.TIM8, p.PC9, REP_ADVANCED)),
+            step_timer::<_, Ch4>(p.TIM8, p.PC9, REP_ADVANCED),
             dir(p.PC1.into()),
         ),
         // 2: TIM20_CH3 on PC8 (AF6).
         StepChannel::new(
-            Some(step_timer::<_, Ch3>(p.TIM20, p.PC8, REP_ADVANCED)),
+            step_timer::<_, Ch3>(p.TIM20, p.PC8, REP_ADVANCED),
             dir(p.PC2.into()),
         ),
         // 3: TIM15_CH1 on PB14 (AF1).
         StepChannel::new(
-            Some(step_timer::<_, Ch1>(p.TIM15, p.PB14, REP_COMPACT)),
+            step_timer::<_, Ch1>(p.TIM15, p.PB14, REP_COMPACT),
             dir(p.PC3.into()),
         ),
         // 4: TIM16_CH1 on PB4 (AF1).
         StepChannel::new(
-            Some(step_timer::<_, Ch1>(p.TIM16, p.PB4, REP_COMPACT)),
+            step_timer::<_, Ch1>(p.TIM16, p.PB4, REP_COMPACT),
             dir(p.PC4.into()),
         ),
         // 5: TIM17_CH1 on PA7 (AF1).
         StepChannel::new(
-            Some(step_timer::<_, Ch1>(p.TIM17, p.PA7, REP_COMPACT)),
+            step_timer::<_, Ch1>(p.TIM17, p.PA7, REP_COMPACT),
             dir(p.PC5.into()),
         ),
-        // 6: reserved for HRTIM1 timer A output 2 on PA9 (AF13); driven low for now.
-        StepChannel::new(None, dir(p.PB13.into())),
+        // 6: HRTIM1 timer A output 2 on PA9 (AF13).
+        StepChannel::new(hrtim_step(p.HRTIM1, p.PA9, &p.RCC), dir(p.PB13.into())),
     ];
-    let reserved_step = Output::new(p.PA9, Level::Low, Speed::Low);
     let enable = Output::new(p.PB15, opposite(STEPPER_ENABLE_ACTIVE), Speed::Low);
-    let steppers = Steppers::new(channels, enable, STEPPER_ENABLE_ACTIVE, reserved_step);
+    let steppers = Steppers::new(channels, enable, STEPPER_ENABLE_ACTIVE);
 
     let encoders = Encoders::new([
         encoder(p.TIM2, p.PA0, p.PA1),  // servo 0: TIM2 CH1/CH2, AF1
@@ -528,7 +538,7 @@ fn step_timer<T: AdvancedInstance4Channel, C: TimerChannel>(
     tim: Peri<'static, T>,
     pin: Peri<'static, impl TimerPin<T, C>>,
     rep_capacity: u32,
-) -> StepTimer {
+) -> Option<StepOutput> {
     let clock = claim_timer(tim);
     // SAFETY: TIM1/8/20 and TIM15/16/17 share the advanced-timer register layout for
     // every register StepTimer touches (embassy's own drivers view timers through the
@@ -537,7 +547,37 @@ fn step_timer<T: AdvancedInstance4Channel, C: TimerChannel>(
     let timer = StepTimer::new(regs, C::CHANNEL.index(), rep_capacity, clock.0);
     // Only now, with the channel idle low, hand the pin to the timer.
     core::mem::forget(PwmPin::<T, C>::new(pin, OutputType::PushPull));
-    timer
+    Some(StepOutput::Tim(timer))
+}
+
+/// Alternate function of HRTIM1_CHA2 on PA9 (stm32-metapac 21, STM32G474RE).
+pub const HRTIM1_CHA2_AF: u8 = 13;
+
+/// The STEP output of stepper channel 6: HRTIM1 timer A output 2 on PA9. HRTIM1 is
+/// clocked by the APB2 timer clock (stm32-data: `PCLK2_TIM`, 170 MHz here). `None`,
+/// with PA9 held low, if the HRTIM's DLL does not calibrate.
+fn hrtim_step(
+    _hrtim: Peri<'static, HRTIM1>,
+    pin: Peri<'static, PA9>,
+    rcc: &Peri<'static, RCC>,
+) -> Option<StepOutput> {
+    embassy_stm32::rcc::enable_and_reset::<HRTIM1>();
+    let clock = defmt::unwrap!(embassy_stm32::rcc::clocks(rcc).pclk2_tim.to_hertz());
+    let Some(timer) = HrStepTimer::new(pac::HRTIM1, clock.0) else {
+        defmt::warn!("HRTIM1 DLL not ready: stepper channel 6 is not driven");
+        // Forgotten, the output keeps driving PA9 low for good.
+        core::mem::forget(Output::new(pin, Level::Low, Speed::Low));
+        return None;
+    };
+    // Only now, with the output in RUN state and inactive, hand the pin to the HRTIM.
+    let mut pin = Flex::new(pin);
+    pin.set_as_af_unchecked(
+        HRTIM1_CHA2_AF,
+        AfType::output(OutputType::PushPull, Speed::VeryHigh),
+    );
+    // Dropping the pin would disconnect it.
+    core::mem::forget(pin);
+    Some(StepOutput::Hrtim(timer))
 }
 
 /// A quadrature encoder on timer `tim` (CH1 = A, CH2 = B), counting all four edges.
