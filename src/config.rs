@@ -17,9 +17,9 @@ pub const MAX_STEPPERS: usize = 7;
 pub const MAX_SERVOS: usize = 4;
 /// Most steps the reference board (NUCLEO-G474RE, `docs/wiring.md`) emits on each
 /// stepper channel in one tick: channels 0–2 on TIM1/TIM8/TIM20 (16-bit repetition
-/// counters), 3–5 on TIM15/TIM16/TIM17 (8-bit), channel 6 (HRTIM1) not driven yet. A
-/// machine needing more is refused rather than losing steps.
-pub const BOARD_STEPS_PER_TICK: [u32; MAX_STEPPERS] = [65_536, 65_536, 65_536, 256, 256, 256, 0];
+/// counters), 3–5 on TIM15/TIM16/TIM17 and 6 on HRTIM1 timer A (8-bit). A machine
+/// needing more is refused rather than losing steps.
+pub const BOARD_STEPS_PER_TICK: [u32; MAX_STEPPERS] = [65_536, 65_536, 65_536, 256, 256, 256, 256];
 /// Axis names in pose order.
 pub const AXIS_NAMES: [char; AXES] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
 
@@ -1045,14 +1045,23 @@ mod tests {
     #[test]
     fn a_joint_on_a_channel_the_board_cannot_drive_fast_enough_is_refused() {
         let mut m = MachineConfig::cartesian_xyz();
-        if let Drive::Stepper { channel, .. } = &mut m.joints[2].drive {
-            *channel = 6;
+        let set_channel = |m: &mut MachineConfig, c: u8| {
+            if let Drive::Stepper { channel, .. } = &mut m.joints[2].drive {
+                *channel = c;
+            }
+        };
+        // Channels 3–6 take 256 steps per tick: 100 mm/s at 400 steps/mm needs 41.
+        for c in [3, 6] {
+            set_channel(&mut m, c);
+            assert_eq!(m.validate(), Ok(()));
         }
-        assert_eq!(m.validate(), Err(ConfigError::BoardChannel { joint: 2 }));
-        // Channel 3 takes 256 steps per tick: 100 mm/s at 400 steps/mm needs 41.
-        if let Drive::Stepper { channel, .. } = &mut m.joints[2].drive {
-            *channel = 3;
+        // 1000 mm/s needs 401: within the drive's 2 MHz, beyond 8-bit repetition counters.
+        m.joints[2].limits.max_velocity = 1_000 * crate::units::NM_PER_MM;
+        for c in [3, 6] {
+            set_channel(&mut m, c);
+            assert_eq!(m.validate(), Err(ConfigError::BoardChannel { joint: 2 }));
         }
+        set_channel(&mut m, 2); // TIM20: 65 536
         assert_eq!(m.validate(), Ok(()));
     }
 

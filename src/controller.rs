@@ -1484,4 +1484,85 @@ mod tests {
         assert_eq!(c.state(), State::Idle);
         assert!(c.status().alarm.is_none());
     }
+
+    /// A gantry with a second Y motor and rotary A B C: seven stepper joints, one on
+    /// every board channel (channel 6 is HRTIM1's).
+    fn seven_steppers() -> MachineConfig {
+        let mut m = MachineConfig::cartesian_xyz();
+        let deg = crate::units::NDEG_PER_DEG;
+        let rotary = crate::config::Limits {
+            max_velocity: 90 * deg,
+            max_accel: 900 * deg,
+        };
+        for (c, axis) in [(3u8, 3u8), (4, 4), (5, 5), (6, 1)] {
+            let mut j = m.joints[1];
+            if let Drive::Stepper { channel, .. } = &mut j.drive {
+                *channel = c;
+            }
+            if axis >= 3 {
+                j.rotary = true;
+                j.scale = crate::config::Scale::new(50, deg as u64);
+                j.min = -180 * deg;
+                j.max = 180 * deg;
+                j.limits = rotary;
+                j.homing = crate::config::Homing::NONE;
+                m.axes[axis as usize] = rotary;
+            }
+            let _ = m.joints.push(j);
+            if let crate::config::KinematicsConfig::Cartesian { axis_of_joint } = &mut m.kinematics
+            {
+                axis_of_joint[m.joints.len() - 1] = axis;
+            }
+        }
+        m
+    }
+
+    #[test]
+    fn seven_stepper_joints_end_on_exact_steps() {
+        let m = seven_steppers();
+        assert_eq!(m.validate(), Ok(()));
+        let mut c = Controller::new(m.clone()).unwrap();
+        c.unlock();
+        c.receive(&frame(0, &hello(&c)));
+        let deg = crate::units::NDEG_PER_DEG;
+        let target = [
+            10_000_000,
+            20_000_000,
+            -5_000_000,
+            30 * deg,
+            -45 * deg,
+            90 * deg,
+        ];
+        c.receive(&frame(
+            1,
+            &HostMsg::Block(Block {
+                line: 1,
+                motion: Motion::Linear,
+                target,
+                feed: 20_000_000,
+                tolerance_nm: 0,
+            }),
+        ));
+        let mut emitted = [0i64; MAX_STEPPERS];
+        for t in 0..20_000 {
+            if t % 100 == 0 {
+                c.receive(&frame(0, &HostMsg::StatusRequest));
+            }
+            let out = *c.tick(&Inputs::default());
+            for (e, train) in emitted.iter_mut().zip(&out.steps) {
+                *e += if train.forward {
+                    train.count as i64
+                } else {
+                    -(train.count as i64)
+                };
+            }
+            if c.state() == State::Idle && !c.has_work() {
+                break;
+            }
+        }
+        assert_eq!(c.pose(), &target);
+        // Channel 6 (the second Y motor) emitted exactly what Y did.
+        let want = [4000, 8000, -2000, 1500, -2250, 4500, 8000];
+        assert_eq!(emitted, want);
+    }
 }

@@ -593,7 +593,7 @@ pub fn describe(e: &pkmc::config::ConfigError, m: &MachineFile) -> String {
     match e {
         E::NoJoints => "joints: the machine has no joints".into(),
         E::BoardChannel { joint } => format!(
-            "{}.channel: the board's timer on this channel cannot emit the steps its max_velocity needs (channels 3–5 take at most 256 steps per ms, channel 6 none yet)",
+            "{}.channel: the board's timer on this channel cannot emit the steps its max_velocity needs (channels 3–6 take at most 256 steps per ms)",
             jn(joint)
         ),
         E::Smoothing => "motion: the smoothing window must be a power of two up to 32 ticks".into(),
