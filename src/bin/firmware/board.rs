@@ -266,10 +266,10 @@ pub struct Board {
 }
 
 /// Offset (from the start of flash) of the page that keeps the machine configuration:
-/// the last 4 KB page of the 512 KB single-bank flash; `memory.x` ends the program
-/// region before it.
+/// the last 4 KB of the 512 KB flash, bank 2's last two 2 KB pages (dual-bank mode,
+/// the factory setting, see `memory.x`); `memory.x` ends the program region before it.
 pub const CONFIG_PAGE_OFFSET: u32 = 508 * 1024;
-/// Size of that page (single-bank mode erases 4 KB pages).
+/// Size of that region (two 2 KB pages, erased together).
 pub const CONFIG_PAGE_BYTES: u32 = 4 * 1024;
 
 /// Sets up every pin, timer and converter of the pin map, the embassy time base and
@@ -468,9 +468,11 @@ const WATCHDOG_PRESCALER: Pr = Pr::DIVIDE_BY8;
 const WATCHDOG_RELOAD: u16 = 199;
 /// The watchdog timeout at the nominal 32 kHz LSI, ms.
 ///
-/// Why 50 ms: it must outlast a flash page erase, during which the CPU stalls on
-/// every flash fetch (code and vectors are in flash: nothing runs, neither interrupt
-/// refreshes it). The figures designed for: a page erase takes about 22 ms typical
+/// Why 50 ms: it must outlast a flash page erase should the CPU stall on it. In the
+/// dual-bank mode used here it does not: the configuration pages are in bank 2 and
+/// the program in bank 1 (read-while-write, RM0440 flash chapter). The margin is kept
+/// for a configuration where it would (every flash fetch stalled: nothing runs,
+/// neither interrupt refreshes the watchdog). The figures designed for: a page erase takes about 22 ms typical
 /// and 40 ms at most (STM32G4 flash characteristics, RM0440 / DS12288; the 40 ms
 /// maximum is the one that counts). The store task refreshes the watchdog right before
 /// it erases, and the tick refreshes it again within about a millisecond of the stall

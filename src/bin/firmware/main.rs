@@ -249,12 +249,11 @@ mod firmware {
     /// back with it after a reset. Runs only when the controller is at rest (it loads
     /// machines only then).
     ///
-    /// The page erase stalls every flash fetch, so nothing runs for its duration (up to
-    /// 40 ms): the servo loops freeze with their last DAC codes and enable held, the
-    /// tick and USB wait. The watchdog is refreshed right before it, so the erase has
-    /// the whole watchdog timeout ([`board::WATCHDOG_MS`]); the tick refreshes it again
-    /// within about a millisecond after. Each 8-byte write stalls only for its own
-    /// programming time (under 0.1 ms), between which everything runs.
+    /// The pages are in flash bank 2 and the program runs from bank 1, so the erase
+    /// (up to 40 ms) and the writes do not stall the servo loops or the tick
+    /// (read-while-write in dual-bank mode). The watchdog is refreshed right before the
+    /// erase all the same, so that even a stalling erase would have the whole watchdog
+    /// timeout ([`board::WATCHDOG_MS`]).
     #[embassy_executor::task]
     async fn store_task(mut flash: Flash<'static, Blocking>) {
         let mut record = [0xFFu8; RECORD_BYTES];
