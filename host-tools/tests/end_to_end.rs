@@ -6,7 +6,7 @@ use pkmc::config::MachineConfig;
 use pkmc_host::gcode;
 
 mod common;
-use common::{json, nc_send, ok, repo, tmp, Sim};
+use common::{joint_steps, json, nc_send, ok, repo, tmp, Sim};
 
 /// Expected final drive positions: the program's last target, in whole steps.
 fn expected_steps(program: &str) -> Vec<i64> {
@@ -27,12 +27,7 @@ fn nc_send_streams_over_a_pty_and_the_drives_end_on_exact_steps() {
         String::from_utf8_lossy(&out.stderr)
     );
     let r = json(&out);
-    let steps: Vec<i64> = r["final_joint_steps"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_i64().unwrap())
-        .collect();
+    let steps = joint_steps(&r);
     assert_eq!(steps, expected_steps("examples/square.ngc"));
     assert_eq!(steps, vec![5000, 2900, 2000]); // X12.5 Y7.25 Z5 at 400 steps/mm
     assert_eq!(r["final_pose"]["x"], 12.5);
@@ -201,12 +196,7 @@ fn servo_joints_follow_the_square_and_settle_on_target() {
         String::from_utf8_lossy(&out.stderr)
     );
     let r = json(&out);
-    let steps: Vec<i64> = r["final_joint_steps"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_i64().unwrap())
-        .collect();
+    let steps = joint_steps(&r);
     // X and Y are encoder counts (1000/mm) of a plant that settles within a few counts;
     // Z is a stepper and exact.
     assert!((steps[0] - 12_500).abs() <= 5, "X at {} counts", steps[0]);

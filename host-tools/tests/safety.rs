@@ -8,7 +8,7 @@ use pkmc_host::sim::Simulator;
 use std::path::Path;
 
 mod common;
-use common::{json, nc_send, tmp};
+use common::{joint_steps, json, nc_send, tmp};
 
 /// One period, s.
 const T: f64 = 1e-3;
@@ -192,12 +192,7 @@ fn nc_send_homes_before_the_job_when_asked() {
         "examples/square.ngc",
     ]));
     assert_eq!(r["result"], "done", "{r}");
-    let steps: Vec<i64> = r["final_joint_steps"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_i64().unwrap())
-        .collect();
+    let steps = joint_steps(&r);
     assert!((steps[0] - 12_500).abs() <= 2, "X at {} counts", steps[0]);
     assert!((steps[1] - 7_250).abs() <= 2, "Y at {} counts", steps[1]);
     assert_eq!(steps[2], 2000);

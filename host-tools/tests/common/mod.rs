@@ -91,3 +91,13 @@ impl Drop for Sim {
         let _ = self.child.wait();
     }
 }
+
+/// The report's `final_joint_steps`: drive steps or encoder counts per joint.
+pub fn joint_steps(report: &serde_json::Value) -> Vec<i64> {
+    report["final_joint_steps"]
+        .as_array()
+        .expect("final_joint_steps")
+        .iter()
+        .map(|v| v.as_i64().expect("whole steps"))
+        .collect()
+}
