@@ -18,7 +18,7 @@
 //! |---|---|---|
 //! | e-stop input | active (level) | state `EStop`, cause `EStop` |
 //! | limit switch | a joint's switch becomes active (not while that joint homes) | `LimitSwitch`, joint |
-//! | drive fault | a stepper drive's fault input, or a servo amplifier's | `DriveFault`, joint |
+//! | drive fault | a stepper drive's fault input, or a servo amplifier's, while the drives are powered | `DriveFault`, joint |
 //! | following error | a servo loop trips ([`crate::servo`]) | `FollowingError`, joint |
 //! | link loss | no valid frame for [`LINK_LOSS_TICKS`] while moving | `LinkLoss` |
 //! | joint travel | a block would take a joint outside its travel | `JointLimit`, joint |
@@ -781,7 +781,11 @@ impl Controller {
         if inputs.estop {
             self.fault(at(AlarmCause::EStop, None), true);
         }
-        if let Some(j) = first_bit(inputs.drive_fault, n) {
+        // Many drives report a fault while disabled: a fault line counts only while the
+        // drives are powered (after an e-stop they are not, and the reset must pass).
+        let powered = self.out.enable || self.out.servo_enable;
+        let drive_fault = if powered { inputs.drive_fault } else { 0 };
+        if let Some(j) = first_bit(drive_fault, n) {
             self.fault(at(AlarmCause::DriveFault, Some(j)), false);
         }
         // A reset restarts the loops this tick: their trips until then are the ones
@@ -824,7 +828,10 @@ impl Controller {
         if self.link_watch && moving && self.silent_ticks >= LINK_LOSS_TICKS {
             self.fault(at(AlarmCause::LinkLoss, None), false);
         }
-        self.last = *inputs;
+        self.last = Inputs {
+            drive_fault,
+            ..*inputs
+        };
     }
 
     /// One tick of path motion (also the stop after a fault).
@@ -1564,5 +1571,30 @@ mod tests {
         // Channel 6 (the second Y motor) emitted exactly what Y did.
         let want = [4000, 8000, -2000, 1500, -2250, 4500, 8000];
         assert_eq!(emitted, want);
+    }
+
+    #[test]
+    fn a_drive_fault_while_the_drives_are_off_does_not_block_the_reset() {
+        let mut c = session();
+        let pressed = Inputs {
+            estop: true,
+            drive_fault: 0b1, // this drive reports a fault whenever it is disabled
+            ..Inputs::default()
+        };
+        run_with(&mut c, 10, &pressed);
+        assert_eq!(c.state(), State::EStop);
+        let released = Inputs {
+            drive_fault: 0b1,
+            ..Inputs::default()
+        };
+        run_with(&mut c, 10, &released);
+        control(&mut c, 1, Control::AlarmReset);
+        assert_eq!(c.state(), State::Idle, "the fault line of a disabled drive");
+        // Powered again, the fault is real.
+        run_with(&mut c, 2, &released);
+        assert_eq!(
+            c.status().alarm.map(|a| (a.cause, a.joint)),
+            Some((AlarmCause::DriveFault, 0))
+        );
     }
 }
