@@ -6,6 +6,7 @@ use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(text) = std::str::from_utf8(data) {
-        let _ = pkmc_host::gcode::compile(text, "fuzz.ngc", [0; 6]);
+        let options = pkmc_host::gcode::Options::default();
+        let _ = pkmc_host::gcode::compile(text, "fuzz.ngc", &options);
     }
 });

@@ -3,7 +3,7 @@
 //! report, its CSV trace, its exit code).
 
 use pkmc::config::MachineConfig;
-use pkmc_host::gcode;
+use pkmc_host::job;
 
 mod common;
 use common::{joint_steps, json, nc_send, ok, repo, tmp, Sim};
@@ -12,7 +12,7 @@ use common::{joint_steps, json, nc_send, ok, repo, tmp, Sim};
 fn expected_steps(program: &str) -> Vec<i64> {
     let m = MachineConfig::cartesian_xyz();
     let text = std::fs::read_to_string(repo().join(program)).unwrap();
-    let blocks = gcode::compile(&text, program, m.home).unwrap();
+    let blocks = job::compile_text(&text, program, &m, m.home).unwrap();
     let end = blocks.last().unwrap().target;
     (0..3).map(|j| m.joints[j].scale.steps_at(end[j])).collect()
 }
@@ -55,7 +55,7 @@ fn the_square_trace_never_exceeds_feed_or_acceleration() {
     );
     let m = MachineConfig::cartesian_xyz();
     let text = std::fs::read_to_string(repo().join("examples/square.ngc")).unwrap();
-    let blocks = gcode::compile(&text, "square", m.home).unwrap();
+    let blocks = job::compile_text(&text, "square", &m, m.home).unwrap();
     // Allowed path speed per line, mm/s: the feed, or the axis limit for rapids.
     let v_max_axis = m.axes[0].max_velocity as f64 * 1e-6;
     let allowed = |line: u32| -> f64 {

@@ -86,9 +86,15 @@ fn tool_table_entries_can_be_built_in_code() {
 }
 
 #[test]
-fn a_start_pose_still_selects_the_old_block_output() {
+fn canonical_commands_become_protocol_blocks() {
     use pkmc::protocol::Motion;
-    let blocks = compile("G0 X1\nG1 Y2 F600\nG2 X2 Y3 I1 J0", "t.ngc", [0; 6]).unwrap();
+    let canon = compile(
+        "G0 X1\nG1 Y2 F600\nG2 X2 Y3 I1 J0",
+        "t.ngc",
+        &Options::default(),
+    )
+    .unwrap();
+    let blocks = pkmc_host::blocks::from_canon(&canon, [0; 6]).blocks;
     assert_eq!(blocks[0].motion, Motion::Rapid);
     assert_eq!(blocks[1].target[1], 2_000_000);
     assert_eq!(blocks[1].feed, 10_000_000);

@@ -30,14 +30,12 @@
 //! implemented is described in `docs/gcode.md`.
 
 pub mod arcs;
-mod compat;
 pub mod cycles;
 pub mod interp;
 pub mod lexer;
 pub mod params;
 pub mod tools;
 
-pub use compat::CompileWith;
 pub use tools::{Tool, ToolTable};
 
 use crate::canon::Canon;
@@ -116,17 +114,13 @@ pub(crate) fn unsupported(feature: &str) -> String {
     format!("{UNSUPPORTED}{feature}")
 }
 
-/// Compiles a whole program; returns its canonical commands, or every error found.
-///
-/// `options` is normally `&Options`. Passing a start pose (`[i64; 6]`) instead selects
-/// the temporary compatibility form that returns protocol blocks (see
-/// [`CompileWith`]).
-pub fn compile<O: CompileWith>(source: &str, file: &str, options: O) -> O::Output {
-    options.compile(source, file)
+/// Compiles a whole program; returns its canonical commands, or every error found
+/// (the same as [`compile_canon`]).
+pub fn compile(source: &str, file: &str, options: &Options) -> Result<Vec<Canon>, Vec<Diagnostic>> {
+    compile_canon(source, file, options)
 }
 
-/// Compiles a whole program with `options` into canonical commands (what
-/// [`compile`] does for `&Options`).
+/// Compiles a whole program with `options` into canonical commands.
 pub fn compile_canon(
     source: &str,
     file: &str,
