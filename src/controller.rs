@@ -118,6 +118,8 @@ pub struct Controller {
     planner: Planner,
     exec: Executor,
     joints: Joints,
+    /// Joint positions of the home pose (where homing ends).
+    home_joints: Joints,
     /// Steps or counts of each joint's actuator at joint position zero (homing).
     offset: [i64; MAX_JOINTS],
     steps: StepScheduler,
@@ -155,6 +157,13 @@ fn alarm_of(why: Unreachable, line: u32) -> Alarm {
     };
     Alarm { cause, joint, line }
 }
+
+/// The lock after a reset: no joint, no NC line.
+const UNHOMED: Alarm = Alarm {
+    cause: AlarmCause::Unhomed,
+    joint: NO_JOINT,
+    line: 0,
+};
 
 /// Lowest set bit of `bits` among the first `n`.
 fn first_bit(bits: u16, n: usize) -> Option<usize> {
@@ -201,17 +210,14 @@ impl Controller {
             planner,
             exec,
             joints,
+            home_joints: joints,
             offset: [0; MAX_JOINTS],
             steps,
             trains: [StepTrain::default(); MAX_JOINTS],
             homer: Homer::default(),
             servo_joint,
             state: State::Alarm,
-            alarm: Some(Alarm {
-                cause: AlarmCause::Unhomed,
-                joint: NO_JOINT,
-                line: 0,
-            }),
+            alarm: Some(UNHOMED),
             locked: true,
             homed: false,
             stopping: false,
@@ -315,8 +321,13 @@ impl Controller {
             State::Homing => true,
             // An abort completes on the next tick once stopped: that tick is work.
             State::Hold => !self.exec.stopped() || self.abort_pending,
-            _ => self.exec.busy() || !self.planner.is_empty() || !self.exec.settled(),
+            _ => self.path_moving(),
         }
+    }
+
+    /// A block executing or queued, or smoothing still catching up.
+    fn path_moving(&self) -> bool {
+        self.exec.busy() || !self.planner.is_empty() || !self.exec.settled()
     }
 
     /// Jerk limitation: smooths the path motion over `window` ticks (1 = off); see
@@ -577,11 +588,7 @@ impl Controller {
                     self.homer.cancel();
                     self.locked = true;
                     self.state = State::Alarm;
-                    self.alarm = Some(Alarm {
-                        cause: AlarmCause::Unhomed,
-                        joint: NO_JOINT,
-                        line: 0,
-                    });
+                    self.alarm = Some(UNHOMED);
                 }
             }
             Control::AlarmReset => self.reset_alarm(),
@@ -637,11 +644,7 @@ impl Controller {
             self.resync = true;
         }
         if self.locked {
-            self.alarm = Some(Alarm {
-                cause: AlarmCause::Unhomed,
-                joint: NO_JOINT,
-                line: 0,
-            });
+            self.alarm = Some(UNHOMED);
             self.state = State::Alarm;
         } else {
             self.alarm = None;
@@ -836,8 +839,7 @@ impl Controller {
 
     /// One tick of path motion (also the stop after a fault).
     fn motion_tick(&mut self) {
-        let moving = self.exec.busy() || !self.planner.is_empty() || !self.exec.settled();
-        if moving {
+        if self.path_moving() {
             self.motion_ticks += 1;
             if self.state == State::Idle {
                 self.state = State::Running;
@@ -875,11 +877,7 @@ impl Controller {
             self.exec.paused = false;
             self.state = State::Idle;
         }
-        if self.state == State::Running
-            && !self.exec.busy()
-            && self.planner.is_empty()
-            && self.exec.settled()
-        {
+        if self.state == State::Running && !self.path_moving() {
             self.state = State::Idle;
         }
     }
@@ -904,22 +902,17 @@ impl Controller {
 
     fn home_tick(&mut self, inputs: &Inputs) {
         self.motion_ticks += 1;
-        let mut targets = [0; MAX_JOINTS];
-        if let Err(why) =
-            self.kin
-                .inverse_checked(&self.machine.home, &self.machine.joints, &mut targets)
-        {
-            self.raise(alarm_of(why, 0));
-            return;
-        }
         let before = self.joints;
         let hin = HomeInputs {
             home: inputs.home,
             index: inputs.index,
         };
-        let event = self
-            .homer
-            .tick(&self.machine.joints, &targets, &hin, &mut self.joints);
+        let event = self.homer.tick(
+            &self.machine.joints,
+            &self.home_joints,
+            &hin,
+            &mut self.joints,
+        );
         match event {
             Some(HomeEvent::Latched { joint, index }) => {
                 let jc = self.machine.joints[joint];
@@ -985,11 +978,7 @@ impl Controller {
                 self.locked = true;
                 self.homed = false;
                 self.out.servo_reset = true;
-                self.raise(Alarm {
-                    cause: AlarmCause::Unhomed,
-                    joint: NO_JOINT,
-                    line: 0,
-                });
+                self.raise(UNHOMED);
             }
         }
     }

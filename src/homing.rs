@@ -110,10 +110,6 @@ pub fn isqrt(x: u128) -> u128 {
     }
 }
 
-fn sign(x: i64) -> i64 {
-    x.signum()
-}
-
 impl Homer {
     /// Is a cycle running?
     pub fn active(&self) -> bool {
@@ -157,18 +153,16 @@ impl Homer {
             return None;
         }
         let mut event = None;
-        let all_latched = joints.iter().enumerate().all(|(j, _)| {
-            matches!(
-                self.axes[j].phase,
-                Phase::Waiting | Phase::Return | Phase::Done
-            ) || (self.axes[j].phase == Phase::Latched && self.axes[j].v == 0)
+        let all_latched = self.axes[..joints.len()].iter().all(|a| {
+            matches!(a.phase, Phase::Waiting | Phase::Return | Phase::Done)
+                || (a.phase == Phase::Latched && a.v == 0)
         });
         for (j, jc) in joints.iter().enumerate() {
             let h: Homing = jc.homing;
             let a = &mut self.axes[j];
             let on_switch = inputs.home & (1 << j) != 0;
             let travel = (jc.max - jc.min).unsigned_abs();
-            let dir = sign(h.search_velocity);
+            let dir = h.search_velocity.signum();
             if all_latched && matches!(a.phase, Phase::Waiting | Phase::Latched) {
                 a.phase = Phase::Return;
                 a.run = 0;
@@ -226,7 +220,7 @@ impl Homer {
                     };
                     let brake = isqrt(2 * jc.limits.max_accel as u128 * d.unsigned_abs() as u128)
                         .min(i64::MAX as u128) as i64;
-                    sign(d) * vmax.min(brake)
+                    d.signum() * vmax.min(brake)
                 }
                 _ => 0,
             };
@@ -242,11 +236,11 @@ impl Homer {
             a.carry = total % TICK_HZ as i64;
             if a.phase == Phase::Return {
                 let d = targets[j] - q[j];
+                // There, or this period's step reaches it (or it is one unit off at rest).
                 if d == 0
-                    || (step != 0
-                        && step.unsigned_abs() >= d.unsigned_abs()
-                        && sign(step) == sign(d))
-                    || (a.v == 0 && d.unsigned_abs() <= 1)
+                    || (d > 0 && step >= d)
+                    || (d < 0 && step <= d)
+                    || (a.v == 0 && d.abs() <= 1)
                 {
                     q[j] = targets[j];
                     a.v = 0;
@@ -267,10 +261,9 @@ impl Homer {
                 return Some(HomeEvent::Failed { joint: j });
             }
         }
-        if joints
+        if self.axes[..joints.len()]
             .iter()
-            .enumerate()
-            .all(|(j, _)| self.axes[j].phase == Phase::Done)
+            .all(|a| a.phase == Phase::Done)
         {
             self.active = false;
             return Some(HomeEvent::Finished);

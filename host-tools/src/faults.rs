@@ -19,6 +19,16 @@ use pkmc::protocol::{decode_frame, CtrlMsg, FrameReader, HostMsg, Pushed, MAX_BO
 use serde::Serialize;
 use std::collections::HashSet;
 
+/// Parses a per-byte fault rate (`--link-faults RATE`): a number from 0 to 1.
+pub fn parse_rate(s: &str) -> Result<f64, String> {
+    let r: f64 = s.parse().map_err(|e| format!("{s}: {e}"))?;
+    if (0.0..=1.0).contains(&r) {
+        Ok(r)
+    } else {
+        Err(format!("{s}: a rate is between 0 and 1"))
+    }
+}
+
 /// What to inject.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FaultConfig {

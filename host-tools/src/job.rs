@@ -204,8 +204,26 @@ pub struct SimSetup<'a> {
     pub plants: Vec<Option<crate::plant::PlantFile>>,
     /// Faults to inject ([`crate::sim::Injection`]).
     pub inject: Vec<crate::sim::Injection>,
-    /// `--check` only: home before the dry run (else it unlocks).
-    pub home_first: bool,
+}
+
+impl SimSetup<'_> {
+    /// A simulator for `machine` with this set-up's plants and trace (not its faults);
+    /// failures to build it exit with `code`.
+    fn simulator(&self, machine: MachineConfig, code: i32) -> Result<Simulator, Failure> {
+        let mut sim = Simulator::with_plants(machine, self.plants.clone(), [0; MAX_JOINTS])
+            .map_err(|e| Failure::new(code, format!("simulator: {e:#}")))?;
+        if let Some(p) = self.trace {
+            let f = std::fs::File::create(p).map_err(|e| {
+                Failure::new(
+                    exit::BAD_INPUT,
+                    format!("{}: cannot create: {e}", p.display()),
+                )
+            })?;
+            sim.trace_to(Box::new(std::io::BufWriter::new(f)))
+                .map_err(|e| Failure::new(code, format!("{}: {e:#}", p.display())))?;
+        }
+        Ok(sim)
+    }
 }
 
 /// A simulator serving on a pseudo-terminal in a thread.
@@ -221,20 +239,9 @@ impl SimServer {
     /// Starts a simulator for `machine` as `setup` says.
     pub fn start(machine: MachineConfig, setup: &SimSetup<'_>) -> Result<Self, Failure> {
         let fail = |m: String| Failure::new(exit::LINK, m);
-        let mut sim = Simulator::with_plants(machine, setup.plants.clone(), [0; MAX_JOINTS])
-            .map_err(|e| fail(format!("simulator: {e:#}")))?;
+        let mut sim = setup.simulator(machine, exit::LINK)?;
         sim.inject(&setup.inject)
             .map_err(|e| Failure::new(exit::BAD_INPUT, format!("{e:#}")))?;
-        if let Some(p) = setup.trace {
-            let f = std::fs::File::create(p).map_err(|e| {
-                Failure::new(
-                    exit::BAD_INPUT,
-                    format!("{}: cannot create: {e}", p.display()),
-                )
-            })?;
-            sim.trace_to(Box::new(std::io::BufWriter::new(f)))
-                .map_err(|e| fail(format!("{}: {e:#}", p.display())))?;
-        }
         let (mut master, slave) = serialport::TTYPort::pair()
             .map_err(|e| fail(format!("cannot create a pseudo-terminal: {e}")))?;
         let port_path = serialport::SerialPort::name(&slave)
@@ -546,28 +553,19 @@ pub fn run(
 
 /// Dry run: compiles `program`, pre-checks it and runs it through the controller in
 /// this process on the simulated clock (no port, nothing moves), tracing to
-/// `setup.trace` and keeping the path when `setup.record_path`. The report's
-/// `run_time_s` is the planned run time; an alarm names its NC line.
+/// `opts.sim.trace` and keeping the path when `opts.sim.record_path`; homes first with
+/// `opts.home`, else unlocks. The report's `run_time_s` is the planned run time; an
+/// alarm names its NC line.
 pub fn check(
     machine: &MachineConfig,
     program: &Path,
-    setup: &SimSetup<'_>,
+    opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
+    let setup = &opts.sim;
     let blocks = compile_program(program, machine)?;
     let pre = crate::preflight::check(&blocks, machine, machine.home);
-    let mut sim = Simulator::with_plants(machine.clone(), setup.plants.clone(), [0; MAX_JOINTS])
-        .map_err(|e| Failure::new(exit::BAD_INPUT, format!("simulator: {e:#}")))?;
-    if let Some(p) = setup.trace {
-        let f = std::fs::File::create(p).map_err(|e| {
-            Failure::new(
-                exit::BAD_INPUT,
-                format!("{}: cannot create: {e}", p.display()),
-            )
-        })?;
-        sim.trace_to(Box::new(std::io::BufWriter::new(f)))
-            .map_err(|e| Failure::new(exit::BAD_INPUT, format!("{}: {e:#}", p.display())))?;
-    }
+    let sim = setup.simulator(machine.clone(), exit::BAD_INPUT)?;
     let recorder = std::rc::Rc::new(std::cell::RefCell::new(Recorder::new(
         machine.joints.len(),
         setup.record_path,
@@ -575,7 +573,7 @@ pub fn check(
     let rec = recorder.clone();
     let io = InProcess::new(sim, Box::new(move |s| rec.borrow_mut().record(s)));
     let mut link = Link::connect(io, machine, LinkOptions::default())?;
-    let end = match prepare(&mut link, setup.home_first, true, hooks)? {
+    let end = match prepare(&mut link, opts.home, true, hooks)? {
         Some(end) => end,
         None => link.run_job(&blocks, hooks)?,
     };

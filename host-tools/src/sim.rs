@@ -330,6 +330,13 @@ impl std::str::FromStr for Injection {
     }
 }
 
+/// Encoder reading of each servo channel (zero where none).
+fn counts_of(servos: &[Option<SimServo>; MAX_SERVOS]) -> [i64; MAX_SERVOS] {
+    servos
+        .each_ref()
+        .map(|s| s.as_ref().map_or(0, SimServo::counts))
+}
+
 /// One trace row, in user units.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TraceRow {
@@ -461,8 +468,8 @@ impl Simulator {
         self.ticks as f64 * TICK_NS as f64 * 1e-9
     }
 
-    /// Is an injected link cut due (its start time reached)? Returns the injection's
-    /// start time the first time only.
+    /// Is an injected link cut due (its start time reached)? True once per injection:
+    /// the server then cuts the line for [`LINK_CUT`].
     pub fn take_link_cut(&mut self) -> bool {
         let now = self.time_s();
         if let Some(k) = self
@@ -538,13 +545,7 @@ impl Simulator {
     }
 
     fn encoder_counts(&self) -> [i64; MAX_SERVOS] {
-        let mut c = [0; MAX_SERVOS];
-        for (c, s) in c.iter_mut().zip(&self.servos) {
-            if let Some(s) = s {
-                *c = s.counts();
-            }
-        }
-        c
+        counts_of(&self.servos)
     }
 
     /// Writes a CSV trace row per tick to `out` from now on (header first).
@@ -715,13 +716,7 @@ impl Simulator {
         if let Some(bank) = self.bank.as_mut() {
             let machine = self.ctrl.machine();
             if out.servo_reset {
-                let mut counts = [0; MAX_SERVOS];
-                for (c, s) in counts.iter_mut().zip(&self.servos) {
-                    if let Some(s) = s {
-                        *c = s.counts();
-                    }
-                }
-                *bank = ServoBank::new(machine, &counts);
+                *bank = ServoBank::new(machine, &counts_of(&self.servos));
             }
             bank.load_tick(&out.servo_target);
             let mut fault = [false; MAX_SERVOS];
@@ -731,14 +726,8 @@ impl Simulator {
                 }
             }
             for _ in 0..SERVO_PER_TICK {
-                let mut feedback = [0; MAX_SERVOS];
-                for (f, s) in feedback.iter_mut().zip(&self.servos) {
-                    if let Some(s) = s {
-                        *f = s.counts();
-                    }
-                }
                 self.bank_out = bank.period(&PeriodInputs {
-                    feedback,
+                    feedback: counts_of(&self.servos),
                     fault,
                     enable: out.servo_enable,
                 });

@@ -251,7 +251,7 @@ impl H4Table {
 mod tests {
     use super::*;
     use crate::config::{KinematicsConfig, MachineConfig, MAX_JOINTS};
-    use crate::kinematics::reference::{self as re, real};
+    use crate::kinematics::reference::{self as re, lcg, real};
     use proptest::prelude::*;
 
     fn geometry() -> H4TableGeometry {
@@ -270,13 +270,6 @@ mod tests {
         (0..4)
             .map(|i| (q[i] as f64 - want[i]).abs())
             .fold(0.0, f64::max)
-    }
-
-    fn lcg(state: &mut u64) -> f64 {
-        *state = state
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        (*state >> 11) as f64 / (1u64 << 53) as f64
     }
 
     /// Random pose over the usable box: E within |x|, |y| ≤ 100 mm, |z| ≤ 50 mm of home,

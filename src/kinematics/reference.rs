@@ -129,6 +129,15 @@ pub fn newton<const N: usize>(
     panic!("reference Newton did not converge");
 }
 
+/// Next uniform number in [0, 1) of a 64-bit linear congruential generator (Knuth's
+/// MMIX constants): reproducible random poses for the tests.
+pub fn lcg(state: &mut u64) -> f64 {
+    *state = state
+        .wrapping_mul(6_364_136_223_846_793_005)
+        .wrapping_add(1_442_695_040_888_963_407);
+    (*state >> 11) as f64 / (1u64 << 53) as f64
+}
+
 /// Integer pose as `f64`.
 pub fn real(p: &Pose) -> [f64; 6] {
     p.map(|v| v as f64)

@@ -34,7 +34,7 @@ struct Args {
     report: Option<String>,
     /// Simulator only: corrupt, drop or duplicate each byte on the line with this
     /// probability, both directions (e.g. 0.01).
-    #[arg(long, global = true, value_name = "RATE", value_parser = parse_rate)]
+    #[arg(long, global = true, value_name = "RATE", value_parser = pkmc_host::faults::parse_rate)]
     link_faults: Option<f64>,
     /// Seed of the fault generator.
     #[arg(long, global = true, default_value_t = 1)]
@@ -99,15 +99,6 @@ enum Command {
     },
     /// Clear an alarm once its cause is gone.
     Reset,
-}
-
-fn parse_rate(s: &str) -> Result<f64, String> {
-    let r: f64 = s.parse().map_err(|e| format!("{s}: {e}"))?;
-    if (0.0..=1.0).contains(&r) {
-        Ok(r)
-    } else {
-        Err(format!("{s}: a rate is between 0 and 1"))
-    }
 }
 
 fn main() {
@@ -206,7 +197,6 @@ fn run(args: &Args) -> Result<i32, Failure> {
             record_path: args.plot.is_some(),
             plants,
             inject: args.inject.clone(),
-            home_first: args.home,
         },
         link,
         home: args.home,
@@ -245,7 +235,7 @@ fn run_program(
     let mut op = Operator::new(Progress::new(style, blocks.len()), interrupts, keys);
     op.auto_resume = args.check || matches!(opts.target, Target::Sim);
     let result = if args.check {
-        job::check(machine, program, &opts.sim, &mut op)
+        job::check(machine, program, opts, &mut op)
     } else {
         job::run_blocks(
             machine,

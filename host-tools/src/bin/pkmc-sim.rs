@@ -22,7 +22,7 @@ struct Args {
     flash: Option<PathBuf>,
     /// Corrupt, drop or duplicate each byte on the line with this probability (both
     /// directions).
-    #[arg(long, value_name = "RATE", value_parser = parse_rate)]
+    #[arg(long, value_name = "RATE", value_parser = pkmc_host::faults::parse_rate)]
     link_faults: Option<f64>,
     /// Seed of the fault generator.
     #[arg(long, default_value_t = 1)]
@@ -30,15 +30,6 @@ struct Args {
     /// Inject a fault at a simulated time, KIND[:JOINT]@SECONDS (as `nc-send --inject`).
     #[arg(long, value_name = "FAULT@SECONDS")]
     inject: Vec<pkmc_host::sim::Injection>,
-}
-
-fn parse_rate(s: &str) -> Result<f64, String> {
-    let r: f64 = s.parse().map_err(|e| format!("{s}: {e}"))?;
-    if (0.0..=1.0).contains(&r) {
-        Ok(r)
-    } else {
-        Err(format!("{s}: a rate is between 0 and 1"))
-    }
 }
 
 fn main() -> anyhow::Result<()> {
