@@ -82,6 +82,8 @@ fn run(machine: &MachineConfig, blocks: &[Block], n: usize) {
     let port = PortTransport::open(&server.port_path).expect("pty opens");
     let mut link = Link::connect(port, machine, LinkOptions::default()).expect("handshake");
     let mut clock = Clock { all_accepted: None };
+    // A fresh controller is locked after its reset: unlock it where it stands.
+    pkmc_host::job::prepare(&mut link, false, true, &mut clock).expect("unlocked");
     let t0 = Instant::now();
     let end = link.run_job(blocks, &mut clock).expect("the job runs");
     let t_end = t0.elapsed();
