@@ -32,7 +32,9 @@
 //! tripped servo loop disables its own amplifier. Blocks are planned as they are
 //! queued ([`crate::planner`]); control commands bypass the queue.
 
-use crate::config::{ConfigError, Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS, MAX_STEPPERS};
+use crate::config::{
+    ConfigError, Drive, FastScale, MachineConfig, MAX_JOINTS, MAX_SERVOS, MAX_STEPPERS,
+};
 use crate::homing::{HomeEvent, HomeInputs, Homer};
 use crate::interp::{Event, Executor};
 use crate::kinematics::{Joints, Kinematics, MachineKinematics, Unreachable};
@@ -42,7 +44,7 @@ use crate::protocol::{
     HostMsg, Motion, NakReason, Pushed, State, Status, MAX_BODY, MAX_FRAME, NO_JOINT,
     PROTOCOL_VERSION,
 };
-use crate::servo::{target_q16, Trip, SETPOINT_FRAC_BITS};
+use crate::servo::{Trip, SETPOINT_FRAC_BITS};
 use crate::stepper::{StepScheduler, StepTrain};
 use crate::units::TICK_HZ;
 
@@ -127,6 +129,8 @@ pub struct Controller {
     homer: Homer,
     /// Joint of each servo channel.
     servo_joint: [u8; MAX_SERVOS],
+    /// Each joint's scale, with its reciprocal (no division per tick).
+    fast: [FastScale; MAX_JOINTS],
     state: State,
     alarm: Option<Alarm>,
     /// Locked after a reset: neither homed nor unlocked.
@@ -193,6 +197,10 @@ impl Controller {
                 servo_joint[channel as usize] = j as u8;
             }
         }
+        let mut fast = [crate::config::Scale::new(1, 1).fast(); MAX_JOINTS];
+        for (f, jc) in fast.iter_mut().zip(&machine.joints) {
+            *f = jc.scale.fast();
+        }
         let machine_for_id = machine.clone();
         let mut c = Self {
             machine,
@@ -216,6 +224,7 @@ impl Controller {
             trains: [StepTrain::default(); MAX_JOINTS],
             homer: Homer::default(),
             servo_joint,
+            fast,
             state: State::Alarm,
             alarm: Some(UNHOMED),
             locked: true,
@@ -885,7 +894,7 @@ impl Controller {
     /// Actuator reference of joint `j` (steps or encoder counts) for the position
     /// `q`, counts × 2^16.
     fn actuator_q16(&self, j: usize, q: i64) -> i64 {
-        target_q16(&self.machine.joints[j].scale, q) + (self.offset[j] << SETPOINT_FRAC_BITS)
+        self.fast[j].steps_at_frac(q, SETPOINT_FRAC_BITS) + (self.offset[j] << SETPOINT_FRAC_BITS)
     }
 
     /// Re-bases joint `j`: the actuator reading `reference` (steps or counts) is the
@@ -1000,8 +1009,8 @@ impl Controller {
             self.fresh = false;
             for (j, jc) in self.machine.joints.iter().enumerate() {
                 if let Drive::Servo { channel } = jc.drive {
-                    self.offset[j] =
-                        inputs.encoder_counts[channel as usize] - jc.scale.steps_at(self.joints[j]);
+                    self.offset[j] = inputs.encoder_counts[channel as usize]
+                        - self.fast[j].steps_at(self.joints[j]);
                 }
             }
             self.out.servo_reset = true;

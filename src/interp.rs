@@ -173,7 +173,7 @@ impl Executor {
             Some(a) => match a.profile {
                 None => a.dwell_left as f32,
                 Some(p) if p.t2 == HELD => 0.0,
-                Some(p) => from_q32((p.duration() - a.t).max(0)) as f32,
+                Some(p) => from_q32((p.duration() - a.t).max(0)),
             },
         }
     }
@@ -211,13 +211,13 @@ impl Executor {
             Kind::Rapid | Kind::Feed => {
                 let target = planner.first_entry_target();
                 let (p, got) = Profile::plan(
-                    b.path.length as f64,
-                    b.entry as f64,
-                    planner.cap(&b) as f64,
-                    target as f64,
-                    b.accel as f64,
+                    b.path.length as f32,
+                    b.entry,
+                    planner.cap(&b),
+                    target,
+                    b.accel,
                 );
-                planner.set_first_entry(got.exit as f32);
+                planner.set_first_entry(got.exit);
                 self.block_start = self.s_raw;
                 if let Some(f) = self.smoothing.as_mut() {
                     if f.hist.is_full() {
@@ -255,18 +255,18 @@ impl Executor {
         };
         let (s, v) = p.at(a.t);
         a.s_base += s;
-        let left = ((a.block.path.length << 16) - a.s_base).max(0) as f64 / 65_536.0;
+        let left = ((a.block.path.length << 16) - a.s_base).max(0) as f32 / 65_536.0;
         let target = planner.first_entry_target();
         let (np, got) = Profile::plan(
             left,
             from_q32(v),
-            planner.cap(&a.block) as f64,
-            target as f64,
-            a.block.accel as f64,
+            planner.cap(&a.block),
+            target,
+            a.block.accel,
         );
         a.profile = Some(np);
         a.t = 0;
-        planner.set_first_entry(got.exit as f32);
+        planner.set_first_entry(got.exit);
     }
 
     /// Advances one tick; returns an event when one stops execution at rest.

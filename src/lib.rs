@@ -23,6 +23,7 @@ pub mod geometry;
 pub mod homing;
 pub mod interp;
 pub mod kinematics;
+pub mod math;
 pub mod planner;
 pub mod profile;
 pub mod protocol;

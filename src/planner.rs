@@ -34,6 +34,7 @@
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
 use crate::geometry::{GeometryError, Path};
 use crate::kinematics::{Kinematics, MachineKinematics, Unreachable};
+use crate::math::{fmax, fmin};
 use crate::protocol::{Aux, Block, Motion};
 use crate::units::TICK_HZ;
 
@@ -188,7 +189,7 @@ impl Planner {
         }
         match b.kind {
             Kind::Rapid => b.v_limit,
-            Kind::Feed => (b.feed * self.feed_override as f32 / 100.0).min(b.v_limit),
+            Kind::Feed => fmin(b.feed * self.feed_override as f32 / 100.0, b.v_limit),
             _ => 0.0,
         }
     }
@@ -245,7 +246,7 @@ impl Planner {
         // Path tolerance (G64 P): between two tick samples the tool moves in a
         // straight line, which cuts a corner taken at v (nm/tick) by v·|Δu|/4 at most
         // (the corner half-way through a tick); keep that within the tolerance.
-        let du = libm::sqrtf(
+        let du = crate::math::sqrtf(
             (0..3)
                 .map(|i| {
                     let d = start_tangent[i] - self.end_tangent[i];
@@ -318,7 +319,7 @@ impl Planner {
         } else {
             self.cap(self.at(i - 1))
         };
-        b.corner.min(self.cap(b)).min(prev_cap)
+        fmin(fmin(b.corner, self.cap(b)), prev_cap)
     }
 
     /// Runs the reverse and forward passes over the queue.
@@ -332,8 +333,8 @@ impl Planner {
         for i in (0..self.queue.len()).rev() {
             let limit = self.entry_limit(i);
             let b = self.at_mut(i);
-            let reach = libm::sqrtf(next_entry * next_entry + 2.0 * b.accel * b.length());
-            b.entry = limit.min(reach);
+            let reach = crate::math::sqrtf(next_entry * next_entry + 2.0 * b.accel * b.length());
+            b.entry = fmin(limit, reach);
             next_entry = b.entry;
         }
     }
@@ -349,10 +350,10 @@ impl Planner {
                 let b = self.at(i);
                 (b.entry, b.accel, b.length())
             };
-            let hi = libm::sqrtf(e * e + 2.0 * a * len);
-            let lo = libm::sqrtf((e * e - 2.0 * a * len).max(0.0));
+            let hi = crate::math::sqrtf(e * e + 2.0 * a * len);
+            let lo = crate::math::sqrtf(fmax(e * e - 2.0 * a * len, 0.0));
             let nb = self.at_mut(i + 1);
-            nb.entry = nb.entry.min(hi).max(lo);
+            nb.entry = fmax(fmin(nb.entry, hi), lo);
         }
     }
 
@@ -381,7 +382,7 @@ impl Planner {
                 Kind::Dwell(n) => n as f32,
                 Kind::Rapid | Kind::Feed => {
                     let exit = self.queue.get(i + 1).map_or(0.0, |n| n.entry);
-                    let v = self.cap(b).max(b.entry).max(exit);
+                    let v = fmax(fmax(self.cap(b), b.entry), exit);
                     let v_mean = ((b.entry + exit) / 2.0 + v) / 2.0;
                     if v_mean > 0.0 {
                         b.length() / v_mean
@@ -492,7 +493,7 @@ fn limits_along(
                 a = a.min(if curved { amax / (2.0 * d1) } else { amax / d1 });
             }
             if curved {
-                v = v.min(libm::sqrtf(amax / (2.0 * d2)));
+                v = v.min(crate::math::sqrtf(amax / (2.0 * d2)));
             }
         }
     }
@@ -500,7 +501,7 @@ fn limits_along(
         // Half the acceleration for the tangential profile, half for the centripetal
         // v²/r: an axis then never sees more than a.
         a /= 2.0;
-        v = v.min(libm::sqrtf(a * r as f32));
+        v = v.min(crate::math::sqrtf(a * r as f32));
     }
     // Single-precision planning rounds to about 10⁻⁷: stay that far inside.
     Ok((v * LIMIT_MARGIN, a * LIMIT_MARGIN))

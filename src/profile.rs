@@ -9,50 +9,51 @@
 //! Representation (all fixed point, chosen here once): time in ticks Q32.32 (`i64`),
 //! speed in nm/tick Q32.32, acceleration in nm/tick² Q24.40 (fine enough that a·t²/2
 //! stays exact to 10⁻⁴ nm over ten thousand ticks), distance in nm Q47.16.
-//! Planning the phases uses `f64` once per block; evaluating a tick uses integer
+//!
+//! Planning the phases uses `f32` (the Cortex-M4F's hardware floats: no software
+//! `f64`, no division of wide integers) once per block, then fixes the phases up in
+//! fixed point so that the profile is continuous whatever the single-precision
+//! rounding: the cruise speed is the first phase's end speed (v₀ + a₁·t₁, exact), the
+//! exit speed is the cruise speed less the last phase's (v_c − A·t₃, exact), and the
+//! cruise time is refined by one correction step until the cruise ends where the last
+//! phase begins (to a fraction of a nanometre). Evaluating a tick uses integer
 //! multiplies only. The last phase is evaluated backwards from the block's end
-//! (s = S − (v₁·r + A·r²/2), r the time left), so the block ends exactly at S whatever
-//! the rounding of the phase times.
+//! (s = S − (v₁·r + A·r²/2), r the time left), so the block ends exactly at S.
 //!
 //! Sampling a continuous profile whose speed changes at most A per unit time gives
 //! per-tick speed differences of at most A·T (each tick's displacement is the integral
 //! of the speed over the tick), so the discrete motion keeps the limits too.
+
+use crate::math::{fmax, fmin, sqrtf};
 
 /// One tick in Q32.32.
 pub const TICK_Q32: i64 = 1 << 32;
 /// A cruise that never ends: the block is held at rest (feed hold).
 pub const HELD: i64 = i64::MAX / 4;
 
-/// Converts a speed or time in `f64` to Q32.32, saturating.
-pub fn to_q32(v: f64) -> i64 {
-    let x = v * 4_294_967_296.0;
-    if x >= i64::MAX as f64 {
-        i64::MAX
-    } else if x <= i64::MIN as f64 {
-        i64::MIN
-    } else {
-        libm::round(x) as i64
-    }
+/// 2³², 2⁴⁰ and 2¹⁶ as `f32` (exact).
+const Q32F: f32 = 4_294_967_296.0;
+const Q40F: f32 = 1_099_511_627_776.0;
+const Q16F: f32 = 65_536.0;
+
+/// Converts a speed or time in `f32` to Q32.32 (saturating; NaN gives 0).
+pub fn to_q32(v: f32) -> i64 {
+    (v * Q32F) as i64
 }
 
-/// Converts Q32.32 to `f64`.
-pub fn from_q32(v: i64) -> f64 {
-    v as f64 / 4_294_967_296.0
+/// Converts Q32.32 to `f32`.
+pub fn from_q32(v: i64) -> f32 {
+    v as f32 * (1.0 / Q32F)
 }
 
-/// Converts an acceleration in `f64` to Q24.40, saturating.
-pub fn to_q40(a: f64) -> i64 {
-    let x = a * 1_099_511_627_776.0;
-    if x >= i64::MAX as f64 {
-        i64::MAX
-    } else if x <= i64::MIN as f64 {
-        i64::MIN
-    } else {
-        libm::round(x) as i64
-    }
+/// Converts an acceleration in `f32` to Q24.40 (saturating).
+pub fn to_q40(a: f32) -> i64 {
+    (a * Q40F) as i64
 }
 
-/// `v·t + a·t²/2` for Q32.32 `v` and `t` and Q24.40 `a`; result in nm Q16.
+/// `v·t + a·t²/2` for Q32.32 `v` and `t` and Q24.40 `a`; result in nm Q16. Not
+/// inlined: the planner's fix-ups call it several times (flash).
+#[inline(never)]
 fn distance(v: i64, t: i64, a: i64) -> i64 {
     let vt = (v as i128 * t as i128) >> 48;
     let at = (a as i128 * t as i128) >> 40;
@@ -90,79 +91,136 @@ pub struct Profile {
 pub struct Achieved {
     /// Exit speed actually reached (higher than asked when the block is too short to
     /// slow down, lower when too short to speed up).
-    pub exit: f64,
+    pub exit: f32,
 }
 
 impl Profile {
     /// Plans a profile over `length` nm from `v0` toward `v_max`, leaving at `v1`, with
     /// acceleration `a` (speeds nm/tick, accel nm/tick², all ≥ 0, `a` > 0). `v_max`
     /// = 0 with `v1` = 0 means "stop as soon as possible and hold" when `v0` > 0.
-    pub fn plan(length: f64, v0: f64, v_max: f64, v1: f64, a: f64) -> (Profile, Achieved) {
-        let length = length.max(0.0);
-        let a = a.max(1e-12);
-        let (v0, v_max) = (v0.max(0.0), v_max.max(0.0));
-        let mut v1 = v1.max(0.0);
+    pub fn plan(length: f32, v0: f32, v_max: f32, v1: f32, a: f32) -> (Profile, Achieved) {
+        let length = fmax(length, 0.0);
+        let a = fmax(a, 1e-12);
+        let (v0, v_max) = (fmax(v0, 0.0), fmax(v_max, 0.0));
+        let mut v1 = fmax(v1, 0.0);
+        let two_a_s = 2.0 * a * length;
         // Exit speed the block can reach at all from v0 over its length.
-        let reach_hi = libm::sqrt(v0 * v0 + 2.0 * a * length);
-        let reach_lo = libm::sqrt((v0 * v0 - 2.0 * a * length).max(0.0));
-        // max/min rather than clamp: see `Planner::push`.
-        #[allow(clippy::manual_clamp)]
-        {
-            v1 = v1.min(v_max).max(reach_lo).min(reach_hi);
-        }
-        let hold = v_max <= 0.0 && v1 <= 0.0 && v0 * v0 < 2.0 * a * length;
-        let (vc, a1, t1, t2, t3);
-        if hold {
+        let reach_hi = sqrtf(v0 * v0 + two_a_s);
+        let reach_lo = sqrtf(fmax(v0 * v0 - two_a_s, 0.0));
+        v1 = fmin(fmax(fmin(v1, v_max), reach_lo), reach_hi);
+        let length_q16 = (length * Q16F) as i64;
+        let a_q = to_q40(a);
+        let v0_q = to_q32(v0);
+        if v_max <= 0.0 && v1 <= 0.0 && v0 * v0 < two_a_s {
             // Decelerate to rest inside the block and stay there.
-            vc = 0.0;
-            a1 = -a;
-            t1 = v0 / a;
-            t2 = f64::INFINITY;
-            t3 = 0.0;
-        } else {
-            // Highest speed reachable between v0 and v1 over the length.
-            let peak = libm::sqrt(((2.0 * a * length + v0 * v0 + v1 * v1) / 2.0).max(0.0));
-            let top = if v0 > v_max {
-                v_max.max(v1)
-            } else {
-                peak.min(v_max).max(v0).max(v1)
+            let t1 = to_q32(v0 / a);
+            let p = Profile {
+                v0: v0_q,
+                a1: -a_q,
+                t1,
+                vc: 0,
+                t2: HELD,
+                v1: 0,
+                a3: a_q,
+                t3: 0,
+                s1: distance(v0_q, t1, -a_q),
+                length: length_q16,
             };
-            let first = (top * top - v0 * v0).abs() / (2.0 * a);
-            let last = (top * top - v1 * v1) / (2.0 * a);
-            if first + last <= length * (1.0 + 1e-12) {
-                vc = top;
-                a1 = if top >= v0 { a } else { -a };
-                t1 = (top - v0).abs() / a;
-                t3 = (top - v1) / a;
-                let cruise = (length - first - last).max(0.0);
-                t2 = if vc > 0.0 { cruise / vc } else { 0.0 };
-            } else {
-                // Entered too fast to reach v_max and then v1: decelerate throughout.
-                vc = v0;
-                a1 = 0.0;
-                t1 = 0.0;
-                t2 = 0.0;
-                t3 = (v0 - v1).max(0.0) / a;
-            }
+            return (p, Achieved { exit: 0.0 });
         }
-        let p = Profile {
-            v0: to_q32(v0),
-            a1: to_q40(a1),
-            t1: to_q32(t1),
-            vc: to_q32(vc),
-            t2: if t2.is_finite() {
-                to_q32(t2).min(HELD)
-            } else {
-                HELD
-            },
-            v1: to_q32(v1),
-            a3: to_q40(a),
-            t3: to_q32(t3),
-            s1: 0,
-            length: (length * 65_536.0) as i64,
+        // Highest speed reachable between v0 and v1 over the length, a hair under
+        // (10⁻⁶) so that single-precision rounding leaves the ramps a little room
+        // rather than overlapping them.
+        let peak = sqrtf(fmax((two_a_s + v0 * v0 + v1 * v1) / 2.0, 0.0)) * (1.0 - 1e-6);
+        let top = if v0 > v_max {
+            fmax(v_max, v1)
+        } else {
+            fmax(fmax(fmin(peak, v_max), v0), v1)
         };
-        let s1 = distance(p.v0, p.t1, p.a1);
-        (Profile { s1, ..p }, Achieved { exit: v1 })
+        let first = (top * top - v0 * v0).abs() / (2.0 * a);
+        let last = (top * top - v1 * v1) / (2.0 * a);
+        let (a1, t1, t3) = if first + last <= length {
+            let a1 = if top >= v0 { a_q } else { -a_q };
+            // A hair short (the quotient's rounding is within 2⁻²²), so that the first
+            // phase never ends beyond the top speed.
+            let t1 = to_q32((top - v0).abs() / a * (1.0 - 3e-7));
+            (a1, t1, to_q32(fmax(top - v1, 0.0) / a))
+        } else {
+            // Entered too fast to reach v_max and then v1: decelerate throughout, over
+            // a hair less than the length (the rest is a cruise at v0), the time from
+            // the form without cancellation: (v0 − v1)/a = 2·s/(v0 + v1).
+            let shed = two_a_s * (1.0 - 2e-6);
+            let v1 = fmax(v1, sqrtf(fmax(v0 * v0 - shed, 0.0)));
+            let s = fmin((v0 * v0 - v1 * v1) / (2.0 * a), shed / (2.0 * a));
+            (0, 0, to_q32(2.0 * fmax(s, 0.0) / fmax(v0 + v1, 1e-30)))
+        };
+        // Continuity in fixed point: the cruise speed is where the first phase ends,
+        // the exit where the last phase, run backwards from the cruise, ends.
+        let vc = v0_q + ((a1 as i128 * t1 as i128) >> 40) as i64;
+        let mut t3 = t3;
+        let mut v1_q = vc - ((a_q as i128 * t3 as i128) >> 40) as i64;
+        if v1_q < 0 {
+            // Rounding overshot the stop: the last phase ends exactly at rest.
+            t3 = to_q32(from_q32(vc) / a);
+            v1_q = (vc - ((a_q as i128 * t3 as i128) >> 40) as i64).max(0);
+        }
+        let s1 = distance(v0_q, t1, a1);
+        let mut s3 = distance(v1_q, t3, a_q);
+        let mut rem = length_q16 - s1 - s3;
+        // Ramps that overlap by rounding (a difference of nearly equal speeds): a
+        // Newton step on the last phase's time, at fixed cruise speed (ds₃/dt₃ = v₁),
+        // lands just short of the overlap, since s₃(t₃) is concave.
+        // With no last phase to shorten, the same on the first phase's time
+        // (ds₁/dt₁ = v_c; the exit is then the new cruise speed).
+        let (mut t1, mut vc, mut s1) = (t1, vc, s1);
+        for _ in 0..3 {
+            if rem >= 0 {
+                break;
+            }
+            let over = rem as f32 * (1.0 / Q16F);
+            if v1_q > 0 && t3 > 0 {
+                t3 = (t3 + to_q32(over / from_q32(v1_q))).max(0);
+            } else if vc > 0 && t1 > 0 {
+                t1 = (t1 + to_q32(over / from_q32(vc))).max(0);
+                vc = v0_q + ((a1 as i128 * t1 as i128) >> 40) as i64;
+                s1 = distance(v0_q, t1, a1);
+            } else {
+                break;
+            }
+            v1_q = (vc - ((a_q as i128 * t3 as i128) >> 40) as i64).max(0);
+            s3 = distance(v1_q, t3, a_q);
+            rem = length_q16 - s1 - s3;
+        }
+        // The cruise covers what the ramps leave: t2 = rem / vc, refined once so that
+        // the cruise ends where the last phase starts (single-precision estimate,
+        // then its error, measured exactly, corrected).
+        let t2 = if rem <= 0 || vc <= 0 {
+            0
+        } else {
+            // Ticks Q32 per nm at the cruise speed.
+            let inv_vc = Q32F / from_q32(vc);
+            let est = (rem as f32 * (1.0 / Q16F) * inv_vc) as i64;
+            let err = rem - ((vc as i128 * est as i128) >> 48) as i64;
+            (est + (err as f32 * (1.0 / Q16F) * inv_vc) as i64).max(0)
+        };
+        let p = Profile {
+            v0: v0_q,
+            a1,
+            t1,
+            vc,
+            t2: t2.min(HELD),
+            v1: v1_q,
+            a3: a_q,
+            t3,
+            s1,
+            length: length_q16,
+        };
+        (
+            p,
+            Achieved {
+                exit: from_q32(v1_q),
+            },
+        )
     }
 
     /// Total duration, ticks Q32 (≥ [`HELD`] when held).
@@ -198,6 +256,10 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
+    fn q32(v: i64) -> f64 {
+        v as f64 / 4_294_967_296.0
+    }
+
     /// Samples positions (nm) every tick until the profile ends (or `max` ticks), then
     /// two ticks more of the continuation at the exit speed.
     fn samples(p: &Profile, max: i64) -> Vec<f64> {
@@ -205,7 +267,7 @@ mod tests {
         (0..=end.min(max))
             .map(|k| {
                 let t = k << 32;
-                let over = from_q32((t - p.duration()).max(0)) * from_q32(p.v1);
+                let over = q32((t - p.duration()).max(0)) * q32(p.v1);
                 p.at(t).0 as f64 / 65_536.0 + over
             })
             .collect()
@@ -218,7 +280,12 @@ mod tests {
         assert_eq!(got.exit, 0.0);
         assert_eq!(p.at(p.duration()).0, p.length);
         assert_eq!(p.at(p.duration() + TICK_Q32).0, p.length);
-        assert!((from_q32(p.duration()) - 2100.0).abs() < 1e-6);
+        // Single-precision planning: within a microsecond.
+        assert!(
+            (q32(p.duration()) - 2100.0).abs() < 1e-3,
+            "{}",
+            q32(p.duration())
+        );
     }
 
     #[test]
@@ -244,11 +311,14 @@ mod tests {
             length in 1.0f64..2e9, v0 in 0.0f64..2e5, vmax in 1.0f64..2e5, v1 in 0.0f64..2e5,
             a in 0.5f64..2000.0,
         ) {
+            // The profile plans in single precision: check it against what it was given.
+            let [length, v0, vmax, v1, a] = [length, v0, vmax, v1, a].map(|x| x as f32);
             let (p, got) = Profile::plan(length, v0, vmax, v1, a);
+            let [v0, vmax, a] = [v0, vmax, a].map(f64::from);
             prop_assume!(p.duration() < 4_000_000 * TICK_Q32);
             let x = samples(&p, 4_000_000);
             prop_assert_eq!(p.at(p.duration()).0, p.length);
-            let top = vmax.max(v0).max(got.exit);
+            let top = vmax.max(v0).max(got.exit as f64);
             let mut prev = v0;
             for w in x.windows(2) {
                 let v = w[1] - w[0];

@@ -20,7 +20,7 @@
 //! in [`StepScheduler::lagged_ticks`]. Edges of consecutive ticks are at least one
 //! interval apart because each train leaves half an interval free at both ends.
 
-use crate::config::{Drive, JointConfig, StepTiming, MAX_JOINTS};
+use crate::config::{Drive, FastScale, JointConfig, Scale, StepTiming, MAX_JOINTS};
 use crate::units::TICK_NS;
 
 /// One tick's step train for one joint; times are from the start of the tick.
@@ -58,6 +58,8 @@ pub struct StepScheduler {
     /// Steps added to each joint's position in steps (set by homing: the drive's step
     /// count where the joint position is zero).
     pub offset: [i64; MAX_JOINTS],
+    /// Each joint's scale with its reciprocal (no division per tick).
+    fast: [FastScale; MAX_JOINTS],
 }
 
 impl StepScheduler {
@@ -67,13 +69,20 @@ impl StepScheduler {
             emitted: 0,
             forward: None,
         }; MAX_JOINTS];
-        for (c, (jc, q)) in channels.iter_mut().zip(config.iter().zip(joints)) {
+        let mut fast = [Scale::new(1, 1).fast(); MAX_JOINTS];
+        for ((c, f), (jc, q)) in channels
+            .iter_mut()
+            .zip(fast.iter_mut())
+            .zip(config.iter().zip(joints))
+        {
             c.emitted = jc.scale.steps_at(*q);
+            *f = jc.scale.fast();
         }
         Self {
             channels,
             lagged_ticks: 0,
             offset: [0; MAX_JOINTS],
+            fast,
         }
     }
 
@@ -96,7 +105,7 @@ impl StepScheduler {
                 continue;
             };
             let ch = &mut self.channels[j];
-            let want = jc.scale.steps_at(joints[j]) + self.offset[j] - ch.emitted;
+            let want = self.fast[j].steps_at(joints[j]) + self.offset[j] - ch.emitted;
             if want == 0 {
                 out[j].forward = ch.forward.unwrap_or(true);
                 continue;

@@ -1,0 +1,218 @@
+//! Arithmetic the Cortex-M4F does in hardware, or exactly without a division.
+//!
+//! On the controller's processor `f64`, 64/128-bit division and `libm`'s square roots
+//! are software routines costing hundreds to thousands of cycles each; the tick and
+//! receive paths use these instead:
+//!
+//! * [`sqrtf`]: the FPU's `vsqrt.f32` on the MCU, `libm::sqrtf` elsewhere. Both are
+//!   IEEE 754 correctly rounded, so host and MCU compute the same bits.
+//! * [`Recip`]: division by an invariant 64-bit divisor through a reciprocal formed
+//!   once (Möller & Granlund, "Improved division by invariant integers", IEEE Trans.
+//!   Computers 60(2), 2011, algorithm 4): one 64×64→128 multiply, one 64×64 multiply
+//!   and two corrections give the exact quotient and remainder. Joint scales divide by
+//!   the same numbers every tick, so each gets its reciprocal when the machine loads.
+//! * [`fmin`], [`fmax`]: comparisons inline (ARMv7E-M has no `vminnm`; `f32::min`
+//!   would call a library routine). Neither argument is ever NaN where they are used.
+
+/// Square root, correctly rounded (the FPU's `vsqrt.f32` on the MCU).
+#[inline(always)]
+pub fn sqrtf(x: f32) -> f32 {
+    #[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+    {
+        // SAFETY: `pkmc_vsqrt` (below) follows the hard-float procedure-call standard:
+        // argument and result in s0, nothing else touched.
+        unsafe { pkmc_vsqrt(x) }
+    }
+    #[cfg(not(all(target_arch = "arm", target_abi = "eabihf")))]
+    {
+        libm::sqrtf(x)
+    }
+}
+
+// Rust's inline assembly offers single-precision registers only with the
+// double-precision `vfp2` feature, which the Cortex-M4F lacks: a two-instruction
+// function instead (AAPCS-VFP: the argument and the result in s0).
+#[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+core::arch::global_asm!(
+    ".section .text.pkmc_vsqrt,\"ax\",%progbits",
+    ".global pkmc_vsqrt",
+    ".type pkmc_vsqrt,%function",
+    ".thumb_func",
+    ".fpu fpv4-sp-d16",
+    "pkmc_vsqrt:",
+    "vsqrt.f32 s0, s0",
+    "bx lr",
+    ".size pkmc_vsqrt, . - pkmc_vsqrt",
+);
+
+#[cfg(all(target_arch = "arm", target_abi = "eabihf"))]
+extern "C" {
+    fn pkmc_vsqrt(x: f32) -> f32;
+}
+
+/// The smaller of two numbers (not NaN).
+#[inline(always)]
+pub fn fmin(a: f32, b: f32) -> f32 {
+    if b < a {
+        b
+    } else {
+        a
+    }
+}
+
+/// The larger of two numbers (not NaN).
+#[inline(always)]
+pub fn fmax(a: f32, b: f32) -> f32 {
+    if b > a {
+        b
+    } else {
+        a
+    }
+}
+
+/// Exact division by a fixed divisor `d` > 0 without a division instruction.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Recip {
+    /// The divisor shifted left until its top bit is set.
+    norm: u64,
+    /// That shift.
+    shift: u32,
+    /// ⌊(2¹²⁸ − 1) / norm⌋ − 2⁶⁴.
+    inv: u64,
+    /// The divisor.
+    d: u64,
+}
+
+impl Recip {
+    /// The reciprocal of `d` (0 is taken as 1). Divides once, in software: call it
+    /// when a machine loads, not per tick.
+    #[inline(never)]
+    pub const fn new(d: u64) -> Self {
+        let d = if d == 0 { 1 } else { d };
+        let shift = d.leading_zeros();
+        let norm = d << shift;
+        let inv = (u128::MAX / norm as u128 - (1u128 << 64)) as u64;
+        Self {
+            norm,
+            shift,
+            inv,
+            d,
+        }
+    }
+
+    /// The divisor.
+    pub const fn divisor(&self) -> u64 {
+        self.d
+    }
+
+    /// ⌊n / d⌋ and n mod d, for n < d·2⁶⁴ (the quotient fits in 64 bits); larger
+    /// numerators take the software division. Not inlined: one copy serves every
+    /// joint (flash), at the cost of a call.
+    #[inline(never)]
+    pub fn div_rem(&self, n: u128) -> (u64, u64) {
+        if (n >> 64) as u64 >= self.d {
+            return ((n / self.d as u128) as u64, (n % self.d as u128) as u64);
+        }
+        // n < d·2⁶⁴ < 2^(128 − shift): the shift loses nothing, and u1 < norm.
+        let n = n << self.shift;
+        let (u1, u0) = ((n >> 64) as u64, n as u64);
+        let p = (self.inv as u128 * u1 as u128).wrapping_add(((u1 as u128 + 1) << 64) | u0 as u128);
+        let (mut q, low) = ((p >> 64) as u64, p as u64);
+        let mut r = u0.wrapping_sub(q.wrapping_mul(self.norm));
+        if r > low {
+            q = q.wrapping_sub(1);
+            r = r.wrapping_add(self.norm);
+        }
+        if r >= self.norm {
+            q += 1;
+            r -= self.norm;
+        }
+        (q, r >> self.shift)
+    }
+
+    /// `n / d` rounded to nearest, ties away from zero (as
+    /// [`crate::units::div_round`]); the quotient must fit in `i64`.
+    #[inline]
+    pub fn div_round(&self, n: i128) -> i64 {
+        let (q, _) = self.div_rem(n.unsigned_abs() + (self.d / 2) as u128);
+        if n < 0 {
+            -(q as i64)
+        } else {
+            q as i64
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn division_is_exact_at_the_edges() {
+        for d in [
+            1u64,
+            2,
+            3,
+            7,
+            1000,
+            2500,
+            20_000_000,
+            u64::MAX / 3,
+            u64::MAX,
+        ] {
+            let r = Recip::new(d);
+            for n in [
+                0u128,
+                1,
+                d as u128 - 1,
+                d as u128,
+                d as u128 + 1,
+                (d as u128) << 32,
+                (d as u128) * (u64::MAX as u128) + (d as u128 - 1),
+            ] {
+                assert_eq!(
+                    r.div_rem(n),
+                    ((n / d as u128) as u64, (n % d as u128) as u64),
+                    "{n} / {d}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn rounding_matches_the_reference() {
+        let r = Recip::new(2);
+        assert_eq!(r.div_round(5), 3);
+        assert_eq!(r.div_round(-5), -3);
+        let r = Recip::new(3);
+        assert_eq!(r.div_round(4), 1);
+        assert_eq!(r.div_round(-4), -1);
+    }
+
+    proptest! {
+        #[test]
+        fn quotient_and_remainder_are_exact(d in 1u64.., q in any::<u64>(), rem in any::<u64>()) {
+            let n = q as u128 * d as u128 + (rem % d) as u128;
+            prop_assert_eq!(Recip::new(d).div_rem(n), (q, rem % d));
+        }
+
+        #[test]
+        fn rounding_agrees_with_div_round(
+            d in 1u64..1u64 << 40, q in -(1i64 << 62)..(1i64 << 62), off in any::<u64>(),
+        ) {
+            let n = q as i128 * d as i128 + (off % d) as i128;
+            prop_assert_eq!(
+                Recip::new(d).div_round(n) as i128,
+                crate::units::div_round(n, d as i128)
+            );
+        }
+
+        #[test]
+        fn square_roots_are_correctly_rounded(x in 0.0f32..1e30) {
+            let r = sqrtf(x) as f64;
+            let exact = (x as f64).sqrt();
+            prop_assert!((r - exact).abs() <= exact * 6e-8);
+        }
+    }
+}
