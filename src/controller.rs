@@ -51,7 +51,9 @@ use crate::units::TICK_HZ;
 pub use crate::planner::QUEUE_CAPACITY;
 /// Bytes of outgoing frames buffered between two `transmit` calls.
 pub const TX_CAPACITY: usize = 2048;
-/// Ticks between two unsolicited status messages (50 ms at 1 kHz).
+/// Ticks between two unsolicited status messages (50 ms at 1 kHz). Freed queue slots
+/// are reported at once, by an `Ack` of the last block accepted, in the tick that
+/// frees them.
 pub const STATUS_EVERY_TICKS: u32 = 50;
 /// Ticks without a valid frame from the host, while moving, after which the link is
 /// lost (1 s at 1 kHz; the host asks for a status at least every 100 ms).
@@ -190,7 +192,7 @@ impl Controller {
         let mut exec = Executor::new(pose);
         exec.set_smoothing(machine.motion.smoothing_ticks as u32);
         let mut planner = Planner::new(pose);
-        planner.smoothing = machine.motion.smoothing_ticks as u32;
+        planner.smoothing = crate::interp::window_of(machine.motion.smoothing_ticks as u32);
         let mut servo_joint = [NO_JOINT; MAX_SERVOS];
         for (j, jc) in machine.joints.iter().enumerate() {
             if let Drive::Servo { channel } = jc.drive {
@@ -343,7 +345,7 @@ impl Controller {
     /// [`crate::interp`].
     pub fn set_smoothing(&mut self, window: u32) {
         self.exec.set_smoothing(window);
-        self.planner.smoothing = window.max(1).next_power_of_two();
+        self.planner.smoothing = crate::interp::window_of(window);
     }
 
     /// Feeds bytes received from the link.
@@ -484,7 +486,7 @@ impl Controller {
                 }
                 self.send(&CtrlMsg::ControlAck { id });
             }
-            HostMsg::Block(block) => {
+            HostMsg::Block(planned) => {
                 if !self.session {
                     self.nak(NakReason::NoSession);
                     return;
@@ -509,7 +511,10 @@ impl Controller {
                     self.ack(seq);
                     return;
                 }
-                match self.planner.push(&block, &self.machine, &self.kin) {
+                match self
+                    .planner
+                    .push_planned(&planned, &self.machine, &self.kin)
+                {
                     Ok(()) => {
                         self.expected_seq = seq.wrapping_add(1);
                         self.ack(seq);
@@ -854,6 +859,7 @@ impl Controller {
                 self.state = State::Running;
             }
         }
+        self.exec.retarget(&mut self.planner);
         match self.exec.tick(&mut self.planner) {
             Some(Event::Unreachable { line, why }) => self.raise(alarm_of(why, line)),
             Some(Event::Aux { aux, .. }) => match aux {
@@ -1019,10 +1025,16 @@ impl Controller {
         if self.resync {
             self.resync_servos(inputs);
         }
+        let queued = self.planner.len();
         match self.state {
             State::Homing => self.home_tick(inputs),
             State::Alarm | State::EStop if !self.stopping => {}
             _ => self.motion_tick(),
+        }
+        if self.session && self.planner.len() < queued && self.state != State::Alarm {
+            // Credits as slots free: the host refills within a tick or two instead of
+            // waiting for the next status.
+            self.ack(self.expected_seq.wrapping_sub(1));
         }
         self.steps
             .tick(&self.machine.joints, &self.joints, &mut self.trains);
@@ -1077,14 +1089,38 @@ mod tests {
         out
     }
 
+    /// The host's plan of `blocks` from `start` on `m` (unlimited look-ahead).
+    fn planned(m: &MachineConfig, start: [i64; 6], blocks: &[Block]) -> Vec<HostMsg> {
+        let kin = MachineKinematics::new(m);
+        let mut out = vec![crate::planner::PlanBlock::default(); blocks.len()];
+        crate::planner::plan_into(blocks, start, m, &kin, 1, &mut out).unwrap();
+        blocks
+            .iter()
+            .zip(&out)
+            .map(|(b, p)| {
+                HostMsg::Block(crate::protocol::PlannedBlock {
+                    block: *b,
+                    plan: p.plan(),
+                })
+            })
+            .collect()
+    }
+
+    /// A line along X from X = 0 on the Cartesian machine, planned by the host.
     fn line_to(x_mm: i64, line: u32) -> HostMsg {
-        HostMsg::Block(Block {
+        line_from(0, x_mm, line)
+    }
+
+    fn line_from(from_mm: i64, x_mm: i64, line: u32) -> HostMsg {
+        let b = Block {
             line,
             motion: Motion::Linear,
             target: [x_mm * 1_000_000, 0, 0, 0, 0, 0],
             feed: 50_000_000,
             tolerance_nm: u32::MAX,
-        })
+        };
+        let start = [from_mm * 1_000_000, 0, 0, 0, 0, 0];
+        planned(&MachineConfig::cartesian_xyz(), start, &[b]).remove(0)
     }
 
     fn hello(c: &Controller) -> HostMsg {
@@ -1178,9 +1214,9 @@ mod tests {
             r[1],
             CtrlMsg::Ack {
                 seq: 1,
-                free_slots: 63,
+                free_slots,
                 ..
-            }
+            } if free_slots as usize == QUEUE_CAPACITY - 1
         ));
         run(&mut c, 10_000);
         assert_eq!(c.state(), State::Idle);
@@ -1199,9 +1235,9 @@ mod tests {
             r[2],
             CtrlMsg::Ack {
                 seq: 1,
-                free_slots: 63,
+                free_slots,
                 ..
-            }
+            } if free_slots as usize == QUEUE_CAPACITY - 1
         ));
     }
 
@@ -1234,7 +1270,7 @@ mod tests {
     fn an_unreachable_block_raises_an_alarm_naming_line_and_joint() {
         let mut c = session();
         c.receive(&frame(1, &line_to(50, 41)));
-        c.receive(&frame(2, &line_to(500, 42)));
+        c.receive(&frame(2, &line_from(50, 500, 42)));
         run(&mut c, 5000);
         assert_eq!(c.state(), State::Alarm);
         assert_eq!(
@@ -1538,16 +1574,14 @@ mod tests {
             -45 * deg,
             90 * deg,
         ];
-        c.receive(&frame(
-            1,
-            &HostMsg::Block(Block {
-                line: 1,
-                motion: Motion::Linear,
-                target,
-                feed: 20_000_000,
-                tolerance_nm: 0,
-            }),
-        ));
+        let b = Block {
+            line: 1,
+            motion: Motion::Linear,
+            target,
+            feed: 20_000_000,
+            tolerance_nm: 0,
+        };
+        c.receive(&frame(1, &planned(&m, *c.pose(), &[b])[0]));
         let mut emitted = [0i64; MAX_STEPPERS];
         for t in 0..20_000 {
             if t % 100 == 0 {

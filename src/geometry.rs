@@ -15,9 +15,11 @@
 
 use crate::config::AXES;
 use crate::protocol::{Block, Motion, Plane};
+use serde::{Deserialize, Serialize};
 
-/// Shape of a path.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Shape of a path. Computed by the host ([`Path::new`]) and sent with each block;
+/// the controller checks it against the block ([`Path::from_plan`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Shape {
     /// Straight line; `unit[i]` = Δᵢ/S in Q20.44.
     Line {
@@ -89,6 +91,28 @@ pub enum GeometryError {
     ArcEndOffCircle,
     /// An arc with zero radius.
     ArcWithoutRadius,
+    /// A geometry sent with a block does not describe that block (wrong length,
+    /// direction, centre, sweep or rates).
+    PlanMismatch,
+}
+
+/// How far a host-computed path may miss the block's start or end, axis units (the
+/// host's own rounding is within 2).
+pub const PLAN_SLACK_UNITS: i64 = 8;
+
+/// Is `got` within [`PLAN_SLACK_UNITS`] of `want` on every axis, plus what rounding
+/// the length to a whole unit moves an axis of direction `unit` (Q44) by: |u|/2?
+fn near(got: &[i64; AXES], want: &[i64; AXES], unit: &[i64; AXES]) -> bool {
+    (0..AXES).all(|i| {
+        let slack = PLAN_SLACK_UNITS as u64 + (unit[i].unsigned_abs() >> 45);
+        got[i].wrapping_sub(want[i]).unsigned_abs() <= slack
+    })
+}
+
+/// Does `rate` equal `(x << 16) / len` as [`Path::new`] rounds it (toward zero)?
+fn rate_of(rate: i128, x: i128, len: i64) -> bool {
+    let e = (x << 16).wrapping_sub(rate.wrapping_mul(len as i128));
+    e.unsigned_abs() < len as u128
 }
 
 /// Largest start/end radius difference accepted for an arc, nm (the host checks its
@@ -206,13 +230,147 @@ impl Path {
         }
     }
 
+    /// The path of `block` from `start` with the length and shape the host computed
+    /// ([`Path::new`] on the host), checked without `f64` and without a division:
+    /// lines must have the measured length (within half a unit) and reach the target;
+    /// arcs must have the block's plane, centre, direction and turns, rates that
+    /// match their sweep and radius change, start on the start and reach the target
+    /// (within [`PLAN_SLACK_UNITS`]), and a length matching r̄·|sweep| and the helix
+    /// (to 10⁻⁵).
+    pub fn from_plan(
+        block: &Block,
+        start: &[i64; AXES],
+        length: i64,
+        shape: Shape,
+    ) -> Result<Path, GeometryError> {
+        let end = match block.motion {
+            Motion::Dwell(_) | Motion::Aux(_) => *start,
+            _ => block.target,
+        };
+        let delta: [i64; AXES] = core::array::from_fn(|i| end[i].wrapping_sub(start[i]));
+        let squares = |r: core::ops::Range<usize>| -> u128 {
+            delta[r]
+                .iter()
+                .map(|d| d.unsigned_abs() as u128 * d.unsigned_abs() as u128)
+                .sum()
+        };
+        let point = Path {
+            start: *start,
+            end,
+            length: 0,
+            rotary_only: false,
+            shape: Shape::Point,
+        };
+        let bad = Err(GeometryError::PlanMismatch);
+        match (block.motion, shape) {
+            (Motion::Dwell(_) | Motion::Aux(_), Shape::Point) if length == 0 => Ok(point),
+            (Motion::Rapid | Motion::Linear, Shape::Point) if length == 0 && delta == [0; AXES] => {
+                Ok(point)
+            }
+            (Motion::Rapid | Motion::Linear, Shape::Line { unit }) => {
+                let (lin, rot) = (squares(0..3), squares(3..6));
+                let rotary_only = lin == 0;
+                let sq = if rotary_only { rot } else { lin };
+                // length = round(√sq): (2L − 1)² ≤ 4·sq ≤ (2L + 1)².
+                let l2 = 2 * length.max(0) as u128;
+                if length <= 0
+                    || sq.saturating_mul(4) < (l2 - 1) * (l2 - 1)
+                    || sq.saturating_mul(4) > (l2 + 1) * (l2 + 1)
+                {
+                    return bad;
+                }
+                let p = Path {
+                    length,
+                    rotary_only,
+                    shape,
+                    ..point
+                };
+                let mut at = [0; AXES];
+                p.eval(length << 16, &mut at);
+                if near(&at, &end, &unit) {
+                    Ok(p)
+                } else {
+                    bad
+                }
+            }
+            (
+                Motion::Arc {
+                    center,
+                    plane,
+                    clockwise,
+                    turns,
+                },
+                Shape::Arc {
+                    plane: p_plane,
+                    center: p_center,
+                    r0,
+                    dr,
+                    sweep,
+                    phi_rate,
+                    r_rate,
+                    unit,
+                    ..
+                },
+            ) => {
+                let whole = |n: u32| (n as u128) << 64;
+                let turns_ok = sweep.unsigned_abs() > whole(turns as u32)
+                    && sweep.unsigned_abs() <= whole(turns as u32 + 1);
+                let (i, j, k) = plane.axes();
+                if p_plane != plane
+                    || p_center != center
+                    || length <= 0
+                    || r0 < 1
+                    || r0 + dr < 1
+                    || dr.unsigned_abs() > ARC_RADIUS_SLACK_NM as u64
+                    || clockwise != (sweep < 0)
+                    || !turns_ok
+                    || unit[i] != 0
+                    || unit[j] != 0
+                    || !rate_of(phi_rate, sweep, length)
+                    || !rate_of(r_rate as i128, dr as i128, length)
+                {
+                    return bad;
+                }
+                // Length: √((r̄·|sweep|)² + helix²), to 10⁻⁵ (single precision).
+                let planar = (r0 as f32 + dr as f32 / 2.0)
+                    * (sweep.unsigned_abs() as f32
+                        * (core::f32::consts::TAU / 18_446_744_073_709_551_616.0));
+                let helix = delta[k] as f32;
+                let want = planar * planar + helix * helix;
+                let got = length as f32 * length as f32;
+                if (got - want).abs() > 1e-5 * want + 4.0 * length as f32 {
+                    return bad;
+                }
+                let p = Path {
+                    length,
+                    rotary_only: false,
+                    shape,
+                    ..point
+                };
+                let (mut from, mut to) = ([0; AXES], [0; AXES]);
+                p.eval(0, &mut from);
+                p.eval(length << 16, &mut to);
+                if near(&from, start, &[0; AXES]) && near(&to, &end, &unit) {
+                    Ok(p)
+                } else {
+                    bad
+                }
+            }
+            _ => bad,
+        }
+    }
+
     /// Pose after `s` (nm Q16) along the path; `s ≥ length` gives the exact end.
     pub fn pose_at(&self, s: i64, pose: &mut [i64; AXES]) {
         if s >= self.length << 16 || self.length == 0 {
             *pose = self.end;
             return;
         }
-        let s = s.max(0);
+        self.eval(s.max(0), pose);
+    }
+
+    /// The path's formula at `s` (nm Q16, ≥ 0), without snapping to the end.
+    fn eval(&self, s: i64, pose: &mut [i64; AXES]) {
         let linear = |unit: &[i64; AXES], pose: &mut [i64; AXES]| {
             for (p, (st, u)) in pose.iter_mut().zip(self.start.iter().zip(unit)) {
                 // (u Q44 × s Q16) >> 60, rounded; axes that do not move cost nothing.

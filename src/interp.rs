@@ -22,9 +22,11 @@
 //! auxiliary functions wait for the smoothed motion to arrive.
 //!
 //! Invariants: the executing block was profiled from the speed the previous one left
-//! at to the entry speed the planner fixed for its successor; a hold or a feed-override
-//! change re-profiles it from where it is, at the speed it has, so the stop happens on
-//! the path and within v²/2a (continuing into the next blocks if need be).
+//! at toward [`Planner::exit_target`] (the next block's planned entry, and a speed
+//! from which the queued blocks can still stop); a hold or a feed-override change
+//! re-profiles it from where it is, at the speed it has, so the stop happens on the
+//! path and within v²/2a, continuing into the next blocks if need be (each is profiled
+//! when it starts, from the speed the previous one left at). No pass over the queue.
 
 use crate::config::AXES;
 use crate::kinematics::Unreachable;
@@ -61,6 +63,8 @@ struct Active {
     s_base: i64,
     /// Dwell ticks left.
     dwell_left: u32,
+    /// The exit speed the profile was planned toward, nm/tick.
+    target: f32,
 }
 
 /// Executes the planner's blocks.
@@ -77,6 +81,8 @@ pub struct Executor {
     pub completed: u32,
     /// Stop taking new blocks (a pause or tool change is waiting for resume).
     pub paused: bool,
+    /// Speed at which the last profiled block leaves, nm/tick: the next block's entry.
+    exit: f32,
     /// Jerk limitation (see the module doc); `None` for plain trapezoids.
     smoothing: Option<Smoothing>,
     /// Path distance travelled since start-up by the unsmoothed profile, nm Q16
@@ -88,6 +94,12 @@ pub struct Executor {
 
 /// Most ticks of smoothing (the moving-average window).
 pub const MAX_WINDOW: usize = 32;
+
+/// The smoothing window in force for a request of `ticks`: a power of two, at most
+/// [`MAX_WINDOW`] (1: none).
+pub fn window_of(ticks: u32) -> u32 {
+    ticks.max(1).next_power_of_two().min(MAX_WINDOW as u32)
+}
 /// Blocks remembered for the smoothed position to fall in.
 pub const HISTORY: usize = 48;
 
@@ -119,6 +131,7 @@ impl Executor {
             line: 0,
             completed: 0,
             paused: false,
+            exit: 0.0,
             smoothing: None,
             s_raw: 0,
             block_start: 0,
@@ -128,11 +141,7 @@ impl Executor {
     /// Smooths the path distance with a moving average of `window` ticks (rounded up
     /// to a power of two, at most [`MAX_WINDOW`]); 1 turns smoothing off.
     pub fn set_smoothing(&mut self, window: u32) {
-        let log2 = window
-            .max(1)
-            .next_power_of_two()
-            .min(MAX_WINDOW as u32)
-            .trailing_zeros();
+        let log2 = window_of(window).trailing_zeros();
         self.smoothing = (log2 > 0).then(|| Smoothing {
             log2,
             ring: [self.s_raw; MAX_WINDOW],
@@ -182,6 +191,7 @@ impl Executor {
     pub fn stop(&mut self) {
         self.active = None;
         self.speed = 0;
+        self.exit = 0.0;
         if let Some(f) = self.smoothing.as_ref() {
             let window = 1 << f.log2;
             self.s_raw = 0;
@@ -195,29 +205,32 @@ impl Executor {
         match b.kind {
             Kind::Unreachable(why) => Some(Event::Unreachable { line: b.line, why }),
             Kind::Aux(aux) => {
+                self.exit = 0.0;
                 self.completed += 1;
                 Some(Event::Aux { line: b.line, aux })
             }
             Kind::Dwell(n) => {
+                self.exit = 0.0;
                 self.active = Some(Active {
                     block: b,
                     profile: None,
                     t: 0,
                     s_base: 0,
                     dwell_left: n,
+                    target: 0.0,
                 });
                 None
             }
             Kind::Rapid | Kind::Feed => {
-                let target = planner.first_entry_target();
+                let target = planner.exit_target();
                 let (p, got) = Profile::plan(
-                    b.path.length as f32,
-                    b.entry,
+                    b.path.length << 16,
+                    self.exit,
                     planner.cap(&b),
                     target,
                     b.accel,
                 );
-                planner.set_first_entry(got.exit);
+                self.exit = got.exit;
                 self.block_start = self.s_raw;
                 if let Some(f) = self.smoothing.as_mut() {
                     if f.hist.is_full() {
@@ -235,6 +248,7 @@ impl Executor {
                     t: 0,
                     s_base: 0,
                     dwell_left: 0,
+                    target,
                 });
                 None
             }
@@ -242,21 +256,18 @@ impl Executor {
     }
 
     /// Re-profiles the executing block from where it is (after a hold, a resume or a
-    /// feed-override change) and replans the queue behind it.
+    /// feed-override change); later blocks are profiled when they start.
     pub fn replan(&mut self, planner: &mut Planner) {
         let Some(a) = self.active.as_mut() else {
-            planner.first_entry = 0.0;
-            planner.replan();
             return;
         };
         let Some(p) = a.profile else {
-            planner.replan();
             return;
         };
         let (s, v) = p.at(a.t);
         a.s_base += s;
-        let left = ((a.block.path.length << 16) - a.s_base).max(0) as f32 / 65_536.0;
-        let target = planner.first_entry_target();
+        let left = ((a.block.path.length << 16) - a.s_base).max(0);
+        let target = planner.exit_target();
         let (np, got) = Profile::plan(
             left,
             from_q32(v),
@@ -266,7 +277,21 @@ impl Executor {
         );
         a.profile = Some(np);
         a.t = 0;
-        planner.set_first_entry(got.exit);
+        a.target = target;
+        self.exit = got.exit;
+    }
+
+    /// Blocks that arrived after the executing block started may let it leave faster
+    /// than it was planned to (it was profiled to stop where the queue ended):
+    /// re-profiles it from where it is when the exit it may now aim for is higher. O(1).
+    pub fn retarget(&mut self, planner: &mut Planner) {
+        let Some(a) = self.active.as_ref() else {
+            return;
+        };
+        let held = a.profile.is_none_or(|p| p.t2 == HELD);
+        if !held && !planner.hold && planner.exit_target() > a.target * 1.001 + 0.01 {
+            self.replan(planner);
+        }
     }
 
     /// Advances one tick; returns an event when one stops execution at rest.
@@ -275,7 +300,9 @@ impl Executor {
         let mut event = None;
         loop {
             if self.active.is_none() {
-                if self.paused || planner.hold {
+                // A hold or pause takes no new block once at rest; a stop still under
+                // way continues into the next blocks (profiled to stop).
+                if self.paused || (planner.hold && self.exit <= 0.0) {
                     break;
                 }
                 // Dwells, auxiliary functions, faults and blocks entered from rest (a

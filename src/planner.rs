@@ -1,24 +1,37 @@
-//! Look-ahead planner: the queue of blocks waiting to execute and the speeds at which
-//! each is entered.
+//! Look-ahead planning: the speeds at which each block is entered, and the queue of
+//! blocks the controller executes.
 //!
-//! Each queued block carries its geometry ([`Path`]), its requested feed, its hard
-//! speed and acceleration limits (from every pose axis and every joint, through the
-//! kinematics, sampled along the block, and from curvature on arcs) and a hard limit
-//! on its entry speed from the corner with the previous block. Speeds are in nm/tick
-//! (`f32`), accelerations in nm/tick².
+//! **Where the planning runs.** The whole program is known on the host, so the host
+//! plans it ([`plan_into`]) with unlimited look-ahead, using this module's code with
+//! the same kinematics: each block's limits (from every pose axis and every joint,
+//! sampled along the block through the kinematics, and from curvature on arcs), its
+//! corner with the previous block, then a reverse and a forward pass over the whole
+//! program. Each block is streamed with that plan ([`crate::protocol::Plan`]). The
+//! controller ([`Planner`]) does no pass over its queue: pushing a block is O(1)
+//! (check the geometry, check the target against the joint travel, add the block to two
+//! running sums), and so is choosing the speed at which the executing block may leave:
+//! the smaller of the next block's planned entry and the speed from which the machine
+//! can still stop within what is buffered ([`Planner::exit_target`]). A feed hold, a
+//! feed-override change or a fault re-profiles only the executing block; each later
+//! block is profiled when it starts, from the speed the previous one left at, so a stop
+//! continues block by block at the planned deceleration.
 //!
-//! Passes, run after every change (grbl's scheme, with its invariants stated):
-//! * **Reverse pass**, last block to first. Invariant after it: every block can
+//! **Stopping within the buffer** (invariant, O(1) per tick): let W be Σ 2·aᵢ·Sᵢ over
+//! the queued blocks (the speed² that decelerating at each block's acceleration sheds
+//! over them; an exact integer sum). A block is entered at speed v with v² ≤ its own
+//! 2·a·S plus the W behind it, and leaves at x with x² ≤ W behind it: so whatever
+//! arrives later, or if nothing does, the machine can stop at the end of the buffer.
+//! Blocks only add to W. Speeds never exceed the host's plan, whose hard limits
+//! (corners, joints) therefore hold.
+//!
+//! **The host's passes** (grbl's scheme, with its invariants stated):
+//! * Reverse pass, last block to first. Invariant after it: every block can
 //!   decelerate from its entry speed to the next block's entry speed within its length
 //!   (entryᵢ² ≤ entryᵢ₊₁² + 2·aᵢ·Sᵢ), the block after the last is entered at 0 — so
-//!   the buffered path always ends in a complete stop — and no entry exceeds its
-//!   corner limit or the speed caps of the blocks on either side.
-//! * **Forward pass**, first block to last, starting from the first block's fixed
-//!   entry (the exit speed the executing block was profiled for, or 0 at rest).
-//!   Invariant after it: every block can also reach its successor's entry by
-//!   accelerating (entryᵢ₊₁² ≤ entryᵢ² + 2·aᵢ·Sᵢ) and cannot be forced to enter
-//!   slower than it can decelerate to (entryᵢ₊₁² ≥ entryᵢ² − 2·aᵢ·Sᵢ; this lower bound
-//!   only binds after a feed-override drop or a hold, whose caps are soft).
+//!   the path always ends in a complete stop — and no entry exceeds its corner limit or
+//!   the speed caps of the blocks on either side.
+//! * Forward pass, first block to last, from rest. Invariant after it: every block can
+//!   also reach its successor's entry by accelerating (entryᵢ₊₁² ≤ entryᵢ² + 2·aᵢ·Sᵢ).
 //!
 //! Corner limit (the discrete-time rule, stricter than grbl's junction deviation): the
 //! path passes through the programmed corner, so the velocity turns from u₁ to u₂ within
@@ -30,16 +43,19 @@
 //! corner as the share the turn needs at the programmed speed (so a gentle polyline
 //! keeps almost all of its acceleration), capped at ½. G61 (tolerance 0) stops exactly
 //! at the corner.
+//!
+//! Speeds are in nm/tick (`f32`), accelerations in nm/tick².
 
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
-use crate::geometry::{GeometryError, Path};
+use crate::geometry::{GeometryError, Path, Shape};
 use crate::kinematics::{Kinematics, MachineKinematics, Unreachable};
-use crate::math::{fmax, fmin};
-use crate::protocol::{Aux, Block, Motion};
+use crate::math::{fmax, fmin, sqrtf};
+use crate::protocol::{Aux, Block, Motion, Plan, PlannedBlock};
 use crate::units::TICK_HZ;
 
-/// Blocks of look-ahead the controller buffers.
-pub const QUEUE_CAPACITY: usize = 64;
+/// Blocks the controller buffers: enough that the stopping distance at 100 mm/s and
+/// 1000 mm/s² (5 mm) fits in 0.05 mm segments with room for the link's latency.
+pub const QUEUE_CAPACITY: usize = 160;
 
 /// Factor applied to every planned limit so that single-precision rounding cannot
 /// take a joint past its own limit.
@@ -95,24 +111,80 @@ impl PlanBlock {
     pub fn length(&self) -> f32 {
         self.path.length as f32
     }
+
+    /// What the host streams for this block.
+    pub fn plan(&self) -> Plan {
+        Plan {
+            length: self.path.length,
+            shape: self.path.shape,
+            v_limit: self.v_limit,
+            accel: self.accel,
+            entry: self.entry,
+            stop: self.corner == 0.0,
+        }
+    }
+
+    /// Its share of the stop budget: 2·a·S, (nm/tick)² (0 for blocks that do not
+    /// move, or cannot be executed).
+    fn budget(&self) -> u64 {
+        match self.kind {
+            Kind::Rapid | Kind::Feed => (2.0 * self.accel * self.length()) as u64,
+            _ => 0,
+        }
+    }
+
+    /// Estimated duration, ticks × 16 (for flow control): at the planned entry and
+    /// its cap, whichever is faster.
+    fn estimate(&self) -> u64 {
+        match self.kind {
+            Kind::Dwell(n) => n as u64 * 16,
+            Kind::Rapid | Kind::Feed => {
+                let v = fmax(fmin(self.feed, self.v_limit), self.entry);
+                if v > 0.0 {
+                    (self.length() * 16.0 / v) as u64
+                } else {
+                    0
+                }
+            }
+            _ => 0,
+        }
+    }
 }
 
-/// The planner.
-#[derive(Clone, Debug)]
-pub struct Planner {
-    queue: heapless::Deque<PlanBlock, QUEUE_CAPACITY>,
-    /// End pose of the last block pushed (where the next one starts).
+impl Default for PlanBlock {
+    /// An auxiliary no-op at the origin (a placeholder for buffers).
+    fn default() -> Self {
+        Self {
+            line: 0,
+            kind: Kind::Dwell(0),
+            path: Path {
+                start: [0; AXES],
+                end: [0; AXES],
+                length: 0,
+                rotary_only: false,
+                shape: Shape::Point,
+            },
+            feed: 0.0,
+            v_limit: 0.0,
+            accel: 1.0,
+            accel_full: 1.0,
+            rho_in: 0.0,
+            corner: 0.0,
+            entry: 0.0,
+        }
+    }
+}
+
+/// The planning state between blocks: where the last block ended and how, so that
+/// the next one's corner can be planned ([`Lookahead::plan`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Lookahead {
+    /// End pose of the last block planned.
     pub end: [i64; AXES],
     end_tangent: [f32; AXES],
     end_stops: bool,
-    /// Blending tolerance of the last block pushed, nm.
+    /// Blending tolerance of the last block planned, nm.
     end_tolerance: u32,
-    /// Feed override, percent.
-    pub feed_override: u16,
-    /// Feed hold: every soft cap is 0.
-    pub hold: bool,
-    /// Entry speed of the first queued block, fixed by the executing block's profile.
-    pub first_entry: f32,
     /// Jerk-limitation window, ticks (1: none); see [`crate::interp`].
     pub smoothing: u32,
 }
@@ -125,87 +197,42 @@ fn per_tick2(a: i64) -> f32 {
     a as f32 / (TICK_HZ as f32 * TICK_HZ as f32)
 }
 
-impl Planner {
-    /// An empty planner at `pose`.
-    pub fn new(pose: [i64; AXES]) -> Self {
+/// Soft speed cap of a block (feed × override, 0 in a hold), nm/tick.
+pub fn cap(b: &PlanBlock, feed_override: u16, hold: bool) -> f32 {
+    if hold {
+        return 0.0;
+    }
+    match b.kind {
+        Kind::Rapid => b.v_limit,
+        Kind::Feed => fmin(b.feed * feed_override as f32 / 100.0, b.v_limit),
+        _ => 0.0,
+    }
+}
+
+impl Lookahead {
+    /// Planning from `pose`, at rest, with a jerk-limitation window of `smoothing`.
+    pub fn new(pose: [i64; AXES], smoothing: u32) -> Self {
         Self {
-            queue: heapless::Deque::new(),
             end: pose,
             end_tangent: [0.0; AXES],
             end_stops: true,
             end_tolerance: 0,
-            feed_override: 100,
-            hold: false,
-            first_entry: 0.0,
-            smoothing: 1,
+            smoothing,
         }
     }
 
-    fn at(&self, i: usize) -> &PlanBlock {
-        self.queue.get(i).expect("index within the queue")
-    }
-
-    fn at_mut(&mut self, i: usize) -> &mut PlanBlock {
-        self.queue.get_mut(i).expect("index within the queue")
-    }
-
-    /// Queued blocks.
-    pub fn len(&self) -> usize {
-        self.queue.len()
-    }
-    /// No block queued?
-    pub fn is_empty(&self) -> bool {
-        self.queue.is_empty()
-    }
-    /// Free slots.
-    pub fn free(&self) -> usize {
-        QUEUE_CAPACITY - self.queue.len()
-    }
-    /// The next block, if any.
-    pub fn front(&self) -> Option<&PlanBlock> {
-        self.queue.front()
-    }
-    /// Takes the next block.
-    pub fn pop(&mut self) -> Option<PlanBlock> {
-        self.queue.pop_front()
-    }
-    /// Iterates the queue, front first.
-    pub fn iter(&self) -> impl Iterator<Item = &PlanBlock> {
-        self.queue.iter()
-    }
-
-    /// Drops every queued block; the next block starts at `pose`, at rest.
-    pub fn clear(&mut self, pose: [i64; AXES]) {
-        self.queue.clear();
-        self.end = pose;
-        self.end_stops = true;
-        self.first_entry = 0.0;
-    }
-
-    /// Soft speed cap of a block (feed × override, 0 in a hold), nm/tick.
-    pub fn cap(&self, b: &PlanBlock) -> f32 {
-        if self.hold {
-            return 0.0;
-        }
-        match b.kind {
-            Kind::Rapid => b.v_limit,
-            Kind::Feed => fmin(b.feed * self.feed_override as f32 / 100.0, b.v_limit),
-            _ => 0.0,
-        }
-    }
-
-    /// Plans `block` and appends it. Fails when the queue is full or the geometry is
-    /// malformed; an unreachable target is queued as such (it stops the machine there).
-    pub fn push(
+    /// Plans `block` after `prev` (the block planned before it, whose acceleration a
+    /// blended corner may reduce): geometry, limits along it, and its corner. Its
+    /// `entry` is left at the corner limit, for the passes. An unreachable target is
+    /// planned as such (it stops the machine there).
+    pub fn plan(
         &mut self,
         block: &Block,
+        prev: Option<&mut PlanBlock>,
         machine: &MachineConfig,
         kin: &MachineKinematics,
-    ) -> Result<(), PushError> {
-        if self.queue.is_full() {
-            return Err(PushError::Full);
-        }
-        let path = Path::new(block, &self.end).map_err(PushError::Geometry)?;
+    ) -> Result<PlanBlock, GeometryError> {
+        let path = Path::new(block, &self.end)?;
         let mut kind = match block.motion {
             Motion::Rapid => Kind::Rapid,
             Motion::Linear | Motion::Arc { .. } => Kind::Feed,
@@ -215,11 +242,7 @@ impl Planner {
         if path.length == 0 && matches!(kind, Kind::Rapid | Kind::Feed) {
             kind = Kind::Dwell(0);
         }
-        let feed = match kind {
-            Kind::Feed if path.rotary_only => per_tick(block.feed.saturating_mul(1000)),
-            Kind::Feed => per_tick(block.feed),
-            _ => f32::INFINITY,
-        };
+        let feed = feed_of(block, &path, kind);
         // The fastest this block may be asked to go (feed override up to 200 %).
         let requested = feed * 2.0;
         let (v_limit, accel) = match kind {
@@ -246,7 +269,7 @@ impl Planner {
         // Path tolerance (G64 P): between two tick samples the tool moves in a
         // straight line, which cuts a corner taken at v (nm/tick) by v·|Δu|/4 at most
         // (the corner half-way through a tick); keep that within the tolerance.
-        let du = crate::math::sqrtf(
+        let du = sqrtf(
             (0..3)
                 .map(|i| {
                     let d = start_tangent[i] - self.end_tangent[i];
@@ -269,14 +292,14 @@ impl Planner {
                 // [`crate::interp`]); a corner that cannot is a stop, which the executor
                 // lets the smoothing settle into before turning.
                 let w = self.smoothing.max(1) as f32;
-                let a_near = self.queue.back().map_or(0.0, |p| p.accel_full).max(accel);
+                let a_near = prev.as_ref().map_or(0.0, |p| p.accel_full).max(accel);
                 let by_jerk = (1.0 / (w * n) - a_near * w / 2.0).max(0.0);
                 let limit = by_tolerance.min(if self.smoothing > 1 {
                     by_jerk
                 } else {
                     f32::INFINITY
                 });
-                let prev_v = self.queue.back().map_or(0.0, |p| p.feed.min(p.v_limit));
+                let prev_v = prev.as_ref().map_or(0.0, |p| p.feed.min(p.v_limit));
                 let want = prev_v.min(feed.min(v_limit)).min(limit);
                 // max/min rather than clamp: clamp's panic message formats floats, which
                 // costs the firmware kilobytes of formatting code.
@@ -286,11 +309,15 @@ impl Planner {
             }
         };
         if rho > 0.0 {
-            if let Some(prev) = self.queue.back_mut() {
+            if let Some(prev) = prev {
                 prev.accel = prev.accel_full * (1.0 - rho.max(prev.rho_in));
             }
         }
-        let b = PlanBlock {
+        self.end = path.end;
+        self.end_tangent = path.tangent_at(path.length << 16);
+        self.end_stops = !moving || block.tolerance_nm == 0;
+        self.end_tolerance = block.tolerance_nm;
+        Ok(PlanBlock {
             line: block.line,
             kind,
             path,
@@ -300,100 +327,264 @@ impl Planner {
             accel_full: accel,
             rho_in: rho,
             corner,
-            entry: 0.0,
+            entry: corner,
+        })
+    }
+}
+
+/// Requested feed of a block, nm/tick (∞ for rapids and blocks that do not move).
+fn feed_of(block: &Block, path: &Path, kind: Kind) -> f32 {
+    match kind {
+        Kind::Feed if path.rotary_only => per_tick(block.feed.saturating_mul(1000)),
+        Kind::Feed => per_tick(block.feed),
+        _ => f32::INFINITY,
+    }
+}
+
+/// Largest entry speed allowed for block `i` (corner, its cap, the previous cap).
+fn entry_limit(blocks: &[PlanBlock], i: usize, feed_override: u16, hold: bool) -> f32 {
+    let b = &blocks[i];
+    let prev_cap = if i == 0 {
+        f32::INFINITY
+    } else {
+        cap(&blocks[i - 1], feed_override, hold)
+    };
+    fmin(fmin(b.corner, cap(b, feed_override, hold)), prev_cap)
+}
+
+/// The reverse pass over `blocks` (see the module doc): the last one ends at rest.
+pub fn reverse_pass(blocks: &mut [PlanBlock], feed_override: u16, hold: bool) {
+    let mut next_entry = 0.0f32;
+    for i in (0..blocks.len()).rev() {
+        let limit = entry_limit(blocks, i, feed_override, hold);
+        let b = &mut blocks[i];
+        let reach = sqrtf(next_entry * next_entry + 2.0 * b.accel * b.length());
+        b.entry = fmin(limit, reach);
+        next_entry = b.entry;
+    }
+}
+
+/// The forward pass over `blocks` from `first_entry` (see the module doc).
+pub fn forward_pass(blocks: &mut [PlanBlock], first_entry: f32) {
+    let Some(first) = blocks.first_mut() else {
+        return;
+    };
+    first.entry = first_entry;
+    for i in 0..blocks.len() - 1 {
+        let (e, a, len) = (blocks[i].entry, blocks[i].accel, blocks[i].length());
+        let hi = sqrtf(e * e + 2.0 * a * len);
+        let lo = sqrtf(fmax(e * e - 2.0 * a * len, 0.0));
+        let nb = &mut blocks[i + 1];
+        nb.entry = fmax(fmin(nb.entry, hi), lo);
+    }
+}
+
+/// Plans a whole program from `start` at rest, with unlimited look-ahead (the host's
+/// job): `out[i]` receives block `i`'s plan ([`PlanBlock::plan`] is what is streamed).
+/// `smoothing` is the controller's jerk-limitation window in ticks
+/// ([`crate::interp::window_of`] of the machine's). Fails with the index of a block
+/// whose geometry is malformed.
+pub fn plan_into(
+    blocks: &[Block],
+    start: [i64; AXES],
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+    smoothing: u32,
+    out: &mut [PlanBlock],
+) -> Result<(), (usize, GeometryError)> {
+    let mut la = Lookahead::new(start, smoothing);
+    for (i, b) in blocks.iter().enumerate() {
+        let (done, rest) = out.split_at_mut(i);
+        rest[0] = la
+            .plan(b, done.last_mut(), machine, kin)
+            .map_err(|e| (i, e))?;
+    }
+    let out = &mut out[..blocks.len()];
+    reverse_pass(out, 100, false);
+    forward_pass(out, 0.0);
+    Ok(())
+}
+
+/// The controller's queue of planned blocks.
+#[derive(Clone, Debug)]
+pub struct Planner {
+    queue: heapless::Deque<PlanBlock, QUEUE_CAPACITY>,
+    /// End pose of the last block pushed (where the next one starts).
+    pub end: [i64; AXES],
+    /// Feed override, percent.
+    pub feed_override: u16,
+    /// Feed hold: every soft cap is 0.
+    pub hold: bool,
+    /// Jerk-limitation window, ticks (1: none), for the controller's own motions.
+    pub smoothing: u32,
+    /// Σ 2·a·S of the queued blocks, (nm/tick)² (see the module doc).
+    budget: u64,
+    /// Σ estimated duration of the queued blocks, ticks × 16.
+    estimate: u64,
+}
+
+impl Planner {
+    /// An empty planner at `pose`.
+    pub fn new(pose: [i64; AXES]) -> Self {
+        Self {
+            queue: heapless::Deque::new(),
+            end: pose,
+            feed_override: 100,
+            hold: false,
+            smoothing: 1,
+            budget: 0,
+            estimate: 0,
+        }
+    }
+
+    /// Queued blocks.
+    pub fn len(&self) -> usize {
+        self.queue.len()
+    }
+    /// No block queued?
+    pub fn is_empty(&self) -> bool {
+        self.queue.is_empty()
+    }
+    /// Free slots.
+    pub fn free(&self) -> usize {
+        QUEUE_CAPACITY - self.queue.len()
+    }
+    /// The next block, if any.
+    pub fn front(&self) -> Option<&PlanBlock> {
+        self.queue.front()
+    }
+    /// Takes the next block.
+    pub fn pop(&mut self) -> Option<PlanBlock> {
+        let b = self.queue.pop_front()?;
+        self.budget -= b.budget();
+        self.estimate -= b.estimate();
+        Some(b)
+    }
+    /// Iterates the queue, front first.
+    pub fn iter(&self) -> impl Iterator<Item = &PlanBlock> {
+        self.queue.iter()
+    }
+
+    /// Drops every queued block; the next block starts at `pose`, at rest.
+    pub fn clear(&mut self, pose: [i64; AXES]) {
+        self.queue.clear();
+        self.end = pose;
+        self.budget = 0;
+        self.estimate = 0;
+    }
+
+    /// Soft speed cap of a block now (feed × override, 0 in a hold), nm/tick.
+    pub fn cap(&self, b: &PlanBlock) -> f32 {
+        cap(b, self.feed_override, self.hold)
+    }
+
+    /// The speed at which the executing block may leave (it has been taken off the
+    /// queue): the next block's planned entry and cap, and no faster than the machine
+    /// can stop from within the queued blocks. 0 when nothing is queued. O(1).
+    pub fn exit_target(&self) -> f32 {
+        let Some(next) = self.queue.front() else {
+            return 0.0;
         };
-        self.end = path.end;
-        self.end_tangent = path.tangent_at(path.length << 16);
-        self.end_stops = !moving || block.tolerance_nm == 0;
-        self.end_tolerance = block.tolerance_nm;
-        let _ = self.queue.push_back(b);
-        self.replan();
+        let stop = sqrtf(self.budget as f32);
+        fmin(fmin(next.entry, self.cap(next)), stop)
+    }
+
+    /// Total time of the queued motion, ticks (an estimate for flow control). O(1).
+    pub fn buffered_ticks(&self) -> f32 {
+        self.estimate as f32 / 16.0
+    }
+
+    /// Queues a block the host planned, in O(1): checks its geometry against the block
+    /// ([`Path::from_plan`]), its speeds (finite, not negative) and its target against
+    /// the joint travel (an unreachable target is queued as such: the machine stops
+    /// before it and raises an alarm there).
+    pub fn push_planned(
+        &mut self,
+        pb: &PlannedBlock,
+        machine: &MachineConfig,
+        kin: &MachineKinematics,
+    ) -> Result<(), PushError> {
+        if self.queue.is_full() {
+            return Err(PushError::Full);
+        }
+        let (block, plan) = (&pb.block, &pb.plan);
+        let path = Path::from_plan(block, &self.end, plan.length, plan.shape)
+            .map_err(PushError::Geometry)?;
+        let speeds_ok = [plan.v_limit, plan.accel, plan.entry]
+            .iter()
+            .all(|v| v.is_finite() && *v >= 0.0)
+            && plan.accel > 0.0;
+        if !speeds_ok {
+            return Err(PushError::Geometry(GeometryError::PlanMismatch));
+        }
+        let mut kind = match block.motion {
+            Motion::Rapid => Kind::Rapid,
+            Motion::Linear | Motion::Arc { .. } => Kind::Feed,
+            Motion::Dwell(ms) => Kind::Dwell(((ms as u64 * TICK_HZ as u64).div_ceil(1000)) as u32),
+            Motion::Aux(a) => Kind::Aux(a),
+        };
+        if path.length == 0 && matches!(kind, Kind::Rapid | Kind::Feed) {
+            kind = Kind::Dwell(0);
+        }
+        if matches!(kind, Kind::Rapid | Kind::Feed) {
+            let mut q = [0i64; MAX_JOINTS];
+            if let Err(e) = kin.inverse_checked(&path.end, &machine.joints, &mut q) {
+                kind = Kind::Unreachable(e);
+            }
+        }
+        let moving = matches!(kind, Kind::Rapid | Kind::Feed);
+        let corner = if plan.stop || !moving {
+            0.0
+        } else {
+            f32::INFINITY
+        };
+        let b = PlanBlock {
+            line: block.line,
+            kind,
+            path,
+            feed: feed_of(block, &path, kind),
+            v_limit: if moving { plan.v_limit } else { 0.0 },
+            accel: plan.accel,
+            accel_full: plan.accel,
+            rho_in: 0.0,
+            corner,
+            entry: if moving {
+                fmin(plan.entry, corner)
+            } else {
+                0.0
+            },
+        };
+        self.push_block(b);
         Ok(())
     }
 
-    /// Largest entry speed allowed for block `i` (corner, its cap, the previous cap).
-    fn entry_limit(&self, i: usize) -> f32 {
-        let b = self.at(i);
-        let prev_cap = if i == 0 {
-            f32::INFINITY
-        } else {
-            self.cap(self.at(i - 1))
-        };
-        fmin(fmin(b.corner, self.cap(b)), prev_cap)
-    }
-
-    /// Runs the reverse and forward passes over the queue.
-    pub fn replan(&mut self) {
-        self.reverse_pass();
-        self.forward_pass();
-    }
-
-    fn reverse_pass(&mut self) {
-        let mut next_entry = 0.0f32;
-        for i in (0..self.queue.len()).rev() {
-            let limit = self.entry_limit(i);
-            let b = self.at_mut(i);
-            let reach = crate::math::sqrtf(next_entry * next_entry + 2.0 * b.accel * b.length());
-            b.entry = fmin(limit, reach);
-            next_entry = b.entry;
+    /// Plans and queues one of the controller's own motions (a jog, the move home),
+    /// from rest to rest; only when the queue is empty (it plans without look-ahead,
+    /// and is not for streaming).
+    pub fn push(
+        &mut self,
+        block: &Block,
+        machine: &MachineConfig,
+        kin: &MachineKinematics,
+    ) -> Result<(), PushError> {
+        if !self.queue.is_empty() {
+            return Err(PushError::Full);
         }
+        let mut la = Lookahead::new(self.end, self.smoothing);
+        let mut b = la
+            .plan(block, None, machine, kin)
+            .map_err(PushError::Geometry)?;
+        b.entry = 0.0;
+        b.corner = 0.0;
+        self.push_block(b);
+        Ok(())
     }
 
-    fn forward_pass(&mut self) {
-        let n = self.queue.len();
-        if n == 0 {
-            return;
-        }
-        self.at_mut(0).entry = self.first_entry;
-        for i in 0..n - 1 {
-            let (e, a, len) = {
-                let b = self.at(i);
-                (b.entry, b.accel, b.length())
-            };
-            let hi = crate::math::sqrtf(e * e + 2.0 * a * len);
-            let lo = crate::math::sqrtf(fmax(e * e - 2.0 * a * len, 0.0));
-            let nb = self.at_mut(i + 1);
-            nb.entry = fmax(fmin(nb.entry, hi), lo);
-        }
-    }
-
-    /// Entry speed the reverse pass allows for the first queued block (what the
-    /// executing block may aim to leave at); 0 when nothing is queued. Leaves the
-    /// forward pass to [`Self::set_first_entry`], which must follow.
-    pub fn first_entry_target(&mut self) -> f32 {
-        self.reverse_pass();
-        self.queue.front().map_or(0.0, |b| b.entry)
-    }
-
-    /// Fixes the first queued block's entry speed (the exit the executing block was
-    /// profiled for) and runs the forward pass from it; the reverse pass of
-    /// [`Self::first_entry_target`] still holds, as it does not depend on it.
-    pub fn set_first_entry(&mut self, entry: f32) {
-        self.first_entry = entry;
-        self.forward_pass();
-    }
-
-    /// Total time of the queued motion at the planned speeds, ticks (an estimate that
-    /// ignores the acceleration phases' shape; used for flow control).
-    pub fn buffered_ticks(&self) -> f32 {
-        let mut t = 0.0;
-        for (i, b) in self.queue.iter().enumerate() {
-            t += match b.kind {
-                Kind::Dwell(n) => n as f32,
-                Kind::Rapid | Kind::Feed => {
-                    let exit = self.queue.get(i + 1).map_or(0.0, |n| n.entry);
-                    let v = fmax(fmax(self.cap(b), b.entry), exit);
-                    let v_mean = ((b.entry + exit) / 2.0 + v) / 2.0;
-                    if v_mean > 0.0 {
-                        b.length() / v_mean
-                    } else {
-                        0.0
-                    }
-                }
-                _ => 0.0,
-            };
-        }
-        t
+    fn push_block(&mut self, b: PlanBlock) {
+        self.end = b.path.end;
+        self.budget += b.budget();
+        self.estimate += b.estimate();
+        let _ = self.queue.push_back(b);
     }
 }
 
@@ -551,14 +742,23 @@ mod tests {
         }
     }
 
-    fn planner_with(blocks: &[Block]) -> Planner {
+    fn planner_with(blocks: &[Block]) -> Vec<PlanBlock> {
         let m = MachineConfig::cartesian_xyz();
         let k = MachineKinematics::new(&m);
-        let mut p = Planner::new([0; AXES]);
-        for b in blocks {
-            p.push(b, &m, &k).unwrap();
-        }
-        p
+        let mut out = vec![PlanBlock::default(); blocks.len()];
+        plan_into(blocks, [0; AXES], &m, &k, 1, &mut out).unwrap();
+        out
+    }
+
+    fn planned(blocks: &[Block]) -> Vec<PlannedBlock> {
+        blocks
+            .iter()
+            .zip(planner_with(blocks))
+            .map(|(b, p)| PlannedBlock {
+                block: *b,
+                plan: p.plan(),
+            })
+            .collect()
     }
 
     #[test]
@@ -633,12 +833,75 @@ mod tests {
             line(50_000_000, 0, 50, u32::MAX),
             line(100_000_000, 0, 50, u32::MAX),
         ]);
-        p.hold = true;
-        p.first_entry = 30_000.0;
-        p.replan();
+        reverse_pass(&mut p, 100, true);
+        forward_pass(&mut p, 30_000.0);
         let e = p.iter().last().unwrap().entry;
         // Entered at 30 000 nm/tick, the first block (50 mm) can only slow to
         // sqrt(30000² − 2·1000·5e7) < 0 → 0.
         assert_eq!(e, 0.0);
+    }
+
+    #[test]
+    fn the_controller_never_leaves_faster_than_it_can_stop_within_its_queue() {
+        let m = MachineConfig::cartesian_xyz();
+        let k = MachineKinematics::new(&m);
+        // 400 collinear 0.05 mm segments at 100 mm/s: the host plans the middle ones
+        // at full speed (its look-ahead sees the whole 20 mm), but a queue holding only
+        // 0.5 mm of them can stop from √(2·a·0.5 mm) only.
+        let blocks: Vec<Block> = (1..=400)
+            .map(|i| line(i * 50_000, 0, 100, u32::MAX))
+            .collect();
+        let plan = planned(&blocks);
+        assert!(plan[200].plan.entry > 99_000.0, "{}", plan[200].plan.entry);
+        let mut p = Planner::new(plan[199].block.target);
+        for b in &plan[200..211] {
+            p.push_planned(b, &m, &k).unwrap();
+        }
+        p.pop();
+        // Ten segments behind: 2 · 1000 nm/tick² · 0.5 mm.
+        let want = (2.0f32 * 1000.0 * LIMIT_MARGIN * 500_000.0).sqrt();
+        let got = p.exit_target();
+        assert!((got - want).abs() < want * 1e-4, "{got} vs {want}");
+        assert!(got <= plan[201].plan.entry);
+        // A full queue lets the planned speed through.
+        let mut p = Planner::new(plan[199].block.target);
+        for b in &plan[200..200 + QUEUE_CAPACITY] {
+            p.push_planned(b, &m, &k).unwrap();
+        }
+        p.pop();
+        assert_eq!(p.exit_target(), plan[201].plan.entry);
+        // Draining the queue brings the budget back to exactly zero.
+        let mut p = Planner::new([0; AXES]);
+        for b in &plan[..11] {
+            p.push_planned(b, &m, &k).unwrap();
+        }
+        while p.pop().is_some() {}
+        assert_eq!(p.exit_target(), 0.0);
+        assert_eq!(p.buffered_ticks(), 0.0);
+    }
+
+    #[test]
+    fn a_plan_that_does_not_match_its_block_is_refused() {
+        let m = MachineConfig::cartesian_xyz();
+        let k = MachineKinematics::new(&m);
+        let plan = planned(&[line(10_000_000, 0, 50, u32::MAX)]);
+        let mut p = Planner::new([0; AXES]);
+        let mut short = plan[0];
+        short.plan.length /= 2;
+        assert_eq!(
+            p.push_planned(&short, &m, &k),
+            Err(PushError::Geometry(GeometryError::PlanMismatch))
+        );
+        let mut elsewhere = plan[0];
+        elsewhere.block.target[1] = 3_000_000;
+        elsewhere.block.target[0] = 9_539_392;
+        assert_eq!(
+            p.push_planned(&elsewhere, &m, &k),
+            Err(PushError::Geometry(GeometryError::PlanMismatch))
+        );
+        let mut nan = plan[0];
+        nan.plan.v_limit = f32::NAN;
+        assert!(p.push_planned(&nan, &m, &k).is_err());
+        assert_eq!(p.push_planned(&plan[0], &m, &k), Ok(()));
     }
 }

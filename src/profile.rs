@@ -95,11 +95,13 @@ pub struct Achieved {
 }
 
 impl Profile {
-    /// Plans a profile over `length` nm from `v0` toward `v_max`, leaving at `v1`, with
-    /// acceleration `a` (speeds nm/tick, accel nm/tick², all ≥ 0, `a` > 0). `v_max`
-    /// = 0 with `v1` = 0 means "stop as soon as possible and hold" when `v0` > 0.
-    pub fn plan(length: f32, v0: f32, v_max: f32, v1: f32, a: f32) -> (Profile, Achieved) {
-        let length = fmax(length, 0.0);
+    /// Plans a profile over `length_q16` (nm Q16, exact: the profile ends there) from
+    /// `v0` toward `v_max`, leaving at `v1`, with acceleration `a` (speeds nm/tick,
+    /// accel nm/tick², all ≥ 0, `a` > 0). `v_max` = 0 with `v1` = 0 means "stop as
+    /// soon as possible and hold" when `v0` > 0.
+    pub fn plan(length_q16: i64, v0: f32, v_max: f32, v1: f32, a: f32) -> (Profile, Achieved) {
+        let length_q16 = length_q16.max(0);
+        let length = length_q16 as f32 * (1.0 / Q16F);
         let a = fmax(a, 1e-12);
         let (v0, v_max) = (fmax(v0, 0.0), fmax(v_max, 0.0));
         let mut v1 = fmax(v1, 0.0);
@@ -108,7 +110,6 @@ impl Profile {
         let reach_hi = sqrtf(v0 * v0 + two_a_s);
         let reach_lo = sqrtf(fmax(v0 * v0 - two_a_s, 0.0));
         v1 = fmin(fmax(fmin(v1, v_max), reach_lo), reach_hi);
-        let length_q16 = (length * Q16F) as i64;
         let a_q = to_q40(a);
         let v0_q = to_q32(v0);
         if v_max <= 0.0 && v1 <= 0.0 && v0 * v0 < two_a_s {
@@ -276,7 +277,7 @@ mod tests {
     #[test]
     fn a_rest_to_rest_move_reaches_cruise_and_ends_exactly() {
         // 100 mm at 50 mm/s (50 000 nm/tick), 500 mm/s² (500 nm/tick²).
-        let (p, got) = Profile::plan(1e8, 0.0, 5e4, 0.0, 500.0);
+        let (p, got) = Profile::plan(100_000_000 << 16, 0.0, 5e4, 0.0, 500.0);
         assert_eq!(got.exit, 0.0);
         assert_eq!(p.at(p.duration()).0, p.length);
         assert_eq!(p.at(p.duration() + TICK_Q32).0, p.length);
@@ -290,7 +291,7 @@ mod tests {
 
     #[test]
     fn a_hold_stops_inside_the_block_and_stays() {
-        let (p, _) = Profile::plan(1e8, 5e4, 0.0, 0.0, 500.0);
+        let (p, _) = Profile::plan(100_000_000 << 16, 5e4, 0.0, 0.0, 500.0);
         assert_eq!(p.t2, HELD);
         let (s, v) = p.at(200 * TICK_Q32);
         assert_eq!(v, 0);
@@ -300,7 +301,7 @@ mod tests {
 
     #[test]
     fn a_block_too_short_to_slow_down_reports_its_real_exit_speed() {
-        let (p, got) = Profile::plan(1e6, 5e4, 5e4, 0.0, 500.0);
+        let (p, got) = Profile::plan(1_000_000 << 16, 5e4, 5e4, 0.0, 500.0);
         assert!(got.exit > 0.0);
         assert_eq!(p.at(p.duration()).0, p.length);
     }
@@ -312,8 +313,8 @@ mod tests {
             a in 0.5f64..2000.0,
         ) {
             // The profile plans in single precision: check it against what it was given.
-            let [length, v0, vmax, v1, a] = [length, v0, vmax, v1, a].map(|x| x as f32);
-            let (p, got) = Profile::plan(length, v0, vmax, v1, a);
+            let [v0, vmax, v1, a] = [v0, vmax, v1, a].map(|x| x as f32);
+            let (p, got) = Profile::plan((length * 65_536.0) as i64, v0, vmax, v1, a);
             let [v0, vmax, a] = [v0, vmax, a].map(f64::from);
             prop_assume!(p.duration() < 4_000_000 * TICK_Q32);
             let x = samples(&p, 4_000_000);

@@ -12,9 +12,10 @@ use crate::config::{AXES, MAX_JOINTS};
 use serde::{Deserialize, Serialize};
 
 /// Protocol version, exchanged in the handshake; both sides must agree.
-pub const PROTOCOL_VERSION: u16 = 3;
-/// Largest unencoded frame body (sequence number, message and CRC), bytes.
-pub const MAX_BODY: usize = 240;
+pub const PROTOCOL_VERSION: u16 = 4;
+/// Largest unencoded frame body (sequence number, message and CRC), bytes: a planned
+/// helix with every field at its widest fits.
+pub const MAX_BODY: usize = 384;
 /// Largest encoded frame including its delimiter, bytes.
 pub const MAX_FRAME: usize = crate::cobs::max_encoded_len(MAX_BODY) + 1;
 
@@ -103,6 +104,38 @@ pub struct Block {
     pub tolerance_nm: u32,
 }
 
+/// The host's plan of a motion block, made with the whole program in view by the
+/// core's own planner ([`crate::planner::plan_into`]) on the host: the geometry, the
+/// speed and acceleration limits sampled along the block through the kinematics, and
+/// the entry speed of unlimited look-ahead. The controller checks the geometry against
+/// the block ([`crate::geometry::Path::from_plan`]) and the target against the joint
+/// travel, and never runs faster than the plan nor than it can stop within what it has
+/// buffered ([`crate::planner`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    /// Path length, nm (n° for a move of rotary axes only).
+    pub length: i64,
+    /// Geometry.
+    pub shape: crate::geometry::Shape,
+    /// Hard speed limit along the block, nm/tick.
+    pub v_limit: f32,
+    /// Acceleration of the block's profile, nm/tick².
+    pub accel: f32,
+    /// Planned entry speed, nm/tick.
+    pub entry: f32,
+    /// The block must be entered at rest (exact stop, or a corner not blended).
+    pub stop: bool,
+}
+
+/// A block with its plan: what the host streams.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PlannedBlock {
+    /// The block.
+    pub block: Block,
+    /// Its plan.
+    pub plan: Plan,
+}
+
 /// Commands that bypass the block queue. Each is idempotent.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Control {
@@ -138,7 +171,7 @@ pub enum Control {
 }
 
 /// Messages from the host to the controller.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum HostMsg {
     /// Opens a session; resets sequence numbering to the frame's `seq + 1`.
     Hello {
@@ -162,8 +195,8 @@ pub enum HostMsg {
         /// The chunk.
         data: heapless::Vec<u8, { crate::store::CHUNK_BYTES }>,
     },
-    /// Queues a motion block (sequenced).
-    Block(Block),
+    /// Queues a planned motion block (sequenced).
+    Block(PlannedBlock),
     /// Asks for a [`Status`] now (bypasses the queue).
     StatusRequest,
     /// A control command (bypasses the queue); answered by `ControlAck { id }`. The
@@ -459,17 +492,38 @@ mod tests {
     use super::*;
 
     fn sample_block() -> HostMsg {
-        HostMsg::Block(Block {
-            line: 12,
-            motion: Motion::Arc {
-                center: [i64::MIN, i64::MAX],
-                plane: Plane::Zx,
-                clockwise: true,
-                turns: u16::MAX,
+        HostMsg::Block(PlannedBlock {
+            block: Block {
+                line: 12,
+                motion: Motion::Arc {
+                    center: [i64::MIN, i64::MAX],
+                    plane: Plane::Zx,
+                    clockwise: true,
+                    turns: u16::MAX,
+                },
+                target: [10_000_000, -5, i64::MAX, i64::MIN, 0, 1],
+                feed: 16_666_666,
+                tolerance_nm: u32::MAX,
             },
-            target: [10_000_000, -5, i64::MAX, i64::MIN, 0, 1],
-            feed: 16_666_666,
-            tolerance_nm: u32::MAX,
+            // Every field at its widest: the largest block message there is.
+            plan: Plan {
+                length: i64::MIN,
+                shape: crate::geometry::Shape::Arc {
+                    plane: Plane::Zx,
+                    center: [i64::MIN, i64::MAX],
+                    r0: i64::MIN,
+                    dr: i64::MIN,
+                    phi0: u64::MAX,
+                    sweep: i128::MIN,
+                    phi_rate: i128::MIN,
+                    r_rate: i64::MIN,
+                    unit: [i64::MIN; AXES],
+                },
+                v_limit: f32::MAX,
+                accel: f32::MIN,
+                entry: f32::INFINITY,
+                stop: true,
+            },
         })
     }
 

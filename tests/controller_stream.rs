@@ -3,6 +3,8 @@
 //! between ticks, and the machine must end exactly on the last target, in whole steps,
 //! having never moved faster or accelerated harder than its limits on any axis.
 
+mod common;
+
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::controller::{Controller, Inputs};
 use pkmc::protocol::{
@@ -56,16 +58,18 @@ proptest! {
         let mut c = Controller::new(m.clone()).unwrap();
     c.unlock();
         let mut bytes = frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id() });
-        for (i, (t, f, rapid)) in moves.iter().enumerate() {
+        let blocks: Vec<Block> = moves.iter().enumerate().map(|(i, (t, f, rapid))| {
             let mut target = [0i64; AXES];
             target[..3].copy_from_slice(t);
-            let b = Block {
+            Block {
                 line: i as u32 + 1,
                 motion: if *rapid { Motion::Rapid } else { Motion::Linear },
                 target,
                 feed: *f,
                 tolerance_nm: if i % 3 == 0 { 0 } else { u32::MAX },
-            };
+            }
+        }).collect();
+        for (i, b) in common::planned(&m, *c.pose(), 1, &blocks).into_iter().enumerate() {
             bytes.extend(frame(i as u16 + 1, &HostMsg::Block(b)));
         }
         let (mut reader, mut replies) = (FrameReader::new(), Vec::new());
@@ -105,8 +109,15 @@ proptest! {
             prop_assert_eq!(c.steps_emitted(j), jc.scale.steps_at(*q));
         }
         prop_assert_eq!(c.status().blocks_done as usize, moves.len());
-        let acks = replies.iter().filter(|r| matches!(r, CtrlMsg::Ack { .. })).count();
-        prop_assert_eq!(acks, moves.len());
+        // Every block is acknowledged (freed slots are credited by more `Ack`s of the
+        // last block accepted).
+        let mut acked: Vec<u16> = replies.iter().filter_map(|r| match r {
+            CtrlMsg::Ack { seq, .. } => Some(*seq),
+            _ => None,
+        }).collect();
+        acked.dedup();
+        let want: Vec<u16> = (1..=moves.len() as u16).collect();
+        prop_assert_eq!(acked, want);
     }
 }
 
@@ -139,16 +150,18 @@ proptest! {
     c.unlock();
         c.set_smoothing(w);
         let mut bytes = frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id() });
-        for (i, (t, f, rapid)) in moves.iter().enumerate() {
+        let blocks: Vec<Block> = moves.iter().enumerate().map(|(i, (t, f, rapid))| {
             let mut target = [0i64; AXES];
             target[..3].copy_from_slice(t);
-            let b = Block {
+            Block {
                 line: i as u32 + 1,
                 motion: if *rapid { Motion::Rapid } else { Motion::Linear },
                 target,
                 feed: *f,
                 tolerance_nm: u32::MAX,
-            };
+            }
+        }).collect();
+        for (i, b) in common::planned(&m, *c.pose(), w, &blocks).into_iter().enumerate() {
             bytes.extend(frame(i as u16 + 1, &HostMsg::Block(b)));
         }
         c.receive(&bytes);

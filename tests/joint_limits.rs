@@ -3,6 +3,8 @@
 //! the kinematics, beyond rounding), every block ends exactly on its target, and the
 //! motion is continuous across blocks.
 
+mod common;
+
 use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
 use pkmc::controller::{Controller, Inputs};
 use pkmc::kinematics::MachineKinematics;
@@ -65,14 +67,14 @@ proptest! {
         let mut c = Controller::new(m.clone()).unwrap();
     c.unlock();
         c.receive(&frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id() }));
-        for (i, p) in poses.iter().enumerate() {
-            let b = Block {
-                line: i as u32 + 1,
-                motion: if i % 2 == 0 { Motion::Linear } else { Motion::Rapid },
-                target: *p,
-                feed: feeds[i] * NM_PER_MM,
-                tolerance_nm: if blend { u32::MAX } else { 0 },
-            };
+        let blocks: Vec<Block> = poses.iter().enumerate().map(|(i, p)| Block {
+            line: i as u32 + 1,
+            motion: if i % 2 == 0 { Motion::Linear } else { Motion::Rapid },
+            target: *p,
+            feed: feeds[i] * NM_PER_MM,
+            tolerance_nm: if blend { u32::MAX } else { 0 },
+        }).collect();
+        for (i, b) in common::planned(&m, *c.pose(), 1, &blocks).into_iter().enumerate() {
             c.receive(&frame(i as u16 + 1, &HostMsg::Block(b)));
         }
         let n = m.joints.len();
@@ -130,6 +132,7 @@ fn a_joint_limit_tighter_than_the_feed_is_what_binds() {
         feed: 150 * NM_PER_MM,
         tolerance_nm: 0,
     };
+    let b = common::planned(&m, *c.pose(), 1, &[b])[0];
     c.receive(&frame(1, &HostMsg::Block(b)));
     let mut peak = 0i64;
     let mut last = c.joints()[0];

@@ -1,6 +1,8 @@
 //! Whole runs through the planner and interpolator, checked from the outside: dense
 //! micro-segment programs keep their feed, and arcs follow the true circle.
 
+mod common;
+
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::controller::{Controller, Inputs};
 use pkmc::protocol::{
@@ -35,6 +37,7 @@ fn run_smoothed(
             machine: c.machine_id(),
         },
     ));
+    let blocks = common::planned(c.machine(), *c.pose(), window, blocks);
     let mut next = 0;
     let mut poses = Vec::new();
     let mut sink = [0u8; 4096];

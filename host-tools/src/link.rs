@@ -47,9 +47,11 @@
 use crate::faults::FaultyLine;
 use crate::sim::Simulator;
 use pkmc::config::MachineConfig;
+use pkmc::kinematics::MachineKinematics;
+use pkmc::planner::{plan_into, PlanBlock};
 use pkmc::protocol::{
     decode_frame, encode_frame, Alarm, Block, Control, CtrlMsg, FrameReader, HostMsg, Motion,
-    NakReason, Pushed, State, Status, MAX_BODY, MAX_FRAME, PROTOCOL_VERSION,
+    NakReason, PlannedBlock, Pushed, State, Status, MAX_BODY, MAX_FRAME, PROTOCOL_VERSION,
 };
 use serde::Serialize;
 use serialport::SerialPort;
@@ -674,6 +676,8 @@ pub struct Link<T: Transport> {
     pub stats: ClientStats,
     their_machine: u32,
     axis_vmax: [i64; 6],
+    /// The machine, for planning the blocks before they are streamed.
+    machine: MachineConfig,
 }
 
 impl<T: Transport> Link<T> {
@@ -710,6 +714,7 @@ impl<T: Transport> Link<T> {
             stats: ClientStats::default(),
             their_machine: 0,
             axis_vmax: core::array::from_fn(|i| machine.axes[i].max_velocity),
+            machine: machine.clone(),
         };
         let start = Instant::now();
         while start.elapsed() < opts.link_timeout {
@@ -1063,6 +1068,7 @@ impl<T: Transport> Link<T> {
                 return Ok(JobEnd::Alarm(a));
             }
         }
+        let planned = self.plan(blocks, start_status.pose)?;
         let mut job = JobState::new(self.next_seq, self.capacity, &start_status);
         // Cumulative estimated motion, ms: `planned_ms[i]` covers blocks before `i`.
         let mut from = start_status.pose;
@@ -1076,14 +1082,37 @@ impl<T: Transport> Link<T> {
                 from = b.target;
             }
         }
-        let result = self.job_loop(blocks, hooks, &mut job);
+        let result = self.job_loop(blocks, &planned, hooks, &mut job);
         self.next_seq = job.seq_of(job.acked.max(job.high));
         result
+    }
+
+    /// Plans `blocks` from `start` with the whole job in view: the core's planner, as
+    /// the controller would with unlimited look-ahead ([`pkmc::planner::plan_into`]).
+    fn plan(&self, blocks: &[Block], start: [i64; 6]) -> Result<Vec<PlannedBlock>, LinkError> {
+        let kin = MachineKinematics::new(&self.machine);
+        let mut out = vec![PlanBlock::default(); blocks.len()];
+        let window = pkmc::interp::window_of(self.machine.motion.smoothing_ticks as u32);
+        plan_into(blocks, start, &self.machine, &kin, window, &mut out).map_err(|(i, _)| {
+            LinkError::BadBlock {
+                port: self.port(),
+                line: blocks[i].line,
+            }
+        })?;
+        Ok(blocks
+            .iter()
+            .zip(&out)
+            .map(|(b, p)| PlannedBlock {
+                block: *b,
+                plan: p.plan(),
+            })
+            .collect())
     }
 
     fn job_loop(
         &mut self,
         blocks: &[Block],
+        planned: &[PlannedBlock],
         hooks: &mut dyn JobHooks,
         job: &mut JobState,
     ) -> Result<JobEnd, LinkError> {
@@ -1111,7 +1140,7 @@ impl<T: Transport> Link<T> {
                             < self.opts.max_buffered_ms as f64)
                 {
                     let seq = job.seq_of(job.sent);
-                    self.queue(seq, &HostMsg::Block(blocks[job.sent]))?;
+                    self.queue(seq, &HostMsg::Block(planned[job.sent]))?;
                     if job.sent < job.high {
                         self.stats.resent += 1;
                     } else {

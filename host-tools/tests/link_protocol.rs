@@ -74,7 +74,9 @@ fn without_the_millisecond_limit_the_queue_fills_to_its_slots() {
         max_buffered_ms: u32::MAX,
         ..LinkOptions::default()
     });
-    let blocks: Vec<Block> = (0..100)
+    // More blocks than the queue holds.
+    let n = 2 * pkmc::controller::QUEUE_CAPACITY as u32;
+    let blocks: Vec<Block> = (0..n)
         .map(|i| line_to(if i % 2 == 0 { 10.0 } else { 0.0 }, 5.0, i + 1, 50))
         .collect();
     let mut seen = Statuses::default();
