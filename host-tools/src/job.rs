@@ -105,8 +105,9 @@ pub fn compile_program(path: &Path, machine: &MachineConfig) -> Result<Vec<Block
 }
 
 /// Compiles program text named `name` for `machine`, starting from pose `start`;
-/// checks every block end against the machine's reach. The one place where G-code
-/// becomes blocks (files through [`compile_program`], MDI lines directly).
+/// refuses axis words for axes the machine lacks ([`machine_axes`]) and checks every
+/// block end against the machine's reach. The one place where G-code becomes blocks
+/// (files through [`compile_program`], MDI lines directly).
 pub fn compile_text(
     text: &str,
     name: &str,
@@ -115,6 +116,7 @@ pub fn compile_text(
 ) -> Result<Vec<Block>, Failure> {
     let options = gcode::Options {
         start,
+        axes: machine_axes(machine),
         ..gcode::Options::default()
     };
     let canon = gcode::compile_canon(text, name, &options).map_err(|errs| {
@@ -151,6 +153,12 @@ pub fn compile_text(
         ));
     }
     Ok(program.blocks)
+}
+
+/// The axes `machine` has: those with limits in its `[axes]`. Any other axis has no
+/// speed to move at, so a program naming one is refused before anything runs.
+pub fn machine_axes(machine: &MachineConfig) -> [bool; AXES] {
+    std::array::from_fn(|i| machine.axes[i].max_velocity > 0)
 }
 
 /// What the simulator side reports after a job.
