@@ -13,7 +13,7 @@ use crate::faults::{FaultConfig, FaultReport, FaultyLine};
 use crate::gcode;
 use crate::link::{
     serve, ClientStats, InProcess, JobEnd, JobHooks, Link, LinkError, LinkOptions, PortTransport,
-    Transport,
+    SimClock, Transport,
 };
 use crate::plot::{lines_digest, Recorder};
 use crate::sim::{Simulator, Violation};
@@ -44,6 +44,11 @@ pub mod exit {
     pub const ALARM: i32 = 5;
     /// The operator stopped the job (Ctrl-C or the `q` key).
     pub const STOPPED: i32 = 6;
+    /// A simulated run stalled: the controller said it was moving but made no progress
+    /// ([`crate::link::STALL_TICKS`] of simulated time). Same code as [`ALARM`]: like
+    /// an alarm (or a drive timing breach), the machine failed to execute the program,
+    /// while the link itself was fine (not [`LINK`]); the message names the NC line.
+    pub const STALLED: i32 = ALARM;
 }
 
 /// An error with the exit code it maps to.
@@ -70,6 +75,7 @@ impl From<LinkError> for Failure {
         let code = match e {
             LinkError::BadBlock { .. } => exit::BAD_INPUT,
             LinkError::MachineMismatch { .. } | LinkError::MachineRefused { .. } => exit::PREFLIGHT,
+            LinkError::Stalled { .. } => exit::STALLED,
             _ => exit::LINK,
         };
         Failure::new(code, e.to_string())
@@ -238,6 +244,8 @@ impl SimSetup<'_> {
 pub struct SimServer {
     /// Path of the port a client opens.
     pub port_path: String,
+    /// The simulator's clock, for the client's stall guard.
+    pub clock: SimClock,
     stop: Arc<AtomicBool>,
     handle: JoinHandle<Result<SimOutcome, String>>,
     _client_end: serialport::TTYPort,
@@ -259,9 +267,14 @@ impl SimServer {
         let faults = setup.faults;
         let joints = sim.ctrl.machine().joints.len();
         let mut recorder = Recorder::new(joints, setup.record_path);
+        let clock = SimClock::default();
+        let ticks = clock.clone();
         let handle = std::thread::spawn(move || -> Result<SimOutcome, String> {
             let mut line = faults.map(FaultyLine::new);
-            let mut on_tick = |s: &Simulator| recorder.record(s);
+            let mut on_tick = |s: &Simulator| {
+                recorder.record(s);
+                ticks.set(s.ticks);
+            };
             serve(&mut sim, &mut master, &stop2, line.as_mut(), &mut on_tick)
                 .map_err(|e| e.to_string())?;
             let report = match (&line, &faults) {
@@ -272,6 +285,7 @@ impl SimServer {
         });
         Ok(Self {
             port_path,
+            clock,
             stop,
             handle,
             _client_end: slave,
@@ -505,6 +519,16 @@ fn open_target(
     }
 }
 
+/// Opens the port at `path`; the port of `server`, when given, with its clock (the
+/// stall guard of a simulation).
+fn open_port(path: &str, server: Option<&SimServer>) -> Result<PortTransport, Failure> {
+    let port = PortTransport::open(path)?;
+    Ok(match server {
+        Some(s) => port.with_sim_clock(s.clock.clone()),
+        None => port,
+    })
+}
+
 /// Streams `blocks` (named `program`) to the target; returns the report.
 pub fn run_blocks(
     machine: &MachineConfig,
@@ -515,7 +539,8 @@ pub fn run_blocks(
 ) -> Result<RunResult, Failure> {
     let (server, path) = open_target(machine, opts)?;
     let outcome = (|| -> Result<(JobEnd, Status, ClientStats), Failure> {
-        let mut link = Link::connect(PortTransport::open(&path)?, machine, opts.link)?;
+        let io = open_port(&path, server.as_ref())?;
+        let mut link = Link::connect(io, machine, opts.link)?;
         let sim = matches!(opts.target, Target::Sim);
         if let Some(end) = prepare(&mut link, opts.home, sim, hooks)? {
             let status = link.request_status()?;
@@ -681,7 +706,9 @@ pub fn with_link<R>(
     f: impl FnOnce(&mut Link<PortTransport>) -> Result<R, Failure>,
 ) -> Result<R, Failure> {
     let (server, path) = open_target(machine, opts)?;
-    let result = connect(machine, &path, opts.link).and_then(|mut link| f(&mut link));
+    let result = open_port(&path, server.as_ref())
+        .and_then(|io| Ok(Link::connect(io, machine, opts.link)?))
+        .and_then(|mut link| f(&mut link));
     if let Some(s) = server {
         s.finish()?;
     }
