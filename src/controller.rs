@@ -589,7 +589,14 @@ impl Controller {
                     self.planner.hold = false;
                     self.exec.paused = false;
                     self.exec.replan(&mut self.planner);
-                    self.state = State::Running;
+                    // A pause or hold with nothing after it (M0 then M2): idle at once.
+                    // Running with nothing to run would wait for a tick to turn idle,
+                    // and a tick comes only while there is work (`has_work`).
+                    self.state = if self.path_moving() {
+                        State::Running
+                    } else {
+                        State::Idle
+                    };
                 }
             }
             Control::Abort => {
@@ -1322,6 +1329,38 @@ mod tests {
         run(&mut c, 5000);
         assert_eq!(c.state(), State::Idle);
         assert_eq!(c.pose()[0], 80_000_000);
+    }
+
+    #[test]
+    fn a_resume_after_a_pause_that_ends_the_queue_is_idle_at_once() {
+        let mut c = session();
+        c.receive(&frame(1, &line_to(1, 1)));
+        let pause = Block {
+            line: 2,
+            motion: Motion::Aux(Aux::Pause(true)),
+            target: [1_000_000, 0, 0, 0, 0, 0],
+            feed: 0,
+            tolerance_nm: 0,
+        };
+        let at = [1_000_000, 0, 0, 0, 0, 0];
+        let pause = planned(&MachineConfig::cartesian_xyz(), at, &[pause]).remove(0);
+        c.receive(&frame(2, &pause));
+        run(&mut c, 2000);
+        assert_eq!(c.state(), State::Hold, "M1 pauses");
+        assert!(!c.has_work());
+        c.receive(&frame(
+            0,
+            &HostMsg::Control {
+                id: 1,
+                cmd: Control::Resume,
+            },
+        ));
+        assert_eq!(
+            c.state(),
+            State::Idle,
+            "nothing left to run: no tick needed"
+        );
+        assert_eq!(c.status().blocks_done, 2);
     }
 
     #[test]

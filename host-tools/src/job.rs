@@ -13,7 +13,7 @@ use crate::faults::{FaultConfig, FaultReport, FaultyLine};
 use crate::gcode;
 use crate::link::{
     serve, ClientStats, InProcess, JobEnd, JobHooks, Link, LinkError, LinkOptions, PortTransport,
-    Transport,
+    SimClock, Transport,
 };
 use crate::plot::{lines_digest, Recorder};
 use crate::sim::{Simulator, Violation};
@@ -44,6 +44,11 @@ pub mod exit {
     pub const ALARM: i32 = 5;
     /// The operator stopped the job (Ctrl-C or the `q` key).
     pub const STOPPED: i32 = 6;
+    /// A simulated run stalled: the controller said it was moving but made no progress
+    /// ([`crate::link::STALL_TICKS`] of simulated time). Same code as [`ALARM`]: like
+    /// an alarm (or a drive timing breach), the machine failed to execute the program,
+    /// while the link itself was fine (not [`LINK`]); the message names the NC line.
+    pub const STALLED: i32 = ALARM;
 }
 
 /// An error with the exit code it maps to.
@@ -70,6 +75,7 @@ impl From<LinkError> for Failure {
         let code = match e {
             LinkError::BadBlock { .. } => exit::BAD_INPUT,
             LinkError::MachineMismatch { .. } | LinkError::MachineRefused { .. } => exit::PREFLIGHT,
+            LinkError::Stalled { .. } => exit::STALLED,
             _ => exit::LINK,
         };
         Failure::new(code, e.to_string())
@@ -105,8 +111,9 @@ pub fn compile_program(path: &Path, machine: &MachineConfig) -> Result<Vec<Block
 }
 
 /// Compiles program text named `name` for `machine`, starting from pose `start`;
-/// checks every block end against the machine's reach. The one place where G-code
-/// becomes blocks (files through [`compile_program`], MDI lines directly).
+/// refuses axis words for axes the machine lacks ([`machine_axes`]) and checks every
+/// block end against the machine's reach. The one place where G-code becomes blocks
+/// (files through [`compile_program`], MDI lines directly).
 pub fn compile_text(
     text: &str,
     name: &str,
@@ -115,6 +122,7 @@ pub fn compile_text(
 ) -> Result<Vec<Block>, Failure> {
     let options = gcode::Options {
         start,
+        axes: machine_axes(machine),
         ..gcode::Options::default()
     };
     let canon = gcode::compile_canon(text, name, &options).map_err(|errs| {
@@ -151,6 +159,12 @@ pub fn compile_text(
         ));
     }
     Ok(program.blocks)
+}
+
+/// The axes `machine` has: those with limits in its `[axes]`. Any other axis has no
+/// speed to move at, so a program naming one is refused before anything runs.
+pub fn machine_axes(machine: &MachineConfig) -> [bool; AXES] {
+    std::array::from_fn(|i| machine.axes[i].max_velocity > 0)
 }
 
 /// What the simulator side reports after a job.
@@ -230,6 +244,8 @@ impl SimSetup<'_> {
 pub struct SimServer {
     /// Path of the port a client opens.
     pub port_path: String,
+    /// The simulator's clock, for the client's stall guard.
+    pub clock: SimClock,
     stop: Arc<AtomicBool>,
     handle: JoinHandle<Result<SimOutcome, String>>,
     _client_end: serialport::TTYPort,
@@ -251,9 +267,14 @@ impl SimServer {
         let faults = setup.faults;
         let joints = sim.ctrl.machine().joints.len();
         let mut recorder = Recorder::new(joints, setup.record_path);
+        let clock = SimClock::default();
+        let ticks = clock.clone();
         let handle = std::thread::spawn(move || -> Result<SimOutcome, String> {
             let mut line = faults.map(FaultyLine::new);
-            let mut on_tick = |s: &Simulator| recorder.record(s);
+            let mut on_tick = |s: &Simulator| {
+                recorder.record(s);
+                ticks.set(s.ticks);
+            };
             serve(&mut sim, &mut master, &stop2, line.as_mut(), &mut on_tick)
                 .map_err(|e| e.to_string())?;
             let report = match (&line, &faults) {
@@ -264,6 +285,7 @@ impl SimServer {
         });
         Ok(Self {
             port_path,
+            clock,
             stop,
             handle,
             _client_end: slave,
@@ -497,6 +519,16 @@ fn open_target(
     }
 }
 
+/// Opens the port at `path`; the port of `server`, when given, with its clock (the
+/// stall guard of a simulation).
+fn open_port(path: &str, server: Option<&SimServer>) -> Result<PortTransport, Failure> {
+    let port = PortTransport::open(path)?;
+    Ok(match server {
+        Some(s) => port.with_sim_clock(s.clock.clone()),
+        None => port,
+    })
+}
+
 /// Streams `blocks` (named `program`) to the target; returns the report.
 pub fn run_blocks(
     machine: &MachineConfig,
@@ -507,7 +539,8 @@ pub fn run_blocks(
 ) -> Result<RunResult, Failure> {
     let (server, path) = open_target(machine, opts)?;
     let outcome = (|| -> Result<(JobEnd, Status, ClientStats), Failure> {
-        let mut link = Link::connect(PortTransport::open(&path)?, machine, opts.link)?;
+        let io = open_port(&path, server.as_ref())?;
+        let mut link = Link::connect(io, machine, opts.link)?;
         let sim = matches!(opts.target, Target::Sim);
         if let Some(end) = prepare(&mut link, opts.home, sim, hooks)? {
             let status = link.request_status()?;
@@ -673,7 +706,9 @@ pub fn with_link<R>(
     f: impl FnOnce(&mut Link<PortTransport>) -> Result<R, Failure>,
 ) -> Result<R, Failure> {
     let (server, path) = open_target(machine, opts)?;
-    let result = connect(machine, &path, opts.link).and_then(|mut link| f(&mut link));
+    let result = open_port(&path, server.as_ref())
+        .and_then(|io| Ok(Link::connect(io, machine, opts.link)?))
+        .and_then(|mut link| f(&mut link));
     if let Some(s) = server {
         s.finish()?;
     }

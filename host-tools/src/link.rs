@@ -43,10 +43,17 @@
 //! A job ends when every block is acknowledged and a status shows the controller idle
 //! with all of them executed, when it reports an alarm, or when the operator's abort
 //! or immediate stop (from [`JobHooks::control`]) has taken effect.
+//!
+//! Stall guard: against a simulator on this host ([`Transport::sim_ticks`]: `--check`
+//! and `--sim`, where no operator watches), a job, homing or jog whose controller says
+//! it is moving (running or homing) but makes no progress (no block ends; pose, joints
+//! and state unchanged) for [`STALL_TICKS`] of simulated time, plus the time of the
+//! dwell it is executing, ends with [`LinkError::Stalled`] naming the NC line. Time at
+//! rest (idle, an alarm, a pause or hold waiting for the operator) never counts.
 
 use crate::faults::FaultyLine;
 use crate::sim::Simulator;
-use pkmc::config::MachineConfig;
+use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
 use pkmc::kinematics::MachineKinematics;
 use pkmc::planner::{plan_into, PlanBlock};
 use pkmc::protocol::{
@@ -58,7 +65,8 @@ use serialport::SerialPort;
 use std::collections::VecDeque;
 use std::fmt;
 use std::io::{self, ErrorKind, Read, Write};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Default limit of motion buffered in the controller, ms: no block is sent while the
@@ -78,6 +86,11 @@ pub const HELLO_RESEND_AFTER: Duration = Duration::from_millis(300);
 pub const MIN_WINDOW: usize = 2;
 /// Longest wait in one read while nothing else is due.
 const READ_WAIT: Duration = Duration::from_millis(5);
+/// Simulated time, ticks (10 s), that a simulated controller may say it is moving
+/// without progress before the job is stopped as stalled. The longest legitimate
+/// standstill while moving is about 1 s (the slowest feed, 1 nm/s, moves the pose one
+/// nm a second); a dwell's own time is added to this; servo settling happens at rest.
+pub const STALL_TICKS: u64 = 10 * pkmc::units::TICK_HZ as u64;
 
 /// Tunables of the client.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -170,6 +183,18 @@ pub enum LinkError {
         /// Port.
         port: String,
     },
+    /// A simulated controller said it was moving but made no progress for
+    /// [`STALL_TICKS`] (plus the dwell it was executing) of simulated time.
+    Stalled {
+        /// Port.
+        port: String,
+        /// NC line it was on.
+        line: u32,
+        /// Its state.
+        state: State,
+        /// Simulated time without progress.
+        still: Duration,
+    },
     /// A message did not fit in a frame (a bug).
     Frame {
         /// Port.
@@ -224,6 +249,23 @@ impl fmt::Display for LinkError {
                 f,
                 "{port}: the controller runs another machine and refuses to move"
             ),
+            LinkError::Stalled {
+                port,
+                line,
+                state,
+                still,
+            } => {
+                write!(f, "{port}: stalled")?;
+                if *line != 0 {
+                    write!(f, " at line {line}")?;
+                }
+                write!(
+                    f,
+                    ": the controller has been {state:?} for {:.1} s of simulated time with no \
+                     block ending and nothing moving; run stopped",
+                    still.as_secs_f64()
+                )
+            }
             LinkError::Frame { port, what } => write!(f, "{port}: cannot frame {what}"),
         }
     }
@@ -255,12 +297,36 @@ pub trait Transport {
     fn write_some(&mut self, bytes: &[u8], wait: Duration) -> io::Result<usize>;
     /// Reads what has arrived, waiting at most `wait` for the first byte; 0 on timeout.
     fn read_some(&mut self, buf: &mut [u8], wait: Duration) -> io::Result<usize>;
+    /// Simulated time at the other end, ticks, when it is a simulator on this host
+    /// ([`InProcess`], or a pseudo-terminal with a [`SimClock`]): the stall guard runs
+    /// on it. `None` for a board: its operator watches the machine.
+    fn sim_ticks(&self) -> Option<u64> {
+        None
+    }
+}
+
+/// The clock of a simulator serving in another thread, read by the client's stall
+/// guard: the server stores its tick count after every tick.
+#[derive(Clone, Debug, Default)]
+pub struct SimClock(Arc<AtomicU64>);
+
+impl SimClock {
+    /// Records the simulator's tick count.
+    pub fn set(&self, ticks: u64) {
+        self.0.store(ticks, Ordering::Relaxed);
+    }
+
+    /// The simulator's tick count last recorded.
+    pub fn ticks(&self) -> u64 {
+        self.0.load(Ordering::Relaxed)
+    }
 }
 
 /// A serial port (a board's USB CDC port or a pseudo-terminal).
 pub struct PortTransport {
     port: Box<dyn SerialPort>,
     name: String,
+    clock: Option<SimClock>,
 }
 
 impl PortTransport {
@@ -276,7 +342,14 @@ impl PortTransport {
         Ok(Self {
             port,
             name: path.to_string(),
+            clock: None,
         })
+    }
+
+    /// The port of a simulator whose clock is `clock`: turns the stall guard on.
+    pub fn with_sim_clock(mut self, clock: SimClock) -> Self {
+        self.clock = Some(clock);
+        self
     }
 }
 
@@ -301,6 +374,10 @@ impl Transport for PortTransport {
             Err(e) if is_timeout(&e) => Ok(0),
             Err(e) => Err(e),
         }
+    }
+
+    fn sim_ticks(&self) -> Option<u64> {
+        self.clock.as_ref().map(SimClock::ticks)
     }
 }
 
@@ -361,6 +438,10 @@ impl Transport for InProcess {
             (self.on_tick)(&self.sim);
         }
         Ok(0)
+    }
+
+    fn sim_ticks(&self) -> Option<u64> {
+        Some(self.sim.ticks)
     }
 }
 
@@ -558,6 +639,57 @@ pub fn serve(
     sim.finish_trace()
         .map_err(|e| io_err("write the trace")(io::Error::other(e)))?;
     Ok(stats)
+}
+
+/// What a status shows of a controller's progress.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Mark {
+    state: State,
+    blocks_done: u32,
+    pose: [i64; AXES],
+    joints: [i64; MAX_JOINTS],
+}
+
+/// The stall guard's memory: the last progress seen and when, in simulated ticks.
+#[derive(Clone, Copy, Debug, Default)]
+struct StallGuard {
+    mark: Option<Mark>,
+    since: u64,
+}
+
+impl StallGuard {
+    /// Takes status `s`, seen at simulated tick `now`; returns the ticks the controller
+    /// has been moving without progress.
+    fn observe(&mut self, s: &Status, now: u64) -> u64 {
+        let mark = Mark {
+            state: s.state,
+            blocks_done: s.blocks_done,
+            pose: s.pose,
+            joints: s.joints,
+        };
+        // Idle or in alarm: waiting for the host. Held: braking (the pose changes) or
+        // waiting for the operator (a pause, a tool change, a feed hold). The reported
+        // speed is no sign of progress: it is not zeroed during a dwell.
+        let at_rest = matches!(
+            s.state,
+            State::Idle | State::Alarm | State::EStop | State::Hold
+        );
+        if at_rest || self.mark != Some(mark) {
+            self.mark = Some(mark);
+            self.since = now;
+        }
+        now.saturating_sub(self.since)
+    }
+}
+
+/// Ticks of the dwell a job is executing when status `s` arrives (0 if none): the
+/// stall guard adds them to [`STALL_TICKS`].
+fn dwell_ticks(blocks: &[Block], done_before: u32, s: &Status) -> u64 {
+    let executing = s.blocks_done.wrapping_sub(done_before) as usize;
+    match blocks.get(executing).map(|b| b.motion) {
+        Some(Motion::Dwell(ms)) => ms as u64 * pkmc::units::TICK_HZ as u64 / 1000,
+        _ => 0,
+    }
 }
 
 /// How a job ended.
@@ -1012,15 +1144,41 @@ impl<T: Transport> Link<T> {
         id
     }
 
+    /// The stall guard on status `s` (simulators only): an error once the controller
+    /// has been moving without progress for [`STALL_TICKS`] plus `allowance` ticks.
+    fn check_stall(
+        &self,
+        guard: &mut StallGuard,
+        s: &Status,
+        allowance: u64,
+    ) -> Result<(), LinkError> {
+        let Some(now) = self.io.sim_ticks() else {
+            return Ok(());
+        };
+        let still = guard.observe(s, now);
+        if still <= STALL_TICKS + allowance {
+            return Ok(());
+        }
+        Err(LinkError::Stalled {
+            port: self.port(),
+            line: s.line,
+            state: s.state,
+            still: Duration::from_nanos(still * pkmc::units::TICK_NS as u64),
+        })
+    }
+
     /// Waits until the controller is at rest: idle with an empty queue (`Done`), or in
     /// alarm. `hooks` sees every status.
     /// The operator's controls from `hooks` are sent on the way; after an `Abort` the
-    /// end is `Aborted`, after a `Stop` it is `Stopped`.
+    /// end is `Aborted`, after a `Stop` it is `Stopped`. On a simulator, a controller
+    /// moving without progress is an error ([`LinkError::Stalled`]).
     pub fn wait_idle(&mut self, hooks: &mut dyn JobHooks) -> Result<JobEnd, LinkError> {
         let mut ended_by = None;
+        let mut guard = StallGuard::default();
         loop {
             let s = self.request_status()?;
             hooks.status(&s);
+            self.check_stall(&mut guard, &s, 0)?;
             let view = LinkView {
                 status: Some(s.clone()),
                 ..LinkView::default()
@@ -1055,7 +1213,8 @@ impl<T: Transport> Link<T> {
     }
 
     /// Streams `blocks` and waits until they have all executed, the controller raises
-    /// an alarm, or the operator's abort or stop has taken effect.
+    /// an alarm, or the operator's abort or stop has taken effect; on a simulator, a
+    /// controller moving without progress is an error ([`LinkError::Stalled`]).
     pub fn run_job(
         &mut self,
         blocks: &[Block],
@@ -1355,6 +1514,8 @@ impl<T: Transport> Link<T> {
                 {
                     return Ok(Some(JobEnd::Done));
                 }
+                let dwell = dwell_ticks(blocks, job.done_before, &s);
+                self.check_stall(&mut job.stall, &s, dwell)?;
             }
             CtrlMsg::HelloAck { .. }
             | CtrlMsg::MachineLoaded { .. }
@@ -1397,6 +1558,7 @@ struct JobState {
     done_before: u32,
     ending: Option<Ending>,
     planned_ms: Vec<f64>,
+    stall: StallGuard,
 }
 
 impl JobState {
@@ -1415,6 +1577,7 @@ impl JobState {
             done_before: status.blocks_done,
             ending: None,
             planned_ms: Vec::new(),
+            stall: StallGuard::default(),
         }
     }
 

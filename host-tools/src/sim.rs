@@ -611,10 +611,13 @@ impl Simulator {
         (count, all)
     }
 
-    /// Does simulated time need to advance: the controller has work, or a servo joint
-    /// is still settling on its target (for at most [`SETTLE_TICKS`] after the work)?
+    /// Does simulated time need to advance: the controller has work, or says it is
+    /// running (a board's clock never stops: a controller left running with nothing
+    /// to do gets the tick that makes it idle, and one stuck running is seen by the
+    /// stall guard, which measures simulated time), or a servo joint is still
+    /// settling on its target (for at most [`SETTLE_TICKS`] after the work)?
     pub fn busy(&self) -> bool {
-        if self.ctrl.has_work() {
+        if self.ctrl.has_work() || self.ctrl.state() == State::Running {
             return true;
         }
         if self.idle_ticks >= SETTLE_TICKS {

@@ -100,3 +100,21 @@ fn canonical_commands_become_protocol_blocks() {
     assert_eq!(blocks[1].feed, 10_000_000);
     assert!(matches!(blocks[2].motion, Motion::Arc { .. }));
 }
+
+#[test]
+fn an_axis_word_for_an_axis_the_machine_lacks_is_refused_at_its_column() {
+    let xyz = Options {
+        axes: [true, true, true, false, false, false],
+        ..Options::default()
+    };
+    let errors = compile("G0 X1\nG0 Y2 C90 B4\nG92 A0\nG0 Z1", "t.ngc", &xyz).unwrap_err();
+    let got: Vec<String> = errors.iter().map(|d| d.to_string()).collect();
+    assert_eq!(
+        got,
+        [
+            "t.ngc:2:7: C90: the machine has no C axis (its axes: X Y Z)",
+            "t.ngc:3:5: A0: the machine has no A axis (its axes: X Y Z)",
+        ]
+    );
+    assert!(compile("G0 A4", "t.ngc", &Options::default()).is_ok());
+}

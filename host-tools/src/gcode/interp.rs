@@ -324,6 +324,7 @@ impl<'o> Interp<'o> {
         {
             return Ok(());
         }
+        self.check_axes(w)?;
         let g = if w.g.is_empty() {
             [None; G_GROUPS]
         } else {
@@ -702,6 +703,36 @@ impl<'o> Interp<'o> {
     pub(crate) fn length(&self, w: Word) -> Res<i64> {
         let per = if self.inch { NM_PER_INCH } else { NM_PER_MM };
         bounded(w.num.scaled(per, 1), w)
+    }
+
+    /// Refuses the leftmost axis word for an axis the machine lacks, naming the axes
+    /// it has.
+    fn check_axes(&self, w: &Words) -> Res<()> {
+        let lacked = (0..AXES)
+            .filter(|&i| !self.opts.axes[i])
+            .filter_map(|i| w.get(AXIS_NAMES[i] as u8).map(|word| (i, word)))
+            .min_by_key(|(_, word)| word.col);
+        let Some((i, word)) = lacked else {
+            return Ok(());
+        };
+        let has: Vec<String> = (0..AXES)
+            .filter(|&k| self.opts.axes[k])
+            .map(|k| AXIS_NAMES[k].to_string())
+            .collect();
+        fail(
+            word.col,
+            format!(
+                "{}{}: the machine has no {} axis (its axes: {})",
+                AXIS_NAMES[i],
+                word.num,
+                AXIS_NAMES[i],
+                if has.is_empty() {
+                    "none".into()
+                } else {
+                    has.join(" ")
+                }
+            ),
+        )
     }
 
     /// Axis word `i` → axis units (nm, or n° for A B C), bounded.

@@ -70,6 +70,10 @@ pub struct Options {
     pub arc_tolerance_nm: i64,
     /// Pose the machine is at when the program starts (axis units, machine frame).
     pub start: [i64; AXES],
+    /// The axes the machine has (X Y Z A B C, in that order): an axis word for any
+    /// other is an error at its column, since the machine could never move there.
+    /// Default: all six.
+    pub axes: [bool; AXES],
 }
 
 impl Default for Options {
@@ -79,6 +83,7 @@ impl Default for Options {
             tools: ToolTable::default(),
             arc_tolerance_nm: DEFAULT_ARC_TOLERANCE_NM,
             start: [0; AXES],
+            axes: [true; AXES],
         }
     }
 }

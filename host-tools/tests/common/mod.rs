@@ -4,9 +4,10 @@
 // Each test file uses its own subset of these helpers.
 #![allow(dead_code)]
 
-use std::io::BufRead;
+use std::io::{BufRead, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
 
 /// The repository root (examples and machine files are named from there).
 pub fn repo() -> PathBuf {
@@ -20,6 +21,49 @@ pub fn nc_send(args: &[&str]) -> Output {
         .current_dir(repo())
         .output()
         .expect("nc-send runs")
+}
+
+/// Runs `nc-send` with `args` from the repository root, killing it and failing the
+/// test if it has not exited within `limit`: a run that hangs fails instead of
+/// hanging the suite.
+pub fn nc_send_within(limit: Duration, args: &[&str]) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_nc-send"))
+        .args(args)
+        .current_dir(repo())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("nc-send runs");
+    // Drain both pipes while waiting, so a chatty run cannot block on a full pipe.
+    let drain = |mut pipe: Box<dyn Read + Send>| {
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            let _ = pipe.read_to_end(&mut bytes);
+            bytes
+        })
+    };
+    let stdout = drain(Box::new(child.stdout.take().expect("stdout piped")));
+    let stderr = drain(Box::new(child.stderr.take().expect("stderr piped")));
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("nc-send can be waited for") {
+            break status;
+        }
+        if start.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!(
+                "nc-send {args:?} still running after {limit:?} (hangs)\nstderr: {}",
+                String::from_utf8_lossy(&stderr.join().unwrap_or_default())
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    Output {
+        status,
+        stdout: stdout.join().expect("stdout read"),
+        stderr: stderr.join().expect("stderr read"),
+    }
 }
 
 /// The JSON report on stdout.
