@@ -405,6 +405,34 @@ pub fn plan_into(
     Ok(())
 }
 
+/// Motion time of planned blocks (as [`plan_into`] leaves them) at 100 % feed, ticks:
+/// each block profiled from its entry to the next one's (0 before a block that does
+/// not move, and at the end), dwells counted.
+pub fn planned_ticks(blocks: &[PlanBlock]) -> f64 {
+    let mut ticks = 0.0;
+    for (i, b) in blocks.iter().enumerate() {
+        match b.kind {
+            Kind::Dwell(n) => ticks += n as f64,
+            Kind::Rapid | Kind::Feed => {
+                let exit = blocks
+                    .get(i + 1)
+                    .filter(|n| matches!(n.kind, Kind::Rapid | Kind::Feed))
+                    .map_or(0.0, |n| n.entry);
+                let (p, _) = crate::profile::Profile::plan(
+                    b.path.length << 16,
+                    b.entry,
+                    cap(b, 100, false),
+                    exit,
+                    b.accel,
+                );
+                ticks += p.duration() as f64 / 4_294_967_296.0;
+            }
+            _ => {}
+        }
+    }
+    ticks
+}
+
 /// The controller's queue of planned blocks.
 #[derive(Clone, Debug)]
 pub struct Planner {

@@ -146,6 +146,14 @@ impl Profile {
             // phase never ends beyond the top speed.
             let t1 = to_q32((top - v0).abs() / a * (1.0 - 3e-7));
             (a1, t1, to_q32(fmax(top - v1, 0.0) / a))
+        } else if v1 > v0 {
+            // Too short to reach v1 and come back: accelerate throughout, over a hair
+            // less than the length (the rest is a cruise at the exit speed), the time
+            // from the form without cancellation: (v1 − v0)/a = 2·s/(v0 + v1).
+            let gain = two_a_s * (1.0 - 2e-6);
+            let v1 = fmin(v1, sqrtf(v0 * v0 + gain));
+            let s = fmin((v1 * v1 - v0 * v0) / (2.0 * a), gain / (2.0 * a));
+            (a_q, to_q32(2.0 * fmax(s, 0.0) / fmax(v0 + v1, 1e-30)), 0)
         } else {
             // Entered too fast to reach v_max and then v1: decelerate throughout, over
             // a hair less than the length (the rest is a cruise at v0), the time from

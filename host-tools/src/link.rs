@@ -719,7 +719,7 @@ pub struct NakCounts {
 }
 
 /// Link statistics seen by the client.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
 pub struct ClientStats {
     /// Frames sent (including resends, control commands and status requests).
     pub frames_sent: u64,
@@ -749,6 +749,10 @@ pub struct ClientStats {
     pub frames_received: u64,
     /// Received frames that failed to decode (damaged on the way).
     pub corrupt_received: u64,
+    /// Motion time of the last job as planned on the host with unlimited look-ahead,
+    /// s: what an ideal controller under the same limits takes (jerk smoothing not
+    /// counted).
+    pub plan_time_s: f64,
 }
 
 /// What the job runner tells its caller, and asks it.
@@ -1248,7 +1252,7 @@ impl<T: Transport> Link<T> {
 
     /// Plans `blocks` from `start` with the whole job in view: the core's planner, as
     /// the controller would with unlimited look-ahead ([`pkmc::planner::plan_into`]).
-    fn plan(&self, blocks: &[Block], start: [i64; 6]) -> Result<Vec<PlannedBlock>, LinkError> {
+    fn plan(&mut self, blocks: &[Block], start: [i64; 6]) -> Result<Vec<PlannedBlock>, LinkError> {
         let kin = MachineKinematics::new(&self.machine);
         let mut out = vec![PlanBlock::default(); blocks.len()];
         let window = pkmc::interp::window_of(self.machine.motion.smoothing_ticks as u32);
@@ -1258,6 +1262,8 @@ impl<T: Transport> Link<T> {
                 line: blocks[i].line,
             }
         })?;
+        self.stats.plan_time_s =
+            pkmc::planner::planned_ticks(&out) * pkmc::units::TICK_NS as f64 * 1e-9;
         Ok(blocks
             .iter()
             .zip(&out)
