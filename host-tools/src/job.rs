@@ -613,6 +613,14 @@ pub fn check(
     let status = link.request_status()?;
     let stats = link.stats;
     let mut io = link.into_transport();
+    // The drives start the last tick's step trains at the next tick edge, as on the
+    // board: run it, so the report's drive positions are final.
+    while !io.sim.ctrl.has_work() && io.sim.steps_due() {
+        io.sim
+            .tick()
+            .map_err(|e| Failure::new(exit::BAD_INPUT, format!("simulator: {e:#}")))?;
+        recorder.borrow_mut().record(&io.sim);
+    }
     if let Some(p) = setup.trace {
         io.sim
             .finish_trace()

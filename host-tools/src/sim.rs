@@ -11,12 +11,25 @@
 //!
 //! Time advances only through [`Simulator::tick`], one interpolation period at a time,
 //! so runs are deterministic however fast the host computer is.
+//!
+//! The controller is paced exactly as on the board, by the same core code
+//! ([`pkmc::pacing`]): each tick starts with the servo interrupt's edge period
+//! ([`ServoPacer`]: the previous tick's servo targets are loaded, the encoders and
+//! trips are snapshotted), then the tick ([`TickPacer`]) applies the previous tick's
+//! step trains, debounces the switches ([`pkmc::debounce`]) and runs the controller,
+//! then the tick's other nine servo periods run. So stepper and servo joints follow
+//! the controller's commands one tick late, and an injected limit or home switch
+//! reaches it after the board's three samples (the e-stop at once), as on the board.
+//! The switches are sampled at the tick edge, where the joints stand before the tick's
+//! trains start.
 
 use crate::plant::{DiscretePlant, PlantFile, TransferFunction};
 use anyhow::{bail, Result};
 use pkmc::config::{Drive, MachineConfig, StepTiming, MAX_JOINTS, MAX_SERVOS, MAX_STEPPERS};
-use pkmc::contour::{PeriodInputs, PeriodOutputs, ServoBank};
+use pkmc::contour::{PeriodOutputs, ServoBank};
 use pkmc::controller::{Controller, Inputs};
+use pkmc::debounce::Switches;
+use pkmc::pacing::{RawInputs, ServoPacer, Snapshot, TickPacer};
 use pkmc::protocol::State;
 use pkmc::servo::{DAC_MID, SERVO_HZ, SERVO_PER_TICK};
 use pkmc::stepper::StepTrain;
@@ -358,8 +371,13 @@ pub struct Simulator {
     pub ctrl: Controller,
     steppers: [Option<SimStepper>; MAX_STEPPERS],
     servos: [Option<SimServo>; MAX_SERVOS],
-    bank: Option<ServoBank>,
+    /// The servo interrupt's loops and pacing; `None` for a machine without servo
+    /// joints (the loops would have nothing to drive).
+    servo: Option<ServoPacer>,
+    /// Outputs of the last servo period.
     bank_out: PeriodOutputs,
+    /// The tick's side of the pacing: switch filters, the step trains due next.
+    pacer: TickPacer,
     /// Plant of each joint, from the machine file ([`DEFAULT_PLANT_GAIN`] when absent).
     plants: Vec<Option<PlantFile>>,
     /// True position minus believed position of each joint at power-up, axis units.
@@ -367,7 +385,7 @@ pub struct Simulator {
     injections: Vec<Injection>,
     /// Inputs forced by the injections so far.
     forced: Inputs,
-    /// Index marks crossed during the last tick, per servo channel.
+    /// Index marks crossed since the last tick, per servo channel.
     index: [Option<i64>; MAX_SERVOS],
     /// The controller's last outputs.
     last_out: pkmc::controller::Outputs,
@@ -410,8 +428,9 @@ impl Simulator {
             ctrl,
             steppers: Default::default(),
             servos: Default::default(),
-            bank: None,
+            servo: None,
             bank_out: PeriodOutputs::default(),
+            pacer: TickPacer::new(),
             plants,
             power_up_offset,
             injections: Vec::new(),
@@ -510,7 +529,8 @@ impl Simulator {
 
     /// Builds the simulated drives for the controller's machine, standing where the
     /// controller believes its joints are plus the power-up offsets (as after
-    /// power-up: encoder counters read zero, step counts are positions).
+    /// power-up: encoder counters read zero, step counts are positions), with the
+    /// servo and tick pacing of a board just started.
     fn attach_drives(&mut self) -> Result<()> {
         let machine = self.ctrl.machine().clone();
         self.machine_id = self.ctrl.machine_id();
@@ -535,12 +555,15 @@ impl Simulator {
             }
         }
         let counts = self.encoder_counts();
-        self.bank = self
+        self.servo = self
             .servos
             .iter()
             .any(Option::is_some)
-            .then(|| ServoBank::new(&machine, &counts));
+            .then(|| ServoPacer::new(ServoBank::new(&machine, &counts), &counts));
         self.bank_out = PeriodOutputs::default();
+        // New drives, standing where the controller's joints are: no train of the old
+        // ones is due on them.
+        self.pacer = TickPacer::new();
         Ok(())
     }
 
@@ -611,13 +634,20 @@ impl Simulator {
         (count, all)
     }
 
+    /// Has the controller computed steps that the drives have not taken yet (the last
+    /// tick's trains, which start at the next tick edge, as on the board)?
+    pub fn steps_due(&self) -> bool {
+        self.pacer.due().steps.iter().any(|t| t.count > 0)
+    }
+
     /// Does simulated time need to advance: the controller has work, or says it is
     /// running (a board's clock never stops: a controller left running with nothing
     /// to do gets the tick that makes it idle, and one stuck running is seen by the
-    /// stall guard, which measures simulated time), or a servo joint is still
-    /// settling on its target (for at most [`SETTLE_TICKS`] after the work)?
+    /// stall guard, which measures simulated time), the last tick's step trains are
+    /// still to run, or a servo joint is still settling on its target (for at most
+    /// [`SETTLE_TICKS`] after the work)?
     pub fn busy(&self) -> bool {
-        if self.ctrl.has_work() || self.ctrl.state() == State::Running {
+        if self.ctrl.has_work() || self.ctrl.state() == State::Running || self.steps_due() {
             return true;
         }
         if self.idle_ticks >= SETTLE_TICKS {
@@ -691,7 +721,40 @@ impl Simulator {
         }
     }
 
-    /// Simulates one interpolation period.
+    /// Each servo channel's amplifier fault input, from the injected drive faults of
+    /// the servo joints.
+    fn amplifier_faults(&self) -> [bool; MAX_SERVOS] {
+        let mut fault = [false; MAX_SERVOS];
+        for (j, jc) in self.ctrl.machine().joints.iter().enumerate() {
+            if let Drive::Servo { channel } = jc.drive {
+                fault[channel as usize] |= self.forced.drive_fault & (1 << j) != 0;
+            }
+        }
+        fault
+    }
+
+    /// One servo period of the servo interrupt, the simulated plants following its
+    /// outputs; returns whether it was a tick edge.
+    fn servo_period(&mut self, fault: &[bool; MAX_SERVOS]) -> bool {
+        let Some(pacer) = self.servo.as_mut() else {
+            return false;
+        };
+        let period = pacer.period(&counts_of(&self.servos), fault);
+        self.bank_out = period.out;
+        for (c, s) in self.servos.iter_mut().enumerate() {
+            if let Some(s) = s {
+                let mark = s.period(period.out.dac[c], period.out.enable[c]);
+                if self.index[c].is_none() {
+                    self.index[c] = mark;
+                }
+            }
+        }
+        period.tick
+    }
+
+    /// Simulates one interpolation period, in the board's order: the switches as they
+    /// stand at the tick edge, the edge's servo period, the previous tick's step
+    /// trains, the controller's tick, the remaining servo periods.
     pub fn tick(&mut self) -> Result<()> {
         if self.ctrl.machine_id() != self.machine_id {
             // The host loaded another machine: the controller restarted at its home.
@@ -699,50 +762,45 @@ impl Simulator {
         }
         self.apply_injections();
         let (home, limit) = self.switches();
-        let inputs = Inputs {
-            encoder_counts: self.encoder_counts(),
-            index: std::mem::take(&mut self.index),
-            estop: self.forced.estop,
-            limit: limit | self.forced.limit,
-            home,
-            drive_fault: self.forced.drive_fault,
-            servo_trip: self.bank_out.trip,
+        let fault = self.amplifier_faults();
+        let edge = self.servo_period(&fault);
+        let snapshot = match &self.servo {
+            Some(pacer) => {
+                debug_assert!(edge, "every tick starts at a tick edge");
+                pacer.snapshot()
+            }
+            None => Snapshot::default(),
         };
-        let out = *self.ctrl.tick(&inputs);
-        self.last_out = out;
         let t0 = self.ticks * TICK_NS as u64;
-        for (d, train) in self.steppers.iter_mut().zip(&out.steps) {
+        for (d, train) in self.steppers.iter_mut().zip(&self.pacer.due().steps) {
             if let Some(d) = d {
                 d.apply(t0, train);
             }
         }
-        if let Some(bank) = self.bank.as_mut() {
-            let machine = self.ctrl.machine();
-            if out.servo_reset {
-                *bank = ServoBank::new(machine, &counts_of(&self.servos));
+        let mut servo_joints = 0u16;
+        for (j, jc) in self.ctrl.machine().joints.iter().enumerate() {
+            if matches!(jc.drive, Drive::Servo { .. }) {
+                servo_joints |= 1 << j;
             }
-            bank.load_tick(&out.servo_target);
-            let mut fault = [false; MAX_SERVOS];
-            for (j, jc) in machine.joints.iter().enumerate() {
-                if let Drive::Servo { channel } = jc.drive {
-                    fault[channel as usize] = self.forced.drive_fault & (1 << j) != 0;
-                }
-            }
-            for _ in 0..SERVO_PER_TICK {
-                self.bank_out = bank.period(&PeriodInputs {
-                    feedback: counts_of(&self.servos),
-                    fault,
-                    enable: out.servo_enable,
-                });
-                for (c, s) in self.servos.iter_mut().enumerate() {
-                    if let Some(s) = s {
-                        let mark = s.period(self.bank_out.dac[c], self.bank_out.enable[c]);
-                        if self.index[c].is_none() {
-                            self.index[c] = mark;
-                        }
-                    }
-                }
-            }
+        }
+        let raw = RawInputs {
+            switches: Switches {
+                estop: self.forced.estop,
+                limit: limit | self.forced.limit,
+                home,
+            },
+            // Stepper drives' fault lines, read by the tick; the servo joints' come
+            // through the amplifier fault inputs and the snapshot.
+            drive_fault: self.forced.drive_fault & !servo_joints,
+            index: std::mem::take(&mut self.index),
+        };
+        let command = self.pacer.tick(&mut self.ctrl, &raw, &snapshot);
+        self.last_out = *self.pacer.due();
+        if let Some(pacer) = self.servo.as_mut() {
+            pacer.post(command);
+        }
+        for _ in 1..SERVO_PER_TICK {
+            self.servo_period(&fault);
         }
         self.ticks += 1;
         self.idle_ticks = if self.ctrl.has_work() {

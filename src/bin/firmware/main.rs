@@ -4,13 +4,16 @@
 //! firmware: a 10 kHz servo interrupt running every servo channel's loop
 //! ([`servo_period`]: encoders in, DAC commands and amplifier enable out), which paces
 //! a 1 kHz interpolation tick: the tick applies the previous tick's stepper outputs
-//! (step trains in timer hardware, DIR, ENABLE), samples and debounces the e-stop and
-//! limit/home switches ([`debounce`]), advances a [`Controller`] kept in a static and
-//! posts its servo targets to the servo loops, and refreshes the independent
-//! watchdog; a USB CDC-ACM link feeding the controller's `receive` and draining its
-//! `transmit`; a heartbeat LED. For the host it is a launcher that re-runs cargo for
-//! the MCU target, so `cargo run --release` at the repository root builds, flashes and
-//! runs the firmware through the probe-rs runner of `.cargo/config.toml`.
+//! (step trains in timer hardware, DIR, ENABLE), samples the e-stop and limit/home
+//! switches, advances a [`Controller`] kept in a static on them (debounced) and on the
+//! servo interrupt's snapshot, posts its servo targets to the servo loops, and
+//! refreshes the independent watchdog (the pacing and the debouncing are the core's,
+//! `pkmc::pacing` and `pkmc::debounce`, shared with the simulator: these handlers only
+//! read and write the hardware around them); a USB CDC-ACM link feeding the
+//! controller's `receive` and draining its `transmit`; a heartbeat LED. For the host
+//! it is a launcher that re-runs cargo for the MCU target, so `cargo run --release` at
+//! the repository root builds, flashes and runs the firmware through the probe-rs
+//! runner of `.cargo/config.toml`.
 //!
 //! Invariants: the controller is built once and moved once into its static before the
 //! servo timer starts; afterwards it is touched only under the tick's priority-ceiling
@@ -45,8 +48,6 @@ fn main() {
 #[cfg(target_os = "none")]
 mod board;
 #[cfg(target_os = "none")]
-mod debounce;
-#[cfg(target_os = "none")]
 mod encoders;
 #[cfg(target_os = "none")]
 mod servo_period;
@@ -77,16 +78,17 @@ mod firmware {
     use embassy_usb::class::cdc_acm::{self, CdcAcmClass, Sender};
     use embassy_usb::driver::EndpointError;
     use embassy_usb::{Builder, UsbDevice};
-    use pkmc::config::{Drive, MachineConfig, MAX_SERVOS};
+    use pkmc::config::MachineConfig;
     use pkmc::contour::ServoBank;
-    use pkmc::controller::{Controller, Inputs, Outputs};
+    use pkmc::controller::Controller;
+    use pkmc::debounce::Switches as SwitchStates;
+    use pkmc::pacing::{RawInputs, TickPacer};
     use pkmc::protocol::{AlarmCause, State};
     use static_cell::StaticCell;
     use {defmt_rtt as _, panic_probe as _};
 
     use crate::board::{self, Switches, UsbDriver};
-    use crate::debounce::{self, Debounced, Debouncer};
-    use crate::servo_period::{self, Command};
+    use crate::servo_period;
     use crate::shared::TickShared;
     use crate::steppers::{StepStats, Steppers};
 
@@ -97,8 +99,6 @@ mod firmware {
     const TX_POLL: Duration = Duration::from_millis(5);
     /// Seconds between two diagnostic log lines of the heartbeat task.
     const LOG_EVERY_S: u32 = 10;
-    /// Limit/home inputs on the board: input k is joint k's shared home/limit switch.
-    const SWITCH_INPUTS: usize = 8;
 
     /// Where the controller lives (in .bss: no 12 KB initial image in flash).
     static CONTROLLER_CELL: StaticCell<Controller> = StaticCell::new();
@@ -109,21 +109,14 @@ mod firmware {
     /// What the tick drives and reads. `None` only during start-up.
     static TICK_IO: TickShared<Option<&'static mut TickIo>> = TickShared::new(None);
 
-    /// The tick's hardware, input filters and the outputs it applies next.
+    /// The tick's hardware and its side of the pacing.
     struct TickIo {
         /// STEP/DIR/ENABLE outputs.
         steppers: Steppers,
         /// E-stop and limit/home inputs.
         switches: Switches,
-        /// E-stop filter ([`debounce::ESTOP`]).
-        estop: Debouncer,
-        /// Limit/home filters ([`debounce::SWITCH`]), input k = joint k.
-        limits: Debounced<SWITCH_INPUTS>,
-        /// Debounced states handed to the controller by the last tick (diagnostics).
-        last_estop: bool,
-        last_limits: u16,
-        /// Outputs computed by the previous tick, applied at the start of the next.
-        pending: Outputs,
+        /// Switch filters and the outputs due at the start of the next tick.
+        pacer: TickPacer,
         /// Servo periods counted at the last watchdog refresh.
         fed_at: u32,
         /// Ticks run since start-up.
@@ -135,68 +128,41 @@ mod firmware {
         CONTROLLER.lock(|c| c.as_deref_mut().map(f)).flatten()
     }
 
-    /// Bit j set for every joint of `machine` driven by a servo channel.
-    fn servo_joints(machine: &MachineConfig) -> u16 {
-        let mut bits = 0;
-        for (j, joint) in machine.joints.iter().enumerate() {
-            if matches!(joint.drive, Drive::Servo { .. }) {
-                bits |= 1 << j;
-            }
-        }
-        bits
-    }
-
     /// One interpolation tick; called by the tick interrupt, which the servo interrupt
     /// pends at every tick edge.
     ///
-    /// First applies the stepper outputs computed one tick ago (so step trains start a
-    /// short, fixed time after the tick edge), then samples and debounces the switches,
-    /// builds the controller's inputs from them and from the servo interrupt's snapshot
-    /// of the edge, advances the controller, and posts its servo targets (with a rebuilt
-    /// bank when it asks for a servo reset) for the next edge. Last, it refreshes the
-    /// watchdog if the servo interrupt has run since the previous refresh: a stalled
-    /// servo interrupt (which also stops pending the tick) or a stalled tick both let
-    /// the watchdog reset the chip.
+    /// First applies the stepper outputs computed one tick ago ([`TickPacer::due`]: so
+    /// step trains start a short, fixed time after the tick edge), then samples the
+    /// switches and runs [`TickPacer::tick`] on them and on the servo interrupt's
+    /// snapshot of the edge (debouncing, the controller's tick), and posts the command
+    /// it returns (servo targets, with a rebuilt bank when the controller asks for a
+    /// servo reset) for the next edge. Last, it refreshes the watchdog if the servo
+    /// interrupt has run since the previous refresh: a stalled servo interrupt (which
+    /// also stops pending the tick) or a stalled tick both let the watchdog reset the
+    /// chip.
     pub fn on_tick() {
         let snapshot = servo_period::snapshot();
         TICK_IO.lock(|io| {
             let Some(io) = io.as_deref_mut() else {
                 return;
             };
-            io.steppers.apply(&io.pending);
-            io.last_estop = io.estop.sample(io.switches.estop());
-            io.last_limits = io.limits.sample(io.switches.limits());
+            io.steppers.apply(io.pacer.due());
+            let limits = io.switches.limits();
+            let raw = RawInputs {
+                switches: SwitchStates {
+                    estop: io.switches.estop(),
+                    // Shared home/limit switches: one input per joint, both roles.
+                    limit: limits,
+                    home: limits,
+                },
+                // No stepper fault lines and no index inputs on this board (no pin
+                // left); the amplifiers' fault line comes with the snapshot.
+                ..RawInputs::default()
+            };
             let ticked = CONTROLLER
                 .lock(|c| {
                     let c = c.as_deref_mut()?;
-                    // The update keeps this building when the core adds an input.
-                    #[allow(clippy::needless_update)]
-                    let inputs = Inputs {
-                        encoder_counts: snapshot.counts,
-                        // No index inputs on this board (no pin left): never latched.
-                        index: [None; MAX_SERVOS],
-                        estop: io.last_estop,
-                        // Shared home/limit switches: one input per joint, both roles.
-                        limit: io.last_limits,
-                        home: io.last_limits,
-                        // One fault line for every amplifier: every servo joint's fault.
-                        drive_fault: if snapshot.fault {
-                            servo_joints(c.machine())
-                        } else {
-                            0
-                        },
-                        servo_trip: snapshot.trips,
-                        ..Inputs::default()
-                    };
-                    io.pending = *c.tick(&inputs);
-                    let out = &io.pending;
-                    servo_period::post(Command {
-                        bank: out
-                            .servo_reset
-                            .then(|| ServoBank::new(c.machine(), &snapshot.counts)),
-                        targets: out.servo_target,
-                        enable: out.servo_enable,
-                    });
+                    servo_period::post(io.pacer.tick(c, &raw, &snapshot));
                     Some(())
                 })
                 .flatten()
@@ -307,11 +273,7 @@ mod firmware {
         let tick_io = TICK_IO_CELL.init(TickIo {
             steppers: board.steppers,
             switches: board.switches,
-            estop: debounce::ESTOP,
-            limits: Debounced::new(debounce::SWITCH),
-            last_estop: false,
-            last_limits: 0,
-            pending: Outputs::default(),
+            pacer: TickPacer::new(),
             fed_at: 0,
             ticks: 0,
         });
@@ -447,27 +409,30 @@ mod firmware {
 
     /// Logs controller, link, servo and step-output counters and the active inputs.
     fn log_diagnostics(state: State) {
-        let (stats, ticks, estop, limits) = TICK_IO
+        let (stats, ticks, inputs) = TICK_IO
             .lock(|io| {
                 io.as_deref()
-                    .map(|io| (io.steppers.stats(), io.ticks, io.last_estop, io.last_limits))
+                    .map(|io| (io.steppers.stats(), io.ticks, io.pacer.switches()))
             })
             .flatten()
-            .unwrap_or((StepStats::default(), 0, false, 0));
+            .unwrap_or((StepStats::default(), 0, SwitchStates::default()));
         let link = with_controller(|c| c.link_stats()).unwrap_or_default();
+        let servo = servo_period::stats();
         info!(
-            "state {} ticks {} link corrupt {} tx_dropped {} steps {} servo {}",
+            "state {} ticks {} link corrupt {} tx_dropped {} steps {} servo periods {} late_ticks {} fault {}",
             state_name(state),
             ticks,
             link.corrupt,
             link.tx_dropped,
             stats,
-            servo_period::stats()
+            servo.periods,
+            servo.late_ticks,
+            servo.fault
         );
-        if estop || limits != 0 {
+        if inputs.estop || inputs.limit != 0 {
             warn!(
                 "inputs active: e-stop {} limit/home {=u16:#b}",
-                estop, limits
+                inputs.estop, inputs.limit
             );
         }
     }

@@ -1,0 +1,577 @@
+//! Pacing of the servo loops and the interpolation tick: what the 10 kHz servo
+//! interrupt and the 1 kHz tick hand each other, and when. The firmware's interrupt
+//! handlers are thin adapters around these two state machines (they read the
+//! hardware, call them, and write what they return); the simulator drives the very
+//! same code with simulated time, so it reproduces the board's latencies.
+//!
+//! **Servo side** ([`ServoPacer`], one call per servo period). Every
+//! [`SERVO_PER_TICK`]th period is a tick edge. There the pacer first takes the
+//! [`Command`] the previous tick posted ([`ServoPacer::post`]): a rebuilt bank if the
+//! controller asked for a servo reset, then the tick's targets
+//! ([`ServoBank::load_tick`]) and the enable; then it runs the period; then it leaves
+//! a [`Snapshot`] of that period (encoder counts, trips, whether each channel's fault
+//! input was active in any period since the last edge) and reports the edge
+//! ([`ServoPeriod::tick`]): the tick runs next, on that snapshot. A tick that has not
+//! posted by the next edge (only if it ran longer than a tick) is counted in
+//! [`ServoStats::late_ticks`]; the loops then hold their last target for that tick.
+//!
+//! **Tick side** ([`TickPacer`], one call per tick). At the start of tick N the caller
+//! applies [`TickPacer::due`], the outputs tick N − 1 computed (step trains, DIR and
+//! ENABLE); then [`TickPacer::tick`] debounces the raw switch samples
+//! ([`crate::debounce`]), builds the controller's [`Inputs`] from them and from edge
+//! N's snapshot, advances the controller, keeps its outputs as the next due ones and
+//! returns the command to post for edge N + 1.
+//!
+//! So the targets computed by tick N are loaded at edge N + 1, the same edge at which
+//! tick N + 1 starts tick N's step trains: servo and stepper joints follow the path
+//! with the same one-tick delay, and the loops always ramp over exactly
+//! [`SERVO_PER_TICK`] periods. A limit or home switch reaches the controller two ticks
+//! after the tick that first read it (three equal samples), the e-stop in the tick
+//! that reads it.
+//!
+//! Invariants: no time source, no hardware: a call is a period or a tick. The servo
+//! side's state is touched only by the servo interrupt, except [`ServoPacer::post`],
+//! [`ServoPacer::snapshot`] and [`ServoPacer::stats`], which the tick calls (the
+//! firmware under a short critical section: copies only).
+
+use crate::config::{Drive, MachineConfig, MAX_SERVOS};
+use crate::contour::{PeriodInputs, PeriodOutputs, ServoBank};
+use crate::controller::{Controller, Inputs, Outputs};
+use crate::debounce::{SwitchFilter, Switches};
+use crate::servo::{Trip, SERVO_PER_TICK, SETPOINT_FRAC_BITS};
+
+/// What the servo side saw at the last tick edge, for the tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Snapshot {
+    /// Encoder positions read in the edge period, counts.
+    pub counts: [i64; MAX_SERVOS],
+    /// Trip latched by each channel's loop, as of the edge period.
+    pub trips: [Option<Trip>; MAX_SERVOS],
+    /// Each channel's amplifier fault input was active in at least one period since
+    /// the previous edge (edge included).
+    pub fault: [bool; MAX_SERVOS],
+    /// Servo periods run since start-up (wrapping).
+    pub periods: u32,
+}
+
+/// What a tick hands to the servo loops, taken at the next tick edge.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Command {
+    /// A new bank to run from now on (the controller asked for a servo reset).
+    pub bank: Option<ServoBank>,
+    /// Each channel's target at the end of the next tick, counts × 2^16.
+    pub targets: [i64; MAX_SERVOS],
+    /// The controller wants the amplifiers enabled.
+    pub enable: bool,
+}
+
+impl Command {
+    /// The loops standing at `counts` (their own positions), disabled.
+    pub fn standing(counts: &[i64; MAX_SERVOS]) -> Self {
+        Self {
+            bank: None,
+            targets: counts.map(|c| c << SETPOINT_FRAC_BITS),
+            enable: false,
+        }
+    }
+
+    /// What the controller's outputs `out` ask of the loops: with a bank of `machine`
+    /// rebuilt at `counts` (the snapshot the tick ran on) when they ask for a servo
+    /// reset.
+    pub fn of(out: &Outputs, machine: &MachineConfig, counts: &[i64; MAX_SERVOS]) -> Self {
+        Self {
+            bank: out.servo_reset.then(|| ServoBank::new(machine, counts)),
+            targets: out.servo_target,
+            enable: out.servo_enable,
+        }
+    }
+}
+
+/// Diagnostics of the servo side (wrapping counters).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ServoStats {
+    /// Servo periods run.
+    pub periods: u32,
+    /// Tick edges at which the previous tick had not posted its command yet.
+    pub late_ticks: u32,
+    /// Some channel's fault input at the last edge (see [`Snapshot::fault`]).
+    pub fault: bool,
+}
+
+/// What one servo period drives.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServoPeriod {
+    /// The loops' outputs: DAC codes, amplifier enables, trips.
+    pub out: PeriodOutputs,
+    /// This period was a tick edge: its snapshot is ready and the tick runs now.
+    pub tick: bool,
+}
+
+/// The servo loops and their side of the exchange with the tick. See the module
+/// documentation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ServoPacer {
+    bank: ServoBank,
+    /// `PeriodInputs::enable` in force (from the last command taken).
+    enable: bool,
+    /// Periods since the last tick edge: 0 at an edge.
+    phase: usize,
+    /// Fault input of each channel seen active since the last edge.
+    fault_seen: [bool; MAX_SERVOS],
+    stats: ServoStats,
+    snapshot: Snapshot,
+    /// Posted by the last tick, not yet taken.
+    command: Option<Command>,
+}
+
+impl ServoPacer {
+    /// The loops of `bank`, whose encoders read `counts`: the next period is a tick
+    /// edge, and it loads the loops' own standing targets, disabled.
+    pub fn new(bank: ServoBank, counts: &[i64; MAX_SERVOS]) -> Self {
+        Self {
+            bank,
+            enable: false,
+            phase: 0,
+            fault_seen: [false; MAX_SERVOS],
+            stats: ServoStats::default(),
+            snapshot: Snapshot {
+                counts: *counts,
+                ..Snapshot::default()
+            },
+            command: Some(Command::standing(counts)),
+        }
+    }
+
+    /// One servo period, on the encoder positions `feedback` (counts) and each
+    /// channel's amplifier fault input `fault`, both read at the start of the period.
+    pub fn period(
+        &mut self,
+        feedback: &[i64; MAX_SERVOS],
+        fault: &[bool; MAX_SERVOS],
+    ) -> ServoPeriod {
+        for (seen, &f) in self.fault_seen.iter_mut().zip(fault) {
+            *seen |= f;
+        }
+        let edge = self.phase == 0;
+        if edge {
+            match self.command.take() {
+                Some(command) => {
+                    if let Some(bank) = command.bank {
+                        self.bank = bank;
+                    }
+                    self.bank.load_tick(&command.targets);
+                    self.enable = command.enable;
+                }
+                None => self.stats.late_ticks = self.stats.late_ticks.wrapping_add(1),
+            }
+        }
+        let out = self.bank.period(&PeriodInputs {
+            feedback: *feedback,
+            fault: *fault,
+            enable: self.enable,
+        });
+        self.stats.periods = self.stats.periods.wrapping_add(1);
+        self.phase += 1;
+        if self.phase == SERVO_PER_TICK {
+            self.phase = 0;
+        }
+        if edge {
+            self.stats.fault = self.fault_seen.iter().any(|&f| f);
+            self.snapshot = Snapshot {
+                counts: *feedback,
+                trips: out.trip,
+                fault: self.fault_seen,
+                periods: self.stats.periods,
+            };
+            self.fault_seen = [false; MAX_SERVOS];
+        }
+        ServoPeriod { out, tick: edge }
+    }
+
+    /// Posts a tick's command, to be taken at the next tick edge (replacing one not
+    /// yet taken).
+    pub fn post(&mut self, command: Command) {
+        self.command = Some(command);
+    }
+
+    /// The snapshot of the last tick edge.
+    pub fn snapshot(&self) -> Snapshot {
+        self.snapshot
+    }
+
+    /// Diagnostics since start-up.
+    pub fn stats(&self) -> ServoStats {
+        self.stats
+    }
+}
+
+/// What the tick reads itself, raw, besides the servo side's [`Snapshot`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RawInputs {
+    /// The e-stop and the limit and home switches, as sampled (debounced by the
+    /// [`TickPacer`]).
+    pub switches: Switches,
+    /// Drive fault lines the tick reads directly (bit j), taken as they are: stepper
+    /// drives' lines (none on the reference board). The servo amplifiers' fault
+    /// inputs come through the snapshot.
+    pub drive_fault: u16,
+    /// Encoder count latched by the hardware at an index pulse since the last tick,
+    /// per servo channel (none on the reference board).
+    pub index: [Option<i64>; MAX_SERVOS],
+}
+
+/// The tick's side of the pacing: the switch filters and the outputs due at the start
+/// of the next tick. See the module documentation.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TickPacer {
+    switches: SwitchFilter,
+    /// Outputs of the last tick, applied at the start of the next.
+    due: Outputs,
+}
+
+impl TickPacer {
+    /// Every switch inactive, nothing due.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The outputs the previous tick computed: apply them at the very start of this
+    /// tick, before [`TickPacer::tick`].
+    pub fn due(&self) -> &Outputs {
+        &self.due
+    }
+
+    /// The debounced switch states the last tick handed to the controller.
+    pub fn switches(&self) -> Switches {
+        self.switches.state()
+    }
+
+    /// One tick of `ctrl` on the raw inputs `raw` and the snapshot of this tick's
+    /// edge; its outputs become [`TickPacer::due`], and the returned command is to be
+    /// posted to the servo side for the next edge.
+    pub fn tick(&mut self, ctrl: &mut Controller, raw: &RawInputs, snapshot: &Snapshot) -> Command {
+        let switches = self.switches.sample(&raw.switches);
+        let amplifier_fault = if snapshot.fault.iter().any(|&f| f) {
+            servo_joints_faulted(ctrl.machine(), &snapshot.fault)
+        } else {
+            0
+        };
+        // The update keeps this building when the core adds an input.
+        #[allow(clippy::needless_update)]
+        let inputs = Inputs {
+            encoder_counts: snapshot.counts,
+            index: raw.index,
+            estop: switches.estop,
+            limit: switches.limit,
+            home: switches.home,
+            drive_fault: raw.drive_fault | amplifier_fault,
+            servo_trip: snapshot.trips,
+            ..Inputs::default()
+        };
+        self.due = *ctrl.tick(&inputs);
+        Command::of(&self.due, ctrl.machine(), &snapshot.counts)
+    }
+}
+
+/// Bit j set for every joint of `machine` driven by a servo channel whose fault input
+/// is active in `fault`.
+fn servo_joints_faulted(machine: &MachineConfig, fault: &[bool; MAX_SERVOS]) -> u16 {
+    let mut bits = 0;
+    for (j, joint) in machine.joints.iter().enumerate() {
+        if let Drive::Servo { channel } = joint.drive {
+            if fault.get(channel as usize).copied().unwrap_or(false) {
+                bits |= 1 << j;
+            }
+        }
+    }
+    bits
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::{encode_frame, Control, HostMsg, MAX_FRAME};
+
+    /// The H-4 table machine: four servo joints (channels 0–3) and steppers.
+    fn machine() -> MachineConfig {
+        MachineConfig::h4_table()
+    }
+
+    /// A pacer standing at `counts`, its bank of the H-4 machine.
+    fn pacer(counts: &[i64; MAX_SERVOS]) -> ServoPacer {
+        ServoPacer::new(ServoBank::new(&machine(), counts), counts)
+    }
+
+    /// Runs the `SERVO_PER_TICK` periods of one tick at `feedback`, no fault;
+    /// returns whether each was an edge.
+    fn one_tick(p: &mut ServoPacer, feedback: &[i64; MAX_SERVOS]) -> [bool; SERVO_PER_TICK] {
+        core::array::from_fn(|_| p.period(feedback, &[false; MAX_SERVOS]).tick)
+    }
+
+    #[test]
+    fn every_tenth_period_is_a_tick_edge_starting_with_the_first() {
+        let mut p = pacer(&[0; MAX_SERVOS]);
+        for _ in 0..3 {
+            let edges = one_tick(&mut p, &[0; MAX_SERVOS]);
+            assert!(edges[0]);
+            assert!(edges[1..].iter().all(|&e| !e));
+        }
+        assert_eq!(p.stats().periods, 3 * SERVO_PER_TICK as u32);
+        // The first edge takes the standing command; nothing was posted for the others.
+        assert_eq!(p.stats().late_ticks, 2);
+    }
+
+    #[test]
+    fn a_posted_target_is_loaded_at_the_next_edge_and_ramped_over_one_tick() {
+        // The pacer against a bank fed by hand on the board's schedule: the command
+        // posted after edge N is loaded at edge N + 1, never earlier.
+        let counts = [100, -50, 0, 7];
+        let m = machine();
+        let mut p = pacer(&counts);
+        let mut reference = ServoBank::new(&m, &counts);
+        let mut posted = Command::standing(&counts);
+        let mut loaded = posted;
+        let enabled = PeriodInputs {
+            feedback: counts,
+            fault: [false; MAX_SERVOS],
+            enable: true,
+        };
+        for tick in 0..4i64 {
+            for k in 0..SERVO_PER_TICK {
+                let got = p.period(&counts, &[false; MAX_SERVOS]);
+                if k == 0 {
+                    loaded = posted;
+                    reference.load_tick(&loaded.targets);
+                }
+                let want = reference.period(&PeriodInputs {
+                    enable: loaded.enable,
+                    ..enabled
+                });
+                assert_eq!(got.out, want, "tick {tick}, period {k}");
+                if k == 0 {
+                    // The tick runs here and posts its command for the next edge.
+                    let c = Command {
+                        bank: None,
+                        targets: counts.map(|c| (c + 40 * (tick + 1)) << SETPOINT_FRAC_BITS),
+                        enable: true,
+                    };
+                    p.post(c);
+                    posted = c;
+                }
+            }
+        }
+        assert_eq!(p.stats().late_ticks, 0);
+    }
+
+    #[test]
+    fn a_late_tick_is_counted_and_the_loops_hold_their_last_target() {
+        // Standing at 200 counts, the encoders reading 195: the loops are driving.
+        let at = [200; MAX_SERVOS];
+        let feedback = [195; MAX_SERVOS];
+        let hold = Command {
+            bank: None,
+            targets: at.map(|c| c << SETPOINT_FRAC_BITS),
+            enable: true,
+        };
+        let mut p = pacer(&at);
+        one_tick(&mut p, &feedback);
+        p.post(hold);
+        one_tick(&mut p, &feedback);
+        // No command for the next edge: one late tick, and the loops run exactly as
+        // if the same target had been posted again.
+        let mut late = p;
+        let mut held = p;
+        held.post(hold);
+        for _ in 0..SERVO_PER_TICK {
+            let a = late.period(&feedback, &[false; MAX_SERVOS]);
+            let b = held.period(&feedback, &[false; MAX_SERVOS]);
+            assert_eq!(a.out, b.out);
+            assert_eq!(a.out.enable, [true; MAX_SERVOS]);
+        }
+        assert_eq!(late.stats().late_ticks, 1);
+        assert_eq!(held.stats().late_ticks, 0);
+    }
+
+    #[test]
+    fn of_two_commands_posted_before_an_edge_the_last_is_taken() {
+        let counts = [0; MAX_SERVOS];
+        let mut p = pacer(&counts);
+        one_tick(&mut p, &counts);
+        p.post(Command {
+            enable: true,
+            ..Command::standing(&counts)
+        });
+        p.post(Command::standing(&counts));
+        let s = p.period(&counts, &[false; MAX_SERVOS]);
+        assert!(s.tick);
+        assert_eq!(s.out.enable, [false; MAX_SERVOS]);
+        assert_eq!(p.stats().late_ticks, 0);
+    }
+
+    #[test]
+    fn the_snapshot_holds_the_edge_counts_and_any_fault_since_the_last_edge() {
+        let mut p = pacer(&[0; MAX_SERVOS]);
+        let no = [false; MAX_SERVOS];
+        let s = p.period(&[1, 2, 3, 4], &no);
+        assert!(s.tick);
+        let snap = p.snapshot();
+        assert_eq!(snap.counts, [1, 2, 3, 4]);
+        assert_eq!(snap.fault, no);
+        assert_eq!(snap.periods, 1);
+        // A one-period pulse on channel 2 between edges is reported at the next edge,
+        // once; the counts stay those of the edge until the next one.
+        for k in 1..SERVO_PER_TICK {
+            let fault = [false, false, k == 4, false];
+            p.period(&[9, 9, 9, 9], &fault);
+            assert_eq!(p.snapshot().counts, [1, 2, 3, 4]);
+        }
+        p.post(Command::standing(&[0; MAX_SERVOS]));
+        assert!(p.period(&[5, 6, 7, 8], &no).tick);
+        let snap = p.snapshot();
+        assert_eq!(snap.counts, [5, 6, 7, 8]);
+        assert_eq!(snap.fault, [false, false, true, false]);
+        assert!(p.stats().fault);
+        for _ in 1..SERVO_PER_TICK {
+            p.period(&[5, 6, 7, 8], &no);
+        }
+        p.post(Command::standing(&[0; MAX_SERVOS]));
+        p.period(&[5, 6, 7, 8], &no);
+        assert_eq!(p.snapshot().fault, no);
+        assert!(!p.stats().fault);
+    }
+
+    #[test]
+    fn an_amplifier_fault_trips_its_loop_and_the_snapshot_carries_the_trip() {
+        let counts = [0; MAX_SERVOS];
+        let mut p = pacer(&counts);
+        one_tick(&mut p, &counts);
+        p.post(Command {
+            bank: None,
+            targets: [0; MAX_SERVOS],
+            enable: true,
+        });
+        let fault = [true, false, false, false];
+        let s = p.period(&counts, &fault);
+        assert_eq!(s.out.trip[0], Some(Trip::AmplifierFault));
+        assert_eq!(p.snapshot().trips[0], Some(Trip::AmplifierFault));
+        assert_eq!(p.snapshot().trips[1], None);
+    }
+
+    #[test]
+    fn a_reset_command_replaces_the_bank_at_the_next_edge() {
+        let m = machine();
+        let counts = [0; MAX_SERVOS];
+        let mut p = pacer(&counts);
+        one_tick(&mut p, &counts);
+        p.post(Command {
+            bank: None,
+            targets: [0; MAX_SERVOS],
+            enable: true,
+        });
+        // Trip channel 0, then reset the bank standing at new counts.
+        p.period(&counts, &[true, false, false, false]);
+        for _ in 1..SERVO_PER_TICK {
+            p.period(&counts, &[false; MAX_SERVOS]);
+        }
+        let at = [300, 0, 0, 0];
+        let out = Outputs {
+            servo_target: at.map(|c| c << SETPOINT_FRAC_BITS),
+            servo_enable: true,
+            servo_reset: true,
+            ..Outputs::default()
+        };
+        p.post(Command::of(&out, &m, &at));
+        let s = p.period(&at, &[false; MAX_SERVOS]);
+        assert_eq!(s.out.trip, [None; MAX_SERVOS]);
+        assert_eq!(s.out.enable, [true; MAX_SERVOS]);
+    }
+
+    fn control(ctrl: &mut Controller, id: u16, cmd: Control) {
+        let mut f = [0u8; MAX_FRAME];
+        let n = encode_frame(0, &HostMsg::Control { id, cmd }, &mut f).unwrap();
+        ctrl.receive(&f[..n]);
+    }
+
+    #[test]
+    fn a_ticks_step_trains_are_due_at_the_start_of_the_next_tick() {
+        let mut ctrl = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
+        ctrl.unlock();
+        let mut t = TickPacer::new();
+        let snap = Snapshot::default();
+        let raw = RawInputs::default();
+        t.tick(&mut ctrl, &raw, &snap);
+        control(
+            &mut ctrl,
+            1,
+            Control::Jog {
+                axis: 0,
+                distance: 1_000_000,
+                feed: 10_000_000,
+            },
+        );
+        let mut applied = 0i64;
+        let mut computed = 0i64;
+        for _ in 0..2000 {
+            // What the board applies at the start of the tick: the last tick's trains.
+            let due = t.due().steps[0];
+            applied += i64::from(due.count) * if due.forward { 1 } else { -1 };
+            assert_eq!(applied, computed, "one tick behind the controller");
+            t.tick(&mut ctrl, &raw, &snap);
+            computed = ctrl.steps_emitted(0);
+        }
+        assert_eq!(computed, 400, "1 mm at 400 steps/mm");
+        assert_eq!(applied, computed);
+    }
+
+    #[test]
+    fn a_limit_switch_reaches_the_controller_at_its_third_sample_and_the_estop_at_once() {
+        let mut ctrl = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
+        ctrl.unlock();
+        let mut t = TickPacer::new();
+        let snap = Snapshot::default();
+        let mut raw = RawInputs::default();
+        t.tick(&mut ctrl, &raw, &snap);
+        raw.switches.limit = 1 << 1;
+        let mut seen = 0;
+        while ctrl.status().alarm.is_none() {
+            t.tick(&mut ctrl, &raw, &snap);
+            seen += 1;
+            assert!(seen <= 3);
+        }
+        assert_eq!(seen, 3);
+        assert_eq!(t.switches().limit, 1 << 1);
+
+        let mut ctrl = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
+        ctrl.unlock();
+        let mut t = TickPacer::new();
+        let raw = RawInputs {
+            switches: Switches {
+                estop: true,
+                ..Switches::default()
+            },
+            ..RawInputs::default()
+        };
+        t.tick(&mut ctrl, &raw, &snap);
+        assert!(
+            ctrl.status().alarm.is_some(),
+            "the e-stop in the tick that reads it"
+        );
+    }
+
+    #[test]
+    fn an_amplifier_fault_in_the_snapshot_is_the_drive_fault_of_its_servo_joint() {
+        let m = machine();
+        let mut fault = [false; MAX_SERVOS];
+        fault[2] = true;
+        let bits = servo_joints_faulted(&m, &fault);
+        let expected = m
+            .joints
+            .iter()
+            .enumerate()
+            .filter(|(_, j)| matches!(j.drive, Drive::Servo { channel: 2 }))
+            .fold(0u16, |b, (i, _)| b | 1 << i);
+        assert_ne!(expected, 0);
+        assert_eq!(bits, expected);
+        assert_eq!(servo_joints_faulted(&m, &[false; MAX_SERVOS]), 0);
+    }
+}
