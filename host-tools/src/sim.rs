@@ -371,6 +371,8 @@ pub struct Simulator {
     index: [Option<i64>; MAX_SERVOS],
     /// The controller's last outputs.
     last_out: pkmc::controller::Outputs,
+    /// The inputs the last tick passed to the controller.
+    last_in: Inputs,
     /// First tick at which the controller was in `Alarm` or `EStop` (not the lock
     /// after reset).
     pub alarm_tick: Option<u64>,
@@ -418,6 +420,7 @@ impl Simulator {
             forced: Inputs::default(),
             index: [None; MAX_SERVOS],
             last_out: pkmc::controller::Outputs::default(),
+            last_in: Inputs::default(),
             alarm_tick: None,
             ticks: 0,
             idle_ticks: 0,
@@ -461,6 +464,17 @@ impl Simulator {
             });
         }
         Ok(())
+    }
+
+    /// The inputs the last [`Simulator::tick`] passed to the controller (for harnesses
+    /// that replay a run call by call: `perf/m4count`).
+    pub fn last_inputs(&self) -> &Inputs {
+        &self.last_in
+    }
+
+    /// The outputs the controller returned on the last [`Simulator::tick`].
+    pub fn last_outputs(&self) -> &pkmc::controller::Outputs {
+        &self.last_out
     }
 
     /// Simulated time, s.
@@ -706,6 +720,7 @@ impl Simulator {
             servo_trip: self.bank_out.trip,
         };
         let out = *self.ctrl.tick(&inputs);
+        self.last_in = inputs;
         self.last_out = out;
         let t0 = self.ticks * TICK_NS as u64;
         for (d, train) in self.steppers.iter_mut().zip(&out.steps) {
