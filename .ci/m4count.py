@@ -1,13 +1,16 @@
 #!/usr/bin/env python3
-"""Cortex-M4 instruction counts of the kinematics, emulated; fails above the budgets.
+"""Cortex-M4 instruction counts, emulated: the kinematics, the servo period and whole
+controller calls over whole programs; fails above the budgets.
 
-    python3 .ci/m4count.py            # build, count, print the table, check budgets
-    python3 .ci/m4count.py --no-build # reuse the last ELF (harness debugging only)
+    python3 .ci/m4count.py                     # build, count, print the tables, check budgets
+    python3 .ci/m4count.py --enforce-realtime  # also fail above the real-time budgets (issue 9)
+    python3 .ci/m4count.py --no-build          # reuse the last builds (harness debugging only)
 
 Builds perf/m4count (its own workspace, with a copy of the workspace's Cargo.lock)
 twice: for thumbv7em-none-eabihf (release, the firmware's profile: opt-level "s", fat
-LTO, one codegen unit, -C target-cpu=cortex-m4) and for the host, whose run prints the
-benchmark cases with the host's results. Each case is then run in
+LTO, one codegen unit, -C target-cpu=cortex-m4) and for the host (profile `host`),
+whose run prints the benchmark cases with the host's results and, with `--record`,
+records whole programs call by call (perf/m4count/src/record.rs). Each case is then run in
 the unicorn emulator (Cortex-M4 model, FPU on): the measured function is called with
 arguments in emulated RAM and its executed instructions are counted by a basic-block
 hook, each block's instructions counted once by disassembling it with capstone (cached
@@ -15,11 +18,29 @@ per block). Per-instruction hooks are not used: QEMU skips the code hook for
 instructions of an IT block whose condition fails, which a block count includes (they
 still take an issue slot on the core). Every emulated result must equal the host's.
 
+Whole calls: each recorded program is replayed on one emulated `Controller`, built in
+emulated RAM for its machine, call by call in the recorded order: `receive` of each
+USB packet, `tick` with the recorded inputs, `transmit` into 64-byte buffers. Every
+tick's outputs and every transmitted byte must equal the host's. Counted per call:
+the whole `Controller::receive`, `tick` or `transmit` call including the few
+instructions of its C-ABI wrapper (`bench_ctrl_*`). A receive is also split at the
+frames it completes (per frame: from the call's start, or the end of the previous
+frame's work, to the first read of the byte after the frame's delimiter, found by a
+memory-read hook on the packet). The worst 1 ms period is one tick plus every
+receive and transmit call between it and the previous tick plus ten servo periods
+(the `servo_ccpm_4axes` maximum); the lock-held figure is the longest single call (the
+firmware makes each under the controller's lock). Executed symbols of every counted
+call are checked for soft-float `f64` helpers, 64/128-bit division (the helpers, and
+LLVM's inline expansion of 128-bit division, recognised as a block that loops on
+itself with six or more subtract-with-carry instructions) and software square roots.
+
 Needs: Python 3, `pip install unicorn capstone` (tested with unicorn 2.1.4, capstone
 5.0.9), the Rust toolchain with the thumbv7em-none-eabihf target.
 """
 
+import bisect
 import os
+import re
 import shutil
 import struct
 import subprocess
@@ -28,7 +49,7 @@ import time
 
 try:
     import capstone
-    from unicorn import Uc, UcError, UC_ARCH_ARM, UC_MODE_THUMB, UC_MODE_MCLASS, UC_HOOK_BLOCK
+    from unicorn import Uc, UcError, UC_ARCH_ARM, UC_MODE_THUMB, UC_MODE_MCLASS, UC_HOOK_BLOCK, UC_HOOK_MEM_READ
     from unicorn import arm_const as A
 except ImportError:
     sys.exit("m4count: needs `pip install unicorn capstone`")
@@ -38,20 +59,37 @@ CRATE = os.path.join(ROOT, "perf", "m4count")
 TARGET = "thumbv7em-none-eabihf"
 TARGET_DIR = os.path.join(CRATE, "target")
 ELF = os.path.join(TARGET_DIR, TARGET, "release", "pkmc-m4count")
+HOST_BIN = os.path.join(TARGET_DIR, "host", "pkmc-m4count")
+CALLS_DIR = os.path.join(TARGET_DIR, "calls")  # recorded programs (perf/m4count/src/record.rs)
 
 # Instruction budgets per call (docs/performance.md).
 BUDGETS = {"h4_ik": 600, "hexapod_ik": 1000, "servo_ccpm_4axes": 2000, "h4_period": 1500}
+# Real-time budgets of whole controller calls (issue 9), instructions; enforced with
+# --enforce-realtime only.
+RT_BUDGETS = [
+    ("tick", "any tick", 10_000),
+    ("frame", "any receive of one frame", 5_000),
+    ("period", "worst 1 ms period", 102_000),
+    ("lock", "lock held (longest single call)", 20_000),
+]
+SERVO_PER_TICK = 10  # 10 kHz servo periods per 1 kHz tick
 
 FLASH, FLASH_SIZE = 0x0800_0000, 0x8_0000
-RAM, RAM_SIZE = 0x2000_0000, 0x2_0000
+RAM, RAM_SIZE = 0x2000_0000, 0x10_0000  # 1 MiB: more than the MCU, room for the controller
 RET = FLASH + FLASH_SIZE - 0x100  # return address: a `b .` placed at the end of flash
 KIN = RAM + 0x1000  # MachineKinematics (1024 bytes reserved)
 ARG = RAM + 0x2000  # argument buffers
 BANK = RAM + 0x3000  # ServoBank (2048 bytes reserved)
 PERIOD = RAM + 0x4000  # Period (64 KiB reserved: up to RAM + 0x14000)
 PERIOD_WARMUP, PERIOD_CHUNK = 1600, 200  # as perf/m4count/src/main.rs
-STACK_TOP = RAM + RAM_SIZE
-MAX_STEPS = 2_000_000  # a runaway run stops here
+CALL = RAM + 0x1_8000  # whole-call buffers (below)
+PACKET, IN_WORDS_A, OUT_WORDS_A, INPUTS, TXBUF = CALL, CALL + 0x100, CALL + 0x300, CALL + 0x600, CALL + 0xA00
+CTRL = RAM + 0x2_0000  # Controller (CTRL_BYTES reserved)
+CTRL_BYTES = 192 * 1024  # as perf/m4count/src/main.rs
+STACK_TOP = RAM + RAM_SIZE  # the stack grows down from the end of RAM (to CTRL + CTRL_BYTES)
+INPUT_WORDS, OUTPUT_WORDS = 4 + 8 + 4 + 12, 5 * 7 + 4 + 3  # as perf/m4count/src/main.rs, mod wire
+USB_PACKET = 64
+MAX_STEPS = 20_000_000  # instructions: a runaway call stops here
 
 
 def build():
@@ -66,17 +104,32 @@ def build():
     subprocess.run(
         ["cargo", "build", "--release", "--target", TARGET, "--target-dir", TARGET_DIR],
         cwd=CRATE, env=env, check=True)
+    env.pop("RUSTFLAGS")
+    subprocess.run(["cargo", "build", "--profile", "host", "--target-dir", TARGET_DIR],
+                   cwd=CRATE, env=env, check=True)
 
 
 def host_cases():
-    out = subprocess.run(
-        ["cargo", "run", "--release", "--quiet", "--target-dir", TARGET_DIR],
-        cwd=CRATE, check=True, capture_output=True, text=True).stdout
+    out = subprocess.run([HOST_BIN], cwd=CRATE, check=True, capture_output=True, text=True).stdout
     return [line.split() for line in out.splitlines() if line.strip()]
 
 
+def record_programs():
+    """Runs the programs through nc-send's client on the host; returns, per program,
+    (name, machine, log path, blocks)."""
+    out = subprocess.run([HOST_BIN, "--record", CALLS_DIR], cwd=CRATE, check=True,
+                         capture_output=True, text=True).stdout
+    programs = []
+    for line in out.splitlines():
+        f = line.split()
+        if f and f[0] == "program":
+            programs.append((f[1], int(f[2]), f[3], int(f[4])))
+    return programs
+
+
 def read_elf(path):
-    """PT_LOAD segments and function symbols of a 32-bit little-endian ELF."""
+    """PT_LOAD segments and function symbols (name: (address, size)) of a 32-bit
+    little-endian ELF."""
     data = open(path, "rb").read()
     if data[:4] != b"\x7fELF" or data[4] != 1 or data[5] != 1:
         sys.exit(f"m4count: {path} is not a 32-bit little-endian ELF")
@@ -103,6 +156,98 @@ def read_elf(path):
     return segments, symbols
 
 
+# --- Rust symbol names -----------------------------------------------------------
+
+LEGACY_ESCAPES = {"$SP$": "@", "$BP$": "*", "$RF$": "&", "$LT$": "<", "$GT$": ">", "$LP$": "(",
+                  "$RP$": ")", "$C$": ",", "$u20$": " ", "$u27$": "'", "$u5b$": "[", "$u5d$": "]",
+                  "$u7b$": "{", "$u7d$": "}", "$u3b$": ";", "$u2b$": "+", "$u22$": '"', "$u7e$": "~"}
+
+
+def demangle(name):
+    """Readable form of a Rust symbol (legacy `_ZN…E` or the simple v0 `_R` paths that
+    compiler_builtins uses); other names unchanged."""
+    if name.startswith("_ZN") and name.endswith("E"):
+        parts, i, body = [], 0, name[3:-1]
+        while i < len(body) and body[i].isdigit():
+            j = i
+            while body[j].isdigit():
+                j += 1
+            n = int(body[i:j])
+            parts.append(body[j:j + n])
+            i = j + n
+        if parts and re.fullmatch(r"h[0-9a-f]{16}", parts[-1]):
+            parts.pop()
+        text = "::".join(parts)
+        for k, v in LEGACY_ESCAPES.items():
+            text = text.replace(k, v)
+        text = text.replace("..", "::")
+        return text[1:] if text.startswith("_<") else text
+    if name.startswith("_R"):
+        try:
+            idents, _ = v0_path(name, 2)
+            return "::".join(idents)
+        except (IndexError, ValueError):
+            return name
+    return name
+
+
+def v0_path(s, i):
+    """Identifiers of a v0 nested path at s[i:] (`C` crate roots and `N` nested paths
+    only, what compiler_builtins' symbols use); raises ValueError on anything else."""
+    c = s[i]
+    if c == "C":
+        i = v0_ident(s, v0_disambiguator(s, i + 1))
+        return [i[0]], i[1]
+    if c == "N":
+        parent, i = v0_path(s, i + 2)
+        ident, i = v0_ident(s, v0_disambiguator(s, i))
+        return parent + [ident], i
+    raise ValueError(s)
+
+
+def v0_disambiguator(s, i):
+    return s.index("_", i) + 1 if s[i] == "s" else i
+
+
+def v0_ident(s, i):
+    if s[i] == "u":
+        i += 1
+    j = i
+    while s[j].isdigit():
+        j += 1
+    if j == i:
+        raise ValueError(s)
+    n = int(s[i:j])
+    if s[j] == "_":
+        j += 1
+    return s[j:j + n], j + n
+
+
+# Helpers that must not run in a counted tick or receive (issue 9), by category.
+SOFT_DOUBLE = re.compile(r"^_+(aeabi_(d[a-z0-9]+|f2d|i2d|ui2d|l2d|ul2d)|\w*df\d?|\w*df\w*)$")
+WIDE_DIV = {"__aeabi_ldivmod", "__aeabi_uldivmod", "__udivmoddi4", "__divmoddi4", "__divdi3",
+            "__udivdi3", "__moddi3", "__umoddi3", "__udivti3", "__divti3", "__umodti3",
+            "__modti3", "__udivmodti4", "__divmodti4"}
+# The C names of f64 math functions (compiler_builtins exports some, unmangled).
+C_MATH_F64 = {"fmin", "fmax", "floor", "ceil", "trunc", "round", "fabs", "fma", "atan", "atan2",
+              "sin", "cos", "exp", "log", "pow", "hypot", "cbrt", "fmod"}
+INLINE_WIDE_DIV = "inline 128-bit division loop"
+
+
+def forbidden_kind(name):
+    """Category of a forbidden helper, or None; `name` demangled."""
+    last = name.split("::")[-1]
+    if last in WIDE_DIV or "specialized_div_rem" in name:
+        return "64/128-bit division"
+    if last in ("sqrt", "sqrtf") or (name.startswith("libm::") and "sqrt" in name):
+        return "software square root"
+    if SOFT_DOUBLE.match(last):
+        return "soft-float f64"
+    if (name.startswith("libm::") and not last.endswith("f")) or name in C_MATH_F64:
+        return "soft-float f64"  # libm's f64 functions (atan2, round, fmin, ...)
+    return None
+
+
 class M4:
     def __init__(self, elf):
         segments, self.symbols = read_elf(elf)
@@ -111,41 +256,99 @@ class M4:
         self.uc.mem_map(FLASH, FLASH_SIZE)
         self.uc.mem_map(RAM, RAM_SIZE)
         for vaddr, content, memsz in segments:
+            if RAM <= vaddr < RAM + RAM_SIZE and vaddr + memsz > KIN:
+                sys.exit("m4count: the image's static data overlaps the benchmark buffers")
             self.uc.mem_write(vaddr, content + b"\0" * (memsz - len(content)))
         self.uc.mem_write(RET, b"\xfe\xe7")  # b .
         # Full access to CP10/CP11 (the FPU), as the firmware's start-up code sets it.
         self.uc.reg_write(A.UC_ARM_REG_C1_C0_2, 0xF << 20)
         self.md = capstone.Cs(capstone.CS_ARCH_ARM, capstone.CS_MODE_THUMB | capstone.CS_MODE_MCLASS)
         self.block_len = {}
+        self.wide_div_blocks = set()
         self.count = 0
+        self.trace = []  # blocks of the current call, in order
         self.uc.hook_add(UC_HOOK_BLOCK, self._block)
+        # Functions by address, for attributing blocks (Thumb bit cleared).
+        funcs = sorted(((a & ~1, sz, demangle(n)) for n, (a, sz) in self.symbols.items()), key=lambda f: f[0])
+        self.func_starts = [f[0] for f in funcs]
+        self.funcs = funcs
+        self.reads = None  # (offset, count) of packet bytes read, while a receive runs
+        self.uc.hook_add(UC_HOOK_MEM_READ, self._read, begin=PACKET, end=PACKET + USB_PACKET - 1)
 
     def _block(self, uc, address, size, _user):
         key = (address, size)
         n = self.block_len.get(key)
         if n is None:
-            code = bytes(uc.mem_read(address, size))
-            n = sum(1 for _ in self.md.disasm_lite(code, address))
-            self.block_len[key] = n
+            n = self._learn(uc, key)
         self.count += n
+        self.trace.append(key)
 
-    def call(self, name, *args):
-        """Calls `name` with up to four word arguments; returns (r0, instructions)."""
+    def _learn(self, uc, key):
+        """Instructions of a new block; notes LLVM's inline wide-division loop."""
+        address, size = key
+        code = bytes(uc.mem_read(address, size))
+        insns = list(self.md.disasm_lite(code, address))
+        n = len(insns)
+        self.block_len[key] = n
+        if insns:
+            _, _, mnemonic, op = insns[-1]
+            m = re.fullmatch(r"#(0x[0-9a-f]+)", op.strip())
+            loops = mnemonic.split(".")[0] in ("b", "beq", "bne", "bhs", "blo", "bhi", "bls", "bge",
+                                              "blt", "bgt", "ble", "bmi", "bpl", "bcs", "bcc")
+            if loops and m and address <= int(m.group(1), 16) < address + size:
+                carries = sum(1 for i in insns if i[2].split(".")[0] in ("sbc", "sbcs"))
+                if carries >= 6:
+                    self.wide_div_blocks.add(key)
+        return n
+
+    def _read(self, uc, access, address, size, value, _user):
+        if self.reads is not None:
+            self.reads.append((address - PACKET, self.count))
+
+    def function_of(self, address):
+        i = bisect.bisect_right(self.func_starts, address) - 1
+        if i >= 0:
+            start, size, name = self.funcs[i]
+            if address < start + max(size, 2):
+                return name
+        return f"?{address:#x}"
+
+    def profile(self, trace):
+        """Flat profile of a call: instructions per function (each executed block
+        attributed to the function containing it)."""
+        hits = {}
+        for key in trace:
+            hits[key] = hits.get(key, 0) + 1
+        per = {}
+        for key, k in hits.items():
+            f = self.function_of(key[0])
+            per[f] = per.get(f, 0) + k * self.block_len[key]
+        return sorted(per.items(), key=lambda kv: -kv[1])
+
+    def call_raw(self, name, *args):
+        """Calls `name` with up to four word arguments; returns (r0 unsigned, instructions)."""
         addr, _ = self.symbols[name]
         for reg, v in zip((A.UC_ARM_REG_R0, A.UC_ARM_REG_R1, A.UC_ARM_REG_R2, A.UC_ARM_REG_R3), args):
             self.uc.reg_write(reg, v)
         self.uc.reg_write(A.UC_ARM_REG_SP, STACK_TOP)
         self.uc.reg_write(A.UC_ARM_REG_LR, RET | 1)
         self.count = 0
+        self.trace = []
         try:
             self.uc.emu_start(addr | 1, RET, count=MAX_STEPS)
         except UcError as e:
             pc = self.uc.reg_read(A.UC_ARM_REG_PC)
-            sys.exit(f"m4count: {name} faulted at {pc:#x}: {e} (a panic executes `udf`)")
+            sys.exit(f"m4count: {name} faulted at {pc:#x} ({self.function_of(pc)}): {e} (a panic executes `udf`)")
         if self.uc.reg_read(A.UC_ARM_REG_PC) != RET:
-            sys.exit(f"m4count: {name} did not return within {MAX_STEPS} blocks")
+            sys.exit(f"m4count: {name} did not return within {MAX_STEPS} instructions")
         # The block hook also counted the `b .` at RET once.
-        return struct.unpack("<i", struct.pack("<I", self.uc.reg_read(A.UC_ARM_REG_R0)))[0], self.count - 1
+        self.trace.pop()
+        return self.uc.reg_read(A.UC_ARM_REG_R0), self.count - 1
+
+    def call(self, name, *args):
+        """Calls `name`; returns (r0 signed, instructions)."""
+        r0, n = self.call_raw(name, *args)
+        return struct.unpack("<i", struct.pack("<I", r0))[0], n
 
     def write_i64(self, addr, values):
         self.uc.mem_write(addr, struct.pack(f"<{len(values)}q", *values))
@@ -157,12 +360,9 @@ class M4:
         return list(struct.unpack(f"<{n}i", self.uc.mem_read(addr, 4 * n)))
 
 
-def main():
-    t0 = time.time()
-    if "--no-build" not in sys.argv:
-        build()
-    cases = host_cases()
-    m4 = M4(ELF)
+def kinematics_cases(m4, cases):
+    """The per-function cases (kinematics, servo period, interpolation period); returns
+    the instruction counts per key."""
     stats = {}
 
     def record(key, n):
@@ -230,6 +430,197 @@ def main():
             check("period result", got, vals[1], c)
             check("period joints", m4.read_i64(joints_a, 11), vals[2:13], c)
             record("h4_period", n)
+    return stats
+
+
+# --- whole calls ------------------------------------------------------------------
+
+def read_log(path):
+    """The recorded calls: ("R", bytes) | ("T", input words, output words) | ("X", bytes)."""
+    data = open(path, "rb").read()
+    magic = b"PKMC-M4-CALLS-1"
+    if not data.startswith(magic):
+        sys.exit(f"m4count: {path} is not a call log")
+    calls, i = [], len(magic)
+    while i < len(data):
+        kind = data[i:i + 1]
+        i += 1
+        if kind in (b"R", b"X"):
+            (n,) = struct.unpack_from("<H", data, i)
+            calls.append((kind.decode(), data[i + 2:i + 2 + n]))
+            i += 2 + n
+        elif kind == b"T":
+            words = struct.unpack_from(f"<{INPUT_WORDS + OUTPUT_WORDS}q", data, i)
+            calls.append(("T", words[:INPUT_WORDS], list(words[INPUT_WORDS:])))
+            i += 8 * (INPUT_WORDS + OUTPUT_WORDS)
+        else:
+            sys.exit(f"m4count: {path}: bad record {kind!r} at byte {i - 1}")
+    return calls
+
+
+def percentile(sorted_values, q):
+    """Nearest-rank percentile."""
+    if not sorted_values:
+        return 0
+    k = max(0, min(len(sorted_values) - 1, -(-len(sorted_values) * q // 100) - 1))
+    return sorted_values[int(k)]
+
+
+class Replay:
+    """One program replayed on the emulated controller: counts, worst calls, symbols."""
+
+    def __init__(self, name, machine, blocks):
+        self.name, self.machine, self.blocks = name, machine, blocks
+        self.counts = {"tick": [], "receive": [], "frame": [], "transmit": [], "period": []}
+        self.seconds = 0.0
+        self.period = (0, None)  # worst: (instructions, composition)
+        self.lock = (0, None)  # longest single call: (instructions, kind)
+        self.worst = {}  # kind -> (instructions, call index, profile)
+        self.executed = {"tick": set(), "receive": set(), "transmit": set()}  # blocks run
+
+
+def replay(m4, name, machine, path, blocks, servo_period):
+    t0 = time.time()
+    r = Replay(name, machine, blocks)
+    calls = read_log(path)
+    rc, _ = m4.call("bench_ctrl_init", machine, CTRL)
+    if rc != 0:
+        sys.exit(f"m4count: {name}: the emulated controller refused machine {machine}")
+    since = {"receive": 0, "transmit": 0, "frames": 0, "packets": 0}
+    for index, call in enumerate(calls):
+        kind = call[0]
+        if kind == "R":
+            packet = call[1]
+            m4.uc.mem_write(PACKET, packet)
+            m4.reads = []
+            _, n = m4.call("bench_ctrl_receive", CTRL, PACKET, len(packet))
+            reads, m4.reads = m4.reads, None
+            what = "receive"
+            # Per frame: from the previous boundary to the first read of the byte after
+            # the frame's delimiter (or the call's end).
+            first_read = {}
+            for off, at in reads:
+                first_read.setdefault(off, at)
+            start = 0
+            for d in [i for i, b in enumerate(packet) if b == 0]:
+                end = first_read.get(d + 1, n) if d + 1 < len(packet) else n
+                r.counts["frame"].append(end - start)
+                if end - start > r.worst.get("frame", (-1,))[0]:
+                    r.worst["frame"] = (end - start, index, None)
+                start = end
+                since["frames"] += 1
+            since["packets"] += 1
+            since["receive"] += n
+        elif kind == "T":
+            m4.write_i64(IN_WORDS_A, call[1])
+            m4.call("bench_ctrl_inputs", IN_WORDS_A, INPUTS)
+            out_ptr, n = m4.call_raw("bench_ctrl_tick", CTRL, INPUTS)
+            trace = m4.trace
+            m4.call("bench_ctrl_outputs", out_ptr, OUT_WORDS_A)
+            m4.trace = trace
+            got = m4.read_i64(OUT_WORDS_A, OUTPUT_WORDS)
+            if got != call[2]:
+                sys.exit(f"m4count: {name}: tick outputs (call {index}) differ from the host's:\n"
+                         f"  emulated {got}\n  host     {call[2]}")
+            what = "tick"
+        else:
+            want = call[1]
+            sent, n = m4.call_raw("bench_ctrl_transmit", CTRL, TXBUF, USB_PACKET)
+            got = bytes(m4.uc.mem_read(TXBUF, sent))
+            if got != want:
+                sys.exit(f"m4count: {name}: transmitted bytes (call {index}) differ from the host's:\n"
+                         f"  emulated {got.hex()}\n  host     {want.hex()}")
+            what = "transmit"
+        r.counts[what].append(n)
+        if what == "transmit":
+            since["transmit"] += n
+        r.executed[what].update(m4.trace)
+        if n > r.lock[0]:
+            r.lock = (n, what)
+        if what != "transmit" and n > r.worst.get(what, (-1,))[0]:
+            r.worst[what] = (n, index, m4.profile(m4.trace))
+        if what == "tick":
+            servo = SERVO_PER_TICK * servo_period
+            total = since["receive"] + since["transmit"] + n + servo
+            r.counts["period"].append(total)
+            if total > r.period[0]:
+                r.period = (total, dict(since, tick=n, servo=servo))
+            since = {"receive": 0, "transmit": 0, "frames": 0, "packets": 0}
+    r.seconds = time.time() - t0
+    return r
+
+
+def categories(m4, executed):
+    """Forbidden helpers among the executed blocks: {category: set of functions}."""
+    seen = {}
+    for key in executed:
+        f = m4.function_of(key[0])
+        kind = forbidden_kind(f)
+        if key in m4.wide_div_blocks:
+            seen.setdefault("64/128-bit division", set()).add(f"{INLINE_WIDE_DIV} in {f}")
+        if kind:
+            seen.setdefault(kind, set()).add(f)
+    return seen
+
+
+def short(name, width=60):
+    """`name` without the module paths inside `<… as …>` and at most `width` long."""
+    name = re.sub(r"<([^<>]*)>", lambda m: "<" + re.sub(r"\b[a-z_][a-z0-9_]*::", "", m.group(1)) + ">", name)
+    return name if len(name) <= width else name[:width - 1] + "…"
+
+
+def report_whole_calls(m4, replays, servo_period):
+    print()
+    print("whole controller calls, instructions per call (tick, receive and transmit include their C-ABI")
+    print("wrapper; receive = one USB packet; frame = the part of a receive that completes one frame;")
+    print(f"period = a tick + the receive and transmit calls since the previous tick + "
+          f"{SERVO_PER_TICK} x servo_ccpm_4axes max {servo_period}; lock = the longest single call)")
+    print(f"{'program':18} {'blocks':>6} {'call':8} {'calls':>6} {'min':>7} {'median':>7} {'p99':>7} {'max':>7}")
+    for r in replays:
+        first = True
+        for kind in ("tick", "receive", "frame", "transmit", "period"):
+            v = sorted(r.counts[kind])
+            label = f"{r.name:18} {r.blocks:6d}" if first else " " * 25
+            first = False
+            print(f"{label} {kind:8} {len(v):6d} {v[0]:7d} {percentile(v, 50):7d} "
+                  f"{percentile(v, 99):7d} {v[-1]:7d}")
+        p, c = r.period
+        print(f"{'':25} worst period: tick {c['tick']} + {c['packets']} receives {c['receive']} "
+              f"({c['frames']} frames) + transmits {c['transmit']} + servo {c['servo']}; "
+              f"lock held {r.lock[0]} ({r.lock[1]}); replayed in {r.seconds:.1f} s")
+    print()
+    print("functions of the worst calls (flat: each function's own instructions; Controller::tick and")
+    print("Controller::receive are inlined into the bench_ctrl_* wrappers, as into the firmware's callers)")
+    for r in replays:
+        for kind in ("tick", "receive"):
+            n, index, prof = r.worst[kind]
+            parts = [f"{100 * k / n:.0f}% {short(f, 48)}" for f, k in prof[:6]]
+            print(f"  {r.name} worst {kind} {n} (call {index}): " + "; ".join(parts))
+    print()
+    print("forbidden helpers executed in counted calls (soft-float f64, 64/128-bit division, software sqrt):")
+    any_seen, kinds, programs = {}, {}, {}
+    for r in replays:
+        for kind, blocks in r.executed.items():
+            for k, fs in categories(m4, blocks).items():
+                any_seen.setdefault(k, set()).update(fs)
+                kinds.setdefault(k, set()).add(kind)
+                programs.setdefault(k, set()).add(r.name)
+    if not any_seen:
+        print("  none")
+    for k, fs in sorted(any_seen.items()):
+        print(f"  {k} (in {', '.join(sorted(kinds[k]))}; {len(programs[k])} of {len(replays)} programs): "
+              f"{', '.join(sorted(short(f, 70) for f in fs))}")
+    return any_seen
+
+
+def main():
+    t0 = time.time()
+    if "--no-build" not in sys.argv:
+        build()
+    cases = host_cases()
+    programs = record_programs()
+    m4 = M4(ELF)
+    stats = kinematics_cases(m4, cases)
 
     failed = False
     print(f"{'function':28} {'cases':>5} {'min':>6} {'mean':>7} {'max':>6} {'budget':>7}")
@@ -244,8 +635,42 @@ def main():
         if key not in stats:
             failed = True
             print(f"m4count: no {key} cases were run")
-    print(f"every emulated result equals the host's; {time.time() - t0:.1f} s")
-    sys.exit(1 if failed else 0)
+    t1 = time.time()
+
+    size, _ = m4.call_raw("bench_ctrl_size")
+    if size > CTRL_BYTES:
+        sys.exit(f"m4count: Controller is {size} bytes, more than the {CTRL_BYTES} reserved")
+    servo_period = max(stats["servo_ccpm_4axes"])
+    replays = []
+    t2 = time.time()
+    for name, machine, path, blocks in programs:
+        replays.append(replay(m4, name, machine, path, blocks, servo_period))
+    replayed = sum(sum(r.counts[k]) for r in replays for k in ("tick", "receive", "transmit"))
+    t3 = time.time()
+    seen = report_whole_calls(m4, replays, servo_period)
+
+    print()
+    print(f"{'real-time budget (issue 9)':34} {'worst':>8} {'budget':>8}  where")
+    rt_failed = False
+    for key, label, budget in RT_BUDGETS:
+        if key == "period":
+            worst = max((r.period[0], r.name) for r in replays)
+        elif key == "lock":
+            worst = max((r.lock[0], r.name) for r in replays)
+        else:
+            worst = max((max(r.counts[key]), r.name) for r in replays)
+        over = worst[0] > budget
+        rt_failed |= over
+        print(f"{label:34} {worst[0]:8d} {budget:8d}  {'OVER' if over else 'PASS'} ({worst[1]})")
+    helpers = sorted(f for fs in seen.values() for f in fs)
+    print(f"{'forbidden helpers executed':34} {len(helpers):8d} {0:8d}  {'OVER' if helpers else 'PASS'}")
+    rt_failed |= bool(helpers)
+    enforce = "--enforce-realtime" in sys.argv
+    print(f"every emulated result equals the host's (Controller: {size} bytes on the M4); "
+          f"{t1 - t0:.1f} s to the kinematics, {replayed / 1e6:.0f} million instructions of whole "
+          f"calls replayed in {t3 - t2:.0f} s, {time.time() - t0:.1f} s in all"
+          + ("" if enforce or not rt_failed else "; real-time budgets not enforced (--enforce-realtime)"))
+    sys.exit(1 if failed or (enforce and rt_failed) else 0)
 
 
 if __name__ == "__main__":

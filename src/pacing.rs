@@ -227,6 +227,8 @@ pub struct TickPacer {
     switches: SwitchFilter,
     /// Outputs of the last tick, applied at the start of the next.
     due: Outputs,
+    /// What the last tick handed to the controller.
+    inputs: Inputs,
 }
 
 impl TickPacer {
@@ -239,6 +241,11 @@ impl TickPacer {
     /// tick, before [`TickPacer::tick`].
     pub fn due(&self) -> &Outputs {
         &self.due
+    }
+
+    /// The inputs the last tick handed to the controller.
+    pub fn inputs(&self) -> &Inputs {
+        &self.inputs
     }
 
     /// The debounced switch states the last tick handed to the controller.
@@ -268,6 +275,7 @@ impl TickPacer {
             servo_trip: snapshot.trips,
             ..Inputs::default()
         };
+        self.inputs = inputs;
         self.due = *ctrl.tick(&inputs);
         Command::of(&self.due, ctrl.machine(), &snapshot.counts)
     }

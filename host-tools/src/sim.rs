@@ -389,6 +389,8 @@ pub struct Simulator {
     index: [Option<i64>; MAX_SERVOS],
     /// The controller's last outputs.
     last_out: pkmc::controller::Outputs,
+    /// The inputs the last tick passed to the controller.
+    last_in: Inputs,
     /// First tick at which the controller was in `Alarm` or `EStop` (not the lock
     /// after reset).
     pub alarm_tick: Option<u64>,
@@ -437,6 +439,7 @@ impl Simulator {
             forced: Inputs::default(),
             index: [None; MAX_SERVOS],
             last_out: pkmc::controller::Outputs::default(),
+            last_in: Inputs::default(),
             alarm_tick: None,
             ticks: 0,
             idle_ticks: 0,
@@ -480,6 +483,17 @@ impl Simulator {
             });
         }
         Ok(())
+    }
+
+    /// The inputs the last [`Simulator::tick`] passed to the controller (for harnesses
+    /// that replay a run call by call: `perf/m4count`).
+    pub fn last_inputs(&self) -> &Inputs {
+        &self.last_in
+    }
+
+    /// The outputs the controller returned on the last [`Simulator::tick`].
+    pub fn last_outputs(&self) -> &pkmc::controller::Outputs {
+        &self.last_out
     }
 
     /// Simulated time, s.
@@ -795,6 +809,7 @@ impl Simulator {
             index: std::mem::take(&mut self.index),
         };
         let command = self.pacer.tick(&mut self.ctrl, &raw, &snapshot);
+        self.last_in = *self.pacer.inputs();
         self.last_out = *self.pacer.due();
         if let Some(pacer) = self.servo.as_mut() {
             pacer.post(command);

@@ -1,5 +1,5 @@
-//! Cortex-M4 instruction counts of the kinematics: the measured functions behind C-ABI
-//! entry points.
+//! Cortex-M4 instruction counts of the kinematics, the servo period and whole controller
+//! calls: the measured functions behind C-ABI entry points.
 //!
 //! For `thumbv7em-none-eabihf` this is a `no_std`, `no_main` image with no start-up
 //! code: `.ci/m4count.py` loads it into the unicorn emulator and calls the `bench_*`
@@ -12,10 +12,19 @@
 //! `isqrt n r`, `servo k f0..f3 d0..d3`; M = 0 for the H-4 with rolling table, 1 for
 //! the hexapod; rc = 0 or the iteration count, negative for an `Unreachable` reason;
 //! servo: period k of a tick, encoder feedback f, DAC codes d.
+//!
+//! Whole controller calls: `bench_ctrl_init` builds a real [`Controller`] in emulated
+//! RAM; `bench_ctrl_receive`, `bench_ctrl_tick` and `bench_ctrl_transmit` each make one
+//! whole call of the core's `receive`, `tick` or `transmit` (the counted calls);
+//! `bench_ctrl_inputs` and `bench_ctrl_outputs` convert a tick's inputs and outputs
+//! from and to the flat words of [`wire`] (not counted). The calls to replay come from
+//! the host build run with `--record DIR`, which streams whole programs through
+//! `nc-send`'s link client to the simulator and logs every call (`src/record.rs`).
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 use pkmc::config::MachineConfig;
 use pkmc::contour::{PeriodInputs, ServoBank};
+use pkmc::controller::{Controller, Inputs, Outputs};
 use pkmc::kinematics::fixed::{isqrt, sincos};
 use pkmc::kinematics::{Joints, Kinematics, MachineKinematics, Pose, Unreachable};
 
@@ -300,6 +309,219 @@ pub unsafe extern "C" fn bench_period(p: *mut Period, joints: *mut Joints) -> i3
     }
 }
 
+/// Bytes the emulator reserves for one [`Controller`] (`.ci/m4count.py` checks
+/// [`bench_ctrl_size`] against its own reserve).
+pub const CTRL_BYTES: usize = 192 * 1024;
+const _: () = assert!(core::mem::size_of::<Controller>() <= CTRL_BYTES);
+
+/// `size_of::<Controller>()`, for the emulator's memory map.
+#[no_mangle]
+pub extern "C" fn bench_ctrl_size() -> u32 {
+    core::mem::size_of::<Controller>() as u32
+}
+
+/// Builds the controller of machine `m` into `out` (not timed), with the link-loss
+/// watch off as `nc-send --check` runs it (`pkmc_host::link::InProcess`); returns 0,
+/// or −1 if the controller refuses the machine.
+///
+/// # Safety
+/// `out` must be valid for writing [`CTRL_BYTES`] bytes, 8-aligned.
+#[no_mangle]
+pub unsafe extern "C" fn bench_ctrl_init(m: u32, out: *mut Controller) -> i32 {
+    match Controller::new(machine(m)) {
+        Ok(mut c) => {
+            c.set_link_watch(false);
+            // SAFETY: the caller provides room and alignment.
+            unsafe { out.write(c) };
+            0
+        }
+        Err(_) => -1,
+    }
+}
+
+/// One whole `Controller::receive` call: the bytes of one USB packet.
+///
+/// # Safety
+/// `c` from [`bench_ctrl_init`]; `bytes` valid for `len` bytes.
+#[no_mangle]
+pub unsafe extern "C" fn bench_ctrl_receive(c: *mut Controller, bytes: *const u8, len: usize) {
+    // SAFETY: the caller passes valid pointers.
+    unsafe { (*c).receive(core::slice::from_raw_parts(bytes, len)) }
+}
+
+/// One whole `Controller::tick` call; returns the controller's outputs (read by
+/// [`bench_ctrl_outputs`], outside the count).
+///
+/// # Safety
+/// `c` from [`bench_ctrl_init`]; `inputs` from [`bench_ctrl_inputs`].
+#[no_mangle]
+pub unsafe extern "C" fn bench_ctrl_tick(
+    c: *mut Controller,
+    inputs: *const Inputs,
+) -> *const Outputs {
+    // SAFETY: the caller passes valid pointers.
+    unsafe { (*c).tick(&*inputs) }
+}
+
+/// One whole `Controller::transmit` call into `out[..len]`; returns the bytes written.
+///
+/// # Safety
+/// `c` from [`bench_ctrl_init`]; `out` valid for `len` bytes.
+#[no_mangle]
+pub unsafe extern "C" fn bench_ctrl_transmit(
+    c: *mut Controller,
+    out: *mut u8,
+    len: usize,
+) -> usize {
+    // SAFETY: the caller passes valid pointers.
+    unsafe { (*c).transmit(core::slice::from_raw_parts_mut(out, len)) }
+}
+
+/// Rebuilds a tick's [`Inputs`] from the log's words (not timed).
+///
+/// # Safety
+/// Valid, aligned pointers.
+#[no_mangle]
+pub unsafe extern "C" fn bench_ctrl_inputs(
+    words: *const [i64; wire::INPUT_WORDS],
+    out: *mut Inputs,
+) {
+    // SAFETY: the caller passes valid pointers.
+    unsafe { out.write(wire::inputs_from(&*words)) }
+}
+
+/// Flattens a tick's [`Outputs`] into words, as the host logged its own (not timed).
+///
+/// # Safety
+/// Valid, aligned pointers.
+#[no_mangle]
+pub unsafe extern "C" fn bench_ctrl_outputs(
+    outputs: *const Outputs,
+    words: *mut [i64; wire::OUTPUT_WORDS],
+) {
+    // SAFETY: the caller passes valid pointers.
+    unsafe { *words = wire::outputs_words(&*outputs) }
+}
+
+/// The controller's tick inputs and outputs as flat `i64` words: the form in which the
+/// host logs them and the emulator passes and compares them. Every field is named
+/// (no `..`): a field added to [`Inputs`] or [`Outputs`] stops this from compiling
+/// until the harness carries it.
+pub mod wire {
+    use pkmc::config::{MAX_SERVOS, MAX_STEPPERS};
+    use pkmc::controller::{Inputs, Outputs};
+    use pkmc::servo::Trip;
+    use pkmc::stepper::StepTrain;
+
+    /// Words of one [`Inputs`]: encoder counts, index (flag, count) per servo channel,
+    /// e-stop, limit, home and drive-fault bits, trip (code, error, limit) per channel.
+    pub const INPUT_WORDS: usize = MAX_SERVOS + 2 * MAX_SERVOS + 4 + 3 * MAX_SERVOS;
+    /// Words of one [`Outputs`]: five per step train, the servo targets, three flags.
+    pub const OUTPUT_WORDS: usize = 5 * MAX_STEPPERS + MAX_SERVOS + 3;
+
+    /// `inputs` as words.
+    pub fn inputs_words(inputs: &Inputs) -> [i64; INPUT_WORDS] {
+        let Inputs {
+            encoder_counts,
+            index,
+            estop,
+            limit,
+            home,
+            drive_fault,
+            servo_trip,
+        } = *inputs;
+        let mut w = [0; INPUT_WORDS];
+        let mut k = 0;
+        let mut put = |v: i64| {
+            w[k] = v;
+            k += 1;
+        };
+        for c in encoder_counts {
+            put(c);
+        }
+        for i in index {
+            put(i.is_some() as i64);
+            put(i.unwrap_or(0));
+        }
+        put(estop as i64);
+        put(limit as i64);
+        put(home as i64);
+        put(drive_fault as i64);
+        for t in servo_trip {
+            let (code, error, limit) = match t {
+                None => (0, 0, 0),
+                Some(Trip::FollowingError { error, limit }) => (1, error, limit),
+                Some(Trip::AmplifierFault) => (2, 0, 0),
+                // A kind this harness does not know: no rebuilt input equals it, so the
+                // recording's round-trip check fails and names it.
+                Some(_) => (-1, 0, 0),
+            };
+            put(code);
+            put(error as i64);
+            put(limit as i64);
+        }
+        w
+    }
+
+    /// The [`Inputs`] that [`inputs_words`] flattened.
+    pub fn inputs_from(w: &[i64; INPUT_WORDS]) -> Inputs {
+        let s = MAX_SERVOS;
+        Inputs {
+            encoder_counts: core::array::from_fn(|c| w[c]),
+            index: core::array::from_fn(|c| (w[s + 2 * c] != 0).then_some(w[s + 2 * c + 1])),
+            estop: w[3 * s] != 0,
+            limit: w[3 * s + 1] as u16,
+            home: w[3 * s + 2] as u16,
+            drive_fault: w[3 * s + 3] as u16,
+            servo_trip: core::array::from_fn(|c| {
+                let t = 3 * s + 4 + 3 * c;
+                match w[t] {
+                    1 => Some(Trip::FollowingError {
+                        error: w[t + 1] as i32,
+                        limit: w[t + 2] as i32,
+                    }),
+                    2 => Some(Trip::AmplifierFault),
+                    _ => None,
+                }
+            }),
+        }
+    }
+
+    /// `outputs` as words.
+    pub fn outputs_words(outputs: &Outputs) -> [i64; OUTPUT_WORDS] {
+        let Outputs {
+            steps,
+            servo_target,
+            enable,
+            servo_enable,
+            servo_reset,
+        } = *outputs;
+        let mut w = [0; OUTPUT_WORDS];
+        for (c, t) in steps.iter().enumerate() {
+            let StepTrain {
+                count,
+                forward,
+                first_edge_ns,
+                interval_ns,
+                pulse_ns,
+            } = *t;
+            w[5 * c..5 * c + 5].copy_from_slice(&[
+                count as i64,
+                forward as i64,
+                first_edge_ns as i64,
+                interval_ns as i64,
+                pulse_ns as i64,
+            ]);
+        }
+        let s = 5 * MAX_STEPPERS;
+        w[s..s + MAX_SERVOS].copy_from_slice(&servo_target);
+        w[s + MAX_SERVOS] = enable as i64;
+        w[s + MAX_SERVOS + 1] = servo_enable as i64;
+        w[s + MAX_SERVOS + 2] = servo_reset as i64;
+        w
+    }
+}
+
 #[cfg(target_os = "none")]
 #[panic_handler]
 fn panic(_: &core::panic::PanicInfo) -> ! {
@@ -309,8 +531,28 @@ fn panic(_: &core::panic::PanicInfo) -> ! {
 }
 
 #[cfg(not(target_os = "none"))]
+mod record;
+
+/// Without arguments: prints the benchmark cases with the host's results. With
+/// `--record DIR`: runs the whole programs through `nc-send`'s link client against the
+/// simulated controller, writes one call log per program into DIR and prints one line
+/// per program (see [`record`]).
+#[cfg(not(target_os = "none"))]
 fn main() {
-    host::print_cases();
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.as_slice() {
+        [] => host::print_cases(),
+        [flag, dir] if flag == "--record" => {
+            if let Err(e) = record::record_all(std::path::Path::new(dir)) {
+                eprintln!("pkmc-m4count: {e}");
+                std::process::exit(1);
+            }
+        }
+        _ => {
+            eprintln!("usage: pkmc-m4count [--record DIR]");
+            std::process::exit(2);
+        }
+    }
 }
 
 #[cfg(not(target_os = "none"))]

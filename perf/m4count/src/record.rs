@@ -1,0 +1,443 @@
+//! Whole programs recorded on the host, call by call, for the emulator to replay
+//! (`python3 .ci/m4count.py`, the whole-call section of `docs/performance.md`).
+//!
+//! Each program is G-code generated here ([`programs`]), compiled by the host's G-code
+//! front end as `nc-send` compiles a file ([`pkmc_host::job::compile_text`]: parser,
+//! canonical commands, blocks, pre-flight against the machine's reach), and streamed
+//! by `nc-send`'s own link client as `nc-send --check` streams it:
+//! [`Link::connect`], [`pkmc_host::job::prepare`] (which unlocks the controller),
+//! [`Link::run_job`] and a last status request, with the default [`LinkOptions`]. The
+//! client talks to a [`Simulator`] in this process through [`Recorder`], a transport
+//! that stands for the board's USB link and logs every call into the controller, in
+//! order, with its arguments and results:
+//!
+//! * `receive(bytes)`: the host's writes cut into USB full-speed bulk packets of at
+//!   most [`USB_PACKET`] bytes, one call per packet, as the firmware's link task calls
+//!   it (`src/bin/firmware/main.rs`: one `receive` per `read_packet`);
+//! * `tick(&inputs)`: the inputs exactly as [`Simulator::tick`] passed them (read back
+//!   through [`Simulator::last_inputs`]) and the controller's outputs;
+//! * `transmit(buf)`: the controller's transmit buffer drained into buffers of
+//!   [`USB_PACKET`] bytes until a call returns 0, after every packet received and
+//!   after every tick, as the firmware's `drain` does; the bytes each call returned.
+//!
+//! Link timing. Like `nc-send --check` ([`pkmc_host::link::InProcess`]), simulated
+//! time advances only while the controller has work (or when the link holds bytes back,
+//! below), and a read runs ticks until the controller has something to say. Unlike it,
+//! a write is not handed to the controller at once: between two ticks the link carries
+//! at most [`USB_PACKETS_PER_TICK`] packets and [`FRAMES_PER_TICK`] frames; the
+//! rest waits for the next tick (the write returns short, and the client writes the rest
+//! later, as with a real port). The frame limit is the issue's streaming rate (10 000
+//! blocks/s); without it the client's first write (the queue's 64 free slots at once)
+//! would put all of them into one period, which no link can do in 1 ms (USB full speed
+//! carries about 30 block frames of 36–46 bytes per millisecond).
+//!
+//! Log (little-endian), one file per program: the magic `PKMC-M4-CALLS-1`, then records
+//! until the end of the file:
+//!
+//! * `R` `len: u16` `bytes[len]`: `receive(bytes)`;
+//! * `T` `inputs: [i64; INPUT_WORDS]` `outputs: [i64; OUTPUT_WORDS]`: `tick`, its
+//!   inputs and outputs flattened by [`crate::wire`];
+//! * `X` `n: u16` `bytes[n]`: `transmit` into a [`USB_PACKET`]-byte buffer returned `n`.
+
+use crate::wire;
+use pkmc::config::MachineConfig;
+use pkmc::controller::Controller;
+use pkmc::protocol::State;
+use pkmc_host::job::{compile_text, prepare};
+use pkmc_host::link::{JobEnd, Link, LinkOptions, NoHooks, Transport};
+use pkmc_host::sim::Simulator;
+use std::io;
+use std::path::Path;
+use std::time::Duration;
+
+/// Bytes of a USB full-speed bulk packet: the most one `receive` or `transmit` call
+/// of the firmware handles.
+pub const USB_PACKET: usize = 64;
+/// Packets USB full speed carries at most in one 1 ms frame (19 bulk packets of 64
+/// bytes).
+pub const USB_PACKETS_PER_TICK: usize = 19;
+/// Frames the link delivers at most between two ticks: the streaming rate of 10 000
+/// blocks/s that the period budget assumes (issue 9).
+pub const FRAMES_PER_TICK: usize = 10;
+/// Magic at the start of a log.
+pub const MAGIC: &[u8] = b"PKMC-M4-CALLS-1";
+/// Most ticks one read runs before returning empty-handed (as `InProcess`).
+const TICKS_PER_READ: u32 = 10_000;
+
+/// Calls of one recording.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Counts {
+    /// `tick` calls.
+    pub ticks: u64,
+    /// `receive` calls (packets).
+    pub packets: u64,
+    /// Frames delivered (frame delimiters received).
+    pub frames: u64,
+    /// `transmit` calls.
+    pub transmits: u64,
+}
+
+/// The recording transport: the link to a simulated controller, logging every call
+/// into it. See the module documentation.
+pub struct Recorder {
+    /// The simulated controller.
+    pub sim: Simulator,
+    /// The log so far.
+    pub log: Vec<u8>,
+    /// Calls made.
+    pub counts: Counts,
+    /// Bytes the controller transmitted that the client has not read yet.
+    rx: Vec<u8>,
+    /// Packets and frames the link may still carry before the next tick.
+    packets_left: usize,
+    frames_left: usize,
+    /// The last write was cut short by the link's rate: the next read runs a tick.
+    held_back: bool,
+}
+
+impl Recorder {
+    /// Wraps `sim`, with the controller's link-loss watch off, as `InProcess` does
+    /// (simulated time runs far ahead of the client's wall-clock heartbeat).
+    pub fn new(mut sim: Simulator) -> Self {
+        sim.ctrl.set_link_watch(false);
+        Self {
+            sim,
+            log: MAGIC.to_vec(),
+            counts: Counts::default(),
+            rx: Vec::new(),
+            packets_left: USB_PACKETS_PER_TICK,
+            frames_left: FRAMES_PER_TICK,
+            held_back: false,
+        }
+    }
+
+    /// One `receive` call with one packet.
+    fn receive(&mut self, packet: &[u8]) {
+        self.log.push(b'R');
+        self.log
+            .extend_from_slice(&(packet.len() as u16).to_le_bytes());
+        self.log.extend_from_slice(packet);
+        self.sim.ctrl.receive(packet);
+        self.counts.packets += 1;
+    }
+
+    /// Drains the controller's transmit buffer in packets, as the firmware does.
+    fn drain(&mut self) {
+        loop {
+            let mut buf = [0u8; USB_PACKET];
+            let n = self.sim.ctrl.transmit(&mut buf);
+            self.log.push(b'X');
+            self.log.extend_from_slice(&(n as u16).to_le_bytes());
+            self.log.extend_from_slice(&buf[..n]);
+            self.counts.transmits += 1;
+            self.rx.extend_from_slice(&buf[..n]);
+            if n == 0 {
+                break;
+            }
+        }
+    }
+
+    /// One simulator tick (one `tick` call), then a drain; the link's budget renews.
+    fn tick(&mut self) -> io::Result<()> {
+        self.sim.tick().map_err(io::Error::other)?;
+        let inputs = *self.sim.last_inputs();
+        let words = wire::inputs_words(&inputs);
+        if wire::inputs_from(&words) != inputs {
+            return Err(io::Error::other(format!(
+                "the tick inputs do not survive the log's words: {inputs:?}"
+            )));
+        }
+        self.log.push(b'T');
+        for w in words
+            .iter()
+            .chain(&wire::outputs_words(self.sim.last_outputs()))
+        {
+            self.log.extend_from_slice(&w.to_le_bytes());
+        }
+        self.counts.ticks += 1;
+        self.packets_left = USB_PACKETS_PER_TICK;
+        self.frames_left = FRAMES_PER_TICK;
+        self.drain();
+        Ok(())
+    }
+
+    /// Hands over what the controller transmitted, as far as `buf` takes it.
+    fn hand_over(&mut self, buf: &mut [u8]) -> usize {
+        let n = self.rx.len().min(buf.len());
+        buf[..n].copy_from_slice(&self.rx[..n]);
+        self.rx.drain(..n);
+        n
+    }
+}
+
+impl Transport for Recorder {
+    fn name(&self) -> &str {
+        "recorded in-process simulator"
+    }
+
+    fn write_some(&mut self, bytes: &[u8], _wait: Duration) -> io::Result<usize> {
+        let mut taken = 0;
+        while taken < bytes.len() && self.packets_left > 0 && self.frames_left > 0 {
+            let mut end = (taken + USB_PACKET).min(bytes.len());
+            // A packet ends early after the last frame the link may still carry.
+            let mut frames = 0;
+            for (i, &b) in bytes[taken..end].iter().enumerate() {
+                if b == 0 {
+                    frames += 1;
+                    if frames == self.frames_left {
+                        end = taken + i + 1;
+                        break;
+                    }
+                }
+            }
+            let packet = &bytes[taken..end];
+            self.receive(packet);
+            self.counts.frames += frames as u64;
+            self.frames_left -= frames;
+            self.packets_left -= 1;
+            taken = end;
+            self.drain();
+        }
+        self.held_back = taken < bytes.len();
+        // As `InProcess`: a held controller with a command taking effect on the next
+        // tick (an abort finishing a hold) gets that tick.
+        if self.sim.ctrl.state() == State::Hold && !self.sim.ctrl.has_work() {
+            self.tick()?;
+        }
+        Ok(taken)
+    }
+
+    fn read_some(&mut self, buf: &mut [u8], _wait: Duration) -> io::Result<usize> {
+        if !self.rx.is_empty() {
+            return Ok(self.hand_over(buf));
+        }
+        if self.held_back {
+            // The client is waiting for the link: a period passes.
+            self.held_back = false;
+            self.tick()?;
+            return Ok(self.hand_over(buf));
+        }
+        for _ in 0..TICKS_PER_READ {
+            if !self.sim.busy() {
+                return Ok(0);
+            }
+            self.tick()?;
+            if !self.rx.is_empty() {
+                return Ok(self.hand_over(buf));
+            }
+        }
+        Ok(0)
+    }
+}
+
+/// One recorded program.
+pub struct Program {
+    /// Short name (`h4_seg0.05mm`, …).
+    pub name: String,
+    /// Machine: 0 the H-4 with rolling table, 1 the hexapod ([`crate::machine`]).
+    pub machine: u32,
+    /// The G-code.
+    pub text: String,
+}
+
+/// Formats mm or degrees for G-code (0.1 µm, 0.1 µ°).
+fn f(v: f64) -> String {
+    let s = format!("{v:.4}");
+    if s == "-0.0000" {
+        "0.0000".into()
+    } else {
+        s
+    }
+}
+
+/// A sine along X, `amp` mm high, `wave` mm long, from `x0` over `len` mm of X at
+/// height `z`, in G1 segments of `seg` mm of path each (the last one shorter).
+fn sine(seg: f64, len: f64, x0: f64, z: f64, amp: f64, wave: f64) -> String {
+    let k = std::f64::consts::TAU / wave;
+    let y = |x: f64| amp * (k * (x - x0)).sin();
+    let mut g = format!("G21 G90 G64\nG0 X{} Y0 Z{}\nF6000\n", f(x0), f(z));
+    let mut x = x0;
+    while x < x0 + len {
+        // The step in X whose chord is `seg` long, to first order.
+        let slope = amp * k * (k * (x - x0)).cos();
+        x = (x + seg / (1.0 + slope * slope).sqrt()).min(x0 + len);
+        g += &format!("G1 X{} Y{}\n", f(x), f(y(x)));
+    }
+    g + "M2\n"
+}
+
+/// A chain of `n` tangent arcs of radius `r` mm, each turning `sweep` degrees,
+/// alternately counter-clockwise (G3) and clockwise (G2), starting at (`x0`, 0, `z`)
+/// heading along +X, at F6000.
+fn arcs(n: usize, r: f64, sweep: f64, x0: f64, z: f64) -> String {
+    let mut g = format!("G21 G90 G64 G17\nG0 X{} Y0 Z{}\nF6000\n", f(x0), f(z));
+    let (mut p, mut heading) = ([x0, 0.0], 0.0f64);
+    let phi = sweep.to_radians();
+    for i in 0..n {
+        let ccw = i % 2 == 0;
+        let side = if ccw { 1.0 } else { -1.0 };
+        // The centre lies on the side the arc turns to; the end is the start turned
+        // about it.
+        let c = [
+            p[0] - side * r * heading.sin(),
+            p[1] + side * r * heading.cos(),
+        ];
+        let turn = side * phi;
+        let (s, co) = turn.sin_cos();
+        let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
+        let end = [c[0] + co * dx - s * dy, c[1] + s * dx + co * dy];
+        g += &format!(
+            "{} X{} Y{} I{} J{}\n",
+            if ccw { "G3" } else { "G2" },
+            f(end[0]),
+            f(end[1]),
+            f(c[0] - p[0]),
+            f(c[1] - p[1])
+        );
+        p = end;
+        heading += turn;
+    }
+    g + "M2\n"
+}
+
+/// A circle of radius `r` mm about (0, 0) at height `z` in `n` G1 segments at F3000,
+/// the rotary axes following `angles(t)` (t from 0 to 1 over the circle: words such as
+/// `A12.5 C-3`).
+fn five_axis(n: usize, r: f64, z: f64, angles: impl Fn(f64) -> String) -> String {
+    let mut g = format!(
+        "G21 G90 G64\nG0 X{} Y0 Z{} {}\nF3000\n",
+        f(r),
+        f(z),
+        angles(0.0)
+    );
+    for i in 1..=n {
+        let t = i as f64 / n as f64;
+        let a = std::f64::consts::TAU * t;
+        g += &format!("G1 X{} Y{} {}\n", f(r * a.cos()), f(r * a.sin()), angles(t));
+    }
+    g + "M2\n"
+}
+
+/// The measured programs, whole, on both machines: 0.05 mm, 1 mm and 2 mm G1
+/// segments along a sine (5 mm high, 40 mm long waves: 8 mm radius at the crests, which
+/// both machines take at or near F6000) at F6000, a chain of tangent
+/// G2/G3 arcs at F6000, and a five-axis circle with the table turning (H-4: A tilts the
+/// table 0–30° and back while C swings ±15°; hexapod: A and B tilt the platform ±8°,
+/// C swings ±5°). X spans ±`SINE_MM`/2 about the machine's home (H-4: the tool tip at
+/// Z −80 mm, the workpiece frame; hexapod: the platform at Z 450 mm).
+pub fn programs() -> Vec<Program> {
+    let mut out = Vec::new();
+    for (m, tag, z) in [(0u32, "h4", -80.0), (1, "hexapod", 450.0)] {
+        let x0 = -SINE_MM / 2.0;
+        let mut add = |what: &str, text: String| {
+            out.push(Program {
+                name: format!("{tag}_{what}"),
+                machine: m,
+                text,
+            })
+        };
+        add("seg0.05mm", sine(0.05, SINE_MM, x0, z, 5.0, 40.0));
+        add("seg1mm", sine(1.0, SINE_MM, x0, z, 5.0, 40.0));
+        add("seg2mm", sine(2.0, SINE_MM, x0, z, 5.0, 40.0));
+        add("arcs", arcs(ARCS, 5.0, 20.0, x0, z));
+        let angles: Box<dyn Fn(f64) -> String> = if m == 0 {
+            Box::new(|t: f64| {
+                let a = 30.0 * (std::f64::consts::PI * t).sin();
+                let c = 15.0 * (std::f64::consts::TAU * t).sin();
+                format!("A{} C{}", f(a), f(c))
+            })
+        } else {
+            Box::new(|t: f64| {
+                let w = std::f64::consts::TAU * t;
+                format!(
+                    "A{} B{} C{}",
+                    f(8.0 * w.sin()),
+                    f(8.0 * w.cos() - 8.0),
+                    f(5.0 * (2.0 * w).sin())
+                )
+            })
+        };
+        add("5axis", five_axis(FIVE_AXIS_SEGMENTS, 20.0, z, angles));
+    }
+    out
+}
+
+/// X span of the sines, mm (about 113 mm of path).
+pub const SINE_MM: f64 = 100.0;
+/// Arcs in the tangent chain (5 mm radius, 20° each: 1.75 mm of path per arc).
+pub const ARCS: usize = 60;
+/// Segments of the five-axis circle (20 mm radius: 1.05 mm each).
+pub const FIVE_AXIS_SEGMENTS: usize = 120;
+
+/// The machine files `nc-send` would be given for machine `m`.
+fn machine_file(m: u32) -> std::path::PathBuf {
+    let name = if m == 0 { "h4-table" } else { "hexapod" };
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples/machines")
+        .join(format!("{name}.toml"))
+}
+
+/// Records `p` as `nc-send --check` would run it; returns the log and the calls made.
+pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
+    let machine: MachineConfig = crate::machine(p.machine);
+    // The emulated controller is built from the built-in configuration; it must be
+    // the machine file's.
+    let file = machine_file(p.machine);
+    let loaded = pkmc_host::machine_file::load(&file).map_err(|e| format!("{e:#}"))?;
+    if loaded != machine {
+        return Err(format!(
+            "{} differs from the built-in machine",
+            file.display()
+        ));
+    }
+    let blocks = compile_text(&p.text, &p.name, &machine, machine.home).map_err(|e| e.message)?;
+    let sim = Simulator::new(machine.clone()).map_err(|e| format!("{e:#}"))?;
+    let io = Recorder::new(sim);
+    let mut link =
+        Link::connect(io, &machine, LinkOptions::default()).map_err(|e| e.to_string())?;
+    let mut hooks = NoHooks;
+    let end = match prepare(&mut link, false, true, &mut hooks).map_err(|e| e.message)? {
+        Some(end) => end,
+        None => link
+            .run_job(&blocks, &mut hooks)
+            .map_err(|e| e.to_string())?,
+    };
+    let status = link.request_status().map_err(|e| e.to_string())?;
+    if end != JobEnd::Done || status.state != State::Idle {
+        return Err(format!(
+            "{}: the job ended {end:?} in state {:?}",
+            p.name, status.state
+        ));
+    }
+    let io = link.into_transport();
+    Ok((io.log, io.counts, blocks.len()))
+}
+
+/// Records every program into `dir` (one `NAME.calls` file each) and prints one line
+/// per program: `program NAME MACHINE FILE BLOCKS TICKS PACKETS FRAMES TRANSMITS`.
+pub fn record_all(dir: &Path) -> Result<(), String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    for p in programs() {
+        let (log, c, blocks) = record(&p)?;
+        let path = dir.join(format!("{}.calls", p.name));
+        std::fs::write(&path, &log).map_err(|e| format!("{}: {e}", path.display()))?;
+        std::fs::write(dir.join(format!("{}.ngc", p.name)), &p.text)
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        println!(
+            "program {} {} {} {blocks} {} {} {} {}",
+            p.name,
+            p.machine,
+            path.display(),
+            c.ticks,
+            c.packets,
+            c.frames,
+            c.transmits
+        );
+    }
+    // The controller's size on the host, for comparison with the target's.
+    eprintln!(
+        "pkmc-m4count: Controller is {} bytes on the host",
+        core::mem::size_of::<Controller>()
+    );
+    Ok(())
+}
