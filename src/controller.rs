@@ -40,7 +40,7 @@ use crate::interp::{Event, Executor};
 use crate::kinematics::{Joints, Kinematics, MachineKinematics, Unreachable};
 use crate::planner::{Planner, PushError};
 use crate::protocol::{
-    decode_frame, encode_frame, Alarm, AlarmCause, Aux, Block, Control, CtrlMsg, FrameReader,
+    decode_frame, encode_frame_with, Alarm, AlarmCause, Aux, Block, Control, CtrlMsg, FrameReader,
     HostMsg, Motion, NakReason, Pushed, State, Status, MAX_BODY, MAX_FRAME, NO_JOINT,
     PROTOCOL_VERSION,
 };
@@ -110,7 +110,12 @@ pub struct Controller {
     machine: MachineConfig,
     kin: MachineKinematics,
     reader: FrameReader,
-    tx: heapless::Deque<u8, TX_CAPACITY>,
+    tx: crate::ring::ByteRing<TX_CAPACITY>,
+    /// Scratch for frames: a decoded body, an encoded one and an encoded frame
+    /// (fields, so that no call clears them).
+    rx_body: [u8; MAX_BODY],
+    tx_body: [u8; MAX_BODY],
+    tx_frame: [u8; MAX_FRAME],
     tx_seq: u16,
     session: bool,
     expected_seq: u16,
@@ -208,7 +213,10 @@ impl Controller {
             machine,
             kin,
             reader: FrameReader::new(),
-            tx: heapless::Deque::new(),
+            tx: crate::ring::ByteRing::default(),
+            rx_body: [0; MAX_BODY],
+            tx_body: [0; MAX_BODY],
+            tx_frame: [0; MAX_FRAME],
             tx_seq: 0,
             session: false,
             expected_seq: 0,
@@ -351,11 +359,10 @@ impl Controller {
     /// Feeds bytes received from the link.
     pub fn receive(&mut self, bytes: &[u8]) {
         for &b in bytes {
-            let mut body = [0u8; MAX_BODY];
             let decoded = match self.reader.push(b) {
                 Pushed::Pending => continue,
                 Pushed::Overlong => None,
-                Pushed::Frame(f) => decode_frame::<HostMsg>(f, &mut body).ok(),
+                Pushed::Frame(f) => decode_frame::<HostMsg>(f, &mut self.rx_body).ok(),
             };
             match decoded {
                 Some((seq, msg)) => {
@@ -372,32 +379,16 @@ impl Controller {
 
     /// Moves pending outgoing bytes into `out`; returns how many.
     pub fn transmit(&mut self, out: &mut [u8]) -> usize {
-        let mut n = 0;
-        while n < out.len() {
-            match self.tx.pop_front() {
-                Some(b) => {
-                    out[n] = b;
-                    n += 1;
-                }
-                None => break,
-            }
-        }
-        n
+        self.tx.pop_into(out)
     }
 
     fn send(&mut self, msg: &CtrlMsg) {
-        let mut frame = [0u8; MAX_FRAME];
-        let Ok(n) = encode_frame(self.tx_seq, msg, &mut frame) else {
-            self.stats.tx_dropped += 1;
-            return;
-        };
-        if self.tx.capacity() - self.tx.len() < n {
-            self.stats.tx_dropped += 1;
-            return;
-        }
-        self.tx_seq = self.tx_seq.wrapping_add(1);
-        for &b in &frame[..n] {
-            let _ = self.tx.push_back(b);
+        let encoded = encode_frame_with(self.tx_seq, msg, &mut self.tx_body, &mut self.tx_frame);
+        match encoded {
+            Ok(n) if self.tx.push_slice(&self.tx_frame[..n]) => {
+                self.tx_seq = self.tx_seq.wrapping_add(1);
+            }
+            _ => self.stats.tx_dropped += 1,
         }
     }
 
@@ -1075,6 +1066,7 @@ impl Controller {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::protocol::encode_frame;
 
     fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
         let mut f = [0u8; MAX_FRAME];

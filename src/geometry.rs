@@ -43,7 +43,8 @@ pub enum Shape {
         /// Angle per path distance: sweep·2¹⁶ / length, so that φ(s) = φ₀ + (k·s) ≫ 32
         /// for s in nm Q16 (no division per tick).
         phi_rate: i128,
-        /// Radius change per path distance: (dr·2¹⁶) / length, used as (k·s) ≫ 32.
+        /// Radius change per path distance: (dr·2⁴⁰) / length, used as (k·s) ≫ 56 (fine
+        /// enough that the radius lands within a nanometre of the end on any arc).
         r_rate: i64,
         /// Per-axis direction of the linear part (helix axis and A B C), Q20.44;
         /// in-plane entries are 0.
@@ -221,7 +222,7 @@ impl Path {
                         phi0: turn_of(wrap(a0, tau)) as u64,
                         sweep,
                         phi_rate: (sweep << 16) / len as i128,
-                        r_rate: (((dr as i128) << 16) / len as i128) as i64,
+                        r_rate: (((dr as i128) << 40) / len as i128) as i64,
                         unit,
                     },
                     ..point
@@ -327,7 +328,7 @@ impl Path {
                     || unit[i] != 0
                     || unit[j] != 0
                     || !rate_of(phi_rate, sweep, length)
-                    || !rate_of(r_rate as i128, dr as i128, length)
+                    || !rate_of(r_rate as i128, (dr as i128) << 24, length)
                 {
                     return bad;
                 }
@@ -397,7 +398,7 @@ impl Path {
                 linear(&unit, pose);
                 let s = s as i128;
                 let phi = phi0.wrapping_add(((phi_rate * s) >> 32) as u64);
-                let r = r0 + ((r_rate as i128 * s) >> 32) as i64;
+                let r = r0 + ((r_rate as i128 * s) >> 56) as i64;
                 // The angle as a signed fraction of a turn, then in n° within ±180°
                 // (the sine's fast path).
                 let turn = (phi as i64 as i128 * 360_000_000_000) >> 64;
@@ -530,5 +531,94 @@ mod tests {
         p.pose_at(p.length << 15, &mut pose);
         assert!((pose[0] - 61_728_394).abs() <= 1, "{pose:?}");
         assert!((pose[1] + 49_382_716).abs() <= 1, "{pose:?}");
+    }
+
+    /// What the host computes for `block` from `start`, checked as the controller does.
+    fn round_trip(block: &Block, start: &[i64; AXES]) -> Result<Path, GeometryError> {
+        let host = Path::new(block, start)?;
+        Path::from_plan(block, start, host.length, host.shape)
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn the_controller_accepts_every_arc_the_host_computes(
+            r_um in 10i64..5_000_000, a0 in 0.0f64..360.0, sweep in 1.0f64..359.0,
+            helix in -50_000_000i64..50_000_000, cw in proptest::bool::ANY, turns in 0u16..3,
+            plane in 0usize..3, dr in -2_000i64..2_000,
+        ) {
+            let plane = [Plane::Xy, Plane::Zx, Plane::Yz][plane];
+            let (i, j, k) = plane.axes();
+            let r = r_um * 1000;
+            let c = [1_000_000i64, -2_000_000];
+            let a1 = if cw { a0 - sweep } else { a0 + sweep };
+            let mut start = [0i64; AXES];
+            start[i] = c[0] + (r as f64 * a0.to_radians().cos()).round() as i64;
+            start[j] = c[1] + (r as f64 * a0.to_radians().sin()).round() as i64;
+            let mut target = start;
+            let r1 = (r + dr).max(1) as f64;
+            target[i] = c[0] + (r1 * a1.to_radians().cos()).round() as i64;
+            target[j] = c[1] + (r1 * a1.to_radians().sin()).round() as i64;
+            target[k] += helix;
+            let b = Block {
+                line: 1,
+                motion: Motion::Arc { center: c, plane, clockwise: cw, turns },
+                target,
+                feed: 1_000_000,
+                tolerance_nm: 0,
+            };
+            let host = Path::new(&b, &start);
+            proptest::prop_assume!(host.is_ok());
+            let host = host.unwrap();
+            proptest::prop_assert_eq!(round_trip(&b, &start), Ok(host));
+        }
+
+        #[test]
+        fn the_controller_accepts_every_line_the_host_computes(
+            d in proptest::array::uniform6(-500_000_000i64..500_000_000),
+            rotary_only in proptest::bool::ANY,
+        ) {
+            let mut target = d;
+            if rotary_only {
+                target[..3].copy_from_slice(&[0, 0, 0]);
+            }
+            let b = Block { line: 1, motion: Motion::Linear, target, feed: 1_000_000, tolerance_nm: 0 };
+            let start = [0; AXES];
+            proptest::prop_assert_eq!(round_trip(&b, &start), Path::new(&b, &start));
+        }
+    }
+
+    #[test]
+    fn a_plan_for_another_arc_is_refused() {
+        let b = arc([0, 10_000_000, 0, 0, 0, 0], [0, 0], false, 0);
+        let start = [10_000_000, 0, 0, 0, 0, 0];
+        let host = Path::new(&b, &start).unwrap();
+        // The other way round (three quarters), or one turn more.
+        let mut other = b;
+        other.motion = Motion::Arc {
+            center: [0, 0],
+            plane: Plane::Xy,
+            clockwise: true,
+            turns: 0,
+        };
+        assert_eq!(
+            Path::from_plan(&other, &start, host.length, host.shape),
+            Err(GeometryError::PlanMismatch)
+        );
+        let mut more = b;
+        more.motion = Motion::Arc {
+            center: [0, 0],
+            plane: Plane::Xy,
+            clockwise: false,
+            turns: 1,
+        };
+        assert_eq!(
+            Path::from_plan(&more, &start, host.length, host.shape),
+            Err(GeometryError::PlanMismatch)
+        );
+        // A length that does not match the sweep.
+        assert_eq!(
+            Path::from_plan(&b, &start, host.length * 2, host.shape),
+            Err(GeometryError::PlanMismatch)
+        );
     }
 }

@@ -30,6 +30,7 @@ pub mod pacing;
 pub mod planner;
 pub mod profile;
 pub mod protocol;
+pub mod ring;
 pub mod servo;
 pub mod stepper;
 pub mod store;

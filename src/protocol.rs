@@ -395,7 +395,17 @@ pub fn encode_frame<M: Serialize>(
     msg: &M,
     out: &mut [u8; MAX_FRAME],
 ) -> Result<usize, FrameError> {
-    let mut body = [0u8; MAX_BODY];
+    encode_frame_with(seq, msg, &mut [0u8; MAX_BODY], out)
+}
+
+/// [`encode_frame`] with the caller's scratch `body` (its contents do not matter; no
+/// buffer is cleared, for the controller's transmit path).
+pub fn encode_frame_with<M: Serialize>(
+    seq: u16,
+    msg: &M,
+    body: &mut [u8; MAX_BODY],
+    out: &mut [u8; MAX_FRAME],
+) -> Result<usize, FrameError> {
     body[..2].copy_from_slice(&seq.to_le_bytes());
     let used = postcard::to_slice(msg, &mut body[2..MAX_BODY - 4])
         .map_err(|_| FrameError::TooLong)?
