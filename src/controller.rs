@@ -176,28 +176,27 @@ const UNHOMED: Alarm = Alarm {
     line: 0,
 };
 
-/// Lowest set bit of `bits` among the first `n`.
-fn first_bit(bits: u16, n: usize) -> Option<usize> {
-    (0..n).find(|j| bits & (1 << j) != 0)
+/// What a controller for a machine needs besides the machine, computed and checked
+/// before anything is written (small: no queue).
+struct Prepared {
+    kin: MachineKinematics,
+    joints: Joints,
+    steps: StepScheduler,
+    servo_joint: [u8; MAX_SERVOS],
+    fast: [FastScale; MAX_JOINTS],
+    machine_id: u32,
 }
 
-impl Controller {
-    /// A controller for `machine`, standing at its home pose.
-    pub fn new(machine: MachineConfig) -> Result<Self, ConfigError> {
+impl Prepared {
+    fn of(machine: &MachineConfig) -> Result<Self, ConfigError> {
         machine.validate()?;
-        let kin = MachineKinematics::new(&machine);
-        let pose = machine.home;
+        let kin = MachineKinematics::new(machine);
         let mut joints = [0; MAX_JOINTS];
-        kin.inverse_checked(&pose, &machine.joints, &mut joints)
+        kin.inverse_checked(&machine.home, &machine.joints, &mut joints)
             .map_err(|e| match e {
                 Unreachable::JointLimit { joint } => ConfigError::HomeOutsideTravel { joint },
                 _ => ConfigError::HomeOutsideTravel { joint: 0 },
             })?;
-        let steps = StepScheduler::new(&machine.joints, &joints);
-        let mut exec = Executor::new(pose);
-        exec.set_smoothing(machine.motion.smoothing_ticks as u32);
-        let mut planner = Planner::new(pose);
-        planner.smoothing = crate::interp::window_of(machine.motion.smoothing_ticks as u32);
         let mut servo_joint = [NO_JOINT; MAX_SERVOS];
         for (j, jc) in machine.joints.iter().enumerate() {
             if let Drive::Servo { channel } = jc.drive {
@@ -208,52 +207,104 @@ impl Controller {
         for (f, jc) in fast.iter_mut().zip(&machine.joints) {
             *f = jc.scale.fast();
         }
-        let machine_for_id = machine.clone();
-        let mut c = Self {
-            machine,
+        Ok(Self {
             kin,
-            reader: FrameReader::new(),
-            tx: crate::ring::ByteRing::default(),
-            rx_body: [0; MAX_BODY],
-            tx_body: [0; MAX_BODY],
-            tx_frame: [0; MAX_FRAME],
-            tx_seq: 0,
-            session: false,
-            expected_seq: 0,
-            last_control: None,
-            machine_id: crate::store::identity(&machine_for_id),
-            mismatch: false,
-            assembler: crate::store::Assembler::new(),
-            store_pending: false,
-            planner,
-            exec,
+            steps: StepScheduler::new(&machine.joints, &joints),
             joints,
-            home_joints: joints,
-            offset: [0; MAX_JOINTS],
-            steps,
-            trains: [StepTrain::default(); MAX_JOINTS],
-            homer: Homer::default(),
             servo_joint,
             fast,
-            state: State::Alarm,
-            alarm: Some(UNHOMED),
-            locked: true,
-            homed: false,
-            stopping: false,
-            resync: false,
-            fresh: true,
-            abort_pending: false,
-            spindle: Aux::SpindleOff,
-            motion_ticks: 0,
-            since_status: 0,
-            silent_ticks: 0,
-            link_watch: true,
-            last: Inputs::default(),
-            out: Outputs::default(),
-            stats: LinkStats::default(),
-        };
-        c.update_servo_targets();
-        Ok(c)
+            machine_id: crate::store::identity(machine),
+        })
+    }
+}
+
+/// Lowest set bit of `bits` among the first `n`.
+fn first_bit(bits: u16, n: usize) -> Option<usize> {
+    (0..n).find(|j| bits & (1 << j) != 0)
+}
+
+impl Controller {
+    /// A controller for `machine`, standing at its home pose (on the host: the value is
+    /// tens of kilobytes; the firmware builds it in place with [`Controller::init`]).
+    pub fn new(machine: MachineConfig) -> Result<Self, ConfigError> {
+        let mut slot = core::mem::MaybeUninit::<Self>::uninit();
+        Self::init(&mut slot, machine)?;
+        // SAFETY: `init` succeeded, so it wrote every field.
+        Ok(unsafe { slot.assume_init() })
+    }
+
+    /// Builds a controller for `machine` in `slot`, field by field, so that no
+    /// temporary of the whole controller (or of its queue) is made on the stack: the
+    /// MCU's stack could not hold one. Fails, leaving `slot` untouched, when the
+    /// machine is invalid.
+    pub fn init(
+        slot: &mut core::mem::MaybeUninit<Self>,
+        machine: MachineConfig,
+    ) -> Result<&mut Self, ConfigError> {
+        let prepared = Prepared::of(&machine)?;
+        // SAFETY: `write` writes every field; the slot is valid and aligned.
+        unsafe {
+            Self::write(slot.as_mut_ptr(), machine, &prepared);
+            Ok(slot.assume_init_mut())
+        }
+    }
+
+    /// Writes every field of a fresh controller into `p`.
+    ///
+    /// # Safety
+    /// `p` valid for writes and aligned; its old contents are not dropped (nothing in
+    /// a controller needs dropping).
+    unsafe fn write(p: *mut Self, machine: MachineConfig, prep: &Prepared) {
+        use core::ptr::addr_of_mut as at;
+        let pose = machine.home;
+        let window = crate::interp::window_of(machine.motion.smoothing_ticks as u32);
+        // SAFETY: the caller's promise; each write is to a field of `*p`.
+        unsafe {
+            at!((*p).machine).write(machine);
+            at!((*p).kin).write(prep.kin);
+            at!((*p).reader).write(FrameReader::new());
+            at!((*p).tx).write(crate::ring::ByteRing::default());
+            at!((*p).rx_body).write([0; MAX_BODY]);
+            at!((*p).tx_body).write([0; MAX_BODY]);
+            at!((*p).tx_frame).write([0; MAX_FRAME]);
+            at!((*p).tx_seq).write(0);
+            at!((*p).session).write(false);
+            at!((*p).expected_seq).write(0);
+            at!((*p).last_control).write(None);
+            at!((*p).machine_id).write(prep.machine_id);
+            at!((*p).mismatch).write(false);
+            at!((*p).assembler).write(crate::store::Assembler::new());
+            at!((*p).store_pending).write(false);
+            Planner::init_at(at!((*p).planner), pose);
+            (*p).planner.smoothing = window;
+            Executor::init_at(at!((*p).exec), pose);
+            (*p).exec.set_smoothing(window);
+            at!((*p).joints).write(prep.joints);
+            at!((*p).home_joints).write(prep.joints);
+            at!((*p).offset).write([0; MAX_JOINTS]);
+            at!((*p).steps).write(prep.steps.clone());
+            at!((*p).trains).write([StepTrain::default(); MAX_JOINTS]);
+            at!((*p).homer).write(Homer::default());
+            at!((*p).servo_joint).write(prep.servo_joint);
+            at!((*p).fast).write(prep.fast);
+            at!((*p).state).write(State::Alarm);
+            at!((*p).alarm).write(Some(UNHOMED));
+            at!((*p).locked).write(true);
+            at!((*p).homed).write(false);
+            at!((*p).stopping).write(false);
+            at!((*p).resync).write(false);
+            at!((*p).fresh).write(true);
+            at!((*p).abort_pending).write(false);
+            at!((*p).spindle).write(Aux::SpindleOff);
+            at!((*p).motion_ticks).write(0);
+            at!((*p).since_status).write(0);
+            at!((*p).silent_ticks).write(0);
+            at!((*p).link_watch).write(true);
+            at!((*p).last).write(Inputs::default());
+            at!((*p).out).write(Outputs::default());
+            at!((*p).stats).write(LinkStats::default());
+            (*p).update_servo_targets();
+        }
     }
 
     /// Unlocks a controller locked after a reset, at the position it believes it is at
@@ -518,34 +569,40 @@ impl Controller {
     }
 
     /// Adopts `config`: the controller restarts at its home pose, keeping the session.
+    /// Rebuilt in place (no second controller on the stack).
     fn load_machine(&mut self, config: MachineConfig) {
-        match Controller::new(config) {
-            Err(e) => self.send(&CtrlMsg::MachineRefused {
-                error: crate::store::StoreError::Invalid(e),
-            }),
-            Ok(fresh) => {
-                let link = (
-                    core::mem::take(&mut self.tx),
-                    self.tx_seq,
-                    self.expected_seq,
-                    self.last_control,
-                    self.stats,
-                );
-                *self = fresh;
-                (
-                    self.tx,
-                    self.tx_seq,
-                    self.expected_seq,
-                    self.last_control,
-                    self.stats,
-                ) = link;
-                self.session = true;
-                self.store_pending = true;
-                self.send(&CtrlMsg::MachineLoaded {
-                    machine: self.machine_id,
+        let prepared = match Prepared::of(&config) {
+            Ok(p) => p,
+            Err(e) => {
+                self.send(&CtrlMsg::MachineRefused {
+                    error: crate::store::StoreError::Invalid(e),
                 });
+                return;
             }
-        }
+        };
+        let (tx_seq, expected_seq, last_control, stats) = (
+            self.tx_seq,
+            self.expected_seq,
+            self.last_control,
+            self.stats,
+        );
+        let mut tx = crate::ring::ByteRing::default();
+        core::mem::swap(&mut tx, &mut self.tx);
+        // SAFETY: `self` is a valid, aligned controller; `write` overwrites every field
+        // and nothing in it needs dropping.
+        unsafe { Self::write(self, config, &prepared) };
+        core::mem::swap(&mut tx, &mut self.tx);
+        (
+            self.tx_seq,
+            self.expected_seq,
+            self.last_control,
+            self.stats,
+        ) = (tx_seq, expected_seq, last_control, stats);
+        self.session = true;
+        self.store_pending = true;
+        self.send(&CtrlMsg::MachineLoaded {
+            machine: self.machine_id,
+        });
     }
 
     /// Identity of the machine configuration in force.
@@ -947,9 +1004,7 @@ impl Controller {
             }
             Some(HomeEvent::Finished) => {
                 let completed = self.exec.completed;
-                let window = self.machine.motion.smoothing_ticks as u32;
-                self.exec = Executor::new(self.machine.home);
-                self.exec.set_smoothing(window);
+                self.exec.reset(self.machine.home);
                 self.exec.completed = completed;
                 self.planner.clear(self.machine.home);
                 self.homed = true;
@@ -978,9 +1033,7 @@ impl Controller {
                 self.joints = joints;
                 let completed = self.exec.completed;
                 let line = self.exec.line;
-                self.exec = Executor::new(pose);
-                self.exec
-                    .set_smoothing(self.machine.motion.smoothing_ticks as u32);
+                self.exec.reset(pose);
                 self.exec.completed = completed;
                 self.exec.line = line;
                 self.planner.clear(pose);

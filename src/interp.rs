@@ -83,8 +83,9 @@ pub struct Executor {
     pub paused: bool,
     /// Speed at which the last profiled block leaves, nm/tick: the next block's entry.
     exit: f32,
-    /// Jerk limitation (see the module doc); `None` for plain trapezoids.
-    smoothing: Option<Smoothing>,
+    /// Jerk limitation (see the module doc); off (`log2` = 0) for plain trapezoids.
+    /// Kept in place, on or off, so that nothing builds its history on the stack.
+    smoothing: Smoothing,
     /// Path distance travelled since start-up by the unsmoothed profile, nm Q16
     /// (blocks laid end to end).
     s_raw: i64,
@@ -122,40 +123,81 @@ struct Smoothing {
 }
 
 impl Executor {
-    /// An idle executor at `pose`.
+    /// An idle executor at `pose` (on the host; the controller builds its own in place
+    /// with [`Executor::init_at`]).
     pub fn new(pose: [i64; AXES]) -> Self {
-        Self {
-            active: None,
-            pose,
-            speed: 0,
-            line: 0,
-            completed: 0,
-            paused: false,
-            exit: 0.0,
-            smoothing: None,
-            s_raw: 0,
-            block_start: 0,
+        let mut slot = core::mem::MaybeUninit::<Self>::uninit();
+        // SAFETY: `init_at` writes every field of the slot.
+        unsafe {
+            Self::init_at(slot.as_mut_ptr(), pose);
+            slot.assume_init()
         }
+    }
+
+    /// Writes an idle executor at `pose`, without smoothing, into `p`, field by field
+    /// (the smoothing history is 12 KB: no temporary of it on the stack).
+    ///
+    /// # Safety
+    /// `p` must be valid for writes and aligned; whatever it held is overwritten
+    /// without being dropped (nothing in an executor needs dropping).
+    pub unsafe fn init_at(p: *mut Self, pose: [i64; AXES]) {
+        use core::ptr::addr_of_mut as at;
+        // SAFETY: the caller's promise; each write is to a field of `*p`.
+        unsafe {
+            at!((*p).active).write(None);
+            at!((*p).pose).write(pose);
+            at!((*p).speed).write(0);
+            at!((*p).line).write(0);
+            at!((*p).completed).write(0);
+            at!((*p).paused).write(false);
+            at!((*p).exit).write(0.0);
+            at!((*p).s_raw).write(0);
+            at!((*p).block_start).write(0);
+            let f = at!((*p).smoothing);
+            at!((*f).log2).write(0);
+            at!((*f).ring).write([0; MAX_WINDOW]);
+            at!((*f).head).write(0);
+            at!((*f).sum).write(0);
+            at!((*f).s).write(0);
+            at!((*f).hist).write(heapless::Deque::new());
+        }
+    }
+
+    /// Back to idle at `pose`, keeping the smoothing window, in place.
+    pub fn reset(&mut self, pose: [i64; AXES]) {
+        let window = 1u32 << self.smoothing.log2;
+        self.active = None;
+        self.pose = pose;
+        self.speed = 0;
+        self.line = 0;
+        self.completed = 0;
+        self.paused = false;
+        self.exit = 0.0;
+        self.s_raw = 0;
+        self.block_start = 0;
+        self.set_smoothing(window);
     }
 
     /// Smooths the path distance with a moving average of `window` ticks (rounded up
     /// to a power of two, at most [`MAX_WINDOW`]); 1 turns smoothing off.
     pub fn set_smoothing(&mut self, window: u32) {
-        let log2 = window_of(window).trailing_zeros();
-        self.smoothing = (log2 > 0).then(|| Smoothing {
-            log2,
-            ring: [self.s_raw; MAX_WINDOW],
-            head: 0,
-            sum: (self.s_raw as i128) << log2,
-            s: self.s_raw,
-            hist: heapless::Deque::new(),
-        });
+        let f = &mut self.smoothing;
+        f.log2 = window_of(window).trailing_zeros();
+        f.ring = [self.s_raw; MAX_WINDOW];
+        f.head = 0;
+        f.sum = (self.s_raw as i128) << f.log2;
+        f.s = self.s_raw;
+        f.hist.clear();
+    }
+
+    /// The smoothing, when on.
+    fn smoothing(&self) -> Option<&Smoothing> {
+        (self.smoothing.log2 > 0).then_some(&self.smoothing)
     }
 
     /// The smoothed motion has caught up with the profile (always, without smoothing).
     pub fn settled(&self) -> bool {
-        self.smoothing
-            .as_ref()
+        self.smoothing()
             .is_none_or(|f| f.s == self.s_raw && f.sum == (self.s_raw as i128) << f.log2)
     }
 
@@ -192,7 +234,7 @@ impl Executor {
         self.active = None;
         self.speed = 0;
         self.exit = 0.0;
-        if let Some(f) = self.smoothing.as_ref() {
+        if let Some(f) = self.smoothing() {
             let window = 1 << f.log2;
             self.s_raw = 0;
             self.block_start = 0;
@@ -232,7 +274,8 @@ impl Executor {
                 );
                 self.exit = got.exit;
                 self.block_start = self.s_raw;
-                if let Some(f) = self.smoothing.as_mut() {
+                if self.smoothing.log2 > 0 {
+                    let f = &mut self.smoothing;
                     if f.hist.is_full() {
                         f.hist.pop_front();
                     }
@@ -356,7 +399,7 @@ impl Executor {
                     if p.t2 != HELD && a.t >= d {
                         budget = a.t - d;
                         self.s_raw = self.block_start + (a.block.path.length << 16);
-                        if self.smoothing.is_none() {
+                        if self.smoothing.log2 == 0 {
                             self.pose = a.block.path.end;
                         }
                         self.completed += 1;
@@ -369,7 +412,7 @@ impl Executor {
                     }
                     let (s, v) = p.at(a.t);
                     self.s_raw = self.block_start + a.s_base + s;
-                    if self.smoothing.is_none() {
+                    if self.smoothing.log2 == 0 {
                         a.block.path.pose_at(a.s_base + s, &mut self.pose);
                         self.speed = v;
                     }
@@ -377,7 +420,7 @@ impl Executor {
                 }
             }
         }
-        if self.smoothing.is_some() {
+        if self.smoothing.log2 > 0 {
             self.smooth();
         } else if self.active.is_none() {
             self.speed = 0;
@@ -387,9 +430,10 @@ impl Executor {
 
     /// Moves the smoothed position one tick and evaluates the pose there.
     fn smooth(&mut self) {
-        let Some(f) = self.smoothing.as_mut() else {
+        if self.smoothing.log2 == 0 {
             return;
-        };
+        }
+        let f = &mut self.smoothing;
         let window = 1usize << f.log2;
         f.sum += (self.s_raw - f.ring[f.head]) as i128;
         f.ring[f.head] = self.s_raw;

@@ -452,16 +452,34 @@ pub struct Planner {
 }
 
 impl Planner {
-    /// An empty planner at `pose`.
+    /// An empty planner at `pose` (on the host; the controller builds its own in place
+    /// with [`Planner::init_at`]).
     pub fn new(pose: [i64; AXES]) -> Self {
-        Self {
-            queue: heapless::Deque::new(),
-            end: pose,
-            feed_override: 100,
-            hold: false,
-            smoothing: 1,
-            budget: 0,
-            estimate: 0,
+        let mut slot = core::mem::MaybeUninit::<Self>::uninit();
+        // SAFETY: `init_at` writes every field of the slot.
+        unsafe {
+            Self::init_at(slot.as_mut_ptr(), pose);
+            slot.assume_init()
+        }
+    }
+
+    /// Writes an empty planner at `pose` into `p`, field by field (the queue is tens of
+    /// kilobytes: no temporary of it on the stack).
+    ///
+    /// # Safety
+    /// `p` must be valid for writes and aligned; whatever it held is overwritten
+    /// without being dropped (queued blocks need no dropping).
+    pub unsafe fn init_at(p: *mut Self, pose: [i64; AXES]) {
+        use core::ptr::addr_of_mut as at;
+        // SAFETY: the caller's promise; each write is to a field of `*p`.
+        unsafe {
+            at!((*p).queue).write(heapless::Deque::new());
+            at!((*p).end).write(pose);
+            at!((*p).feed_override).write(100);
+            at!((*p).hold).write(false);
+            at!((*p).smoothing).write(1);
+            at!((*p).budget).write(0);
+            at!((*p).estimate).write(0);
         }
     }
 

@@ -198,13 +198,16 @@ mod firmware {
                 MachineConfig::cartesian_xyz()
             }
         };
-        let controller = match Controller::new(machine) {
-            Ok(c) => CONTROLLER_CELL.init(c),
-            Err(_) => match Controller::new(MachineConfig::cartesian_xyz()) {
-                Ok(c) => CONTROLLER_CELL.init(c),
-                Err(_) => defmt::panic!("the built-in machine configuration is invalid"),
-            },
-        };
+        // Built in place in its static cell: the controller is larger than the stack
+        // could hold as a temporary.
+        let slot = CONTROLLER_CELL.uninit();
+        if Controller::init(slot, machine).is_err()
+            && Controller::init(slot, MachineConfig::cartesian_xyz()).is_err()
+        {
+            defmt::panic!("the built-in machine configuration is invalid");
+        }
+        // SAFETY: one of the two `init`s succeeded and wrote every field.
+        let controller = unsafe { slot.assume_init_mut() };
         if watchdog_reset {
             controller.raise_at_start(AlarmCause::Watchdog);
         }
