@@ -1,0 +1,86 @@
+//! What the controller exchanges with the hardware each tick: the inputs it reads and
+//! the outputs it commands, and the conversion of joint positions to actuator
+//! references (steps or encoder counts, with the joints' homing offsets).
+
+use super::Controller;
+use crate::config::{Drive, MAX_SERVOS, MAX_STEPPERS};
+use crate::protocol::State;
+use crate::servo::{Trip, SETPOINT_FRAC_BITS};
+use crate::stepper::StepTrain;
+
+/// What the hardware reports each tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Inputs {
+    /// Encoder position of each servo channel, counts (extended beyond 16 bits).
+    pub encoder_counts: [i64; MAX_SERVOS],
+    /// Encoder count latched by the hardware at an index pulse since the last tick.
+    pub index: [Option<i64>; MAX_SERVOS],
+    /// Emergency stop input active.
+    pub estop: bool,
+    /// Limit switch of each joint (bit j), active when tripped.
+    pub limit: u16,
+    /// Home switch of each joint (bit j), active.
+    pub home: u16,
+    /// Fault input of each joint's drive (bit j), active: stepper drives and servo
+    /// amplifiers alike (the servo loops also see their amplifier's line).
+    pub drive_fault: u16,
+    /// Trip latched by each servo channel's loop ([`crate::contour::ServoBank`]).
+    pub servo_trip: [Option<Trip>; MAX_SERVOS],
+}
+
+/// What the hardware must do this tick.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Outputs {
+    /// Step train of each stepper channel; `forward` already includes DIR inversion.
+    pub steps: [StepTrain; MAX_STEPPERS],
+    /// Target of each servo channel at the end of this tick, counts × 2^16: load into
+    /// [`crate::contour::ServoBank::load_tick`].
+    pub servo_target: [i64; MAX_SERVOS],
+    /// Stepper drives enabled.
+    pub enable: bool,
+    /// Servo amplifiers enabled (the loops' `enable`).
+    pub servo_enable: bool,
+    /// The servo loops must restart, clearing their trips, standing at their present
+    /// feedback (which `servo_target` now equals): rebuild the bank from it.
+    pub servo_reset: bool,
+}
+
+impl Controller {
+    /// Actuator reference of joint `j` (steps or encoder counts) for the position
+    /// `q`, counts × 2^16.
+    pub(super) fn actuator_q16(&self, j: usize, q: i64) -> i64 {
+        self.fast[j].steps_at_frac(q, SETPOINT_FRAC_BITS) + (self.offset[j] << SETPOINT_FRAC_BITS)
+    }
+
+    pub(super) fn update_servo_targets(&mut self) {
+        for (j, jc) in self.machine.joints.iter().enumerate() {
+            if let Drive::Servo { channel } = jc.drive {
+                self.out.servo_target[channel as usize] = self.actuator_q16(j, self.joints[j]);
+            }
+        }
+    }
+
+    /// This tick's outputs from the joints' positions: step trains (DIR inverted where
+    /// the drive wants it) on each stepper's channel, servo targets, drive enables.
+    pub(super) fn update_outputs(&mut self) {
+        self.steps
+            .tick(&self.machine.joints, &self.joints, &mut self.trains);
+        self.out.steps = [StepTrain::default(); MAX_STEPPERS];
+        for (j, jc) in self.machine.joints.iter().enumerate() {
+            if let Drive::Stepper {
+                channel,
+                invert_dir,
+                ..
+            } = jc.drive
+            {
+                let mut t = self.trains[j];
+                t.forward ^= invert_dir;
+                self.out.steps[channel as usize] = t;
+            }
+        }
+        self.update_servo_targets();
+        let powered = self.state != State::EStop || self.stopping;
+        self.out.enable = powered;
+        self.out.servo_enable = powered;
+    }
+}
