@@ -42,10 +42,12 @@
 use crate::wire;
 use pkmc::config::MachineConfig;
 use pkmc::controller::Controller;
+use pkmc::protocol::Control;
 use pkmc::protocol::State;
 use pkmc_host::job::{compile_text, prepare};
-use pkmc_host::link::{JobEnd, Link, LinkOptions, NoHooks, Transport};
+use pkmc_host::link::{JobEnd, JobHooks, Link, LinkOptions, LinkView, NoHooks, Transport};
 use pkmc_host::sim::Simulator;
+use pkmc_host::sim::{FaultKind, Injection};
 use std::io;
 use std::path::Path;
 use std::time::Duration;
@@ -238,6 +240,9 @@ pub struct Program {
     pub machine: u32,
     /// The G-code.
     pub text: String,
+    /// Operator events during the run (hold, resume, feed override changes), and an
+    /// e-stop: the calls where the controller re-profiles and raises its alarm.
+    pub events: bool,
 }
 
 /// Formats mm or degrees for G-code (0.1 µm, 0.1 µ°).
@@ -334,9 +339,11 @@ pub fn programs() -> Vec<Program> {
                 name: format!("{tag}_{what}"),
                 machine: m,
                 text,
+                events: what == "events",
             })
         };
         add("seg0.05mm", sine(0.05, SINE_MM, x0, z, 5.0, 40.0));
+        add("events", sine(0.05, SINE_MM, x0, z, 5.0, 40.0));
         add("seg1mm", sine(1.0, SINE_MM, x0, z, 5.0, 40.0));
         add("seg2mm", sine(2.0, SINE_MM, x0, z, 5.0, 40.0));
         add("arcs", arcs(ARCS, 5.0, 20.0, x0, z));
@@ -360,6 +367,49 @@ pub fn programs() -> Vec<Program> {
         add("5axis", five_axis(FIVE_AXIS_SEGMENTS, 20.0, z, angles));
     }
     out
+}
+
+/// The operator of the `events` programs: at these motion times (ticks, as the
+/// controller's status reports them) a hold, a resume once the hold has stopped the
+/// machine (`None`: when the status shows it held at rest), feed overrides of 50 %,
+/// 150 % and 100 %; then the e-stop at [`EVENTS_ESTOP_S`] of simulated time.
+const OPERATOR_EVENTS: [(Option<u64>, Control); 5] = [
+    (Some(300), Control::Hold),
+    (None, Control::Resume),
+    (Some(600), Control::FeedOverride(50)),
+    (Some(800), Control::FeedOverride(150)),
+    (Some(1000), Control::FeedOverride(100)),
+];
+
+/// When the `events` programs' e-stop trips, s of simulated time.
+const EVENTS_ESTOP_S: f64 = 1.4;
+
+/// Sends [`OPERATOR_EVENTS`] as their times come (nothing when `on` is false).
+struct Operator {
+    on: bool,
+    next: usize,
+}
+
+impl Operator {
+    fn new(on: bool) -> Self {
+        Self { on, next: 0 }
+    }
+}
+
+impl JobHooks for Operator {
+    fn control(&mut self, link: &LinkView) -> Option<Control> {
+        let (at, cmd) = *OPERATOR_EVENTS.get(self.next).filter(|_| self.on)?;
+        let status = link.status.as_ref()?;
+        let due = match at {
+            Some(t) => status.motion_ticks >= t,
+            None => status.state == State::Hold && status.speed == 0,
+        };
+        if link.control_pending || !due {
+            return None;
+        }
+        self.next += 1;
+        Some(cmd)
+    }
 }
 
 /// X span of the sines, mm (about 113 mm of path).
@@ -391,19 +441,34 @@ pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
         ));
     }
     let blocks = compile_text(&p.text, &p.name, &machine, machine.home).map_err(|e| e.message)?;
-    let sim = Simulator::new(machine.clone()).map_err(|e| format!("{e:#}"))?;
+    let mut sim = Simulator::new(machine.clone()).map_err(|e| format!("{e:#}"))?;
+    if p.events {
+        sim.inject(&[Injection {
+            kind: FaultKind::EStop,
+            joint: None,
+            at_s: EVENTS_ESTOP_S,
+        }])
+        .map_err(|e| format!("{e:#}"))?;
+    }
     let io = Recorder::new(sim);
     let mut link =
         Link::connect(io, &machine, LinkOptions::default()).map_err(|e| e.to_string())?;
-    let mut hooks = NoHooks;
-    let end = match prepare(&mut link, false, true, &mut hooks).map_err(|e| e.message)? {
+    let mut hooks = Operator::new(p.events);
+    let end = match prepare(&mut link, false, true, &mut NoHooks).map_err(|e| e.message)? {
         Some(end) => end,
         None => link
             .run_job(&blocks, &mut hooks)
             .map_err(|e| e.to_string())?,
     };
     let status = link.request_status().map_err(|e| e.to_string())?;
-    if end != JobEnd::Done || status.state != State::Idle {
+    let expected = if p.events {
+        matches!(end, JobEnd::Alarm(a) if a.cause == pkmc::protocol::AlarmCause::EStop)
+            && status.state == State::EStop
+            && hooks.next == OPERATOR_EVENTS.len()
+    } else {
+        end == JobEnd::Done && status.state == State::Idle
+    };
+    if !expected {
         return Err(format!(
             "{}: the job ended {end:?} in state {:?}",
             p.name, status.state
