@@ -1,8 +1,9 @@
 //! Link throughput: `N` short blocks (0.05 mm chords of a 20 mm circle, 6000 mm/min)
 //! streamed by the real client ([`pkmc_host::link::Link`]) to the simulated controller
-//! over a pseudo-terminal, as fast as flow control allows. The simulator ticks on
-//! simulated time as fast as it can while it has motion, so this measures the link and
-//! the controller's acceptance (decode, plan, execute), not the machine's speed.
+//! over a pseudo-terminal, as fast as flow control allows. The simulator's clock runs
+//! free ([`ServeClock::Free`]: as fast as it can while it has motion, not paced to the
+//! wall clock as for `nc-send --sim`), so this measures the link and the controller's
+//! acceptance (decode, plan, execute), not the machine's speed.
 //!
 //! Run: `cargo bench -p pkmc-host --bench link` (default 100 000 blocks; give another
 //! count as `-- N`). Prints blocks/s until the last block was accepted, blocks/s until
@@ -11,7 +12,7 @@
 use pkmc::config::MachineConfig;
 use pkmc::protocol::{Block, Control, Motion};
 use pkmc_host::job::{SimServer, SimSetup};
-use pkmc_host::link::{JobEnd, JobHooks, Link, LinkOptions, LinkView, PortTransport};
+use pkmc_host::link::{JobEnd, JobHooks, Link, LinkOptions, LinkView, PortTransport, ServeClock};
 use std::time::Instant;
 
 /// Records when the last block was acknowledged.
@@ -78,7 +79,12 @@ fn main() {
 }
 
 fn run(machine: &MachineConfig, blocks: &[Block], n: usize) {
-    let server = SimServer::start(machine.clone(), &SimSetup::default()).expect("simulator");
+    // The free clock: this measures the link, not the machine's real time.
+    let setup = SimSetup {
+        clock: ServeClock::Free,
+        ..SimSetup::default()
+    };
+    let server = SimServer::start(machine.clone(), &setup).expect("simulator");
     let port = PortTransport::open(&server.port_path).expect("pty opens");
     let mut link = Link::connect(port, machine, LinkOptions::default()).expect("handshake");
     let mut clock = Clock { all_accepted: None };

@@ -13,7 +13,7 @@ use crate::faults::{FaultConfig, FaultReport, FaultyLine};
 use crate::gcode;
 use crate::link::{
     serve, ClientStats, InProcess, JobEnd, JobHooks, Link, LinkError, LinkOptions, PortTransport,
-    SimClock, Transport,
+    ServeClock, SimClock, Transport,
 };
 use crate::plot::{lines_digest, Recorder};
 use crate::sim::{Simulator, Violation};
@@ -218,6 +218,9 @@ pub struct SimSetup<'a> {
     pub plants: Vec<Option<crate::plant::PlantFile>>,
     /// Faults to inject ([`crate::sim::Injection`]).
     pub inject: Vec<crate::sim::Injection>,
+    /// How the served simulator advances its clock (paced to the wall clock while
+    /// the host streams, by default).
+    pub clock: ServeClock,
 }
 
 impl SimSetup<'_> {
@@ -265,6 +268,7 @@ impl SimServer {
         let stop = Arc::new(AtomicBool::new(false));
         let stop2 = stop.clone();
         let faults = setup.faults;
+        let serve_clock = setup.clock;
         let joints = sim.ctrl.machine().joints.len();
         let mut recorder = Recorder::new(joints, setup.record_path);
         let clock = SimClock::default();
@@ -275,8 +279,15 @@ impl SimServer {
                 recorder.record(s);
                 ticks.set(s.ticks);
             };
-            serve(&mut sim, &mut master, &stop2, line.as_mut(), &mut on_tick)
-                .map_err(|e| e.to_string())?;
+            serve(
+                &mut sim,
+                &mut master,
+                &stop2,
+                line.as_mut(),
+                serve_clock,
+                &mut on_tick,
+            )
+            .map_err(|e| e.to_string())?;
             let report = match (&line, &faults) {
                 (Some(l), Some(c)) => Some(l.report(c)),
                 _ => None,

@@ -10,7 +10,12 @@
 //!   encoder counts, integrated with ten sub-steps per tick.
 //!
 //! Time advances only through [`Simulator::tick`], one interpolation period at a time,
-//! so runs are deterministic however fast the host computer is.
+//! so runs are deterministic however fast the host computer is. Who calls it decides
+//! how simulated time relates to the wall clock: the in-process `--check` ticks when
+//! the client reads, until the controller has something to say; the server on a pseudo-terminal
+//! ([`crate::link::serve`], `--sim`) paces it to the wall clock while the host
+//! streams into a short queue, as a board's 1 kHz tick is (see `link`'s module
+//! documentation).
 //!
 //! The controller is paced exactly as on the board, by the same core code
 //! ([`pkmc::pacing`]): each tick starts with the servo interrupt's edge period

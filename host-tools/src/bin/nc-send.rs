@@ -197,6 +197,7 @@ fn run(args: &Args) -> Result<i32, Failure> {
             record_path: args.plot.is_some(),
             plants,
             inject: args.inject.clone(),
+            clock: Default::default(),
         },
         link,
         home: args.home,

@@ -58,6 +58,13 @@ fn main() -> anyhow::Result<()> {
     let mut line = args
         .link_faults
         .map(|rate| FaultyLine::new(FaultConfig::new(rate, args.seed)));
-    pkmc_host::link::serve(&mut sim, &mut master, &stop, line.as_mut(), &mut |_| {})?;
+    pkmc_host::link::serve(
+        &mut sim,
+        &mut master,
+        &stop,
+        line.as_mut(),
+        pkmc_host::link::ServeClock::Paced,
+        &mut |_| {},
+    )?;
     Ok(())
 }

@@ -1,0 +1,283 @@
+//! Micro-segment programs at full feed, end to end (issue 9, "End to end"): the real
+//! `nc-send` binary runs a sine made of 0.05 mm `G1` segments at F6000 and one of
+//! 0.01 mm segments at F3000, on the built-in Cartesian machine and on the H-4 with
+//! its table, in-process (`--check`) and over the pseudo-terminal (`--sim`, the real
+//! serial path: the client refills the controller's queue from another thread while
+//! the simulator ticks at real time). Each run must end done, without a drive timing
+//! breach, in at most 1.03 × the motion time of the host's own plan
+//! (`link.plan_time_s`, the whole program planned with unlimited look-ahead), and
+//! with a path speed that follows that plan: speed ripple at most 3 % in the steady
+//! part.
+//!
+//! Ripple, defined against the plan: the sines' curvature changes all the time, so
+//! the planned speed is nowhere constant for long (at F6000 it is curvature-limited
+//! at every crest), and "(max − min) / mean of the speed" would measure the program,
+//! not the controller. So the test computes the host's plan itself (the core planner
+//! over the same blocks from the same start, checked against the reported
+//! `plan_time_s`), turns it into the planned speed at every path position (the
+//! core's block profiles), and takes, for every interpolation period of the trace
+//! (`--trace`: x, y, z per millisecond), the ratio of the traced path speed to the
+//! planned speed at the period's mid-point along the path. The ripple is (max − min)
+//! / mean of that ratio over the steady part: the sine from 5 mm after its first
+//! segment to 5 mm before its last, which leaves out the acceleration from rest and
+//! the final stop (at these feeds and accelerations both take at most
+//! v² / 2a = 100² / 2000 = 5 mm). A controller that follows its plan has ratio 1
+//! throughout; a queue that runs dry shows as the saw-tooth the issue describes
+//! (speed falling towards the stopping distance of a short queue and recovering),
+//! several tens of percent deep.
+
+use pkmc::config::MachineConfig;
+use pkmc::kinematics::MachineKinematics;
+use pkmc::planner::{plan_into, Kind, PlanBlock};
+use pkmc::profile::Profile;
+use std::path::Path;
+
+mod common;
+use common::{ok, tmp};
+
+/// A sine along X, amplitude 5 mm and wavelength 20 mm, `length` mm long from
+/// (`x0`, 0), as `G1` segments `segment` mm long (chords: the step in X shrinks where
+/// the sine is steep) at `feed` mm/min; coordinates to 0.1 µm, as a CAM program.
+fn sine(length: f64, segment: f64, feed: u32, x0: f64) -> String {
+    let k = std::f64::consts::TAU / 20.0;
+    let y = |x: f64| 5.0 * (k * (x - x0)).sin();
+    let end = x0 + length;
+    let mut p = format!("G21 G90 G17 G64\nG0 X{x0} Y0\n");
+    let mut x = x0;
+    let mut first = true;
+    while x < end {
+        let slope = 5.0 * k * (k * (x - x0)).cos();
+        x = (x + segment / (1.0 + slope * slope).sqrt()).min(end);
+        p += &format!("G1 X{x:.4} Y{:.4}", y(x));
+        if first {
+            p += &format!(" F{feed}");
+            first = false;
+        }
+        p += "\n";
+    }
+    p + "M2\n"
+}
+
+/// The planned path speed as a function of the distance along the path: samples
+/// (mm, mm/s) in path order, and where the sine's feed moves start and end, mm.
+struct PlannedSpeed {
+    samples: Vec<(f64, f64)>,
+    feed_from: f64,
+    feed_to: f64,
+    /// Motion time of the plan, s (as `link.plan_time_s` reports it).
+    time_s: f64,
+}
+
+impl PlannedSpeed {
+    /// The host's plan of `program` on `machine` from its home pose, where a fresh
+    /// simulator stands: the core planner with the whole program in view, each block
+    /// then profiled as the controller profiles it (entry, cap, the next block's
+    /// entry as exit, the block's acceleration).
+    fn of(program: &str, machine: &MachineConfig) -> Self {
+        let blocks = pkmc_host::job::compile_text(program, "sine", machine, machine.home)
+            .unwrap_or_else(|f| panic!("the program compiles: {}", f.message));
+        let kin = MachineKinematics::new(machine);
+        let window = pkmc::interp::window_of(machine.motion.smoothing_ticks as u32);
+        let mut plan = vec![PlanBlock::default(); blocks.len()];
+        plan_into(&blocks, machine.home, machine, &kin, window, &mut plan)
+            .unwrap_or_else(|(i, e)| panic!("block {i} plans: {e:?}"));
+        let moves = |b: &PlanBlock| matches!(b.kind, Kind::Rapid | Kind::Feed);
+        let (mut samples, mut at, mut feed_from, mut feed_to) = (Vec::new(), 0.0, None, 0.0);
+        for (i, b) in plan.iter().enumerate().filter(|(_, b)| moves(b)) {
+            let exit = plan
+                .get(i + 1)
+                .filter(|n| moves(n))
+                .map_or(0.0, |n| n.entry);
+            let cap = pkmc::planner::cap(b, 100, false);
+            let (p, _) = Profile::plan(b.path.length << 16, b.entry, cap, exit, b.accel);
+            let ticks = p.duration() as f64 / 2f64.powi(32);
+            let n = ((ticks * 8.0).ceil() as i64).max(8);
+            for j in 0..=n {
+                let (s, v) = p.at((p.duration() as i128 * j as i128 / n as i128) as i64);
+                samples.push((
+                    at + s as f64 / 65536.0 * 1e-6,
+                    v as f64 / 2f64.powi(32) * 1e-3,
+                ));
+            }
+            if b.kind == Kind::Feed {
+                feed_from.get_or_insert(at);
+                feed_to = at + b.path.length as f64 * 1e-6;
+            }
+            at += b.path.length as f64 * 1e-6;
+        }
+        Self {
+            samples,
+            feed_from: feed_from.expect("the program has feed moves"),
+            feed_to,
+            time_s: pkmc::planner::planned_ticks(&plan) * pkmc::units::TICK_NS as f64 * 1e-9,
+        }
+    }
+
+    /// Planned speed at `s` mm along the path, mm/s (linear between samples).
+    fn at(&self, s: f64) -> f64 {
+        let k = self.samples.partition_point(|&(x, _)| x < s);
+        if k == 0 || k == self.samples.len() {
+            return 0.0;
+        }
+        let ((s0, v0), (s1, v1)) = (self.samples[k - 1], self.samples[k]);
+        if s1 <= s0 {
+            return v1;
+        }
+        v0 + (v1 - v0) * (s - s0) / (s1 - s0)
+    }
+}
+
+/// Ratio of the traced path speed to the planned one, period by period, over the
+/// steady part (see the module documentation); `home` is where the trace starts, mm.
+fn speed_ratios(trace: &Path, plan: &PlannedSpeed, home: [f64; 3]) -> Vec<f64> {
+    let text = std::fs::read_to_string(trace).expect("the trace was written");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
+    let (t, x, y, z) = (col("t_s"), col("x"), col("y"), col("z"));
+    let (mut s, mut last, mut last_t) = (0.0, home, None::<f64>);
+    let mut ratios = Vec::new();
+    for row in lines {
+        let f: Vec<f64> = row
+            .split(',')
+            .map(|v| v.parse().expect("a number"))
+            .collect();
+        let p = [f[x], f[y], f[z]];
+        let step = (0..3).map(|i| (p[i] - last[i]).powi(2)).sum::<f64>().sqrt();
+        if let Some(t0) = last_t {
+            let mid = s + step / 2.0;
+            if mid > plan.feed_from + 5.0 && mid < plan.feed_to - 5.0 {
+                ratios.push(step / (f[t] - t0) / plan.at(mid));
+            }
+        }
+        s += step;
+        last = p;
+        last_t = Some(f[t]);
+    }
+    ratios
+}
+
+/// What one run showed.
+struct Run {
+    what: String,
+    ratio: f64,
+    ripple: f64,
+    periods: usize,
+    report: serde_json::Value,
+}
+
+/// Runs `nc-send MODE --report json --trace …` on `program` (named `name`) and
+/// measures it against `plan`.
+fn run(
+    mode: &str,
+    name: &str,
+    program: &Path,
+    machine_args: &[&str],
+    plan: &PlannedSpeed,
+    home: [f64; 3],
+) -> Run {
+    let trace = tmp(&format!("{name}{}.csv", mode.trim_start_matches('-')));
+    let mut args = vec![mode, "--report", "json", "--trace", trace.to_str().unwrap()];
+    args.extend_from_slice(machine_args);
+    args.push(program.to_str().unwrap());
+    let report = ok(&common::nc_send_within(
+        std::time::Duration::from_secs(60),
+        &args,
+    ));
+    let plan_time = report["link"]["plan_time_s"].as_f64().expect("plan_time_s");
+    assert!(
+        (plan_time - plan.time_s).abs() < 1e-9,
+        "{name}: the test's plan is the host's ({} s against {plan_time} s)",
+        plan.time_s
+    );
+    let ratios = speed_ratios(&trace, plan, home);
+    let mean = ratios.iter().sum::<f64>() / ratios.len() as f64;
+    let (lo, hi) = ratios
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(lo, hi), &r| (lo.min(r), hi.max(r)));
+    Run {
+        what: format!("{name} {mode}"),
+        ratio: report["run_time_s"].as_f64().expect("run_time_s") / plan_time,
+        ripple: (hi - lo) / mean,
+        periods: ratios.len(),
+        report,
+    }
+}
+
+#[test]
+fn dense_segments_run_at_the_planned_speed_through_the_real_link() {
+    let programs = [
+        ("sine120-0.05mm-F6000", sine(120.0, 0.05, 6000, -60.0)),
+        ("sine40-0.01mm-F3000", sine(40.0, 0.01, 3000, -20.0)),
+    ];
+    let machines: [(&str, &[&str], MachineConfig); 2] = [
+        (
+            "cartesian",
+            &[],
+            pkmc_host::machine_file::parse(
+                pkmc_host::machine_file::DEFAULT_MACHINE,
+                "built-in machine",
+            )
+            .unwrap(),
+        ),
+        (
+            "h4-table",
+            &["--machine", "examples/machines/h4-table.toml"],
+            pkmc_host::machine_file::parse(
+                pkmc_host::machine_file::H4_TABLE_MACHINE,
+                "h4-table.toml",
+            )
+            .unwrap(),
+        ),
+    ];
+    // The four program × machine pairs run side by side (a paced run mostly waits for
+    // the wall clock); each runs --check, then --sim.
+    let runs: Vec<Run> = std::thread::scope(|scope| {
+        let mut handles = Vec::new();
+        for (pname, text) in &programs {
+            for (mname, margs, machine) in &machines {
+                handles.push(scope.spawn(move || {
+                    let name = format!("{pname}-{mname}");
+                    let program = tmp(&format!("{name}.ngc"));
+                    std::fs::write(&program, text).unwrap();
+                    let plan = PlannedSpeed::of(text, machine);
+                    let h = machine.home.map(|v| v as f64 * 1e-6);
+                    let home = [h[0], h[1], h[2]];
+                    ["--check", "--sim"].map(|mode| run(mode, &name, &program, margs, &plan, home))
+                }));
+            }
+        }
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().expect("a run panicked"))
+            .collect()
+    });
+    let mut failures = Vec::new();
+    for r in &runs {
+        println!(
+            "{:<38} time {:.4} × plan, ripple {:.2} % over {} periods",
+            r.what,
+            r.ratio,
+            r.ripple * 100.0,
+            r.periods
+        );
+        assert!(r.periods > 300, "{}: a steady part to measure", r.what);
+        let mut fail = |why: String| failures.push(format!("{}: {why}", r.what));
+        if r.report["result"] != "done" {
+            fail(format!("result {}", r.report["result"]));
+        }
+        if r.report["drive_violations"] != 0 {
+            fail(format!("{} drive violations", r.report["drive_violations"]));
+        }
+        if r.ratio > 1.03 {
+            fail(format!("ran {:.4} × the plan's time (limit 1.03)", r.ratio));
+        }
+        if r.ripple > 0.03 {
+            fail(format!(
+                "speed ripple {:.2} % (limit 3 %)",
+                r.ripple * 100.0
+            ));
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
