@@ -500,6 +500,14 @@ mod tests {
         ctrl.receive(&f[..n]);
     }
 
+    /// A jog as `nc-send` sends it, from where `c` stands.
+    fn jog_cmd(c: &Controller, axis: usize, distance: i64, feed: i64) -> Control {
+        let kin = crate::kinematics::MachineKinematics::new(c.machine());
+        Control::Jog(
+            crate::planner::plan_jog(c.machine(), &kin, c.pose(), axis, distance, feed).unwrap(),
+        )
+    }
+
     #[test]
     fn a_ticks_step_trains_are_due_at_the_start_of_the_next_tick() {
         let mut ctrl = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
@@ -508,15 +516,8 @@ mod tests {
         let snap = Snapshot::default();
         let raw = RawInputs::default();
         t.tick(&mut ctrl, &raw, &snap);
-        control(
-            &mut ctrl,
-            1,
-            Control::Jog {
-                axis: 0,
-                distance: 1_000_000,
-                feed: 10_000_000,
-            },
-        );
+        let jog = jog_cmd(&ctrl, 0, 1_000_000, 10_000_000);
+        control(&mut ctrl, 1, jog);
         let mut applied = 0i64;
         let mut computed = 0i64;
         for _ in 0..2000 {

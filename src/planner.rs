@@ -433,6 +433,86 @@ pub fn planned_ticks(blocks: &[PlanBlock]) -> f64 {
     ticks
 }
 
+/// Plans one move from `start`, from rest to rest, as the host streams it (a jog, the
+/// move home): what [`crate::protocol::Control::Jog`] carries.
+pub fn plan_move(
+    block: &Block,
+    start: [i64; AXES],
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+) -> Result<PlannedBlock, GeometryError> {
+    let mut out = [PlanBlock::default()];
+    let window = crate::interp::window_of(machine.motion.smoothing_ticks as u32);
+    plan_into(
+        core::slice::from_ref(block),
+        start,
+        machine,
+        kin,
+        window,
+        &mut out,
+    )
+    .map_err(|(_, e)| e)?;
+    Ok(PlannedBlock {
+        block: *block,
+        plan: out[0].plan(),
+    })
+}
+
+/// A jog as the host sends it: `distance` (axis units) along pose axis `axis` from
+/// `from` at `feed` (units/s), clipped to the joint travel ([`jog_target`]) and planned
+/// from rest to rest ([`plan_move`]).
+pub fn plan_jog(
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+    from: &[i64; AXES],
+    axis: usize,
+    distance: i64,
+    feed: i64,
+) -> Result<PlannedBlock, GeometryError> {
+    let block = Block {
+        line: 0,
+        motion: Motion::Linear,
+        target: jog_target(machine, kin, from, axis.min(AXES - 1), distance),
+        feed: feed.max(1),
+        tolerance_nm: 0,
+    };
+    plan_move(&block, *from, machine, kin)
+}
+
+/// The pose a jog of `distance` (axis units) along pose axis `axis` reaches from
+/// `from`, shortened so that every joint stays inside its travel (the soft limits):
+/// the largest reachable distance, by bisection through the inverse kinematics.
+pub fn jog_target(
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+    from: &[i64; AXES],
+    axis: usize,
+    distance: i64,
+) -> [i64; AXES] {
+    let at = |d: i64| {
+        let mut t = *from;
+        t[axis] = t[axis].saturating_add(d);
+        t
+    };
+    let ok = |d: i64| {
+        let mut q = [0; MAX_JOINTS];
+        kin.inverse_checked(&at(d), &machine.joints, &mut q).is_ok()
+    };
+    if ok(distance) {
+        return at(distance);
+    }
+    let (mut lo, mut hi) = (0i64, distance);
+    while (hi - lo).abs() > 1 {
+        let mid = lo + (hi - lo) / 2;
+        if ok(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    at(lo)
+}
+
 /// The controller's queue of planned blocks.
 #[derive(Clone, Debug)]
 pub struct Planner {
@@ -600,28 +680,6 @@ impl Planner {
                 0.0
             },
         };
-        self.push_block(b);
-        Ok(())
-    }
-
-    /// Plans and queues one of the controller's own motions (a jog, the move home),
-    /// from rest to rest; only when the queue is empty (it plans without look-ahead,
-    /// and is not for streaming).
-    pub fn push(
-        &mut self,
-        block: &Block,
-        machine: &MachineConfig,
-        kin: &MachineKinematics,
-    ) -> Result<(), PushError> {
-        if !self.queue.is_empty() {
-            return Err(PushError::Full);
-        }
-        let mut la = Lookahead::new(self.end, self.smoothing);
-        let mut b = la
-            .plan(block, None, machine, kin)
-            .map_err(PushError::Geometry)?;
-        b.entry = 0.0;
-        b.corner = 0.0;
         self.push_block(b);
         Ok(())
     }

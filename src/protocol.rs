@@ -137,7 +137,9 @@ pub struct PlannedBlock {
 }
 
 /// Commands that bypass the block queue. Each is idempotent.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+// No allocator in the core: a jog carries its planned move inline.
+#[allow(clippy::large_enum_variant)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Control {
     /// Feed hold: decelerate on the path and stop; position kept.
     Hold,
@@ -150,20 +152,17 @@ pub enum Control {
     AlarmReset,
     /// Feed override, percent (1..=200).
     FeedOverride(u16),
-    /// Jog one pose axis (0..6) by `distance` axis units at `feed` units/s; only when
-    /// idle.
-    Jog {
-        /// Pose axis index.
-        axis: u8,
-        /// Signed distance, nm or n°.
-        distance: i64,
-        /// Speed, units/s.
-        feed: i64,
-    },
+    /// A move the host planned from the controller's pose, from rest to rest: a jog
+    /// (its target clipped to the joint travel, [`crate::planner::jog_target`]) or the
+    /// move to the home pose of a machine without home switches
+    /// ([`crate::planner::plan_move`]). Acted on only when idle with nothing queued, and
+    /// only if it starts where the controller stands (checked like any block); the
+    /// controller plans nothing itself, so a command never costs more than a block.
+    Jog(PlannedBlock),
     /// Home the machine: every joint with a home switch searches it (then its encoder
     /// index where configured), and all joints go to the home pose ([`crate::homing`]).
-    /// On a machine without home switches: go to the home pose. Allowed when idle or
-    /// locked after a reset (alarm `Unhomed`).
+    /// Allowed when idle or locked after a reset (alarm `Unhomed`). A machine without
+    /// home switches goes home by a `Jog` the host plans.
     Home,
     /// Immediate stop: motion ends now, without deceleration, and the controller
     /// enters `Alarm` (cause `Aborted`), position kept.

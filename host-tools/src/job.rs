@@ -18,7 +18,8 @@ use crate::link::{
 use crate::plot::{lines_digest, Recorder};
 use crate::sim::{Simulator, Violation};
 use pkmc::config::{axis_is_rotary, MachineConfig, AXES, AXIS_NAMES, MAX_JOINTS};
-use pkmc::protocol::{Alarm, Block, Control, State, Status};
+use pkmc::kinematics::MachineKinematics;
+use pkmc::protocol::{Alarm, Block, Control, Motion, State, Status};
 use pkmc::units::{to_user, TICK_NS};
 use serde::Serialize;
 use std::path::Path;
@@ -659,6 +660,63 @@ pub fn check(
     })
 }
 
+/// What `home` sends: the homing cycle on a machine with home switches; on one
+/// without, the rapid move to its home pose, planned here from where the controller
+/// stands (the controller plans nothing itself).
+pub fn home_command<T: Transport>(link: &mut Link<T>) -> Result<Control, Failure> {
+    let machine = link.machine().clone();
+    if machine.joints.iter().any(|j| j.homing.enabled()) {
+        return Ok(Control::Home);
+    }
+    let from = link.request_status()?.pose;
+    let block = Block {
+        line: 0,
+        motion: Motion::Rapid,
+        target: machine.home,
+        feed: 0,
+        tolerance_nm: 0,
+    };
+    let kin = MachineKinematics::new(&machine);
+    let planned = pkmc::planner::plan_move(&block, from, &machine, &kin).map_err(|e| {
+        Failure::new(
+            exit::PREFLIGHT,
+            format!("home: the move home cannot be planned: {e:?}"),
+        )
+    })?;
+    Ok(Control::Jog(planned))
+}
+
+/// What `jog` sends: `distance` (axis units) along pose axis `axis` at `feed`
+/// (units/s), clipped to the joint travel and planned here from where the controller
+/// stands. An axis the machine does not have is refused (exit 2).
+pub fn jog_command<T: Transport>(
+    link: &mut Link<T>,
+    axis: usize,
+    distance: i64,
+    feed: i64,
+) -> Result<Control, Failure> {
+    let machine = link.machine().clone();
+    if machine.axes[axis].max_velocity <= 0 {
+        let have: Vec<String> = (0..AXES)
+            .filter(|&i| machine.axes[i].max_velocity > 0)
+            .map(|i| AXIS_NAMES[i].to_string())
+            .collect();
+        return Err(Failure::new(
+            exit::BAD_INPUT,
+            format!(
+                "jog: the machine has no {} axis (its axes: {})",
+                AXIS_NAMES[axis],
+                have.join(" ")
+            ),
+        ));
+    }
+    let from = link.request_status()?.pose;
+    let kin = MachineKinematics::new(&machine);
+    let planned = pkmc::planner::plan_jog(&machine, &kin, &from, axis, distance, feed)
+        .map_err(|e| Failure::new(exit::PREFLIGHT, format!("jog: cannot be planned: {e:?}")))?;
+    Ok(Control::Jog(planned))
+}
+
 /// Before a job or a move: with `home`, homes the machine and waits until it is
 /// there; otherwise a controller locked after a reset (alarm `Unhomed`) is unlocked
 /// where it stands on the simulator (`sim`), and is an error naming the fix on a
@@ -685,7 +743,8 @@ pub fn prepare<T: Transport>(
                 ),
             ));
         }
-        link.control(Control::Home)?;
+        let cmd = home_command(link)?;
+        link.control(cmd)?;
         return match link.wait_idle(hooks)? {
             JobEnd::Done => Ok(None),
             end => Ok(Some(end)),
@@ -770,5 +829,21 @@ pub fn move_and_wait<T: Transport>(
         ));
     }
     link.control(cmd)?;
-    Ok(link.wait_idle(hooks)?)
+    let end = link.wait_idle(hooks)?;
+    if let (JobEnd::Done, Control::Jog(planned)) = (&end, cmd) {
+        // The controller acts on a planned move only if it starts where it stands:
+        // a refusal leaves it where it was, which must not pass for success.
+        let after = link.request_status()?;
+        if after.pose != planned.block.target {
+            return Err(Failure::new(
+                exit::ALARM,
+                format!(
+                    "{}: the controller did not make the move (it refuses a move that does \
+                     not start where it stands, or comes while it is busy)",
+                    link.transport().name()
+                ),
+            ));
+        }
+    }
+    Ok(end)
 }

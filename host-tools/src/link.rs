@@ -912,6 +912,11 @@ pub struct Link<T: Transport> {
 }
 
 impl<T: Transport> Link<T> {
+    /// The machine this link runs.
+    pub fn machine(&self) -> &MachineConfig {
+        &self.machine
+    }
+
     /// Opens a session on `io` for `machine`: sends `Hello` until `HelloAck` arrives;
     /// when the controller has another machine, sends it ours and waits until it is
     /// loaded (the controller refuses to move until then).

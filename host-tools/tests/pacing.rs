@@ -28,12 +28,13 @@ fn unlocked(machine: MachineConfig) -> Simulator {
 
 /// Jogs X by `mm` at `mm_s`.
 fn jog_x(sim: &mut Simulator, mm: f64, mm_s: f64) {
-    let cmd = Control::Jog {
-        axis: 0,
-        distance: (mm * 1e6) as i64,
-        feed: (mm_s * 1e6) as i64,
-    };
-    control(sim, 1, cmd);
+    let m = sim.ctrl.machine().clone();
+    let kin = pkmc::kinematics::MachineKinematics::new(&m);
+    let from = *sim.ctrl.pose();
+    let planned =
+        pkmc::planner::plan_jog(&m, &kin, &from, 0, (mm * 1e6) as i64, (mm_s * 1e6) as i64)
+            .unwrap();
+    control(sim, 1, Control::Jog(planned));
 }
 
 #[test]

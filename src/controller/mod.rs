@@ -41,9 +41,8 @@ use crate::interp::{Event, Executor};
 use crate::kinematics::{Joints, MachineKinematics, Unreachable};
 use crate::planner::{Planner, PushError};
 use crate::protocol::{
-    decode_frame, encode_frame_with, Alarm, AlarmCause, Aux, Block, Control, CtrlMsg, FrameReader,
-    HostMsg, Motion, NakReason, Pushed, State, Status, MAX_BODY, MAX_FRAME, NO_JOINT,
-    PROTOCOL_VERSION,
+    decode_frame, encode_frame_with, Alarm, AlarmCause, Aux, Control, CtrlMsg, FrameReader,
+    HostMsg, NakReason, Pushed, State, Status, MAX_BODY, MAX_FRAME, NO_JOINT, PROTOCOL_VERSION,
 };
 use crate::stepper::{StepScheduler, StepTrain};
 use crate::units::TICK_HZ;
@@ -588,16 +587,13 @@ impl Controller {
                 self.planner.feed_override = p.clamp(1, 200);
                 self.exec.replan(&mut self.planner);
             }
-            Control::Jog {
-                axis,
-                distance,
-                feed,
-            } => {
-                if self.state == State::Idle && !self.has_work() && (axis as usize) < 6 {
-                    let target = self.jog_target(axis as usize, distance);
-                    if target != self.exec.pose {
-                        self.push_motion(Motion::Linear, target, feed.max(1));
-                    }
+            Control::Jog(planned) => {
+                if self.state == State::Idle && !self.has_work() {
+                    // Refused (it does not start here, or is malformed): nothing moves,
+                    // and the host, which waits for the target, says so.
+                    let _ = self
+                        .planner
+                        .push_planned(&planned, &self.machine, &self.kin);
                 }
             }
             Control::Stop => {
@@ -613,48 +609,6 @@ impl Controller {
             }
             Control::Home => self.home(),
         }
-    }
-
-    /// The pose a jog of `distance` along `axis` reaches, shortened so that every
-    /// joint stays inside its travel (the soft limits).
-    fn jog_target(&self, axis: usize, distance: i64) -> [i64; crate::config::AXES] {
-        let from = self.exec.pose;
-        let at = |d: i64| {
-            let mut t = from;
-            t[axis] = t[axis].saturating_add(d);
-            t
-        };
-        let ok = |d: i64| {
-            let mut q = [0; MAX_JOINTS];
-            self.kin
-                .inverse_checked(&at(d), &self.machine.joints, &mut q)
-                .is_ok()
-        };
-        if ok(distance) {
-            return at(distance);
-        }
-        // Largest reachable distance by bisection (to the unit).
-        let (mut lo, mut hi) = (0i64, distance);
-        while (hi - lo).abs() > 1 {
-            let mid = lo + (hi - lo) / 2;
-            if ok(mid) {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        at(lo)
-    }
-
-    fn push_motion(&mut self, motion: Motion, target: [i64; 6], feed: i64) {
-        let b = Block {
-            line: 0,
-            motion,
-            target,
-            feed,
-            tolerance_nm: 0,
-        };
-        let _ = self.planner.push(&b, &self.machine, &self.kin);
     }
 
     /// A status snapshot.

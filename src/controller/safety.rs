@@ -11,7 +11,7 @@ use super::{Controller, Inputs, LINK_LOSS_TICKS};
 use crate::config::{Drive, MAX_SERVOS};
 use crate::homing::{HomeEvent, HomeInputs};
 use crate::kinematics::{Kinematics, Unreachable};
-use crate::protocol::{Alarm, AlarmCause, Motion, State, NO_JOINT};
+use crate::protocol::{Alarm, AlarmCause, State, NO_JOINT};
 use crate::servo::Trip;
 
 pub(super) fn alarm_of(why: Unreachable, line: u32) -> Alarm {
@@ -86,8 +86,8 @@ impl Controller {
         }
     }
 
-    /// `Home`: the homing cycle on a machine with home switches, else a rapid move to
-    /// the home pose (only when unlocked).
+    /// `Home`: the homing cycle on a machine with home switches (a machine without
+    /// them goes home by a move the host plans, `Control::Jog`).
     pub(super) fn home(&mut self) {
         let switches = self.machine.joints.iter().any(|j| j.homing.enabled());
         let locked = self.alarm.map(|a| a.cause) == Some(AlarmCause::Unhomed);
@@ -96,8 +96,6 @@ impl Controller {
             self.state = State::Homing;
             self.homed = false;
             self.homer.start(&self.machine.joints);
-        } else if !switches && self.state == State::Idle && !self.has_work() {
-            self.push_motion(Motion::Rapid, self.machine.home, 0);
         }
     }
 

@@ -4,6 +4,7 @@
 use super::*;
 use crate::config::MAX_STEPPERS;
 use crate::protocol::encode_frame;
+use crate::protocol::{Block, Motion};
 use crate::servo::Trip;
 
 fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
@@ -327,6 +328,14 @@ fn run_with(c: &mut Controller, ticks: usize, inputs: &Inputs) {
     }
 }
 
+/// A jog as `nc-send` sends it, from where `c` stands.
+fn jog_cmd(c: &Controller, axis: usize, distance: i64, feed: i64) -> Control {
+    let kin = crate::kinematics::MachineKinematics::new(c.machine());
+    Control::Jog(
+        crate::planner::plan_jog(c.machine(), &kin, c.pose(), axis, distance, feed).unwrap(),
+    )
+}
+
 fn control(c: &mut Controller, id: u16, cmd: Control) {
     c.receive(&frame(0, &HostMsg::Control { id, cmd }));
 }
@@ -338,15 +347,8 @@ fn after_reset_nothing_moves_until_unlocked() {
     assert_eq!(c.state(), State::Alarm);
     assert_eq!(c.status().alarm.map(|a| a.cause), Some(AlarmCause::Unhomed));
     c.receive(&frame(1, &line_to(10, 1)));
-    control(
-        &mut c,
-        1,
-        Control::Jog {
-            axis: 0,
-            distance: 1_000_000,
-            feed: 10_000_000,
-        },
-    );
+    let jog = jog_cmd(&c, 0, 1_000_000, 10_000_000);
+    control(&mut c, 1, jog);
     run(&mut c, 2000);
     assert_eq!(
         c.pose()[0],
@@ -426,15 +428,8 @@ fn a_limit_switch_alarms_on_its_edge_naming_the_joint() {
 #[test]
 fn jogs_stop_at_the_soft_limits() {
     let mut c = session();
-    control(
-        &mut c,
-        1,
-        Control::Jog {
-            axis: 0,
-            distance: 500_000_000,
-            feed: 100_000_000,
-        },
-    );
+    let jog = jog_cmd(&c, 0, 500_000_000, 100_000_000);
+    control(&mut c, 1, jog);
     run(&mut c, 10_000);
     assert_eq!(c.state(), State::Idle);
     assert_eq!(c.pose()[0], c.machine().joints[0].max);

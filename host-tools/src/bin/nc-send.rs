@@ -397,7 +397,10 @@ fn command(
                 link.control(Control::AlarmReset)?;
                 (JobEnd::Done, None)
             }
-            Command::Home => (job::move_and_wait(link, Control::Home, &mut op)?, None),
+            Command::Home => {
+                let cmd = job::home_command(link)?;
+                (job::move_and_wait(link, cmd, &mut op)?, None)
+            }
 
             Command::Jog {
                 axis,
@@ -410,11 +413,12 @@ fn command(
                 if feed.is_nan() || *feed <= 0.0 {
                     return Err(bad("jog: --feed must be positive"));
                 }
-                let cmd = Control::Jog {
-                    axis: i as u8,
-                    distance: (distance * scale).round() as i64,
-                    feed: (feed / 60.0 * scale).round() as i64,
-                };
+                let cmd = job::jog_command(
+                    link,
+                    i,
+                    (distance * scale).round() as i64,
+                    (feed / 60.0 * scale).round() as i64,
+                )?;
                 (job::move_and_wait(link, cmd, &mut op)?, None)
             }
             Command::Mdi { line } => {
