@@ -40,8 +40,8 @@ use crate::interp::{Event, Executor};
 use crate::kinematics::{Joints, Kinematics, MachineKinematics, Unreachable};
 use crate::planner::{Planner, PushError};
 use crate::protocol::{
-    decode_frame, encode_frame_with, Alarm, AlarmCause, Aux, Block, Control, CtrlMsg, FrameReader,
-    HostMsg, Motion, NakReason, Pushed, State, Status, MAX_BODY, MAX_FRAME, NO_JOINT,
+    decode_block, encode_frame_with, Alarm, AlarmCause, Aux, Block, Control, CtrlMsg, FrameDecoder,
+    HostMsg, Motion, NakReason, PlannedBlock, State, Status, MAX_BODY, MAX_FRAME, NO_JOINT,
     PROTOCOL_VERSION,
 };
 use crate::servo::{Trip, SETPOINT_FRAC_BITS};
@@ -52,7 +52,7 @@ pub use crate::planner::QUEUE_CAPACITY;
 /// Bytes of outgoing frames buffered between two `transmit` calls.
 pub const TX_CAPACITY: usize = 2048;
 /// Ticks between two unsolicited status messages (50 ms at 1 kHz). Freed queue slots
-/// are reported at once, by an `Ack` of the last block accepted, in the tick that
+/// are reported at once, by an `Ack` of the last block accepted, from the tick that
 /// frees them.
 pub const STATUS_EVERY_TICKS: u32 = 50;
 /// Ticks without a valid frame from the host, while moving, after which the link is
@@ -109,11 +109,10 @@ pub struct LinkStats {
 pub struct Controller {
     machine: MachineConfig,
     kin: MachineKinematics,
-    reader: FrameReader,
+    reader: FrameDecoder,
     tx: crate::ring::ByteRing<TX_CAPACITY>,
-    /// Scratch for frames: a decoded body, an encoded one and an encoded frame
-    /// (fields, so that no call clears them).
-    rx_body: [u8; MAX_BODY],
+    /// Scratch for outgoing frames: a body and its encoding (fields, so that no call
+    /// clears them).
     tx_body: [u8; MAX_BODY],
     tx_frame: [u8; MAX_FRAME],
     tx_seq: u16,
@@ -153,6 +152,12 @@ pub struct Controller {
     spindle: Aux,
     motion_ticks: u64,
     since_status: u32,
+    /// An `Ack` of the last block accepted is owed (acks are cumulative: one covers
+    /// every block accepted and every slot freed since the last); encoded by
+    /// `transmit`, not in the `receive` or `tick` that made it due.
+    ack_due: bool,
+    /// A status is owed (requested, or periodic); encoded by `transmit`.
+    status_due: bool,
     silent_ticks: u32,
     link_watch: bool,
     last: Inputs,
@@ -212,9 +217,8 @@ impl Controller {
         let mut c = Self {
             machine,
             kin,
-            reader: FrameReader::new(),
+            reader: FrameDecoder::new(),
             tx: crate::ring::ByteRing::default(),
-            rx_body: [0; MAX_BODY],
             tx_body: [0; MAX_BODY],
             tx_frame: [0; MAX_FRAME],
             tx_seq: 0,
@@ -246,6 +250,8 @@ impl Controller {
             spindle: Aux::SpindleOff,
             motion_ticks: 0,
             since_status: 0,
+            ack_due: false,
+            status_due: false,
             silent_ticks: 0,
             link_watch: true,
             last: Inputs::default(),
@@ -358,37 +364,81 @@ impl Controller {
 
     /// Feeds bytes received from the link.
     pub fn receive(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            let decoded = match self.reader.push(b) {
-                Pushed::Pending => continue,
-                Pushed::Overlong => None,
-                Pushed::Frame(f) => decode_frame::<HostMsg>(f, &mut self.rx_body).ok(),
+        let mut rest = bytes;
+        while !rest.is_empty() {
+            let (taken, frame) = self.reader.feed(rest);
+            rest = &rest[taken..];
+            let Some(frame) = frame else {
+                continue;
             };
-            match decoded {
-                Some((seq, msg)) => {
+            let Ok((seq, message)) = frame else {
+                self.corrupt();
+                continue;
+            };
+            // Messages are handled by reference: a block is some 250 bytes, not to be
+            // moved around; blocks, the bulk of the traffic, are decoded by hand.
+            match &decode_block(message) {
+                Some(Ok(planned)) => {
                     self.silent_ticks = 0;
-                    self.handle(seq, msg)
+                    self.block(seq, planned);
                 }
-                None => {
-                    self.stats.corrupt += 1;
-                    self.nak(NakReason::Corrupt);
-                }
+                Some(Err(_)) => self.corrupt(),
+                None => match &postcard::from_bytes::<HostMsg>(message) {
+                    Ok(msg) => {
+                        self.silent_ticks = 0;
+                        self.handle(seq, msg);
+                    }
+                    Err(_) => self.corrupt(),
+                },
             }
         }
     }
 
-    /// Moves pending outgoing bytes into `out`; returns how many.
+    fn corrupt(&mut self) {
+        self.stats.corrupt += 1;
+        self.nak(NakReason::Corrupt);
+    }
+
+    /// Moves pending outgoing bytes into `out`; returns how many. The `Ack` and the
+    /// status owed are encoded first (one of each, however many blocks were accepted,
+    /// slots freed or statuses asked for since the last call).
     pub fn transmit(&mut self, out: &mut [u8]) -> usize {
+        self.send_due();
         self.tx.pop_into(out)
     }
 
-    fn send(&mut self, msg: &CtrlMsg) {
+    /// Encodes `msg` into the transmit buffer; false when it does not fit (nothing
+    /// written).
+    fn push_frame(&mut self, msg: &CtrlMsg) -> bool {
         let encoded = encode_frame_with(self.tx_seq, msg, &mut self.tx_body, &mut self.tx_frame);
         match encoded {
             Ok(n) if self.tx.push_slice(&self.tx_frame[..n]) => {
                 self.tx_seq = self.tx_seq.wrapping_add(1);
+                true
             }
-            _ => self.stats.tx_dropped += 1,
+            _ => false,
+        }
+    }
+
+    fn send(&mut self, msg: &CtrlMsg) {
+        if !self.push_frame(msg) {
+            self.stats.tx_dropped += 1;
+        }
+    }
+
+    /// Encodes the `Ack` and the status owed; what does not fit stays owed.
+    fn send_due(&mut self) {
+        if self.ack_due {
+            let ack = CtrlMsg::Ack {
+                seq: self.expected_seq.wrapping_sub(1),
+                free_slots: self.planner.free() as u16,
+                buffered_ms: self.buffered_ms(),
+            };
+            self.ack_due = !self.push_frame(&ack);
+        }
+        if self.status_due {
+            let s = CtrlMsg::Status(self.status());
+            self.status_due = !self.push_frame(&s);
         }
     }
 
@@ -404,17 +454,11 @@ impl Controller {
         (ticks * 1000.0 / TICK_HZ as f32).min(u32::MAX as f32) as u32
     }
 
-    fn ack(&mut self, seq: u16) {
-        self.send(&CtrlMsg::Ack {
-            seq,
-            free_slots: self.planner.free() as u16,
-            buffered_ms: self.buffered_ms(),
-        });
-    }
-
-    fn handle(&mut self, seq: u16, msg: HostMsg) {
-        match msg {
+    fn handle(&mut self, seq: u16, msg: &HostMsg) {
+        match *msg {
             HostMsg::Hello { version, machine } => {
+                // What the old session is owed goes first, as it was owed.
+                self.send_due();
                 if version != PROTOCOL_VERSION {
                     self.nak(NakReason::Version);
                     return;
@@ -443,7 +487,7 @@ impl Controller {
                 offset,
                 total,
                 crc,
-                data,
+                ref data,
             } => {
                 let fresh = self.last_control != Some(id);
                 self.last_control = Some(id);
@@ -459,17 +503,18 @@ impl Controller {
                 }
                 match self
                     .assembler
-                    .add(offset as usize, total as usize, crc, &data)
+                    .add(offset as usize, total as usize, crc, data)
                 {
                     Ok(None) => {}
-                    Ok(Some(config)) => self.load_machine(config),
+                    Ok(Some(config)) => {
+                        // What is owed goes out before the controller restarts.
+                        self.send_due();
+                        self.load_machine(config)
+                    }
                     Err(error) => self.send(&CtrlMsg::MachineRefused { error }),
                 }
             }
-            HostMsg::StatusRequest => {
-                let s = self.status();
-                self.send(&CtrlMsg::Status(s));
-            }
+            HostMsg::StatusRequest => self.status_due = true,
             HostMsg::Control { id, cmd } => {
                 if self.last_control != Some(id) {
                     self.last_control = Some(id);
@@ -477,43 +522,43 @@ impl Controller {
                 }
                 self.send(&CtrlMsg::ControlAck { id });
             }
-            HostMsg::Block(planned) => {
-                if !self.session {
-                    self.nak(NakReason::NoSession);
-                    return;
-                }
-                let ahead = seq.wrapping_sub(self.expected_seq) as i16;
-                if ahead < 0 {
-                    // A duplicate of an accepted frame: acknowledge, do not execute.
-                    self.ack(self.expected_seq.wrapping_sub(1));
-                    return;
-                }
-                if ahead > 0 {
-                    self.nak(NakReason::Gap);
-                    return;
-                }
-                if self.mismatch {
-                    self.nak(NakReason::MachineMismatch);
-                    return;
-                }
-                if matches!(self.state, State::Alarm | State::EStop) {
-                    // Accepted and dropped: the job is over until the alarm is reset.
-                    self.expected_seq = seq.wrapping_add(1);
-                    self.ack(seq);
-                    return;
-                }
-                match self
-                    .planner
-                    .push_planned(&planned, &self.machine, &self.kin)
-                {
-                    Ok(()) => {
-                        self.expected_seq = seq.wrapping_add(1);
-                        self.ack(seq);
-                    }
-                    Err(PushError::Full) => self.nak(NakReason::QueueFull),
-                    Err(PushError::Geometry(_)) => self.nak(NakReason::BadBlock),
-                }
+            HostMsg::Block(ref planned) => self.block(seq, planned),
+        }
+    }
+
+    /// A block message (sequenced).
+    fn block(&mut self, seq: u16, planned: &PlannedBlock) {
+        if !self.session {
+            self.nak(NakReason::NoSession);
+            return;
+        }
+        let ahead = seq.wrapping_sub(self.expected_seq) as i16;
+        if ahead < 0 {
+            // A duplicate of an accepted frame: acknowledge, do not execute.
+            self.ack_due = true;
+            return;
+        }
+        if ahead > 0 {
+            self.nak(NakReason::Gap);
+            return;
+        }
+        if self.mismatch {
+            self.nak(NakReason::MachineMismatch);
+            return;
+        }
+        if matches!(self.state, State::Alarm | State::EStop) {
+            // Accepted and dropped: the job is over until the alarm is reset.
+            self.expected_seq = seq.wrapping_add(1);
+            self.ack_due = true;
+            return;
+        }
+        match self.planner.push_planned(planned, &self.machine, &self.kin) {
+            Ok(()) => {
+                self.expected_seq = seq.wrapping_add(1);
+                self.ack_due = true;
             }
+            Err(PushError::Full) => self.nak(NakReason::QueueFull),
+            Err(PushError::Geometry(_)) => self.nak(NakReason::BadBlock),
         }
     }
 
@@ -1032,7 +1077,7 @@ impl Controller {
         if self.session && self.planner.len() < queued && self.state != State::Alarm {
             // Credits as slots free: the host refills within a tick or two instead of
             // waiting for the next status.
-            self.ack(self.expected_seq.wrapping_sub(1));
+            self.ack_due = true;
         }
         self.steps
             .tick(&self.machine.joints, &self.joints, &mut self.trains);
@@ -1056,8 +1101,7 @@ impl Controller {
         self.since_status += 1;
         if self.session && self.since_status >= STATUS_EVERY_TICKS {
             self.since_status = 0;
-            let s = self.status();
-            self.send(&CtrlMsg::Status(s));
+            self.status_due = true;
         }
         &self.out
     }
@@ -1066,7 +1110,7 @@ impl Controller {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::protocol::encode_frame;
+    use crate::protocol::{decode_frame, encode_frame, FrameReader, Pushed};
 
     fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
         let mut f = [0u8; MAX_FRAME];
@@ -1228,15 +1272,31 @@ mod tests {
     fn a_duplicate_block_is_acknowledged_but_not_queued_twice() {
         let mut c = session();
         c.receive(&frame(1, &line_to(10, 1)));
+        let _ = replies(&mut c);
         c.receive(&frame(1, &line_to(10, 1)));
+        // Acks are owed until `transmit`: the duplicate is acknowledged on its own.
         let r = replies(&mut c);
         assert!(matches!(
-            r[2],
-            CtrlMsg::Ack {
+            r[..],
+            [CtrlMsg::Ack {
                 seq: 1,
                 free_slots,
                 ..
-            } if free_slots as usize == QUEUE_CAPACITY - 1
+            }] if free_slots as usize == QUEUE_CAPACITY - 1
+        ));
+        // Received together, the block and its duplicate draw one cumulative ack.
+        let mut c = session();
+        let _ = replies(&mut c);
+        c.receive(&frame(1, &line_to(10, 1)));
+        c.receive(&frame(1, &line_to(10, 1)));
+        let r = replies(&mut c);
+        assert!(matches!(
+            r[..],
+            [CtrlMsg::Ack {
+                seq: 1,
+                free_slots,
+                ..
+            }] if free_slots as usize == QUEUE_CAPACITY - 1
         ));
     }
 

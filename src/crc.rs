@@ -43,31 +43,44 @@ const fn make_nibble_table() -> [u32; 16] {
 
 static NIBBLES: [u32; 16] = make_nibble_table();
 
-/// CRC-32 of `data`.
+/// The register before the first byte.
+pub const INIT: u32 = 0xFFFF_FFFF;
+
+/// The register after a message followed by its own CRC (little-endian): a frame
+/// whose CRC is right leaves this whatever its message (the register is not yet
+/// complemented; `!RESIDUE` is the catalogue's residue 0x2144DF1C).
+pub const RESIDUE: u32 = 0xDEBB_20E3;
+
+/// The register after one more byte `b` (no final XOR).
 #[cfg(not(target_os = "none"))]
-pub fn crc32(data: &[u8]) -> u32 {
-    let mut c = 0xFFFF_FFFFu32;
-    for &b in data {
-        c = TABLE[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8);
-    }
-    c ^ 0xFFFF_FFFF
+#[inline(always)]
+pub fn update(c: u32, b: u8) -> u32 {
+    TABLE[((c ^ b as u32) & 0xFF) as usize] ^ (c >> 8)
+}
+
+/// The register after one more byte `b` (no final XOR).
+#[cfg(target_os = "none")]
+#[inline(always)]
+pub fn update(c: u32, b: u8) -> u32 {
+    update_nibbles(c, b)
+}
+
+/// [`update`], four bits per lookup.
+#[inline(always)]
+pub fn update_nibbles(c: u32, b: u8) -> u32 {
+    let c = c ^ b as u32;
+    let c = NIBBLES[(c & 0xF) as usize] ^ (c >> 4);
+    NIBBLES[(c & 0xF) as usize] ^ (c >> 4)
 }
 
 /// CRC-32 of `data`.
-#[cfg(target_os = "none")]
 pub fn crc32(data: &[u8]) -> u32 {
-    crc32_nibbles(data)
+    !data.iter().fold(INIT, |c, &b| update(c, b))
 }
 
 /// CRC-32 of `data`, four bits per lookup.
 pub fn crc32_nibbles(data: &[u8]) -> u32 {
-    let mut c = 0xFFFF_FFFFu32;
-    for &b in data {
-        c ^= b as u32;
-        c = NIBBLES[(c & 0xF) as usize] ^ (c >> 4);
-        c = NIBBLES[(c & 0xF) as usize] ^ (c >> 4);
-    }
-    c ^ 0xFFFF_FFFF
+    !data.iter().fold(INIT, |c, &b| update_nibbles(c, b))
 }
 
 #[cfg(test)]
@@ -91,6 +104,20 @@ mod tests {
             .collect();
         for n in [0, 1, 2, 7, 64, 4096] {
             assert_eq!(super::crc32(&data[..n]), super::crc32_nibbles(&data[..n]));
+        }
+    }
+
+    #[test]
+    fn a_message_followed_by_its_crc_leaves_the_residue() {
+        for data in [&b""[..], b"123456789", &[0u8; 100], &[0xFF; 3]] {
+            let mut framed = data.to_vec();
+            framed.extend_from_slice(&super::crc32(data).to_le_bytes());
+            let reg = framed.iter().fold(super::INIT, |c, &b| super::update(c, b));
+            assert_eq!(reg, super::RESIDUE);
+            assert_eq!(!reg, 0x2144_DF1C);
+            framed[0] ^= 1;
+            let reg = framed.iter().fold(super::INIT, |c, &b| super::update(c, b));
+            assert_ne!(reg, super::RESIDUE);
         }
     }
 }
