@@ -40,9 +40,9 @@ use crate::interp::{Event, Executor};
 use crate::kinematics::{Joints, Kinematics, MachineKinematics, Unreachable};
 use crate::planner::{Planner, PushError};
 use crate::protocol::{
-    decode_block, encode_frame_with, Alarm, AlarmCause, Aux, Block, Control, CtrlMsg, FrameDecoder,
-    HostMsg, Motion, NakReason, PlannedBlock, State, Status, MAX_BODY, MAX_FRAME, NO_JOINT,
-    PROTOCOL_VERSION,
+    decode_block, encode_ack, encode_frame_with, encode_status, Alarm, AlarmCause, Aux, Block,
+    Control, CtrlMsg, FrameDecoder, HostMsgOf, Motion, NakReason, NotBlock, PlannedBlock, State,
+    Status, MAX_BODY, MAX_FRAME, NO_JOINT, PROTOCOL_VERSION,
 };
 use crate::servo::{Trip, SETPOINT_FRAC_BITS};
 use crate::stepper::{StepScheduler, StepTrain};
@@ -383,7 +383,7 @@ impl Controller {
                     self.block(seq, planned);
                 }
                 Some(Err(_)) => self.corrupt(),
-                None => match &postcard::from_bytes::<HostMsg>(message) {
+                None => match &postcard::from_bytes::<HostMsgOf<NotBlock>>(message) {
                     Ok(msg) => {
                         self.silent_ticks = 0;
                         self.handle(seq, msg);
@@ -394,6 +394,7 @@ impl Controller {
         }
     }
 
+    #[cold]
     fn corrupt(&mut self) {
         self.stats.corrupt += 1;
         self.nak(NakReason::Corrupt);
@@ -407,21 +408,28 @@ impl Controller {
         self.tx.pop_into(out)
     }
 
-    /// Encodes `msg` into the transmit buffer; false when it does not fit (nothing
-    /// written).
-    fn push_frame(&mut self, msg: &CtrlMsg) -> bool {
-        let encoded = encode_frame_with(self.tx_seq, msg, &mut self.tx_body, &mut self.tx_frame);
-        match encoded {
-            Ok(n) if self.tx.push_slice(&self.tx_frame[..n]) => {
-                self.tx_seq = self.tx_seq.wrapping_add(1);
-                true
-            }
-            _ => false,
+    /// Adds a frame to the transmit buffer, made by `encode` from the next sequence
+    /// number (into the buffer itself when the largest frame fits there in one piece,
+    /// else into scratch, then copied); false when it does not fit (nothing added).
+    fn push_frame(
+        &mut self,
+        encode: impl FnOnce(u16, &mut [u8; MAX_BODY], &mut [u8; MAX_FRAME]) -> Option<usize>,
+    ) -> bool {
+        let seq = self.tx_seq;
+        let added = match self.tx.tail_mut::<MAX_FRAME>() {
+            Some(room) => encode(seq, &mut self.tx_body, room).map(|n| self.tx.commit(n)),
+            None => encode(seq, &mut self.tx_body, &mut self.tx_frame)
+                .filter(|&n| self.tx.push_slice(&self.tx_frame[..n]))
+                .map(drop),
+        };
+        if added.is_some() {
+            self.tx_seq = seq.wrapping_add(1);
         }
+        added.is_some()
     }
 
     fn send(&mut self, msg: &CtrlMsg) {
-        if !self.push_frame(msg) {
+        if !self.push_frame(|seq, body, out| encode_frame_with(seq, msg, body, out).ok()) {
             self.stats.tx_dropped += 1;
         }
     }
@@ -429,16 +437,15 @@ impl Controller {
     /// Encodes the `Ack` and the status owed; what does not fit stays owed.
     fn send_due(&mut self) {
         if self.ack_due {
-            let ack = CtrlMsg::Ack {
-                seq: self.expected_seq.wrapping_sub(1),
-                free_slots: self.planner.free() as u16,
-                buffered_ms: self.buffered_ms(),
-            };
-            self.ack_due = !self.push_frame(&ack);
+            let acked = self.expected_seq.wrapping_sub(1);
+            let (free, ms) = (self.planner.free() as u16, self.buffered_ms());
+            self.ack_due = !self
+                .push_frame(|seq, body, out| Some(encode_ack(seq, acked, free, ms, body, out)));
         }
         if self.status_due {
-            let s = CtrlMsg::Status(self.status());
-            self.status_due = !self.push_frame(&s);
+            let s = self.status();
+            self.status_due =
+                !self.push_frame(|seq, body, out| Some(encode_status(seq, &s, body, out)));
         }
     }
 
@@ -454,9 +461,12 @@ impl Controller {
         (ticks * 1000.0 / TICK_HZ as f32).min(u32::MAX as f32) as u32
     }
 
-    fn handle(&mut self, seq: u16, msg: &HostMsg) {
+    /// A message other than a block (rare: not inlined into `receive`, whose block
+    /// path it would slow down).
+    #[inline(never)]
+    fn handle(&mut self, seq: u16, msg: &HostMsgOf<NotBlock>) {
         match *msg {
-            HostMsg::Hello { version, machine } => {
+            HostMsgOf::Hello { version, machine } => {
                 // What the old session is owed goes first, as it was owed.
                 self.send_due();
                 if version != PROTOCOL_VERSION {
@@ -482,7 +492,7 @@ impl Controller {
                     machine: self.machine_id,
                 });
             }
-            HostMsg::Machine {
+            HostMsgOf::Machine {
                 id,
                 offset,
                 total,
@@ -514,15 +524,15 @@ impl Controller {
                     Err(error) => self.send(&CtrlMsg::MachineRefused { error }),
                 }
             }
-            HostMsg::StatusRequest => self.status_due = true,
-            HostMsg::Control { id, cmd } => {
+            HostMsgOf::StatusRequest => self.status_due = true,
+            HostMsgOf::Control { id, cmd } => {
                 if self.last_control != Some(id) {
                     self.last_control = Some(id);
                     self.control(cmd);
                 }
                 self.send(&CtrlMsg::ControlAck { id });
             }
-            HostMsg::Block(ref planned) => self.block(seq, planned),
+            HostMsgOf::Block(never) => match never {},
         }
     }
 
@@ -1110,7 +1120,7 @@ impl Controller {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::protocol::{decode_frame, encode_frame, FrameReader, Pushed};
+    use crate::protocol::{decode_frame, encode_frame, FrameReader, HostMsg, Pushed};
 
     fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
         let mut f = [0u8; MAX_FRAME];

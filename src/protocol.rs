@@ -171,8 +171,14 @@ pub enum Control {
 }
 
 /// Messages from the host to the controller.
+pub type HostMsg = HostMsgOf<PlannedBlock>;
+
+/// [`HostMsg`] with the payload of its `Block` variant as a parameter: the controller
+/// decodes blocks by hand ([`decode_block`]) and every other message as
+/// `HostMsgOf<NotBlock>`, which leaves serde's code for blocks out of the firmware.
+/// The encoding is the same (one definition).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub enum HostMsg {
+pub enum HostMsgOf<B> {
     /// Opens a session; resets sequence numbering to the frame's `seq + 1`.
     Hello {
         /// The host's [`PROTOCOL_VERSION`].
@@ -196,7 +202,7 @@ pub enum HostMsg {
         data: heapless::Vec<u8, { crate::store::CHUNK_BYTES }>,
     },
     /// Queues a planned motion block (sequenced).
-    Block(PlannedBlock),
+    Block(B),
     /// Asks for a [`Status`] now (bypasses the queue).
     StatusRequest,
     /// A control command (bypasses the queue); answered by `ControlAck { id }`. The
@@ -209,6 +215,11 @@ pub enum HostMsg {
         cmd: Control,
     },
 }
+
+/// No block: the `Block` payload of the messages the controller decodes with serde
+/// (it decodes blocks by hand); a block message fails to decode as one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum NotBlock {}
 
 /// Controller state.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -410,13 +421,174 @@ pub fn encode_frame_with<M: Serialize>(
     let used = postcard::to_slice(msg, &mut body[2..MAX_BODY - 4])
         .map_err(|_| FrameError::TooLong)?
         .len();
-    let n = 2 + used;
-    let crc = crate::crc::crc32(&body[..n]);
-    body[n..n + 4].copy_from_slice(&crc.to_le_bytes());
-    let len = crate::cobs::encode(&body[..n + 4], &mut out[..MAX_FRAME - 1])
-        .ok_or(FrameError::TooLong)?;
-    out[len] = 0;
-    Ok(len + 1)
+    Ok(seal(&body[..2 + used], out))
+}
+
+/// Completes a frame: the COBS encoding of `data` (sequence number and message, at
+/// most `MAX_BODY - 4` bytes) and of its CRC, then the delimiter, written into `out` in
+/// one pass; returns its length.
+fn seal(data: &[u8], out: &mut [u8; MAX_FRAME]) -> usize {
+    let mut crc = crate::crc::INIT;
+    let (mut code_at, mut at) = (0, 1);
+    if data.len() + 4 < 0xFE {
+        // No run of 254 non-zero bytes fits: only zeros end a block.
+        let mut put = |b: u8| {
+            if b == 0 {
+                out[code_at] = (at - code_at) as u8;
+                code_at = at;
+            } else {
+                out[at] = b;
+            }
+            at += 1;
+        };
+        for &b in data {
+            crc = crate::crc::update(crc, b);
+            put(b);
+        }
+        for b in (!crc).to_le_bytes() {
+            put(b);
+        }
+    } else {
+        let mut put = |b: u8| {
+            if b == 0 {
+                out[code_at] = (at - code_at) as u8;
+                code_at = at;
+                at += 1;
+            } else {
+                out[at] = b;
+                at += 1;
+                if at - code_at == 0xFF {
+                    out[code_at] = 0xFF;
+                    code_at = at;
+                    at += 1;
+                }
+            }
+        };
+        for &b in data {
+            crc = crate::crc::update(crc, b);
+            put(b);
+        }
+        for b in (!crc).to_le_bytes() {
+            put(b);
+        }
+    }
+    out[code_at] = (at - code_at) as u8;
+    out[at] = 0;
+    at + 1
+}
+
+/// Variant indices of [`CtrlMsg`] in the message encoding.
+const CTRL_MSG_ACK: u8 = 3;
+const CTRL_MSG_STATUS: u8 = 6;
+
+/// Writes a message in postcard's encoding, for the two messages the controller sends
+/// most ([`encode_ack`], [`encode_status`]): what `postcard::to_slice` writes (tested),
+/// without serde's generic code.
+struct Writer<'a> {
+    buf: &'a mut [u8; MAX_BODY],
+    len: usize,
+}
+
+impl Writer<'_> {
+    fn byte(&mut self, b: u8) {
+        self.buf[self.len] = b;
+        self.len += 1;
+    }
+
+    fn u32(&mut self, mut v: u32) {
+        while v >= 0x80 {
+            self.byte(v as u8 | 0x80);
+            v >>= 7;
+        }
+        self.byte(v as u8);
+    }
+
+    fn u64(&mut self, v: u64) {
+        if v >> 32 == 0 {
+            return self.u32(v as u32);
+        }
+        // Four groups of seven bits from the low word, then the rest.
+        let low = v as u32;
+        for i in 0..4 {
+            self.byte((low >> (7 * i)) as u8 | 0x80);
+        }
+        let mut v = v >> 28;
+        while v >= 0x80 {
+            self.byte(v as u8 | 0x80);
+            v >>= 7;
+        }
+        self.byte(v as u8);
+    }
+
+    fn i64(&mut self, v: i64) {
+        self.u64(((v << 1) ^ (v >> 63)) as u64);
+    }
+}
+
+/// Encodes `CtrlMsg::Ack { seq: acked, free_slots, buffered_ms }` with sequence number
+/// `seq` as a complete frame (as [`encode_frame_with`] does); returns its length.
+pub fn encode_ack(
+    seq: u16,
+    acked: u16,
+    free_slots: u16,
+    buffered_ms: u32,
+    body: &mut [u8; MAX_BODY],
+    out: &mut [u8; MAX_FRAME],
+) -> usize {
+    let mut w = Writer { buf: body, len: 0 };
+    for b in seq.to_le_bytes() {
+        w.byte(b);
+    }
+    w.byte(CTRL_MSG_ACK);
+    w.u32(acked as u32);
+    w.u32(free_slots as u32);
+    w.u32(buffered_ms);
+    let n = w.len;
+    seal(&body[..n], out)
+}
+
+/// Encodes `CtrlMsg::Status(s)` with sequence number `seq` as a complete frame (as
+/// [`encode_frame_with`] does); returns its length.
+pub fn encode_status(
+    seq: u16,
+    s: &Status,
+    body: &mut [u8; MAX_BODY],
+    out: &mut [u8; MAX_FRAME],
+) -> usize {
+    // The widest status (every varint at its longest) fits with its CRC.
+    const WIDEST: usize = 2 + 1 + 1 + 5 + 5 + 10 * (1 + AXES + MAX_JOINTS + 1) + 5 + 3 + 3 + 8 + 1;
+    const _: () = assert!(WIDEST + 4 <= MAX_BODY);
+    let mut w = Writer { buf: body, len: 0 };
+    for b in seq.to_le_bytes() {
+        w.byte(b);
+    }
+    w.byte(CTRL_MSG_STATUS);
+    w.u32(s.state as u32);
+    w.u32(s.line);
+    w.u32(s.blocks_done);
+    w.u64(s.motion_ticks);
+    for &p in &s.pose {
+        w.i64(p);
+    }
+    for &q in &s.joints {
+        w.i64(q);
+    }
+    w.i64(s.speed);
+    w.u32(s.buffered_ms);
+    w.u32(s.free_slots as u32);
+    w.u32(s.feed_override as u32);
+    match s.alarm {
+        None => w.byte(0),
+        Some(a) => {
+            w.byte(1);
+            w.u32(a.cause as u32);
+            w.byte(a.joint);
+            w.u32(a.line);
+        }
+    }
+    w.byte(s.homed as u8);
+    let n = w.len;
+    seal(&body[..n], out)
 }
 
 /// Decodes one frame's bytes (between delimiters, without the 0x00) into its sequence
@@ -840,6 +1012,7 @@ impl FrameDecoder {
     /// that ends a frame (empty frames are skipped), or all of them; returns how many
     /// it took and, when a frame ended, its sequence number and message bytes (or why
     /// it was refused).
+    #[inline(never)]
     pub fn feed(&mut self, bytes: &[u8]) -> (usize, Option<Frame<'_>>) {
         let (mut len, mut left, mut zero, mut crc) = (self.len, self.left, self.zero, self.crc);
         let (mut started, mut overflow) = (self.started, self.overflow);
@@ -1030,13 +1203,14 @@ mod tests {
                     2 => 250 + rnd(10) as usize,         // around a 254-byte COBS block
                     _ => rnd(200) as usize,
                 };
-                let zeros = rnd(4);
+                // One byte in `every` is a zero (none with 0: runs of 254 and more).
+                let every = [0, 2, 4, 40][rnd(4) as usize];
                 let message: Vec<u8> = (0..len)
                     .map(|_| {
-                        if rnd(zeros + 1) == 0 {
+                        if every > 0 && rnd(every) == 0 {
                             0
                         } else {
-                            rnd(256) as u8
+                            rnd(255) as u8 + 1
                         }
                     })
                     .collect();
@@ -1067,12 +1241,26 @@ mod tests {
         );
     }
 
-    /// `decode_block` against `postcard::from_bytes::<HostMsg>` on `message`.
+    /// `decode_block`, then `HostMsgOf<NotBlock>` for what is not a block, against
+    /// `postcard::from_bytes::<HostMsg>` on `message`.
     fn check_block_decoder(message: &[u8]) -> bool {
         let by_serde = postcard::from_bytes::<HostMsg>(message);
         match (decode_block(message), by_serde) {
             (None, Ok(HostMsg::Block(_))) => panic!("a block missed: {message:02x?}"),
-            (None, _) => false,
+            (None, want) => {
+                let got = postcard::from_bytes::<HostMsgOf<NotBlock>>(message);
+                let (mut a, mut b) = ([0u8; MAX_BODY], [0u8; MAX_BODY]);
+                match (got, want) {
+                    (Ok(got), Ok(want)) => assert_eq!(
+                        postcard::to_slice(&got, &mut a).unwrap(),
+                        postcard::to_slice(&want, &mut b).unwrap(),
+                        "{message:02x?}"
+                    ),
+                    (Err(_), Err(_)) => {}
+                    (got, want) => panic!("{message:02x?}: decoded {got:?}, postcard {want:?}"),
+                }
+                false
+            }
             (Some(Err(_)), Err(_)) => false,
             (Some(Ok(got)), Ok(HostMsg::Block(want))) => {
                 // Compared through their encoding: the same bits (NaNs included).
@@ -1190,18 +1378,134 @@ mod tests {
                 check_block_decoder(&m);
             }
         }
-        // Other messages are left to postcard.
+        // Other messages are left to postcard, as `HostMsgOf<NotBlock>`.
         for m in [
             HostMsg::StatusRequest,
             HostMsg::Control {
                 id: 2,
-                cmd: Control::Hold,
+                cmd: Control::Jog {
+                    axis: 1,
+                    distance: -5,
+                    feed: 7,
+                },
+            },
+            HostMsg::Hello {
+                version: PROTOCOL_VERSION,
+                machine: 0xDEAD_BEEF,
+            },
+            HostMsg::Machine {
+                id: 3,
+                offset: 64,
+                total: 300,
+                crc: 9,
+                data: heapless::Vec::from_slice(&[1, 0, 2]).unwrap(),
             },
         ] {
             let mut buf = [0u8; MAX_BODY];
-            assert!(decode_block(postcard::to_slice(&m, &mut buf).unwrap()).is_none());
+            let good = postcard::to_slice(&m, &mut buf).unwrap().to_vec();
+            assert!(decode_block(&good).is_none());
+            let got: HostMsgOf<NotBlock> = postcard::from_bytes(&good).unwrap();
+            assert_eq!(format!("{got:?}"), format!("{m:?}"));
+            for i in 0..good.len() {
+                for v in 0..=255 {
+                    let mut m = good.clone();
+                    m[i] = v;
+                    check_block_decoder(&m);
+                }
+            }
         }
         assert!(decoded > 10_000, "{decoded} damaged messages still decoded");
+    }
+
+    #[test]
+    fn acks_and_statuses_encode_by_hand_exactly_as_postcard_encodes_them() {
+        let mut x = 0x1357_9BDFu32;
+        let mut rnd = move |n: u32| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x % n
+        };
+        let mut wide = || {
+            let v =
+                ((rnd(1 << 16) as i64) << 48) ^ ((rnd(1 << 24) as i64) << 24) ^ rnd(1 << 24) as i64;
+            v >> rnd(64)
+        };
+        let (mut body, mut want, mut got) = ([0u8; MAX_BODY], [0u8; MAX_FRAME], [0u8; MAX_FRAME]);
+        let causes = [
+            AlarmCause::Unreachable,
+            AlarmCause::JointLimit,
+            AlarmCause::LinkLoss,
+            AlarmCause::HomingFailed,
+        ];
+        let states = [State::Idle, State::Running, State::Hold, State::EStop];
+        for k in 0..5000usize {
+            let seq = wide() as u16;
+            let (acked, free, ms) = (wide() as u16, wide() as u16, wide() as u32);
+            let msg = CtrlMsg::Ack {
+                seq: acked,
+                free_slots: free,
+                buffered_ms: ms,
+            };
+            let n = encode_frame(seq, &msg, &mut want).unwrap();
+            assert_eq!(n, encode_ack(seq, acked, free, ms, &mut body, &mut got));
+            assert_eq!(want[..n], got[..n], "{msg:?}");
+            let s = Status {
+                state: states[k % 4],
+                line: wide() as u32,
+                blocks_done: wide() as u32,
+                motion_ticks: wide() as u64,
+                pose: core::array::from_fn(|_| wide()),
+                joints: core::array::from_fn(|_| wide()),
+                speed: wide(),
+                buffered_ms: wide() as u32,
+                free_slots: wide() as u16,
+                feed_override: wide() as u16,
+                alarm: (k % 3 != 0).then(|| Alarm {
+                    cause: causes[k % 4],
+                    joint: wide() as u8,
+                    line: wide() as u32,
+                }),
+                homed: k % 2 == 0,
+            };
+            let msg = CtrlMsg::Status(s.clone());
+            let n = encode_frame(seq, &msg, &mut want).unwrap();
+            assert_eq!(n, encode_status(seq, &s, &mut body, &mut got));
+            assert_eq!(want[..n], got[..n], "{msg:?}");
+        }
+    }
+
+    #[test]
+    fn a_sealed_frame_is_the_cobs_encoding_of_its_body_and_crc() {
+        let mut x = 0x0BAD_F00Du32;
+        let mut rnd = move |n: u32| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x % n
+        };
+        for len in 0..=MAX_BODY - 4 {
+            for every in [0, 2, 40] {
+                // One byte in `every` is a zero (none with 0: runs of 254 and more).
+                let data: Vec<u8> = (0..len)
+                    .map(|_| {
+                        if every > 0 && rnd(every) == 0 {
+                            0
+                        } else {
+                            rnd(255) as u8 + 1
+                        }
+                    })
+                    .collect();
+                let mut framed = data.clone();
+                framed.extend_from_slice(&crate::crc::crc32(&data).to_le_bytes());
+                let mut want = vec![0u8; crate::cobs::max_encoded_len(framed.len())];
+                let m = crate::cobs::encode(&framed, &mut want).unwrap();
+                let mut out = [0u8; MAX_FRAME];
+                let n = seal(&data, &mut out);
+                assert_eq!(out[..n - 1], want[..m], "{len} bytes");
+                assert_eq!(out[n - 1], 0);
+            }
+        }
     }
 
     #[test]
