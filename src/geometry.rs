@@ -244,6 +244,27 @@ impl Path {
         length: i64,
         shape: Shape,
     ) -> Result<Path, GeometryError> {
+        let mut p = Path {
+            start: *start,
+            end: *start,
+            length: 0,
+            rotary_only: false,
+            shape: Shape::Point,
+        };
+        p.set_from_plan(block, start, length, &shape)?;
+        Ok(p)
+    }
+
+    /// [`Path::from_plan`] written into `self`, for the controller's receive path: the
+    /// path is built where it will stay, not returned and moved (some 230 bytes each
+    /// time). On error `self` holds some path, not the block's.
+    pub fn set_from_plan(
+        &mut self,
+        block: &Block,
+        start: &[i64; AXES],
+        length: i64,
+        shape: &Shape,
+    ) -> Result<(), GeometryError> {
         let end = match block.motion {
             Motion::Dwell(_) | Motion::Aux(_) => *start,
             _ => block.target,
@@ -255,18 +276,17 @@ impl Path {
                 .map(|d| d.unsigned_abs() as u128 * d.unsigned_abs() as u128)
                 .sum()
         };
-        let point = Path {
-            start: *start,
-            end,
-            length: 0,
-            rotary_only: false,
-            shape: Shape::Point,
-        };
+        // A point until proven otherwise.
+        self.start = *start;
+        self.end = end;
+        self.length = 0;
+        self.rotary_only = false;
+        self.shape = Shape::Point;
         let bad = Err(GeometryError::PlanMismatch);
         match (block.motion, shape) {
-            (Motion::Dwell(_) | Motion::Aux(_), Shape::Point) if length == 0 => Ok(point),
+            (Motion::Dwell(_) | Motion::Aux(_), Shape::Point) if length == 0 => Ok(()),
             (Motion::Rapid | Motion::Linear, Shape::Point) if length == 0 && delta == [0; AXES] => {
-                Ok(point)
+                Ok(())
             }
             (Motion::Rapid | Motion::Linear, Shape::Line { unit }) => {
                 let (lin, rot) = (squares(0..3), squares(3..6));
@@ -280,16 +300,13 @@ impl Path {
                 {
                     return bad;
                 }
-                let p = Path {
-                    length,
-                    rotary_only,
-                    shape,
-                    ..point
-                };
+                self.length = length;
+                self.rotary_only = rotary_only;
+                self.shape = *shape;
                 let mut at = [0; AXES];
-                p.eval(length << 16, &mut at);
-                if near(&at, &end, &unit) {
-                    Ok(p)
+                self.eval(length << 16, &mut at);
+                if near(&at, &end, unit) {
+                    Ok(())
                 } else {
                     bad
                 }
@@ -301,7 +318,7 @@ impl Path {
                     clockwise,
                     turns,
                 },
-                Shape::Arc {
+                &Shape::Arc {
                     plane: p_plane,
                     center: p_center,
                     r0,
@@ -309,7 +326,7 @@ impl Path {
                     sweep,
                     phi_rate,
                     r_rate,
-                    unit,
+                    ref unit,
                     ..
                 },
             ) => {
@@ -342,17 +359,13 @@ impl Path {
                 if (got - want).abs() > 1e-5 * want + 4.0 * length as f32 {
                     return bad;
                 }
-                let p = Path {
-                    length,
-                    rotary_only: false,
-                    shape,
-                    ..point
-                };
+                self.length = length;
+                self.shape = *shape;
                 let (mut from, mut to) = ([0; AXES], [0; AXES]);
-                p.eval(0, &mut from);
-                p.eval(length << 16, &mut to);
-                if near(&from, start, &[0; AXES]) && near(&to, &end, &unit) {
-                    Ok(p)
+                self.eval(0, &mut from);
+                self.eval(length << 16, &mut to);
+                if near(&from, start, &[0; AXES]) && near(&to, &end, unit) {
+                    Ok(())
                 } else {
                     bad
                 }

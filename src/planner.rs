@@ -634,8 +634,12 @@ impl Planner {
             return Err(PushError::Full);
         }
         let (block, plan) = (&pb.block, &pb.plan);
-        let path = Path::from_plan(block, &self.end, plan.length, plan.shape)
+        // Built in place: the block's path is checked where it is written.
+        let mut b = PlanBlock::default();
+        b.path
+            .set_from_plan(block, &self.end, plan.length, &plan.shape)
             .map_err(PushError::Geometry)?;
+        let path = &b.path;
         let speeds_ok = [plan.v_limit, plan.accel, plan.entry]
             .iter()
             .all(|v| v.is_finite() && *v >= 0.0)
@@ -664,21 +668,18 @@ impl Planner {
         } else {
             f32::INFINITY
         };
-        let b = PlanBlock {
-            line: block.line,
-            kind,
-            path,
-            feed: feed_of(block, &path, kind),
-            v_limit: if moving { plan.v_limit } else { 0.0 },
-            accel: plan.accel,
-            accel_full: plan.accel,
-            rho_in: 0.0,
-            corner,
-            entry: if moving {
-                fmin(plan.entry, corner)
-            } else {
-                0.0
-            },
+        b.feed = feed_of(block, path, kind);
+        b.line = block.line;
+        b.kind = kind;
+        b.v_limit = if moving { plan.v_limit } else { 0.0 };
+        b.accel = plan.accel;
+        b.accel_full = plan.accel;
+        b.rho_in = 0.0;
+        b.corner = corner;
+        b.entry = if moving {
+            fmin(plan.entry, corner)
+        } else {
+            0.0
         };
         self.push_block(b);
         Ok(())

@@ -170,8 +170,14 @@ pub enum Control {
 }
 
 /// Messages from the host to the controller.
+pub type HostMsg = HostMsgOf<PlannedBlock>;
+
+/// [`HostMsg`] with the payload of its `Block` variant as a parameter: the controller
+/// decodes blocks by hand ([`decode_block`]) and every other message as
+/// `HostMsgOf<NotBlock>`, which leaves serde's code for blocks out of the firmware.
+/// The encoding is the same (one definition).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub enum HostMsg {
+pub enum HostMsgOf<B> {
     /// Opens a session; resets sequence numbering to the frame's `seq + 1`.
     Hello {
         /// The host's [`PROTOCOL_VERSION`].
@@ -195,7 +201,7 @@ pub enum HostMsg {
         data: heapless::Vec<u8, { crate::store::CHUNK_BYTES }>,
     },
     /// Queues a planned motion block (sequenced).
-    Block(PlannedBlock),
+    Block(B),
     /// Asks for a [`Status`] now (bypasses the queue).
     StatusRequest,
     /// A control command (bypasses the queue); answered by `ControlAck { id }`. The
@@ -208,6 +214,11 @@ pub enum HostMsg {
         cmd: Control,
     },
 }
+
+/// No block: the `Block` payload of the messages the controller decodes with serde
+/// (it decodes blocks by hand); a block message fails to decode as one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum NotBlock {}
 
 /// Controller state.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -409,13 +420,174 @@ pub fn encode_frame_with<M: Serialize>(
     let used = postcard::to_slice(msg, &mut body[2..MAX_BODY - 4])
         .map_err(|_| FrameError::TooLong)?
         .len();
-    let n = 2 + used;
-    let crc = crate::crc::crc32(&body[..n]);
-    body[n..n + 4].copy_from_slice(&crc.to_le_bytes());
-    let len = crate::cobs::encode(&body[..n + 4], &mut out[..MAX_FRAME - 1])
-        .ok_or(FrameError::TooLong)?;
-    out[len] = 0;
-    Ok(len + 1)
+    Ok(seal(&body[..2 + used], out))
+}
+
+/// Completes a frame: the COBS encoding of `data` (sequence number and message, at
+/// most `MAX_BODY - 4` bytes) and of its CRC, then the delimiter, written into `out` in
+/// one pass; returns its length.
+fn seal(data: &[u8], out: &mut [u8; MAX_FRAME]) -> usize {
+    let mut crc = crate::crc::INIT;
+    let (mut code_at, mut at) = (0, 1);
+    if data.len() + 4 < 0xFE {
+        // No run of 254 non-zero bytes fits: only zeros end a block.
+        let mut put = |b: u8| {
+            if b == 0 {
+                out[code_at] = (at - code_at) as u8;
+                code_at = at;
+            } else {
+                out[at] = b;
+            }
+            at += 1;
+        };
+        for &b in data {
+            crc = crate::crc::update(crc, b);
+            put(b);
+        }
+        for b in (!crc).to_le_bytes() {
+            put(b);
+        }
+    } else {
+        let mut put = |b: u8| {
+            if b == 0 {
+                out[code_at] = (at - code_at) as u8;
+                code_at = at;
+                at += 1;
+            } else {
+                out[at] = b;
+                at += 1;
+                if at - code_at == 0xFF {
+                    out[code_at] = 0xFF;
+                    code_at = at;
+                    at += 1;
+                }
+            }
+        };
+        for &b in data {
+            crc = crate::crc::update(crc, b);
+            put(b);
+        }
+        for b in (!crc).to_le_bytes() {
+            put(b);
+        }
+    }
+    out[code_at] = (at - code_at) as u8;
+    out[at] = 0;
+    at + 1
+}
+
+/// Variant indices of [`CtrlMsg`] in the message encoding.
+const CTRL_MSG_ACK: u8 = 3;
+const CTRL_MSG_STATUS: u8 = 6;
+
+/// Writes a message in postcard's encoding, for the two messages the controller sends
+/// most ([`encode_ack`], [`encode_status`]): what `postcard::to_slice` writes (tested),
+/// without serde's generic code.
+struct Writer<'a> {
+    buf: &'a mut [u8; MAX_BODY],
+    len: usize,
+}
+
+impl Writer<'_> {
+    fn byte(&mut self, b: u8) {
+        self.buf[self.len] = b;
+        self.len += 1;
+    }
+
+    fn u32(&mut self, mut v: u32) {
+        while v >= 0x80 {
+            self.byte(v as u8 | 0x80);
+            v >>= 7;
+        }
+        self.byte(v as u8);
+    }
+
+    fn u64(&mut self, v: u64) {
+        if v >> 32 == 0 {
+            return self.u32(v as u32);
+        }
+        // Four groups of seven bits from the low word, then the rest.
+        let low = v as u32;
+        for i in 0..4 {
+            self.byte((low >> (7 * i)) as u8 | 0x80);
+        }
+        let mut v = v >> 28;
+        while v >= 0x80 {
+            self.byte(v as u8 | 0x80);
+            v >>= 7;
+        }
+        self.byte(v as u8);
+    }
+
+    fn i64(&mut self, v: i64) {
+        self.u64(((v << 1) ^ (v >> 63)) as u64);
+    }
+}
+
+/// Encodes `CtrlMsg::Ack { seq: acked, free_slots, buffered_ms }` with sequence number
+/// `seq` as a complete frame (as [`encode_frame_with`] does); returns its length.
+pub fn encode_ack(
+    seq: u16,
+    acked: u16,
+    free_slots: u16,
+    buffered_ms: u32,
+    body: &mut [u8; MAX_BODY],
+    out: &mut [u8; MAX_FRAME],
+) -> usize {
+    let mut w = Writer { buf: body, len: 0 };
+    for b in seq.to_le_bytes() {
+        w.byte(b);
+    }
+    w.byte(CTRL_MSG_ACK);
+    w.u32(acked as u32);
+    w.u32(free_slots as u32);
+    w.u32(buffered_ms);
+    let n = w.len;
+    seal(&body[..n], out)
+}
+
+/// Encodes `CtrlMsg::Status(s)` with sequence number `seq` as a complete frame (as
+/// [`encode_frame_with`] does); returns its length.
+pub fn encode_status(
+    seq: u16,
+    s: &Status,
+    body: &mut [u8; MAX_BODY],
+    out: &mut [u8; MAX_FRAME],
+) -> usize {
+    // The widest status (every varint at its longest) fits with its CRC.
+    const WIDEST: usize = 2 + 1 + 1 + 5 + 5 + 10 * (1 + AXES + MAX_JOINTS + 1) + 5 + 3 + 3 + 8 + 1;
+    const _: () = assert!(WIDEST + 4 <= MAX_BODY);
+    let mut w = Writer { buf: body, len: 0 };
+    for b in seq.to_le_bytes() {
+        w.byte(b);
+    }
+    w.byte(CTRL_MSG_STATUS);
+    w.u32(s.state as u32);
+    w.u32(s.line);
+    w.u32(s.blocks_done);
+    w.u64(s.motion_ticks);
+    for &p in &s.pose {
+        w.i64(p);
+    }
+    for &q in &s.joints {
+        w.i64(q);
+    }
+    w.i64(s.speed);
+    w.u32(s.buffered_ms);
+    w.u32(s.free_slots as u32);
+    w.u32(s.feed_override as u32);
+    match s.alarm {
+        None => w.byte(0),
+        Some(a) => {
+            w.byte(1);
+            w.u32(a.cause as u32);
+            w.byte(a.joint);
+            w.u32(a.line);
+        }
+    }
+    w.byte(s.homed as u8);
+    let n = w.len;
+    seal(&body[..n], out)
 }
 
 /// Decodes one frame's bytes (between delimiters, without the 0x00) into its sequence
@@ -424,6 +596,17 @@ pub fn decode_frame<'de, M: Deserialize<'de>>(
     encoded: &[u8],
     body: &'de mut [u8; MAX_BODY],
 ) -> Result<(u16, M), FrameError> {
+    let (seq, message) = decode_body(encoded, body)?;
+    let msg = postcard::from_bytes(message).map_err(|_| FrameError::Message)?;
+    Ok((seq, msg))
+}
+
+/// Decodes one frame's bytes (between delimiters, without the 0x00) into its sequence
+/// number and message bytes, checking its COBS encoding, length and CRC.
+pub fn decode_body<'b>(
+    encoded: &[u8],
+    body: &'b mut [u8; MAX_BODY],
+) -> Result<(u16, &'b [u8]), FrameError> {
     let n = crate::cobs::decode(encoded, body).map_err(|_| FrameError::Cobs)?;
     if n < 6 {
         return Err(FrameError::Short);
@@ -434,8 +617,288 @@ pub fn decode_frame<'de, M: Deserialize<'de>>(
         return Err(FrameError::Crc);
     }
     let seq = u16::from_le_bytes([data[0], data[1]]);
-    let msg = postcard::from_bytes(&body[2..n - 4]).map_err(|_| FrameError::Message)?;
-    Ok((seq, msg))
+    Ok((seq, &body[2..n - 4]))
+}
+
+/// Variant index of [`HostMsg::Block`] in the message encoding.
+const HOST_MSG_BLOCK: u32 = 2;
+
+/// The low seven bits of up to four varint bytes, in one word (constant shifts), and
+/// how many bytes up to and including the last one (0: the varint goes on).
+#[inline(always)]
+fn group4(w: [u8; 4]) -> (u32, usize) {
+    let mut bits = (w[0] & 0x7F) as u32;
+    if w[0] < 0x80 {
+        return (bits, 1);
+    }
+    bits |= ((w[1] & 0x7F) as u32) << 7;
+    if w[1] < 0x80 {
+        return (bits, 2);
+    }
+    bits |= ((w[2] & 0x7F) as u32) << 14;
+    if w[2] < 0x80 {
+        return (bits, 3);
+    }
+    bits |= ((w[3] & 0x7F) as u32) << 21;
+    if w[3] < 0x80 {
+        return (bits, 4);
+    }
+    (bits, 0)
+}
+
+/// Reads a postcard message the way `postcard::from_bytes` does, for the one message
+/// the controller decodes by hand ([`decode_block`]). A read past the end or of an
+/// invalid encoding marks the message bad (and reads zeros from then on): one check
+/// at the end instead of one per field, and every value returned in registers.
+struct Cursor<'a> {
+    bytes: &'a [u8],
+    at: usize,
+    bad: bool,
+}
+
+impl Cursor<'_> {
+    fn fail<T: Default>(&mut self) -> T {
+        self.bad = true;
+        self.at = self.bytes.len();
+        T::default()
+    }
+
+    fn byte(&mut self) -> u8 {
+        match self.bytes.get(self.at) {
+            Some(&b) => {
+                self.at += 1;
+                b
+            }
+            None => self.fail(),
+        }
+    }
+
+    /// A varint of at most `max` (3 to 10) bytes whose last byte, when there are
+    /// `max`, is at most `last` (postcard's rule for an integer of that width); bits
+    /// beyond 64 are dropped (as postcard drops what its type does not hold).
+    #[inline(never)]
+    fn varint(&mut self, max: usize, last: u8) -> u64 {
+        let Some(w) = self.bytes[self.at..].first_chunk::<12>() else {
+            return self.varint_near_end(max, last);
+        };
+        // Four bytes at a time, with constant shifts.
+        let (low, n) = group4([w[0], w[1], w[2], w[3]]);
+        let mut v = low as u64;
+        let mut n = n;
+        if n == 0 {
+            let (mid, m) = group4([w[4], w[5], w[6], w[7]]);
+            v |= (mid as u64) << 28;
+            n = if m == 0 {
+                let (high, h) = group4([w[8], w[9], w[10], w[11]]);
+                v |= (high as u64) << 56;
+                if h == 0 {
+                    return self.fail();
+                }
+                8 + h
+            } else {
+                4 + m
+            };
+        }
+        if n > max || (n == max && w[n - 1] > last) {
+            return self.fail();
+        }
+        self.at += n;
+        v
+    }
+
+    /// [`Cursor::varint`] within the last twelve bytes of the message.
+    #[inline(never)]
+    fn varint_near_end(&mut self, max: usize, last: u8) -> u64 {
+        let mut v = 0u64;
+        for i in 0..max {
+            let b = self.byte();
+            v |= ((b & 0x7F) as u64) << (7 * i);
+            if b < 0x80 {
+                return if i + 1 == max && b > last {
+                    self.fail()
+                } else {
+                    v
+                };
+            }
+        }
+        self.fail()
+    }
+
+    fn u16(&mut self) -> u16 {
+        self.varint(3, 0x03) as u16
+    }
+
+    fn u32(&mut self) -> u32 {
+        self.varint(5, 0x0F) as u32
+    }
+
+    fn u64(&mut self) -> u64 {
+        self.varint(10, 0x01)
+    }
+
+    fn i64(&mut self) -> i64 {
+        let v = self.u64();
+        (v >> 1) as i64 ^ -((v & 1) as i64)
+    }
+
+    fn i64s<const N: usize>(&mut self) -> [i64; N] {
+        core::array::from_fn(|_| self.i64())
+    }
+
+    /// A zigzag varint of at most 19 bytes, the last at most 3 (postcard's `i128`).
+    fn i128(&mut self) -> i128 {
+        let mut v = 0u128;
+        if let Some(w) = self.bytes[self.at..].first_chunk::<20>() {
+            for g in 0..5 {
+                let (bits, used) = group4(w[4 * g..4 * g + 4].try_into().unwrap());
+                v |= (bits as u128) << (28 * g);
+                if used != 0 {
+                    let n = 4 * g + used;
+                    if n > 19 || (n == 19 && w[18] > 0x03) {
+                        return self.fail();
+                    }
+                    self.at += n;
+                    return (v >> 1) as i128 ^ -((v & 1) as i128);
+                }
+            }
+            return self.fail();
+        }
+        for i in 0..19 {
+            let b = self.byte();
+            v |= ((b & 0x7F) as u128) << (7 * i);
+            if b < 0x80 {
+                if i == 18 && b > 0x03 {
+                    return self.fail();
+                }
+                return (v >> 1) as i128 ^ -((v & 1) as i128);
+            }
+        }
+        self.fail()
+    }
+
+    fn f32(&mut self) -> f32 {
+        match self.bytes.get(self.at..self.at + 4) {
+            Some(b) => {
+                self.at += 4;
+                f32::from_le_bytes([b[0], b[1], b[2], b[3]])
+            }
+            None => self.fail(),
+        }
+    }
+
+    fn bool(&mut self) -> bool {
+        match self.byte() {
+            0 => false,
+            1 => true,
+            _ => self.fail(),
+        }
+    }
+
+    fn plane(&mut self) -> Plane {
+        match self.u32() {
+            0 => Plane::Xy,
+            1 => Plane::Zx,
+            2 => Plane::Yz,
+            _ => {
+                self.fail::<()>();
+                Plane::Xy
+            }
+        }
+    }
+
+    fn aux(&mut self) -> Aux {
+        match self.u32() {
+            0 => Aux::SpindleOff,
+            1 => Aux::SpindleCw(self.u32()),
+            2 => Aux::SpindleCcw(self.u32()),
+            3 => Aux::Mist,
+            4 => Aux::Flood,
+            5 => Aux::CoolantOff,
+            6 => Aux::ToolChange(self.u32()),
+            7 => Aux::Pause(self.bool()),
+            _ => {
+                self.fail::<()>();
+                Aux::SpindleOff
+            }
+        }
+    }
+
+    fn motion(&mut self) -> Motion {
+        match self.u32() {
+            0 => Motion::Rapid,
+            1 => Motion::Linear,
+            2 => Motion::Arc {
+                center: self.i64s(),
+                plane: self.plane(),
+                clockwise: self.bool(),
+                turns: self.u16(),
+            },
+            3 => Motion::Dwell(self.u32()),
+            4 => Motion::Aux(self.aux()),
+            _ => {
+                self.fail::<()>();
+                Motion::Rapid
+            }
+        }
+    }
+
+    fn shape(&mut self) -> crate::geometry::Shape {
+        use crate::geometry::Shape;
+        match self.u32() {
+            0 => Shape::Line { unit: self.i64s() },
+            1 => Shape::Arc {
+                plane: self.plane(),
+                center: self.i64s(),
+                r0: self.i64(),
+                dr: self.i64(),
+                phi0: self.u64(),
+                sweep: self.i128(),
+                phi_rate: self.i128(),
+                r_rate: self.i64(),
+                unit: self.i64s(),
+            },
+            2 => Shape::Point,
+            _ => {
+                self.fail::<()>();
+                Shape::Point
+            }
+        }
+    }
+}
+
+/// Decodes a [`HostMsg::Block`] message (a frame's message bytes) without serde, whose
+/// generic code moves the 250-byte message around several times on its way out: `None`
+/// when `message` is not a block message (decode it with `postcard::from_bytes`),
+/// else the block, or `FrameError::Message` exactly where `postcard::from_bytes`
+/// fails (tested).
+pub fn decode_block(message: &[u8]) -> Option<Result<PlannedBlock, FrameError>> {
+    let mut c = Cursor {
+        bytes: message,
+        at: 0,
+        bad: false,
+    };
+    if c.u32() != HOST_MSG_BLOCK || c.bad {
+        return None;
+    }
+    let block = Block {
+        line: c.u32(),
+        motion: c.motion(),
+        target: c.i64s(),
+        feed: c.i64(),
+        tolerance_nm: c.u32(),
+    };
+    let plan = Plan {
+        length: c.i64(),
+        shape: c.shape(),
+        v_limit: c.f32(),
+        accel: c.f32(),
+        entry: c.f32(),
+        stop: c.bool(),
+    };
+    if c.bad {
+        return Some(Err(FrameError::Message));
+    }
+    Some(Ok(PlannedBlock { block, plan }))
 }
 
 /// Splits a byte stream into frames at 0x00 delimiters. A frame longer than
@@ -496,6 +959,143 @@ impl FrameReader {
     }
 }
 
+/// A frame read by [`FrameDecoder::feed`]: its sequence number and message bytes, or
+/// why it was refused.
+pub type Frame<'a> = Result<(u16, &'a [u8]), FrameError>;
+
+/// Reads frames off a byte stream in one pass: each byte is COBS-decoded into the
+/// frame's body and added to its CRC as it arrives (the controller's receive path: no
+/// copy of the encoded frame, no second and third pass over it). Accepts and refuses
+/// exactly what [`FrameReader`] then [`decode_frame`] accept and refuse (tested): a
+/// body longer than [`MAX_BODY`] is refused, and so is every frame longer than
+/// [`MAX_FRAME`], whose body is always longer.
+#[derive(Debug)]
+pub struct FrameDecoder {
+    body: [u8; MAX_BODY],
+    /// Body bytes decoded so far.
+    len: usize,
+    /// Data bytes still to come in the current COBS block (0: a code byte is next).
+    left: u8,
+    /// The current COBS block ends with a zero (its code is below 0xFF), written when
+    /// the next block starts.
+    zero: bool,
+    /// A byte other than the delimiter since the last delimiter.
+    started: bool,
+    /// The body outgrew [`MAX_BODY`].
+    overflow: bool,
+    /// CRC register over the body so far ([`crate::crc::update`]).
+    crc: u32,
+}
+
+impl Default for FrameDecoder {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl FrameDecoder {
+    /// A decoder expecting the start of a frame.
+    pub const fn new() -> Self {
+        Self {
+            body: [0; MAX_BODY],
+            len: 0,
+            left: 0,
+            zero: false,
+            started: false,
+            overflow: false,
+            crc: crate::crc::INIT,
+        }
+    }
+
+    /// Takes bytes from the start of `bytes` up to and including the first delimiter
+    /// that ends a frame (empty frames are skipped), or all of them; returns how many
+    /// it took and, when a frame ended, its sequence number and message bytes (or why
+    /// it was refused).
+    #[inline(never)]
+    pub fn feed(&mut self, bytes: &[u8]) -> (usize, Option<Frame<'_>>) {
+        let (mut len, mut left, mut zero, mut crc) = (self.len, self.left, self.zero, self.crc);
+        let (mut started, mut overflow) = (self.started, self.overflow);
+        let mut at = 0;
+        let mut ended = false;
+        while at < bytes.len() {
+            if left == 0 {
+                // A code byte, or the delimiter.
+                let b = bytes[at];
+                at += 1;
+                if b == 0 {
+                    if started {
+                        ended = true;
+                        break;
+                    }
+                    continue;
+                }
+                started = true;
+                if core::mem::replace(&mut zero, b != 0xFF) {
+                    if len < MAX_BODY {
+                        self.body[len] = 0;
+                        len += 1;
+                        crc = crate::crc::update(crc, 0);
+                    } else {
+                        overflow = true;
+                    }
+                }
+                left = b - 1;
+                continue;
+            }
+            // A run of data bytes: copied and added to the CRC in one tight loop, up
+            // to the end of the block, of `bytes` or of the room left.
+            let run = (left as usize).min(bytes.len() - at);
+            let src = &bytes[at..at + run];
+            let room = MAX_BODY - len;
+            let dst = &mut self.body[len..len + run.min(room)];
+            let mut n = 0;
+            for (d, &b) in dst.iter_mut().zip(src) {
+                if b == 0 {
+                    break;
+                }
+                *d = b;
+                crc = crate::crc::update(crc, b);
+                n += 1;
+            }
+            len += n;
+            if n < run && src[n] != 0 {
+                // No room for the rest of the run: skip it up to a delimiter.
+                overflow = true;
+                n += src[n..].iter().take_while(|&&b| b != 0).count();
+            }
+            at += n;
+            left -= n as u8;
+            if n < run {
+                // The delimiter, inside a block: a truncated frame.
+                at += 1;
+                ended = true;
+                break;
+            }
+        }
+        let taken = at;
+        if !ended {
+            (self.len, self.left, self.zero, self.crc) = (len, left, zero, crc);
+            (self.started, self.overflow) = (started, overflow);
+            return (taken, None);
+        }
+        (self.len, self.left, self.zero, self.crc) = (0, 0, false, crate::crc::INIT);
+        (self.started, self.overflow) = (false, false);
+        let result = if overflow || left != 0 {
+            Err(FrameError::Cobs)
+        } else if len < 6 {
+            Err(FrameError::Short)
+        } else if crc != crate::crc::RESIDUE {
+            Err(FrameError::Crc)
+        } else {
+            Ok((
+                u16::from_le_bytes([self.body[0], self.body[1]]),
+                &self.body[2..len - 4],
+            ))
+        };
+        (taken, Some(result))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -534,6 +1134,380 @@ mod tests {
                 stop: true,
             },
         })
+    }
+
+    /// What [`FrameReader`] then [`decode_body`] make of `stream`: per frame, its
+    /// sequence number and message bytes, or `None` when refused.
+    fn read_two_pass(stream: &[u8]) -> Vec<Option<(u16, Vec<u8>)>> {
+        let mut reader = FrameReader::new();
+        let mut out = Vec::new();
+        for &b in stream {
+            match reader.push(b) {
+                Pushed::Pending => {}
+                Pushed::Overlong => out.push(None),
+                Pushed::Frame(f) => {
+                    let mut body = [0u8; MAX_BODY];
+                    out.push(decode_body(f, &mut body).ok().map(|(s, m)| (s, m.to_vec())));
+                }
+            }
+        }
+        out
+    }
+
+    /// What [`FrameDecoder`] makes of `stream` fed in pieces of `chunk` bytes.
+    fn read_one_pass(stream: &[u8], chunk: usize) -> Vec<Option<(u16, Vec<u8>)>> {
+        let mut dec = FrameDecoder::new();
+        let mut out = Vec::new();
+        for piece in stream.chunks(chunk.max(1)) {
+            let mut rest = piece;
+            while !rest.is_empty() {
+                let (n, frame) = dec.feed(rest);
+                rest = &rest[n..];
+                if let Some(f) = frame {
+                    out.push(f.ok().map(|(s, m)| (s, m.to_vec())));
+                }
+            }
+        }
+        out
+    }
+
+    /// A frame of `message` bytes with sequence number `seq`, delimiter included.
+    fn raw_frame(seq: u16, message: &[u8]) -> Vec<u8> {
+        let mut body = seq.to_le_bytes().to_vec();
+        body.extend_from_slice(message);
+        body.extend_from_slice(&crate::crc::crc32(&body).to_le_bytes());
+        let mut enc = vec![0u8; crate::cobs::max_encoded_len(body.len())];
+        let n = crate::cobs::encode(&body, &mut enc).unwrap();
+        enc.truncate(n);
+        enc.push(0);
+        enc
+    }
+
+    #[test]
+    fn the_one_pass_decoder_agrees_with_the_reader_on_streams_of_damaged_frames() {
+        let mut x = 0x9E37_79B9u32;
+        let mut rnd = move |n: u32| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x % n
+        };
+        let (mut frames, mut refused) = (0, 0);
+        for _ in 0..400 {
+            let mut stream = Vec::new();
+            for _ in 0..rnd(12) + 1 {
+                let len = match rnd(8) {
+                    0 => rnd(4) as usize,
+                    1 => MAX_BODY - 6 + rnd(5) as usize, // at and past the limit
+                    2 => 250 + rnd(10) as usize,         // around a 254-byte COBS block
+                    _ => rnd(200) as usize,
+                };
+                // One byte in `every` is a zero (none with 0: runs of 254 and more).
+                let every = [0, 2, 4, 40][rnd(4) as usize];
+                let message: Vec<u8> = (0..len)
+                    .map(|_| {
+                        if every > 0 && rnd(every) == 0 {
+                            0
+                        } else {
+                            rnd(255) as u8 + 1
+                        }
+                    })
+                    .collect();
+                let mut f = raw_frame(rnd(65536) as u16, &message);
+                match rnd(10) {
+                    0 => {
+                        let i = rnd(f.len() as u32) as usize;
+                        f[i] ^= 1 << rnd(8); // may become or stop being a delimiter
+                    }
+                    1 => f.truncate(rnd(f.len() as u32) as usize), // runs into the next
+                    2 => f.insert(0, 0),                           // an empty frame
+                    3 => f = (0..rnd(500)).map(|_| rnd(255) as u8 + 1).collect(), // garbage
+                    4 => f.splice(0..0, vec![0xFF; 300]).for_each(drop), // overlong
+                    _ => {}
+                }
+                stream.extend(f);
+            }
+            let want = read_two_pass(&stream);
+            frames += want.iter().filter(|f| f.is_some()).count();
+            refused += want.iter().filter(|f| f.is_none()).count();
+            for chunk in [1, 7, 64, stream.len()] {
+                assert_eq!(read_one_pass(&stream, chunk), want, "stream {stream:02x?}");
+            }
+        }
+        assert!(
+            frames > 1000 && refused > 500,
+            "{frames} good, {refused} refused"
+        );
+    }
+
+    /// `decode_block`, then `HostMsgOf<NotBlock>` for what is not a block, against
+    /// `postcard::from_bytes::<HostMsg>` on `message`.
+    fn check_block_decoder(message: &[u8]) -> bool {
+        let by_serde = postcard::from_bytes::<HostMsg>(message);
+        match (decode_block(message), by_serde) {
+            (None, Ok(HostMsg::Block(_))) => panic!("a block missed: {message:02x?}"),
+            (None, want) => {
+                let got = postcard::from_bytes::<HostMsgOf<NotBlock>>(message);
+                let (mut a, mut b) = ([0u8; MAX_BODY], [0u8; MAX_BODY]);
+                match (got, want) {
+                    (Ok(got), Ok(want)) => assert_eq!(
+                        postcard::to_slice(&got, &mut a).unwrap(),
+                        postcard::to_slice(&want, &mut b).unwrap(),
+                        "{message:02x?}"
+                    ),
+                    (Err(_), Err(_)) => {}
+                    (got, want) => panic!("{message:02x?}: decoded {got:?}, postcard {want:?}"),
+                }
+                false
+            }
+            (Some(Err(_)), Err(_)) => false,
+            (Some(Ok(got)), Ok(HostMsg::Block(want))) => {
+                // Compared through their encoding: the same bits (NaNs included).
+                let (mut a, mut b) = ([0u8; MAX_BODY], [0u8; MAX_BODY]);
+                assert_eq!(
+                    postcard::to_slice(&got, &mut a).unwrap(),
+                    postcard::to_slice(&want, &mut b).unwrap(),
+                    "{message:02x?}"
+                );
+                true
+            }
+            (got, want) => panic!("{message:02x?}: decoded {got:?}, postcard {want:?}"),
+        }
+    }
+
+    #[test]
+    fn blocks_decode_by_hand_exactly_as_postcard_decodes_them() {
+        let mut x = 0x2545_F491u32;
+        let mut rnd = move |n: u32| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x % n
+        };
+        let wide = |r: &mut dyn FnMut(u32) -> u32| -> i64 {
+            let v = ((r(1 << 16) as i64) << 48) ^ ((r(1 << 24) as i64) << 24) ^ r(1 << 24) as i64;
+            v >> r(64)
+        };
+        let mut decoded = 0;
+        for k in 0..3000 {
+            let mut w = || wide(&mut rnd);
+            let motion = match k % 9 {
+                0 => Motion::Rapid,
+                1 => Motion::Dwell(w() as u32),
+                2 => Motion::Aux(Aux::Pause(k % 2 == 0)),
+                3 => Motion::Aux(Aux::SpindleCcw(w() as u32)),
+                4 | 5 => Motion::Arc {
+                    center: [w(), w()],
+                    plane: [Plane::Xy, Plane::Zx, Plane::Yz][k % 3],
+                    clockwise: k % 2 == 1,
+                    turns: w() as u16,
+                },
+                _ => Motion::Linear,
+            };
+            let shape = match k % 5 {
+                0 => crate::geometry::Shape::Point,
+                1 | 2 => crate::geometry::Shape::Arc {
+                    plane: [Plane::Xy, Plane::Zx, Plane::Yz][k % 3],
+                    center: [w(), w()],
+                    r0: w(),
+                    dr: w(),
+                    phi0: w() as u64,
+                    sweep: (w() as i128) << (k % 60),
+                    phi_rate: ((w() as i128) << 64) ^ w() as i128,
+                    r_rate: w(),
+                    unit: [w(), w(), w(), w(), w(), w()],
+                },
+                _ => crate::geometry::Shape::Line {
+                    unit: [w(), w(), w(), w(), w(), w()],
+                },
+            };
+            let msg = HostMsg::Block(PlannedBlock {
+                block: Block {
+                    line: w() as u32,
+                    motion,
+                    target: [w(), w(), w(), w(), w(), w()],
+                    feed: w(),
+                    tolerance_nm: w() as u32,
+                },
+                plan: Plan {
+                    length: w(),
+                    shape,
+                    v_limit: f32::from_bits(w() as u32),
+                    accel: w() as f32,
+                    entry: 1.5,
+                    stop: k % 2 == 0,
+                },
+            });
+            let mut buf = [0u8; MAX_BODY];
+            let n = postcard::to_slice(&msg, &mut buf).unwrap().len();
+            let good = &buf[..n];
+            assert!(check_block_decoder(good));
+            // Cut short anywhere, with trailing bytes, and damaged.
+            for cut in 0..n {
+                check_block_decoder(&good[..cut]);
+            }
+            let mut longer = good.to_vec();
+            longer.extend([0xFF, 0x00]);
+            assert!(check_block_decoder(&longer));
+            for _ in 0..40 {
+                let mut bad = good.to_vec();
+                for _ in 0..rnd(3) + 1 {
+                    let i = rnd(n as u32) as usize;
+                    match rnd(6) {
+                        0 => bad[i] = 0xFF,
+                        1 => bad[i] = 0x80,
+                        2 => bad.insert(i, 0x80), // a longer (non-canonical) varint
+                        3 => bad[i] = rnd(4) as u8,
+                        _ => bad[i] ^= 1 << rnd(8),
+                    }
+                }
+                decoded += check_block_decoder(&bad) as u32;
+            }
+        }
+        // Every value of every byte of the widest block there is (varints at their
+        // longest, where postcard checks the last byte's bits).
+        let mut buf = [0u8; MAX_BODY];
+        let good = postcard::to_slice(&sample_block(), &mut buf)
+            .unwrap()
+            .to_vec();
+        for i in 0..good.len() {
+            for v in 0..=255 {
+                let mut m = good.clone();
+                m[i] = v;
+                check_block_decoder(&m);
+            }
+        }
+        // Other messages are left to postcard, as `HostMsgOf<NotBlock>`.
+        for m in [
+            HostMsg::StatusRequest,
+            HostMsg::Control {
+                id: 2,
+                cmd: Control::FeedOverride(7),
+            },
+            HostMsg::Control {
+                id: 4,
+                cmd: match sample_block() {
+                    HostMsg::Block(b) => Control::Jog(b),
+                    _ => unreachable!(),
+                },
+            },
+            HostMsg::Hello {
+                version: PROTOCOL_VERSION,
+                machine: 0xDEAD_BEEF,
+            },
+            HostMsg::Machine {
+                id: 3,
+                offset: 64,
+                total: 300,
+                crc: 9,
+                data: heapless::Vec::from_slice(&[1, 0, 2]).unwrap(),
+            },
+        ] {
+            let mut buf = [0u8; MAX_BODY];
+            let good = postcard::to_slice(&m, &mut buf).unwrap().to_vec();
+            assert!(decode_block(&good).is_none());
+            let got: HostMsgOf<NotBlock> = postcard::from_bytes(&good).unwrap();
+            assert_eq!(format!("{got:?}"), format!("{m:?}"));
+            for i in 0..good.len() {
+                for v in 0..=255 {
+                    let mut m = good.clone();
+                    m[i] = v;
+                    check_block_decoder(&m);
+                }
+            }
+        }
+        assert!(decoded > 10_000, "{decoded} damaged messages still decoded");
+    }
+
+    #[test]
+    fn acks_and_statuses_encode_by_hand_exactly_as_postcard_encodes_them() {
+        let mut x = 0x1357_9BDFu32;
+        let mut rnd = move |n: u32| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x % n
+        };
+        let mut wide = || {
+            let v =
+                ((rnd(1 << 16) as i64) << 48) ^ ((rnd(1 << 24) as i64) << 24) ^ rnd(1 << 24) as i64;
+            v >> rnd(64)
+        };
+        let (mut body, mut want, mut got) = ([0u8; MAX_BODY], [0u8; MAX_FRAME], [0u8; MAX_FRAME]);
+        let causes = [
+            AlarmCause::Unreachable,
+            AlarmCause::JointLimit,
+            AlarmCause::LinkLoss,
+            AlarmCause::HomingFailed,
+        ];
+        let states = [State::Idle, State::Running, State::Hold, State::EStop];
+        for k in 0..5000usize {
+            let seq = wide() as u16;
+            let (acked, free, ms) = (wide() as u16, wide() as u16, wide() as u32);
+            let msg = CtrlMsg::Ack {
+                seq: acked,
+                free_slots: free,
+                buffered_ms: ms,
+            };
+            let n = encode_frame(seq, &msg, &mut want).unwrap();
+            assert_eq!(n, encode_ack(seq, acked, free, ms, &mut body, &mut got));
+            assert_eq!(want[..n], got[..n], "{msg:?}");
+            let s = Status {
+                state: states[k % 4],
+                line: wide() as u32,
+                blocks_done: wide() as u32,
+                motion_ticks: wide() as u64,
+                pose: core::array::from_fn(|_| wide()),
+                joints: core::array::from_fn(|_| wide()),
+                speed: wide(),
+                buffered_ms: wide() as u32,
+                free_slots: wide() as u16,
+                feed_override: wide() as u16,
+                alarm: (k % 3 != 0).then(|| Alarm {
+                    cause: causes[k % 4],
+                    joint: wide() as u8,
+                    line: wide() as u32,
+                }),
+                homed: k % 2 == 0,
+            };
+            let msg = CtrlMsg::Status(s.clone());
+            let n = encode_frame(seq, &msg, &mut want).unwrap();
+            assert_eq!(n, encode_status(seq, &s, &mut body, &mut got));
+            assert_eq!(want[..n], got[..n], "{msg:?}");
+        }
+    }
+
+    #[test]
+    fn a_sealed_frame_is_the_cobs_encoding_of_its_body_and_crc() {
+        let mut x = 0x0BAD_F00Du32;
+        let mut rnd = move |n: u32| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x % n
+        };
+        for len in 0..=MAX_BODY - 4 {
+            for every in [0, 2, 40] {
+                // One byte in `every` is a zero (none with 0: runs of 254 and more).
+                let data: Vec<u8> = (0..len)
+                    .map(|_| {
+                        if every > 0 && rnd(every) == 0 {
+                            0
+                        } else {
+                            rnd(255) as u8 + 1
+                        }
+                    })
+                    .collect();
+                let mut framed = data.clone();
+                framed.extend_from_slice(&crate::crc::crc32(&data).to_le_bytes());
+                let mut want = vec![0u8; crate::cobs::max_encoded_len(framed.len())];
+                let m = crate::cobs::encode(&framed, &mut want).unwrap();
+                let mut out = [0u8; MAX_FRAME];
+                let n = seal(&data, &mut out);
+                assert_eq!(out[..n - 1], want[..m], "{len} bytes");
+                assert_eq!(out[n - 1], 0);
+            }
+        }
     }
 
     #[test]

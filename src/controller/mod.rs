@@ -41,8 +41,9 @@ use crate::interp::{Event, Executor};
 use crate::kinematics::{Joints, MachineKinematics, Unreachable};
 use crate::planner::{Planner, PushError};
 use crate::protocol::{
-    decode_frame, encode_frame_with, Alarm, AlarmCause, Aux, Control, CtrlMsg, FrameReader,
-    HostMsg, NakReason, Pushed, State, Status, MAX_BODY, MAX_FRAME, NO_JOINT, PROTOCOL_VERSION,
+    decode_block, encode_ack, encode_frame_with, encode_status, Alarm, AlarmCause, Aux, Control,
+    CtrlMsg, FrameDecoder, HostMsgOf, NakReason, NotBlock, PlannedBlock, State, Status, MAX_BODY,
+    MAX_FRAME, NO_JOINT, PROTOCOL_VERSION,
 };
 use crate::stepper::{StepScheduler, StepTrain};
 use crate::units::TICK_HZ;
@@ -53,7 +54,7 @@ pub use crate::planner::QUEUE_CAPACITY;
 /// Bytes of outgoing frames buffered between two `transmit` calls.
 pub const TX_CAPACITY: usize = 2048;
 /// Ticks between two unsolicited status messages (50 ms at 1 kHz). Freed queue slots
-/// are reported at once, by an `Ack` of the last block accepted, in the tick that
+/// are reported at once, by an `Ack` of the last block accepted, from the tick that
 /// frees them.
 pub const STATUS_EVERY_TICKS: u32 = 50;
 /// Ticks without a valid frame from the host, while moving, after which the link is
@@ -73,11 +74,10 @@ pub struct LinkStats {
 pub struct Controller {
     machine: MachineConfig,
     kin: MachineKinematics,
-    reader: FrameReader,
+    reader: FrameDecoder,
     tx: crate::ring::ByteRing<TX_CAPACITY>,
-    /// Scratch for frames: a decoded body, an encoded one and an encoded frame
-    /// (fields, so that no call clears them).
-    rx_body: [u8; MAX_BODY],
+    /// Scratch for outgoing frames: a body and its encoding (fields, so that no call
+    /// clears them).
     tx_body: [u8; MAX_BODY],
     tx_frame: [u8; MAX_FRAME],
     tx_seq: u16,
@@ -117,6 +117,12 @@ pub struct Controller {
     spindle: Aux,
     motion_ticks: u64,
     since_status: u32,
+    /// An `Ack` of the last block accepted is owed (acks are cumulative: one covers
+    /// every block accepted and every slot freed since the last); encoded by
+    /// `transmit`, not in the `receive` or `tick` that made it due.
+    ack_due: bool,
+    /// A status is owed (requested, or periodic); encoded by `transmit`.
+    status_due: bool,
     silent_ticks: u32,
     link_watch: bool,
     last: Inputs,
@@ -205,9 +211,8 @@ impl Controller {
         unsafe {
             at!((*p).machine).write(machine);
             at!((*p).kin).write(prep.kin);
-            at!((*p).reader).write(FrameReader::new());
+            at!((*p).reader).write(FrameDecoder::new());
             at!((*p).tx).write(crate::ring::ByteRing::default());
-            at!((*p).rx_body).write([0; MAX_BODY]);
             at!((*p).tx_body).write([0; MAX_BODY]);
             at!((*p).tx_frame).write([0; MAX_FRAME]);
             at!((*p).tx_seq).write(0);
@@ -241,6 +246,8 @@ impl Controller {
             at!((*p).spindle).write(Aux::SpindleOff);
             at!((*p).motion_ticks).write(0);
             at!((*p).since_status).write(0);
+            at!((*p).ack_due).write(false);
+            at!((*p).status_due).write(false);
             at!((*p).silent_ticks).write(0);
             at!((*p).link_watch).write(true);
             at!((*p).last).write(Inputs::default());
@@ -331,37 +338,88 @@ impl Controller {
 
     /// Feeds bytes received from the link.
     pub fn receive(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            let decoded = match self.reader.push(b) {
-                Pushed::Pending => continue,
-                Pushed::Overlong => None,
-                Pushed::Frame(f) => decode_frame::<HostMsg>(f, &mut self.rx_body).ok(),
+        let mut rest = bytes;
+        while !rest.is_empty() {
+            let (taken, frame) = self.reader.feed(rest);
+            rest = &rest[taken..];
+            let Some(frame) = frame else {
+                continue;
             };
-            match decoded {
-                Some((seq, msg)) => {
+            let Ok((seq, message)) = frame else {
+                self.corrupt();
+                continue;
+            };
+            // Messages are handled by reference: a block is some 250 bytes, not to be
+            // moved around; blocks, the bulk of the traffic, are decoded by hand.
+            match &decode_block(message) {
+                Some(Ok(planned)) => {
                     self.silent_ticks = 0;
-                    self.handle(seq, msg)
+                    self.block(seq, planned);
                 }
-                None => {
-                    self.stats.corrupt += 1;
-                    self.nak(NakReason::Corrupt);
-                }
+                Some(Err(_)) => self.corrupt(),
+                None => match &postcard::from_bytes::<HostMsgOf<NotBlock>>(message) {
+                    Ok(msg) => {
+                        self.silent_ticks = 0;
+                        self.handle(seq, msg);
+                    }
+                    Err(_) => self.corrupt(),
+                },
             }
         }
     }
 
-    /// Moves pending outgoing bytes into `out`; returns how many.
+    #[cold]
+    fn corrupt(&mut self) {
+        self.stats.corrupt += 1;
+        self.nak(NakReason::Corrupt);
+    }
+
+    /// Moves pending outgoing bytes into `out`; returns how many. The `Ack` and the
+    /// status owed are encoded first (one of each, however many blocks were accepted,
+    /// slots freed or statuses asked for since the last call).
     pub fn transmit(&mut self, out: &mut [u8]) -> usize {
+        self.send_due();
         self.tx.pop_into(out)
     }
 
+    /// Adds a frame to the transmit buffer, made by `encode` from the next sequence
+    /// number (into the buffer itself when the largest frame fits there in one piece,
+    /// else into scratch, then copied); false when it does not fit (nothing added).
+    fn push_frame(
+        &mut self,
+        encode: impl FnOnce(u16, &mut [u8; MAX_BODY], &mut [u8; MAX_FRAME]) -> Option<usize>,
+    ) -> bool {
+        let seq = self.tx_seq;
+        let added = match self.tx.tail_mut::<MAX_FRAME>() {
+            Some(room) => encode(seq, &mut self.tx_body, room).map(|n| self.tx.commit(n)),
+            None => encode(seq, &mut self.tx_body, &mut self.tx_frame)
+                .filter(|&n| self.tx.push_slice(&self.tx_frame[..n]))
+                .map(drop),
+        };
+        if added.is_some() {
+            self.tx_seq = seq.wrapping_add(1);
+        }
+        added.is_some()
+    }
+
     fn send(&mut self, msg: &CtrlMsg) {
-        let encoded = encode_frame_with(self.tx_seq, msg, &mut self.tx_body, &mut self.tx_frame);
-        match encoded {
-            Ok(n) if self.tx.push_slice(&self.tx_frame[..n]) => {
-                self.tx_seq = self.tx_seq.wrapping_add(1);
-            }
-            _ => self.stats.tx_dropped += 1,
+        if !self.push_frame(|seq, body, out| encode_frame_with(seq, msg, body, out).ok()) {
+            self.stats.tx_dropped += 1;
+        }
+    }
+
+    /// Encodes the `Ack` and the status owed; what does not fit stays owed.
+    fn send_due(&mut self) {
+        if self.ack_due {
+            let acked = self.expected_seq.wrapping_sub(1);
+            let (free, ms) = (self.planner.free() as u16, self.buffered_ms());
+            self.ack_due = !self
+                .push_frame(|seq, body, out| Some(encode_ack(seq, acked, free, ms, body, out)));
+        }
+        if self.status_due {
+            let s = self.status();
+            self.status_due =
+                !self.push_frame(|seq, body, out| Some(encode_status(seq, &s, body, out)));
         }
     }
 
@@ -377,17 +435,14 @@ impl Controller {
         (ticks * 1000.0 / TICK_HZ as f32).min(u32::MAX as f32) as u32
     }
 
-    fn ack(&mut self, seq: u16) {
-        self.send(&CtrlMsg::Ack {
-            seq,
-            free_slots: self.planner.free() as u16,
-            buffered_ms: self.buffered_ms(),
-        });
-    }
-
-    fn handle(&mut self, seq: u16, msg: HostMsg) {
-        match msg {
-            HostMsg::Hello { version, machine } => {
+    /// A message other than a block (rare: not inlined into `receive`, whose block
+    /// path it would slow down).
+    #[inline(never)]
+    fn handle(&mut self, seq: u16, msg: &HostMsgOf<NotBlock>) {
+        match *msg {
+            HostMsgOf::Hello { version, machine } => {
+                // What the old session is owed goes first, as it was owed.
+                self.send_due();
                 if version != PROTOCOL_VERSION {
                     self.nak(NakReason::Version);
                     return;
@@ -411,12 +466,12 @@ impl Controller {
                     machine: self.machine_id,
                 });
             }
-            HostMsg::Machine {
+            HostMsgOf::Machine {
                 id,
                 offset,
                 total,
                 crc,
-                data,
+                ref data,
             } => {
                 let fresh = self.last_control != Some(id);
                 self.last_control = Some(id);
@@ -432,61 +487,62 @@ impl Controller {
                 }
                 match self
                     .assembler
-                    .add(offset as usize, total as usize, crc, &data)
+                    .add(offset as usize, total as usize, crc, data)
                 {
                     Ok(None) => {}
-                    Ok(Some(config)) => self.load_machine(config),
+                    Ok(Some(config)) => {
+                        // What is owed goes out before the controller restarts.
+                        self.send_due();
+                        self.load_machine(config)
+                    }
                     Err(error) => self.send(&CtrlMsg::MachineRefused { error }),
                 }
             }
-            HostMsg::StatusRequest => {
-                let s = self.status();
-                self.send(&CtrlMsg::Status(s));
-            }
-            HostMsg::Control { id, cmd } => {
+            HostMsgOf::StatusRequest => self.status_due = true,
+            HostMsgOf::Control { id, cmd } => {
                 if self.last_control != Some(id) {
                     self.last_control = Some(id);
                     self.control(cmd);
                 }
                 self.send(&CtrlMsg::ControlAck { id });
             }
-            HostMsg::Block(planned) => {
-                if !self.session {
-                    self.nak(NakReason::NoSession);
-                    return;
-                }
-                let ahead = seq.wrapping_sub(self.expected_seq) as i16;
-                if ahead < 0 {
-                    // A duplicate of an accepted frame: acknowledge, do not execute.
-                    self.ack(self.expected_seq.wrapping_sub(1));
-                    return;
-                }
-                if ahead > 0 {
-                    self.nak(NakReason::Gap);
-                    return;
-                }
-                if self.mismatch {
-                    self.nak(NakReason::MachineMismatch);
-                    return;
-                }
-                if matches!(self.state, State::Alarm | State::EStop) {
-                    // Accepted and dropped: the job is over until the alarm is reset.
-                    self.expected_seq = seq.wrapping_add(1);
-                    self.ack(seq);
-                    return;
-                }
-                match self
-                    .planner
-                    .push_planned(&planned, &self.machine, &self.kin)
-                {
-                    Ok(()) => {
-                        self.expected_seq = seq.wrapping_add(1);
-                        self.ack(seq);
-                    }
-                    Err(PushError::Full) => self.nak(NakReason::QueueFull),
-                    Err(PushError::Geometry(_)) => self.nak(NakReason::BadBlock),
-                }
+            HostMsgOf::Block(never) => match never {},
+        }
+    }
+
+    /// A block message (sequenced).
+    fn block(&mut self, seq: u16, planned: &PlannedBlock) {
+        if !self.session {
+            self.nak(NakReason::NoSession);
+            return;
+        }
+        let ahead = seq.wrapping_sub(self.expected_seq) as i16;
+        if ahead < 0 {
+            // A duplicate of an accepted frame: acknowledge, do not execute.
+            self.ack_due = true;
+            return;
+        }
+        if ahead > 0 {
+            self.nak(NakReason::Gap);
+            return;
+        }
+        if self.mismatch {
+            self.nak(NakReason::MachineMismatch);
+            return;
+        }
+        if matches!(self.state, State::Alarm | State::EStop) {
+            // Accepted and dropped: the job is over until the alarm is reset.
+            self.expected_seq = seq.wrapping_add(1);
+            self.ack_due = true;
+            return;
+        }
+        match self.planner.push_planned(planned, &self.machine, &self.kin) {
+            Ok(()) => {
+                self.expected_seq = seq.wrapping_add(1);
+                self.ack_due = true;
             }
+            Err(PushError::Full) => self.nak(NakReason::QueueFull),
+            Err(PushError::Geometry(_)) => self.nak(NakReason::BadBlock),
         }
     }
 
@@ -703,14 +759,13 @@ impl Controller {
         if self.session && self.planner.len() < queued && self.state != State::Alarm {
             // Credits as slots free: the host refills within a tick or two instead of
             // waiting for the next status.
-            self.ack(self.expected_seq.wrapping_sub(1));
+            self.ack_due = true;
         }
         self.update_outputs();
         self.since_status += 1;
         if self.session && self.since_status >= STATUS_EVERY_TICKS {
             self.since_status = 0;
-            let s = self.status();
-            self.send(&CtrlMsg::Status(s));
+            self.status_due = true;
         }
         &self.out
     }
