@@ -274,8 +274,16 @@ pub unsafe extern "C" fn bench_period_init(out: *mut Period) {
         core::ptr::addr_of_mut!((*out).exec).write(pkmc::interp::Executor::new(home));
         core::ptr::addr_of_mut!((*out).machine).write(machine);
         let p = &mut *out;
-        for b in period_blocks(home) {
-            let _ = p.planner.push(&b, &p.machine, &p.kin);
+        // Planned as the host plans them, then queued as the controller queues them.
+        let blocks = period_blocks(home);
+        let mut plans = [pkmc::planner::PlanBlock::default(); 2];
+        let _ = pkmc::planner::plan_into(&blocks, home, &p.machine, &p.kin, 1, &mut plans);
+        for (b, plan) in blocks.iter().zip(&plans) {
+            let planned = pkmc::protocol::PlannedBlock {
+                block: *b,
+                plan: plan.plan(),
+            };
+            let _ = p.planner.push_planned(&planned, &p.machine, &p.kin);
         }
     }
 }
@@ -706,8 +714,15 @@ mod host {
         let kin = MachineKinematics::new(&machine);
         let mut planner = pkmc::planner::Planner::new(machine.home);
         let mut exec = pkmc::interp::Executor::new(machine.home);
-        for b in period_blocks(machine.home) {
-            let _ = planner.push(&b, &machine, &kin);
+        let blocks = period_blocks(machine.home);
+        let mut plans = [pkmc::planner::PlanBlock::default(); 2];
+        let _ = pkmc::planner::plan_into(&blocks, machine.home, &machine, &kin, 1, &mut plans);
+        for (b, plan) in blocks.iter().zip(&plans) {
+            let planned = pkmc::protocol::PlannedBlock {
+                block: *b,
+                plan: plan.plan(),
+            };
+            let _ = planner.push_planned(&planned, &machine, &kin);
         }
         for _ in 0..PERIOD_WARMUP {
             exec.tick(&mut planner);
