@@ -233,15 +233,7 @@ impl Lookahead {
         kin: &MachineKinematics,
     ) -> Result<PlanBlock, GeometryError> {
         let path = Path::new(block, &self.end)?;
-        let mut kind = match block.motion {
-            Motion::Rapid => Kind::Rapid,
-            Motion::Linear | Motion::Arc { .. } => Kind::Feed,
-            Motion::Dwell(ms) => Kind::Dwell(((ms as u64 * TICK_HZ as u64).div_ceil(1000)) as u32),
-            Motion::Aux(a) => Kind::Aux(a),
-        };
-        if path.length == 0 && matches!(kind, Kind::Rapid | Kind::Feed) {
-            kind = Kind::Dwell(0);
-        }
+        let mut kind = kind_of(block, &path);
         let feed = feed_of(block, &path, kind);
         // The fastest this block may be asked to go (feed override up to 200 %).
         let requested = feed * 2.0;
@@ -330,6 +322,20 @@ impl Lookahead {
             entry: corner,
         })
     }
+}
+
+/// What a block does, given its geometry (a move of length 0 is a dwell of 0 ticks).
+fn kind_of(block: &Block, path: &Path) -> Kind {
+    let kind = match block.motion {
+        Motion::Rapid => Kind::Rapid,
+        Motion::Linear | Motion::Arc { .. } => Kind::Feed,
+        Motion::Dwell(ms) => Kind::Dwell(((ms as u64 * TICK_HZ as u64).div_ceil(1000)) as u32),
+        Motion::Aux(a) => Kind::Aux(a),
+    };
+    if path.length == 0 && matches!(kind, Kind::Rapid | Kind::Feed) {
+        return Kind::Dwell(0);
+    }
+    kind
 }
 
 /// Requested feed of a block, nm/tick (∞ for rapids and blocks that do not move).
@@ -647,15 +653,7 @@ impl Planner {
         if !speeds_ok {
             return Err(PushError::Geometry(GeometryError::PlanMismatch));
         }
-        let mut kind = match block.motion {
-            Motion::Rapid => Kind::Rapid,
-            Motion::Linear | Motion::Arc { .. } => Kind::Feed,
-            Motion::Dwell(ms) => Kind::Dwell(((ms as u64 * TICK_HZ as u64).div_ceil(1000)) as u32),
-            Motion::Aux(a) => Kind::Aux(a),
-        };
-        if path.length == 0 && matches!(kind, Kind::Rapid | Kind::Feed) {
-            kind = Kind::Dwell(0);
-        }
+        let mut kind = kind_of(block, &path);
         if matches!(kind, Kind::Rapid | Kind::Feed) {
             let mut q = [0i64; MAX_JOINTS];
             if let Err(e) = kin.inverse_checked(&path.end, &machine.joints, &mut q) {
