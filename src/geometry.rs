@@ -153,12 +153,17 @@ impl Path {
                 if length < 0.5 {
                     return Ok(point);
                 }
+                // Direction per unit of the *stored* (whole-unit) length, so that
+                // start + u·s reaches the target at s = length and never passes it (a
+                // rotary axis turning thousands of n° per nm would overshoot its travel
+                // by the rounding of the length otherwise).
+                let length = libm::round(length);
                 let mut unit = [0i64; AXES];
                 for (u, d) in unit.iter_mut().zip(&delta) {
                     *u = unit_q44(*d, length);
                 }
                 Ok(Path {
-                    length: libm::round(length) as i64,
+                    length: length as i64,
                     rotary_only,
                     shape: Shape::Line { unit },
                     ..point
@@ -205,7 +210,8 @@ impl Path {
                 let length = libm::sqrt(planar * planar + helix * helix);
                 let mut unit = [0i64; AXES];
                 for (u, d) in unit.iter_mut().zip(&lin) {
-                    *u = unit_q44(*d, length);
+                    // Per unit of the stored length, as for lines.
+                    *u = unit_q44(*d, libm::round(length).max(1.0));
                 }
                 let turn_of = |rad: f64| rad / tau * TURN_Q64;
                 let len = (libm::round(length) as i64).max(1);

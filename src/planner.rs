@@ -653,7 +653,7 @@ impl Planner {
         if !speeds_ok {
             return Err(PushError::Geometry(GeometryError::PlanMismatch));
         }
-        let mut kind = kind_of(block, &path);
+        let mut kind = kind_of(block, path);
         if matches!(kind, Kind::Rapid | Kind::Feed) {
             let mut q = [0i64; MAX_JOINTS];
             if let Err(e) = kin.inverse_checked(&path.end, &machine.joints, &mut q) {

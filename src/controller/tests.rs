@@ -3,7 +3,10 @@
 
 use super::*;
 use crate::config::MAX_STEPPERS;
-use crate::protocol::{decode_frame, encode_frame, FrameReader, HostMsg, Pushed};
+use crate::protocol::{
+    decode_frame, encode_frame, AlarmCause, Control, CtrlMsg, FrameReader, HostMsg, NakReason,
+    Pushed, PROTOCOL_VERSION,
+};
 use crate::protocol::{Block, Motion};
 use crate::servo::Trip;
 

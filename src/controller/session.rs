@@ -1,0 +1,387 @@
+//! The controller's link session: bytes in (frames decoded, blocks queued, controls
+//! acted on, machines loaded), bytes out (acknowledgements, statuses and answers,
+//! encoded when the link drains them), and the session's sequence numbers.
+//!
+//! Invariants: the controller accepts exactly the next sequence number; an accepted
+//! block, a duplicate, or slots freed by a tick make one cumulative `Ack` owed, and a
+//! periodic or requested status makes a `Status` owed: `transmit` encodes what is owed,
+//! with the values of that moment, before draining, so neither `receive` nor `tick`
+//! encodes them; `Nak`, `HelloAck`, `ControlAck` and the machine answers go at once.
+
+use super::safety::UNHOMED;
+use super::{Controller, LinkStats, Prepared, QUEUE_CAPACITY};
+use crate::config::MachineConfig;
+use crate::planner::PushError;
+use crate::protocol::{
+    decode_block, encode_ack, encode_frame_with, encode_status, Alarm, AlarmCause, Control,
+    CtrlMsg, HostMsgOf, NakReason, NotBlock, PlannedBlock, State, Status, MAX_BODY, MAX_FRAME,
+    NO_JOINT, PROTOCOL_VERSION,
+};
+use crate::units::TICK_HZ;
+
+impl Controller {
+    /// Ticks since the last valid frame from the host.
+    pub fn link_silence_ticks(&self) -> u32 {
+        self.silent_ticks
+    }
+
+    /// Turns the link-loss watch off (or on): only for a controller fed in the same
+    /// process as its host, where there is no link to lose (`nc-send --check`).
+    pub fn set_link_watch(&mut self, on: bool) {
+        self.link_watch = on;
+    }
+
+    /// Link counters.
+    pub fn link_stats(&self) -> LinkStats {
+        self.stats
+    }
+
+    /// Feeds bytes received from the link.
+    pub fn receive(&mut self, bytes: &[u8]) {
+        let mut rest = bytes;
+        while !rest.is_empty() {
+            let (taken, frame) = self.reader.feed(rest);
+            rest = &rest[taken..];
+            let Some(frame) = frame else {
+                continue;
+            };
+            let Ok((seq, message)) = frame else {
+                self.corrupt();
+                continue;
+            };
+            // Messages are handled by reference: a block is some 250 bytes, not to be
+            // moved around; blocks, the bulk of the traffic, are decoded by hand.
+            match &decode_block(message) {
+                Some(Ok(planned)) => {
+                    self.silent_ticks = 0;
+                    self.block(seq, planned);
+                }
+                Some(Err(_)) => self.corrupt(),
+                None => match &postcard::from_bytes::<HostMsgOf<NotBlock>>(message) {
+                    Ok(msg) => {
+                        self.silent_ticks = 0;
+                        self.handle(seq, msg);
+                    }
+                    Err(_) => self.corrupt(),
+                },
+            }
+        }
+    }
+
+    #[cold]
+    pub(super) fn corrupt(&mut self) {
+        self.stats.corrupt += 1;
+        self.nak(NakReason::Corrupt);
+    }
+
+    /// Moves pending outgoing bytes into `out`; returns how many. The `Ack` and the
+    /// status owed are encoded first (one of each, however many blocks were accepted,
+    /// slots freed or statuses asked for since the last call).
+    pub fn transmit(&mut self, out: &mut [u8]) -> usize {
+        self.send_due();
+        self.tx.pop_into(out)
+    }
+
+    /// Adds a frame to the transmit buffer, made by `encode` from the next sequence
+    /// number (into the buffer itself when the largest frame fits there in one piece,
+    /// else into scratch, then copied); false when it does not fit (nothing added).
+    pub(super) fn push_frame(
+        &mut self,
+        encode: impl FnOnce(u16, &mut [u8; MAX_BODY], &mut [u8; MAX_FRAME]) -> Option<usize>,
+    ) -> bool {
+        let seq = self.tx_seq;
+        let added = match self.tx.tail_mut::<MAX_FRAME>() {
+            Some(room) => encode(seq, &mut self.tx_body, room).map(|n| self.tx.commit(n)),
+            None => encode(seq, &mut self.tx_body, &mut self.tx_frame)
+                .filter(|&n| self.tx.push_slice(&self.tx_frame[..n]))
+                .map(drop),
+        };
+        if added.is_some() {
+            self.tx_seq = seq.wrapping_add(1);
+        }
+        added.is_some()
+    }
+
+    pub(super) fn send(&mut self, msg: &CtrlMsg) {
+        if !self.push_frame(|seq, body, out| encode_frame_with(seq, msg, body, out).ok()) {
+            self.stats.tx_dropped += 1;
+        }
+    }
+
+    /// Encodes the `Ack` and the status owed; what does not fit stays owed.
+    pub(super) fn send_due(&mut self) {
+        if self.ack_due {
+            let acked = self.expected_seq.wrapping_sub(1);
+            let (free, ms) = (self.planner.free() as u16, self.buffered_ms());
+            self.ack_due = !self
+                .push_frame(|seq, body, out| Some(encode_ack(seq, acked, free, ms, body, out)));
+        }
+        if self.status_due {
+            let s = self.status();
+            self.status_due =
+                !self.push_frame(|seq, body, out| Some(encode_status(seq, &s, body, out)));
+        }
+    }
+
+    pub(super) fn nak(&mut self, reason: NakReason) {
+        self.send(&CtrlMsg::Nak {
+            expected: self.expected_seq,
+            reason,
+        });
+    }
+
+    pub(super) fn buffered_ms(&self) -> u32 {
+        let ticks = self.planner.buffered_ticks() + self.exec.remaining_ticks();
+        (ticks * 1000.0 / TICK_HZ as f32).min(u32::MAX as f32) as u32
+    }
+
+    /// A message other than a block (rare: not inlined into `receive`, whose block
+    /// path it would slow down).
+    #[inline(never)]
+    pub(super) fn handle(&mut self, seq: u16, msg: &HostMsgOf<NotBlock>) {
+        match *msg {
+            HostMsgOf::Hello { version, machine } => {
+                // What the old session is owed goes first, as it was owed.
+                self.send_due();
+                if version != PROTOCOL_VERSION {
+                    self.nak(NakReason::Version);
+                    return;
+                }
+                self.session = true;
+                self.expected_seq = seq.wrapping_add(1);
+                self.last_control = None;
+                self.exec.completed = 0;
+                self.motion_ticks = 0;
+                self.mismatch = machine != self.machine_id;
+                if self.mismatch {
+                    self.raise(Alarm {
+                        cause: AlarmCause::MachineMismatch,
+                        joint: NO_JOINT,
+                        line: 0,
+                    });
+                }
+                self.send(&CtrlMsg::HelloAck {
+                    version: PROTOCOL_VERSION,
+                    queue_capacity: QUEUE_CAPACITY as u16,
+                    machine: self.machine_id,
+                });
+            }
+            HostMsgOf::Machine {
+                id,
+                offset,
+                total,
+                crc,
+                ref data,
+            } => {
+                let fresh = self.last_control != Some(id);
+                self.last_control = Some(id);
+                self.send(&CtrlMsg::ControlAck { id });
+                if !fresh {
+                    return;
+                }
+                if self.has_work() {
+                    self.send(&CtrlMsg::MachineRefused {
+                        error: crate::store::StoreError::Busy,
+                    });
+                    return;
+                }
+                match self
+                    .assembler
+                    .add(offset as usize, total as usize, crc, data)
+                {
+                    Ok(None) => {}
+                    Ok(Some(config)) => {
+                        // What is owed goes out before the controller restarts.
+                        self.send_due();
+                        self.load_machine(config)
+                    }
+                    Err(error) => self.send(&CtrlMsg::MachineRefused { error }),
+                }
+            }
+            HostMsgOf::StatusRequest => self.status_due = true,
+            HostMsgOf::Control { id, cmd } => {
+                if self.last_control != Some(id) {
+                    self.last_control = Some(id);
+                    self.control(cmd);
+                }
+                self.send(&CtrlMsg::ControlAck { id });
+            }
+            HostMsgOf::Block(never) => match never {},
+        }
+    }
+
+    /// A block message (sequenced).
+    pub(super) fn block(&mut self, seq: u16, planned: &PlannedBlock) {
+        if !self.session {
+            self.nak(NakReason::NoSession);
+            return;
+        }
+        let ahead = seq.wrapping_sub(self.expected_seq) as i16;
+        if ahead < 0 {
+            // A duplicate of an accepted frame: acknowledge, do not execute.
+            self.ack_due = true;
+            return;
+        }
+        if ahead > 0 {
+            self.nak(NakReason::Gap);
+            return;
+        }
+        if self.mismatch {
+            self.nak(NakReason::MachineMismatch);
+            return;
+        }
+        if matches!(self.state, State::Alarm | State::EStop) {
+            // Accepted and dropped: the job is over until the alarm is reset.
+            self.expected_seq = seq.wrapping_add(1);
+            self.ack_due = true;
+            return;
+        }
+        match self.planner.push_planned(planned, &self.machine, &self.kin) {
+            Ok(()) => {
+                self.expected_seq = seq.wrapping_add(1);
+                self.ack_due = true;
+            }
+            Err(PushError::Full) => self.nak(NakReason::QueueFull),
+            Err(PushError::Geometry(_)) => self.nak(NakReason::BadBlock),
+        }
+    }
+
+    /// Adopts `config`: the controller restarts at its home pose, keeping the session.
+    /// Rebuilt in place (no second controller on the stack).
+    pub(super) fn load_machine(&mut self, config: MachineConfig) {
+        let prepared = match Prepared::of(&config) {
+            Ok(p) => p,
+            Err(e) => {
+                self.send(&CtrlMsg::MachineRefused {
+                    error: crate::store::StoreError::Invalid(e),
+                });
+                return;
+            }
+        };
+        let (tx_seq, expected_seq, last_control, stats) = (
+            self.tx_seq,
+            self.expected_seq,
+            self.last_control,
+            self.stats,
+        );
+        let mut tx = crate::ring::ByteRing::default();
+        core::mem::swap(&mut tx, &mut self.tx);
+        // SAFETY: `self` is a valid, aligned controller; `write` overwrites every field
+        // and nothing in it needs dropping.
+        unsafe { Self::write(self, config, &prepared) };
+        core::mem::swap(&mut tx, &mut self.tx);
+        (
+            self.tx_seq,
+            self.expected_seq,
+            self.last_control,
+            self.stats,
+        ) = (tx_seq, expected_seq, last_control, stats);
+        self.session = true;
+        self.store_pending = true;
+        self.send(&CtrlMsg::MachineLoaded {
+            machine: self.machine_id,
+        });
+    }
+
+    /// Identity of the machine configuration in force.
+    pub fn machine_id(&self) -> u32 {
+        self.machine_id
+    }
+
+    /// A configuration adopted from the host that the firmware should now write to
+    /// flash; returned once.
+    pub fn take_store_request(&mut self) -> Option<&MachineConfig> {
+        if core::mem::replace(&mut self.store_pending, false) {
+            Some(&self.machine)
+        } else {
+            None
+        }
+    }
+
+    pub(super) fn control(&mut self, cmd: Control) {
+        if self.mismatch && !matches!(cmd, Control::Stop | Control::Abort) {
+            return;
+        }
+        match cmd {
+            Control::Hold => {
+                if matches!(self.state, State::Running | State::Idle) {
+                    self.planner.hold = true;
+                    self.exec.replan(&mut self.planner);
+                    self.state = State::Hold;
+                }
+            }
+            Control::Resume => {
+                if self.state == State::Hold && !self.abort_pending {
+                    self.planner.hold = false;
+                    self.exec.paused = false;
+                    self.exec.replan(&mut self.planner);
+                    // A pause or hold with nothing after it (M0 then M2): idle at once.
+                    // Running with nothing to run would wait for a tick to turn idle,
+                    // and a tick comes only while there is work (`has_work`).
+                    self.state = if self.path_moving() {
+                        State::Running
+                    } else {
+                        State::Idle
+                    };
+                }
+            }
+            Control::Abort => {
+                if matches!(self.state, State::Running | State::Hold | State::Idle) {
+                    self.planner.hold = true;
+                    self.abort_pending = true;
+                    self.exec.replan(&mut self.planner);
+                    self.state = State::Hold;
+                } else if self.state == State::Homing {
+                    self.homer.cancel();
+                    self.locked = true;
+                    self.state = State::Alarm;
+                    self.alarm = Some(UNHOMED);
+                }
+            }
+            Control::AlarmReset => self.reset_alarm(),
+            Control::FeedOverride(p) => {
+                self.planner.feed_override = p.clamp(1, 200);
+                self.exec.replan(&mut self.planner);
+            }
+            Control::Jog(planned) => {
+                if self.state == State::Idle && !self.has_work() {
+                    // Refused (it does not start here, or is malformed): nothing moves,
+                    // and the host, which waits for the target, says so.
+                    let _ = self
+                        .planner
+                        .push_planned(&planned, &self.machine, &self.kin);
+                }
+            }
+            Control::Stop => {
+                if self.state == State::Homing {
+                    self.homer.cancel();
+                    self.locked = true;
+                }
+                self.raise(Alarm {
+                    cause: AlarmCause::Aborted,
+                    joint: NO_JOINT,
+                    line: self.exec.line,
+                })
+            }
+            Control::Home => self.home(),
+        }
+    }
+
+    /// A status snapshot.
+    pub fn status(&self) -> Status {
+        Status {
+            state: self.state,
+            line: self.exec.line,
+            blocks_done: self.exec.completed,
+            motion_ticks: self.motion_ticks,
+            pose: self.exec.pose,
+            joints: self.joints,
+            speed: ((self.exec.speed as i128 * TICK_HZ as i128) >> 32) as i64,
+            buffered_ms: self.buffered_ms(),
+            free_slots: self.planner.free() as u16,
+            feed_override: self.planner.feed_override,
+            alarm: self.alarm,
+            homed: self.homed,
+        }
+    }
+}
