@@ -140,16 +140,7 @@ pub fn compile_text(
     let program = crate::blocks::from_canon(&canon, start);
     let report = crate::preflight::check(&program.blocks, machine, start);
     if !report.findings.is_empty() {
-        let lines: Vec<String> = report
-            .findings
-            .iter()
-            .map(|f| {
-                format!(
-                    "{name}:{}: {} (at X{} Y{} Z{} A{} B{} C{})",
-                    f.line, f.what, f.at[0], f.at[1], f.at[2], f.at[3], f.at[4], f.at[5]
-                )
-            })
-            .collect();
+        let lines = findings_text(name, &report.findings);
         return Err(Failure::new(
             exit::PREFLIGHT,
             format!(
@@ -160,6 +151,42 @@ pub fn compile_text(
         ));
     }
     Ok(program.blocks)
+}
+
+/// The pre-flight findings as lines of text: a run of the same problem on consecutive
+/// NC lines (a stretch of a program out of travel, thousands of lines of CAM output)
+/// is one line naming its first and last line and how many, at its first pose.
+fn findings_text(name: &str, findings: &[crate::preflight::Finding]) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < findings.len() {
+        let f = &findings[i];
+        let mut j = i + 1;
+        while j < findings.len()
+            && findings[j].what == f.what
+            && findings[j].line <= findings[j - 1].line + 1
+        {
+            j += 1;
+        }
+        let at = format!(
+            "X{} Y{} Z{} A{} B{} C{}",
+            f.at[0], f.at[1], f.at[2], f.at[3], f.at[4], f.at[5]
+        );
+        let last = &findings[j - 1];
+        out.push(if j - i == 1 {
+            format!("{name}:{}: {} (at {at})", f.line, f.what)
+        } else {
+            format!(
+                "{name}:{}: {} (at {at}), and on every line to {name}:{} ({} lines)",
+                f.line,
+                f.what,
+                last.line,
+                j - i
+            )
+        });
+        i = j;
+    }
+    out
 }
 
 /// The axes `machine` has: those with limits in its `[axes]`. Any other axis has no

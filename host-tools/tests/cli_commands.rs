@@ -145,6 +145,29 @@ fn check_reports_a_program_error_with_its_line() {
 }
 
 #[test]
+fn a_stretch_out_of_travel_is_reported_once_with_its_first_and_last_line() {
+    let prog = tmp("stretch.ngc");
+    // Line 1 inside, lines 2-51 end beyond X's travel (100 mm), line 52 comes back
+    // from there (it starts outside too).
+    let mut text = String::from("G1 X10 F600\n");
+    for i in 0..50 {
+        text.push_str(&format!("G1 X{}\n", 110 + i));
+    }
+    text.push_str("G1 X20\n");
+    std::fs::write(&prog, text).unwrap();
+    let out = nc_send(&["--check", prog.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(3));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("stretch.ngc:2: joint q1 would leave its travel"),
+        "{err}"
+    );
+    assert!(err.contains("stretch.ngc:52 (51 lines)"), "{err}");
+    assert!(err.contains("51 pre-flight problem(s)"), "{err}");
+    assert!(err.lines().count() < 6, "one line for the stretch: {err}");
+}
+
+#[test]
 fn plots_are_written_as_svg_and_png() {
     let svg = tmp("square.svg");
     let png = tmp("square.png");
