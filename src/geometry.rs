@@ -101,13 +101,12 @@ pub enum GeometryError {
 /// host's own rounding is within 2).
 pub const PLAN_SLACK_UNITS: i64 = 8;
 
-/// Is `got` within [`PLAN_SLACK_UNITS`] of `want` on every axis, plus what rounding
-/// the length to a whole unit moves an axis of direction `unit` (Q44) by: |u|/2?
-fn near(got: &[i64; AXES], want: &[i64; AXES], unit: &[i64; AXES]) -> bool {
-    (0..AXES).all(|i| {
-        let slack = PLAN_SLACK_UNITS as u64 + (unit[i].unsigned_abs() >> 45);
-        got[i].wrapping_sub(want[i]).unsigned_abs() <= slack
-    })
+/// Is `got` within [`PLAN_SLACK_UNITS`] of `want` on every axis? (Directions are per
+/// unit of the stored whole-unit length, so a path reaches its target at s = length.)
+fn near(got: &[i64; AXES], want: &[i64; AXES]) -> bool {
+    got.iter()
+        .zip(want)
+        .all(|(g, w)| g.wrapping_sub(*w).unsigned_abs() <= PLAN_SLACK_UNITS as u64)
 }
 
 /// Does `rate` equal `(x << 16) / len` as [`Path::new`] rounds it (toward zero)?
@@ -294,7 +293,7 @@ impl Path {
             (Motion::Rapid | Motion::Linear, Shape::Point) if length == 0 && delta == [0; AXES] => {
                 Ok(())
             }
-            (Motion::Rapid | Motion::Linear, Shape::Line { unit }) => {
+            (Motion::Rapid | Motion::Linear, Shape::Line { .. }) => {
                 let (lin, rot) = (squares(0..3), squares(3..6));
                 let rotary_only = lin == 0;
                 let sq = if rotary_only { rot } else { lin };
@@ -311,7 +310,7 @@ impl Path {
                 self.shape = *shape;
                 let mut at = [0; AXES];
                 self.eval(length << 16, &mut at);
-                if near(&at, &end, unit) {
+                if near(&at, &end) {
                     Ok(())
                 } else {
                     bad
@@ -370,7 +369,7 @@ impl Path {
                 let (mut from, mut to) = ([0; AXES], [0; AXES]);
                 self.eval(0, &mut from);
                 self.eval(length << 16, &mut to);
-                if near(&from, start, &[0; AXES]) && near(&to, &end, unit) {
+                if near(&from, start) && near(&to, &end) {
                     Ok(())
                 } else {
                     bad

@@ -100,11 +100,6 @@ impl Recip {
         }
     }
 
-    /// The divisor.
-    pub const fn divisor(&self) -> u64 {
-        self.d
-    }
-
     /// ⌊n / d⌋ and n mod d, for n < d·2⁶⁴ (the quotient fits in 64 bits); larger
     /// numerators take the software division. Not inlined: one copy serves every
     /// joint (flash), at the cost of a call.

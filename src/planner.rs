@@ -529,8 +529,6 @@ pub struct Planner {
     pub feed_override: u16,
     /// Feed hold: every soft cap is 0.
     pub hold: bool,
-    /// Jerk-limitation window, ticks (1: none), for the controller's own motions.
-    pub smoothing: u32,
     /// Σ 2·a·S of the queued blocks, (nm/tick)² (see the module doc).
     budget: u64,
     /// Σ estimated duration of the queued blocks, ticks × 16.
@@ -563,7 +561,6 @@ impl Planner {
             at!((*p).end).write(pose);
             at!((*p).feed_override).write(100);
             at!((*p).hold).write(false);
-            at!((*p).smoothing).write(1);
             at!((*p).budget).write(0);
             at!((*p).estimate).write(0);
         }
@@ -591,10 +588,6 @@ impl Planner {
         self.budget -= b.budget();
         self.estimate -= b.estimate();
         Some(b)
-    }
-    /// Iterates the queue, front first.
-    pub fn iter(&self) -> impl Iterator<Item = &PlanBlock> {
-        self.queue.iter()
     }
 
     /// Drops every queued block; the next block starts at `pose`, at rest.

@@ -86,6 +86,12 @@ impl StepScheduler {
         }
     }
 
+    /// Joint `j`'s scale with its reciprocal: the controller's one copy, for its servo
+    /// targets too.
+    pub fn scale(&self, j: usize) -> &FastScale {
+        &self.fast[j]
+    }
+
     /// Steps emitted so far by joint `j` (its position in steps).
     pub fn steps(&self, j: usize) -> i64 {
         self.channels[j].emitted

@@ -49,7 +49,8 @@ impl Controller {
     /// Actuator reference of joint `j` (steps or encoder counts) for the position
     /// `q`, counts × 2^16.
     pub(super) fn actuator_q16(&self, j: usize, q: i64) -> i64 {
-        self.fast[j].steps_at_frac(q, SETPOINT_FRAC_BITS) + (self.offset[j] << SETPOINT_FRAC_BITS)
+        self.steps.scale(j).steps_at_frac(q, SETPOINT_FRAC_BITS)
+            + (self.offset[j] << SETPOINT_FRAC_BITS)
     }
 
     pub(super) fn update_servo_targets(&mut self) {

@@ -36,7 +36,7 @@ mod actuators;
 mod safety;
 mod session;
 
-use crate::config::{ConfigError, Drive, FastScale, MachineConfig, MAX_JOINTS, MAX_SERVOS};
+use crate::config::{ConfigError, Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS};
 use crate::homing::Homer;
 use crate::interp::{Event, Executor};
 use crate::kinematics::{Joints, MachineKinematics, Unreachable};
@@ -96,8 +96,6 @@ pub struct Controller {
     homer: Homer,
     /// Joint of each servo channel.
     servo_joint: [u8; MAX_SERVOS],
-    /// Each joint's scale, with its reciprocal (no division per tick).
-    fast: [FastScale; MAX_JOINTS],
     state: State,
     alarm: Option<Alarm>,
     /// Locked after a reset: neither homed nor unlocked.
@@ -133,7 +131,6 @@ struct Prepared {
     joints: Joints,
     steps: StepScheduler,
     servo_joint: [u8; MAX_SERVOS],
-    fast: [FastScale; MAX_JOINTS],
     machine_id: u32,
 }
 
@@ -153,16 +150,11 @@ impl Prepared {
                 servo_joint[channel as usize] = j as u8;
             }
         }
-        let mut fast = [crate::config::Scale::new(1, 1).fast(); MAX_JOINTS];
-        for (f, jc) in fast.iter_mut().zip(&machine.joints) {
-            *f = jc.scale.fast();
-        }
         Ok(Self {
             kin,
             steps: StepScheduler::new(&machine.joints, &joints),
             joints,
             servo_joint,
-            fast,
             machine_id: crate::store::identity(machine),
         })
     }
@@ -220,7 +212,6 @@ impl Controller {
             at!((*p).assembler).write(crate::store::Assembler::new());
             at!((*p).store_pending).write(false);
             Planner::init_at(at!((*p).planner), pose);
-            (*p).planner.smoothing = window;
             Executor::init_at(at!((*p).exec), pose);
             (*p).exec.set_smoothing(window);
             at!((*p).joints).write(prep.joints);
@@ -230,7 +221,6 @@ impl Controller {
             at!((*p).trains).write([StepTrain::default(); MAX_JOINTS]);
             at!((*p).homer).write(Homer::default());
             at!((*p).servo_joint).write(prep.servo_joint);
-            at!((*p).fast).write(prep.fast);
             at!((*p).state).write(State::Alarm);
             at!((*p).alarm).write(Some(UNHOMED));
             at!((*p).locked).write(true);
@@ -314,7 +304,6 @@ impl Controller {
     /// [`crate::interp`].
     pub fn set_smoothing(&mut self, window: u32) {
         self.exec.set_smoothing(window);
-        self.planner.smoothing = crate::interp::window_of(window);
     }
 
     /// One tick of path motion (also the stop after a fault).
@@ -373,7 +362,7 @@ impl Controller {
             for (j, jc) in self.machine.joints.iter().enumerate() {
                 if let Drive::Servo { channel } = jc.drive {
                     self.offset[j] = inputs.encoder_counts[channel as usize]
-                        - self.fast[j].steps_at(self.joints[j]);
+                        - self.steps.scale(j).steps_at(self.joints[j]);
                 }
             }
             self.out.servo_reset = true;
