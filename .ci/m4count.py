@@ -268,6 +268,12 @@ class M4:
         self.count = 0
         self.trace = []  # blocks of the current call, in order
         self.uc.hook_add(UC_HOOK_BLOCK, self._block)
+        # Debugging aid (M4COUNT_MEMCPY=1): who calls memcpy/memclr in the worst calls.
+        self.mem_watch = None
+        self.mem_calls = []
+        if os.environ.get("M4COUNT_MEMCPY"):
+            self.mem_watch = {a & ~1: n for n, (a, _) in self.symbols.items()
+                              if re.search(r"mem(cpy|clr|set|move)", n)}
         # Functions by address, for attributing blocks (Thumb bit cleared).
         funcs = sorted(((a & ~1, sz, demangle(n)) for n, (a, sz) in self.symbols.items()), key=lambda f: f[0])
         self.func_starts = [f[0] for f in funcs]
@@ -282,6 +288,10 @@ class M4:
             n = self._learn(uc, key)
         self.count += n
         self.trace.append(key)
+        if self.mem_watch is not None and address in self.mem_watch:
+            lr = uc.reg_read(A.UC_ARM_REG_LR) & ~1
+            self.mem_calls.append((self.mem_watch[address], self.function_of(lr), lr,
+                                   uc.reg_read(A.UC_ARM_REG_R2), uc.reg_read(A.UC_ARM_REG_R1)))
 
     def _learn(self, uc, key):
         """Instructions of a new block; notes LLVM's inline wide-division loop."""
@@ -334,6 +344,7 @@ class M4:
         self.uc.reg_write(A.UC_ARM_REG_LR, RET | 1)
         self.count = 0
         self.trace = []
+        self.mem_calls = []
         try:
             self.uc.emu_start(addr | 1, RET, count=MAX_STEPS)
         except UcError as e:
@@ -476,6 +487,7 @@ class Replay:
         self.period = (0, None)  # worst: (instructions, composition)
         self.lock = (0, None)  # longest single call: (instructions, kind)
         self.worst = {}  # kind -> (instructions, call index, profile)
+        self.worst_mem = {}  # kind -> memcpy/memclr calls (M4COUNT_MEMCPY only)
         self.executed = {"tick": set(), "receive": set(), "transmit": set()}  # blocks run
 
 
@@ -515,9 +527,9 @@ def replay(m4, name, machine, path, blocks, servo_period):
             m4.write_i64(IN_WORDS_A, call[1])
             m4.call("bench_ctrl_inputs", IN_WORDS_A, INPUTS)
             out_ptr, n = m4.call_raw("bench_ctrl_tick", CTRL, INPUTS)
-            trace = m4.trace
+            trace, mem_calls = m4.trace, m4.mem_calls
             m4.call("bench_ctrl_outputs", out_ptr, OUT_WORDS_A)
-            m4.trace = trace
+            m4.trace, m4.mem_calls = trace, mem_calls
             got = m4.read_i64(OUT_WORDS_A, OUTPUT_WORDS)
             if got != call[2]:
                 sys.exit(f"m4count: {name}: tick outputs (call {index}) differ from the host's:\n"
@@ -539,6 +551,8 @@ def replay(m4, name, machine, path, blocks, servo_period):
             r.lock = (n, what)
         if what != "transmit" and n > r.worst.get(what, (-1,))[0]:
             r.worst[what] = (n, index, m4.profile(m4.trace))
+            if m4.mem_watch is not None:
+                r.worst_mem[what] = list(m4.mem_calls)
         if what == "tick":
             servo = SERVO_PER_TICK * servo_period
             total = since["receive"] + since["transmit"] + n + servo
@@ -594,8 +608,12 @@ def report_whole_calls(m4, replays, servo_period):
     for r in replays:
         for kind in ("tick", "receive"):
             n, index, prof = r.worst[kind]
-            parts = [f"{100 * k / n:.0f}% {short(f, 48)}" for f, k in prof[:6]]
+            top = len(prof) if os.environ.get("M4COUNT_FULL") else 6
+            parts = [f"{100 * k / n:.0f}% {short(f, 48)}" + (f" ({k})" if top > 6 else "")
+                     for f, k in prof[:top]]
             print(f"  {r.name} worst {kind} {n} (call {index}): " + "; ".join(parts))
+            for m in getattr(r, "worst_mem", {}).get(kind, []):
+                print(f"      {m[0]} from {m[1]} @{m[2]:#x} r2={m[3]} r1={m[4]}")
     print()
     print("forbidden helpers executed in counted calls (soft-float f64, 64/128-bit division, software sqrt):")
     any_seen, kinds, programs = {}, {}, {}

@@ -53,9 +53,10 @@ pub enum Event {
     },
 }
 
+/// The executing block's state; the block itself stays in its queue slot
+/// ([`Planner::executing`]).
 #[derive(Clone, Copy, Debug)]
 struct Active {
-    block: PlanBlock,
     profile: Option<Profile>,
     /// Time into the profile, ticks Q32.
     t: i64,
@@ -111,6 +112,41 @@ struct Past {
     line: u32,
 }
 
+/// The last [`HISTORY`] blocks' paths, oldest first, written in place (a block's path
+/// is copied once, into its slot).
+#[derive(Clone, Debug)]
+struct History {
+    slots: [Past; HISTORY],
+    /// Slot of the oldest.
+    head: usize,
+    len: usize,
+}
+
+impl History {
+    fn clear(&mut self) {
+        self.head = 0;
+        self.len = 0;
+    }
+    fn get(&self, i: usize) -> &Past {
+        &self.slots[(self.head + i) % HISTORY]
+    }
+    fn pop_front(&mut self) {
+        if self.len > 0 {
+            self.head = (self.head + 1) % HISTORY;
+            self.len -= 1;
+        }
+    }
+    /// A slot for the newest (the oldest is forgotten when full).
+    fn push(&mut self) -> &mut Past {
+        if self.len == HISTORY {
+            self.pop_front();
+        }
+        let i = (self.head + self.len) % HISTORY;
+        self.len += 1;
+        &mut self.slots[i]
+    }
+}
+
 /// Moving average of the path distance over a window of 2ᵏ ticks.
 #[derive(Clone, Debug)]
 struct Smoothing {
@@ -119,7 +155,7 @@ struct Smoothing {
     head: usize,
     sum: i128,
     s: i64,
-    hist: heapless::Deque<Past, HISTORY>,
+    hist: History,
 }
 
 impl Executor {
@@ -159,7 +195,16 @@ impl Executor {
             at!((*f).head).write(0);
             at!((*f).sum).write(0);
             at!((*f).s).write(0);
-            at!((*f).hist).write(heapless::Deque::new());
+            let h = at!((*f).hist);
+            at!((*h).head).write(0);
+            at!((*h).len).write(0);
+            let slots = at!((*h).slots) as *mut Past;
+            for i in 0..HISTORY {
+                let past = slots.add(i);
+                at!((*past).start).write(0);
+                at!((*past).path).write(PlanBlock::default().path);
+                at!((*past).line).write(0);
+            }
         }
     }
 
@@ -242,19 +287,30 @@ impl Executor {
         }
     }
 
-    fn activate(&mut self, planner: &mut Planner, b: PlanBlock) -> Option<Event> {
+    /// Starts the planner's next block ([`Planner::start`], in place); blocks that do
+    /// not move are finished at once unless they wait (dwell).
+    fn activate(&mut self, planner: &mut Planner) -> Option<Event> {
+        if !planner.start() {
+            return None;
+        }
+        let b = planner.executing().expect("started above");
         self.line = b.line;
         match b.kind {
-            Kind::Unreachable(why) => Some(Event::Unreachable { line: b.line, why }),
+            Kind::Unreachable(why) => {
+                let line = b.line;
+                planner.finish();
+                Some(Event::Unreachable { line, why })
+            }
             Kind::Aux(aux) => {
+                let line = b.line;
+                planner.finish();
                 self.exit = 0.0;
                 self.completed += 1;
-                Some(Event::Aux { line: b.line, aux })
+                Some(Event::Aux { line, aux })
             }
             Kind::Dwell(n) => {
                 self.exit = 0.0;
                 self.active = Some(Active {
-                    block: b,
                     profile: None,
                     t: 0,
                     s_base: 0,
@@ -268,25 +324,19 @@ impl Executor {
                 let (p, got) = Profile::plan(
                     b.path.length << 16,
                     self.exit,
-                    planner.cap(&b),
+                    planner.cap(b),
                     target,
                     b.accel,
                 );
                 self.exit = got.exit;
                 self.block_start = self.s_raw;
                 if self.smoothing.log2 > 0 {
-                    let f = &mut self.smoothing;
-                    if f.hist.is_full() {
-                        f.hist.pop_front();
-                    }
-                    let _ = f.hist.push_back(Past {
-                        start: self.s_raw,
-                        path: b.path,
-                        line: b.line,
-                    });
+                    let past = self.smoothing.hist.push();
+                    past.start = self.s_raw;
+                    past.path = b.path;
+                    past.line = b.line;
                 }
                 self.active = Some(Active {
-                    block: b,
                     profile: Some(p),
                     t: 0,
                     s_base: 0,
@@ -304,20 +354,17 @@ impl Executor {
         let Some(a) = self.active.as_mut() else {
             return;
         };
-        let Some(p) = a.profile else {
+        let Some(p) = &a.profile else {
+            return;
+        };
+        let Some(b) = planner.executing() else {
             return;
         };
         let (s, v) = p.at(a.t);
         a.s_base += s;
-        let left = ((a.block.path.length << 16) - a.s_base).max(0);
+        let left = ((b.path.length << 16) - a.s_base).max(0);
         let target = planner.exit_target();
-        let (np, got) = Profile::plan(
-            left,
-            from_q32(v),
-            planner.cap(&a.block),
-            target,
-            a.block.accel,
-        );
+        let (np, got) = Profile::plan(left, from_q32(v), planner.cap(b), target, b.accel);
         a.profile = Some(np);
         a.t = 0;
         a.target = target;
@@ -356,10 +403,10 @@ impl Executor {
                 if at_rest_kind && !self.settled() {
                     break;
                 }
-                let Some(b) = planner.pop() else {
+                if planner.front().is_none() {
                     break;
-                };
-                if let Some(e) = self.activate(planner, b) {
+                }
+                if let Some(e) = self.activate(planner) {
                     event = Some(e);
                     if matches!(e, Event::Unreachable { .. }) {
                         break;
@@ -376,7 +423,7 @@ impl Executor {
                 }
             }
             let a = self.active.as_mut().expect("activated above");
-            match a.profile {
+            match &a.profile {
                 None => {
                     if a.dwell_left > 0 && budget > 0 {
                         a.dwell_left -= 1;
@@ -384,28 +431,34 @@ impl Executor {
                     }
                     if a.dwell_left == 0 {
                         self.completed += 1;
-                        self.pose = a.block.path.end;
+                        if let Some(b) = planner.executing() {
+                            self.pose = b.path.end;
+                        }
+                        planner.finish();
                         self.active = None;
                         continue;
                     }
                     break;
                 }
                 Some(p) => {
+                    let b = planner.executing().expect("a motion block is executing");
                     a.t += budget;
                     if p.t2 == HELD {
                         a.t = a.t.min(p.t1.saturating_add(TICK_Q32));
                     }
                     let d = p.duration();
                     if p.t2 != HELD && a.t >= d {
+                        let v1 = p.v1;
                         budget = a.t - d;
-                        self.s_raw = self.block_start + (a.block.path.length << 16);
+                        self.s_raw = self.block_start + (b.path.length << 16);
                         if self.smoothing.log2 == 0 {
-                            self.pose = a.block.path.end;
+                            self.pose = b.path.end;
                         }
+                        planner.finish();
                         self.completed += 1;
                         self.active = None;
                         if budget == 0 {
-                            self.speed = p.v1;
+                            self.speed = v1;
                             break;
                         }
                         continue;
@@ -413,7 +466,7 @@ impl Executor {
                     let (s, v) = p.at(a.t);
                     self.s_raw = self.block_start + a.s_base + s;
                     if self.smoothing.log2 == 0 {
-                        a.block.path.pose_at(a.s_base + s, &mut self.pose);
+                        b.path.pose_at(a.s_base + s, &mut self.pose);
                         self.speed = v;
                     }
                     break;
@@ -443,16 +496,15 @@ impl Executor {
         f.s = s;
         // The oldest sample in the window bounds what can still be needed.
         let oldest = f.ring[f.head];
-        while f.hist.len() >= 2 && f.hist.iter().nth(1).is_some_and(|p| p.start <= oldest) {
+        while f.hist.len >= 2 && f.hist.get(1).start <= oldest {
             f.hist.pop_front();
         }
-        if let Some(past) = f
-            .hist
-            .iter()
-            .rev()
-            .find(|p| p.start <= s)
-            .or(f.hist.front())
-        {
+        if f.hist.len > 0 {
+            let mut i = f.hist.len - 1;
+            while i > 0 && f.hist.get(i).start > s {
+                i -= 1;
+            }
+            let past = f.hist.get(i);
             past.path.pose_at(s - past.start, &mut self.pose);
             self.line = past.line;
         }

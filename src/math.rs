@@ -211,3 +211,76 @@ mod tests {
         }
     }
 }
+
+/// `x as i64` (truncation toward zero, saturating, NaN → 0), with the FPU's 32-bit
+/// conversion when the result fits (the 64-bit conversion is a library routine on the
+/// M4). Same bits as `x as i64`.
+#[inline]
+pub fn f32_to_i64(x: f32) -> i64 {
+    if x.abs() < 2_147_483_648.0 {
+        x as i32 as i64
+    } else {
+        x as i64
+    }
+}
+
+/// `x·2³²` as `i64` (truncation toward zero, saturating, NaN → 0), exactly as
+/// `(x * 2³²) as i64`, from two 32-bit hardware conversions when |x| < 2³¹: the
+/// integer part, then the fraction (exact in `f32`) scaled by 2³².
+#[inline]
+pub fn f32_to_q32(x: f32) -> i64 {
+    let m = x.abs();
+    if m < 2_147_483_648.0 {
+        let hi = m as u32;
+        let lo = ((m - hi as f32) * 4_294_967_296.0) as u32;
+        let r = ((hi as i64) << 32) | lo as i64;
+        if x < 0.0 {
+            -r
+        } else {
+            r
+        }
+    } else {
+        (x * 4_294_967_296.0) as i64
+    }
+}
+
+/// `v as f32` (round to nearest), with the FPU's 32-bit conversion when `v` fits.
+/// Same bits as `v as f32`.
+#[inline]
+pub fn i64_to_f32(v: i64) -> f32 {
+    if v as i32 as i64 == v {
+        v as i32 as f32
+    } else {
+        v as f32
+    }
+}
+
+#[cfg(test)]
+mod conversion_tests {
+    use super::*;
+
+    #[test]
+    fn the_fast_conversions_give_the_same_bits_as_the_casts() {
+        let mut x: u32 = 0x1234_5678;
+        let mut cases = vec![0.0f32, -0.0, 0.5, -0.5, 1.0, -1.0, 2.5e9, -2.5e9, 2_147_483_647.0,
+            -2_147_483_648.0, 1e-30, -1e-30, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 3.0e38];
+        for _ in 0..200_000 {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            cases.push(f32::from_bits(x));
+        }
+        for v in cases {
+            assert_eq!(f32_to_i64(v), v as i64, "{v:e}");
+            assert_eq!(f32_to_q32(v), (v * 4_294_967_296.0) as i64, "{v:e}");
+        }
+        let mut y: u64 = 0x9E37_79B9_7F4A_7C15;
+        for i in 0..200_000 {
+            y ^= y << 13;
+            y ^= y >> 7;
+            y ^= y << 17;
+            let v = (y as i64) >> (i % 64);
+            assert_eq!(i64_to_f32(v).to_bits(), (v as f32).to_bits(), "{v}");
+        }
+    }
+}

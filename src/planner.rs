@@ -49,7 +49,7 @@
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
 use crate::geometry::{GeometryError, Path, Shape};
 use crate::kinematics::{Kinematics, MachineKinematics, Unreachable};
-use crate::math::{fmax, fmin, sqrtf};
+use crate::math::{f32_to_i64, fmax, fmin, i64_to_f32, sqrtf};
 use crate::protocol::{Aux, Block, Motion, Plan, PlannedBlock};
 use crate::units::TICK_HZ;
 
@@ -109,7 +109,7 @@ pub struct PlanBlock {
 impl PlanBlock {
     /// Length in nm as `f32`.
     pub fn length(&self) -> f32 {
-        self.path.length as f32
+        i64_to_f32(self.path.length)
     }
 
     /// What the host streams for this block.
@@ -128,7 +128,7 @@ impl PlanBlock {
     /// move, or cannot be executed).
     fn budget(&self) -> u64 {
         match self.kind {
-            Kind::Rapid | Kind::Feed => (2.0 * self.accel * self.length()) as u64,
+            Kind::Rapid | Kind::Feed => f32_to_i64(2.0 * self.accel * self.length()).max(0) as u64,
             _ => 0,
         }
     }
@@ -141,7 +141,7 @@ impl PlanBlock {
             Kind::Rapid | Kind::Feed => {
                 let v = fmax(fmin(self.feed, self.v_limit), self.entry);
                 if v > 0.0 {
-                    (self.length() * 16.0 / v) as u64
+                    f32_to_i64(self.length() * 16.0 / v).max(0) as u64
                 } else {
                     0
                 }
@@ -533,6 +533,10 @@ pub struct Planner {
     budget: u64,
     /// Σ estimated duration of the queued blocks, ticks × 16.
     estimate: u64,
+    /// The front block is executing ([`Planner::start`]): it stays in its slot (no
+    /// copy of it is made) until [`Planner::finish`], but is no longer in the stop
+    /// budget or the estimate, and [`Planner::front`] is the block after it.
+    running: bool,
 }
 
 impl Planner {
@@ -563,14 +567,15 @@ impl Planner {
             at!((*p).hold).write(false);
             at!((*p).budget).write(0);
             at!((*p).estimate).write(0);
+            at!((*p).running).write(false);
         }
     }
 
-    /// Queued blocks.
+    /// Occupied slots (the executing block included).
     pub fn len(&self) -> usize {
         self.queue.len()
     }
-    /// No block queued?
+    /// No block queued or executing?
     pub fn is_empty(&self) -> bool {
         self.queue.is_empty()
     }
@@ -578,15 +583,49 @@ impl Planner {
     pub fn free(&self) -> usize {
         QUEUE_CAPACITY - self.queue.len()
     }
-    /// The next block, if any.
+    /// The next block to start, if any.
     pub fn front(&self) -> Option<&PlanBlock> {
-        self.queue.front()
+        self.queue.get(self.running as usize)
     }
-    /// Takes the next block.
-    pub fn pop(&mut self) -> Option<PlanBlock> {
-        let b = self.queue.pop_front()?;
+    /// The executing block, if one was started and not finished.
+    pub fn executing(&self) -> Option<&PlanBlock> {
+        if self.running {
+            self.queue.front()
+        } else {
+            None
+        }
+    }
+    /// Starts the next block in place: it leaves the stop budget and the estimate and
+    /// becomes [`Planner::executing`]. False when nothing is queued (or one is still
+    /// executing).
+    pub fn start(&mut self) -> bool {
+        if self.running {
+            return false;
+        }
+        let Some(b) = self.queue.front() else {
+            return false;
+        };
         self.budget -= b.budget();
         self.estimate -= b.estimate();
+        self.running = true;
+        true
+    }
+    /// Frees the executing block's slot.
+    pub fn finish(&mut self) {
+        if self.running {
+            self.running = false;
+            let _ = self.queue.pop_front();
+        }
+    }
+    /// Takes the next block whole (tests).
+    #[cfg(test)]
+    pub fn pop(&mut self) -> Option<PlanBlock> {
+        self.finish();
+        if !self.start() {
+            return None;
+        }
+        let b = *self.queue.front()?;
+        self.finish();
         Some(b)
     }
 
@@ -596,6 +635,7 @@ impl Planner {
         self.end = pose;
         self.budget = 0;
         self.estimate = 0;
+        self.running = false;
     }
 
     /// Soft speed cap of a block now (feed × override, 0 in a hold), nm/tick.
@@ -607,16 +647,16 @@ impl Planner {
     /// queue): the next block's planned entry and cap, and no faster than the machine
     /// can stop from within the queued blocks. 0 when nothing is queued. O(1).
     pub fn exit_target(&self) -> f32 {
-        let Some(next) = self.queue.front() else {
+        let Some(next) = self.front() else {
             return 0.0;
         };
-        let stop = sqrtf(self.budget as f32);
+        let stop = sqrtf(i64_to_f32(self.budget.min(i64::MAX as u64) as i64));
         fmin(fmin(next.entry, self.cap(next)), stop)
     }
 
     /// Total time of the queued motion, ticks (an estimate for flow control). O(1).
     pub fn buffered_ticks(&self) -> f32 {
-        self.estimate as f32 / 16.0
+        i64_to_f32(self.estimate.min(i64::MAX as u64) as i64) / 16.0
     }
 
     /// Queues a block the host planned, in O(1): checks its geometry against the block

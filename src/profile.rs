@@ -24,37 +24,40 @@
 //! per-tick speed differences of at most A·T (each tick's displacement is the integral
 //! of the speed over the tick), so the discrete motion keeps the limits too.
 
-use crate::math::{fmax, fmin, sqrtf};
+use crate::math::{f32_to_i64, f32_to_q32, fmax, fmin, i64_to_f32, sqrtf};
 
 /// One tick in Q32.32.
 pub const TICK_Q32: i64 = 1 << 32;
 /// A cruise that never ends: the block is held at rest (feed hold).
 pub const HELD: i64 = i64::MAX / 4;
 
-/// 2³², 2⁴⁰ and 2¹⁶ as `f32` (exact).
+/// 2³² and 2¹⁶ as `f32` (exact).
 const Q32F: f32 = 4_294_967_296.0;
-const Q40F: f32 = 1_099_511_627_776.0;
 const Q16F: f32 = 65_536.0;
 
 /// Converts a speed or time in `f32` to Q32.32 (saturating; NaN gives 0).
 pub fn to_q32(v: f32) -> i64 {
-    (v * Q32F) as i64
+    f32_to_q32(v)
 }
 
 /// Converts Q32.32 to `f32`.
 pub fn from_q32(v: i64) -> f32 {
-    v as f32 * (1.0 / Q32F)
+    i64_to_f32(v) * (1.0 / Q32F)
 }
 
 /// Converts an acceleration in `f32` to Q24.40 (saturating).
 pub fn to_q40(a: f32) -> i64 {
-    (a * Q40F) as i64
+    f32_to_q32(a * 256.0)
 }
 
 /// `v·t + a·t²/2` for Q32.32 `v` and `t` and Q24.40 `a`; result in nm Q16. Not
 /// inlined: the planner's fix-ups call it several times (flash).
 #[inline(never)]
 fn distance(v: i64, t: i64, a: i64) -> i64 {
+    if t == 0 {
+        // A phase that does not exist (a cruise block has two).
+        return 0;
+    }
     let vt = (v as i128 * t as i128) >> 48;
     let at = (a as i128 * t as i128) >> 40;
     let at2 = (at * t as i128) >> 49;
@@ -101,7 +104,7 @@ impl Profile {
     /// soon as possible and hold" when `v0` > 0.
     pub fn plan(length_q16: i64, v0: f32, v_max: f32, v1: f32, a: f32) -> (Profile, Achieved) {
         let length_q16 = length_q16.max(0);
-        let length = length_q16 as f32 * (1.0 / Q16F);
+        let length = i64_to_f32(length_q16) * (1.0 / Q16F);
         let a = fmax(a, 1e-12);
         let (v0, v_max) = (fmax(v0, 0.0), fmax(v_max, 0.0));
         let mut v1 = fmax(v1, 0.0);
@@ -186,7 +189,7 @@ impl Profile {
             if rem >= 0 {
                 break;
             }
-            let over = rem as f32 * (1.0 / Q16F);
+            let over = i64_to_f32(rem) * (1.0 / Q16F);
             if v1_q > 0 && t3 > 0 {
                 t3 = (t3 + to_q32(over / from_q32(v1_q))).max(0);
             } else if vc > 0 && t1 > 0 {
@@ -208,9 +211,9 @@ impl Profile {
         } else {
             // Ticks Q32 per nm at the cruise speed.
             let inv_vc = Q32F / from_q32(vc);
-            let est = (rem as f32 * (1.0 / Q16F) * inv_vc) as i64;
+            let est = f32_to_i64(i64_to_f32(rem) * (1.0 / Q16F) * inv_vc);
             let err = rem - ((vc as i128 * est as i128) >> 48) as i64;
-            (est + (err as f32 * (1.0 / Q16F) * inv_vc) as i64).max(0)
+            (est + f32_to_i64(i64_to_f32(err) * (1.0 / Q16F) * inv_vc)).max(0)
         };
         let p = Profile {
             v0: v0_q,
