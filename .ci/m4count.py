@@ -268,12 +268,13 @@ class M4:
         self.count = 0
         self.trace = []  # blocks of the current call, in order
         self.uc.hook_add(UC_HOOK_BLOCK, self._block)
-        # Debugging aid (M4COUNT_MEMCPY=1): who calls memcpy/memclr in the worst calls.
+        # Debugging aid (M4COUNT_WATCH=<regex of symbols>): who calls them in the worst
+        # calls, with r1 and r2 (memcpy/memclr: source or size, size or fill).
         self.mem_watch = None
         self.mem_calls = []
-        if os.environ.get("M4COUNT_MEMCPY"):
+        if os.environ.get("M4COUNT_WATCH"):
             self.mem_watch = {a & ~1: n for n, (a, _) in self.symbols.items()
-                              if re.search(r"mem(cpy|clr|set|move)", n)}
+                              if re.search(os.environ["M4COUNT_WATCH"], n)}
         # Functions by address, for attributing blocks (Thumb bit cleared).
         funcs = sorted(((a & ~1, sz, demangle(n)) for n, (a, sz) in self.symbols.items()), key=lambda f: f[0])
         self.func_starts = [f[0] for f in funcs]

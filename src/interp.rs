@@ -379,7 +379,14 @@ impl Executor {
             return;
         };
         let held = a.profile.is_none_or(|p| p.t2 == HELD);
-        if !held && !planner.hold && planner.exit_target() > a.target * 1.001 + 0.01 {
+        // A block that ends within this tick leaves as planned: the next one starts
+        // from that speed, profiled toward the new target (one profile per tick
+        // saved where blocks are shortest).
+        let ending = a
+            .profile
+            .as_ref()
+            .is_some_and(|p| p.duration() - a.t <= TICK_Q32);
+        if !held && !ending && !planner.hold && planner.exit_target() > a.target * 1.001 + 0.01 {
             self.replan(planner);
         }
     }

@@ -212,46 +212,59 @@ mod tests {
     }
 }
 
-/// `x as i64` (truncation toward zero, saturating, NaN → 0), with the FPU's 32-bit
-/// conversion when the result fits (the 64-bit conversion is a library routine on the
-/// M4). Same bits as `x as i64`.
+// Conversions between 64-bit integers and `f32`. The M4's FPU converts only 32-bit
+// integers; the 64-bit conversions are library routines of 30–60 instructions. These
+// give the same bits as the casts from one or two hardware conversions.
+
+/// `x as i64` (truncation toward zero, saturating, NaN → 0). Same bits as the cast.
 #[inline]
 pub fn f32_to_i64(x: f32) -> i64 {
-    if x.abs() < 2_147_483_648.0 {
-        x as i32 as i64
+    let m = x.abs();
+    let r = if m < 2_147_483_648.0 {
+        m as u32 as i64
+    } else if m < 9_223_372_036_854_775_808.0 {
+        // m ≥ 2³¹ has no fraction and at most 24 significant bits: its part above 2³²
+        // is exact in `f32`, and so is the rest.
+        let hi = (m * (1.0 / 4_294_967_296.0)) as u32;
+        let lo = (m - hi as f32 * 4_294_967_296.0) as u32;
+        ((hi as i64) << 32) | lo as i64
     } else {
-        x as i64
+        return x as i64;
+    };
+    if x < 0.0 {
+        -r
+    } else {
+        r
     }
 }
 
-/// `x·2³²` as `i64` (truncation toward zero, saturating, NaN → 0), exactly as
-/// `(x * 2³²) as i64`, from two 32-bit hardware conversions when |x| < 2³¹: the
-/// integer part, then the fraction (exact in `f32`) scaled by 2³².
+/// `(x·2³²) as i64` (the scaling is exact). Same bits as the cast.
 #[inline]
 pub fn f32_to_q32(x: f32) -> i64 {
-    let m = x.abs();
-    if m < 2_147_483_648.0 {
-        let hi = m as u32;
-        let lo = ((m - hi as f32) * 4_294_967_296.0) as u32;
-        let r = ((hi as i64) << 32) | lo as i64;
-        if x < 0.0 {
-            -r
-        } else {
-            r
-        }
-    } else {
-        (x * 4_294_967_296.0) as i64
-    }
+    f32_to_i64(x * 4_294_967_296.0)
 }
 
-/// `v as f32` (round to nearest), with the FPU's 32-bit conversion when `v` fits.
-/// Same bits as `v as f32`.
+/// `a as f32` (round to nearest, ties to even). Same bits as the cast: above 2³² the
+/// top 32 bits are converted with a sticky bit for the rest (which lies below the
+/// rounding position), then scaled by a power of two (exact).
+#[inline]
+pub fn u64_to_f32(a: u64) -> f32 {
+    if a >> 32 == 0 {
+        return a as u32 as f32;
+    }
+    let k = 32 - a.leading_zeros();
+    let m = (a >> k) as u32 | ((a & ((1u64 << k) - 1)) != 0) as u32;
+    m as f32 * f32::from_bits((127 + k) << 23)
+}
+
+/// `v as f32` (round to nearest, ties to even). Same bits as the cast.
 #[inline]
 pub fn i64_to_f32(v: i64) -> f32 {
-    if v as i32 as i64 == v {
-        v as i32 as f32
+    let f = u64_to_f32(v.unsigned_abs());
+    if v < 0 {
+        -f
     } else {
-        v as f32
+        f
     }
 }
 
@@ -262,9 +275,10 @@ mod conversion_tests {
     #[test]
     fn the_fast_conversions_give_the_same_bits_as_the_casts() {
         let mut x: u32 = 0x1234_5678;
-        let mut cases = vec![0.0f32, -0.0, 0.5, -0.5, 1.0, -1.0, 2.5e9, -2.5e9, 2_147_483_647.0,
-            -2_147_483_648.0, 1e-30, -1e-30, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 3.0e38];
-        for _ in 0..200_000 {
+        let mut cases = vec![0.0f32, -0.0, 0.5, -0.5, 1.0, -1.0, 2.5e9, -2.5e9, 2_147_483_648.0,
+            -2_147_483_648.0, 4_294_967_296.0, 9.223_372e18, -9.223_372e18, 1.5e19, -1.5e19,
+            1e-30, -1e-30, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 3.0e38];
+        for _ in 0..1_000_000 {
             x ^= x << 13;
             x ^= x >> 17;
             x ^= x << 5;
@@ -281,6 +295,8 @@ mod conversion_tests {
             y ^= y << 17;
             let v = (y as i64) >> (i % 64);
             assert_eq!(i64_to_f32(v).to_bits(), (v as f32).to_bits(), "{v}");
+            let u = y >> (i % 64);
+            assert_eq!(u64_to_f32(u).to_bits(), (u as f32).to_bits(), "{u}");
         }
     }
 }

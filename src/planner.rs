@@ -49,7 +49,7 @@
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
 use crate::geometry::{GeometryError, Path, Shape};
 use crate::kinematics::{Kinematics, MachineKinematics, Unreachable};
-use crate::math::{f32_to_i64, fmax, fmin, i64_to_f32, sqrtf};
+use crate::math::{f32_to_i64, fmax, fmin, i64_to_f32, sqrtf, u64_to_f32};
 use crate::protocol::{Aux, Block, Motion, Plan, PlannedBlock};
 use crate::units::TICK_HZ;
 
@@ -650,13 +650,13 @@ impl Planner {
         let Some(next) = self.front() else {
             return 0.0;
         };
-        let stop = sqrtf(i64_to_f32(self.budget.min(i64::MAX as u64) as i64));
+        let stop = sqrtf(u64_to_f32(self.budget));
         fmin(fmin(next.entry, self.cap(next)), stop)
     }
 
     /// Total time of the queued motion, ticks (an estimate for flow control). O(1).
     pub fn buffered_ticks(&self) -> f32 {
-        i64_to_f32(self.estimate.min(i64::MAX as u64) as i64) / 16.0
+        u64_to_f32(self.estimate) / 16.0
     }
 
     /// Queues a block the host planned, in O(1): checks its geometry against the block

@@ -59,8 +59,10 @@ fn distance(v: i64, t: i64, a: i64) -> i64 {
         return 0;
     }
     let vt = (v as i128 * t as i128) >> 48;
-    let at = (a as i128 * t as i128) >> 40;
-    let at2 = (at * t as i128) >> 49;
+    // a·t is a speed change in Q32 (it fits an i64 for any block), so both products
+    // are 64 × 64 → 128 bits.
+    let at = ((a as i128 * t as i128) >> 40) as i64;
+    let at2 = (at as i128 * t as i128) >> 49;
     (vt + at2) as i64
 }
 

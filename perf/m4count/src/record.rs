@@ -256,11 +256,16 @@ fn f(v: f64) -> String {
 }
 
 /// A sine along X, `amp` mm high, `wave` mm long, from `x0` over `len` mm of X at
-/// height `z`, in G1 segments of `seg` mm of path each (the last one shorter).
+/// height `z`, in G1 segments of `seg` mm of path each (the last one shorter), at F6000.
 fn sine(seg: f64, len: f64, x0: f64, z: f64, amp: f64, wave: f64) -> String {
+    sine_at(6000, seg, len, x0, z, amp, wave)
+}
+
+/// [`sine`] at feed `feed` mm/min.
+fn sine_at(feed: u32, seg: f64, len: f64, x0: f64, z: f64, amp: f64, wave: f64) -> String {
     let k = std::f64::consts::TAU / wave;
     let y = |x: f64| amp * (k * (x - x0)).sin();
-    let mut g = format!("G21 G90 G64\nG0 X{} Y0 Z{}\nF6000\n", f(x0), f(z));
+    let mut g = format!("G21 G90 G64\nG0 X{} Y0 Z{}\nF{feed}\n", f(x0), f(z));
     let mut x = x0;
     while x < x0 + len {
         // The step in X whose chord is `seg` long, to first order.
@@ -324,7 +329,7 @@ fn five_axis(n: usize, r: f64, z: f64, angles: impl Fn(f64) -> String) -> String
 }
 
 /// The measured programs, whole, on both machines: 0.05 mm, 1 mm and 2 mm G1
-/// segments along a sine (5 mm high, 40 mm long waves: 8 mm radius at the crests, which
+/// segments along a sine (and 0.01 mm at F3000 over 20 mm of X) (5 mm high, 40 mm long waves: 8 mm radius at the crests, which
 /// both machines take at or near F6000) at F6000, a chain of tangent
 /// G2/G3 arcs at F6000, and a five-axis circle with the table turning (H-4: A tilts the
 /// table 0–30° and back while C swings ±15°; hexapod: A and B tilt the platform ±8°,
@@ -343,6 +348,9 @@ pub fn programs() -> Vec<Program> {
             })
         };
         add("seg0.05mm", sine(0.05, SINE_MM, x0, z, 5.0, 40.0));
+        // Five blocks a tick: the densest case of the end-to-end test, over a fifth of
+        // the length (2 300 blocks, as many as the 0.05 mm program).
+        add("seg0.01mm_F3000", sine_at(3000, 0.01, SINE_MM / 5.0, x0, z, 5.0, 40.0));
         add("events", sine(0.05, SINE_MM, x0, z, 5.0, 40.0));
         add("seg1mm", sine(1.0, SINE_MM, x0, z, 5.0, 40.0));
         add("seg2mm", sine(2.0, SINE_MM, x0, z, 5.0, 40.0));
