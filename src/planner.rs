@@ -104,6 +104,9 @@ pub struct PlanBlock {
     pub corner: f32,
     /// Planned entry speed, nm/tick.
     pub entry: f32,
+    /// Its share of the controller's stop budget and of the buffered-time estimate
+    /// ([`PlanBlock::budget`], [`PlanBlock::estimate`]), formed once when queued.
+    shares: (u64, u64),
 }
 
 impl PlanBlock {
@@ -171,6 +174,7 @@ impl Default for PlanBlock {
             rho_in: 0.0,
             corner: 0.0,
             entry: 0.0,
+            shares: (0, 0),
         }
     }
 }
@@ -320,6 +324,7 @@ impl Lookahead {
             rho_in: rho,
             corner,
             entry: corner,
+            shares: (0, 0),
         })
     }
 }
@@ -605,8 +610,8 @@ impl Planner {
         let Some(b) = self.queue.front() else {
             return false;
         };
-        self.budget -= b.budget();
-        self.estimate -= b.estimate();
+        self.budget -= b.shares.0;
+        self.estimate -= b.shares.1;
         self.running = true;
         true
     }
@@ -716,10 +721,11 @@ impl Planner {
         Ok(())
     }
 
-    fn push_block(&mut self, b: PlanBlock) {
+    fn push_block(&mut self, mut b: PlanBlock) {
         self.end = b.path.end;
-        self.budget += b.budget();
-        self.estimate += b.estimate();
+        b.shares = (b.budget(), b.estimate());
+        self.budget += b.shares.0;
+        self.estimate += b.shares.1;
         let _ = self.queue.push_back(b);
     }
 }

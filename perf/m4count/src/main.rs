@@ -220,7 +220,7 @@ pub struct Period {
 }
 
 /// Bytes the emulator reserves for one [`Period`].
-pub const PERIOD_BYTES: usize = 64 * 1024;
+pub const PERIOD_BYTES: usize = 96 * 1024;
 const _: () = assert!(core::mem::size_of::<Period>() <= PERIOD_BYTES);
 /// Ticks run before the measured ones: the head is then on the arc, at its feed.
 pub const PERIOD_WARMUP: u32 = 1600;
