@@ -28,14 +28,15 @@ use crate::units::TICK_NS;
 pub struct StepTrain {
     /// Steps to emit this tick.
     pub count: u32,
-    /// DIR level: `true` for positive motion (before any drive inversion).
-    pub forward: bool,
     /// Rising edge of the first step, ns after the tick starts.
     pub first_edge_ns: u32,
     /// Time between rising edges, ns.
     pub interval_ns: u32,
     /// STEP high time, ns.
     pub pulse_ns: u32,
+    /// DIR level: `true` for positive motion (before any drive inversion). Last, so
+    /// that clearing a train is four word stores and a byte.
+    pub forward: bool,
 }
 
 /// Longest STEP pulse we emit, ns: long enough for opto-coupled inputs.
