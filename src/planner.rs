@@ -524,10 +524,47 @@ pub fn jog_target(
     at(lo)
 }
 
+/// A ring of [`QUEUE_CAPACITY`] blocks whose slots are written in place: a block is
+/// built in the next free slot ([`Ring::spare`]) and becomes queued only when complete
+/// ([`Ring::commit`]); nothing is copied on the way in or out.
+#[derive(Clone, Debug)]
+struct Ring {
+    slots: [PlanBlock; QUEUE_CAPACITY],
+    /// Slot of the oldest.
+    head: usize,
+    len: usize,
+}
+
+impl Ring {
+    fn get(&self, i: usize) -> Option<&PlanBlock> {
+        (i < self.len).then(|| &self.slots[(self.head + i) % QUEUE_CAPACITY])
+    }
+    fn front(&self) -> Option<&PlanBlock> {
+        self.get(0)
+    }
+    fn pop_front(&mut self) {
+        if self.len > 0 {
+            self.head = (self.head + 1) % QUEUE_CAPACITY;
+            self.len -= 1;
+        }
+    }
+    fn is_full(&self) -> bool {
+        self.len == QUEUE_CAPACITY
+    }
+    /// The slot after the last (not queued; the queue must not be full).
+    fn spare(&mut self) -> &mut PlanBlock {
+        &mut self.slots[(self.head + self.len) % QUEUE_CAPACITY]
+    }
+    /// Queues the spare slot.
+    fn commit(&mut self) {
+        self.len += 1;
+    }
+}
+
 /// The controller's queue of planned blocks.
 #[derive(Clone, Debug)]
 pub struct Planner {
-    queue: heapless::Deque<PlanBlock, QUEUE_CAPACITY>,
+    queue: Ring,
     /// End pose of the last block pushed (where the next one starts).
     pub end: [i64; AXES],
     /// Feed override, percent.
@@ -566,7 +603,13 @@ impl Planner {
         use core::ptr::addr_of_mut as at;
         // SAFETY: the caller's promise; each write is to a field of `*p`.
         unsafe {
-            at!((*p).queue).write(heapless::Deque::new());
+            let q = at!((*p).queue);
+            at!((*q).head).write(0);
+            at!((*q).len).write(0);
+            let slots = at!((*q).slots) as *mut PlanBlock;
+            for i in 0..QUEUE_CAPACITY {
+                slots.add(i).write(PlanBlock::default());
+            }
             at!((*p).end).write(pose);
             at!((*p).feed_override).write(100);
             at!((*p).hold).write(false);
@@ -578,15 +621,15 @@ impl Planner {
 
     /// Occupied slots (the executing block included).
     pub fn len(&self) -> usize {
-        self.queue.len()
+        self.queue.len
     }
     /// No block queued or executing?
     pub fn is_empty(&self) -> bool {
-        self.queue.is_empty()
+        self.queue.len == 0
     }
     /// Free slots.
     pub fn free(&self) -> usize {
-        QUEUE_CAPACITY - self.queue.len()
+        QUEUE_CAPACITY - self.queue.len
     }
     /// The next block to start, if any.
     pub fn front(&self) -> Option<&PlanBlock> {
@@ -619,7 +662,7 @@ impl Planner {
     pub fn finish(&mut self) {
         if self.running {
             self.running = false;
-            let _ = self.queue.pop_front();
+            self.queue.pop_front();
         }
     }
     /// Takes the next block whole (tests).
@@ -636,7 +679,8 @@ impl Planner {
 
     /// Drops every queued block; the next block starts at `pose`, at rest.
     pub fn clear(&mut self, pose: [i64; AXES]) {
-        self.queue.clear();
+        self.queue.head = 0;
+        self.queue.len = 0;
         self.end = pose;
         self.budget = 0;
         self.estimate = 0;
@@ -678,12 +722,6 @@ impl Planner {
             return Err(PushError::Full);
         }
         let (block, plan) = (&pb.block, &pb.plan);
-        // Built in place: the block's path is checked where it is written.
-        let mut b = PlanBlock::default();
-        b.path
-            .set_from_plan(block, &self.end, plan.length, &plan.shape)
-            .map_err(PushError::Geometry)?;
-        let path = &b.path;
         let speeds_ok = [plan.v_limit, plan.accel, plan.entry]
             .iter()
             .all(|v| v.is_finite() && *v >= 0.0)
@@ -691,6 +729,14 @@ impl Planner {
         if !speeds_ok {
             return Err(PushError::Geometry(GeometryError::PlanMismatch));
         }
+        // Built in place, in the queue's spare slot: the path is checked where it is
+        // written, and the block is queued (committed) only when whole.
+        let start = self.end;
+        let b = self.queue.spare();
+        b.path
+            .set_from_plan(block, &start, plan.length, &plan.shape)
+            .map_err(PushError::Geometry)?;
+        let path = &b.path;
         let mut kind = kind_of(block, path);
         if matches!(kind, Kind::Rapid | Kind::Feed) {
             let mut q = [0i64; MAX_JOINTS];
@@ -717,16 +763,13 @@ impl Planner {
         } else {
             0.0
         };
-        self.push_block(b);
-        Ok(())
-    }
-
-    fn push_block(&mut self, mut b: PlanBlock) {
-        self.end = b.path.end;
         b.shares = (b.budget(), b.estimate());
-        self.budget += b.shares.0;
-        self.estimate += b.shares.1;
-        let _ = self.queue.push_back(b);
+        let shares = b.shares;
+        self.end = b.path.end;
+        self.budget += shares.0;
+        self.estimate += shares.1;
+        self.queue.commit();
+        Ok(())
     }
 }
 

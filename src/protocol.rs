@@ -1,7 +1,11 @@
 //! The wire protocol between `nc-send` and the controller, defined once for both sides.
 //!
-//! A frame on the byte stream is `COBS(seq_le16 ‖ postcard(message) ‖ crc32_le(seq ‖
-//! message)) ‖ 0x00`. The sequence number orders host messages: the controller accepts
+//! A frame on the byte stream is `COBS(W(seq_le16 ‖ postcard(message) ‖ crc32_le(seq ‖
+//! message))) ‖ 0x00`, where W flips the top bit of every byte (`b ^ 0x80`). Postcard
+//! writes small numbers, zeros and flags as bytes below 0x80, zero often: unflipped,
+//! a block message has a zero every few bytes, and each zero starts a COBS block
+//! (a code byte and its bookkeeping on the controller's receive path); flipped, zero
+//! bytes are rare and COBS blocks long. The sequence number orders host messages: the controller accepts
 //! exactly the next one, acknowledges cumulatively (`Ack { seq }` covers every message
 //! up to `seq`), re-acknowledges a duplicate without acting on it, and answers a gap or
 //! a damaged frame with a `Nak` naming the sequence number it expects. Flow control is
@@ -12,7 +16,7 @@ use crate::config::{AXES, MAX_JOINTS};
 use serde::{Deserialize, Serialize};
 
 /// Protocol version, exchanged in the handshake; both sides must agree.
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 /// Largest unencoded frame body (sequence number, message and CRC), bytes: a planned
 /// helix with every field at its widest fits.
 pub const MAX_BODY: usize = 384;
@@ -423,15 +427,19 @@ pub fn encode_frame_with<M: Serialize>(
     Ok(seal(&body[..2 + used], out))
 }
 
+/// The byte flip W of the module doc (its own inverse).
+pub const WHITEN: u8 = 0x80;
+
 /// Completes a frame: the COBS encoding of `data` (sequence number and message, at
-/// most `MAX_BODY - 4` bytes) and of its CRC, then the delimiter, written into `out` in
-/// one pass; returns its length.
+/// most `MAX_BODY - 4` bytes) and of its CRC, each byte flipped ([`WHITEN`]), then the
+/// delimiter, written into `out` in one pass; returns its length.
 fn seal(data: &[u8], out: &mut [u8; MAX_FRAME]) -> usize {
     let mut crc = crate::crc::INIT;
     let (mut code_at, mut at) = (0, 1);
     if data.len() + 4 < 0xFE {
         // No run of 254 non-zero bytes fits: only zeros end a block.
         let mut put = |b: u8| {
+            let b = b ^ WHITEN;
             if b == 0 {
                 out[code_at] = (at - code_at) as u8;
                 code_at = at;
@@ -449,6 +457,7 @@ fn seal(data: &[u8], out: &mut [u8; MAX_FRAME]) -> usize {
         }
     } else {
         let mut put = |b: u8| {
+            let b = b ^ WHITEN;
             if b == 0 {
                 out[code_at] = (at - code_at) as u8;
                 code_at = at;
@@ -608,6 +617,9 @@ pub fn decode_body<'b>(
     body: &'b mut [u8; MAX_BODY],
 ) -> Result<(u16, &'b [u8]), FrameError> {
     let n = crate::cobs::decode(encoded, body).map_err(|_| FrameError::Cobs)?;
+    for b in &mut body[..n] {
+        *b ^= WHITEN;
+    }
     if n < 6 {
         return Err(FrameError::Short);
     }
@@ -675,9 +687,22 @@ impl Cursor<'_> {
 
     /// A varint of at most `max` (3 to 10) bytes whose last byte, when there are
     /// `max`, is at most `last` (postcard's rule for an integer of that width); bits
-    /// beyond 64 are dropped (as postcard drops what its type does not hold).
-    #[inline(never)]
+    /// beyond 64 are dropped (as postcard drops what its type does not hold). A
+    /// one-byte varint (tags, flags, zeros: half of a block's fields) is read inline.
+    #[inline(always)]
     fn varint(&mut self, max: usize, last: u8) -> u64 {
+        if let Some(&b) = self.bytes.get(self.at) {
+            if b < 0x80 {
+                self.at += 1;
+                return b as u64;
+            }
+        }
+        self.varint_long(max, last)
+    }
+
+    /// [`Cursor::varint`] of two bytes or more.
+    #[inline(never)]
+    fn varint_long(&mut self, max: usize, last: u8) -> u64 {
         let Some(w) = self.bytes[self.at..].first_chunk::<12>() else {
             return self.varint_near_end(max, last);
         };
@@ -963,9 +988,10 @@ impl FrameReader {
 /// why it was refused.
 pub type Frame<'a> = Result<(u16, &'a [u8]), FrameError>;
 
-/// Reads frames off a byte stream in one pass: each byte is COBS-decoded into the
-/// frame's body and added to its CRC as it arrives (the controller's receive path: no
-/// copy of the encoded frame, no second and third pass over it). Accepts and refuses
+/// Reads frames off a byte stream in one pass: each byte is COBS-decoded and flipped
+/// back ([`WHITEN`]) into the frame's body and added to its CRC as it arrives (the
+/// controller's receive path: no copy of the encoded frame, no second and third pass
+/// over it). Accepts and refuses
 /// exactly what [`FrameReader`] then [`decode_frame`] accept and refuse (tested): a
 /// body longer than [`MAX_BODY`] is refused, and so is every frame longer than
 /// [`MAX_FRAME`], whose body is always longer.
@@ -1032,9 +1058,9 @@ impl FrameDecoder {
                 started = true;
                 if core::mem::replace(&mut zero, b != 0xFF) {
                     if len < MAX_BODY {
-                        self.body[len] = 0;
+                        self.body[len] = WHITEN;
                         len += 1;
-                        crc = crate::crc::update(crc, 0);
+                        crc = crate::crc::update(crc, WHITEN);
                     } else {
                         overflow = true;
                     }
@@ -1053,6 +1079,7 @@ impl FrameDecoder {
                 if b == 0 {
                     break;
                 }
+                let b = b ^ WHITEN;
                 *d = b;
                 crc = crate::crc::update(crc, b);
                 n += 1;
@@ -1176,6 +1203,7 @@ mod tests {
         let mut body = seq.to_le_bytes().to_vec();
         body.extend_from_slice(message);
         body.extend_from_slice(&crate::crc::crc32(&body).to_le_bytes());
+        body.iter_mut().for_each(|b| *b ^= WHITEN);
         let mut enc = vec![0u8; crate::cobs::max_encoded_len(body.len())];
         let n = crate::cobs::encode(&body, &mut enc).unwrap();
         enc.truncate(n);
@@ -1488,18 +1516,20 @@ mod tests {
         };
         for len in 0..=MAX_BODY - 4 {
             for every in [0, 2, 40] {
-                // One byte in `every` is a zero (none with 0: runs of 254 and more).
+                // One byte in `every` is a zero once flipped (none with 0: runs of 254
+                // and more).
                 let data: Vec<u8> = (0..len)
                     .map(|_| {
                         if every > 0 && rnd(every) == 0 {
-                            0
+                            WHITEN
                         } else {
-                            rnd(255) as u8 + 1
+                            (rnd(255) as u8 + 1) ^ WHITEN
                         }
                     })
                     .collect();
                 let mut framed = data.clone();
                 framed.extend_from_slice(&crate::crc::crc32(&data).to_le_bytes());
+                framed.iter_mut().for_each(|b| *b ^= WHITEN);
                 let mut want = vec![0u8; crate::cobs::max_encoded_len(framed.len())];
                 let m = crate::cobs::encode(&framed, &mut want).unwrap();
                 let mut out = [0u8; MAX_FRAME];
