@@ -414,9 +414,16 @@ impl Path {
                 ..
             } => {
                 linear(&unit, pose);
-                let s = s as i128;
-                let phi = phi0.wrapping_add(((phi_rate * s) >> 32) as u64);
-                let r = r0 + ((r_rate as i128 * s) >> 56) as i64;
+                // At the start (the plan check's first point) no product is needed.
+                let (phi, r) = if s == 0 {
+                    (phi0, r0)
+                } else {
+                    let s = s as i128;
+                    (
+                        phi0.wrapping_add(((phi_rate * s) >> 32) as u64),
+                        r0 + ((r_rate as i128 * s) >> 56) as i64,
+                    )
+                };
                 // The angle as a signed fraction of a turn, then in n° within ±180°
                 // (the sine's fast path).
                 let turn = (phi as i64 as i128 * 360_000_000_000) >> 64;

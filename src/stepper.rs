@@ -23,7 +23,8 @@
 use crate::config::{Drive, FastScale, JointConfig, Scale, StepTiming, MAX_JOINTS};
 use crate::units::TICK_NS;
 
-/// One tick's step train for one joint; times are from the start of the tick.
+/// One tick's step train for one joint; times are from the start of the tick. With
+/// `count` = 0 there are no steps and the times mean nothing (they are not cleared).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct StepTrain {
     /// Steps to emit this tick.
@@ -107,13 +108,14 @@ impl StepScheduler {
     ) {
         let mut lagged = false;
         for (j, jc) in config.iter().enumerate() {
-            out[j] = StepTrain::default();
             let Drive::Stepper { timing, .. } = jc.drive else {
+                out[j].count = 0;
                 continue;
             };
             let ch = &mut self.channels[j];
             let want = self.fast[j].steps_at(joints[j]) + self.offset[j] - ch.emitted;
             if want == 0 {
+                out[j].count = 0;
                 out[j].forward = ch.forward.unwrap_or(true);
                 continue;
             }

@@ -66,7 +66,8 @@ impl Controller {
     pub(super) fn update_outputs(&mut self) {
         self.steps
             .tick(&self.machine.joints, &self.joints, &mut self.trains);
-        self.out.steps = [StepTrain::default(); MAX_STEPPERS];
+        // Every stepper's channel is written below each tick; the others stay idle
+        // from when the machine was loaded (`Controller::write` builds `out` afresh).
         for (j, jc) in self.machine.joints.iter().enumerate() {
             if let Drive::Stepper {
                 channel,
