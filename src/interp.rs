@@ -241,6 +241,9 @@ impl Executor {
     }
 
     /// The smoothed motion has caught up with the profile (always, without smoothing).
+    /// Not inlined: the tick asks only before a block that starts at rest, and inlined
+    /// its 128-bit comparison was computed before every block.
+    #[inline(never)]
     pub fn settled(&self) -> bool {
         self.smoothing()
             .is_none_or(|f| f.s == self.s_raw && f.sum == (self.s_raw as i128) << f.log2)

@@ -68,6 +68,20 @@ fn distance(v: i64, t: i64, a: i64) -> i64 {
     ((mean as i128 * t as i128) >> 48) as i64
 }
 
+/// Time (ticks Q32) to cover `rem` (nm Q16) at `vc` (nm/tick Q32): a single-precision
+/// estimate, then its error, measured exactly, corrected (0 when either is not
+/// positive).
+fn cruise_ticks(rem: i64, vc: i64) -> i64 {
+    if rem <= 0 || vc <= 0 {
+        return 0;
+    }
+    // Ticks Q32 per nm at the cruise speed.
+    let inv_vc = Q32F / from_q32(vc);
+    let est = f32_to_i64(i64_to_f32(rem) * (1.0 / Q16F) * inv_vc);
+    let err = rem - ((vc as i128 * est as i128) >> 48) as i64;
+    (est + f32_to_i64(i64_to_f32(err) * (1.0 / Q16F) * inv_vc)).max(0)
+}
+
 /// A planned profile over `length` nm.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Profile {
@@ -109,10 +123,40 @@ impl Profile {
     #[inline(always)]
     pub fn plan(length_q16: i64, v0: f32, v_max: f32, v1: f32, a: f32) -> (Profile, Achieved) {
         let length_q16 = length_q16.max(0);
-        let length = i64_to_f32(length_q16) * (1.0 / Q16F);
         let a = fmax(a, 1e-12);
-        let (v0, v_max) = (fmax(v0, 0.0), fmax(v_max, 0.0));
-        let mut v1 = fmax(v1, 0.0);
+        let (v0, v_max, v1) = (fmax(v0, 0.0), fmax(v_max, 0.0), fmax(v1, 0.0));
+        if v0 > 0.0 && v0 == v_max && v1 >= v0 {
+            // Entered at the cap and free to leave at it: a cruise throughout (what the
+            // general case below gives, bit for bit, without its square roots; the
+            // common case of dense short blocks at the programmed feed).
+            let (a_q, vc) = (to_q40(a), to_q32(v0));
+            let p = Profile {
+                v0: vc,
+                a1: a_q,
+                t1: 0,
+                vc,
+                t2: cruise_ticks(length_q16, vc).min(HELD),
+                v1: vc,
+                a3: a_q,
+                t3: 0,
+                s1: 0,
+                length: length_q16,
+            };
+            return (
+                p,
+                Achieved {
+                    exit: from_q32(vc),
+                },
+            );
+        }
+        Self::plan_general(length_q16, v0, v_max, v1, a)
+    }
+
+    /// [`Profile::plan`] without its cruise shortcut (arguments already clamped).
+    #[inline(always)]
+    fn plan_general(length_q16: i64, v0: f32, v_max: f32, v1: f32, a: f32) -> (Profile, Achieved) {
+        let length = i64_to_f32(length_q16) * (1.0 / Q16F);
+        let mut v1 = v1;
         let two_a_s = 2.0 * a * length;
         // Exit speed the block can reach at all from v0 over its length.
         let reach_hi = sqrtf(v0 * v0 + two_a_s);
@@ -211,15 +255,7 @@ impl Profile {
         // The cruise covers what the ramps leave: t2 = rem / vc, refined once so that
         // the cruise ends where the last phase starts (single-precision estimate,
         // then its error, measured exactly, corrected).
-        let t2 = if rem <= 0 || vc <= 0 {
-            0
-        } else {
-            // Ticks Q32 per nm at the cruise speed.
-            let inv_vc = Q32F / from_q32(vc);
-            let est = f32_to_i64(i64_to_f32(rem) * (1.0 / Q16F) * inv_vc);
-            let err = rem - ((vc as i128 * est as i128) >> 48) as i64;
-            (est + f32_to_i64(i64_to_f32(err) * (1.0 / Q16F) * inv_vc)).max(0)
-        };
+        let t2 = cruise_ticks(rem, vc);
         let p = Profile {
             v0: v0_q,
             a1,
@@ -288,6 +324,28 @@ mod tests {
                 p.at(t).0 as f64 / 65_536.0 + over
             })
             .collect()
+    }
+
+    #[test]
+    fn the_cruise_shortcut_gives_the_general_plan_bit_for_bit() {
+        let mut x = 0x2545_F491u32;
+        let mut rnd = move || {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x
+        };
+        for _ in 0..100_000 {
+            let v = (rnd() % 2_000_000) as f32 / 7.0 + 0.001;
+            let length = (rnd() % 50_000_000) as i64 * (1 + (rnd() % 3) as i64 * 1000);
+            let v1 = v * (1.0 + (rnd() % 4) as f32 * 0.3);
+            let a = (rnd() % 10_000) as f32 / 1000.0 + 1e-4;
+            assert_eq!(
+                Profile::plan(length, v, v, v1, a),
+                Profile::plan_general(length, v, v, v1, a),
+                "{length} {v} {v1} {a}"
+            );
+        }
     }
 
     #[test]
