@@ -38,10 +38,10 @@ pub enum Shape {
         dr: i64,
         /// Start angle, turns Q64 (wrapping).
         phi0: u64,
-        /// Signed sweep, turns Q64 (more than one turn for multi-turn arcs).
-        sweep: i128,
-        /// Angle per path distance: sweep·2¹⁶ / length, so that φ(s) = φ₀ + (k·s) ≫ 32
-        /// for s in nm Q16 (no division per tick).
+        /// Angle per path distance: sweep·2¹⁶ / length (sweep: the signed angle, turns
+        /// Q64, more than one turn for multi-turn arcs), so that φ(s) = φ₀ + (k·s) ≫ 32
+        /// for s in nm Q16 (no division per tick). The sweep itself is not stored: it
+        /// is (k·length) ≫ 16 to within length/2¹⁶ + 1 units of 2⁻⁶⁴ turn.
         phi_rate: i128,
         /// Radius change per path distance: (dr·2⁴⁰) / length, used as (k·s) ≫ 56 (fine
         /// enough that the radius lands within a nanometre of the end on any arc).
@@ -225,7 +225,6 @@ impl Path {
                         r0: libm::round(r0) as i64,
                         dr,
                         phi0: turn_of(wrap(a0, tau)) as u64,
-                        sweep,
                         phi_rate: (sweep << 16) / len as i128,
                         r_rate: (((dr as i128) << 40) / len as i128) as i64,
                         unit,
@@ -328,15 +327,18 @@ impl Path {
                     center: p_center,
                     r0,
                     dr,
-                    sweep,
                     phi_rate,
                     r_rate,
                     ref unit,
                     ..
                 },
             ) => {
+                // The sweep the rate stands for (the host's, less at most
+                // length/2¹⁶ + 1 units: the rate was rounded toward zero).
+                let sweep = phi_rate.wrapping_mul(length as i128) >> 16;
+                let slack = (length as u128 >> 16) + 2;
                 let whole = |n: u32| (n as u128) << 64;
-                let turns_ok = sweep.unsigned_abs() > whole(turns as u32)
+                let turns_ok = sweep.unsigned_abs() + slack > whole(turns as u32)
                     && sweep.unsigned_abs() <= whole(turns as u32 + 1);
                 let (i, j, k) = plane.axes();
                 if p_plane != plane
@@ -345,11 +347,10 @@ impl Path {
                     || r0 < 1
                     || r0 + dr < 1
                     || dr.unsigned_abs() > ARC_RADIUS_SLACK_NM as u64
-                    || clockwise != (sweep < 0)
+                    || clockwise != (phi_rate < 0)
                     || !turns_ok
                     || unit[i] != 0
                     || unit[j] != 0
-                    || !rate_of(phi_rate, sweep, length)
                     || !rate_of(r_rate as i128, (dr as i128) << 24, length)
                 {
                     return bad;
@@ -448,7 +449,6 @@ impl Path {
             Shape::Arc {
                 plane,
                 phi0,
-                sweep,
                 phi_rate,
                 r0,
                 dr,
@@ -460,11 +460,11 @@ impl Path {
                 }
                 let s = s.max(0);
                 let f = (s as f64 / 65_536.0) / (self.length.max(1) as f64);
-                let sweep_rad = sweep as f64 / TURN_Q64 * core::f64::consts::TAU;
                 let r = r0 as f64 + dr as f64 * f;
                 // d(position)/ds in plane: r·dφ/ds·(−sin, cos) (radius drift ignored),
-                // with the angle found as in `pose_at`.
-                let dphi_ds = sweep_rad / self.length.max(1) as f64;
+                // with the angle found as in `pose_at`; dφ/ds from the rate (turns Q64
+                // per nm Q16).
+                let dphi_ds = phi_rate as f64 / 65_536.0 / TURN_Q64 * core::f64::consts::TAU;
                 let phi = phi0.wrapping_add(((phi_rate * s as i128) >> 32) as u64);
                 let turn = (phi as i64 as i128 * 360_000_000_000) >> 64;
                 let (sin, cos) = crate::kinematics::fixed::sincos(turn as i64);
@@ -609,6 +609,27 @@ mod tests {
             let b = Block { line: 1, motion: Motion::Linear, target, feed: 1_000_000, tolerance_nm: 0 };
             let start = [0; AXES];
             proptest::prop_assert_eq!(round_trip(&b, &start), Path::new(&b, &start));
+        }
+    }
+
+    #[test]
+    fn an_arc_s_tangent_is_the_derivative_of_its_pose() {
+        for (clockwise, turns) in [(false, 0), (true, 0), (false, 1)] {
+            // A quarter (or one and a quarter) of a 10 mm circle with a 3 mm helix.
+            let b = arc([0, 10_000_000, 3_000_000, 0, 0, 0], [0, 0], clockwise, turns);
+            let p = Path::new(&b, &[10_000_000, 0, 0, 0, 0, 0]).unwrap();
+            for k in 1..8 {
+                let s = (p.length << 16) / 8 * k;
+                let h = 1_000i64 << 16; // 1 µm
+                let (mut a, mut c) = ([0; AXES], [0; AXES]);
+                p.pose_at(s - h, &mut a);
+                p.pose_at(s + h, &mut c);
+                let t = p.tangent_at(s);
+                for i in 0..3 {
+                    let fd = (c[i] - a[i]) as f32 / 2_000.0;
+                    assert!((t[i] - fd).abs() < 1e-3, "{clockwise} {turns} {k} {i}: {t:?} vs {fd}");
+                }
+            }
         }
     }
 
