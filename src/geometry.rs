@@ -342,7 +342,8 @@ impl Path {
                     && sweep.unsigned_abs() <= whole(turns as u32 + 1);
                 let (i, j, k) = plane.axes();
                 if p_plane != plane
-                    || p_center != center
+                    || p_center[0] != center[0]
+                    || p_center[1] != center[1]
                     || length <= 0
                     || r0 < 1
                     || r0 + dr < 1
@@ -355,14 +356,16 @@ impl Path {
                 {
                     return bad;
                 }
-                // Length: √((r̄·|sweep|)² + helix²), to 10⁻⁵ (single precision).
-                let planar = (r0 as f32 + dr as f32 / 2.0)
-                    * (sweep.unsigned_abs() as f32
-                        * (core::f32::consts::TAU / 18_446_744_073_709_551_616.0));
-                let helix = delta[k] as f32;
+                // Length: √((r̄·|sweep|)² + helix²), to 10⁻⁵ (single precision; the
+                // sweep's low 32 bits, below 2⁻³² turn, do not matter).
+                let f = crate::math::i64_to_f32;
+                let sweep_turns = crate::math::u64_to_f32((sweep.unsigned_abs() >> 32) as u64)
+                    * (1.0 / 4_294_967_296.0);
+                let planar = (f(r0) + f(dr) / 2.0) * (sweep_turns * core::f32::consts::TAU);
+                let helix = f(delta[k]);
                 let want = planar * planar + helix * helix;
-                let got = length as f32 * length as f32;
-                if (got - want).abs() > 1e-5 * want + 4.0 * length as f32 {
+                let got = f(length) * f(length);
+                if (got - want).abs() > 1e-5 * want + 4.0 * f(length) {
                     return bad;
                 }
                 self.length = length;

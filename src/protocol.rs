@@ -1,11 +1,13 @@
 //! The wire protocol between `nc-send` and the controller, defined once for both sides.
 //!
 //! A frame on the byte stream is `COBS(W(seq_le16 ‖ postcard(message) ‖ crc32_le(seq ‖
-//! message))) ‖ 0x00`, where W flips the top bit of every byte (`b ^ 0x80`). Postcard
-//! writes small numbers, zeros and flags as bytes below 0x80, zero often: unflipped,
-//! a block message has a zero every few bytes, and each zero starts a COBS block
-//! (a code byte and its bookkeeping on the controller's receive path); flipped, zero
-//! bytes are rare and COBS blocks long. The sequence number orders host messages: the controller accepts
+//! message))) ‖ 0x00`, where W XORs every byte with 0xA5 ([`WHITEN`]). Postcard
+//! writes zeros, small numbers and flags as 0x00 and nearby bytes, and round
+//! coordinates (whole millimetres in nm are multiples of 64) start their varints with
+//! 0x80: left as they are, or with only the top bit flipped, a block message has a
+//! zero every few bytes, and each zero starts a COBS block (a code byte and its
+//! bookkeeping on the controller's receive path). With 0xA5 zero bytes are rare and
+//! COBS blocks long, which the controller decodes four bytes at a time. The sequence number orders host messages: the controller accepts
 //! exactly the next one, acknowledges cumulatively (`Ack { seq }` covers every message
 //! up to `seq`), re-acknowledges a duplicate without acting on it, and answers a gap or
 //! a damaged frame with a `Nak` naming the sequence number it expects. Flow control is
@@ -427,8 +429,8 @@ pub fn encode_frame_with<M: Serialize>(
     Ok(seal(&body[..2 + used], out))
 }
 
-/// The byte flip W of the module doc (its own inverse).
-pub const WHITEN: u8 = 0x80;
+/// The byte mask of W in the module doc (W is its own inverse).
+pub const WHITEN: u8 = 0xA5;
 
 /// Completes a frame: the COBS encoding of `data` (sequence number and message, at
 /// most `MAX_BODY - 4` bytes) and of its CRC, each byte flipped ([`WHITEN`]), then the
@@ -1074,7 +1076,20 @@ impl FrameDecoder {
             let room = MAX_BODY - len;
             let dst = &mut self.body[len..len + run.min(room)];
             let mut n = 0;
-            for (d, &b) in dst.iter_mut().zip(src) {
+            // Four bytes at a time while none of them is a zero (a delimiter inside
+            // the block: left to the byte loop below).
+            let m = dst.len();
+            while n + 4 <= m {
+                let w = u32::from_le_bytes([src[n], src[n + 1], src[n + 2], src[n + 3]]);
+                if w.wrapping_sub(0x0101_0101) & !w & 0x8080_8080 != 0 {
+                    break;
+                }
+                let w = w ^ u32::from_ne_bytes([WHITEN; 4]);
+                dst[n..n + 4].copy_from_slice(&w.to_le_bytes());
+                crc = crate::crc::update_word(crc, w);
+                n += 4;
+            }
+            for (d, &b) in dst[n..].iter_mut().zip(&src[n..]) {
                 if b == 0 {
                     break;
                 }
