@@ -7,10 +7,12 @@
 //! 0x80: left as they are, or with only the top bit flipped, a block message has a
 //! zero every few bytes, and each zero starts a COBS block (a code byte and its
 //! bookkeeping on the controller's receive path). With 0xA5 zero bytes are rare and
-//! COBS blocks long, which the controller decodes four bytes at a time. The sequence number orders host messages: the controller accepts
-//! exactly the next one, acknowledges cumulatively (`Ack { seq }` covers every message
-//! up to `seq`), re-acknowledges a duplicate without acting on it, and answers a gap or
-//! a damaged frame with a `Nak` naming the sequence number it expects. Flow control is
+//! COBS blocks long, which the controller decodes four bytes at a time.
+//!
+//! The sequence number orders host messages: the controller accepts exactly the next
+//! one, acknowledges cumulatively (`Ack { seq }` covers every message up to `seq`),
+//! re-acknowledges a duplicate without acting on it, and answers a gap or a damaged
+//! frame with a `Nak` naming the sequence number it expects. Flow control is
 //! by credits: every `Ack` carries the free block-queue slots and the milliseconds of
 //! motion already buffered, and the host never has more blocks in flight than slots.
 
