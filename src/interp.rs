@@ -324,14 +324,6 @@ impl Executor {
             }
             Kind::Rapid | Kind::Feed => {
                 let target = planner.exit_target();
-                let (p, got) = Profile::plan(
-                    b.path.length << 16,
-                    self.exit,
-                    planner.cap(b),
-                    target,
-                    b.accel,
-                );
-                self.exit = got.exit;
                 self.block_start = self.s_raw;
                 if self.smoothing.log2 > 0 {
                     let past = self.smoothing.hist.push();
@@ -339,13 +331,18 @@ impl Executor {
                     past.path = b.path;
                     past.line = b.line;
                 }
-                self.active = Some(Active {
-                    profile: Some(p),
+                // The profile is planned where it is kept (no copy of it).
+                let exit = self.exit;
+                let a = self.active.insert(Active {
+                    profile: None,
                     t: 0,
                     s_base: 0,
                     dwell_left: 0,
                     target,
                 });
+                let p = a.profile.insert(Profile::IDLE);
+                let got = p.plan_into(b.path.length << 16, exit, planner.cap(b), target, b.accel);
+                self.exit = got.exit;
                 None
             }
         }

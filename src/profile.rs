@@ -116,6 +116,29 @@ pub struct Achieved {
 }
 
 impl Profile {
+    /// [`Profile::plan`] written into `self` (the controller keeps its profile in
+    /// place).
+    #[inline(always)]
+    pub fn plan_into(&mut self, length_q16: i64, v0: f32, v_max: f32, v1: f32, a: f32) -> Achieved {
+        let (p, got) = Self::plan(length_q16, v0, v_max, v1, a);
+        *self = p;
+        got
+    }
+
+    /// A profile that does nothing (a placeholder to plan into).
+    pub const IDLE: Profile = Profile {
+        v0: 0,
+        a1: 0,
+        t1: 0,
+        vc: 0,
+        t2: 0,
+        v1: 0,
+        a3: 0,
+        t3: 0,
+        s1: 0,
+        length: 0,
+    };
+
     /// Plans a profile over `length_q16` (nm Q16, exact: the profile ends there) from
     /// `v0` toward `v_max`, leaving at `v1`, with acceleration `a` (speeds nm/tick,
     /// accel nm/tick², all ≥ 0, `a` > 0). `v_max` = 0 with `v1` = 0 means "stop as

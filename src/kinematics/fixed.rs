@@ -136,23 +136,7 @@ fn sincos_octant(r: i64) -> (i32, i32) {
     (s, c)
 }
 
-/// `u64` to `f32` without a library call: two `VCVT`s and a multiply-add.
-#[inline(always)]
-pub fn u64_to_f32(v: u64) -> f32 {
-    (v >> 32) as u32 as f32 * 4_294_967_296.0 + v as u32 as f32
-}
-
-/// `i64` to `f32` without a library call (relative error ≤ 2^-23; the magnitude is
-/// converted, so small negative values do not cancel).
-#[inline(always)]
-pub fn i64_to_f32(v: i64) -> f32 {
-    let m = u64_to_f32(v.unsigned_abs());
-    if v < 0 {
-        -m
-    } else {
-        m
-    }
-}
+pub use crate::math::{i64_to_f32, u64_to_f32};
 
 /// Nearest `i64` of `v`, saturating at ±2^31 (Newton steps are clamped there).
 #[inline(always)]
