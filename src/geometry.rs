@@ -28,9 +28,11 @@ pub enum Shape {
     },
     /// Arc or helix.
     Arc {
-        /// Plane.
+        /// Plane. Not sent: the block has it ([`Path::from_plan`] takes it from there).
+        #[serde(skip)]
         plane: Plane,
-        /// Centre (first, second in-plane axis), nm.
+        /// Centre (first, second in-plane axis), nm. Not sent, as `plane`.
+        #[serde(skip)]
         center: [i64; 2],
         /// Start radius, nm.
         r0: i64,
@@ -323,8 +325,6 @@ impl Path {
                     turns,
                 },
                 &Shape::Arc {
-                    plane: p_plane,
-                    center: p_center,
                     r0,
                     dr,
                     phi_rate,
@@ -341,10 +341,7 @@ impl Path {
                 let turns_ok = sweep.unsigned_abs() + slack > whole(turns as u32)
                     && sweep.unsigned_abs() <= whole(turns as u32 + 1);
                 let (i, j, k) = plane.axes();
-                if p_plane != plane
-                    || p_center[0] != center[0]
-                    || p_center[1] != center[1]
-                    || length <= 0
+                if length <= 0
                     || r0 < 1
                     || r0 + dr < 1
                     || dr.unsigned_abs() > ARC_RADIUS_SLACK_NM as u64
@@ -370,6 +367,16 @@ impl Path {
                 }
                 self.length = length;
                 self.shape = *shape;
+                // The plane and centre are the block's (they are not sent twice).
+                if let Shape::Arc {
+                    plane: p_plane,
+                    center: p_center,
+                    ..
+                } = &mut self.shape
+                {
+                    *p_plane = plane;
+                    *p_center = center;
+                }
                 let (mut from, mut to) = ([0; AXES], [0; AXES]);
                 self.eval(0, &mut from);
                 self.eval(length << 16, &mut to);

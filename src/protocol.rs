@@ -28,9 +28,10 @@ pub const MAX_BODY: usize = 384;
 pub const MAX_FRAME: usize = crate::cobs::max_encoded_len(MAX_BODY) + 1;
 
 /// Arc plane: the in-plane axes are XY, ZX or YZ and the helix axis Z, Y or X.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Plane {
     /// G17.
+    #[default]
     Xy,
     /// G18.
     Zx,
@@ -876,8 +877,8 @@ impl Cursor<'_> {
         match self.u32() {
             0 => Shape::Line { unit: self.i64s() },
             1 => Shape::Arc {
-                plane: self.plane(),
-                center: self.i64s(),
+                plane: crate::protocol::Plane::Xy,
+                center: [0; 2],
                 r0: self.i64(),
                 dr: self.i64(),
                 phi0: self.u64(),
@@ -1161,8 +1162,9 @@ mod tests {
             plan: Plan {
                 length: i64::MIN,
                 shape: crate::geometry::Shape::Arc {
-                    plane: Plane::Zx,
-                    center: [i64::MIN, i64::MAX],
+                    // Not sent (the block has them): they decode as the defaults.
+                    plane: Plane::Xy,
+                    center: [0, 0],
                     r0: i64::MIN,
                     dr: i64::MIN,
                     phi0: u64::MAX,
