@@ -775,35 +775,20 @@ impl Cursor<'_> {
         core::array::from_fn(|_| self.i64())
     }
 
-    /// A zigzag varint of at most 19 bytes, the last at most 3 (postcard's `i128`).
-    fn i128(&mut self) -> i128 {
-        let mut v = 0u128;
-        if let Some(w) = self.bytes[self.at..].first_chunk::<20>() {
-            for g in 0..5 {
-                let (bits, used) = group4(w[4 * g..4 * g + 4].try_into().unwrap());
-                v |= (bits as u128) << (28 * g);
-                if used != 0 {
-                    let n = 4 * g + used;
-                    if n > 19 || (n == 19 && w[18] > 0x03) {
-                        return self.fail();
-                    }
-                    self.at += n;
-                    return (v >> 1) as i128 ^ -((v & 1) as i128);
-                }
+    /// `N` raw bytes (a fixed-width field).
+    fn raw<const N: usize>(&mut self) -> [u8; N] {
+        match self.bytes.get(self.at..self.at + N) {
+            Some(b) => {
+                self.at += N;
+                let mut out = [0u8; N];
+                out.copy_from_slice(b);
+                out
             }
-            return self.fail();
-        }
-        for i in 0..19 {
-            let b = self.byte();
-            v |= ((b & 0x7F) as u128) << (7 * i);
-            if b < 0x80 {
-                if i == 18 && b > 0x03 {
-                    return self.fail();
-                }
-                return (v >> 1) as i128 ^ -((v & 1) as i128);
+            None => {
+                self.fail::<()>();
+                [0; N]
             }
         }
-        self.fail()
     }
 
     fn f32(&mut self) -> f32 {
@@ -881,8 +866,8 @@ impl Cursor<'_> {
                 center: [0; 2],
                 r0: self.i64(),
                 dr: self.i64(),
-                phi0: self.u64(),
-                phi_rate: self.i128(),
+                phi0: u64::from_le_bytes(self.raw()),
+                phi_rate: i128::from_le_bytes(self.raw()),
                 r_rate: self.i64(),
                 unit: self.i64s(),
             },
