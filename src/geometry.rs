@@ -406,10 +406,13 @@ impl Path {
                     *p_plane = plane;
                     *p_center = center;
                 }
-                let (mut from, mut to) = ([0; AXES], [0; AXES]);
-                self.eval(0, &mut from);
-                self.eval(length << 16, &mut to);
-                if near(&from, start) && near(&to, &end) {
+                let mut at = [0; AXES];
+                self.eval(0, &mut at);
+                if !near(&at, start) {
+                    return bad;
+                }
+                self.eval(length << 16, &mut at);
+                if near(&at, &end) {
                     Ok(())
                 } else {
                     bad

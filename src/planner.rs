@@ -575,6 +575,8 @@ pub struct Planner {
     budget: u64,
     /// Σ estimated duration of the queued blocks, ticks × 16.
     estimate: u64,
+    /// Joints of the last target checked against the travel (scratch).
+    scratch: [i64; MAX_JOINTS],
     /// The front block is executing ([`Planner::start`]): it stays in its slot (no
     /// copy of it is made) until [`Planner::finish`], but is no longer in the stop
     /// budget or the estimate, and [`Planner::front`] is the block after it.
@@ -616,6 +618,7 @@ impl Planner {
             at!((*p).budget).write(0);
             at!((*p).estimate).write(0);
             at!((*p).running).write(false);
+            at!((*p).scratch).write([0; MAX_JOINTS]);
         }
     }
 
@@ -739,8 +742,9 @@ impl Planner {
         let path = &b.path;
         let mut kind = kind_of(block, path);
         if matches!(kind, Kind::Rapid | Kind::Feed) {
-            let mut q = [0i64; MAX_JOINTS];
-            if let Err(e) = kin.inverse_checked(&path.end, &machine.joints, &mut q) {
+            // The joints are not kept (only whether they are within travel): a scratch
+            // array that is not cleared per block.
+            if let Err(e) = kin.inverse_checked(&path.end, &machine.joints, &mut self.scratch) {
                 kind = Kind::Unreachable(e);
             }
         }

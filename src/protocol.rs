@@ -775,20 +775,22 @@ impl Cursor<'_> {
         core::array::from_fn(|_| self.i64())
     }
 
-    /// `N` raw bytes (a fixed-width field).
-    fn raw<const N: usize>(&mut self) -> [u8; N] {
-        match self.bytes.get(self.at..self.at + N) {
+    /// A fixed-width little-endian `u64` (8 bytes).
+    fn u64_le(&mut self) -> u64 {
+        match self.bytes.get(self.at..self.at + 8) {
             Some(b) => {
-                self.at += N;
-                let mut out = [0u8; N];
-                out.copy_from_slice(b);
-                out
+                self.at += 8;
+                u64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]])
             }
-            None => {
-                self.fail::<()>();
-                [0; N]
-            }
+            None => self.fail(),
         }
+    }
+
+    /// A fixed-width little-endian `i128` (16 bytes).
+    fn i128_le(&mut self) -> i128 {
+        let lo = self.u64_le();
+        let hi = self.u64_le();
+        ((hi as u128) << 64 | lo as u128) as i128
     }
 
     fn f32(&mut self) -> f32 {
@@ -866,8 +868,8 @@ impl Cursor<'_> {
                 center: [0; 2],
                 r0: self.i64(),
                 dr: self.i64(),
-                phi0: u64::from_le_bytes(self.raw()),
-                phi_rate: i128::from_le_bytes(self.raw()),
+                phi0: self.u64_le(),
+                phi_rate: self.i128_le(),
                 r_rate: self.i64(),
                 unit: self.i64s(),
             },
@@ -886,6 +888,17 @@ impl Cursor<'_> {
 /// else the block, or `FrameError::Message` exactly where `postcard::from_bytes`
 /// fails (tested).
 pub fn decode_block(message: &[u8]) -> Option<Result<PlannedBlock, FrameError>> {
+    let mut slot = core::mem::MaybeUninit::uninit();
+    decode_block_into(message, &mut slot).map(|r| r.copied())
+}
+
+/// [`decode_block`] written field by field into `slot` (the controller's receive path:
+/// no temporary of the block, no copy of it); the block, by reference, when it decoded.
+pub fn decode_block_into<'a>(
+    message: &[u8],
+    slot: &'a mut core::mem::MaybeUninit<PlannedBlock>,
+) -> Option<Result<&'a PlannedBlock, FrameError>> {
+    use core::ptr::addr_of_mut as at;
     let mut c = Cursor {
         bytes: message,
         at: 0,
@@ -894,25 +907,30 @@ pub fn decode_block(message: &[u8]) -> Option<Result<PlannedBlock, FrameError>> 
     if c.u32() != HOST_MSG_BLOCK || c.bad {
         return None;
     }
-    let block = Block {
-        line: c.u32(),
-        motion: c.motion(),
-        target: c.i64s(),
-        feed: c.i64(),
-        tolerance_nm: c.u32(),
-    };
-    let plan = Plan {
-        length: c.i64(),
-        shape: c.shape(),
-        v_limit: c.f32(),
-        accel: c.f32(),
-        entry: c.f32(),
-        stop: c.bool(),
-    };
+    let p = slot.as_mut_ptr();
+    // SAFETY: every write is to a field of the slot, in bounds and aligned; every field
+    // is written (a read that fails yields a default and marks the cursor bad), so the
+    // slot is initialised when it is handed out below.
+    unsafe {
+        let b = at!((*p).block);
+        at!((*b).line).write(c.u32());
+        at!((*b).motion).write(c.motion());
+        at!((*b).target).write(c.i64s());
+        at!((*b).feed).write(c.i64());
+        at!((*b).tolerance_nm).write(c.u32());
+        let q = at!((*p).plan);
+        at!((*q).length).write(c.i64());
+        at!((*q).shape).write(c.shape());
+        at!((*q).v_limit).write(c.f32());
+        at!((*q).accel).write(c.f32());
+        at!((*q).entry).write(c.f32());
+        at!((*q).stop).write(c.bool());
+    }
     if c.bad {
         return Some(Err(FrameError::Message));
     }
-    Some(Ok(PlannedBlock { block, plan }))
+    // SAFETY: initialised above.
+    Some(Ok(unsafe { slot.assume_init_ref() }))
 }
 
 /// Splits a byte stream into frames at 0x00 delimiters. A frame longer than
@@ -1067,13 +1085,13 @@ impl FrameDecoder {
             // Four bytes at a time while none of them is a zero (a delimiter inside
             // the block: left to the byte loop below).
             let m = dst.len();
-            while n + 4 <= m {
-                let w = u32::from_le_bytes([src[n], src[n + 1], src[n + 2], src[n + 3]]);
+            for (d, s) in dst.chunks_exact_mut(4).zip(src[..m].chunks_exact(4)) {
+                let w = u32::from_le_bytes([s[0], s[1], s[2], s[3]]);
                 if w.wrapping_sub(0x0101_0101) & !w & 0x8080_8080 != 0 {
                     break;
                 }
                 let w = w ^ u32::from_ne_bytes([WHITEN; 4]);
-                dst[n..n + 4].copy_from_slice(&w.to_le_bytes());
+                d.copy_from_slice(&w.to_le_bytes());
                 crc = crate::crc::update_word(crc, w);
                 n += 4;
             }

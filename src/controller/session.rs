@@ -13,7 +13,7 @@ use super::{Controller, LinkStats, Prepared, QUEUE_CAPACITY};
 use crate::config::MachineConfig;
 use crate::planner::PushError;
 use crate::protocol::{
-    decode_block, encode_ack, encode_frame_with, encode_status, Alarm, AlarmCause, Control,
+    decode_block_into, encode_ack, encode_frame_with, encode_status, Alarm, AlarmCause, Control,
     CtrlMsg, HostMsgOf, NakReason, NotBlock, PlannedBlock, State, Status, MAX_BODY, MAX_FRAME,
     NO_JOINT, PROTOCOL_VERSION,
 };
@@ -51,7 +51,8 @@ impl Controller {
             };
             // Messages are handled by reference: a block is some 250 bytes, not to be
             // moved around; blocks, the bulk of the traffic, are decoded by hand.
-            match &decode_block(message) {
+            let mut slot = core::mem::MaybeUninit::uninit();
+            match &decode_block_into(message, &mut slot) {
                 Some(Ok(planned)) => {
                     self.silent_ticks = 0;
                     self.block(seq, planned);
