@@ -658,7 +658,12 @@ mod tests {
     fn an_arc_s_tangent_is_the_derivative_of_its_pose() {
         for (clockwise, turns) in [(false, 0), (true, 0), (false, 1)] {
             // A quarter (or one and a quarter) of a 10 mm circle with a 3 mm helix.
-            let b = arc([0, 10_000_000, 3_000_000, 0, 0, 0], [0, 0], clockwise, turns);
+            let b = arc(
+                [0, 10_000_000, 3_000_000, 0, 0, 0],
+                [0, 0],
+                clockwise,
+                turns,
+            );
             let p = Path::new(&b, &[10_000_000, 0, 0, 0, 0, 0]).unwrap();
             for k in 1..8 {
                 let s = (p.length << 16) / 8 * k;
@@ -669,7 +674,10 @@ mod tests {
                 let t = p.tangent_at(s);
                 for i in 0..3 {
                     let fd = (c[i] - a[i]) as f32 / 2_000.0;
-                    assert!((t[i] - fd).abs() < 1e-3, "{clockwise} {turns} {k} {i}: {t:?} vs {fd}");
+                    assert!(
+                        (t[i] - fd).abs() < 1e-3,
+                        "{clockwise} {turns} {k} {i}: {t:?} vs {fd}"
+                    );
                 }
             }
         }

@@ -272,9 +272,29 @@ mod conversion_tests {
     #[test]
     fn the_fast_conversions_agree_with_the_casts() {
         let mut x: u32 = 0x1234_5678;
-        let mut cases = vec![0.0f32, -0.0, 0.5, -0.5, 1.0, -1.0, 2.5e9, -2.5e9, 2_147_483_648.0,
-            -2_147_483_648.0, 4_294_967_296.0, 9.223_372e18, -9.223_372e18, 1.5e19, -1.5e19,
-            1e-30, -1e-30, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 3.0e38];
+        let mut cases = vec![
+            0.0f32,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            2.5e9,
+            -2.5e9,
+            2_147_483_648.0,
+            -2_147_483_648.0,
+            4_294_967_296.0,
+            9.223_372e18,
+            -9.223_372e18,
+            1.5e19,
+            -1.5e19,
+            1e-30,
+            -1e-30,
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            3.0e38,
+        ];
         for _ in 0..1_000_000 {
             x ^= x << 13;
             x ^= x >> 17;
@@ -292,9 +312,15 @@ mod conversion_tests {
             y ^= y << 17;
             let v = (y as i64) >> (i % 64);
             let want = v as f64;
-            assert!((i64_to_f32(v) as f64 - want).abs() <= want.abs() * 2.4e-7, "{v}");
+            assert!(
+                (i64_to_f32(v) as f64 - want).abs() <= want.abs() * 2.4e-7,
+                "{v}"
+            );
             let u = y >> (i % 64);
-            assert!((u64_to_f32(u) as f64 - u as f64).abs() <= u as f64 * 2.4e-7, "{u}");
+            assert!(
+                (u64_to_f32(u) as f64 - u as f64).abs() <= u as f64 * 2.4e-7,
+                "{u}"
+            );
         }
         assert_eq!(u64_to_f32(u64::MAX), 1.8446744e19);
         assert_eq!(i64_to_f32(-40), -40.0);

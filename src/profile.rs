@@ -165,12 +165,7 @@ impl Profile {
                 s1: 0,
                 length: length_q16,
             };
-            return (
-                p,
-                Achieved {
-                    exit: from_q32(vc),
-                },
-            );
+            return (p, Achieved { exit: from_q32(vc) });
         }
         Self::plan_general(length_q16, v0, v_max, v1, a)
     }
