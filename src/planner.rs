@@ -53,9 +53,10 @@ use crate::math::{f32_to_i64, fmax, fmin, i64_to_f32, sqrtf, u64_to_f32};
 use crate::protocol::{Aux, Block, Motion, Plan, PlannedBlock};
 use crate::units::TICK_HZ;
 
-/// Blocks the controller buffers: enough that the stopping distance at 100 mm/s and
-/// 1000 mm/s² (5 mm) fits in 0.05 mm segments with room for the link's latency.
-pub const QUEUE_CAPACITY: usize = 160;
+/// Blocks the controller buffers: enough that the stopping distance of the H-4 along
+/// one axis at its top speed (200 mm/s at 2000 mm/s²: 10 mm) fits in 0.05 mm segments,
+/// with room for the link's latency (the RAM allows no more; see `docs/design.md`).
+pub const QUEUE_CAPACITY: usize = 220;
 
 /// Factor applied to every planned limit so that single-precision rounding cannot
 /// take a joint past its own limit.
@@ -1034,10 +1035,10 @@ mod tests {
     fn the_controller_never_leaves_faster_than_it_can_stop_within_its_queue() {
         let m = MachineConfig::cartesian_xyz();
         let k = MachineKinematics::new(&m);
-        // 400 collinear 0.05 mm segments at 100 mm/s: the host plans the middle ones
-        // at full speed (its look-ahead sees the whole 20 mm), but a queue holding only
+        // 600 collinear 0.05 mm segments at 100 mm/s: the host plans the middle ones
+        // at full speed (its look-ahead sees the whole 30 mm), but a queue holding only
         // 0.5 mm of them can stop from √(2·a·0.5 mm) only.
-        let blocks: Vec<Block> = (1..=400)
+        let blocks: Vec<Block> = (1..=600)
             .map(|i| line(i * 50_000, 0, 100, u32::MAX))
             .collect();
         let plan = planned(&blocks);
