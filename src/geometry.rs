@@ -85,11 +85,10 @@ mod fixed_width {
     }
 }
 
-/// A block's geometry.
+/// A block's geometry. Its start is not kept: it is the previous block's end, which
+/// every user has at hand (the controller's queue holds hundreds of these).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Path {
-    /// Start pose.
-    pub start: [i64; AXES],
     /// End pose (exact).
     pub end: [i64; AXES],
     /// Length, nm (or n° for rotary-only moves).
@@ -165,7 +164,6 @@ impl Path {
             delta[r].iter().map(|d| (*d as f64) * (*d as f64)).sum()
         };
         let point = Path {
-            start: *start,
             end,
             length: 0,
             rotary_only: false,
@@ -280,7 +278,6 @@ impl Path {
         shape: Shape,
     ) -> Result<Path, GeometryError> {
         let mut p = Path {
-            start: *start,
             end: *start,
             length: 0,
             rotary_only: false,
@@ -312,7 +309,6 @@ impl Path {
                 .sum()
         };
         // A point until proven otherwise.
-        self.start = *start;
         self.end = end;
         self.length = 0;
         self.rotary_only = false;
@@ -339,7 +335,7 @@ impl Path {
                 self.rotary_only = rotary_only;
                 self.shape = *shape;
                 let mut at = [0; AXES];
-                self.eval(length << 16, &mut at);
+                self.eval(start, length << 16, &mut at);
                 if near(&at, &end) {
                     Ok(())
                 } else {
@@ -407,11 +403,11 @@ impl Path {
                     *p_center = center;
                 }
                 let mut at = [0; AXES];
-                self.eval(0, &mut at);
+                self.eval(start, 0, &mut at);
                 if !near(&at, start) {
                     return bad;
                 }
-                self.eval(length << 16, &mut at);
+                self.eval(start, length << 16, &mut at);
                 if near(&at, &end) {
                     Ok(())
                 } else {
@@ -422,19 +418,20 @@ impl Path {
         }
     }
 
-    /// Pose after `s` (nm Q16) along the path; `s ≥ length` gives the exact end.
-    pub fn pose_at(&self, s: i64, pose: &mut [i64; AXES]) {
+    /// Pose after `s` (nm Q16) along the path from `start` (where it begins: the
+    /// previous block's end); `s ≥ length` gives the exact end.
+    pub fn pose_at(&self, start: &[i64; AXES], s: i64, pose: &mut [i64; AXES]) {
         if s >= self.length << 16 || self.length == 0 {
             *pose = self.end;
             return;
         }
-        self.eval(s.max(0), pose);
+        self.eval(start, s.max(0), pose);
     }
 
     /// The path's formula at `s` (nm Q16, ≥ 0), without snapping to the end.
-    fn eval(&self, s: i64, pose: &mut [i64; AXES]) {
+    fn eval(&self, start: &[i64; AXES], s: i64, pose: &mut [i64; AXES]) {
         let linear = |unit: &[i64; AXES], pose: &mut [i64; AXES]| {
-            for (p, (st, u)) in pose.iter_mut().zip(self.start.iter().zip(unit)) {
+            for (p, (st, u)) in pose.iter_mut().zip(start.iter().zip(unit)) {
                 // (u Q44 × s Q16) >> 60, rounded; axes that do not move cost nothing.
                 *p = if *u == 0 {
                     *st
@@ -551,13 +548,14 @@ mod tests {
     fn a_quarter_circle_stays_on_the_circle_and_ends_exactly() {
         let r = 10_000_000;
         let b = arc([0, r, 0, 0, 0, 0], [0, 0], false, 0);
-        let p = Path::new(&b, &[r, 0, 0, 0, 0, 0]).unwrap();
+        let from = [r, 0, 0, 0, 0, 0];
+        let p = Path::new(&b, &from).unwrap();
         let quarter = core::f64::consts::FRAC_PI_2 * r as f64;
         assert!((p.length as f64 - quarter).abs() < 1.0);
         let mut pose = [0; AXES];
         for k in 0..=1000 {
             let s = (p.length << 16) / 1000 * k;
-            p.pose_at(s, &mut pose);
+            p.pose_at(&from, s, &mut pose);
             let rad = ((pose[0] as f64).powi(2) + (pose[1] as f64).powi(2)).sqrt();
             assert!(
                 (rad - r as f64).abs() < 1.0,
@@ -565,7 +563,7 @@ mod tests {
                 rad - r as f64
             );
         }
-        p.pose_at(p.length << 16, &mut pose);
+        p.pose_at(&from, p.length << 16, &mut pose);
         assert_eq!(pose, [0, r, 0, 0, 0, 0]);
     }
 
@@ -573,13 +571,14 @@ mod tests {
     fn a_full_helix_with_an_extra_turn_has_the_length_of_two_turns() {
         let r = 5_000_000;
         let b = arc([r, 0, -2_000_000, 0, 0, 0], [0, 0], true, 1);
-        let p = Path::new(&b, &[r, 0, 0, 0, 0, 0]).unwrap();
+        let from = [r, 0, 0, 0, 0, 0];
+        let p = Path::new(&b, &from).unwrap();
         let planar = 2.0 * core::f64::consts::TAU * r as f64;
         let want = (planar * planar + 4e12).sqrt();
         assert!((p.length as f64 - want).abs() < 1.0);
         // Halfway: one full turn done (back at angle 0), halfway down.
         let mut pose = [0; AXES];
-        p.pose_at(p.length << 15, &mut pose);
+        p.pose_at(&from, p.length << 15, &mut pose);
         assert!((pose[0] - r).abs() <= 1 && pose[1].abs() <= 1, "{pose:?}");
         assert!((pose[2] + 1_000_000).abs() <= 1);
     }
@@ -595,7 +594,7 @@ mod tests {
         };
         let p = Path::new(&b, &[0; AXES]).unwrap();
         let mut pose = [0; AXES];
-        p.pose_at(p.length << 15, &mut pose);
+        p.pose_at(&[0; AXES], p.length << 15, &mut pose);
         assert!((pose[0] - 61_728_394).abs() <= 1, "{pose:?}");
         assert!((pose[1] + 49_382_716).abs() <= 1, "{pose:?}");
     }
@@ -664,13 +663,14 @@ mod tests {
                 clockwise,
                 turns,
             );
-            let p = Path::new(&b, &[10_000_000, 0, 0, 0, 0, 0]).unwrap();
+            let from = [10_000_000, 0, 0, 0, 0, 0];
+            let p = Path::new(&b, &from).unwrap();
             for k in 1..8 {
                 let s = (p.length << 16) / 8 * k;
                 let h = 1_000i64 << 16; // 1 µm
                 let (mut a, mut c) = ([0; AXES], [0; AXES]);
-                p.pose_at(s - h, &mut a);
-                p.pose_at(s + h, &mut c);
+                p.pose_at(&from, s - h, &mut a);
+                p.pose_at(&from, s + h, &mut c);
                 let t = p.tangent_at(s);
                 for i in 0..3 {
                     let fd = (c[i] - a[i]) as f32 / 2_000.0;

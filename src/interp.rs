@@ -108,6 +108,8 @@ pub const HISTORY: usize = 48;
 #[derive(Clone, Debug)]
 struct Past {
     start: i64,
+    /// Where the path begins.
+    from: [i64; AXES],
     path: crate::geometry::Path,
     line: u32,
 }
@@ -202,6 +204,7 @@ impl Executor {
             for i in 0..HISTORY {
                 let past = slots.add(i);
                 at!((*past).start).write(0);
+                at!((*past).from).write([0; AXES]);
                 at!((*past).path).write(PlanBlock::default().path);
                 at!((*past).line).write(0);
             }
@@ -328,6 +331,7 @@ impl Executor {
                 if self.smoothing.log2 > 0 {
                     let past = self.smoothing.hist.push();
                     past.start = self.s_raw;
+                    past.from = *planner.front_start();
                     past.path = b.path;
                     past.line = b.line;
                 }
@@ -473,7 +477,8 @@ impl Executor {
                     let (s, v) = p.at(a.t);
                     self.s_raw = self.block_start + a.s_base + s;
                     if self.smoothing.log2 == 0 {
-                        b.path.pose_at(a.s_base + s, &mut self.pose);
+                        b.path
+                            .pose_at(planner.front_start(), a.s_base + s, &mut self.pose);
                         self.speed = v;
                     }
                     break;
@@ -512,7 +517,8 @@ impl Executor {
                 i -= 1;
             }
             let past = f.hist.get(i);
-            past.path.pose_at(s - past.start, &mut self.pose);
+            past.path
+                .pose_at(&past.from, s - past.start, &mut self.pose);
             self.line = past.line;
         }
     }

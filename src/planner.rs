@@ -53,10 +53,11 @@ use crate::math::{f32_to_i64, fmax, fmin, i64_to_f32, sqrtf, u64_to_f32};
 use crate::protocol::{Aux, Block, Motion, Plan, PlannedBlock};
 use crate::units::TICK_HZ;
 
-/// Blocks the controller buffers: enough that the stopping distance of the H-4 along
-/// one axis at its top speed (200 mm/s at 2000 mm/s²: 10 mm) fits in 0.05 mm segments,
-/// with room for the link's latency (the RAM allows no more; see `docs/design.md`).
-pub const QUEUE_CAPACITY: usize = 220;
+/// Blocks the controller buffers: enough that the H-4's stopping distance at its top
+/// path speed (283 mm/s along the XY diagonal at 2828 mm/s²: 14.1 mm) fits in 0.05 mm
+/// segments with room for the link's latency; about all the RAM allows (94 of the
+/// 96 KiB static budget, see `docs/performance.md`).
+pub const QUEUE_CAPACITY: usize = 280;
 
 /// Factor applied to every planned limit so that single-precision rounding cannot
 /// take a joint past its own limit.
@@ -162,7 +163,6 @@ impl Default for PlanBlock {
             line: 0,
             kind: Kind::Dwell(0),
             path: Path {
-                start: [0; AXES],
                 end: [0; AXES],
                 length: 0,
                 rotary_only: false,
@@ -243,13 +243,15 @@ impl Lookahead {
         // The fastest this block may be asked to go (feed override up to 200 %).
         let requested = feed * 2.0;
         let (v_limit, accel) = match kind {
-            Kind::Rapid | Kind::Feed => match limits_along(&path, requested, machine, kin) {
-                Ok(l) => l,
-                Err(e) => {
-                    kind = Kind::Unreachable(e);
-                    (0.0, 1.0)
+            Kind::Rapid | Kind::Feed => {
+                match limits_along(&self.end, &path, requested, machine, kin) {
+                    Ok(l) => l,
+                    Err(e) => {
+                        kind = Kind::Unreachable(e);
+                        (0.0, 1.0)
+                    }
                 }
-            },
+            }
             _ => (0.0, 1.0),
         };
         let start_tangent = path.tangent_at(0);
@@ -576,6 +578,8 @@ pub struct Planner {
     budget: u64,
     /// Σ estimated duration of the queued blocks, ticks × 16.
     estimate: u64,
+    /// Where the front block starts (the end of the block before it).
+    head_start: [i64; AXES],
     /// Joints of the last target checked against the travel (scratch).
     scratch: [i64; MAX_JOINTS],
     /// The front block is executing ([`Planner::start`]): it stays in its slot (no
@@ -620,6 +624,7 @@ impl Planner {
             at!((*p).estimate).write(0);
             at!((*p).running).write(false);
             at!((*p).scratch).write([0; MAX_JOINTS]);
+            at!((*p).head_start).write(pose);
         }
     }
 
@@ -662,10 +667,17 @@ impl Planner {
         self.running = true;
         true
     }
+    /// Where the executing block (or, none executing, the next) starts.
+    pub fn front_start(&self) -> &[i64; AXES] {
+        &self.head_start
+    }
     /// Frees the executing block's slot.
     pub fn finish(&mut self) {
         if self.running {
             self.running = false;
+            if let Some(b) = self.queue.front() {
+                self.head_start = b.path.end;
+            }
             self.queue.pop_front();
         }
     }
@@ -685,6 +697,7 @@ impl Planner {
     pub fn clear(&mut self, pose: [i64; AXES]) {
         self.queue.head = 0;
         self.queue.len = 0;
+        self.head_start = pose;
         self.end = pose;
         self.budget = 0;
         self.estimate = 0;
@@ -773,6 +786,9 @@ impl Planner {
         self.end = b.path.end;
         self.budget += shares.0;
         self.estimate += shares.1;
+        if self.queue.len == 0 {
+            self.head_start = start;
+        }
         self.queue.commit();
         Ok(())
     }
@@ -820,6 +836,7 @@ fn joint_rates(
 /// On arcs the pose axes get the same split against the centripetal v²/r. Fails when a
 /// sampled pose is out of reach or outside a joint's travel.
 fn limits_along(
+    start: &[i64; AXES],
     path: &Path,
     feed: f32,
     machine: &MachineConfig,
@@ -836,7 +853,7 @@ fn limits_along(
     let mut pose = [0i64; AXES];
     for k in 0..LIMIT_SAMPLES {
         let s = (len as i128 * k as i128 / (LIMIT_SAMPLES as i128 - 1)) as i64;
-        path.pose_at(s, &mut pose);
+        path.pose_at(start, s, &mut pose);
         kin.inverse_checked(&pose, &machine.joints, &mut q1)?;
         let t = path.tangent_at(s);
         for (rate, l) in t.iter().zip(&machine.axes) {
@@ -848,13 +865,13 @@ fn limits_along(
         }
         // Central differences inside the block.
         let mid = s.clamp(h.min(len / 2), (len - h).max(len / 2));
-        path.pose_at(mid - h.min(mid), &mut pose);
+        path.pose_at(start, mid - h.min(mid), &mut pose);
         kin.inverse(&pose, &mut q0)?;
         let mut centre = [0i64; AXES];
-        path.pose_at(mid, &mut centre);
+        path.pose_at(start, mid, &mut centre);
         let mut qc = [0i64; MAX_JOINTS];
         kin.inverse(&centre, &mut qc)?;
-        path.pose_at(mid + h, &mut pose);
+        path.pose_at(start, mid + h, &mut pose);
         kin.inverse(&pose, &mut q2)?;
         for j in 0..n {
             let jc = &machine.joints[j];

@@ -199,7 +199,7 @@ pub fn check(blocks: &[Block], machine: &MachineConfig, start: [i64; AXES]) -> P
         for k in 0..=n {
             let s = ((len as i128) << 16) * k as i128 / n as i128;
             let mut pose = [0i64; AXES];
-            path.pose_at(s as i64, &mut pose);
+            path.pose_at(&from, s as i64, &mut pose);
             out.samples += 1;
             match kin.inverse_checked(&pose, &machine.joints, &mut q) {
                 Err(why) => {

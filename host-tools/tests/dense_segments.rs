@@ -204,6 +204,67 @@ fn run(
     }
 }
 
+/// A straight run of `G1` segments `segment` mm long, `length` mm from (`x0`, `y0`) in
+/// the direction (`dx`, `dy`) (a unit vector), at `feed` mm/min.
+fn straight(length: f64, segment: f64, feed: u32, from: (f64, f64), dir: (f64, f64)) -> String {
+    let (x0, y0) = from;
+    let mut p = format!("G21 G90 G17 G64\nG0 X{x0} Y{y0}\n");
+    let n = (length / segment).round() as usize;
+    for i in 1..=n {
+        let d = i as f64 * segment;
+        p += &format!("G1 X{:.4} Y{:.4}", x0 + d * dir.0, y0 + d * dir.1);
+        if i == 1 {
+            p += &format!(" F{feed}");
+        }
+        p += "\n";
+    }
+    p + "M2\n"
+}
+
+/// The H-4 at its top speed on 0.05 mm segments (issue 9: the look-ahead covers the
+/// stopping distance at the machine's maximum speed): along X at 200 mm/s (F12000;
+/// 10 mm to stop at 2000 mm/s², 200 blocks) and along the XY diagonal at 283 mm/s
+/// (F17000, both axes at 200 mm/s; 14.1 mm to stop at 2828 mm/s² along the path, 283
+/// blocks), through `--check` and `--sim`, within 1.03 × the plan's time.
+#[test]
+fn the_h4_keeps_its_top_speed_on_short_segments() {
+    let s = std::f64::consts::FRAC_1_SQRT_2;
+    let programs = [
+        (
+            "x100-0.05mm-F12000",
+            straight(100.0, 0.05, 12000, (-50.0, 0.0), (1.0, 0.0)),
+        ),
+        (
+            "diag70-0.05mm-F17000",
+            straight(70.0, 0.05, 17000, (-35.0, -35.0), (s, s)),
+        ),
+    ];
+    let machine =
+        pkmc_host::machine_file::parse(pkmc_host::machine_file::H4_TABLE_MACHINE, "h4-table.toml")
+            .unwrap();
+    let margs: &[&str] = &["--machine", "examples/machines/h4-table.toml"];
+    let h = machine.home.map(|v| v as f64 * 1e-6);
+    let home = [h[0], h[1], h[2]];
+    let mut failures = Vec::new();
+    for (pname, text) in &programs {
+        let name = format!("{pname}-h4-table");
+        let program = tmp(&format!("{name}.ngc"));
+        std::fs::write(&program, text).unwrap();
+        let plan = PlannedSpeed::of(text, &machine);
+        for mode in ["--check", "--sim"] {
+            let r = run(mode, &name, &program, margs, &plan, home);
+            println!("{:<38} time {:.4} × plan", r.what, r.ratio);
+            if r.report["result"] != "done" || r.report["drive_violations"] != 0 {
+                failures.push(format!("{}: {}", r.what, r.report));
+            }
+            if r.ratio > 1.03 {
+                failures.push(format!("{}: ran {:.4} × the plan's time", r.what, r.ratio));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
 #[test]
 fn dense_segments_run_at_the_planned_speed_through_the_real_link() {
     let programs = [
