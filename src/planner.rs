@@ -53,10 +53,10 @@ use crate::math::{f32_to_i64, fmax, fmin, i64_to_f32, sqrtf, u64_to_f32};
 use crate::protocol::{Aux, Block, Motion, Plan, PlannedBlock};
 use crate::units::TICK_HZ;
 
-/// Blocks the controller buffers: enough that the H-4's stopping distance at its top
-/// path speed (283 mm/s along the XY diagonal at 2828 mm/s²: 14.1 mm) fits in 0.05 mm
-/// segments with room for the link's latency; about all the RAM allows (94 of the
-/// 96 KiB static budget, see `docs/performance.md`).
+/// Blocks the controller buffers: enough that the H-4's stopping distance along an XY
+/// diagonal at 283 mm/s (14.1 mm at 2828 mm/s²) fits in 0.05 mm segments with room for
+/// the link's latency; about all the RAM allows (94 of the 96 KiB static budget, see
+/// `docs/performance.md`). Its XYZ diagonal at 346 mm/s would need some 370.
 pub const QUEUE_CAPACITY: usize = 280;
 
 /// Factor applied to every planned limit so that single-precision rounding cannot
