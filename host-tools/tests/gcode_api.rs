@@ -118,3 +118,21 @@ fn an_axis_word_for_an_axis_the_machine_lacks_is_refused_at_its_column() {
     );
     assert!(compile("G0 A4", "t.ngc", &Options::default()).is_ok());
 }
+
+#[test]
+fn lines_ending_in_cr_cr_lf_read_as_lines_a_cr_inside_a_line_is_still_an_error() {
+    // Some posts and file transfers double the CR of a CRLF ending (issue 14).
+    let unix = "G21 G90\nG1 X1 Y2 F100\nG0 Z3\nM2\n";
+    let want = compile(unix, "t.ngc", &Options::default()).unwrap();
+    for ending in ["\r\n", "\r\r\n", "\r\r\r\n"] {
+        let text = unix.replace('\n', ending);
+        assert_eq!(
+            compile(&text, "t.ngc", &Options::default()).unwrap(),
+            want,
+            "{ending:?}"
+        );
+    }
+    let e = compile("G1 X1\r F100\n", "t.ngc", &Options::default()).unwrap_err();
+    assert_eq!((e[0].line, e[0].col), (1, 6));
+    assert!(e[0].message.contains("U+000D"), "{}", e[0].message);
+}

@@ -150,7 +150,7 @@ pub fn compile_canon(
     let mut closed = false;
     for (n, raw) in source.split('\n').enumerate() {
         let line = n + 1;
-        let text = raw.strip_suffix('\r').unwrap_or(raw);
+        let text = raw.trim_end_matches('\r');
         let bytes = text.as_bytes();
         let Some(first) = bytes.iter().position(|&b| b != b' ' && b != b'\t') else {
             continue; // blank line

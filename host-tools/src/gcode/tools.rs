@@ -70,7 +70,7 @@ impl ToolTable {
         let mut words = Words::default();
         for (n, raw) in text.split('\n').enumerate() {
             let line = n + 1;
-            let text = raw.strip_suffix('\r').unwrap_or(raw);
+            let text = raw.trim_end_matches('\r');
             let err = |col: u32, message: String| Diagnostic {
                 file: origin.to_string(),
                 line,
