@@ -85,18 +85,72 @@ mod fixed_width {
     }
 }
 
-/// A block's geometry. Its start is not kept: it is the previous block's end, which
-/// every user has at hand (the controller's queue holds hundreds of these).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Path {
+/// What a path is, an arc's in-plane part aside.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Form {
+    /// No motion (dwell, auxiliary function, zero-length move).
+    #[default]
+    Point,
+    /// Straight line.
+    Line,
+    /// Arc or helix; its in-plane part is a [`Bend`].
+    Arc,
+}
+
+/// What every path has: where it ends, its length, and its direction per axis. An
+/// arc's in-plane part is its [`Bend`], kept apart: the controller's queue holds
+/// hundreds of courses and only the arcs among them need a bend (`crate::planner`
+/// keeps bends in a ring of their own), which makes a queued line 72 bytes shorter.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Course {
     /// End pose (exact).
     pub end: [i64; AXES],
     /// Length, nm (or n° for rotary-only moves).
     pub length: i64,
     /// Measured over rotary axes (rotary-only move).
     pub rotary_only: bool,
-    /// Shape.
-    pub shape: Shape,
+    /// Point, line or arc.
+    pub form: Form,
+    /// Direction per axis, Q20.44: a line's, or an arc's linear part (helix axis and
+    /// A B C; in-plane entries are 0).
+    pub unit: [i64; AXES],
+}
+
+/// An arc's in-plane part, as in [`Shape::Arc`] (which see).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Bend {
+    /// Plane.
+    pub plane: Plane,
+    /// Centre (first, second in-plane axis), nm.
+    pub center: [i64; 2],
+    /// Start radius, nm.
+    pub r0: i64,
+    /// End radius minus start radius, nm.
+    pub dr: i64,
+    /// Start angle, turns Q64 (wrapping).
+    pub phi0: u64,
+    /// Angle per path distance (turns Q64 per nm Q16, scaled by 2¹⁶).
+    pub phi_rate: i128,
+    /// Radius change per path distance (used as (k·s) ≫ 56).
+    pub r_rate: i64,
+}
+
+/// A block's geometry: its [`Course`] and, for an arc, its [`Bend`] (ignored
+/// otherwise). Its start is not kept: it is the previous block's end, which every user
+/// has at hand. Reads of the course's fields go through (`path.end`, `path.length`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Path {
+    /// End, length and direction.
+    pub course: Course,
+    /// In-plane part of an arc.
+    pub bend: Bend,
+}
+
+impl core::ops::Deref for Path {
+    type Target = Course;
+    fn deref(&self) -> &Course {
+        &self.course
+    }
 }
 
 const Q44: f64 = 17_592_186_044_416.0;
@@ -164,10 +218,11 @@ impl Path {
             delta[r].iter().map(|d| (*d as f64) * (*d as f64)).sum()
         };
         let point = Path {
-            end,
-            length: 0,
-            rotary_only: false,
-            shape: Shape::Point,
+            course: Course {
+                end,
+                ..Course::default()
+            },
+            bend: Bend::default(),
         };
         match block.motion {
             Motion::Dwell(_) | Motion::Aux(_) => Ok(point),
@@ -191,9 +246,13 @@ impl Path {
                     *u = unit_q44(*d, length);
                 }
                 Ok(Path {
-                    length: length as i64,
-                    rotary_only,
-                    shape: Shape::Line { unit },
+                    course: Course {
+                        end,
+                        length: length as i64,
+                        rotary_only,
+                        form: Form::Line,
+                        unit,
+                    },
                     ..point
                 })
             }
@@ -246,9 +305,14 @@ impl Path {
                 let sweep = turn_of(sweep_rad) as i128;
                 let dr = libm::round(r1 - r0) as i64;
                 Ok(Path {
-                    length: libm::round(length) as i64,
-                    rotary_only: false,
-                    shape: Shape::Arc {
+                    course: Course {
+                        end,
+                        length: libm::round(length) as i64,
+                        rotary_only: false,
+                        form: Form::Arc,
+                        unit,
+                    },
+                    bend: Bend {
                         plane,
                         center,
                         r0: libm::round(r0) as i64,
@@ -256,9 +320,7 @@ impl Path {
                         phi0: turn_of(wrap(a0, tau)) as u64,
                         phi_rate: (sweep << 16) / len as i128,
                         r_rate: (((dr as i128) << 40) / len as i128) as i64,
-                        unit,
                     },
-                    ..point
                 })
             }
         }
@@ -277,21 +339,45 @@ impl Path {
         length: i64,
         shape: Shape,
     ) -> Result<Path, GeometryError> {
-        let mut p = Path {
-            end: *start,
-            length: 0,
-            rotary_only: false,
-            shape: Shape::Point,
-        };
-        p.set_from_plan(block, start, length, &shape)?;
+        let mut p = Path::default();
+        p.course
+            .set_from_plan(&mut p.bend, block, start, length, &shape)?;
         Ok(p)
     }
 
-    /// [`Path::from_plan`] written into `self`, for the controller's receive path: the
-    /// path is built where it will stay, not returned and moved (some 230 bytes each
-    /// time). On error `self` holds some path, not the block's.
+    /// The shape the host sends for this path.
+    pub fn shape(&self) -> Shape {
+        let b = &self.bend;
+        match self.form {
+            Form::Point => Shape::Point,
+            Form::Line => Shape::Line { unit: self.unit },
+            Form::Arc => Shape::Arc {
+                plane: b.plane,
+                center: b.center,
+                r0: b.r0,
+                dr: b.dr,
+                phi0: b.phi0,
+                phi_rate: b.phi_rate,
+                r_rate: b.r_rate,
+                unit: self.unit,
+            },
+        }
+    }
+
+    /// Pose after `s` (nm Q16) along the path from `start` ([`Course::pose_at`]).
+    pub fn pose_at(&self, start: &[i64; AXES], s: i64, pose: &mut [i64; AXES]) {
+        self.course.pose_at(&self.bend, start, s, pose);
+    }
+}
+
+impl Course {
+    /// [`Path::from_plan`] written into `self` and, for an arc, `bend`, for the
+    /// controller's receive path: the course and bend are built where they will stay,
+    /// not returned and moved. On error they hold some path, not the block's; `bend`
+    /// is written only for an arc.
     pub fn set_from_plan(
         &mut self,
+        bend: &mut Bend,
         block: &Block,
         start: &[i64; AXES],
         length: i64,
@@ -312,14 +398,14 @@ impl Path {
         self.end = end;
         self.length = 0;
         self.rotary_only = false;
-        self.shape = Shape::Point;
+        self.form = Form::Point;
         let bad = Err(GeometryError::PlanMismatch);
         match (block.motion, shape) {
             (Motion::Dwell(_) | Motion::Aux(_), Shape::Point) if length == 0 => Ok(()),
             (Motion::Rapid | Motion::Linear, Shape::Point) if length == 0 && delta == [0; AXES] => {
                 Ok(())
             }
-            (Motion::Rapid | Motion::Linear, Shape::Line { .. }) => {
+            (Motion::Rapid | Motion::Linear, Shape::Line { unit }) => {
                 let (lin, rot) = (squares(0..3), squares(3..6));
                 let rotary_only = lin == 0;
                 let sq = if rotary_only { rot } else { lin };
@@ -333,9 +419,10 @@ impl Path {
                 }
                 self.length = length;
                 self.rotary_only = rotary_only;
-                self.shape = *shape;
+                self.form = Form::Line;
+                self.unit = *unit;
                 let mut at = [0; AXES];
-                self.eval(start, length << 16, &mut at);
+                self.eval(bend, start, length << 16, &mut at);
                 if near(&at, &end) {
                     Ok(())
                 } else {
@@ -352,6 +439,7 @@ impl Path {
                 &Shape::Arc {
                     r0,
                     dr,
+                    phi0,
                     phi_rate,
                     r_rate,
                     ref unit,
@@ -391,23 +479,24 @@ impl Path {
                     return bad;
                 }
                 self.length = length;
-                self.shape = *shape;
+                self.form = Form::Arc;
+                self.unit = *unit;
                 // The plane and centre are the block's (they are not sent twice).
-                if let Shape::Arc {
-                    plane: p_plane,
-                    center: p_center,
-                    ..
-                } = &mut self.shape
-                {
-                    *p_plane = plane;
-                    *p_center = center;
-                }
+                *bend = Bend {
+                    plane,
+                    center,
+                    r0,
+                    dr,
+                    phi0,
+                    phi_rate,
+                    r_rate,
+                };
                 let mut at = [0; AXES];
-                self.eval(start, 0, &mut at);
+                self.eval(bend, start, 0, &mut at);
                 if !near(&at, start) {
                     return bad;
                 }
-                self.eval(start, length << 16, &mut at);
+                self.eval(bend, start, length << 16, &mut at);
                 if near(&at, &end) {
                     Ok(())
                 } else {
@@ -419,17 +508,18 @@ impl Path {
     }
 
     /// Pose after `s` (nm Q16) along the path from `start` (where it begins: the
-    /// previous block's end); `s ≥ length` gives the exact end.
-    pub fn pose_at(&self, start: &[i64; AXES], s: i64, pose: &mut [i64; AXES]) {
+    /// previous block's end); `s ≥ length` gives the exact end. `bend` is the arc's
+    /// (ignored for other forms).
+    pub fn pose_at(&self, bend: &Bend, start: &[i64; AXES], s: i64, pose: &mut [i64; AXES]) {
         if s >= self.length << 16 || self.length == 0 {
             *pose = self.end;
             return;
         }
-        self.eval(start, s.max(0), pose);
+        self.eval(bend, start, s.max(0), pose);
     }
 
     /// The path's formula at `s` (nm Q16, ≥ 0), without snapping to the end.
-    fn eval(&self, start: &[i64; AXES], s: i64, pose: &mut [i64; AXES]) {
+    fn eval(&self, bend: &Bend, start: &[i64; AXES], s: i64, pose: &mut [i64; AXES]) {
         let linear = |unit: &[i64; AXES], pose: &mut [i64; AXES]| {
             for (p, (st, u)) in pose.iter_mut().zip(start.iter().zip(unit)) {
                 // (u Q44 × s Q16) >> 60, rounded; axes that do not move cost nothing.
@@ -440,20 +530,20 @@ impl Path {
                 };
             }
         };
-        match self.shape {
-            Shape::Point => *pose = self.end,
-            Shape::Line { unit } => linear(&unit, pose),
-            Shape::Arc {
-                plane,
-                center,
-                r0,
-                phi0,
-                phi_rate,
-                r_rate,
-                unit,
-                ..
-            } => {
-                linear(&unit, pose);
+        match self.form {
+            Form::Point => *pose = self.end,
+            Form::Line => linear(&self.unit, pose),
+            Form::Arc => {
+                let &Bend {
+                    plane,
+                    center,
+                    r0,
+                    phi0,
+                    phi_rate,
+                    r_rate,
+                    ..
+                } = bend;
+                linear(&self.unit, pose);
                 // At the start (the plan check's first point) no product is needed.
                 let (phi, r) = if s == 0 {
                     (phi0, r0)
@@ -474,27 +564,29 @@ impl Path {
             }
         }
     }
+}
 
+impl Path {
     /// Unit tangent at `s` (nm Q16), in `f32` per axis (per nm of path).
     pub fn tangent_at(&self, s: i64) -> [f32; AXES] {
         let mut t = [0f32; AXES];
-        match self.shape {
-            Shape::Point => {}
-            Shape::Line { unit } => {
-                for (t, u) in t.iter_mut().zip(&unit) {
+        match self.form {
+            Form::Point => {}
+            Form::Line => {
+                for (t, u) in t.iter_mut().zip(&self.unit) {
                     *t = (*u as f64 / Q44) as f32;
                 }
             }
-            Shape::Arc {
-                plane,
-                phi0,
-                phi_rate,
-                r0,
-                dr,
-                unit,
-                ..
-            } => {
-                for (t, u) in t.iter_mut().zip(&unit) {
+            Form::Arc => {
+                let Bend {
+                    plane,
+                    phi0,
+                    phi_rate,
+                    r0,
+                    dr,
+                    ..
+                } = self.bend;
+                for (t, u) in t.iter_mut().zip(&self.unit) {
                     *t = (*u as f64 / Q44) as f32;
                 }
                 let s = s.max(0);
@@ -518,10 +610,8 @@ impl Path {
 
     /// Smallest radius of curvature, nm (`None` for straight paths).
     pub fn radius(&self) -> Option<i64> {
-        match self.shape {
-            Shape::Arc { r0, dr, .. } => Some(r0.min(r0 + dr)),
-            _ => None,
-        }
+        let Bend { r0, dr, .. } = self.bend;
+        (self.form == Form::Arc).then_some(r0.min(r0 + dr))
     }
 }
 
@@ -602,7 +692,7 @@ mod tests {
     /// What the host computes for `block` from `start`, checked as the controller does.
     fn round_trip(block: &Block, start: &[i64; AXES]) -> Result<Path, GeometryError> {
         let host = Path::new(block, start)?;
-        Path::from_plan(block, start, host.length, host.shape)
+        Path::from_plan(block, start, host.length, host.shape())
     }
 
     proptest::proptest! {
@@ -697,7 +787,7 @@ mod tests {
             turns: 0,
         };
         assert_eq!(
-            Path::from_plan(&other, &start, host.length, host.shape),
+            Path::from_plan(&other, &start, host.length, host.shape()),
             Err(GeometryError::PlanMismatch)
         );
         let mut more = b;
@@ -708,12 +798,12 @@ mod tests {
             turns: 1,
         };
         assert_eq!(
-            Path::from_plan(&more, &start, host.length, host.shape),
+            Path::from_plan(&more, &start, host.length, host.shape()),
             Err(GeometryError::PlanMismatch)
         );
         // A length that does not match the sweep.
         assert_eq!(
-            Path::from_plan(&b, &start, host.length * 2, host.shape),
+            Path::from_plan(&b, &start, host.length * 2, host.shape()),
             Err(GeometryError::PlanMismatch)
         );
     }

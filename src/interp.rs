@@ -29,8 +29,9 @@
 //! when it starts, from the speed the previous one left at). No pass over the queue.
 
 use crate::config::AXES;
+use crate::geometry::{Form, Path};
 use crate::kinematics::Unreachable;
-use crate::planner::{Kind, PlanBlock, Planner};
+use crate::planner::{Kind, Planner};
 use crate::profile::{from_q32, Profile, HELD, TICK_Q32};
 use crate::protocol::Aux;
 
@@ -110,7 +111,7 @@ struct Past {
     start: i64,
     /// Where the path begins.
     from: [i64; AXES],
-    path: crate::geometry::Path,
+    path: Path,
     line: u32,
 }
 
@@ -205,7 +206,7 @@ impl Executor {
                 let past = slots.add(i);
                 at!((*past).start).write(0);
                 at!((*past).from).write([0; AXES]);
-                at!((*past).path).write(PlanBlock::default().path);
+                at!((*past).path).write(Path::default());
                 at!((*past).line).write(0);
             }
         }
@@ -332,7 +333,10 @@ impl Executor {
                     let past = self.smoothing.hist.push();
                     past.start = self.s_raw;
                     past.from = *planner.front_start();
-                    past.path = b.path;
+                    past.path.course = b.course;
+                    if b.course.form == Form::Arc {
+                        past.path.bend = *planner.bend();
+                    }
                     past.line = b.line;
                 }
                 // The profile is planned where it is kept (no copy of it).
@@ -345,7 +349,7 @@ impl Executor {
                     target,
                 });
                 let p = a.profile.insert(Profile::IDLE);
-                let got = p.plan_into(b.path.length << 16, exit, planner.cap(b), target, b.accel);
+                let got = p.plan_into(b.course.length << 16, exit, planner.cap(b), target, b.accel);
                 self.exit = got.exit;
                 None
             }
@@ -366,7 +370,7 @@ impl Executor {
         };
         let (s, v) = p.at(a.t);
         a.s_base += s;
-        let left = ((b.path.length << 16) - a.s_base).max(0);
+        let left = ((b.course.length << 16) - a.s_base).max(0);
         let target = planner.exit_target();
         let (np, got) = Profile::plan(left, from_q32(v), planner.cap(b), target, b.accel);
         a.profile = Some(np);
@@ -443,7 +447,7 @@ impl Executor {
                     if a.dwell_left == 0 {
                         self.completed += 1;
                         if let Some(b) = planner.executing() {
-                            self.pose = b.path.end;
+                            self.pose = b.course.end;
                         }
                         planner.finish();
                         self.active = None;
@@ -461,9 +465,9 @@ impl Executor {
                     if p.t2 != HELD && a.t >= d {
                         let v1 = p.v1;
                         budget = a.t - d;
-                        self.s_raw = self.block_start + (b.path.length << 16);
+                        self.s_raw = self.block_start + (b.course.length << 16);
                         if self.smoothing.log2 == 0 {
-                            self.pose = b.path.end;
+                            self.pose = b.course.end;
                         }
                         planner.finish();
                         self.completed += 1;
@@ -477,8 +481,12 @@ impl Executor {
                     let (s, v) = p.at(a.t);
                     self.s_raw = self.block_start + a.s_base + s;
                     if self.smoothing.log2 == 0 {
-                        b.path
-                            .pose_at(planner.front_start(), a.s_base + s, &mut self.pose);
+                        b.course.pose_at(
+                            planner.bend(),
+                            planner.front_start(),
+                            a.s_base + s,
+                            &mut self.pose,
+                        );
                         self.speed = v;
                     }
                     break;

@@ -47,17 +47,21 @@
 //! Speeds are in nm/tick (`f32`), accelerations in nm/tick².
 
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
-use crate::geometry::{GeometryError, Path, Shape};
+use crate::geometry::{Bend, Course, Form, GeometryError, Path, Shape};
 use crate::kinematics::{Kinematics, MachineKinematics, Unreachable};
 use crate::math::{f32_to_i64, fmax, fmin, i64_to_f32, sqrtf, u64_to_f32};
 use crate::protocol::{Aux, Block, Motion, Plan, PlannedBlock};
 use crate::units::TICK_HZ;
 
-/// Blocks the controller buffers: enough that the H-4's stopping distance along an XY
-/// diagonal at 283 mm/s (14.1 mm at 2828 mm/s²) fits in 0.05 mm segments with room for
-/// the link's latency; about all the RAM allows (94 of the 96 KiB static budget, see
-/// `docs/performance.md`). Its XYZ diagonal at 346 mm/s would need some 370.
-pub const QUEUE_CAPACITY: usize = 280;
+/// Blocks the controller buffers: enough that the H-4's stopping distance at its top
+/// speed, along its XYZ diagonal at 346 mm/s (17.3 mm at 3464 mm/s²), fits in 0.05 mm
+/// segments with room for the link's latency; with the bends, about all the RAM allows
+/// (94 of the 96 KiB static budget, see `docs/performance.md`).
+pub const QUEUE_CAPACITY: usize = 384;
+
+/// Arcs the controller buffers (their in-plane parts, [`Bend`]s, are kept apart from
+/// the queue's slots, which are line-sized).
+pub const BEND_CAPACITY: usize = 80;
 
 /// Factor applied to every planned limit so that single-precision rounding cannot
 /// take a joint past its own limit.
@@ -106,8 +110,30 @@ pub struct PlanBlock {
     pub corner: f32,
     /// Planned entry speed, nm/tick.
     pub entry: f32,
+}
+
+/// A block in the controller's queue: what the controller uses of a [`PlanBlock`],
+/// with the path's [`Course`] (an arc's [`Bend`] is in the queue's ring of bends).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Queued {
+    /// NC line.
+    pub line: u32,
+    /// Kind.
+    pub kind: Kind,
+    /// End, length and direction.
+    pub course: Course,
+    /// Requested feed, nm/tick (∞ for rapids).
+    pub feed: f32,
+    /// Hard speed limit, nm/tick.
+    pub v_limit: f32,
+    /// Acceleration of the profile, nm/tick².
+    pub accel: f32,
+    /// Hard limit on the entry speed, nm/tick (0: entered from rest).
+    pub corner: f32,
+    /// Planned entry speed, nm/tick.
+    pub entry: f32,
     /// Its share of the controller's stop budget and of the buffered-time estimate
-    /// ([`PlanBlock::budget`], [`PlanBlock::estimate`]), formed once when queued.
+    /// ([`Queued::budget`], [`Queued::estimate`]), formed once when queued.
     shares: (u64, u64),
 }
 
@@ -121,12 +147,38 @@ impl PlanBlock {
     pub fn plan(&self) -> Plan {
         Plan {
             length: self.path.length,
-            shape: self.path.shape,
+            shape: self.path.shape(),
             v_limit: self.v_limit,
             accel: self.accel,
             entry: self.entry,
             stop: self.corner == 0.0,
         }
+    }
+}
+
+impl Queued {
+    /// A no-op at the origin (a placeholder for the queue's free slots).
+    const EMPTY: Self = Self {
+        line: 0,
+        kind: Kind::Dwell(0),
+        course: Course {
+            end: [0; AXES],
+            length: 0,
+            rotary_only: false,
+            form: Form::Point,
+            unit: [0; AXES],
+        },
+        feed: 0.0,
+        v_limit: 0.0,
+        accel: 1.0,
+        corner: 0.0,
+        entry: 0.0,
+        shares: (0, 0),
+    };
+
+    /// Length in nm as `f32`.
+    fn length(&self) -> f32 {
+        i64_to_f32(self.course.length)
     }
 
     /// Its share of the stop budget: 2·a·S, (nm/tick)² (0 for blocks that do not
@@ -162,12 +214,7 @@ impl Default for PlanBlock {
         Self {
             line: 0,
             kind: Kind::Dwell(0),
-            path: Path {
-                end: [0; AXES],
-                length: 0,
-                rotary_only: false,
-                shape: Shape::Point,
-            },
+            path: Path::default(),
             feed: 0.0,
             v_limit: 0.0,
             accel: 1.0,
@@ -175,7 +222,6 @@ impl Default for PlanBlock {
             rho_in: 0.0,
             corner: 0.0,
             entry: 0.0,
-            shares: (0, 0),
         }
     }
 }
@@ -204,12 +250,16 @@ fn per_tick2(a: i64) -> f32 {
 
 /// Soft speed cap of a block (feed × override, 0 in a hold), nm/tick.
 pub fn cap(b: &PlanBlock, feed_override: u16, hold: bool) -> f32 {
+    cap_of(b.kind, b.feed, b.v_limit, feed_override, hold)
+}
+
+fn cap_of(kind: Kind, feed: f32, v_limit: f32, feed_override: u16, hold: bool) -> f32 {
     if hold {
         return 0.0;
     }
-    match b.kind {
-        Kind::Rapid => b.v_limit,
-        Kind::Feed => fmin(b.feed * feed_override as f32 / 100.0, b.v_limit),
+    match kind {
+        Kind::Rapid => v_limit,
+        Kind::Feed => fmin(feed * feed_override as f32 / 100.0, v_limit),
         _ => 0.0,
     }
 }
@@ -327,13 +377,12 @@ impl Lookahead {
             rho_in: rho,
             corner,
             entry: corner,
-            shares: (0, 0),
         })
     }
 }
 
 /// What a block does, given its geometry (a move of length 0 is a dwell of 0 ticks).
-fn kind_of(block: &Block, path: &Path) -> Kind {
+fn kind_of(block: &Block, path: &Course) -> Kind {
     let kind = match block.motion {
         Motion::Rapid => Kind::Rapid,
         Motion::Linear | Motion::Arc { .. } => Kind::Feed,
@@ -347,7 +396,7 @@ fn kind_of(block: &Block, path: &Path) -> Kind {
 }
 
 /// Requested feed of a block, nm/tick (∞ for rapids and blocks that do not move).
-fn feed_of(block: &Block, path: &Path, kind: Kind) -> f32 {
+fn feed_of(block: &Block, path: &Course, kind: Kind) -> f32 {
     match kind {
         Kind::Feed if path.rotary_only => per_tick(block.feed.saturating_mul(1000)),
         Kind::Feed => per_tick(block.feed),
@@ -527,40 +576,64 @@ pub fn jog_target(
     at(lo)
 }
 
-/// A ring of [`QUEUE_CAPACITY`] blocks whose slots are written in place: a block is
-/// built in the next free slot ([`Ring::spare`]) and becomes queued only when complete
-/// ([`Ring::commit`]); nothing is copied on the way in or out.
+/// A ring of [`QUEUE_CAPACITY`] blocks whose slots are written in place, and beside
+/// it a ring of [`BEND_CAPACITY`] bends, one per queued arc in the same order: a block
+/// is built in the next free slot (and bend, [`Ring::spare`]) and becomes queued only
+/// when complete ([`Ring::commit`]); nothing is copied on the way in or out. The front
+/// bend is the first queued arc's.
 #[derive(Clone, Debug)]
 struct Ring {
-    slots: [PlanBlock; QUEUE_CAPACITY],
+    slots: [Queued; QUEUE_CAPACITY],
     /// Slot of the oldest.
     head: usize,
     len: usize,
+    bends: [Bend; BEND_CAPACITY],
+    /// Bend of the oldest arc.
+    bend_head: usize,
+    bend_len: usize,
 }
 
 impl Ring {
-    fn get(&self, i: usize) -> Option<&PlanBlock> {
+    fn get(&self, i: usize) -> Option<&Queued> {
         (i < self.len).then(|| &self.slots[(self.head + i) % QUEUE_CAPACITY])
     }
-    fn front(&self) -> Option<&PlanBlock> {
+    fn front(&self) -> Option<&Queued> {
         self.get(0)
     }
     fn pop_front(&mut self) {
         if self.len > 0 {
+            if self.slots[self.head].course.form == Form::Arc {
+                self.bend_head = (self.bend_head + 1) % BEND_CAPACITY;
+                self.bend_len -= 1;
+            }
             self.head = (self.head + 1) % QUEUE_CAPACITY;
             self.len -= 1;
         }
     }
-    fn is_full(&self) -> bool {
-        self.len == QUEUE_CAPACITY
+
+    /// The slot and the bend after the last (not queued; the queue must not be full).
+    fn spare(&mut self) -> (&mut Queued, &mut Bend) {
+        (
+            &mut self.slots[(self.head + self.len) % QUEUE_CAPACITY],
+            &mut self.bends[(self.bend_head + self.bend_len) % BEND_CAPACITY],
+        )
     }
-    /// The slot after the last (not queued; the queue must not be full).
-    fn spare(&mut self) -> &mut PlanBlock {
-        &mut self.slots[(self.head + self.len) % QUEUE_CAPACITY]
-    }
-    /// Queues the spare slot.
+    /// Queues the spare slot (and its bend, for an arc).
     fn commit(&mut self) {
+        if self.slots[(self.head + self.len) % QUEUE_CAPACITY]
+            .course
+            .form
+            == Form::Arc
+        {
+            self.bend_len += 1;
+        }
         self.len += 1;
+    }
+    fn clear(&mut self) {
+        self.head = 0;
+        self.len = 0;
+        self.bend_head = 0;
+        self.bend_len = 0;
     }
 }
 
@@ -613,9 +686,15 @@ impl Planner {
             let q = at!((*p).queue);
             at!((*q).head).write(0);
             at!((*q).len).write(0);
-            let slots = at!((*q).slots) as *mut PlanBlock;
+            at!((*q).bend_head).write(0);
+            at!((*q).bend_len).write(0);
+            let slots = at!((*q).slots) as *mut Queued;
             for i in 0..QUEUE_CAPACITY {
-                slots.add(i).write(PlanBlock::default());
+                slots.add(i).write(Queued::EMPTY);
+            }
+            let bends = at!((*q).bends) as *mut Bend;
+            for i in 0..BEND_CAPACITY {
+                bends.add(i).write(Bend::default());
             }
             at!((*p).end).write(pose);
             at!((*p).feed_override).write(100);
@@ -636,16 +715,25 @@ impl Planner {
     pub fn is_empty(&self) -> bool {
         self.queue.len == 0
     }
-    /// Free slots.
+    /// Free slots (a line needs one; an arc one and a bend).
     pub fn free(&self) -> usize {
         QUEUE_CAPACITY - self.queue.len
     }
+    /// Free bends: how many arcs can be queued now (at most [`Planner::free`]).
+    pub fn free_bends(&self) -> usize {
+        (BEND_CAPACITY - self.queue.bend_len).min(self.free())
+    }
     /// The next block to start, if any.
-    pub fn front(&self) -> Option<&PlanBlock> {
+    pub fn front(&self) -> Option<&Queued> {
         self.queue.get(self.running as usize)
     }
+    /// The bend of the first queued arc: the executing block's when it is an arc
+    /// (meaningless otherwise).
+    pub fn bend(&self) -> &Bend {
+        &self.queue.bends[self.queue.bend_head]
+    }
     /// The executing block, if one was started and not finished.
-    pub fn executing(&self) -> Option<&PlanBlock> {
+    pub fn executing(&self) -> Option<&Queued> {
         if self.running {
             self.queue.front()
         } else {
@@ -676,14 +764,14 @@ impl Planner {
         if self.running {
             self.running = false;
             if let Some(b) = self.queue.front() {
-                self.head_start = b.path.end;
+                self.head_start = b.course.end;
             }
             self.queue.pop_front();
         }
     }
     /// Takes the next block whole (tests).
     #[cfg(test)]
-    pub fn pop(&mut self) -> Option<PlanBlock> {
+    pub fn pop(&mut self) -> Option<Queued> {
         self.finish();
         if !self.start() {
             return None;
@@ -695,8 +783,7 @@ impl Planner {
 
     /// Drops every queued block; the next block starts at `pose`, at rest.
     pub fn clear(&mut self, pose: [i64; AXES]) {
-        self.queue.head = 0;
-        self.queue.len = 0;
+        self.queue.clear();
         self.head_start = pose;
         self.end = pose;
         self.budget = 0;
@@ -705,8 +792,8 @@ impl Planner {
     }
 
     /// Soft speed cap of a block now (feed × override, 0 in a hold), nm/tick.
-    pub fn cap(&self, b: &PlanBlock) -> f32 {
-        cap(b, self.feed_override, self.hold)
+    pub fn cap(&self, b: &Queued) -> f32 {
+        cap_of(b.kind, b.feed, b.v_limit, self.feed_override, self.hold)
     }
 
     /// The speed at which the executing block may leave (it has been taken off the
@@ -735,7 +822,8 @@ impl Planner {
         machine: &MachineConfig,
         kin: &MachineKinematics,
     ) -> Result<(), PushError> {
-        if self.queue.is_full() {
+        let arc = matches!(pb.plan.shape, Shape::Arc { .. });
+        if self.free() == 0 || (arc && self.free_bends() == 0) {
             return Err(PushError::Full);
         }
         let (block, plan) = (&pb.block, &pb.plan);
@@ -749,11 +837,11 @@ impl Planner {
         // Built in place, in the queue's spare slot: the path is checked where it is
         // written, and the block is queued (committed) only when whole.
         let start = self.end;
-        let b = self.queue.spare();
-        b.path
-            .set_from_plan(block, &start, plan.length, &plan.shape)
+        let (b, bend) = self.queue.spare();
+        b.course
+            .set_from_plan(bend, block, &start, plan.length, &plan.shape)
             .map_err(PushError::Geometry)?;
-        let path = &b.path;
+        let path = &b.course;
         let mut kind = kind_of(block, path);
         if matches!(kind, Kind::Rapid | Kind::Feed) {
             // The joints are not kept (only whether they are within travel): a scratch
@@ -773,8 +861,6 @@ impl Planner {
         b.kind = kind;
         b.v_limit = if moving { plan.v_limit } else { 0.0 };
         b.accel = plan.accel;
-        b.accel_full = plan.accel;
-        b.rho_in = 0.0;
         b.corner = corner;
         b.entry = if moving {
             fmin(plan.entry, corner)
@@ -783,7 +869,7 @@ impl Planner {
         };
         b.shares = (b.budget(), b.estimate());
         let shares = b.shares;
-        self.end = b.path.end;
+        self.end = b.course.end;
         self.budget += shares.0;
         self.estimate += shares.1;
         if self.queue.len == 0 {
@@ -1085,6 +1171,71 @@ mod tests {
         while p.pop().is_some() {}
         assert_eq!(p.exit_target(), 0.0);
         assert_eq!(p.buffered_ticks(), 0.0);
+    }
+
+    /// A full circle about `center` from and back to the current point.
+    fn circle(x: i64, center: [i64; 2]) -> Block {
+        Block {
+            line: 2,
+            motion: Motion::Arc {
+                center,
+                plane: crate::protocol::Plane::Xy,
+                clockwise: true,
+                turns: 0,
+            },
+            target: [x, 0, 0, 0, 0, 0],
+            feed: 50_000_000,
+            tolerance_nm: u32::MAX,
+        }
+    }
+
+    #[test]
+    fn arcs_wait_for_a_free_bend_lines_do_not_and_each_arc_runs_on_its_own_bend() {
+        let m = MachineConfig::cartesian_xyz();
+        let k = MachineKinematics::new(&m);
+        // A line to X10, then circles through X10 about X5 and X0 in turn (radii 5 and
+        // 10 mm), more than the ring of bends holds, then a line.
+        let mut blocks = vec![line(10_000_000, 0, 50, u32::MAX)];
+        for i in 0..=BEND_CAPACITY {
+            blocks.push(circle(10_000_000, [5_000_000 * (i as i64 % 2), 0]));
+        }
+        blocks.push(line(20_000_000, 0, 50, u32::MAX));
+        let plan = planned(&blocks);
+        let mut p = Planner::new([0; AXES]);
+        for b in &plan[..=BEND_CAPACITY] {
+            assert_eq!(p.push_planned(b, &m, &k), Ok(()));
+        }
+        assert_eq!(p.free_bends(), 0);
+        assert_eq!(p.free(), QUEUE_CAPACITY - BEND_CAPACITY - 1);
+        // One more arc does not fit; a line does (tried here out of turn, from where the
+        // last arc ends, as it would be sent if it came next).
+        let extra = &plan[BEND_CAPACITY + 1];
+        assert_eq!(p.push_planned(extra, &m, &k), Err(PushError::Full));
+        let mut q = p.clone();
+        assert_eq!(q.push_planned(&plan[BEND_CAPACITY + 2], &m, &k), Ok(()));
+        // The line leaves: still no bend. The first arc leaves: one.
+        assert_eq!(p.pop().map(|b| b.course.form), Some(Form::Line));
+        assert_eq!(p.free_bends(), 0);
+        assert!(p.start());
+        assert_eq!(p.bend().r0, 10_000_000);
+        p.finish();
+        assert_eq!(p.free_bends(), 1);
+        assert_eq!(p.push_planned(extra, &m, &k), Ok(()));
+        // Every arc executes on its own bend, in order.
+        for i in 1..=BEND_CAPACITY {
+            assert!(p.start());
+            let want = if i % 2 == 0 { 10_000_000 } else { 5_000_000 };
+            assert_eq!(p.bend().r0, want, "arc {i}");
+            let mut pose = [0; AXES];
+            let b = *p.executing().unwrap();
+            b.course
+                .pose_at(p.bend(), p.front_start(), b.course.length << 15, &mut pose);
+            let c = 5_000_000 * (i as i64 % 2);
+            assert!((pose[0] - (c - want)).abs() <= 2, "arc {i}: {pose:?}");
+            p.finish();
+        }
+        assert!(p.is_empty());
+        assert_eq!(p.free_bends(), BEND_CAPACITY);
     }
 
     #[test]

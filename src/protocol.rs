@@ -20,7 +20,7 @@ use crate::config::{AXES, MAX_JOINTS};
 use serde::{Deserialize, Serialize};
 
 /// Protocol version, exchanged in the handshake; both sides must agree.
-pub const PROTOCOL_VERSION: u16 = 5;
+pub const PROTOCOL_VERSION: u16 = 6;
 /// Largest unencoded frame body (sequence number, message and CRC), bytes: a planned
 /// helix with every field at its widest fits.
 pub const MAX_BODY: usize = 384;
@@ -335,6 +335,9 @@ pub struct Status {
     pub buffered_ms: u32,
     /// Free block-queue slots.
     pub free_slots: u16,
+    /// How many of them may hold arcs (arcs keep their in-plane part apart, in a
+    /// ring of [`crate::planner::BEND_CAPACITY`]).
+    pub free_bends: u16,
     /// Feed override, percent.
     pub feed_override: u16,
     /// Active alarm, if any.
@@ -372,6 +375,8 @@ pub enum CtrlMsg {
         seq: u16,
         /// Free block-queue slots after it.
         free_slots: u16,
+        /// How many of them may hold arcs.
+        free_bends: u16,
         /// Motion buffered, ms.
         buffered_ms: u32,
     },
@@ -538,12 +543,13 @@ impl Writer<'_> {
     }
 }
 
-/// Encodes `CtrlMsg::Ack { seq: acked, free_slots, buffered_ms }` with sequence number
+/// Encodes `CtrlMsg::Ack { seq: acked, free_slots, free_bends, buffered_ms }` with sequence number
 /// `seq` as a complete frame (as [`encode_frame_with`] does); returns its length.
 pub fn encode_ack(
     seq: u16,
     acked: u16,
     free_slots: u16,
+    free_bends: u16,
     buffered_ms: u32,
     body: &mut [u8; MAX_BODY],
     out: &mut [u8; MAX_FRAME],
@@ -555,6 +561,7 @@ pub fn encode_ack(
     w.byte(CTRL_MSG_ACK);
     w.u32(acked as u32);
     w.u32(free_slots as u32);
+    w.u32(free_bends as u32);
     w.u32(buffered_ms);
     let n = w.len;
     seal(&body[..n], out)
@@ -569,7 +576,8 @@ pub fn encode_status(
     out: &mut [u8; MAX_FRAME],
 ) -> usize {
     // The widest status (every varint at its longest) fits with its CRC.
-    const WIDEST: usize = 2 + 1 + 1 + 5 + 5 + 10 * (1 + AXES + MAX_JOINTS + 1) + 5 + 3 + 3 + 8 + 1;
+    const WIDEST: usize =
+        2 + 1 + 1 + 5 + 5 + 10 * (1 + AXES + MAX_JOINTS + 1) + 5 + 3 + 3 + 3 + 8 + 1;
     const _: () = assert!(WIDEST + 4 <= MAX_BODY);
     let mut w = Writer { buf: body, len: 0 };
     for b in seq.to_le_bytes() {
@@ -589,6 +597,7 @@ pub fn encode_status(
     w.i64(s.speed);
     w.u32(s.buffered_ms);
     w.u32(s.free_slots as u32);
+    w.u32(s.free_bends as u32);
     w.u32(s.feed_override as u32);
     match s.alarm {
         None => w.byte(0),
@@ -1490,14 +1499,19 @@ mod tests {
         let states = [State::Idle, State::Running, State::Hold, State::EStop];
         for k in 0..5000usize {
             let seq = wide() as u16;
-            let (acked, free, ms) = (wide() as u16, wide() as u16, wide() as u32);
+            let (acked, free, bends, ms) =
+                (wide() as u16, wide() as u16, wide() as u16, wide() as u32);
             let msg = CtrlMsg::Ack {
                 seq: acked,
                 free_slots: free,
+                free_bends: bends,
                 buffered_ms: ms,
             };
             let n = encode_frame(seq, &msg, &mut want).unwrap();
-            assert_eq!(n, encode_ack(seq, acked, free, ms, &mut body, &mut got));
+            assert_eq!(
+                n,
+                encode_ack(seq, acked, free, bends, ms, &mut body, &mut got)
+            );
             assert_eq!(want[..n], got[..n], "{msg:?}");
             let s = Status {
                 state: states[k % 4],
@@ -1509,6 +1523,7 @@ mod tests {
                 speed: wide(),
                 buffered_ms: wide() as u32,
                 free_slots: wide() as u16,
+                free_bends: wide() as u16,
                 feed_override: wide() as u16,
                 alarm: (k % 3 != 0).then(|| Alarm {
                     cause: causes[k % 4],
@@ -1587,6 +1602,7 @@ mod tests {
             speed: i64::MIN,
             buffered_ms: u32::MAX,
             free_slots: u16::MAX,
+            free_bends: u16::MAX,
             feed_override: u16::MAX,
             alarm: Some(Alarm {
                 cause: AlarmCause::FollowingError,

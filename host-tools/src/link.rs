@@ -622,8 +622,9 @@ pub fn serve(
             && delivered.elapsed() < loss_wall;
         let busy = sim.busy() && !starved;
         let status = sim.ctrl.status();
-        if status.free_slots == 0 {
-            // A full queue: a streaming host waits only for the next free slot.
+        if status.free_slots == 0 || status.free_bends == 0 {
+            // A full queue (or ring of arcs): a streaming host waits only for the next
+            // free slot.
             fed = now;
         }
         let paced = busy
@@ -1337,7 +1338,12 @@ impl<T: Transport> Link<T> {
         let mut from = start_status.pose;
         job.planned_ms = Vec::with_capacity(blocks.len() + 1);
         job.planned_ms.push(0.0);
+        job.arcs_before = Vec::with_capacity(blocks.len() + 1);
+        job.arcs_before.push(0);
         for b in blocks {
+            let arcs = job.arcs_before.last().copied().unwrap_or(0);
+            job.arcs_before
+                .push(arcs + matches!(b.motion, Motion::Arc { .. }) as usize);
             let total = job.planned_ms.last().copied().unwrap_or(0.0);
             job.planned_ms
                 .push(total + estimate_ms(&from, b, &self.axis_vmax));
@@ -1399,6 +1405,7 @@ impl<T: Transport> Link<T> {
             if job.ending.is_none() && self.tx.is_empty() {
                 while job.sent < total
                     && job.sent - job.acked < job.free.min(job.window)
+                    && job.bend_free_for(job.sent)
                     && job.buffered_ms < self.opts.max_buffered_ms
                     && (job.sent == job.acked
                         || job.buffered_ms as f64 + job.in_flight_ms()
@@ -1508,6 +1515,7 @@ impl<T: Transport> Link<T> {
             CtrlMsg::Ack {
                 seq,
                 free_slots,
+                free_bends,
                 buffered_ms,
             } => {
                 if let Some(done) = job.index_after(seq) {
@@ -1515,6 +1523,7 @@ impl<T: Transport> Link<T> {
                         job.advance(done);
                     }
                     job.free = free_slots as usize;
+                    job.free_bends = free_bends as usize;
                     job.buffered_ms = buffered_ms;
                 }
             }
@@ -1594,6 +1603,7 @@ impl<T: Transport> Link<T> {
                     job.advance(executed);
                 }
                 job.free = s.free_slots as usize;
+                job.free_bends = s.free_bends as usize;
                 job.buffered_ms = s.buffered_ms;
                 hooks.status(&s);
                 // A fault stops on the path first: the job ends once at rest.
@@ -1656,6 +1666,10 @@ struct JobState {
     /// One past the highest block ever sent.
     high: usize,
     free: usize,
+    /// Free bends (arcs the controller can take) after the last acknowledged block.
+    free_bends: usize,
+    /// `arcs_before[i]`: arcs among the blocks before `i`.
+    arcs_before: Vec<usize>,
     buffered_ms: u32,
     window: usize,
     capacity: usize,
@@ -1675,6 +1689,8 @@ impl JobState {
             sent: 0,
             high: 0,
             free: status.free_slots as usize,
+            free_bends: status.free_bends as usize,
+            arcs_before: Vec::new(),
             buffered_ms: status.buffered_ms,
             window: (capacity as usize).max(MIN_WINDOW),
             capacity: (capacity as usize).max(MIN_WINDOW),
@@ -1684,6 +1700,17 @@ impl JobState {
             ending: None,
             planned_ms: Vec::new(),
             stall: StallGuard::default(),
+        }
+    }
+
+    /// May block `i` be sent as far as bends go? Lines always; an arc while the arcs
+    /// in flight before it leave the controller a free bend.
+    fn bend_free_for(&self, i: usize) -> bool {
+        match (self.arcs_before.get(i), self.arcs_before.get(i + 1)) {
+            (Some(a), Some(b)) if b > a => {
+                a - self.arcs_before.get(self.acked).copied().unwrap_or(0) < self.free_bends
+            }
+            _ => true,
         }
     }
 
@@ -1753,6 +1780,7 @@ mod tests {
             speed: 0,
             buffered_ms: 0,
             free_slots: 64,
+            free_bends: 64,
             feed_override: 100,
             alarm: None,
             homed: false,

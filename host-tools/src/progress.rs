@@ -428,6 +428,7 @@ mod tests {
             speed: speed_mm_s * 1_000_000,
             buffered_ms: 0,
             free_slots: 0,
+            free_bends: 0,
             feed_override: 100,
             alarm: None,
             homed: false,

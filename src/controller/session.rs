@@ -113,9 +113,14 @@ impl Controller {
     pub(super) fn send_due(&mut self) {
         if self.ack_due {
             let acked = self.expected_seq.wrapping_sub(1);
-            let (free, ms) = (self.planner.free() as u16, self.buffered_ms());
-            self.ack_due = !self
-                .push_frame(|seq, body, out| Some(encode_ack(seq, acked, free, ms, body, out)));
+            let (free, bends, ms) = (
+                self.planner.free() as u16,
+                self.planner.free_bends() as u16,
+                self.buffered_ms(),
+            );
+            self.ack_due = !self.push_frame(|seq, body, out| {
+                Some(encode_ack(seq, acked, free, bends, ms, body, out))
+            });
         }
         if self.status_due {
             let s = self.status();
@@ -380,6 +385,7 @@ impl Controller {
             speed: ((self.exec.speed as i128 * TICK_HZ as i128) >> 32) as i64,
             buffered_ms: self.buffered_ms(),
             free_slots: self.planner.free() as u16,
+            free_bends: self.planner.free_bends() as u16,
             feed_override: self.planner.feed_override,
             alarm: self.alarm,
             homed: self.homed,

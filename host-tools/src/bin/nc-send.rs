@@ -371,6 +371,7 @@ fn status_json(s: &Status, machine: &MachineConfig, result: &str) -> serde_json:
         "feed_override": s.feed_override,
         "buffered_ms": s.buffered_ms,
         "free_slots": s.free_slots,
+        "free_bends": s.free_bends,
         "alarm": s.alarm.map(|a| job::describe_alarm(&a)),
         "homed": s.homed,
     })
