@@ -199,6 +199,14 @@ fn rate_of(rate: i128, x: i128, len: i64) -> bool {
     e.unsigned_abs() < len as u128
 }
 
+/// Largest arc radius, nm (10 m): the in-plane position is centre + r·(cos φ, sin φ)
+/// with sine and cosine in Q31 (within 7·10⁻¹⁰), so the interpolated path stays within
+/// r × 7·10⁻¹⁰ ≤ 7 nm of the exact circle, and the arc starts and ends within the
+/// controller's [`PLAN_SLACK_UNITS`] of its programmed points (at 41 m it no longer
+/// did: the plan was refused as malformed). The G-code front end refuses larger radii
+/// by name; the controller refuses a plan with one.
+pub const MAX_ARC_RADIUS_NM: i64 = 10_000_000_000;
+
 /// Largest start/end radius difference accepted for an arc, nm (the host checks its
 /// own, tighter, tolerance; this only guards the controller).
 pub const ARC_RADIUS_SLACK_NM: i64 = 50_000;
@@ -456,6 +464,7 @@ impl Course {
                 let (i, j, k) = plane.axes();
                 if length <= 0
                     || r0 < 1
+                    || r0 > MAX_ARC_RADIUS_NM
                     || r0 + dr < 1
                     || dr.unsigned_abs() > ARC_RADIUS_SLACK_NM as u64
                     || clockwise != (phi_rate < 0)

@@ -952,6 +952,19 @@ impl<'o> Interp<'o> {
                 c
             }
         };
+        let radius = (s[0] - centre[0] as f64).hypot(s[1] - centre[1] as f64);
+        if radius > pkmc::geometry::MAX_ARC_RADIUS_NM as f64 {
+            let at = w.get(b'R').map_or(col, |r| r.col);
+            return fail(
+                at,
+                format!(
+                    "{name} with a radius of {:.3} mm: larger than the {} mm the controller \
+                     interpolates exactly",
+                    radius * 1e-6,
+                    pkmc::geometry::MAX_ARC_RADIUS_NM / 1_000_000
+                ),
+            );
+        }
         let turns = match w.get(b'P') {
             Some(p) => (whole_in(p, 1, i64::from(u32::MAX), "turns P")? - 1) as u32,
             None => 0,
