@@ -463,8 +463,7 @@ impl Course {
                     && sweep.unsigned_abs() <= whole(turns as u32 + 1);
                 let (i, j, k) = plane.axes();
                 if length <= 0
-                    || r0 < 1
-                    || r0 > MAX_ARC_RADIUS_NM
+                    || !(1..=MAX_ARC_RADIUS_NM).contains(&r0)
                     || r0 + dr < 1
                     || dr.unsigned_abs() > ARC_RADIUS_SLACK_NM as u64
                     || clockwise != (phi_rate < 0)

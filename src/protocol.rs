@@ -278,6 +278,11 @@ pub enum AlarmCause {
     Unhomed,
     /// Homing found no switch (or no index pulse) within the joint's travel.
     HomingFailed,
+    /// The per-period guard: a joint's setpoint would have moved more in one period
+    /// than its maximum velocity allows (plus [`crate::controller::GUARD_MARGIN_PERCENT`]),
+    /// or its drive could not take the steps within its timing. The setpoint is not
+    /// applied: the controller's position stays the drives'.
+    JointSpeed,
 }
 
 /// An alarm: its cause, the joint concerned (`NO_JOINT` if none) and the NC line.
@@ -1495,6 +1500,7 @@ mod tests {
             AlarmCause::JointLimit,
             AlarmCause::LinkLoss,
             AlarmCause::HomingFailed,
+            AlarmCause::JointSpeed,
         ];
         let states = [State::Idle, State::Running, State::Hold, State::EStop];
         for k in 0..5000usize {

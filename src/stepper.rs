@@ -100,13 +100,15 @@ impl StepScheduler {
     }
 
     /// Plans this tick's trains toward `joints`; non-stepper joints get empty trains.
+    /// Returns the first joint whose steps did not all fit its drive's timing (the
+    /// rest are carried to the next tick).
     pub fn tick(
         &mut self,
         config: &[JointConfig],
         joints: &[i64; MAX_JOINTS],
         out: &mut [StepTrain; MAX_JOINTS],
-    ) {
-        let mut lagged = false;
+    ) -> Option<usize> {
+        let mut lagged = None;
         for (j, jc) in config.iter().enumerate() {
             let Drive::Stepper { timing, .. } = jc.drive else {
                 out[j].count = 0;
@@ -135,7 +137,9 @@ impl StepScheduler {
                 };
                 continue;
             }
-            lagged |= u64::from(count) < want.unsigned_abs();
+            if u64::from(count) < want.unsigned_abs() && lagged.is_none() {
+                lagged = Some(j);
+            }
             ch.emitted += if forward {
                 count as i64
             } else {
@@ -143,9 +147,10 @@ impl StepScheduler {
             };
             out[j] = StepTrain { forward, ..train };
         }
-        if lagged {
+        if lagged.is_some() {
             self.lagged_ticks += 1;
         }
+        lagged
     }
 }
 

@@ -375,6 +375,8 @@ pub struct Simulator {
     /// The controller under simulation.
     pub ctrl: Controller,
     steppers: [Option<SimStepper>; MAX_STEPPERS],
+    /// Each drive's timing breaches already reported by its fault line.
+    violations_seen: [u64; MAX_STEPPERS],
     servos: [Option<SimServo>; MAX_SERVOS],
     /// The servo interrupt's loops and pacing; `None` for a machine without servo
     /// joints (the loops would have nothing to drive).
@@ -434,6 +436,7 @@ impl Simulator {
         let mut sim = Self {
             ctrl,
             steppers: Default::default(),
+            violations_seen: [0; MAX_STEPPERS],
             servos: Default::default(),
             servo: None,
             bank_out: PeriodOutputs::default(),
@@ -554,6 +557,7 @@ impl Simulator {
         let machine = self.ctrl.machine().clone();
         self.machine_id = self.ctrl.machine_id();
         self.steppers = Default::default();
+        self.violations_seen = [0; MAX_STEPPERS];
         self.servos = Default::default();
         for (j, jc) in machine.joints.iter().enumerate() {
             let truth = self.ctrl.joints()[j] + self.power_up_offset[j];
@@ -791,15 +795,32 @@ impl Simulator {
             None => Snapshot::default(),
         };
         let t0 = self.ticks * TICK_NS as u64;
-        for (d, train) in self.steppers.iter_mut().zip(&self.pacer.due().steps) {
+        // A drive that sees its timing breached faults (its fault line is high for
+        // this tick): the controller stops and names the joint, instead of believing
+        // steps the drive may not have made.
+        let mut breached = [false; MAX_STEPPERS];
+        for (((d, train), b), seen) in self
+            .steppers
+            .iter_mut()
+            .zip(&self.pacer.due().steps)
+            .zip(&mut breached)
+            .zip(&mut self.violations_seen)
+        {
             if let Some(d) = d {
                 d.apply(t0, train);
+                *b = d.violation_count > *seen;
+                *seen = d.violation_count;
             }
         }
         let mut servo_joints = 0u16;
+        let mut timing_fault = 0u16;
         for (j, jc) in self.ctrl.machine().joints.iter().enumerate() {
-            if matches!(jc.drive, Drive::Servo { .. }) {
-                servo_joints |= 1 << j;
+            match jc.drive {
+                Drive::Servo { .. } => servo_joints |= 1 << j,
+                Drive::Stepper { channel, .. } if breached[channel as usize] => {
+                    timing_fault |= 1 << j
+                }
+                Drive::Stepper { .. } => {}
             }
         }
         let raw = RawInputs {
@@ -810,7 +831,7 @@ impl Simulator {
             },
             // Stepper drives' fault lines, read by the tick; the servo joints' come
             // through the amplifier fault inputs and the snapshot.
-            drive_fault: self.forced.drive_fault & !servo_joints,
+            drive_fault: (self.forced.drive_fault | timing_fault) & !servo_joints,
             index: std::mem::take(&mut self.index),
         };
         let command = self.pacer.tick(&mut self.ctrl, &raw, &snapshot);
@@ -876,6 +897,27 @@ fn write_row(out: &mut dyn Write, r: &TraceRow) -> std::io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_drive_whose_timing_is_breached_faults_and_the_controller_names_its_joint() {
+        let mut sim = Simulator::new(MachineConfig::cartesian_xyz()).unwrap();
+        sim.ctrl.unlock();
+        sim.tick().unwrap();
+        assert_eq!(sim.ctrl.state(), pkmc::protocol::State::Idle);
+        // Two 10 ns STEP pulses on Y's drive 100 ns apart: shorter and faster than it
+        // allows.
+        let y = sim.steppers[1].as_mut().unwrap();
+        y.pulse(10_000, 10);
+        y.pulse(10_100, 10);
+        // The tick reads the drives' fault lines as they stood at its edge (one tick
+        // of latency, as on the board).
+        sim.tick().unwrap();
+        sim.tick().unwrap();
+        let alarm = sim.ctrl.status().alarm.expect("an alarm");
+        assert_eq!(alarm.cause, pkmc::protocol::AlarmCause::DriveFault);
+        assert_eq!(alarm.joint, 1);
+        assert!(sim.violations().0 >= 1);
+    }
 
     #[test]
     fn a_step_too_soon_after_a_dir_change_is_a_violation() {

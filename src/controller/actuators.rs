@@ -64,8 +64,16 @@ impl Controller {
     /// This tick's outputs from the joints' positions: step trains (DIR inverted where
     /// the drive wants it) on each stepper's channel, servo targets, drive enables.
     pub(super) fn update_outputs(&mut self) {
-        self.steps
+        let lagged = self
+            .steps
             .tick(&self.machine.joints, &self.joints, &mut self.trains);
+        if let Some(j) = lagged {
+            // Steps that do not fit the drive's timing are carried (the drive catches
+            // up to the setpoint once it holds still): the guard stops the machine.
+            if !matches!(self.state, State::Alarm | State::EStop) {
+                self.guard_trip(j);
+            }
+        }
         // Every stepper's channel is written below each tick; the others stay idle
         // from when the machine was loaded (`Controller::write` builds `out` afresh).
         for (j, jc) in self.machine.joints.iter().enumerate() {

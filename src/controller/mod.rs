@@ -22,6 +22,7 @@
 //! | following error | a servo loop trips ([`crate::servo`]) | `FollowingError`, joint |
 //! | link loss | no valid frame for [`LINK_LOSS_TICKS`] while moving | `LinkLoss` |
 //! | joint travel | a block would take a joint outside its travel | `JointLimit`, joint |
+//! | per-period guard | a joint setpoint would move more in one period than its maximum velocity × T (+ [`GUARD_MARGIN_PERCENT`] + [`GUARD_SLACK_UNITS`]), or a stepper's steps would not fit its drive's timing | `JointSpeed`, joint; the setpoint is not applied, the machine stops at once |
 //!
 //! Every alarm carries the NC line executing. On a fault the motion stops on the path
 //! at the planned deceleration (as a feed hold does, so the stop distance is at most
@@ -56,6 +57,12 @@ pub const STATUS_EVERY_TICKS: u32 = 50;
 /// Ticks without a valid frame from the host, while moving, after which the link is
 /// lost (1 s at 1 kHz; the host asks for a status at least every 100 ms).
 pub const LINK_LOSS_TICKS: u32 = 1000;
+
+/// The per-period guard's margin: a joint setpoint may move in one period at most its
+/// maximum velocity × T plus this share of it, plus [`GUARD_SLACK_UNITS`].
+pub const GUARD_MARGIN_PERCENT: u64 = 5;
+/// The guard's allowance for rounding, axis units (nm or n°).
+pub const GUARD_SLACK_UNITS: u64 = 2;
 
 /// Link counters, for diagnostics.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -96,6 +103,8 @@ pub struct Controller {
     homer: Homer,
     /// Joint of each servo channel.
     servo_joint: [u8; MAX_SERVOS],
+    /// Largest setpoint change per period allowed by the guard, per joint, axis units.
+    max_step: [u64; MAX_JOINTS],
     state: State,
     alarm: Option<Alarm>,
     /// Locked after a reset: neither homed nor unlocked.
@@ -132,6 +141,7 @@ struct Prepared {
     steps: StepScheduler,
     servo_joint: [u8; MAX_SERVOS],
     machine_id: u32,
+    max_step: [u64; MAX_JOINTS],
 }
 
 impl Prepared {
@@ -150,8 +160,15 @@ impl Prepared {
                 servo_joint[channel as usize] = j as u8;
             }
         }
+        let mut max_step = [0; MAX_JOINTS];
+        for (m, jc) in max_step.iter_mut().zip(&machine.joints) {
+            let v = jc.limits.max_velocity.max(0) as u64;
+            *m = (v * (100 + GUARD_MARGIN_PERCENT)).div_ceil(100 * crate::units::TICK_HZ as u64)
+                + GUARD_SLACK_UNITS;
+        }
         Ok(Self {
             kin,
+            max_step,
             steps: StepScheduler::new(&machine.joints, &joints),
             joints,
             servo_joint,
@@ -221,6 +238,7 @@ impl Controller {
             at!((*p).trains).write([StepTrain::default(); MAX_JOINTS]);
             at!((*p).homer).write(Homer::default());
             at!((*p).servo_joint).write(prep.servo_joint);
+            at!((*p).max_step).write(prep.max_step);
             at!((*p).state).write(State::Alarm);
             at!((*p).alarm).write(Some(UNHOMED));
             at!((*p).locked).write(true);
@@ -329,7 +347,10 @@ impl Controller {
             .kin
             .inverse_checked(&self.exec.pose, &self.machine.joints, &mut joints)
         {
-            Ok(()) => self.joints = joints,
+            Ok(()) => match self.overspeed(&joints) {
+                None => self.joints = joints,
+                Some(j) => self.guard_trip(j),
+            },
             Err(why) => self.raise(alarm_of(why, self.exec.line)),
         }
         if self.stopping && self.exec.stopped() {

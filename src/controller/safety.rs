@@ -100,6 +100,39 @@ impl Controller {
     }
 
     /// An alarm that ends motion at once (the motion has already stopped, or must).
+    /// The per-period guard: the first joint whose setpoint would move from the
+    /// present one to `next` by more than its [`Controller::max_step`]. O(joints).
+    #[inline]
+    pub(super) fn overspeed(&self, next: &crate::kinematics::Joints) -> Option<usize> {
+        let n = self.machine.joints.len();
+        (0..n).find(|&j| next[j].wrapping_sub(self.joints[j]).unsigned_abs() > self.max_step[j])
+    }
+
+    /// A breach of the per-period guard at joint `j`: the new setpoints are not applied
+    /// (the drives stay where the controller believes they are), the pose is the one
+    /// of those joints, and the machine stops at once with `JointSpeed`.
+    #[cold]
+    #[inline(never)]
+    pub(super) fn guard_trip(&mut self, j: usize) {
+        let mut pose = self.exec.pose;
+        if self
+            .kin
+            .forward(&self.joints, &self.exec.pose, &mut pose)
+            .is_ok()
+        {
+            self.exec.pose = pose;
+        }
+        self.locked |= self.state == State::Homing;
+        if self.state == State::Homing {
+            self.homer.cancel();
+        }
+        self.raise(Alarm {
+            cause: AlarmCause::JointSpeed,
+            joint: j as u8,
+            line: self.exec.line,
+        });
+    }
+
     pub(super) fn raise(&mut self, alarm: Alarm) {
         self.alarm = Some(alarm);
         self.state = State::Alarm;
@@ -228,12 +261,15 @@ impl Controller {
             home: inputs.home,
             index: inputs.index,
         };
-        let event = self.homer.tick(
-            &self.machine.joints,
-            &self.home_joints,
-            &hin,
-            &mut self.joints,
-        );
+        let mut next = self.joints;
+        let event = self
+            .homer
+            .tick(&self.machine.joints, &self.home_joints, &hin, &mut next);
+        if let Some(j) = self.overspeed(&next) {
+            self.guard_trip(j);
+            return;
+        }
+        self.joints = next;
         match event {
             Some(HomeEvent::Latched { joint, index }) => {
                 let jc = self.machine.joints[joint];

@@ -605,3 +605,40 @@ fn a_drive_fault_while_the_drives_are_off_does_not_block_the_reset() {
         Some((AlarmCause::DriveFault, 0))
     );
 }
+
+#[test]
+fn a_plan_faster_than_a_joint_may_move_trips_the_guard_and_the_drives_keep_the_believed_position() {
+    // A host that plans 1000 mm/s on a machine whose joints allow 100 mm/s (the
+    // controller takes the host's speeds as they come: the guard is the backstop).
+    let mut c = session();
+    let HostMsg::Block(mut pb) = line_to(100, 9) else {
+        unreachable!()
+    };
+    pb.block.feed = 1_000_000_000;
+    pb.plan.v_limit = 1_000_000.0;
+    pb.plan.accel = 100_000.0;
+    c.receive(&frame(1, &HostMsg::Block(pb)));
+    let mut ticks = 0;
+    while c.state() != State::Alarm && ticks < 1000 {
+        c.tick(&Inputs::default());
+        ticks += 1;
+    }
+    let alarm = c.alarm.expect("the guard trips");
+    assert_eq!(
+        (alarm.cause, alarm.joint, alarm.line),
+        (AlarmCause::JointSpeed, 0, 9)
+    );
+    // It tripped in the first period that would have moved X more than 100 mm/s × T
+    // × 1.05 (+ 2 nm): every setpoint applied was within that.
+    let limit = 100_000_000 * 105 / 100 / 1000 + 2;
+    assert!(c.joints()[0] <= limit * ticks, "{:?}", c.joints());
+    // The steps already planned reach the drive; then it stands where the controller
+    // believes it is, and so does the pose.
+    for _ in 0..3 {
+        c.tick(&Inputs::default());
+    }
+    let x = c.joints()[0];
+    assert_eq!(c.steps_emitted(0), c.machine().joints[0].scale.steps_at(x));
+    assert_eq!(c.pose()[0], x);
+    assert!(c.planner.is_empty());
+}
