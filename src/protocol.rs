@@ -194,6 +194,9 @@ pub enum HostMsgOf<B> {
         /// Identity ([`crate::store::identity`]) of the machine the host means to run;
         /// the controller refuses to move while it differs from its own.
         machine: u32,
+        /// Who the host is (`nc-send` sends its process id): named to a later host
+        /// that finds this one's job held ([`HeldJob::host`]).
+        host: u32,
     },
     /// One chunk of a machine configuration ([`crate::store`]); answered by
     /// `ControlAck { id }`, then by `MachineLoaded` or `MachineRefused` once complete.
@@ -317,6 +320,8 @@ pub enum NakReason {
     BadBlock,
     /// Host and controller disagree about the machine: send it first.
     MachineMismatch,
+    /// An earlier session's job is held ([`HeldJob`]): `Resume` or `Abort` it first.
+    JobHeld,
 }
 
 /// Periodic and requested controller status.
@@ -349,6 +354,26 @@ pub struct Status {
     pub alarm: Option<Alarm>,
     /// Every joint with a home switch has been homed since the last reset.
     pub homed: bool,
+    /// The job queued or held is an earlier session's, whose host has gone
+    /// ([`HeldJob`]): blocks are refused (`JobHeld`) until `Resume` adopts it or
+    /// `Abort` drops it.
+    pub orphan: bool,
+}
+
+/// An unfinished job of an earlier session, reported to the host that opens a new
+/// one (`HelloAck`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct HeldJob {
+    /// The earlier host's `Hello::host`.
+    pub host: u32,
+    /// NC line where the job stands.
+    pub line: u32,
+    /// Blocks it completed.
+    pub done: u32,
+    /// Blocks still queued (the executing one included).
+    pub queued: u16,
+    /// The controller's state then.
+    pub state: State,
 }
 
 /// Messages from the controller to the host.
@@ -360,6 +385,8 @@ pub enum CtrlMsg {
         version: u16,
         /// Block-queue capacity (initial credits).
         queue_capacity: u16,
+        /// An earlier session's unfinished job, if one is queued or held.
+        held: Option<HeldJob>,
         /// Identity of the controller's machine configuration.
         machine: u32,
     },
@@ -582,7 +609,7 @@ pub fn encode_status(
 ) -> usize {
     // The widest status (every varint at its longest) fits with its CRC.
     const WIDEST: usize =
-        2 + 1 + 1 + 5 + 5 + 10 * (1 + AXES + MAX_JOINTS + 1) + 5 + 3 + 3 + 3 + 8 + 1;
+        2 + 1 + 1 + 5 + 5 + 10 * (1 + AXES + MAX_JOINTS + 1) + 5 + 3 + 3 + 3 + 8 + 1 + 1;
     const _: () = assert!(WIDEST + 4 <= MAX_BODY);
     let mut w = Writer { buf: body, len: 0 };
     for b in seq.to_le_bytes() {
@@ -614,6 +641,7 @@ pub fn encode_status(
         }
     }
     w.byte(s.homed as u8);
+    w.byte(s.orphan as u8);
     let n = w.len;
     seal(&body[..n], out)
 }
@@ -1455,6 +1483,7 @@ mod tests {
             HostMsg::Hello {
                 version: PROTOCOL_VERSION,
                 machine: 0xDEAD_BEEF,
+                host: 1,
             },
             HostMsg::Machine {
                 id: 3,
@@ -1537,6 +1566,7 @@ mod tests {
                     line: wide() as u32,
                 }),
                 homed: k % 2 == 0,
+                orphan: k % 5 == 0,
             };
             let msg = CtrlMsg::Status(s.clone());
             let n = encode_frame(seq, &msg, &mut want).unwrap();
@@ -1616,6 +1646,7 @@ mod tests {
                 line: u32::MAX,
             }),
             homed: true,
+            orphan: true,
         });
         let mut frame = [0u8; MAX_FRAME];
         assert!(encode_frame(u16::MAX, &s, &mut frame).is_ok());

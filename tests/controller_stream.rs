@@ -57,7 +57,7 @@ proptest! {
         let m = MachineConfig::cartesian_xyz();
         let mut c = Controller::new(m.clone()).unwrap();
     c.unlock();
-        let mut bytes = frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id() });
+        let mut bytes = frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id(), host: 1 });
         let blocks: Vec<Block> = moves.iter().enumerate().map(|(i, (t, f, rapid))| {
             let mut target = [0i64; AXES];
             target[..3].copy_from_slice(t);
@@ -149,7 +149,7 @@ proptest! {
         let mut c = Controller::new(m.clone()).unwrap();
     c.unlock();
         c.set_smoothing(w);
-        let mut bytes = frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id() });
+        let mut bytes = frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id(), host: 1 });
         let blocks: Vec<Block> = moves.iter().enumerate().map(|(i, (t, f, rapid))| {
             let mut target = [0i64; AXES];
             target[..3].copy_from_slice(t);

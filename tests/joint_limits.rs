@@ -66,7 +66,7 @@ proptest! {
         }
         let mut c = Controller::new(m.clone()).unwrap();
     c.unlock();
-        c.receive(&frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id() }));
+        c.receive(&frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id(), host: 1 }));
         let blocks: Vec<Block> = poses.iter().enumerate().map(|(i, p)| Block {
             line: i as u32 + 1,
             motion: if i % 2 == 0 { Motion::Linear } else { Motion::Rapid },
@@ -121,6 +121,7 @@ fn a_joint_limit_tighter_than_the_feed_is_what_binds() {
         &HostMsg::Hello {
             version: PROTOCOL_VERSION,
             machine: c.machine_id(),
+            host: 1,
         },
     ));
     let mut target = m.home;

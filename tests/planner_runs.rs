@@ -35,6 +35,7 @@ fn run_smoothed(
         &HostMsg::Hello {
             version: PROTOCOL_VERSION,
             machine: c.machine_id(),
+            host: 1,
         },
     ));
     let blocks = common::planned(c.machine(), *c.pose(), window, blocks);

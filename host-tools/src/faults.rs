@@ -273,6 +273,7 @@ mod tests {
             let msg = HostMsg::Hello {
                 version: PROTOCOL_VERSION,
                 machine: 7,
+                host: 1,
             };
             let len = encode_frame(seq, &msg, &mut f).unwrap();
             bytes.extend_from_slice(&f[..len]);

@@ -50,6 +50,10 @@ pub mod exit {
     /// an alarm (or a drive timing breach), the machine failed to execute the program,
     /// while the link itself was fine (not [`LINK`]); the message names the NC line.
     pub const STALLED: i32 = ALARM;
+    /// The controller holds an unfinished job of a host that has gone (a crash, a
+    /// closed terminal): nothing was sent; `nc-send resume` continues that job,
+    /// `nc-send abort` drops it.
+    pub const HELD: i32 = 7;
 }
 
 /// An error with the exit code it maps to.
@@ -77,6 +81,7 @@ impl From<LinkError> for Failure {
             LinkError::BadBlock { .. } => exit::BAD_INPUT,
             LinkError::MachineMismatch { .. } | LinkError::MachineRefused { .. } => exit::PREFLIGHT,
             LinkError::Stalled { .. } => exit::STALLED,
+            LinkError::JobHeld { .. } => exit::HELD,
             _ => exit::LINK,
         };
         Failure::new(code, e.to_string())
@@ -447,6 +452,7 @@ impl Report {
                 JobEnd::Alarm(_) => "alarm",
                 JobEnd::Aborted => "aborted",
                 JobEnd::Stopped => "stopped",
+                JobEnd::Paused(_) => "paused",
             }
             .into(),
             final_state: format!("{:?}", status.state),
@@ -839,6 +845,7 @@ pub fn move_and_wait<T: Transport>(
     cmd: Control,
     hooks: &mut dyn JobHooks,
 ) -> Result<JobEnd, Failure> {
+    link.refuse_if_held()?;
     let before = link.request_status()?;
     let locked = before.alarm.map(|a| a.cause) == Some(pkmc::protocol::AlarmCause::Unhomed);
     if before.state != State::Idle && !(cmd == Control::Home && locked) {

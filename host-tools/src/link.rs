@@ -210,6 +210,14 @@ pub enum LinkError {
         /// NC line of the block.
         line: u32,
     },
+    /// The controller holds an earlier host's unfinished job: nothing new is queued
+    /// behind it.
+    JobHeld {
+        /// Port.
+        port: String,
+        /// The job.
+        job: pkmc::protocol::HeldJob,
+    },
     /// The controller refused our machine configuration.
     MachineRefused {
         /// Port.
@@ -279,6 +287,13 @@ impl fmt::Display for LinkError {
             LinkError::BadBlock { port, line } => write!(
                 f,
                 "{port}: the controller refused the block of line {line} as malformed"
+            ),
+            LinkError::JobHeld { port, job } => write!(
+                f,
+                "{port}: the controller holds an unfinished job of another host (process {}, \
+                 gone): {:?} at line {}, {} blocks done, {} still queued; `nc-send resume` \
+                 continues it, `nc-send abort` drops it",
+                job.host, job.state, job.line, job.done, job.queued
             ),
             LinkError::MachineRefused { port, error } => write!(
                 f,
@@ -799,6 +814,9 @@ pub enum JobEnd {
     Aborted,
     /// The operator stopped immediately: the controller is in alarm (`Aborted`).
     Stopped,
+    /// A resumed job stopped at rest again in a pause or tool change (M0, M1, M6) at
+    /// this NC line; `nc-send resume` continues it.
+    Paused(u32),
 }
 
 /// Negative acknowledgements received, by reason.
@@ -907,6 +925,8 @@ pub struct Link<T: Transport> {
     /// Counters.
     pub stats: ClientStats,
     their_machine: u32,
+    /// An earlier session's job the controller holds (from `HelloAck`).
+    held: Option<pkmc::protocol::HeldJob>,
     axis_vmax: [i64; 6],
     /// The machine, for planning the blocks before they are streamed.
     machine: MachineConfig,
@@ -950,6 +970,7 @@ impl<T: Transport> Link<T> {
             status: None,
             stats: ClientStats::default(),
             their_machine: 0,
+            held: None,
             axis_vmax: core::array::from_fn(|i| machine.axes[i].max_velocity),
             machine: machine.clone(),
         };
@@ -960,6 +981,7 @@ impl<T: Transport> Link<T> {
                 &HostMsg::Hello {
                     version: PROTOCOL_VERSION,
                     machine: ours,
+                    host: std::process::id(),
                 },
             )?;
             link.flush()?;
@@ -970,8 +992,10 @@ impl<T: Transport> Link<T> {
                         CtrlMsg::HelloAck {
                             version,
                             queue_capacity,
+                            held,
                             machine,
                         } => {
+                            link.held = held;
                             if version != PROTOCOL_VERSION {
                                 return Err(LinkError::Version {
                                     port: link.io.name().into(),
@@ -1010,6 +1034,29 @@ impl<T: Transport> Link<T> {
     /// Gives the transport back.
     pub fn into_transport(self) -> T {
         self.io
+    }
+
+    /// The unfinished job of an earlier host that the controller held when this link
+    /// opened, if any (see `nc-send resume` and `abort`).
+    pub fn held(&self) -> Option<pkmc::protocol::HeldJob> {
+        self.held
+    }
+
+    /// An error naming the held job, if one is held: a new job or move is refused
+    /// rather than queued behind it.
+    pub fn refuse_if_held(&self) -> Result<(), LinkError> {
+        match self.held {
+            Some(job) => Err(LinkError::JobHeld {
+                port: self.port(),
+                job,
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Marks the held job as dealt with (resumed or aborted by this host).
+    pub fn release_held(&mut self) {
+        self.held = None;
     }
 
     /// Block-queue capacity the controller announced.
@@ -1278,6 +1325,21 @@ impl<T: Transport> Link<T> {
     /// end is `Aborted`, after a `Stop` it is `Stopped`. On a simulator, a controller
     /// moving without progress is an error ([`LinkError::Stalled`]).
     pub fn wait_idle(&mut self, hooks: &mut dyn JobHooks) -> Result<JobEnd, LinkError> {
+        self.wait_until_idle(hooks, false)
+    }
+
+    /// Waits for a job resumed with `Resume` (no host streams it): until it ends, as
+    /// [`Link::wait_idle`], or until it stops at rest in a later pause
+    /// ([`JobEnd::Paused`]) instead of waiting for an operator this host does not have.
+    pub fn wait_resumed(&mut self, hooks: &mut dyn JobHooks) -> Result<JobEnd, LinkError> {
+        self.wait_until_idle(hooks, true)
+    }
+
+    fn wait_until_idle(
+        &mut self,
+        hooks: &mut dyn JobHooks,
+        end_at_pause: bool,
+    ) -> Result<JobEnd, LinkError> {
         let mut ended_by = None;
         let mut guard = StallGuard::default();
         loop {
@@ -1303,6 +1365,9 @@ impl<T: Transport> Link<T> {
                     return Ok(JobEnd::Alarm(a));
                 }
             }
+            if end_at_pause && ended_by.is_none() && s.state == State::Hold && s.speed == 0 {
+                return Ok(JobEnd::Paused(s.line));
+            }
             if s.state == State::Idle
                 && s.speed == 0
                 && s.free_slots == self.capacity
@@ -1325,6 +1390,7 @@ impl<T: Transport> Link<T> {
         blocks: &[Block],
         hooks: &mut dyn JobHooks,
     ) -> Result<JobEnd, LinkError> {
+        self.refuse_if_held()?;
         let start_status = self.request_status()?;
         hooks.status(&start_status);
         if matches!(start_status.state, State::Alarm | State::EStop) {
@@ -1553,6 +1619,18 @@ impl<T: Transport> Link<T> {
                     }
                     NakReason::MachineMismatch => {
                         return Err(LinkError::MachineMismatch { port: self.port() })
+                    }
+                    NakReason::JobHeld => {
+                        return Err(LinkError::JobHeld {
+                            port: self.port(),
+                            job: self.held.unwrap_or(pkmc::protocol::HeldJob {
+                                host: 0,
+                                line: self.status.as_ref().map_or(0, |s| s.line),
+                                done: 0,
+                                queued: 0,
+                                state: self.status.as_ref().map_or(State::Hold, |s| s.state),
+                            }),
+                        })
                     }
                     NakReason::BadBlock => {
                         let line = at.and_then(|i| blocks.get(i)).map_or(0, |b| b.line);
@@ -1784,6 +1862,7 @@ mod tests {
             feed_override: 100,
             alarm: None,
             homed: false,
+            orphan: false,
         }
     }
 

@@ -432,6 +432,7 @@ mod tests {
             feed_override: 100,
             alarm: None,
             homed: false,
+            orphan: false,
         }
     }
 

@@ -42,7 +42,7 @@ use crate::homing::Homer;
 use crate::interp::{Event, Executor};
 use crate::kinematics::{Joints, MachineKinematics, Unreachable};
 use crate::planner::Planner;
-use crate::protocol::{Alarm, Aux, FrameDecoder, State, MAX_BODY, MAX_FRAME, NO_JOINT};
+use crate::protocol::{Alarm, Aux, FrameDecoder, HeldJob, State, MAX_BODY, MAX_FRAME, NO_JOINT};
 use crate::stepper::{StepScheduler, StepTrain};
 pub use actuators::{Inputs, Outputs};
 use safety::{alarm_of, UNHOMED};
@@ -89,6 +89,11 @@ pub struct Controller {
     last_control: Option<u16>,
     machine_id: u32,
     mismatch: bool,
+    /// The session's host (`Hello::host`).
+    host: u32,
+    /// An earlier session's job, queued or held, not yet resumed or aborted by this
+    /// one.
+    orphan: Option<HeldJob>,
     assembler: crate::store::Assembler,
     store_pending: bool,
     planner: Planner,
@@ -226,6 +231,8 @@ impl Controller {
             at!((*p).last_control).write(None);
             at!((*p).machine_id).write(prep.machine_id);
             at!((*p).mismatch).write(false);
+            at!((*p).host).write(0);
+            at!((*p).orphan).write(None);
             at!((*p).assembler).write(crate::store::Assembler::new());
             at!((*p).store_pending).write(false);
             Planner::init_at(at!((*p).planner), pose);
@@ -307,10 +314,25 @@ impl Controller {
         match self.state {
             State::Alarm | State::EStop => self.stopping || self.resync,
             State::Homing => true,
-            // An abort completes on the next tick once stopped: that tick is work.
-            State::Hold => !self.exec.stopped() || self.abort_pending,
+            // An abort completes on the next tick once stopped: that tick is work; so
+            // is the link-loss watch over a held job.
+            State::Hold => !self.exec.stopped() || self.abort_pending || self.watching_hold(),
             _ => self.path_moving(),
         }
+    }
+
+    /// A job is queued, executing or held (a pause or hold at rest counts).
+    pub(super) fn job_held(&self) -> bool {
+        !self.planner.is_empty() || self.exec.busy() || self.state == State::Hold
+    }
+
+    /// The link-loss watch of a held job is running (time must advance for it).
+    fn watching_hold(&self) -> bool {
+        self.session
+            && self.link_watch
+            && self.alarm.is_none()
+            && self.silent_ticks < LINK_LOSS_TICKS
+            && self.job_held()
     }
 
     /// A block executing or queued, or smoothing still catching up.

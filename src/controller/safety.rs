@@ -60,6 +60,11 @@ impl Controller {
     /// `AlarmReset`: refused while the cause is still there (e-stop or a drive fault
     /// active) or the motion is still stopping.
     pub(super) fn reset_alarm(&mut self) {
+        if self.state == State::Hold && self.alarm.map(|a| a.cause) == Some(AlarmCause::LinkLoss) {
+            // The link loss over a held job: the job stays held.
+            self.alarm = None;
+            return;
+        }
         if !matches!(self.state, State::Alarm | State::EStop) || self.mismatch || self.stopping {
             return;
         }
@@ -122,15 +127,35 @@ impl Controller {
         {
             self.exec.pose = pose;
         }
-        self.locked |= self.state == State::Homing;
         if self.state == State::Homing {
-            self.homer.cancel();
+            self.cancel_homing();
         }
         self.raise(Alarm {
             cause: AlarmCause::JointSpeed,
             joint: j as u8,
             line: self.exec.line,
         });
+    }
+
+    /// Homing stops where the joints are: the machine is locked (not homed), and the
+    /// pose and the queue start from those joints (homing moves joints, not the pose:
+    /// without this the next move would start from the pose before homing, a jump).
+    #[cold]
+    pub(super) fn cancel_homing(&mut self) {
+        self.homer.cancel();
+        self.locked = true;
+        self.homed = false;
+        let mut pose = self.exec.pose;
+        if self
+            .kin
+            .forward(&self.joints, &self.exec.pose, &mut pose)
+            .is_ok()
+        {
+            let completed = self.exec.completed;
+            self.exec.reset(pose);
+            self.exec.completed = completed;
+            self.planner.clear(pose);
+        }
     }
 
     pub(super) fn raise(&mut self, alarm: Alarm) {
@@ -158,9 +183,7 @@ impl Controller {
         }
         self.abort_pending = false;
         if homing {
-            self.homer.cancel();
-            self.locked = true;
-            self.homed = false;
+            self.cancel_homing();
             return;
         }
         if self.stopping {
@@ -233,8 +256,14 @@ impl Controller {
             State::Hold => !self.exec.stopped(),
             _ => false,
         };
-        if self.link_watch && moving && self.silent_ticks >= LINK_LOSS_TICKS {
-            self.fault(at(AlarmCause::LinkLoss, None), false);
+        if self.link_watch && self.silent_ticks >= LINK_LOSS_TICKS {
+            if moving {
+                self.fault(at(AlarmCause::LinkLoss, None), false);
+            } else if self.state == State::Hold && self.alarm.is_none() && self.job_held() {
+                // A held job whose host went silent: nothing moves, the job is kept
+                // (a host may resume or abort it), and the alarm says what happened.
+                self.alarm = Some(at(AlarmCause::LinkLoss, None));
+            }
         }
         self.last = Inputs {
             drive_fault,

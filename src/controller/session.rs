@@ -14,8 +14,8 @@ use crate::config::MachineConfig;
 use crate::planner::PushError;
 use crate::protocol::{
     decode_block_into, encode_ack, encode_frame_with, encode_status, Alarm, AlarmCause, Control,
-    CtrlMsg, HostMsgOf, NakReason, NotBlock, PlannedBlock, State, Status, MAX_BODY, MAX_FRAME,
-    NO_JOINT, PROTOCOL_VERSION,
+    CtrlMsg, HeldJob, HostMsgOf, NakReason, NotBlock, PlannedBlock, State, Status, MAX_BODY,
+    MAX_FRAME, NO_JOINT, PROTOCOL_VERSION,
 };
 use crate::units::TICK_HZ;
 
@@ -146,13 +146,32 @@ impl Controller {
     #[inline(never)]
     pub(super) fn handle(&mut self, seq: u16, msg: &HostMsgOf<NotBlock>) {
         match *msg {
-            HostMsgOf::Hello { version, machine } => {
+            HostMsgOf::Hello {
+                version,
+                machine,
+                host,
+            } => {
                 // What the old session is owed goes first, as it was owed.
                 self.send_due();
                 if version != PROTOCOL_VERSION {
                     self.nak(NakReason::Version);
                     return;
                 }
+                // A job left by the earlier session stays the earlier host's until the
+                // new one resumes or aborts it.
+                if self.job_held() {
+                    let first = self.orphan.map_or(self.host, |o| o.host);
+                    self.orphan = Some(HeldJob {
+                        host: first,
+                        line: self.exec.line,
+                        done: self.orphan.map_or(0, |o| o.done) + self.exec.completed,
+                        queued: self.planner.len() as u16,
+                        state: self.state,
+                    });
+                } else {
+                    self.orphan = None;
+                }
+                self.host = host;
                 self.session = true;
                 self.expected_seq = seq.wrapping_add(1);
                 self.last_control = None;
@@ -169,6 +188,7 @@ impl Controller {
                 self.send(&CtrlMsg::HelloAck {
                     version: PROTOCOL_VERSION,
                     queue_capacity: QUEUE_CAPACITY as u16,
+                    held: self.orphan,
                     machine: self.machine_id,
                 });
             }
@@ -234,6 +254,10 @@ impl Controller {
         }
         if self.mismatch {
             self.nak(NakReason::MachineMismatch);
+            return;
+        }
+        if self.orphan.is_some() {
+            self.nak(NakReason::JobHeld);
             return;
         }
         if matches!(self.state, State::Alarm | State::EStop) {
@@ -317,6 +341,12 @@ impl Controller {
                 }
             }
             Control::Resume => {
+                if self.state == State::Hold {
+                    // Resuming adopts a job left by an earlier session, and clears the
+                    // link loss that held it.
+                    self.orphan = None;
+                    self.clear_held_link_loss();
+                }
                 if self.state == State::Hold && !self.abort_pending {
                     self.planner.hold = false;
                     self.exec.paused = false;
@@ -332,14 +362,15 @@ impl Controller {
                 }
             }
             Control::Abort => {
+                self.orphan = None;
+                self.clear_held_link_loss();
                 if matches!(self.state, State::Running | State::Hold | State::Idle) {
                     self.planner.hold = true;
                     self.abort_pending = true;
                     self.exec.replan(&mut self.planner);
                     self.state = State::Hold;
                 } else if self.state == State::Homing {
-                    self.homer.cancel();
-                    self.locked = true;
+                    self.cancel_homing();
                     self.state = State::Alarm;
                     self.alarm = Some(UNHOMED);
                 }
@@ -360,8 +391,7 @@ impl Controller {
             }
             Control::Stop => {
                 if self.state == State::Homing {
-                    self.homer.cancel();
-                    self.locked = true;
+                    self.cancel_homing();
                 }
                 self.raise(Alarm {
                     cause: AlarmCause::Aborted,
@@ -370,6 +400,14 @@ impl Controller {
                 })
             }
             Control::Home => self.home(),
+        }
+    }
+
+    /// A link loss raised over a held job (the job was kept) is over once a host acts
+    /// on the job.
+    fn clear_held_link_loss(&mut self) {
+        if self.state == State::Hold && self.alarm.map(|a| a.cause) == Some(AlarmCause::LinkLoss) {
+            self.alarm = None;
         }
     }
 
@@ -389,6 +427,7 @@ impl Controller {
             feed_override: self.planner.feed_override,
             alarm: self.alarm,
             homed: self.homed,
+            orphan: self.orphan.is_some(),
         }
     }
 }

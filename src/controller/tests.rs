@@ -68,6 +68,7 @@ fn hello(c: &Controller) -> HostMsg {
     HostMsg::Hello {
         version: PROTOCOL_VERSION,
         machine: c.machine_id(),
+        host: 1,
     }
 }
 
@@ -90,6 +91,7 @@ fn a_controller_that_disagrees_about_the_machine_refuses_to_move_until_sent_it()
         &HostMsg::Hello {
             version: PROTOCOL_VERSION,
             machine: id,
+            host: 1,
         },
     ));
     c.receive(&frame(1, &line_to(10, 1)));
@@ -278,6 +280,8 @@ fn a_feed_hold_stops_on_the_path_within_the_braking_distance_and_resumes() {
 #[test]
 fn a_resume_after_a_pause_that_ends_the_queue_is_idle_at_once() {
     let mut c = session();
+    // (A held job with a live link watch is work: time runs for the watch.)
+    c.set_link_watch(false);
     c.receive(&frame(1, &line_to(1, 1)));
     let pause = Block {
         line: 2,

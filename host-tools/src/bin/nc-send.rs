@@ -99,6 +99,12 @@ enum Command {
     },
     /// Clear an alarm once its cause is gone.
     Reset,
+    /// Drop the job the controller holds (another host's unfinished job, or a job
+    /// paused or held): a controlled stop if anything moves, then idle.
+    Abort,
+    /// Continue the job the controller holds (another host's unfinished job, or a
+    /// job paused or held) and wait until it ends or pauses again.
+    Resume,
 }
 
 fn main() {
@@ -386,7 +392,8 @@ fn command(
 ) -> Result<i32, Failure> {
     let quiet = args.report.is_some();
     let mut op = Operator::new(Progress::new(Style::for_stderr(quiet), 0), interrupts, None);
-    let (status, result, code, extra) = job::with_link(machine, opts, |link| {
+    let (status, result, code, extra, held) = job::with_link(machine, opts, |link| {
+        let held = link.held();
         let moves = matches!(cmd, Command::Jog { .. } | Command::Mdi { .. });
         if moves && matches!(opts.target, Target::Sim) {
             // A fresh simulator is locked after its reset: unlock it where it stands.
@@ -426,18 +433,46 @@ fn command(
                 let (blocks, end) = job::mdi(link, machine, line, &mut op)?;
                 (end, Some(blocks.len()))
             }
+            Command::Abort => {
+                link.control(Control::Abort)?;
+                link.release_held();
+                (link.wait_idle(&mut op)?, None)
+            }
+            Command::Resume => {
+                let s = link.request_status()?;
+                if s.state != pkmc::protocol::State::Hold {
+                    return Err(Failure::new(
+                        exit::ALARM,
+                        format!(
+                            "{}: nothing to resume: the controller is {:?}{}",
+                            pkmc_host::link::Transport::name(link.transport()),
+                            s.state,
+                            s.alarm
+                                .map(|a| format!(" ({})", job::describe_alarm(&a)))
+                                .unwrap_or_default()
+                        ),
+                    ));
+                }
+                link.control(Control::Resume)?;
+                link.release_held();
+                (link.wait_resumed(&mut op)?, None)
+            }
         };
         let status = link.request_status()?;
         let (result, code) = match &end {
             JobEnd::Done if matches!(cmd, Command::Reset) && status.alarm.is_some() => {
                 ("alarm", exit::ALARM)
             }
+            JobEnd::Done if matches!(cmd, Command::Abort) => ("aborted", exit::OK),
             JobEnd::Done => ("done", exit::OK),
             JobEnd::Alarm(_) => ("alarm", exit::ALARM),
             JobEnd::Aborted => ("aborted", exit::STOPPED),
+            JobEnd::Paused(_) => ("paused", exit::HELD),
             JobEnd::Stopped => ("stopped", exit::STOPPED),
         };
-        Ok((status, result, code, extra))
+        // What status shows: the job still held (not the one just resumed or aborted).
+        let held = held.filter(|_| matches!(cmd, Command::Status | Command::Reset));
+        Ok((status, result, code, extra, held))
     })?;
     let mut out = std::io::stdout().lock();
     if quiet {
@@ -445,6 +480,16 @@ fn command(
         if let Some(n) = extra {
             v["blocks_sent"] = n.into();
         }
+        v["held_job"] = match held {
+            Some(h) => serde_json::json!({
+                "host_process": h.host,
+                "state": format!("{:?}", h.state),
+                "line": h.line,
+                "blocks_done": h.done,
+                "blocks_queued": h.queued,
+            }),
+            None => serde_json::Value::Null,
+        };
         let _ = writeln!(
             out,
             "{}",
@@ -462,6 +507,15 @@ fn command(
         );
         if let Some(a) = status.alarm {
             let _ = writeln!(out, "ALARM: {}", job::describe_alarm(&a));
+        }
+        if let Some(h) = held {
+            let _ = writeln!(
+                out,
+                "HELD: an unfinished job of another host (process {}, gone): {:?} at line {}, \
+                 {} blocks done, {} still queued; `nc-send resume` continues it, \
+                 `nc-send abort` drops it",
+                h.host, h.state, h.line, h.done, h.queued
+            );
         }
     }
     Ok(code)
