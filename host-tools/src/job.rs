@@ -486,6 +486,7 @@ impl Report {
         match self.result.as_str() {
             "alarm" => exit::ALARM,
             "aborted" | "stopped" => exit::STOPPED,
+            "paused" => exit::HELD,
             _ if self.drive_violations.unwrap_or(0) > 0 => exit::ALARM,
             _ if self.final_state != "Idle" => exit::ALARM,
             _ => exit::OK,

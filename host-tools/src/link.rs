@@ -878,6 +878,12 @@ pub trait JobHooks {
     fn control(&mut self, _link: &LinkView) -> Option<Control> {
         None
     }
+    /// Does a program pause (M0, M1, M6) end the job here, leaving it held on the
+    /// controller ([`JobEnd::Paused`]), because no operator can resume it from this
+    /// host? (Otherwise the job waits for [`JobHooks::control`] to resume it.)
+    fn ends_at_pause(&self) -> bool {
+        false
+    }
 }
 
 /// Hooks that do nothing.
@@ -1684,6 +1690,16 @@ impl<T: Transport> Link<T> {
                 job.free_bends = s.free_bends as usize;
                 job.buffered_ms = s.buffered_ms;
                 hooks.status(&s);
+                if s.state == State::Hold
+                    && s.speed == 0
+                    && job.ending.is_none()
+                    && self.control.is_none()
+                    && hooks.ends_at_pause()
+                {
+                    // Held at a pause with nobody here to resume it: the job stays
+                    // held on the controller for `nc-send resume`.
+                    return Ok(Some(JobEnd::Paused(s.line)));
+                }
                 // A fault stops on the path first: the job ends once at rest.
                 if matches!(s.state, State::Alarm | State::EStop) && s.speed == 0 {
                     if job

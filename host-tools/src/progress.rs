@@ -375,6 +375,10 @@ impl JobHooks for Operator {
         }
     }
 
+    fn ends_at_pause(&self) -> bool {
+        !self.auto_resume && self.keys.is_none() && !self.user_hold && self.stage == Stage::Running
+    }
+
     fn control(&mut self, view: &LinkView) -> Option<Control> {
         let presses = self.interrupts.count();
         if presses > self.handled {

@@ -268,3 +268,36 @@ fn a_host_killed_during_homing_leaves_the_machine_locked_and_a_new_host_recovers
     );
     assert_eq!(json(&out)["pose"]["x"], 1.0);
 }
+
+#[test]
+fn a_program_pause_with_no_operator_ends_the_run_with_the_job_held_and_resume_finishes_it() {
+    let sim = Sim::start(&[]);
+    assert_eq!(send(&sim, &["reset"]).status.code(), Some(0));
+    // `--report json` and no terminal: nobody can press resume here.
+    let out = send(&sim, &[paused_program().as_str()]);
+    assert_eq!(
+        out.status.code(),
+        Some(7),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = json(&out);
+    assert_eq!(
+        (r["result"].clone(), r["final_state"].clone()),
+        ("paused".into(), "Hold".into())
+    );
+    let s = status(&sim);
+    assert_eq!(s["held_job"]["line"], 3, "{s}");
+    let out = send(&sim, &["resume"]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = json(&out);
+    assert_eq!(
+        (r["pose"]["x"].clone(), r["pose"]["y"].clone()),
+        (12.0.into(), 3.0.into())
+    );
+}

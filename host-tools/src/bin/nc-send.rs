@@ -329,6 +329,15 @@ fn print_report(report: &Report, json: bool, check: bool) {
     for a in &report.alarms {
         let _ = writeln!(out, "ALARM: {a}");
     }
+    if report.result == "paused" {
+        let _ = writeln!(
+            out,
+            "PAUSED: a program pause or tool change, and no operator here to resume it (stdin \
+             is not a terminal): the job stays held on the controller with the blocks sent \
+             so far ({} of {}); `nc-send resume` continues them, `nc-send abort` drops them",
+            report.link.blocks_sent, report.blocks_sent
+        );
+    }
 }
 
 fn axis_index(name: &str) -> Result<usize, Failure> {
@@ -392,6 +401,8 @@ fn command(
 ) -> Result<i32, Failure> {
     let quiet = args.report.is_some();
     let mut op = Operator::new(Progress::new(Style::for_stderr(quiet), 0), interrupts, None);
+    // A simulator has no operator: its pauses resume by themselves, as in a program run.
+    op.auto_resume = matches!(opts.target, Target::Sim);
     let (status, result, code, extra, held) = job::with_link(machine, opts, |link| {
         let held = link.held();
         let moves = matches!(cmd, Command::Jog { .. } | Command::Mdi { .. });
