@@ -91,28 +91,9 @@ impl From<LinkError> for Failure {
 /// Reads and compiles a program for `machine`; checks every block end against the
 /// machine's reach.
 pub fn compile_program(path: &Path, machine: &MachineConfig) -> Result<Vec<Block>, Failure> {
-    let bytes = std::fs::read(path).map_err(|e| {
-        Failure::new(
-            exit::BAD_INPUT,
-            format!("{}: cannot read: {e}", path.display()),
-        )
-    })?;
+    let text = crate::input::read_text(path, crate::input::MAX_PROGRAM_BYTES)
+        .map_err(|m| Failure::new(exit::BAD_INPUT, m))?;
     let name = path.display().to_string();
-    let text = String::from_utf8(bytes).map_err(|e| {
-        let at = e.utf8_error().valid_up_to();
-        let before = &e.as_bytes()[..at];
-        let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
-        let col = at
-            - before
-                .iter()
-                .rposition(|&b| b == b'\n')
-                .map_or(0, |p| p + 1)
-            + 1;
-        Failure::new(
-            exit::BAD_INPUT,
-            format!("{name}:{line}:{col}: not text (invalid UTF-8)"),
-        )
-    })?;
     compile_text(&text, &name, machine, machine.home)
 }
 

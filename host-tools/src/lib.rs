@@ -10,6 +10,7 @@ pub mod contour_study;
 pub mod discover;
 pub mod faults;
 pub mod gcode;
+pub mod input;
 pub mod job;
 pub mod link;
 pub mod machine_file;

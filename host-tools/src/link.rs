@@ -381,20 +381,46 @@ pub struct PortTransport {
     port: Box<dyn SerialPort>,
     name: String,
     clock: Option<SimClock>,
+    /// The port's descriptor (non-blocking, see [`PortTransport::open`]).
+    #[cfg(unix)]
+    fd: i32,
 }
 
 impl PortTransport {
     /// Opens the port at `path`.
     pub fn open(path: &str) -> Result<Self, LinkError> {
+        let open_error = |source| LinkError::Open {
+            port: path.to_string(),
+            source,
+        };
         let port = serialport::new(path, 115_200)
             .timeout(Duration::from_millis(10))
-            .open()
-            .map_err(|source| LinkError::Open {
-                port: path.to_string(),
-                source,
-            })?;
+            .open_native()
+            .map_err(open_error)?;
+        // Non-blocking: the port is polled with a timeout before each read, but another
+        // process reading the same port can take the bytes between the poll and the
+        // read, and a blocking read would then wait forever (the link timeout could
+        // never fire). A read that finds nothing returns at once instead.
+        #[cfg(unix)]
+        let fd = {
+            use std::os::fd::AsRawFd;
+            let fd = port.as_raw_fd();
+            // SAFETY: fcntl on a descriptor this function owns (the open port).
+            let ok = unsafe {
+                let flags = libc::fcntl(fd, libc::F_GETFL);
+                flags >= 0 && libc::fcntl(fd, libc::F_SETFL, flags | libc::O_NONBLOCK) == 0
+            };
+            if !ok {
+                return Err(open_error(serialport::Error::from(
+                    io::Error::last_os_error(),
+                )));
+            }
+            fd
+        };
         Ok(Self {
-            port,
+            #[cfg(unix)]
+            fd,
+            port: Box::new(port),
             name: path.to_string(),
             clock: None,
         })
@@ -1384,7 +1410,14 @@ impl<T: Transport> Link<T> {
                     None => JobEnd::Done,
                 });
             }
-            std::thread::sleep(Duration::from_millis(10));
+            if self.io.sim_ticks().is_some() {
+                // A simulated clock advances only while it is read: let it run to its
+                // next status (an in-process controller answers a status request at
+                // once, without ticking, so asking again would never move it).
+                self.pump(Duration::from_millis(10))?;
+            } else {
+                std::thread::sleep(Duration::from_millis(10));
+            }
         }
     }
 
@@ -1861,6 +1894,40 @@ impl JobState {
 
 #[cfg(test)]
 mod tests {
+    #[cfg(unix)]
+    #[test]
+    fn a_port_reads_without_blocking_so_bytes_taken_by_another_reader_cannot_hang_the_client() {
+        use std::io::Write;
+        let (mut master, slave) = serialport::TTYPort::pair().unwrap();
+        let path = serialport::SerialPort::name(&slave).unwrap();
+        let mut port = super::PortTransport::open(&path).unwrap();
+        // Another process opens the same port and takes what arrives.
+        let mut thief = std::fs::File::open(&path).unwrap();
+        master.write_all(b"x").unwrap();
+        let mut one = [0u8; 1];
+        std::io::Read::read(&mut thief, &mut one).unwrap();
+        // The descriptor does not block: a read that finds nothing (as after a poll
+        // that saw the stolen byte) returns at once instead of waiting forever.
+        // SAFETY: fcntl on the transport's own, open descriptor.
+        let flags = unsafe { libc::fcntl(port.fd, libc::F_GETFL) };
+        assert_ne!(
+            flags & libc::O_NONBLOCK,
+            0,
+            "a blocking read would wait forever"
+        );
+        // SAFETY: read into a live one-byte buffer from the same descriptor.
+        let n = unsafe { libc::read(port.fd, one.as_mut_ptr().cast(), 1) };
+        assert_eq!(n, -1);
+        assert_eq!(
+            std::io::Error::last_os_error().kind(),
+            std::io::ErrorKind::WouldBlock
+        );
+        let start = std::time::Instant::now();
+        let got = super::Transport::read_some(&mut port, &mut one, Duration::from_millis(50));
+        assert_eq!(got.unwrap(), 0);
+        assert!(start.elapsed() < Duration::from_secs(1));
+    }
+
     use super::*;
 
     fn status() -> Status {

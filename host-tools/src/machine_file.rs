@@ -5,7 +5,7 @@
 //! errors carry the file's line and column. Unknown fields are refused, so a misspelt
 //! limit is never silently ignored.
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use pkmc::config::{
     Drive, GeometryField, H4TableGeometry, HexapodGeometry, Homing, JointConfig, KinematicsConfig,
     Limits, MachineConfig, Scale, ServoConfig, ServoGains, StepTiming, AXES, AXIS_NAMES,
@@ -659,16 +659,16 @@ pub fn describe(e: &pkmc::config::ConfigError, m: &MachineFile) -> String {
 
 /// Reads and converts a machine file.
 pub fn load(path: &Path) -> Result<MachineConfig> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let text = crate::input::read_text(path, crate::input::MAX_MACHINE_FILE_BYTES)
+        .map_err(|m| anyhow!(m))?;
     parse(&text, &path.display().to_string())
 }
 
 /// The simulator's plant of each joint in the machine file at `path` (`None` for a
 /// joint without one).
 pub fn load_plants(path: &Path) -> Result<Vec<Option<crate::plant::PlantFile>>> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read", path.display()))?;
+    let text = crate::input::read_text(path, crate::input::MAX_MACHINE_FILE_BYTES)
+        .map_err(|m| anyhow!(m))?;
     let file: MachineFile =
         toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), e.message()))?;
     Ok(file.joints.into_iter().map(|j| j.plant).collect())

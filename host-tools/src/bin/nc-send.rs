@@ -145,6 +145,9 @@ fn target(args: &Args, found: &mut Option<String>) -> Result<(), Failure> {
     Ok(())
 }
 
+/// The longest link timeout accepted, s (one hour).
+const MAX_LINK_TIMEOUT_S: f64 = 3600.0;
+
 fn run(args: &Args) -> Result<i32, Failure> {
     let machine = load_machine(args)?;
     let quiet = args.report.is_some();
@@ -174,8 +177,22 @@ fn run(args: &Args) -> Result<i32, Failure> {
         cut_after_bytes: Some(n),
         ..FaultConfig::new(0.0, args.seed)
     }));
-    if args.link_timeout.is_nan() || args.link_timeout <= 0.0 {
-        return Err(bad("--link-timeout must be positive"));
+    if !(args.link_timeout > 0.0 && args.link_timeout <= MAX_LINK_TIMEOUT_S) {
+        return Err(bad(format!(
+            "--link-timeout {}: must be more than 0 and at most {MAX_LINK_TIMEOUT_S} s",
+            args.link_timeout
+        )));
+    }
+    if args.max_buffered_ms == 0 {
+        return Err(bad(
+            "--max-buffered-ms 0: must be at least 1 (with 0 no block could ever be sent)",
+        ));
+    }
+    if !args.sim && (args.link_faults.is_some() || args.link_cut_after.is_some()) {
+        return Err(bad(
+            "--link-faults needs --sim: only the simulator's line can be corrupted (--check \
+             runs the controller in this process, with no line)",
+        ));
     }
     let link = LinkOptions {
         max_buffered_ms: args.max_buffered_ms,
@@ -429,8 +446,13 @@ fn command(
                 let i = axis_index(axis)?;
                 let rotary = axis_is_rotary(i);
                 let scale = pkmc::units::units_per_user(rotary) as f64;
-                if feed.is_nan() || *feed <= 0.0 {
-                    return Err(bad("jog: --feed must be positive"));
+                if !feed.is_finite() || *feed <= 0.0 {
+                    return Err(bad(format!(
+                        "jog: --feed {feed}: must be a positive number"
+                    )));
+                }
+                if !distance.is_finite() {
+                    return Err(bad(format!("jog: distance {distance}: must be a number")));
                 }
                 let cmd = job::jog_command(
                     link,

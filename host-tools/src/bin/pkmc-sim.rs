@@ -32,8 +32,14 @@ struct Args {
     inject: Vec<pkmc_host::sim::Injection>,
 }
 
-fn main() -> anyhow::Result<()> {
-    let args = Args::parse();
+fn main() {
+    if let Err(e) = serve(Args::parse()) {
+        eprintln!("pkmc-sim: {e:#}");
+        std::process::exit(2);
+    }
+}
+
+fn serve(args: Args) -> anyhow::Result<()> {
     let machine = match &args.machine {
         Some(p) => pkmc_host::machine_file::load(p)?,
         None => pkmc_host::machine_file::parse(
