@@ -192,8 +192,10 @@ pub enum LinkError {
     Lost {
         /// Port.
         port: String,
-        /// Silence endured.
+        /// Time since the last valid frame.
         silent: Duration,
+        /// Time waited for the answer (or the progress) that never came.
+        waited: Duration,
         /// What we were doing.
         during: &'static str,
     },
@@ -274,7 +276,20 @@ impl fmt::Display for LinkError {
             LinkError::Lost {
                 port,
                 silent,
+                waited,
                 during,
+            } if *waited > *silent + Duration::from_millis(100) => write!(
+                f,
+                "{port}: link lost: waited {:.1} s while {during} (frames kept arriving, \
+                 damaged or not the answer; the last valid one {:.1} s ago)",
+                waited.as_secs_f64(),
+                silent.as_secs_f64()
+            ),
+            LinkError::Lost {
+                port,
+                silent,
+                during,
+                ..
             } => write!(
                 f,
                 "{port}: link lost: no answer from the controller for {:.1} s while {during}",
@@ -383,6 +398,7 @@ pub struct PortTransport {
     clock: Option<SimClock>,
     /// The port's descriptor (non-blocking, see [`PortTransport::open`]).
     #[cfg(unix)]
+    #[cfg_attr(not(test), allow(dead_code))]
     fd: i32,
 }
 
@@ -946,6 +962,8 @@ pub struct Link<T: Transport> {
     next_seq: u16,
     capacity: u16,
     last_heard: Instant,
+    /// When bytes last arrived, valid or not.
+    last_bytes: Instant,
     last_request: Instant,
     next_control_id: u16,
     controls: VecDeque<Control>,
@@ -993,6 +1011,7 @@ impl<T: Transport> Link<T> {
             next_seq: 1,
             capacity: 0,
             last_heard: now,
+            last_bytes: now,
             last_request: now,
             next_control_id: 1,
             controls: VecDeque::new(),
@@ -1007,7 +1026,7 @@ impl<T: Transport> Link<T> {
             machine: machine.clone(),
         };
         let start = Instant::now();
-        while start.elapsed() < opts.link_timeout {
+        while !link.given_up(start) {
             link.queue(
                 0,
                 &HostMsg::Hello {
@@ -1140,6 +1159,7 @@ impl<T: Transport> Link<T> {
                     return Err(LinkError::Lost {
                         port: self.port(),
                         silent: start.elapsed(),
+                        waited: start.elapsed(),
                         during: "writing",
                     });
                 }
@@ -1207,7 +1227,7 @@ impl<T: Transport> Link<T> {
                 _ => {}
             }
             if start.elapsed() > self.opts.link_timeout {
-                return Err(self.lost("waiting for the controller to load the machine"));
+                return Err(self.lost("waiting for the controller to load the machine", start));
             }
             let msgs = self.pump(READ_WAIT)?;
             self.absorb(&msgs);
@@ -1238,8 +1258,8 @@ impl<T: Transport> Link<T> {
                     return Ok(());
                 }
             }
-            if start.elapsed() > self.opts.link_timeout {
-                return Err(self.lost(during));
+            if self.given_up(start) {
+                return Err(self.lost(during, start));
             }
         }
     }
@@ -1268,6 +1288,9 @@ impl<T: Transport> Link<T> {
                 }
             }
         }
+        if n > 0 {
+            self.last_bytes = Instant::now();
+        }
         if !msgs.is_empty() {
             self.last_heard = Instant::now();
             self.stats.frames_received += msgs.len() as u64;
@@ -1280,12 +1303,21 @@ impl<T: Transport> Link<T> {
         Ok(msgs)
     }
 
-    fn lost(&self, during: &'static str) -> LinkError {
+    fn lost(&self, during: &'static str, since: Instant) -> LinkError {
         LinkError::Lost {
             port: self.port(),
             silent: self.last_heard.elapsed(),
+            waited: since.elapsed(),
             during,
         }
+    }
+
+    /// Has a request made at `start` waited long enough? After the link timeout when
+    /// nothing has arrived for that long; while bytes keep arriving (a live controller
+    /// on a damaged line: the answer may get through), up to ten times it.
+    fn given_up(&self, start: Instant) -> bool {
+        let t = self.opts.link_timeout;
+        start.elapsed() > t && (self.last_bytes.elapsed() > t || start.elapsed() > t * 10)
     }
 
     /// Asks for and waits for a fresh status.
@@ -1305,8 +1337,8 @@ impl<T: Transport> Link<T> {
                     }
                 }
             }
-            if start.elapsed() > self.opts.link_timeout {
-                return Err(self.lost("waiting for a status"));
+            if self.given_up(start) {
+                return Err(self.lost("waiting for a status", start));
             }
         }
     }
@@ -1557,11 +1589,14 @@ impl<T: Transport> Link<T> {
                 job.last_progress = Instant::now();
             }
             if self.last_heard.elapsed() > self.opts.link_timeout {
-                return Err(self.lost(if job.acked < total {
-                    "streaming blocks"
-                } else {
-                    "waiting for the end of the job"
-                }));
+                return Err(self.lost(
+                    if job.acked < total {
+                        "streaming blocks"
+                    } else {
+                        "waiting for the end of the job"
+                    },
+                    self.last_heard,
+                ));
             }
         }
     }

@@ -119,3 +119,26 @@ fn a_line_that_goes_dead_mid_job_is_reported_as_link_loss() {
         "{err}"
     );
 }
+
+/// Issue 17: at 5 % line faults (where most status frames arrive damaged) a finished
+/// job is reported as done, not as a lost link: a request waits while frames keep
+/// arriving (up to ten times the link timeout). Seeds 4 and 7 failed before ("no
+/// answer … for 0.1 s while waiting for a status", exit 4).
+#[test]
+fn a_finished_job_on_a_line_with_five_percent_faults_is_reported_done() {
+    let square = common::repo().join("examples/square.ngc");
+    let runs: Vec<serde_json::Value> = std::thread::scope(|s| {
+        let handles: Vec<_> = ["4", "7"]
+            .map(|seed| {
+                let square = &square;
+                s.spawn(move || run(square, &["--link-faults", "0.05", "--seed", seed]))
+            })
+            .into_iter()
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    for r in runs {
+        assert_eq!(r["result"], "done", "{r}");
+        assert_eq!(r["final_state"], "Idle", "{r}");
+    }
+}

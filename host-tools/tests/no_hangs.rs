@@ -104,7 +104,10 @@ fn an_axis_the_machine_lacks_is_refused_at_its_line_and_column() {
             "{mode}: {stderr}"
         );
         assert!(stderr.contains("nothing was sent"), "{mode}: {stderr}");
-        assert!(out.stdout.is_empty(), "{mode}: nothing ran");
+        // The report says what failed (nothing ran).
+        let report = common::json(&out);
+        assert_eq!(report["result"], "error", "{mode}: {report}");
+        assert_eq!(report["exit_code"], exit::BAD_INPUT, "{mode}: {report}");
     }
     // The H-4 has A (its table) and C (its head) but no B.
     let h4 = program("tilted.ngc", "G0 A10 C5\nG0 B3\nM2\n");

@@ -113,6 +113,15 @@ fn main() {
         Ok(code) => code,
         Err(f) => {
             eprintln!("nc-send: {}", f.message);
+            if args.report.is_some() {
+                // A report on every exit: what failed, and the exit code.
+                let v = serde_json::json!({
+                    "result": "error",
+                    "exit_code": f.code,
+                    "error": f.message,
+                });
+                println!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+            }
             f.code
         }
     };
