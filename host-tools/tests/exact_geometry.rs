@@ -85,7 +85,7 @@ fn mm(v: f64) -> String {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
 
     #[test]
     fn every_arc_is_refused_by_name_or_runs_exactly(
