@@ -176,6 +176,11 @@ pub enum Control {
     /// Immediate stop: motion ends now, without deceleration, and the controller
     /// enters `Alarm` (cause `Aborted`), position kept.
     Stop,
+    /// Every block of the job has been sent (and acknowledged): the job is complete
+    /// on the controller. Until then a host that goes silent for the link-loss time
+    /// leaves an unfinished job, an alarm (`LinkLoss`) even when the queue has run dry
+    /// at rest, so that an interrupted job is never taken for a finished one.
+    EndJob,
 }
 
 /// Messages from the host to the controller.

@@ -1537,6 +1537,12 @@ impl<T: Transport> Link<T> {
             if let Some(cmd) = hooks.control(&view) {
                 self.controls.push_back(cmd);
             }
+            if job.acked == total && !job.end_sent && job.ending.is_none() {
+                // Every block is on the controller: the job is complete there (a host
+                // lost before this leaves an unfinished job, an alarm).
+                job.end_sent = true;
+                self.controls.push_back(Control::EndJob);
+            }
             self.service_controls(now, job)?;
             // Blocks, within credits and the buffered-motion limit.
             if job.ending.is_none() && self.tx.is_empty() {
@@ -1787,6 +1793,9 @@ impl<T: Transport> Link<T> {
                 }
                 if job.ending.is_none()
                     && job.acked == total
+                    && job.end_sent
+                    && self.control.is_none()
+                    && self.controls.is_empty()
                     && s.state == State::Idle
                     && s.blocks_done >= job.done_before.wrapping_add(total as u32)
                 {
@@ -1828,6 +1837,8 @@ struct JobState {
     /// One past the highest block ever sent.
     high: usize,
     free: usize,
+    /// `Control::EndJob` has been queued.
+    end_sent: bool,
     /// Free bends (arcs the controller can take) after the last acknowledged block.
     free_bends: usize,
     /// `arcs_before[i]`: arcs among the blocks before `i`.
@@ -1851,6 +1862,7 @@ impl JobState {
             sent: 0,
             high: 0,
             free: status.free_slots as usize,
+            end_sent: false,
             free_bends: status.free_bends as usize,
             arcs_before: Vec::new(),
             buffered_ms: status.buffered_ms,

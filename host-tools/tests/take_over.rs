@@ -301,3 +301,46 @@ fn a_program_pause_with_no_operator_ends_the_run_with_the_job_held_and_resume_fi
         (12.0.into(), 3.0.into())
     );
 }
+
+/// Issue 17: a host killed while streaming short blocks leaves an alarm, not an idle
+/// controller that looks finished: the controller knows a job is complete only when
+/// the host says so (`Control::EndJob`, after the last block is acknowledged).
+#[test]
+fn a_host_killed_while_streaming_short_blocks_leaves_a_link_loss_not_a_finished_look() {
+    let sim = Sim::start(&[]);
+    assert_eq!(send(&sim, &["reset"]).status.code(), Some(0));
+    let p = tmp("short-blocks.ngc");
+    let mut text = String::from("G21 G90 G64\n");
+    for i in 1..=50_000 {
+        text += &format!("G1 X{:.2} F600\n", (i % 2000) as f64 * 0.01);
+    }
+    std::fs::write(&p, text + "M2\n").unwrap();
+    let host = spawn(&sim, &[p.to_str().unwrap()]);
+    std::thread::sleep(Duration::from_millis(1500));
+    kill(host);
+    std::thread::sleep(Duration::from_millis(1500));
+    let s = wait_for(&sim, &[], "in alarm", |s| s["state"] == "Alarm");
+    assert!(
+        s["alarm"].as_str().unwrap_or("").contains("LinkLoss"),
+        "{s}"
+    );
+}
+
+#[test]
+fn a_job_that_ends_normally_leaves_no_alarm_after_its_host_exits() {
+    let sim = Sim::start(&[]);
+    assert_eq!(send(&sim, &["reset"]).status.code(), Some(0));
+    let p = tmp("short.ngc");
+    std::fs::write(&p, "G21 G90\nG1 X1 F600\nG1 X0\nM2\n").unwrap();
+    let out = send(&sim, &[p.to_str().unwrap()]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::thread::sleep(Duration::from_millis(2000));
+    let s = status(&sim);
+    assert_eq!(s["state"], "Idle", "{s}");
+    assert!(s["alarm"].is_null(), "{s}");
+}

@@ -94,6 +94,9 @@ pub struct Controller {
     /// An earlier session's job, queued or held, not yet resumed or aborted by this
     /// one.
     orphan: Option<HeldJob>,
+    /// Blocks were accepted and the host has not said the job is complete
+    /// (`Control::EndJob`).
+    job_open: bool,
     assembler: crate::store::Assembler,
     store_pending: bool,
     planner: Planner,
@@ -233,6 +236,7 @@ impl Controller {
             at!((*p).mismatch).write(false);
             at!((*p).host).write(0);
             at!((*p).orphan).write(None);
+            at!((*p).job_open).write(false);
             at!((*p).assembler).write(crate::store::Assembler::new());
             at!((*p).store_pending).write(false);
             Planner::init_at(at!((*p).planner), pose);
@@ -317,6 +321,7 @@ impl Controller {
             // An abort completes on the next tick once stopped: that tick is work; so
             // is the link-loss watch over a held job.
             State::Hold => !self.exec.stopped() || self.abort_pending || self.watching_hold(),
+            State::Idle => self.path_moving() || self.watching_hold(),
             _ => self.path_moving(),
         }
     }
@@ -326,13 +331,14 @@ impl Controller {
         !self.planner.is_empty() || self.exec.busy() || self.state == State::Hold
     }
 
-    /// The link-loss watch of a held job is running (time must advance for it).
+    /// The link-loss watch of a held or unfinished job is running (time must advance
+    /// for it).
     fn watching_hold(&self) -> bool {
         self.session
             && self.link_watch
             && self.alarm.is_none()
             && self.silent_ticks < LINK_LOSS_TICKS
-            && self.job_held()
+            && (self.job_held() || self.job_open)
     }
 
     /// A block executing or queued, or smoothing still catching up.

@@ -159,6 +159,7 @@ impl Controller {
     }
 
     pub(super) fn raise(&mut self, alarm: Alarm) {
+        self.job_open = false;
         self.alarm = Some(alarm);
         self.state = State::Alarm;
         self.exec.stop();
@@ -177,6 +178,7 @@ impl Controller {
             _ => {}
         }
         let homing = self.state == State::Homing;
+        self.job_open = false;
         self.state = if estop { State::EStop } else { State::Alarm };
         if self.alarm.is_none() || estop {
             self.alarm = Some(alarm);
@@ -258,6 +260,11 @@ impl Controller {
         };
         if self.link_watch && self.silent_ticks >= LINK_LOSS_TICKS {
             if moving {
+                self.fault(at(AlarmCause::LinkLoss, None), false);
+            } else if self.job_open && self.state == State::Idle {
+                // The queue ran dry before the host said the job was complete: an
+                // interrupted job, not a finished one.
+                self.job_open = false;
                 self.fault(at(AlarmCause::LinkLoss, None), false);
             } else if self.state == State::Hold && self.alarm.is_none() && self.job_held() {
                 // A held job whose host went silent: nothing moves, the job is kept

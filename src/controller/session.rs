@@ -270,6 +270,7 @@ impl Controller {
             Ok(()) => {
                 self.expected_seq = seq.wrapping_add(1);
                 self.ack_due = true;
+                self.job_open = true;
             }
             Err(PushError::Full) => self.nak(NakReason::QueueFull),
             Err(PushError::Geometry(_)) => self.nak(NakReason::BadBlock),
@@ -363,6 +364,7 @@ impl Controller {
             }
             Control::Abort => {
                 self.orphan = None;
+                self.job_open = false;
                 self.clear_held_link_loss();
                 if matches!(self.state, State::Running | State::Hold | State::Idle) {
                     self.planner.hold = true;
@@ -400,6 +402,7 @@ impl Controller {
                 })
             }
             Control::Home => self.home(),
+            Control::EndJob => self.job_open = false,
         }
     }
 

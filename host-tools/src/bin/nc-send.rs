@@ -497,7 +497,12 @@ fn command(
                 }
                 link.control(Control::Resume)?;
                 link.release_held();
-                (link.wait_resumed(&mut op)?, None)
+                let end = link.wait_resumed(&mut op)?;
+                if end == JobEnd::Done {
+                    // What was queued has run: the job is complete on the controller.
+                    link.control(Control::EndJob)?;
+                }
+                (end, None)
             }
         };
         let status = link.request_status()?;
