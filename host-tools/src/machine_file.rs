@@ -180,18 +180,22 @@ impl ContourFile {
 #[serde(deny_unknown_fields)]
 pub struct H4TableFile {
     /// X Y of each vertical rail.
+    #[serde(deserialize_with = "exact::de")]
     pub rails: [[f64; 2]; 4],
     /// Forearm length L.
     pub forearm: f64,
     /// Half length d of the central bar.
     pub bar_half: f64,
     /// Bar end each arm holds: -1 or +1.
+    #[serde(deserialize_with = "exact::de")]
     pub sides: [i8; 4],
     /// Attachment offsets e_i (not turned with C).
+    #[serde(deserialize_with = "exact::de")]
     pub attach: [[f64; 3]; 4],
     /// Tool tip below the head point E.
     pub tool_length: f64,
     /// A point of the table axis (parallel to X).
+    #[serde(deserialize_with = "exact::de")]
     pub table_pivot: [f64; 3],
     /// Lowest forearm elevation above horizontal, degrees.
     pub min_elevation: f64,
@@ -204,16 +208,20 @@ pub struct H4TableFile {
 #[serde(deny_unknown_fields)]
 pub struct HexapodFile {
     /// Base joints a_i, machine frame.
+    #[serde(default, deserialize_with = "exact::de_some")]
     pub base: Option<[[f64; 3]; 6]>,
     /// Radius of the base joints' circle.
     pub base_radius: Option<f64>,
     /// Angles of the base joints on their circle, degrees.
+    #[serde(default, deserialize_with = "exact::de_some")]
     pub base_angles: Option<[f64; 6]>,
     /// Platform joints b_i, platform frame.
+    #[serde(default, deserialize_with = "exact::de_some")]
     pub platform: Option<[[f64; 3]; 6]>,
     /// Radius of the platform joints' circle.
     pub platform_radius: Option<f64>,
     /// Angles of the platform joints on their circle, degrees.
+    #[serde(default, deserialize_with = "exact::de_some")]
     pub platform_angles: Option<[f64; 6]>,
 }
 
@@ -226,7 +234,7 @@ pub struct MachineFile {
     /// "cartesian", "h4-table" or "hexapod".
     pub kinematics: String,
     /// Home pose X Y Z (mm) A B C (degrees).
-    #[serde(default)]
+    #[serde(default, deserialize_with = "exact::de")]
     pub home: [f64; AXES],
     /// Geometry for `kinematics = "h4-table"`.
     pub h4_table: Option<H4TableFile>,
@@ -285,6 +293,60 @@ impl MotionFile {
             }
             other => bail!("motion.profile: unknown profile {other:?} (expected \"trapezoid\" or \"jerk-limited\")"),
         }
+    }
+}
+
+/// Fixed-size arrays read from TOML arrays of exactly that many elements: serde's
+/// arrays take the first N elements and drop the rest without a word (seven `home`
+/// values or five rails were accepted so).
+mod exact {
+    use serde::{de::Error, Deserialize, Deserializer};
+
+    /// A value read exactly from a TOML value.
+    pub trait Exact: Sized {
+        fn exact(v: toml::Value) -> Result<Self, String>;
+    }
+
+    impl Exact for f64 {
+        fn exact(v: toml::Value) -> Result<Self, String> {
+            match v {
+                toml::Value::Float(f) => Ok(f),
+                toml::Value::Integer(i) => Ok(i as f64),
+                other => Err(format!("expected a number, got {}", other.type_str())),
+            }
+        }
+    }
+
+    impl Exact for i8 {
+        fn exact(v: toml::Value) -> Result<Self, String> {
+            match v {
+                toml::Value::Integer(i) => {
+                    i8::try_from(i).map_err(|_| format!("{i} is out of range"))
+                }
+                other => Err(format!("expected an integer, got {}", other.type_str())),
+            }
+        }
+    }
+
+    impl<T: Exact, const N: usize> Exact for [T; N] {
+        fn exact(v: toml::Value) -> Result<Self, String> {
+            let toml::Value::Array(items) = v else {
+                return Err(format!("expected an array of {N}, got {}", v.type_str()));
+            };
+            if items.len() != N {
+                return Err(format!("expected {N} values, got {}", items.len()));
+            }
+            let items: Vec<T> = items.into_iter().map(T::exact).collect::<Result<_, _>>()?;
+            items.try_into().map_err(|_| format!("expected {N} values"))
+        }
+    }
+
+    pub fn de<'de, D: Deserializer<'de>, T: Exact>(d: D) -> Result<T, D::Error> {
+        T::exact(toml::Value::deserialize(d)?).map_err(D::Error::custom)
+    }
+
+    pub fn de_some<'de, D: Deserializer<'de>, T: Exact>(d: D) -> Result<Option<T>, D::Error> {
+        de(d).map(Some)
     }
 }
 
@@ -404,12 +466,12 @@ impl MachineFile {
                 max_velocity: to_units(
                     positive(l.max_velocity, &format!("axes.{key}.max_velocity"))?,
                     rotary,
-                    "",
+                    &format!("axes.{key}.max_velocity"),
                 )?,
                 max_accel: to_units(
                     positive(l.max_accel, &format!("axes.{key}.max_accel"))?,
                     rotary,
-                    "",
+                    &format!("axes.{key}.max_accel"),
                 )?,
             };
         }
@@ -502,9 +564,13 @@ impl MachineFile {
                     max_velocity: to_units(
                         positive(jf.max_velocity, &f("max_velocity"))?,
                         jf.rotary,
-                        "",
+                        &f("max_velocity"),
                     )?,
-                    max_accel: to_units(positive(jf.max_accel, &f("max_accel"))?, jf.rotary, "")?,
+                    max_accel: to_units(
+                        positive(jf.max_accel, &f("max_accel"))?,
+                        jf.rotary,
+                        &f("max_accel"),
+                    )?,
                 },
                 homing: match &jf.homing {
                     None => Homing::NONE,
@@ -579,9 +645,28 @@ impl MachineFile {
             .map_err(|e| anyhow!("{}", describe(&e, self)))?;
         pkmc::controller::Controller::new(config.clone())
             .map_err(|e| anyhow!("{}", describe(&e, self)))?;
+        // A mechanism that is singular where it starts cannot be controlled from there
+        // (a hexapod whose base joints all sit at one angle was accepted, margin 0).
+        let kin = pkmc::kinematics::MachineKinematics::new(&config);
+        let margin = crate::preflight::margin(&config.home, &config, &kin).unwrap_or(0.0);
+        if margin < MIN_HOME_MARGIN {
+            let section = match self.kinematics.as_str() {
+                "hexapod" => "hexapod",
+                "h4-table" => "h4_table",
+                _ => "kinematics",
+            };
+            bail!(
+                "{section}: the mechanism is singular at the home pose (singularity margin \
+                 {margin:.4}, at least {MIN_HOME_MARGIN} needed): check its geometry"
+            );
+        }
         Ok(config)
     }
 }
+
+/// Smallest singularity margin ([`crate::preflight::margin`]) accepted at the home
+/// pose.
+pub const MIN_HOME_MARGIN: f64 = 0.01;
 
 /// Names the field a core configuration error points at.
 pub fn describe(e: &pkmc::config::ConfigError, m: &MachineFile) -> String {
@@ -680,7 +765,78 @@ pub fn parse(text: &str, origin: &str) -> Result<MachineConfig> {
         let (line, col) = e.span().map(|s| line_col(text, s.start)).unwrap_or((0, 0));
         anyhow!("{origin}:{line}:{col}: {}", e.message())
     })?;
-    file.to_config().map_err(|e| anyhow!("{origin}: {e}"))
+    file.to_config().map_err(|e| {
+        let message = e.to_string();
+        match line_of_field(text, &message) {
+            Some(line) => anyhow!("{origin}:{line}: {message}"),
+            None => anyhow!("{origin}: {message}"),
+        }
+    })
+}
+
+/// The line of the field that an error message names first (`joints[2] (Z).max_velocity:
+/// …`, `axes.X.max_accel: …`, `hexapod.base_angles: …`, `home[3]: …`), 1-based: the
+/// line of its key within its table, or the table's header when the key is not
+/// written (a default, or a whole section that is wrong).
+fn line_of_field(text: &str, message: &str) -> Option<usize> {
+    let path = message.split(": ").next()?;
+    let strip = |k: &str| k.split('[').next().unwrap_or(k).trim().to_string();
+    // (table, index among tables of that name, key)
+    let (table, index, key): (Option<String>, usize, Option<String>) =
+        if let Some(rest) = path.strip_prefix("joints[") {
+            let j: usize = rest.split(']').next()?.parse().ok()?;
+            let key = rest.split(").").nth(1).or_else(|| rest.split("].").nth(1));
+            (Some("joints".into()), j, key.map(strip))
+        } else {
+            let parts: Vec<&str> = path.split('.').collect();
+            match parts.as_slice() {
+                ["axes", axis, key, ..] => (Some(format!("axes.{axis}")), 0, Some(strip(key))),
+                ["axes", axis] => (Some(format!("axes.{axis}")), 0, None),
+                [t @ ("h4_table" | "hexapod" | "motion" | "contour"), key, ..] => {
+                    (Some((*t).into()), 0, Some(strip(key)))
+                }
+                [t @ ("h4_table" | "hexapod" | "motion" | "contour" | "joints")] => {
+                    (Some((*t).into()), 0, None)
+                }
+                [key] if !key.contains(' ') => (None, 0, Some(strip(key))),
+                _ => return None,
+            }
+        };
+    let mut current: Option<String> = None;
+    let mut seen = std::collections::HashMap::<String, usize>::new();
+    let mut header_line = None;
+    for (n, raw) in text.lines().enumerate() {
+        let line = raw.split('#').next().unwrap_or("").trim();
+        if line.starts_with('[') {
+            let name = line
+                .trim_matches(|c| c == '[' || c == ']')
+                .trim()
+                .to_string();
+            let k = seen.entry(name.clone()).or_insert(0);
+            let this = *k;
+            *k += 1;
+            let here = table.as_deref() == Some(name.as_str()) && this == index;
+            if here {
+                header_line = Some(n + 1);
+            } else if header_line.is_some() && current.is_some() {
+                // Past the table without finding the key.
+                break;
+            }
+            current = here.then_some(name);
+            continue;
+        }
+        let in_table = match &table {
+            None => current.is_none() && seen.is_empty(),
+            Some(_) => current.is_some(),
+        };
+        if let (true, Some(key)) = (in_table, &key) {
+            let k = line.split('=').next().unwrap_or("").trim();
+            if line.contains('=') && k == key {
+                return Some(n + 1);
+            }
+        }
+    }
+    header_line
 }
 
 fn line_col(text: &str, offset: usize) -> (usize, usize) {
@@ -761,6 +917,78 @@ mod tests {
         let text = DEFAULT_MACHINE.replacen("steps_per_unit = 400", "steps_per_unit = 0", 1);
         let e = parse(&text, "m.toml").unwrap_err().to_string();
         assert!(e.contains("joints[0] (X).steps_per_unit"), "{e}");
+    }
+
+    #[test]
+    fn a_semantic_error_names_the_line_of_its_field() {
+        let text = DEFAULT_MACHINE.replacen("steps_per_unit = 400", "steps_per_unit = 0", 1);
+        let line = 1 + text
+            .lines()
+            .position(|l| l.starts_with("steps_per_unit = 0"))
+            .unwrap();
+        let e = parse(&text, "m.toml").unwrap_err().to_string();
+        assert!(
+            e.starts_with(&format!("m.toml:{line}: joints[0] (X).steps_per_unit")),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn an_out_of_range_limit_names_its_field_and_line() {
+        let text =
+            DEFAULT_MACHINE.replacen("max_velocity = 100   # mm/s", "max_velocity = 1e30", 1);
+        let line = 1 + text
+            .lines()
+            .position(|l| l.starts_with("max_velocity = 1e30"))
+            .unwrap();
+        let e = parse(&text, "m.toml").unwrap_err().to_string();
+        assert!(
+            e.starts_with(&format!("m.toml:{line}: axes.X.max_velocity: ")),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn arrays_with_more_or_fewer_elements_than_their_field_takes_are_refused_where_written() {
+        let seven = DEFAULT_MACHINE.replacen(
+            "home = [0, 0, 0, 0, 0, 0]",
+            "home = [0, 0, 0, 0, 0, 0, 0]",
+            1,
+        );
+        let e = parse(&seven, "m.toml").unwrap_err().to_string();
+        assert!(e.contains(":8: expected 6 values, got 7"), "{e}");
+        let five_rails = H4_TABLE_MACHINE.replacen(
+            "rails = [[-250, 250], [-250, -250], [250, -250], [250, 250]]",
+            "rails = [[-250, 250], [-250, -250], [250, -250], [250, 250], [0, 0]]",
+            1,
+        );
+        let e = parse(&five_rails, "h4.toml").unwrap_err().to_string();
+        assert!(e.contains("expected 4 values, got 5"), "{e}");
+        let seven_angles = HEXAPOD_MACHINE.replacen(
+            "base_angles = [348, 12, 108, 132, 228, 252]",
+            "base_angles = [348, 12, 108, 132, 228, 252, 300]",
+            1,
+        );
+        let e = parse(&seven_angles, "hx.toml").unwrap_err().to_string();
+        assert!(e.contains("expected 6 values, got 7"), "{e}");
+        let short_point =
+            H4_TABLE_MACHINE.replacen("[-250, 250], [-250, -250]", "[-250], [-250, -250]", 1);
+        let e = parse(&short_point, "h4.toml").unwrap_err().to_string();
+        assert!(e.contains("expected 2 values, got 1"), "{e}");
+    }
+
+    #[test]
+    fn a_hexapod_singular_at_its_home_is_refused() {
+        let flat = HEXAPOD_MACHINE.replacen(
+            "base_angles = [348, 12, 108, 132, 228, 252]",
+            "base_angles = [0, 0, 0, 0, 0, 0]",
+            1,
+        );
+        let e = parse(&flat, "hx.toml").unwrap_err().to_string();
+        assert!(
+            e.contains("hexapod: the mechanism is singular at the home pose"),
+            "{e}"
+        );
     }
 
     #[test]
