@@ -684,6 +684,18 @@ impl<'o> Interp<'o> {
                     if n >= params::READ_ONLY_FROM {
                         return fail(a.col, format!("parameter #{n} is read-only"));
                     }
+                    if n == params::CURRENT_SYSTEM
+                        && !(a.value.fract() == 0.0 && (1.0..=9.0).contains(&a.value))
+                    {
+                        return fail(
+                            a.col,
+                            format!(
+                                "parameter #{n} (the coordinate system in force) takes 1 to 9 \
+                                 (G54 to G59.3), not {}",
+                                a.value
+                            ),
+                        );
+                    }
                     if (params::G92_ACTIVE..params::READ_ONLY_FROM).contains(&n) {
                         refresh = Some(a.col);
                     }
