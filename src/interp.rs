@@ -81,6 +81,10 @@ pub struct Executor {
     pub line: u32,
     /// Blocks completed.
     pub completed: u32,
+    /// NC lines of the blocks started since the log was last taken (feature
+    /// `line-log`; at most 64 per tick are kept, far more than a tick starts).
+    #[cfg(feature = "line-log")]
+    pub line_log: heapless::Vec<u32, 64>,
     /// Stop taking new blocks (a pause or tool change is waiting for resume).
     pub paused: bool,
     /// Speed at which the last profiled block leaves, nm/tick: the next block's entry.
@@ -188,6 +192,8 @@ impl Executor {
             at!((*p).speed).write(0);
             at!((*p).line).write(0);
             at!((*p).completed).write(0);
+            #[cfg(feature = "line-log")]
+            at!((*p).line_log).write(heapless::Vec::new());
             at!((*p).paused).write(false);
             at!((*p).exit).write(0.0);
             at!((*p).s_raw).write(0);
@@ -302,6 +308,8 @@ impl Executor {
         }
         let b = planner.executing().expect("started above");
         self.line = b.line;
+        #[cfg(feature = "line-log")]
+        let _ = self.line_log.push(b.line);
         match b.kind {
             Kind::Unreachable(why) => {
                 let line = b.line;

@@ -52,9 +52,12 @@ impl Recorder {
 
     /// Records the simulator's state after a tick.
     pub fn record(&mut self, sim: &crate::sim::Simulator) {
-        let line = sim.ctrl.line();
-        if line != 0 && self.lines.last() != Some(&line) {
-            self.lines.push(line);
+        // Every block started, from the controller's log (not the line at the end of
+        // the tick, which misses blocks that start and end within one).
+        for &line in sim.lines_started() {
+            if line != 0 && self.lines.last() != Some(&line) {
+                self.lines.push(line);
+            }
         }
         if !self.keep_path {
             return;

@@ -375,6 +375,8 @@ pub struct Simulator {
     /// The controller under simulation.
     pub ctrl: Controller,
     steppers: [Option<SimStepper>; MAX_STEPPERS],
+    /// NC lines of the blocks the last tick started.
+    tick_lines: heapless::Vec<u32, 64>,
     /// Each drive's timing breaches already reported by its fault line.
     violations_seen: [u64; MAX_STEPPERS],
     servos: [Option<SimServo>; MAX_SERVOS],
@@ -437,6 +439,7 @@ impl Simulator {
             ctrl,
             steppers: Default::default(),
             violations_seen: [0; MAX_STEPPERS],
+            tick_lines: heapless::Vec::new(),
             servos: Default::default(),
             servo: None,
             bank_out: PeriodOutputs::default(),
@@ -657,6 +660,11 @@ impl Simulator {
         (count, all)
     }
 
+    /// NC lines of the blocks the last tick started, in order.
+    pub fn lines_started(&self) -> &[u32] {
+        &self.tick_lines
+    }
+
     /// Has the controller computed steps that the drives have not taken yet (the last
     /// tick's trains, which start at the next tick edge, as on the board)?
     pub fn steps_due(&self) -> bool {
@@ -835,6 +843,7 @@ impl Simulator {
             index: std::mem::take(&mut self.index),
         };
         let command = self.pacer.tick(&mut self.ctrl, &raw, &snapshot);
+        self.tick_lines = self.ctrl.take_line_log();
         self.last_in = *self.pacer.inputs();
         self.last_out = *self.pacer.due();
         if let Some(pacer) = self.servo.as_mut() {

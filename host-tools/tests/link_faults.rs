@@ -142,3 +142,36 @@ fn a_finished_job_on_a_line_with_five_percent_faults_is_reported_done() {
         assert_eq!(r["final_state"], "Idle", "{r}");
     }
 }
+
+/// Issue 17: the lines executed come from every block the controller starts, not from
+/// the line it happens to stand on at the end of a tick, so zero-length lines and
+/// several short blocks within one tick count whatever the timing: `--check` and
+/// `--sim` (and a faulty line) report the same lines.
+#[test]
+fn the_lines_executed_do_not_depend_on_timing() {
+    let mut text = String::from("G21 G90 G64\n");
+    for i in 1..=300 {
+        // A short move, a zero-length move to the same point, and a zero dwell.
+        let x = i as f64 * 0.005;
+        text += &format!("G1 X{x:.3} F3000\nG1 X{x:.3}\nG4 P0\n");
+    }
+    let p = tmp("zero-length.ngc");
+    std::fs::write(&p, text + "M2\n").unwrap();
+    let lines: Vec<serde_json::Value> = [
+        vec!["--check", "--report", "json"],
+        vec!["--sim", "--report", "json"],
+        vec!["--sim", "--report", "json", "--link-faults", "0.01"],
+    ]
+    .into_iter()
+    .map(|mut args| {
+        args.push(p.to_str().unwrap());
+        let out = nc_send(&args);
+        assert_eq!(out.status.code(), Some(0), "{args:?}");
+        json(&out)["lines_executed"].clone()
+    })
+    .collect();
+    // Every line of the 900 that makes a block (the first line, G21 G90 G64, does not).
+    assert_eq!(lines[0]["count"], 900, "{:?}", lines[0]);
+    assert_eq!(lines[1], lines[0]);
+    assert_eq!(lines[2], lines[0]);
+}

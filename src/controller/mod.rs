@@ -306,6 +306,12 @@ impl Controller {
     pub fn line(&self) -> u32 {
         self.exec.line
     }
+    /// The NC lines of the blocks started since the last call, in order (feature
+    /// `line-log`, host builds: the simulator's exact record of executed lines).
+    #[cfg(feature = "line-log")]
+    pub fn take_line_log(&mut self) -> heapless::Vec<u32, 64> {
+        core::mem::take(&mut self.exec.line_log)
+    }
     /// Spindle state last commanded.
     pub fn spindle(&self) -> Aux {
         self.spindle
