@@ -198,13 +198,30 @@ impl Progress {
 #[derive(Clone, Debug, Default)]
 pub struct Interrupts(Arc<AtomicUsize>);
 
+/// The terminal settings before [`RawKeys`] changed them, restored on a forced exit.
+static SAVED_TERMINAL: std::sync::OnceLock<libc::termios> = std::sync::OnceLock::new();
+
+/// The Ctrl-C press that exits at once, whatever `nc-send` is waiting for.
+pub const EXIT_PRESS: usize = 3;
+
 impl Interrupts {
-    /// Installs the SIGINT handler (once per process).
+    /// Installs the SIGINT handler (once per process). The first press asks for a
+    /// controlled stop, the second for an immediate one (see [`Operator`]); the third
+    /// exits at once (exit code 6), whatever `nc-send` is waiting for: no wait
+    /// outlives the operator's patience (the controller stops on its own once the link
+    /// has been silent for a second).
     pub fn install() -> Result<Self, String> {
         let count = Arc::new(AtomicUsize::new(0));
         let c = count.clone();
         ctrlc::set_handler(move || {
-            c.fetch_add(1, Ordering::SeqCst);
+            if c.fetch_add(1, Ordering::SeqCst) + 1 >= EXIT_PRESS {
+                if let Some(t) = SAVED_TERMINAL.get() {
+                    // SAFETY: restores fd 0's settings from a valid termios.
+                    unsafe { libc::tcsetattr(0, libc::TCSANOW, t) };
+                }
+                eprintln!("\nnc-send: Ctrl-C three times: exiting now");
+                std::process::exit(6);
+            }
         })
         .map_err(|e| format!("cannot install the Ctrl-C handler: {e}"))?;
         Ok(Self(count))
@@ -241,6 +258,7 @@ impl RawKeys {
             }
             t
         };
+        let _ = SAVED_TERMINAL.set(saved);
         let mut raw = saved;
         raw.c_lflag &= !(libc::ICANON | libc::ECHO);
         raw.c_cc[libc::VMIN] = 1;

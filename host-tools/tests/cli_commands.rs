@@ -355,3 +355,35 @@ fn a_second_ctrl_c_stops_at_once() {
         assert_eq!(r["final_state"], "Alarm");
     }
 }
+
+/// Issue 17: every wait is interruptible. Against a port where nothing answers, with a
+/// link timeout of an hour, three Ctrl-C end `nc-send` at once (exit 6).
+#[test]
+fn three_ctrl_c_end_any_wait_at_once() {
+    let (_master, slave) = serialport::TTYPort::pair().unwrap();
+    let port = serialport::SerialPort::name(&slave).unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_nc-send"))
+        .args(["--port", &port, "--link-timeout", "3600", "status"])
+        .current_dir(repo())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    wait_for_handler(&child);
+    let start = std::time::Instant::now();
+    for _ in 0..3 {
+        // SAFETY: sends SIGINT to our own child process.
+        unsafe {
+            libc::kill(child.id() as libc::pid_t, libc::SIGINT);
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        start.elapsed() < Duration::from_secs(2),
+        "{:?}",
+        start.elapsed()
+    );
+    assert_eq!(out.status.code(), Some(6));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("Ctrl-C three times"));
+}
