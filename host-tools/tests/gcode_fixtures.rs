@@ -199,6 +199,13 @@ fixtures!(
     unclosed_percent_is_rejected,
     canned_cycle_mistakes_are_rejected,
     offset_and_tool_mistakes_are_rejected,
+    // Issue 14: as CAM posts and LinuxCNC write it.
+    a_safety_line_with_g80_and_a_motion_code_is_accepted,
+    fractional_s_and_f0_where_nothing_moves_at_feed_are_accepted,
+    a_feed_move_at_f0_is_rejected_there,
+    exists_takes_numbered_and_named_parameters,
+    codes_linuxcnc_or_posts_know_are_refused_by_name,
+    a_refused_arc_ends_where_programmed_so_later_lines_are_not_refused_too,
     coordinates_without_a_motion_mode_are_rejected,
 );
 

@@ -241,6 +241,8 @@ fn m_group(tenths: i32) -> Result<usize, String> {
                 620..=680 => "M62-M68 digital and analog I/O",
                 700..=730 => "M70-M73 modal state save and restore",
                 1000..=1990 => "M100-M199 user-defined M codes",
+                980 | 990 => "M98/M99 subprogram calls (Fanuc style)",
+                270 => "M27 (a machine-specific code some posts write; not in LinuxCNC)",
                 _ => return Err(format!("unknown code {}", code_name('M', tenths))),
             };
             return Err(unsupported(feature));
@@ -261,6 +263,8 @@ pub struct Interp<'o> {
     pub(crate) motion: Motion,
     pub(crate) retract_to_r: bool,
     pub(crate) feed: Option<FeedRate>,
+    /// The feed in force was set to F0 (accepted until a feed move needs it).
+    feed_zero: bool,
     rpm: u32,
     spindle: Spindle,
     selected_tool: u32,
@@ -290,6 +294,7 @@ impl<'o> Interp<'o> {
             motion: Motion::None,
             retract_to_r: true,
             feed: None,
+            feed_zero: false,
             rpm: 0,
             spindle: Spindle::Off,
             selected_tool: 0,
@@ -358,13 +363,19 @@ impl<'o> Interp<'o> {
             used |= bit(b'F');
             if self.inverse_time {
                 line_inverse = Some(inverse_time_us(f)?);
+            } else if f.num.is_zero() {
+                // F0 is accepted where nothing moves at feed (LinuxCNC does); a feed
+                // move at F0 is the error, named there.
+                self.feed = None;
+                self.feed_zero = true;
             } else {
                 self.feed = Some(self.feed_rate(f)?);
+                self.feed_zero = false;
             }
         }
         if let Some(s) = w.get(b'S') {
             used |= bit(b'S');
-            self.rpm = whole_in(s, 0, i64::from(u32::MAX), "spindle speed S (rpm)")? as u32;
+            self.rpm = spindle_rpm(s)?;
             if m[SPINDLE].is_none() {
                 let state = match self.spindle {
                     Spindle::Off => None,
@@ -852,6 +863,12 @@ impl<'o> Interp<'o> {
             };
         }
         let Some(f) = self.feed else {
+            if self.feed_zero {
+                return fail(
+                    col,
+                    format!("{code} at feed F0: a feed move needs F above zero"),
+                );
+            }
             return fail(col, format!("{code} without a feed (F)"));
         };
         // An arc moves X Y Z even when it ends where it starts (a full circle).
@@ -891,8 +908,29 @@ impl<'o> Interp<'o> {
         col: u32,
         out: &mut Vec<Canon>,
     ) -> Res<()> {
-        let name = if clockwise { "G2" } else { "G3" };
         let end = self.target(w, false)?;
+        let done = self.arc_to(end, w, clockwise, line, line_inverse, col, out);
+        if done.is_err() {
+            // A refused arc still ends where it was programmed to: later lines (their
+            // G91 moves, their arc centres) start there, so one bad arc is one message,
+            // not a cascade of knock-on errors.
+            self.pos = end;
+        }
+        done
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn arc_to(
+        &mut self,
+        end: [i64; AXES],
+        w: &Words,
+        clockwise: bool,
+        line: u32,
+        line_inverse: Option<u64>,
+        col: u32,
+        out: &mut Vec<Canon>,
+    ) -> Res<()> {
+        let name = if clockwise { "G2" } else { "G3" };
         let (a, b, h) = self.plane.axes();
         let offset_letter = |axis: usize| b"IJK"[axis];
         let plane_name = match self.plane {
@@ -1250,6 +1288,19 @@ fn first_col(w: &Words, mask: u32) -> u32 {
     }
 }
 
+/// S in rpm: any number from 0 to 2³² − 1, kept to the nearest whole rpm (posts write
+/// S4696.94; LinuxCNC takes it as written, the spindle output resolves whole rpm).
+fn spindle_rpm(s: Word) -> Res<u32> {
+    let v = s.num.to_f64();
+    if !(0.0..=f64::from(u32::MAX)).contains(&v) {
+        return fail(
+            s.col,
+            format!("spindle speed S{} must be from 0 to 4294967295 rpm", s.num),
+        );
+    }
+    Ok(v.round() as u32)
+}
+
 /// G codes by modal group; conflicts and refusals are errors.
 fn group_g(codes: &[Code]) -> Res<[Option<Code>; G_GROUPS]> {
     let mut g: [Option<Code>; G_GROUPS] = [None; G_GROUPS];
@@ -1259,6 +1310,14 @@ fn group_g(codes: &[Code]) -> Res<[Option<Code>; G_GROUPS]> {
             message: m,
         })?;
         if let Some(first) = g[group] {
+            // G80 with another motion code on one line is allowed (LinuxCNC's safety
+            // lines `G0 G17 G40 G49 G80 G90`): the other code is the motion.
+            if group == MOTION && (first.tenths == 800 || c.tenths == 800) {
+                if first.tenths == 800 {
+                    g[group] = Some(c);
+                }
+                continue;
+            }
             return fail(
                 c.col,
                 format!(

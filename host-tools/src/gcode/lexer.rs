@@ -557,7 +557,7 @@ impl Cursor<'_> {
         }
         let known = matches!(
             letter,
-            b'A'..=b'D' | b'F' | b'G' | b'H' | b'I'..=b'N' | b'P'..=b'T' | b'X'..=b'Z'
+            b'A'..=b'F' | b'G' | b'H' | b'I'..=b'N' | b'P'..=b'T' | b'X'..=b'Z'
         );
         if !known {
             return Err(self.err(at, format!("unknown word '{}'", letter as char)));
@@ -1017,11 +1017,33 @@ impl Cursor<'_> {
             let open = self.i;
             self.i += 1;
             if self.peek() != Some(b'#') {
-                return Err(self.unexpected("expected #<name> in EXISTS[…]"));
+                return Err(self.unexpected("expected #<name> or #number in EXISTS[…]"));
             }
             self.i += 1;
+            if self.peek().is_some_and(|c| c.is_ascii_digit()) {
+                // A numbered parameter: #1 … #5601 always exist (they read as 0 until
+                // set), as in LinuxCNC.
+                let start = self.i;
+                while self.peek().is_some_and(|c| c.is_ascii_digit()) {
+                    self.i += 1;
+                }
+                let n: u64 = std::str::from_utf8(&self.b[start..self.i])
+                    .ok()
+                    .and_then(|d| d.parse().ok())
+                    .unwrap_or(u64::MAX);
+                return match self.peek() {
+                    Some(b']') => {
+                        self.i += 1;
+                        Ok(f64::from(
+                            (1..crate::gcode::params::NUM_PARAMS as u64).contains(&n) as u8,
+                        ))
+                    }
+                    None => Err(self.err(open, "'[' opened here is never closed")),
+                    Some(_) => Err(self.unexpected("expected ']'")),
+                };
+            }
             if self.peek() != Some(b'<') {
-                return Err(self.unexpected("expected #<name> in EXISTS[…]"));
+                return Err(self.unexpected("expected #<name> or #number in EXISTS[…]"));
             }
             let mut buf = NameBuf::new();
             self.name(&mut buf)?;
@@ -1253,7 +1275,7 @@ mod tests {
 
     #[test]
     fn columns_count_characters_not_bytes() {
-        let text = "(°) Q1 E2";
+        let text = "(°) Q1 U2";
         let e = scan(text).unwrap_err();
         assert_eq!(char_col(text, e.col), 8);
     }
