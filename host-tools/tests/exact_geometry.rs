@@ -85,7 +85,17 @@ fn mm(v: f64) -> String {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+    // Random cases locally; in CI (`CI` set) a fixed seed, so that a landing does not
+    // depend on luck (the cases found by random runs are kept as tests of their own).
+    #![proptest_config(ProptestConfig {
+        cases: 64,
+        rng_seed: if std::env::var_os("CI").is_some() {
+            proptest::test_runner::RngSeed::Fixed(0x16)
+        } else {
+            proptest::test_runner::RngSeed::Random
+        },
+        ..ProptestConfig::default()
+    })]
 
     #[test]
     fn every_arc_is_refused_by_name_or_runs_exactly(
