@@ -206,6 +206,7 @@ fixtures!(
     exists_takes_numbered_and_named_parameters,
     codes_linuxcnc_or_posts_know_are_refused_by_name,
     a_refused_arc_ends_where_programmed_so_later_lines_are_not_refused_too,
+    predefined_and_ini_parameters_are_read_only,
     coordinates_without_a_motion_mode_are_rejected,
 );
 

@@ -712,7 +712,18 @@ impl<'o> Interp<'o> {
                     }
                     self.params.set_numbered(n, a.value);
                 }
-                ParamRef::Named(name) => self.params.set_named(&name, a.value),
+                ParamRef::Named(name) => {
+                    if params::Params::read_only_name(&name) {
+                        return fail(
+                            a.col,
+                            format!(
+                                "parameter #<{}> is read-only (LinuxCNC maintains it)",
+                                String::from_utf8_lossy(&name)
+                            ),
+                        );
+                    }
+                    self.params.set_named(&name, a.value)
+                }
             }
         }
         match refresh {

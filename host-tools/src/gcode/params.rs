@@ -131,6 +131,74 @@ impl Params {
         self.named.get(name).copied()
     }
 
+    /// Is `#<name>` (normalised name) one LinuxCNC maintains itself, so that a program
+    /// may not set it: the INI values `#<_ini[section]name>` and the predefined
+    /// parameters (`#<_x>`, `#<_feed>`, `#<_current_tool>`, …, LinuxCNC's G-code
+    /// reference, "Predefined Named Parameters")?
+    pub fn read_only_name(name: &[u8]) -> bool {
+        const PREDEFINED: &[&str] = &[
+            "_vmajor",
+            "_vminor",
+            "_line",
+            "_motion_mode",
+            "_plane",
+            "_ccomp",
+            "_metric",
+            "_imperial",
+            "_absolute",
+            "_incremental",
+            "_inverse_time",
+            "_units_per_minute",
+            "_units_per_rev",
+            "_coord_system",
+            "_tool_offset",
+            "_retract_r",
+            "_retract_old_z",
+            "_spindle_rpm_mode",
+            "_spindle_css_mode",
+            "_ijk_absolute_mode",
+            "_lathe_diameter_mode",
+            "_lathe_radius_mode",
+            "_spindle_on",
+            "_spindle_cw",
+            "_mist",
+            "_flood",
+            "_speed_override",
+            "_feed_override",
+            "_adaptive_feed",
+            "_feed_hold",
+            "_feed",
+            "_rpm",
+            "_x",
+            "_y",
+            "_z",
+            "_a",
+            "_b",
+            "_c",
+            "_u",
+            "_v",
+            "_w",
+            "_abs_x",
+            "_abs_y",
+            "_abs_z",
+            "_abs_a",
+            "_abs_b",
+            "_abs_c",
+            "_current_tool",
+            "_current_pocket",
+            "_selected_tool",
+            "_selected_pocket",
+            "_value",
+            "_value_returned",
+            "_task",
+            "_call_level",
+            "_remap_level",
+        ];
+        name.starts_with(b"_ini[")
+            || name.starts_with(b"_hal[")
+            || PREDEFINED.iter().any(|p| p.as_bytes() == name)
+    }
+
     /// Sets `#<name>` (normalised name).
     pub fn set_named(&mut self, name: &[u8], v: f64) {
         match self.named.get_mut(name) {
