@@ -208,8 +208,9 @@ fn rate_of(rate: i128, x: i128, len: i64) -> bool {
 pub const MAX_ARC_RADIUS_NM: i64 = 10_000_000_000;
 
 /// Largest start/end radius difference accepted for an arc, nm (the host checks its
-/// own, tighter, tolerance; this only guards the controller).
-pub const ARC_RADIUS_SLACK_NM: i64 = 50_000;
+/// own, tighter, tolerance: LinuxCNC's, at most 71.8 µm in G20; this only guards the
+/// controller).
+pub const ARC_RADIUS_SLACK_NM: i64 = 80_000;
 
 impl Path {
     /// Geometry of `block` starting at `start`.

@@ -39,15 +39,36 @@ fn every_error_of_a_program_is_reported_and_nothing_is_produced() {
 }
 
 #[test]
-fn a_wider_arc_tolerance_accepts_a_sloppier_arc() {
-    let program = "G0 X10 Y0\nG3 X0 Y10.004 I-10 F100";
+fn a_wider_arc_tolerance_accepts_a_radius_a_little_short_of_half_the_chord() {
+    // R 3 µm short of half the chord: over the default 2 µm, within 5 µm (then a half
+    // circle about the chord's middle).
+    let program = "G0 X0 Y0\nG2 X20 Y0 R9.997 F100";
     assert!(compile(program, "t.ngc", &Options::default()).is_err());
     let loose = Options {
         arc_tolerance_nm: 5_000,
         ..Options::default()
     };
     let c = compile(program, "t.ngc", &loose).unwrap();
-    assert!(matches!(c[1], Canon::Arc { center: [0, 0], .. }));
+    assert!(
+        matches!(
+            c[1],
+            Canon::Arc {
+                center: [10_000_000, 0],
+                ..
+            }
+        ),
+        "{:?}",
+        c[1]
+    );
+}
+
+#[test]
+fn a_centre_format_arc_is_held_to_linuxcnc_s_tolerances() {
+    // 4 µm off on a 10 mm radius (an inch post's rounding) passes; 0.5 % off does not.
+    let ok = "G0 X10 Y0\nG3 X0 Y10.004 I-10 F100";
+    assert!(compile(ok, "t.ngc", &Options::default()).is_ok());
+    let off = "G0 X10 Y0\nG3 X0 Y10.05 I-10 F100";
+    assert!(compile(off, "t.ngc", &Options::default()).is_err());
 }
 
 #[test]

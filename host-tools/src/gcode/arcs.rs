@@ -5,13 +5,15 @@
 //! [`crate::canon::Plane::axes`]), nm, as `f64` (exact for the positions allowed, below
 //! 2⁵³ nm).
 //!
-//! Tolerance (one number, `Options::arc_tolerance_nm`, default 0.002 mm):
-//! - centre format (I J K): the end's distance to the centre may differ from the start's
-//!   by at most the tolerance. LinuxCNC also accepts up to 0.1 % of the radius; this
-//!   interpreter does not, so that the controller never has to absorb a spiral larger
-//!   than the tolerance.
-//! - R format: the radius may be at most the tolerance shorter than half the chord (the
-//!   arc is then taken as a half circle).
+//! Tolerances:
+//! - centre format (I J K), LinuxCNC's rule (`arc_data_ijk`, with its defaults
+//!   `CENTER_ARC_RADIUS_TOLERANCE_MM` = 2·0.01·√2 mm, `…_INCH` = 2·0.001·√2 in and
+//!   `SPIRAL_RELATIVE_TOLERANCE` = 0.001): the end's distance to the centre may differ
+//!   from the start's by at most [`CENTRE_ARC_ABS_NM_MM`] (G21) or
+//!   [`CENTRE_ARC_ABS_NM_INCH`] (G20) **and** at most 0.1 % of the larger radius. The
+//!   controller follows the resulting spiral exactly (its radius moves linearly).
+//! - R format (`Options::arc_tolerance_nm`, default 0.002 mm): the radius may be at most
+//!   the tolerance shorter than half the chord (the arc is then taken as a half circle).
 //!
 //! Source: LinuxCNC's G2/G3 reference and its interpreter's `arc_data_r` (centre of an
 //! R-format arc: on the chord's perpendicular bisector, on the right of the chord for a
@@ -57,11 +59,21 @@ pub fn centre_from_radius(
 
 /// Checks that `end` lies on the circle about `centre` through `start`, within
 /// `tolerance`; a zero radius is an error too.
+/// LinuxCNC's absolute tolerance on a centre-format arc's end radius in G21, nm
+/// (2·0.01·√2 mm).
+pub const CENTRE_ARC_ABS_NM_MM: f64 = 28_284.271;
+/// The same in G20, nm (2·0.001·√2 in).
+pub const CENTRE_ARC_ABS_NM_INCH: f64 = 71_842.051;
+/// LinuxCNC's relative tolerance on it (of the larger radius).
+pub const CENTRE_ARC_REL: f64 = 0.001;
+
+/// Checks that a centre-format arc ends on its circle: its end radius may differ from
+/// its start radius by at most `abs_tolerance` nm and [`CENTRE_ARC_REL`] of the larger.
 pub fn check_end(
     start: [f64; 2],
     end: [f64; 2],
     centre: [f64; 2],
-    tolerance: f64,
+    abs_tolerance: f64,
 ) -> Result<(), String> {
     let r0 = dist(start, centre);
     let r1 = dist(end, centre);
@@ -69,14 +81,17 @@ pub fn check_end(
         return Err("arc with zero radius (its centre is its start point)".into());
     }
     let d = (r1 - r0).abs();
-    if d > tolerance {
+    let rel = d / r0.max(r1);
+    if d > abs_tolerance || rel > CENTRE_ARC_REL {
         return Err(format!(
             "arc end is off its circle: start radius {} mm, end radius {} mm \
-             (they differ by {} mm; the tolerance is {} mm)",
+             (they differ by {} mm, {:.3} % of the radius; at most {} mm and 0.1 % are \
+             accepted)",
             mm(r0),
             mm(r1),
             mm(d),
-            mm(tolerance)
+            rel * 100.0,
+            mm(abs_tolerance)
         ));
     }
     Ok(())
@@ -128,6 +143,36 @@ mod tests {
         let c = centre_from_radius([0.0, 0.0], [20.0, 0.0], 9.999, true, 0.002).unwrap();
         assert!(close(c, [10.0, 0.0]));
         assert!(centre_from_radius([0.0, 0.0], [20.0, 0.0], 9.99, true, 0.002).is_err());
+    }
+
+    #[test]
+    fn an_end_within_linuxcnc_s_tolerances_is_accepted_and_one_beyond_either_is_not() {
+        // 4 µm on a 10 mm radius (an inch post's rounding): accepted, as by LinuxCNC.
+        assert!(check_end(
+            [10e6, 0.0],
+            [0.0, 10.004e6],
+            [0.0, 0.0],
+            CENTRE_ARC_ABS_NM_MM
+        )
+        .is_ok());
+        // LinuxCNC's own bad-arc tests: 28.57 µm on 25 mm (over the absolute part) and
+        // 2.857 mm on 3000 mm (0.095 %, but far over the absolute part).
+        assert!(check_end(
+            [0.0, 0.0],
+            [50e6, 0.0],
+            [24.9857e6, 0.0],
+            CENTRE_ARC_ABS_NM_MM
+        )
+        .is_err());
+        assert!(check_end(
+            [0.0, 0.0],
+            [6000e6, 0.0],
+            [3001.4284e6, 0.0],
+            CENTRE_ARC_ABS_NM_MM
+        )
+        .is_err());
+        // 20 µm on 5 mm: within the absolute part, over 0.1 %.
+        assert!(check_end([5e6, 0.0], [0.0, 5.02e6], [0.0, 0.0], CENTRE_ARC_ABS_NM_MM).is_err());
     }
 
     #[test]

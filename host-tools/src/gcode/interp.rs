@@ -1008,7 +1008,12 @@ impl<'o> Interp<'o> {
                     };
                     c[k] = check_range(base + v, axis, word.map_or(col, |x| x.col))?;
                 }
-                arcs::check_end(s, e, [c[0] as f64, c[1] as f64], tol)
+                let abs = if self.inch {
+                    arcs::CENTRE_ARC_ABS_NM_INCH
+                } else {
+                    arcs::CENTRE_ARC_ABS_NM_MM
+                };
+                arcs::check_end(s, e, [c[0] as f64, c[1] as f64], abs)
                     .map_err(|m| LineError { col, message: m })?;
                 c
             }
