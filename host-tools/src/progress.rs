@@ -321,6 +321,12 @@ pub struct Operator {
     pub auto_resume: bool,
     user_hold: bool,
     resume_due: bool,
+    /// The line of the pause last resumed, until a status shows the controller out of
+    /// it: statuses still showing that pause (in flight when the resume was sent) are
+    /// not a new pause; a hold at another line is.
+    resumed_line: Option<u32>,
+    /// The line of the pause last announced.
+    paused_line: u32,
 }
 
 impl Operator {
@@ -336,6 +342,8 @@ impl Operator {
             auto_resume: false,
             user_hold: false,
             resume_due: false,
+            resumed_line: None,
+            paused_line: 0,
         }
     }
 
@@ -372,12 +380,17 @@ impl Operator {
 impl JobHooks for Operator {
     fn status(&mut self, s: &Status) {
         self.progress.update(s);
+        if s.state != State::Hold || s.speed != 0 || self.resumed_line != Some(s.line) {
+            self.resumed_line = None;
+        }
         if s.state == State::Hold
+            && self.resumed_line.is_none()
             && s.speed == 0
             && self.stage == Stage::Running
             && !self.announced_pause
         {
             self.announced_pause = true;
+            self.paused_line = s.line;
             if self.auto_resume && !self.user_hold {
                 self.resume_due = true;
                 self.progress.say(&format!(
@@ -424,6 +437,7 @@ impl JobHooks for Operator {
         if self.resume_due && self.stage == Stage::Running && !view.control_pending {
             self.resume_due = false;
             self.announced_pause = false;
+            self.resumed_line = Some(self.paused_line);
             return Some(Control::Resume);
         }
         if self.stage == Stage::Running && !view.control_pending {
