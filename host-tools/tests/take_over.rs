@@ -20,6 +20,14 @@ fn send(sim: &Sim, args: &[&str]) -> Output {
     common::nc_send_within(BOUND, &all)
 }
 
+/// `send`, which must exit 0.
+fn send_ok(sim: &Sim, args: &[&str]) -> Output {
+    let out = send(sim, args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{args:?}: {err}");
+    out
+}
+
 fn status(sim: &Sim) -> serde_json::Value {
     status_with(sim, &[])
 }
@@ -87,14 +95,42 @@ fn held_by_a_killed_host() -> Sim {
     let sim = Sim::start(&[]);
     assert_eq!(send(&sim, &["reset"]).status.code(), Some(0));
     let program = paused_program();
-    // The host holds the port while it runs: the controller is looked at once it has
-    // gone. With no terminal to resume from, it leaves by itself at the M0 (exit 7,
-    // the job held); a host still there after the bound is killed.
-    let mut host = spawn(&sim, &[program.as_str()]);
-    let start = Instant::now();
-    while host.try_wait().unwrap().is_none() && start.elapsed() < BOUND {
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    // The host has a terminal (a pseudo-terminal as its stdin), so it waits at the M0
+    // for its operator to press r; it says so on stderr, and is killed there. (The
+    // host holds the port while it runs: the controller is looked at after the kill.)
+    let (_keys, terminal) = serialport::TTYPort::pair().unwrap();
+    // SAFETY: the descriptor is the terminal's own, handed over to the child's stdin.
+    let stdin = unsafe {
+        use std::os::fd::{FromRawFd, IntoRawFd};
+        Stdio::from_raw_fd(terminal.into_raw_fd())
+    };
+    let mut host = Command::new(env!("CARGO_BIN_EXE_nc-send"))
+        .args(["--port", sim.port.as_str(), program.as_str()])
+        .current_dir(repo())
+        .stdin(stdin)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stderr = host.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for line in std::io::BufReader::new(stderr)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if line.contains("press r to resume") {
+                let _ = tx.send(());
+            }
+        }
+    });
+    rx.recv_timeout(BOUND)
+        .expect("the host never reached the M0");
+    assert!(
+        host.try_wait().unwrap().is_none(),
+        "the host waits at the M0"
+    );
     kill(host);
     let s = status(&sim);
     assert_eq!(
@@ -134,13 +170,7 @@ fn held_by_a_killed_host() -> Sim {
 #[test]
 fn a_new_host_resumes_a_job_whose_host_was_killed_in_a_hold_to_its_final_pose() {
     let sim = held_by_a_killed_host();
-    let out = send(&sim, &["resume"]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = send_ok(&sim, &["resume"]);
     let r = json(&out);
     assert_eq!(r["result"], "done", "{r}");
     assert_eq!(r["state"], "Idle", "{r}");
@@ -149,26 +179,14 @@ fn a_new_host_resumes_a_job_whose_host_was_killed_in_a_hold_to_its_final_pose() 
         (12.0.into(), 3.0.into())
     );
     // The controller is the new host's: a new program runs.
-    let out = send(&sim, &["mdi", "G0 X0 Y0"]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = send_ok(&sim, &["mdi", "G0 X0 Y0"]);
     assert_eq!(json(&out)["pose"]["x"], 0.0);
 }
 
 #[test]
 fn a_new_host_aborts_a_job_whose_host_was_killed_in_a_hold() {
     let sim = held_by_a_killed_host();
-    let out = send(&sim, &["abort"]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = send_ok(&sim, &["abort"]);
     let r = json(&out);
     assert_eq!(r["result"], "aborted", "{r}");
     assert_eq!(r["state"], "Idle", "{r}");
@@ -179,13 +197,7 @@ fn a_new_host_aborts_a_job_whose_host_was_killed_in_a_hold() {
     );
     let s = status(&sim);
     assert!(s["held_job"].is_null(), "{s}");
-    let out = send(&sim, &["mdi", "G0 X2"]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = send_ok(&sim, &["mdi", "G0 X2"]);
     assert_eq!(json(&out)["pose"]["x"], 2.0);
 }
 
@@ -220,13 +232,7 @@ fn a_host_killed_during_a_run_leaves_an_explicit_link_loss_and_a_new_host_recove
         String::from_utf8_lossy(&out.stderr)
     );
     assert_eq!(send(&sim, &["reset"]).status.code(), Some(0));
-    let out = send(&sim, &["mdi", "G0 X1"]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = send_ok(&sim, &["mdi", "G0 X1"]);
     assert_eq!(json(&out)["pose"]["x"], 1.0);
 }
 
@@ -257,13 +263,7 @@ fn a_host_killed_during_homing_leaves_the_machine_locked_and_a_new_host_recovers
     let out = send(&sim, &["--machine", machine, "reset"]);
     let r = json(&out);
     assert_eq!(r["alarm"], "Unhomed", "{r}");
-    let out = send(&sim, &["--machine", machine, "reset"]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    send_ok(&sim, &["--machine", machine, "reset"]);
     let out = send(&sim, &["--machine", machine, "mdi", "G0 X1"]);
     assert_eq!(
         out.status.code(),
@@ -293,13 +293,7 @@ fn a_program_pause_with_no_operator_ends_the_run_with_the_job_held_and_resume_fi
     );
     let s = status(&sim);
     assert_eq!(s["held_job"]["line"], 3, "{s}");
-    let out = send(&sim, &["resume"]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = send_ok(&sim, &["resume"]);
     let r = json(&out);
     assert_eq!(
         (r["pose"]["x"].clone(), r["pose"]["y"].clone()),
@@ -337,15 +331,34 @@ fn a_job_that_ends_normally_leaves_no_alarm_after_its_host_exits() {
     assert_eq!(send(&sim, &["reset"]).status.code(), Some(0));
     let p = tmp("short.ngc");
     std::fs::write(&p, "G21 G90\nG1 X1 F600\nG1 X0\nM2\n").unwrap();
-    let out = send(&sim, &[p.to_str().unwrap()]);
-    assert_eq!(
-        out.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    send_ok(&sim, &[p.to_str().unwrap()]);
     std::thread::sleep(Duration::from_millis(2000));
     let s = status(&sim);
     assert_eq!(s["state"], "Idle", "{s}");
     assert!(s["alarm"].is_null(), "{s}");
+}
+
+#[test]
+fn a_new_host_resumes_a_job_whose_host_was_killed_while_it_ran_to_its_final_pose() {
+    let sim = Sim::start(&[]);
+    send_ok(&sim, &["reset"]);
+    let p = tmp("run-then-resume.ngc");
+    // A minute of motion, all of it queued at once (the host may buffer a minute).
+    std::fs::write(&p, "G21 G90\nG1 X30 F60\nG1 X0 Y5\nM2\n").unwrap();
+    let host = spawn(&sim, &["--max-buffered-ms", "120000", p.to_str().unwrap()]);
+    std::thread::sleep(Duration::from_millis(1500));
+    kill(host);
+    // Within the second before the link-loss watch stops it, a new host takes the
+    // running job over and waits for it to end.
+    let out = send_ok(&sim, &["resume"]);
+    let r = json(&out);
+    assert_eq!(
+        (r["result"].clone(), r["state"].clone()),
+        ("done".into(), "Idle".into())
+    );
+    assert_eq!(
+        (r["pose"]["x"].clone(), r["pose"]["y"].clone()),
+        (0.0.into(), 5.0.into())
+    );
+    assert!(r["alarm"].is_null(), "{r}");
 }

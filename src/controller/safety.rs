@@ -264,7 +264,6 @@ impl Controller {
             } else if self.job_open && self.state == State::Idle {
                 // The queue ran dry before the host said the job was complete: an
                 // interrupted job, not a finished one.
-                self.job_open = false;
                 self.fault(at(AlarmCause::LinkLoss, None), false);
             } else if self.state == State::Hold && self.alarm.is_none() && self.job_held() {
                 // A held job whose host went silent: nothing moves, the job is kept

@@ -342,9 +342,9 @@ impl Controller {
                 }
             }
             Control::Resume => {
-                if self.state == State::Hold {
-                    // Resuming adopts a job left by an earlier session, and clears the
-                    // link loss that held it.
+                if matches!(self.state, State::Hold | State::Running) {
+                    // Resuming adopts a job left by an earlier session (held, or still
+                    // running out its queue), and clears the link loss that held it.
                     self.orphan = None;
                     self.clear_held_link_loss();
                 }

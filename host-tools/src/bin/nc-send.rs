@@ -482,7 +482,10 @@ fn command(
             }
             Command::Resume => {
                 let s = link.request_status()?;
-                if s.state != pkmc::protocol::State::Hold {
+                // A held job, or another host's job still running out its queue.
+                let running_orphan =
+                    s.state == pkmc::protocol::State::Running && link.held().is_some();
+                if s.state != pkmc::protocol::State::Hold && !running_orphan {
                     return Err(Failure::new(
                         exit::ALARM,
                         format!(
