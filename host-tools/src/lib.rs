@@ -1,21 +1,29 @@
 //! # pkmc host tools
 //!
-//! `nc-send` and the simulator: the G-code front end ([`gcode`]), machine files
-//! ([`machine_file`]), the simulated controller ([`sim`]), both ends of the serial link
-//! ([`link`]) and the job runner shared by `nc-send` and the tests ([`job`]).
+//! `nc-send`, `pkmc-sim` and `contour-study`, in rooms that follow the data path
+//! (`docs/architecture.md`):
+//!
+//! - [`gcode`]: the front end — G-code text to canonical commands ([`gcode::canon`])
+//!   to protocol blocks ([`gcode::blocks`]).
+//! - [`machine_file`]: the TOML description of a machine, checked and converted to the
+//!   core's `MachineConfig`.
+//! - [`link`]: the client end of the serial link — transports, the protocol client and
+//!   the streaming of a job. It knows nothing of the simulator: a board, a simulator
+//!   behind a pseudo-terminal or one in this process are all a [`link::Transport`].
+//! - [`sim`]: the simulated controller (the core's `Controller` against simulated
+//!   drives, plants and injected faults) and its board loop, served over a
+//!   pseudo-terminal or in process.
+//! - [`analysis`]: pre-flight checks, plots and the contour-error study.
+//! - [`job`]: the application layer shared by the binaries and the tests — compile,
+//!   check, start a simulator when asked, stream, report.
+//! - [`cli`]: the operator's terminal (progress, keys, Ctrl-C) and board discovery.
+//! - [`input`]: bounded reading of input files.
 
-pub mod blocks;
-pub mod canon;
-pub mod contour_study;
-pub mod discover;
-pub mod faults;
+pub mod analysis;
+pub mod cli;
 pub mod gcode;
 pub mod input;
 pub mod job;
 pub mod link;
 pub mod machine_file;
-pub mod plant;
-pub mod plot;
-pub mod preflight;
-pub mod progress;
 pub mod sim;

@@ -1,7 +1,7 @@
 //! The public face of the G-code front end: options, diagnostics, the tool table, and
 //! the temporary block-returning form of `compile` that `job.rs` still uses.
 
-use pkmc_host::canon::{Canon, Feed};
+use pkmc_host::gcode::canon::{Canon, Feed};
 use pkmc_host::gcode::{compile, Diagnostic, Options, Tool, ToolTable, DEFAULT_ARC_TOLERANCE_NM};
 
 #[test]
@@ -115,7 +115,7 @@ fn canonical_commands_become_protocol_blocks() {
         &Options::default(),
     )
     .unwrap();
-    let blocks = pkmc_host::blocks::from_canon(&canon, [0; 6]).blocks;
+    let blocks = pkmc_host::gcode::blocks::from_canon(&canon, [0; 6]).blocks;
     assert_eq!(blocks[0].motion, Motion::Rapid);
     assert_eq!(blocks[1].target[1], 2_000_000);
     assert_eq!(blocks[1].feed, 10_000_000);

@@ -8,7 +8,7 @@
 //! `BLESS=1` to (re)write the `.expect` files from the current output, then review
 //! them. `every_fixture_file_has_a_test` fails when a fixture is not listed below.
 
-use pkmc_host::canon::{Canon, Coolant, Feed, PathMode, Plane, Spindle};
+use pkmc_host::gcode::canon::{Canon, Coolant, Feed, PathMode, Plane, Spindle};
 use pkmc_host::gcode::{compile, Options, ToolTable};
 use std::fmt::Write;
 use std::path::PathBuf;

@@ -96,7 +96,7 @@ fn a_program_of_executed_lines_matches_the_program_in_order() {
     // 30 feed moves plus the rapid, on lines 2 and 4..=33.
     let mut lines: Vec<u32> = vec![2];
     lines.extend(4..34);
-    let expected = pkmc_host::plot::lines_digest(&lines);
+    let expected = pkmc_host::analysis::plot::lines_digest(&lines);
     assert_eq!(r["lines_executed"]["digest"], expected.as_str(), "{r}");
 }
 

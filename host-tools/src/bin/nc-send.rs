@@ -7,10 +7,10 @@ use clap::{Parser, Subcommand};
 use pkmc::config::{axis_is_rotary, MachineConfig, AXIS_NAMES};
 use pkmc::protocol::{Control, Status};
 use pkmc::units::to_user;
-use pkmc_host::faults::FaultConfig;
+use pkmc_host::cli::progress::{Interrupts, Operator, Progress, RawKeys, Style};
 use pkmc_host::job::{self, exit, Failure, Report, RunOptions, SimSetup, Target};
 use pkmc_host::link::{JobEnd, LinkOptions};
-use pkmc_host::progress::{Interrupts, Operator, Progress, RawKeys, Style};
+use pkmc_host::sim::faults::FaultConfig;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -34,7 +34,7 @@ struct Args {
     report: Option<String>,
     /// Simulator only: corrupt, drop or duplicate each byte on the line with this
     /// probability, both directions (e.g. 0.01).
-    #[arg(long, global = true, value_name = "RATE", value_parser = pkmc_host::faults::parse_rate)]
+    #[arg(long, global = true, value_name = "RATE", value_parser = pkmc_host::sim::faults::parse_rate)]
     link_faults: Option<f64>,
     /// Seed of the fault generator.
     #[arg(long, global = true, default_value_t = 1)]
@@ -148,7 +148,7 @@ fn target(args: &Args, found: &mut Option<String>) -> Result<(), Failure> {
     if args.sim || args.port.is_some() {
         return Ok(());
     }
-    let board = pkmc_host::discover::find()
+    let board = pkmc_host::cli::discover::find()
         .map_err(|e| Failure::new(exit::NO_CONTROLLER, e.to_string()))?;
     *found = Some(board.port);
     Ok(())
@@ -172,7 +172,7 @@ fn run(args: &Args) -> Result<i32, Failure> {
         if !(args.sim || args.check) {
             return Err(bad("--plot needs --sim or --check (the path is simulated)"));
         }
-        pkmc_host::plot::format_of(p).map_err(bad)?;
+        pkmc_host::analysis::plot::format_of(p).map_err(bad)?;
     }
     let mut found = None;
     if !args.check {
@@ -282,7 +282,7 @@ fn run_program(
     drop(op);
     let result = result?;
     if let (Some(p), Some(sim)) = (&args.plot, &result.sim) {
-        pkmc_host::plot::draw(p, &sim.recorder, machine)
+        pkmc_host::analysis::plot::draw(p, &sim.recorder, machine)
             .map_err(|e| Failure::new(exit::BAD_INPUT, e))?;
     }
     print_report(&result.report, quiet, args.check);

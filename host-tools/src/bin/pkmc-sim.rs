@@ -1,10 +1,10 @@
 //! `pkmc-sim`: the simulated controller on a pseudo-terminal, for `nc-send --port`.
 //! Prints the port to open, then serves until interrupted. `--link-faults RATE`
-//! puts the faulty line of `pkmc_host::faults` between the port and the controller;
+//! puts the faulty line of `pkmc_host::sim::faults` between the port and the controller;
 //! `--inject FAULT@SECONDS` injects a fault into the simulated machine (docs/safety.md).
 
 use clap::Parser;
-use pkmc_host::faults::{FaultConfig, FaultyLine};
+use pkmc_host::sim::faults::{FaultConfig, FaultyLine};
 use serialport::SerialPort;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
@@ -22,7 +22,7 @@ struct Args {
     flash: Option<PathBuf>,
     /// Corrupt, drop or duplicate each byte on the line with this probability (both
     /// directions).
-    #[arg(long, value_name = "RATE", value_parser = pkmc_host::faults::parse_rate)]
+    #[arg(long, value_name = "RATE", value_parser = pkmc_host::sim::faults::parse_rate)]
     link_faults: Option<f64>,
     /// Seed of the fault generator.
     #[arg(long, default_value_t = 1)]

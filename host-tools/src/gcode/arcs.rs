@@ -2,7 +2,7 @@
 //! a centre-format arc ends on its circle.
 //!
 //! Coordinates are in-plane (first, second axis of the plane, see
-//! [`crate::canon::Plane::axes`]), nm, as `f64` (exact for the positions allowed, below
+//! [`crate::gcode::canon::Plane::axes`]), nm, as `f64` (exact for the positions allowed, below
 //! 2⁵³ nm).
 //!
 //! Tolerances:

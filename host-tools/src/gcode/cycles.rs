@@ -27,7 +27,7 @@
 use super::interp::{check_range, fail, whole_in, Cycle, Interp, LineError, Motion, Res};
 use super::lexer::Words;
 use super::{arcs, MAX_CYCLE_REPEATS, MAX_PECKS};
-use crate::canon::{Canon, Feed, PathMode, Plane};
+use crate::gcode::canon::{Canon, Feed, PathMode, Plane};
 use pkmc::config::{AXES, AXIS_NAMES};
 
 /// How far above the last depth G83 rapids back down, and G73 backs off, nm

@@ -30,7 +30,7 @@ use super::arcs;
 use super::lexer::{bit, Code, ParamRef, Word, Words};
 use super::params::{self, Params};
 use super::{unsupported, Options, MAX_AXIS_UNITS};
-use crate::canon::{Canon, Coolant, Feed, PathMode, Plane, Spindle};
+use crate::gcode::canon::{Canon, Coolant, Feed, PathMode, Plane, Spindle};
 use pkmc::config::{AXES, AXIS_NAMES};
 use pkmc::units::{NDEG_PER_DEG, NM_PER_MM};
 

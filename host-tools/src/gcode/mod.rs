@@ -30,6 +30,8 @@
 //! implemented is described in `docs/gcode.md`.
 
 pub mod arcs;
+pub mod blocks;
+pub mod canon;
 pub mod cycles;
 pub mod interp;
 pub mod lexer;
@@ -38,7 +40,7 @@ pub mod tools;
 
 pub use tools::{Tool, ToolTable};
 
-use crate::canon::Canon;
+use crate::gcode::canon::Canon;
 use pkmc::config::AXES;
 use std::fmt;
 

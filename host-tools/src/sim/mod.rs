@@ -28,7 +28,10 @@
 //! The switches are sampled at the tick edge, where the joints stand before the tick's
 //! trains start.
 
-use crate::plant::{DiscretePlant, PlantFile, TransferFunction};
+pub mod faults;
+pub mod plant;
+
+use crate::sim::plant::{DiscretePlant, PlantFile, TransferFunction};
 use anyhow::{bail, Result};
 use pkmc::config::{Drive, MachineConfig, StepTiming, MAX_JOINTS, MAX_SERVOS, MAX_STEPPERS};
 use pkmc::contour::{PeriodOutputs, ServoBank};
@@ -148,7 +151,7 @@ impl SimStepper {
 }
 
 /// A simulated servo joint: amplifier and mechanics as a transfer function from the
-/// amplifier's command to the joint's displacement ([`crate::plant`]), stepped at the
+/// amplifier's command to the joint's displacement ([`crate::sim::plant`]), stepped at the
 /// servo rate, read back through a quadrature encoder (whole counts, 16-bit hardware
 /// counter extended as the firmware does) with index marks.
 #[derive(Clone, Debug)]

@@ -1,6 +1,6 @@
 //! The contour-control study of report B (`seeds-digest.md` §B): the report's helix
 //! x = t·cos t, y = t·sin t, z = 3t + 260 mm, t = 0..10 s, run on a machine whose servo
-//! joints carry transfer-function plants ([`crate::plant`]), under four controllers
+//! joints carry transfer-function plants ([`crate::sim::plant`]), under four controllers
 //! that share the same per-axis PID gains:
 //!
 //! 1. **uncoupled** — PID only (feed-forward gains zeroed, contour mode uncoupled);
@@ -21,7 +21,7 @@
 //! iteration on the curve parameter), not the controller's estimate.
 
 use crate::machine_file::MachineFile;
-use crate::plant::{DiscretePlant, Mismatch, TransferFunction};
+use crate::sim::plant::{DiscretePlant, Mismatch, TransferFunction};
 use anyhow::{anyhow, bail, Result};
 use pkmc::config::{ContourMode, Drive, KinematicsConfig, MachineConfig, MAX_SERVOS};
 use pkmc::contour::{PeriodInputs, ServoBank};
@@ -447,7 +447,7 @@ impl StudyMachine {
 }
 
 /// The bundled study machine file.
-pub const SEED_B: &str = include_str!("../../examples/machines/seed-b.toml");
+pub const SEED_B: &str = include_str!("../../../examples/machines/seed-b.toml");
 
 /// Runs all four schemes on the bundled `seed-b` machine under [`Conditions::STUDY`].
 pub fn run_study() -> Result<Vec<RunResult>> {

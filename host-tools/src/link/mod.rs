@@ -72,7 +72,7 @@
 //! ticks, sees the same ticks paced or not. [`ServeClock::Free`] never paces (the
 //! link bench, which measures the link, not the machine).
 
-use crate::faults::FaultyLine;
+use crate::sim::faults::FaultyLine;
 use crate::sim::Simulator;
 use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
 use pkmc::kinematics::MachineKinematics;

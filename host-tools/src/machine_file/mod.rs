@@ -74,8 +74,8 @@ pub struct JointFile {
     pub servo: Option<ServoFile>,
     /// Homing on a switch ([`pkmc::homing`]); without it the joint is not homed.
     pub homing: Option<HomingFile>,
-    /// Servo: the plant's transfer function, for simulation ([`crate::plant`]).
-    pub plant: Option<crate::plant::PlantFile>,
+    /// Servo: the plant's transfer function, for simulation ([`crate::sim::plant`]).
+    pub plant: Option<crate::sim::plant::PlantFile>,
 }
 
 /// A servo joint's `servo = { ... }` table: [`pkmc::config::ServoGains`] in file units
@@ -648,7 +648,7 @@ impl MachineFile {
         // A mechanism that is singular where it starts cannot be controlled from there
         // (a hexapod whose base joints all sit at one angle was accepted, margin 0).
         let kin = pkmc::kinematics::MachineKinematics::new(&config);
-        let margin = crate::preflight::margin(&config.home, &config, &kin).unwrap_or(0.0);
+        let margin = crate::analysis::preflight::margin(&config.home, &config, &kin).unwrap_or(0.0);
         if margin < MIN_HOME_MARGIN {
             let section = match self.kinematics.as_str() {
                 "hexapod" => "hexapod",
@@ -664,7 +664,7 @@ impl MachineFile {
     }
 }
 
-/// Smallest singularity margin ([`crate::preflight::margin`]) accepted at the home
+/// Smallest singularity margin ([`crate::analysis::preflight::margin`]) accepted at the home
 /// pose.
 pub const MIN_HOME_MARGIN: f64 = 0.01;
 
@@ -751,7 +751,7 @@ pub fn load(path: &Path) -> Result<MachineConfig> {
 
 /// The simulator's plant of each joint in the machine file at `path` (`None` for a
 /// joint without one).
-pub fn load_plants(path: &Path) -> Result<Vec<Option<crate::plant::PlantFile>>> {
+pub fn load_plants(path: &Path) -> Result<Vec<Option<crate::sim::plant::PlantFile>>> {
     let text = crate::input::read_text(path, crate::input::MAX_MACHINE_FILE_BYTES)
         .map_err(|m| anyhow!(m))?;
     let file: MachineFile =
@@ -850,13 +850,13 @@ fn line_col(text: &str, offset: usize) -> (usize, usize) {
 }
 
 /// The built-in default machine file (Cartesian X Y Z steppers).
-pub const DEFAULT_MACHINE: &str = include_str!("../../examples/machines/cartesian-xyz.toml");
+pub const DEFAULT_MACHINE: &str = include_str!("../../../examples/machines/cartesian-xyz.toml");
 
 /// The H-4 with rolling table machine file.
-pub const H4_TABLE_MACHINE: &str = include_str!("../../examples/machines/h4-table.toml");
+pub const H4_TABLE_MACHINE: &str = include_str!("../../../examples/machines/h4-table.toml");
 
 /// The hexapod machine file.
-pub const HEXAPOD_MACHINE: &str = include_str!("../../examples/machines/hexapod.toml");
+pub const HEXAPOD_MACHINE: &str = include_str!("../../../examples/machines/hexapod.toml");
 
 #[cfg(test)]
 mod tests {

@@ -1,6 +1,6 @@
 //! Running a job end to end: compile the program, check it against the machine, start
 //! the simulator behind a pseudo-terminal when asked (optionally through a faulty
-//! line, [`crate::faults`]), stream over the serial port, wait for the end, and
+//! line, [`crate::sim::faults`]), stream over the serial port, wait for the end, and
 //! summarise in a [`Report`]. Also the dry run of `--check` ([`check`]: the same
 //! client against the controller in this process, on the simulated clock) and the
 //! single commands (`status`, `home`, `jog`, `mdi`, `reset`). Shared by `nc-send` and
@@ -9,13 +9,13 @@
 //! Every error is a [`Failure`] carrying its exit code ([`exit`]) and a message that
 //! names where it happened (file and line, or port).
 
-use crate::faults::{FaultConfig, FaultReport, FaultyLine};
+use crate::analysis::plot::{lines_digest, Recorder};
 use crate::gcode;
 use crate::link::{
     serve, ClientStats, InProcess, JobEnd, JobHooks, Link, LinkError, LinkOptions, PortTransport,
     ServeClock, SimClock, Transport,
 };
-use crate::plot::{lines_digest, Recorder};
+use crate::sim::faults::{FaultConfig, FaultReport, FaultyLine};
 use crate::sim::{Simulator, Violation};
 use pkmc::config::{axis_is_rotary, MachineConfig, AXES, AXIS_NAMES, MAX_JOINTS};
 use pkmc::kinematics::MachineKinematics;
@@ -123,8 +123,8 @@ pub fn compile_text(
             ),
         )
     })?;
-    let program = crate::blocks::from_canon(&canon, start);
-    let report = crate::preflight::check(&program.blocks, machine, start);
+    let program = crate::gcode::blocks::from_canon(&canon, start);
+    let report = crate::analysis::preflight::check(&program.blocks, machine, start);
     if !report.findings.is_empty() {
         let lines = findings_text(name, &report.findings);
         return Err(Failure::new(
@@ -142,7 +142,7 @@ pub fn compile_text(
 /// The pre-flight findings as lines of text: a run of the same problem on consecutive
 /// NC lines (a stretch of a program out of travel, thousands of lines of CAM output)
 /// is one line naming its first and last line and how many, at its first pose.
-fn findings_text(name: &str, findings: &[crate::preflight::Finding]) -> Vec<String> {
+fn findings_text(name: &str, findings: &[crate::analysis::preflight::Finding]) -> Vec<String> {
     let mut out = Vec::new();
     let mut i = 0;
     while i < findings.len() {
@@ -229,7 +229,7 @@ pub struct SimSetup<'a> {
     /// Keep the tool path (for plots).
     pub record_path: bool,
     /// Plant of each joint from the machine file (servo joints; `None`: the default).
-    pub plants: Vec<Option<crate::plant::PlantFile>>,
+    pub plants: Vec<Option<crate::sim::plant::PlantFile>>,
     /// Faults to inject ([`crate::sim::Injection`]).
     pub inject: Vec<crate::sim::Injection>,
     /// How the served simulator advances its clock (paced to the wall clock while
@@ -380,7 +380,7 @@ pub struct Report {
     /// NC lines executed (simulator only).
     pub lines_executed: Option<LinesExecuted>,
     /// Pre-flight (`--check`): poses sampled along the path and the smallest
-    /// singularity margin met, with its NC line (see [`crate::preflight`]).
+    /// singularity margin met, with its NC line (see [`crate::analysis::preflight`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub preflight: Option<PreflightSummary>,
 }
@@ -624,7 +624,7 @@ pub fn check(
 ) -> Result<RunResult, Failure> {
     let setup = &opts.sim;
     let blocks = compile_program(program, machine)?;
-    let pre = crate::preflight::check(&blocks, machine, machine.home);
+    let pre = crate::analysis::preflight::check(&blocks, machine, machine.home);
     let sim = setup.simulator(machine.clone(), exit::BAD_INPUT)?;
     let recorder = std::rc::Rc::new(std::cell::RefCell::new(Recorder::new(
         machine.joints.len(),

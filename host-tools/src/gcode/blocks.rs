@@ -7,7 +7,7 @@
 //! execute in order. Operator messages stay on the host, keyed by NC line, and are
 //! shown when that line starts executing.
 
-use crate::canon::{Canon, Coolant, Feed, PathMode, Spindle};
+use crate::gcode::canon::{Canon, Coolant, Feed, PathMode, Spindle};
 use pkmc::config::AXES;
 use pkmc::geometry::Path;
 use pkmc::protocol::{Aux, Block, Motion};

@@ -1,0 +1,69 @@
+#!/usr/bin/env python3
+"""Structure budget of the host tools (issue 15): no source file in host-tools/src
+over 700 lines and no function over 120 lines, except where the file says why.
+
+A file opts out of a limit with a line `// structure: <reason>` (the reason is
+printed). Functions are measured from their `fn` line to the line of the brace
+that closes them. Exit status 1 when a limit is broken.
+"""
+import pathlib
+import re
+import sys
+
+MAX_FILE = 700
+MAX_FN = 120
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+FN = re.compile(r"^\s*(pub(\([a-z]+\))?\s+)?(const\s+)?(async\s+)?(unsafe\s+)?fn\s+(\w+)")
+
+
+def functions(lines):
+    """Yield (name, first line, length) for every fn with a body."""
+    i = 0
+    while i < len(lines):
+        m = FN.match(lines[i])
+        if not m:
+            i += 1
+            continue
+        depth, started, j = 0, False, i
+        while j < len(lines):
+            code = re.sub(r'"(\\.|[^"\\])*"', '""', lines[j].split("//")[0])
+            code = re.sub(r"'(\\.|[^'\\])'", "''", code)
+            for ch in code:
+                if ch == "{":
+                    depth += 1
+                    started = True
+                elif ch == "}":
+                    depth -= 1
+            if not started and code.rstrip().endswith(";"):
+                break  # a declaration without a body
+            if started and depth == 0:
+                yield m.group(6), i + 1, j - i + 1
+                break
+            j += 1
+        i += 1
+
+
+def main():
+    failed = False
+    for path in sorted((ROOT / "host-tools" / "src").rglob("*.rs")):
+        text = path.read_text()
+        lines = text.splitlines()
+        rel = path.relative_to(ROOT)
+        why = re.search(r"// structure: (.*)", text)
+        if why:
+            print(f"{rel}: exempt ({why.group(1).strip()})")
+            continue
+        if len(lines) > MAX_FILE:
+            print(f"{rel}: {len(lines)} lines (limit {MAX_FILE})")
+            failed = True
+        for name, at, n in functions(lines):
+            if n > MAX_FN:
+                print(f"{rel}:{at}: fn {name} is {n} lines (limit {MAX_FN})")
+                failed = True
+    if failed:
+        sys.exit(1)
+    print(f"host-tools/src: no file over {MAX_FILE} lines, no function over {MAX_FN}")
+
+
+if __name__ == "__main__":
+    main()
