@@ -12,7 +12,8 @@
 use pkmc::config::MachineConfig;
 use pkmc::protocol::{Block, Control, Motion};
 use pkmc_host::job::{SimServer, SimSetup};
-use pkmc_host::link::{JobEnd, JobHooks, Link, LinkOptions, LinkView, PortTransport, ServeClock};
+use pkmc_host::link::{JobEnd, JobHooks, Link, LinkOptions, LinkView, PortTransport};
+use pkmc_host::sim::serve::ServeClock;
 use std::time::Instant;
 
 /// Records when the last block was acknowledged.

@@ -4,9 +4,8 @@
 
 use pkmc::config::MachineConfig;
 use pkmc::protocol::{Block, Control, Motion, Plane, Status};
-use pkmc_host::link::{
-    InProcess, JobEnd, JobHooks, Link, LinkError, LinkOptions, LinkView, NoHooks,
-};
+use pkmc_host::link::{JobEnd, JobHooks, Link, LinkError, LinkOptions, LinkView, NoHooks};
+use pkmc_host::sim::serve::InProcess;
 use pkmc_host::sim::Simulator;
 
 fn machine() -> MachineConfig {

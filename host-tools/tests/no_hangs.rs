@@ -7,7 +7,8 @@
 use pkmc::config::MachineConfig;
 use pkmc::protocol::{Block, Control, Motion};
 use pkmc_host::job::{self, exit, RunOptions, SimSetup, Target};
-use pkmc_host::link::{InProcess, JobEnd, Link, LinkError, LinkOptions, NoHooks};
+use pkmc_host::link::{JobEnd, Link, LinkError, LinkOptions, NoHooks};
+use pkmc_host::sim::serve::InProcess;
 use pkmc_host::sim::Simulator;
 use std::process::Output;
 use std::sync::mpsc;

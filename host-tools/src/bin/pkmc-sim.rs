@@ -64,12 +64,12 @@ fn serve(args: Args) -> anyhow::Result<()> {
     let mut line = args
         .link_faults
         .map(|rate| FaultyLine::new(FaultConfig::new(rate, args.seed)));
-    pkmc_host::link::serve(
+    pkmc_host::sim::serve::serve(
         &mut sim,
         &mut master,
         &stop,
         line.as_mut(),
-        pkmc_host::link::ServeClock::Paced,
+        pkmc_host::sim::serve::ServeClock::Paced,
         &mut |_| {},
     )?;
     Ok(())

@@ -12,10 +12,10 @@
 use crate::analysis::plot::{lines_digest, Recorder};
 use crate::gcode;
 use crate::link::{
-    serve, ClientStats, InProcess, JobEnd, JobHooks, Link, LinkError, LinkOptions, PortTransport,
-    ServeClock, SimClock, Transport,
+    ClientStats, JobEnd, JobHooks, Link, LinkError, LinkOptions, PortTransport, SimClock, Transport,
 };
 use crate::sim::faults::{FaultConfig, FaultReport, FaultyLine};
+use crate::sim::serve::{serve, InProcess, ServeClock};
 use crate::sim::{Simulator, Violation};
 use pkmc::config::{axis_is_rotary, MachineConfig, AXES, AXIS_NAMES, MAX_JOINTS};
 use pkmc::kinematics::MachineKinematics;

@@ -30,6 +30,7 @@
 
 pub mod faults;
 pub mod plant;
+pub mod serve;
 
 use crate::sim::plant::{DiscretePlant, PlantFile, TransferFunction};
 use anyhow::{bail, Result};
