@@ -299,7 +299,6 @@ impl<T: Transport> Link<T> {
         hooks: &mut dyn JobHooks,
         job: &mut JobState,
     ) -> Result<Option<JobEnd>, LinkError> {
-        let total = blocks.len();
         match m {
             CtrlMsg::Ack {
                 seq,
@@ -316,77 +315,7 @@ impl<T: Transport> Link<T> {
                     job.buffered_ms = buffered_ms;
                 }
             }
-            CtrlMsg::Nak { expected, reason } => {
-                self.stats.naks += 1;
-                match reason {
-                    NakReason::Corrupt => self.stats.nak_reasons.corrupt += 1,
-                    NakReason::Gap => self.stats.nak_reasons.gap += 1,
-                    NakReason::QueueFull => self.stats.nak_reasons.queue_full += 1,
-                    _ => self.stats.nak_reasons.other += 1,
-                }
-                let at = job.index_at(expected);
-                if let Some(at) = at {
-                    if at > job.acked {
-                        job.advance(at);
-                    }
-                }
-                match reason {
-                    NakReason::Version => {
-                        return Err(LinkError::Version {
-                            port: self.port(),
-                            theirs: None,
-                        })
-                    }
-                    NakReason::NoSession => {
-                        return Err(LinkError::SessionLost { port: self.port() })
-                    }
-                    NakReason::MachineMismatch => {
-                        return Err(LinkError::MachineMismatch { port: self.port() })
-                    }
-                    NakReason::JobHeld => {
-                        return Err(LinkError::JobHeld {
-                            port: self.port(),
-                            job: self.held.unwrap_or(pkmc::protocol::HeldJob {
-                                host: 0,
-                                line: self.status.as_ref().map_or(0, |s| s.line),
-                                done: 0,
-                                queued: 0,
-                                state: self.status.as_ref().map_or(State::Hold, |s| s.state),
-                            }),
-                        })
-                    }
-                    NakReason::BadBlock => {
-                        let line = at.and_then(|i| blocks.get(i)).map_or(0, |b| b.line);
-                        return Err(LinkError::BadBlock {
-                            port: self.port(),
-                            line,
-                        });
-                    }
-                    NakReason::QueueFull => job.free = 0,
-                    _ => {}
-                }
-                if let Some(at) = at {
-                    if job.ending.is_none() && at < job.sent {
-                        match job.guard.as_mut() {
-                            Some(g) if g.at == at && g.stale_left > 0 => {
-                                g.stale_left -= 1;
-                                self.stats.naks_ignored += 1;
-                            }
-                            _ => {
-                                let stale = job.sent - at - 1;
-                                job.rewind_to(at, &mut self.stats);
-                                job.guard = Some(Guard {
-                                    at,
-                                    stale_left: stale,
-                                });
-                                job.last_progress = Instant::now();
-                            }
-                        }
-                    } else {
-                        self.stats.naks_ignored += 1;
-                    }
-                }
-            }
+            CtrlMsg::Nak { expected, reason } => self.on_nak(expected, reason, blocks, job)?,
             CtrlMsg::ControlAck { id } => {
                 if self.control.is_some_and(|pc| pc.id == id) {
                     self.control = None;
@@ -397,60 +326,153 @@ impl<T: Transport> Link<T> {
                     }
                 }
             }
-            CtrlMsg::Status(s) => {
-                // Blocks executed were accepted: a lost final `Ack` need not be waited for.
-                let executed = s.blocks_done.wrapping_sub(job.done_before) as usize;
-                if executed > job.acked && executed <= job.high {
-                    job.advance(executed);
-                }
-                job.free = s.free_slots as usize;
-                job.free_bends = s.free_bends as usize;
-                job.buffered_ms = s.buffered_ms;
-                hooks.status(&s);
-                if s.state == State::Hold
-                    && s.speed == 0
-                    && job.ending.is_none()
-                    && self.control.is_none()
-                    && hooks.ends_at_pause()
-                {
-                    // Held at a pause with nobody here to resume it: the job stays
-                    // held on the controller for `nc-send resume`.
-                    return Ok(Some(JobEnd::Paused(s.line)));
-                }
-                // A fault stops on the path first: the job ends once at rest.
-                if matches!(s.state, State::Alarm | State::EStop) && s.speed == 0 {
-                    if job
-                        .ending
-                        .is_some_and(|e| e.acked && e.cmd == Control::Stop)
-                    {
-                        return Ok(Some(JobEnd::Stopped));
-                    }
-                    if let Some(a) = s.alarm {
-                        return Ok(Some(JobEnd::Alarm(a)));
-                    }
-                }
-                if let Some(e) = job.ending.filter(|e| e.acked) {
-                    if e.cmd == Control::Abort && s.state == State::Idle && s.speed == 0 {
-                        return Ok(Some(JobEnd::Aborted));
-                    }
-                }
-                if job.ending.is_none()
-                    && job.acked == total
-                    && job.end_sent
-                    && self.control.is_none()
-                    && self.controls.is_empty()
-                    && s.state == State::Idle
-                    && s.blocks_done >= job.done_before.wrapping_add(total as u32)
-                {
-                    return Ok(Some(JobEnd::Done));
-                }
-                let dwell = dwell_ticks(blocks, job.done_before, &s);
-                self.check_stall(&mut job.stall, &s, dwell)?;
-            }
+            CtrlMsg::Status(s) => return self.on_status(&s, blocks, hooks, job),
             CtrlMsg::HelloAck { .. }
             | CtrlMsg::MachineLoaded { .. }
             | CtrlMsg::MachineRefused { .. } => {}
         }
+        Ok(None)
+    }
+
+    /// A `Nak`: counted by reason; refusals no resend can cure end the job; otherwise
+    /// the stream goes back to the block the controller expects, once per loss (the
+    /// `Nak`s the blocks behind the lost one draw are ignored).
+    fn on_nak(
+        &mut self,
+        expected: u16,
+        reason: NakReason,
+        blocks: &[Block],
+        job: &mut JobState,
+    ) -> Result<(), LinkError> {
+        self.stats.naks += 1;
+        match reason {
+            NakReason::Corrupt => self.stats.nak_reasons.corrupt += 1,
+            NakReason::Gap => self.stats.nak_reasons.gap += 1,
+            NakReason::QueueFull => self.stats.nak_reasons.queue_full += 1,
+            _ => self.stats.nak_reasons.other += 1,
+        }
+        let at = job.index_at(expected);
+        if let Some(at) = at {
+            if at > job.acked {
+                job.advance(at);
+            }
+        }
+        match reason {
+            NakReason::Version => {
+                return Err(LinkError::Version {
+                    port: self.port(),
+                    theirs: None,
+                })
+            }
+            NakReason::NoSession => return Err(LinkError::SessionLost { port: self.port() }),
+            NakReason::MachineMismatch => {
+                return Err(LinkError::MachineMismatch { port: self.port() })
+            }
+            NakReason::JobHeld => {
+                return Err(LinkError::JobHeld {
+                    port: self.port(),
+                    job: self.held.unwrap_or(pkmc::protocol::HeldJob {
+                        host: 0,
+                        line: self.status.as_ref().map_or(0, |s| s.line),
+                        done: 0,
+                        queued: 0,
+                        state: self.status.as_ref().map_or(State::Hold, |s| s.state),
+                    }),
+                })
+            }
+            NakReason::BadBlock => {
+                let line = at.and_then(|i| blocks.get(i)).map_or(0, |b| b.line);
+                return Err(LinkError::BadBlock {
+                    port: self.port(),
+                    line,
+                });
+            }
+            NakReason::QueueFull => job.free = 0,
+            _ => {}
+        }
+        if let Some(at) = at {
+            if job.ending.is_none() && at < job.sent {
+                match job.guard.as_mut() {
+                    Some(g) if g.at == at && g.stale_left > 0 => {
+                        g.stale_left -= 1;
+                        self.stats.naks_ignored += 1;
+                    }
+                    _ => {
+                        let stale = job.sent - at - 1;
+                        job.rewind_to(at, &mut self.stats);
+                        job.guard = Some(Guard {
+                            at,
+                            stale_left: stale,
+                        });
+                        job.last_progress = Instant::now();
+                    }
+                }
+            } else {
+                self.stats.naks_ignored += 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// A status: acknowledges what it shows executed, updates the credits, and ends
+    /// the job when it shows the end (done, alarm, abort or stop taken effect, or a
+    /// pause nobody here can resume); feeds the stall guard.
+    fn on_status(
+        &mut self,
+        s: &Status,
+        blocks: &[Block],
+        hooks: &mut dyn JobHooks,
+        job: &mut JobState,
+    ) -> Result<Option<JobEnd>, LinkError> {
+        let total = blocks.len();
+        // Blocks executed were accepted: a lost final `Ack` need not be waited for.
+        let executed = s.blocks_done.wrapping_sub(job.done_before) as usize;
+        if executed > job.acked && executed <= job.high {
+            job.advance(executed);
+        }
+        job.free = s.free_slots as usize;
+        job.free_bends = s.free_bends as usize;
+        job.buffered_ms = s.buffered_ms;
+        hooks.status(s);
+        if s.state == State::Hold
+            && s.speed == 0
+            && job.ending.is_none()
+            && self.control.is_none()
+            && hooks.ends_at_pause()
+        {
+            // Held at a pause with nobody here to resume it: the job stays
+            // held on the controller for `nc-send resume`.
+            return Ok(Some(JobEnd::Paused(s.line)));
+        }
+        // A fault stops on the path first: the job ends once at rest.
+        if matches!(s.state, State::Alarm | State::EStop) && s.speed == 0 {
+            if job
+                .ending
+                .is_some_and(|e| e.acked && e.cmd == Control::Stop)
+            {
+                return Ok(Some(JobEnd::Stopped));
+            }
+            if let Some(a) = s.alarm {
+                return Ok(Some(JobEnd::Alarm(a)));
+            }
+        }
+        if let Some(e) = job.ending.filter(|e| e.acked) {
+            if e.cmd == Control::Abort && s.state == State::Idle && s.speed == 0 {
+                return Ok(Some(JobEnd::Aborted));
+            }
+        }
+        if job.ending.is_none()
+            && job.acked == total
+            && job.end_sent
+            && self.control.is_none()
+            && self.controls.is_empty()
+            && s.state == State::Idle
+            && s.blocks_done >= job.done_before.wrapping_add(total as u32)
+        {
+            return Ok(Some(JobEnd::Done));
+        }
+        let dwell = dwell_ticks(blocks, job.done_before, s);
+        self.check_stall(&mut job.stall, s, dwell)?;
         Ok(None)
     }
 }

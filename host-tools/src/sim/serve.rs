@@ -169,6 +169,126 @@ pub enum ServeClock {
     Free,
 }
 
+/// The board loop's memory between turns.
+struct Board<'a> {
+    port: &'a mut dyn SerialPort,
+    faults: Option<&'a mut FaultyLine>,
+    name: String,
+    stats: ServeStats,
+    buf: Vec<u8>,
+    out: Vec<u8>,
+    line_out: Vec<u8>,
+    pending: Vec<u8>,
+    /// Wall time of the last bytes delivered to the controller.
+    delivered: Instant,
+    /// Wall time at which the host last queued a block, or the controller's queue was
+    /// last seen full: the host is streaming.
+    fed: Instant,
+    /// The end of an injected link cut.
+    cut_until: Option<Instant>,
+    /// Wall time at which the next paced tick is due; `None` while running free.
+    next_tick: Option<Instant>,
+}
+
+impl Board<'_> {
+    fn error(&self, op: &'static str, source: io::Error) -> ServeError {
+        ServeError {
+            port: self.name.clone(),
+            op,
+            source,
+        }
+    }
+
+    /// Takes what the port has (waiting up to `wait`) to the controller, through the
+    /// faulty line when there is one; a cut line delivers nothing.
+    fn receive(
+        &mut self,
+        sim: &mut Simulator,
+        wait: Duration,
+        cut: bool,
+        free_before: u16,
+        on_tick: &mut dyn FnMut(&Simulator),
+    ) -> Result<(), ServeError> {
+        self.port
+            .set_timeout(wait)
+            .map_err(|e| self.error("read", e.into()))?;
+        match self.port.read(&mut self.buf) {
+            Ok(_) if cut => {}
+            Ok(n) => {
+                self.stats.bytes_in += n as u64;
+                if n > 0 {
+                    self.delivered = Instant::now();
+                }
+                match self.faults.as_deref_mut() {
+                    Some(line) => {
+                        self.line_out.clear();
+                        line.towards_controller(&self.buf[..n], &mut self.line_out);
+                        sim.ctrl.receive(&self.line_out);
+                    }
+                    None => sim.ctrl.receive(&self.buf[..n]),
+                }
+                if sim.ctrl.status().free_slots < free_before {
+                    // Blocks queued (the queue only fills on receipt).
+                    self.fed = Instant::now();
+                }
+                sim.persist()
+                    .map_err(|e| self.error("store the machine", io::Error::other(e)))?;
+                if settle(sim).map_err(|e| self.error("simulate", io::Error::other(e)))? {
+                    on_tick(sim);
+                }
+            }
+            Err(e) if is_timeout(&e) => {}
+            Err(e) => return Err(self.error("read", e)),
+        }
+        Ok(())
+    }
+
+    /// Takes what the controller has to say and writes what the port accepts now; a
+    /// cut line loses it.
+    fn transmit(&mut self, sim: &mut Simulator, cut: bool) -> Result<(), ServeError> {
+        loop {
+            let n = sim.ctrl.transmit(&mut self.out);
+            if n == 0 {
+                break;
+            }
+            if cut {
+                continue;
+            }
+            match self.faults.as_deref_mut() {
+                Some(line) => line.towards_host(&self.out[..n], &mut self.pending),
+                None => self.pending.extend_from_slice(&self.out[..n]),
+            }
+        }
+        if self.pending.is_empty() {
+            return Ok(());
+        }
+        self.port
+            .set_timeout(Duration::from_millis(1))
+            .map_err(|e| self.error("write", e.into()))?;
+        match self.port.write(&self.pending) {
+            Ok(n) => {
+                self.stats.bytes_out += n as u64;
+                self.pending.drain(..n);
+            }
+            Err(e) if is_timeout(&e) => {}
+            Err(e) => return Err(self.error("write", e)),
+        }
+        Ok(())
+    }
+
+    /// The next paced deadline, one tick on; a server that fell further behind than
+    /// it may catch up lets simulated time lag instead.
+    fn next_deadline(&mut self) {
+        if let Some(t) = self.next_tick.as_mut() {
+            *t += Duration::from_nanos(pkmc::units::TICK_NS as u64);
+            let late = Instant::now().saturating_duration_since(*t);
+            if late > PACE_CATCH_UP {
+                *t += late - PACE_CATCH_UP;
+            }
+        }
+    }
+}
+
 /// Serves `sim` on `port` until `stop` is set, through `faults` when given; `on_tick`
 /// sees the simulator after every tick. Simulated time advances while the controller
 /// has motion to execute, as `clock` says (paced to the wall clock while the host
@@ -178,68 +298,59 @@ pub fn serve(
     sim: &mut Simulator,
     port: &mut dyn SerialPort,
     stop: &AtomicBool,
-    mut faults: Option<&mut FaultyLine>,
+    faults: Option<&mut FaultyLine>,
     clock: ServeClock,
     on_tick: &mut dyn FnMut(&Simulator),
 ) -> Result<ServeStats, ServeError> {
-    let name = port.name().unwrap_or_else(|| "pseudo-terminal".into());
-    let io_err = |op: &'static str| {
-        let port = name.clone();
-        move |source: io::Error| ServeError {
-            port: port.clone(),
-            op,
-            source,
-        }
+    let now = Instant::now();
+    let mut board = Board {
+        name: port.name().unwrap_or_else(|| "pseudo-terminal".into()),
+        port,
+        faults,
+        stats: ServeStats::default(),
+        buf: vec![0u8; 65536],
+        out: vec![0u8; pkmc::controller::TX_CAPACITY],
+        line_out: Vec::with_capacity(65536),
+        pending: Vec::with_capacity(65536),
+        delivered: now,
+        fed: now,
+        cut_until: None,
+        next_tick: None,
     };
-    let mut stats = ServeStats::default();
-    let mut buf = vec![0u8; 65536];
-    let mut out = vec![0u8; pkmc::controller::TX_CAPACITY];
-    let mut line_out: Vec<u8> = Vec::with_capacity(65536);
-    let mut pending: Vec<u8> = Vec::with_capacity(65536);
-    // Wall time of the last bytes delivered to the controller, and the end of an
-    // injected link cut.
-    let mut delivered = Instant::now();
-    // Wall time at which the host last queued a block, or the controller's queue was
-    // last seen full: the host is streaming.
-    let mut fed = delivered;
-    let mut cut_until: Option<Instant> = None;
     let loss_wall = Duration::from_millis(pkmc::controller::LINK_LOSS_TICKS as u64);
-    let tick_wall = Duration::from_nanos(pkmc::units::TICK_NS as u64);
-    // Wall time at which the next paced tick is due; `None` while running free.
-    let mut next_tick: Option<Instant> = None;
     while !stop.load(Ordering::Relaxed) {
         let now = Instant::now();
         if sim.take_link_cut() {
-            cut_until = Some(now + crate::sim::LINK_CUT);
+            board.cut_until = Some(now + crate::sim::LINK_CUT);
         }
-        let cut = cut_until.is_some_and(|t| now < t);
+        let cut = board.cut_until.is_some_and(|t| now < t);
         // Simulated time may run ahead of the host's wall clock; it may pass the
         // controller's link-loss limit only when the host has really been silent
         // that long (or the line is cut).
         let starved = sim.ctrl.link_silence_ticks() + 1 >= pkmc::controller::LINK_LOSS_TICKS
-            && delivered.elapsed() < loss_wall;
+            && board.delivered.elapsed() < loss_wall;
         let busy = sim.busy() && !starved;
         let status = sim.ctrl.status();
         if status.free_slots == 0 || status.free_bends == 0 {
             // A full queue (or ring of arcs): a streaming host waits only for the next
             // free slot.
-            fed = now;
+            board.fed = now;
         }
         let paced = busy
             && clock == ServeClock::Paced
             && status.buffered_ms < PACE_BELOW_MS
-            && now.duration_since(fed) < PACE_AFTER_BLOCKS;
+            && now.duration_since(board.fed) < PACE_AFTER_BLOCKS;
         // Paced, the tick is due at its deadline (at once when pacing starts); free,
         // at once.
         let due = if paced {
-            *next_tick.get_or_insert(now)
+            *board.next_tick.get_or_insert(now)
         } else {
-            next_tick = None;
+            board.next_tick = None;
             now
         };
         let tick_now = busy && now >= due;
         let ready = if tick_now {
-            port.bytes_to_read().unwrap_or(0) as usize
+            board.port.bytes_to_read().unwrap_or(0) as usize
         } else {
             1
         };
@@ -252,85 +363,24 @@ pub fn serve(
             } else {
                 due - now
             };
-            port.set_timeout(wait)
-                .map_err(|e| io_err("read")(e.into()))?;
-            match port.read(&mut buf) {
-                Ok(_) if cut => {}
-                Ok(n) => {
-                    stats.bytes_in += n as u64;
-                    if n > 0 {
-                        delivered = Instant::now();
-                    }
-                    match faults.as_deref_mut() {
-                        Some(line) => {
-                            line_out.clear();
-                            line.towards_controller(&buf[..n], &mut line_out);
-                            sim.ctrl.receive(&line_out);
-                        }
-                        None => sim.ctrl.receive(&buf[..n]),
-                    }
-                    if sim.ctrl.status().free_slots < status.free_slots {
-                        // Blocks queued (the queue only fills on receipt).
-                        fed = Instant::now();
-                    }
-                    sim.persist()
-                        .map_err(|e| io_err("store the machine")(io::Error::other(e)))?;
-                    if settle(sim).map_err(|e| io_err("simulate")(io::Error::other(e)))? {
-                        on_tick(sim);
-                    }
-                }
-                Err(e) if is_timeout(&e) => {}
-                Err(e) => return Err(io_err("read")(e)),
-            }
+            board.receive(sim, wait, cut, status.free_slots, on_tick)?;
         }
         if tick_now {
             sim.tick()
-                .map_err(|e| io_err("simulate")(io::Error::other(e)))?;
+                .map_err(|e| board.error("simulate", io::Error::other(e)))?;
             on_tick(sim);
-            if let Some(t) = next_tick.as_mut() {
-                // The next deadline, one tick on; a server that fell further behind
-                // than it may catch up lets simulated time lag instead.
-                *t += tick_wall;
-                let late = Instant::now().saturating_duration_since(*t);
-                if late > PACE_CATCH_UP {
-                    *t += late - PACE_CATCH_UP;
-                }
-            }
+            board.next_deadline();
         }
-        loop {
-            let n = sim.ctrl.transmit(&mut out);
-            if n == 0 {
-                break;
-            }
-            if cut {
-                continue;
-            }
-            match faults.as_deref_mut() {
-                Some(line) => line.towards_host(&out[..n], &mut pending),
-                None => pending.extend_from_slice(&out[..n]),
-            }
-        }
-        if !pending.is_empty() {
-            port.set_timeout(Duration::from_millis(1))
-                .map_err(|e| io_err("write")(e.into()))?;
-            match port.write(&pending) {
-                Ok(n) => {
-                    stats.bytes_out += n as u64;
-                    pending.drain(..n);
-                }
-                Err(e) if is_timeout(&e) => {}
-                Err(e) => return Err(io_err("write")(e)),
-            }
-        }
+        board.transmit(sim, cut)?;
     }
     // The host is done: servo joints still settling on their last targets finish
     // doing so (the controller itself has nothing left to do).
     while !sim.ctrl.has_work() && sim.busy() {
         sim.tick()
-            .map_err(|e| io_err("simulate")(io::Error::other(e)))?;
+            .map_err(|e| board.error("simulate", io::Error::other(e)))?;
         on_tick(sim);
     }
     sim.finish_trace()
-        .map_err(|e| io_err("write the trace")(io::Error::other(e)))?;
-    Ok(stats)
+        .map_err(|e| board.error("write the trace", io::Error::other(e)))?;
+    Ok(board.stats)
 }
