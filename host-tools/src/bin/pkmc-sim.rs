@@ -52,7 +52,7 @@ fn serve(args: Args) -> anyhow::Result<()> {
         None => Vec::new(),
     };
     let mut sim = match args.flash {
-        Some(f) => pkmc_host::sim::Simulator::with_flash(f, machine)?,
+        Some(f) => pkmc_host::sim::Simulator::with_flash(f, machine, plants)?,
         None => {
             pkmc_host::sim::Simulator::with_plants(machine, plants, [0; pkmc::config::MAX_JOINTS])?
         }

@@ -28,351 +28,73 @@
 //! The switches are sampled at the tick edge, where the joints stand before the tick's
 //! trains start.
 
+mod drives;
 pub mod faults;
+mod inject;
 pub mod plant;
 pub mod serve;
+mod trace;
 
-use crate::sim::plant::{DiscretePlant, PlantFile, TransferFunction};
-use anyhow::{bail, Result};
-use pkmc::config::{Drive, MachineConfig, StepTiming, MAX_JOINTS, MAX_SERVOS, MAX_STEPPERS};
+use drives::counts_of;
+pub use drives::{
+    SimServo, SimStepper, Violation, DEFAULT_PLANT_GAIN, DEFAULT_PLANT_TAU_S, INDEX_PITCH,
+    LIMIT_BEYOND_TRAVEL, MAX_VIOLATIONS_KEPT, SWITCH_BEFORE_INDEX,
+};
+pub use inject::{FaultKind, Injection, LINK_CUT};
+use trace::write_row;
+pub use trace::TraceRow;
+
+use crate::sim::plant::{PlantError, PlantFile};
+use pkmc::config::{Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS, MAX_STEPPERS};
 use pkmc::contour::{PeriodOutputs, ServoBank};
 use pkmc::controller::{Controller, Inputs};
 use pkmc::debounce::Switches;
 use pkmc::pacing::{RawInputs, ServoPacer, Snapshot, TickPacer};
 use pkmc::protocol::State;
-use pkmc::servo::{DAC_MID, SERVO_HZ, SERVO_PER_TICK};
-use pkmc::stepper::StepTrain;
-use pkmc::units::{to_user, units_per_user, TICK_NS};
-use serde::Serialize;
+use pkmc::servo::SERVO_PER_TICK;
+use pkmc::units::{units_per_user, TICK_NS};
 use std::io::Write;
 
-/// A breach of a drive's timing rules.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
-pub struct Violation {
-    /// Stepper channel.
-    pub channel: usize,
-    /// Simulated time of the offending edge, ns.
-    pub t_ns: u64,
-    /// What was broken.
-    pub rule: &'static str,
-    /// Measured value against the rule, ns.
-    pub measured_ns: u64,
+/// Why the simulator cannot start or go on.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// The controller refused the machine.
+    #[error("machine refused by the controller: {0:?}")]
+    Refused(pkmc::config::ConfigError),
+    /// A servo joint's plant model is malformed.
+    #[error(transparent)]
+    Plant(#[from] PlantError),
+    /// An injection names a joint the machine does not have.
+    #[error("--inject: joint {joint} does not exist ({machine} has {joints} joints, 0-based)")]
+    NoSuchJoint {
+        /// The joint named, 0-based.
+        joint: usize,
+        /// The machine's name.
+        machine: String,
+        /// How many joints it has.
+        joints: usize,
+    },
+    /// A following error injected into a stepper joint, which has no encoder.
+    #[error(
+        "--inject following-error: joint {joint} of {machine} is a stepper: no encoder, \
+         no following error (name a servo joint: following-error:J@SECONDS)"
+    )]
+    NotAServo {
+        /// The joint named, 0-based.
+        joint: usize,
+        /// The machine's name.
+        machine: String,
+    },
+    /// The machine adopted is too large for the flash page.
+    #[error("machine configuration too large to store")]
+    TooLarge,
+    /// Writing the flash file or the trace failed.
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
 }
 
-/// Violations kept in full; further ones are only counted.
-pub const MAX_VIOLATIONS_KEPT: usize = 100;
-
-/// A step/direction drive that checks every edge.
-#[derive(Clone, Debug)]
-pub struct SimStepper {
-    channel: usize,
-    timing: StepTiming,
-    /// Position in steps (positive when DIR is high).
-    pub position: i64,
-    dir_high: bool,
-    last_dir_change: Option<u64>,
-    last_rise: Option<u64>,
-    /// Timing breaches seen (first [`MAX_VIOLATIONS_KEPT`]).
-    pub violations: Vec<Violation>,
-    /// Timing breaches seen in all.
-    pub violation_count: u64,
-}
-
-impl SimStepper {
-    /// A drive on `channel` with DIR initially at `dir_high`.
-    pub fn new(channel: usize, timing: StepTiming, dir_high: bool) -> Self {
-        Self {
-            channel,
-            timing,
-            position: 0,
-            dir_high,
-            last_dir_change: None,
-            last_rise: None,
-            violations: Vec::new(),
-            violation_count: 0,
-        }
-    }
-
-    fn breach(&mut self, t_ns: u64, rule: &'static str, measured_ns: u64) {
-        self.violation_count += 1;
-        if self.violations.len() < MAX_VIOLATIONS_KEPT {
-            self.violations.push(Violation {
-                channel: self.channel,
-                t_ns,
-                rule,
-                measured_ns,
-            });
-        }
-    }
-
-    /// DIR set to `high` at `t_ns`.
-    pub fn dir(&mut self, t_ns: u64, high: bool) {
-        if high == self.dir_high {
-            return;
-        }
-        if let Some(r) = self.last_rise {
-            if t_ns - r < self.timing.dir_hold_ns as u64 {
-                self.breach(t_ns, "DIR hold after STEP", t_ns - r);
-            }
-        }
-        self.dir_high = high;
-        self.last_dir_change = Some(t_ns);
-    }
-
-    /// A STEP pulse rising at `rise_ns`, high for `high_ns`.
-    pub fn pulse(&mut self, rise_ns: u64, high_ns: u64) {
-        if let Some(d) = self.last_dir_change {
-            if rise_ns - d < self.timing.dir_setup_ns as u64 {
-                self.breach(rise_ns, "DIR setup before STEP", rise_ns - d);
-            }
-        }
-        if let Some(r) = self.last_rise {
-            if rise_ns - r < self.timing.min_interval_ns() as u64 {
-                self.breach(rise_ns, "STEP rate", rise_ns - r);
-            }
-        }
-        if high_ns < self.timing.min_pulse_ns as u64 {
-            self.breach(rise_ns, "STEP pulse width", high_ns);
-        }
-        self.last_rise = Some(rise_ns);
-        self.position += if self.dir_high { 1 } else { -1 };
-    }
-
-    /// Applies one tick's train starting at `t0_ns`.
-    pub fn apply(&mut self, t0_ns: u64, train: &StepTrain) {
-        if train.count == 0 {
-            return;
-        }
-        self.dir(t0_ns, train.forward);
-        for i in 0..train.count as u64 {
-            let rise = t0_ns + train.first_edge_ns as u64 + i * train.interval_ns as u64;
-            self.pulse(rise, train.pulse_ns as u64);
-        }
-    }
-}
-
-/// A simulated servo joint: amplifier and mechanics as a transfer function from the
-/// amplifier's command to the joint's displacement ([`crate::sim::plant`]), stepped at the
-/// servo rate, read back through a quadrature encoder (whole counts, 16-bit hardware
-/// counter extended as the firmware does) with index marks.
-#[derive(Clone, Debug)]
-pub struct SimServo {
-    plant: DiscretePlant,
-    /// Command units per DAC count above mid-scale.
-    input_per_count: f64,
-    /// Encoder counts per user unit (mm or degree).
-    counts_per_user: f64,
-    /// Counts the encoder reads at true joint position zero.
-    zero: i64,
-    /// True position at power-up, counts from `zero`.
-    start: f64,
-    /// Frozen (a jammed axis) at this many counts from `zero`.
-    jammed: Option<f64>,
-    /// Encoder reading now, counts.
-    counts: i64,
-    /// Index marks at these counts (from `zero`) plus multiples of `index_pitch`.
-    index_at: Option<(i64, i64)>,
-}
-
-/// Default plant of a servo joint whose machine file gives none: the amplifier and
-/// motor as G(s) = K / (s·(τs + 1)), K = 300 encoder counts/s per DAC count, τ = 20 ms
-/// (the model [`pkmc::config::ServoGains::DEFAULT_PLANT`] is tuned for).
-pub const DEFAULT_PLANT_GAIN: f64 = 300.0;
-/// See [`DEFAULT_PLANT_GAIN`].
-pub const DEFAULT_PLANT_TAU_S: f64 = 0.02;
-/// Spacing of a simulated encoder's index marks, user units (mm or degrees); one mark
-/// sits exactly at the joint's `homing.switch_at`.
-pub const INDEX_PITCH: f64 = 5.0;
-/// How far beyond the index mark (towards the switch) a simulated home switch of a
-/// joint homing on its index releases, user units.
-pub const SWITCH_BEFORE_INDEX: f64 = 0.3;
-/// How far beyond a joint's travel its simulated limit switches trip, user units.
-pub const LIMIT_BEYOND_TRAVEL: f64 = 3.0;
-
-impl SimServo {
-    /// The plant of joint `jc` from `file` (or the default), at rest at true
-    /// position `at` (axis units), its encoder reading `reading` there.
-    pub fn new(
-        jc: &pkmc::config::JointConfig,
-        file: Option<&PlantFile>,
-        at: i64,
-        reading: i64,
-    ) -> Result<Self> {
-        let counts_per_user =
-            jc.scale.steps as f64 / jc.scale.per_units as f64 * units_per_user(jc.rotary) as f64;
-        let (tf, input_per_count) = match file {
-            Some(f) => (TransferFunction::new(&f.num, &f.den)?, f.input_per_count),
-            None => (
-                TransferFunction::new(
-                    &[DEFAULT_PLANT_GAIN / counts_per_user],
-                    &[DEFAULT_PLANT_TAU_S, 1.0, 0.0],
-                )?,
-                1.0,
-            ),
-        };
-        let start = jc.scale.steps_at(at);
-        let zero = reading - start;
-        let index_at = (jc.homing.use_index).then(|| {
-            (
-                jc.scale.steps_at(jc.homing.switch_at),
-                (INDEX_PITCH * counts_per_user).round() as i64,
-            )
-        });
-        Ok(Self {
-            plant: tf.discretize(1.0 / SERVO_HZ as f64),
-            input_per_count,
-            counts_per_user,
-            zero,
-            start: start as f64,
-            jammed: None,
-            counts: reading,
-            index_at,
-        })
-    }
-
-    /// True position, counts from the joint's zero (fractional).
-    fn true_counts(&self, u: f64) -> f64 {
-        match self.jammed {
-            Some(at) => at,
-            None => self.start + self.plant.output(u) * self.counts_per_user,
-        }
-    }
-
-    /// One servo period under DAC code `dac` (amplifier enabled or not); returns the
-    /// count of an index mark crossed, if any.
-    pub fn period(&mut self, dac: u16, enabled: bool) -> Option<i64> {
-        let u = if enabled {
-            (dac as i32 - DAC_MID) as f64 * self.input_per_count
-        } else {
-            0.0
-        };
-        let before = self.counts - self.zero;
-        if self.jammed.is_none() {
-            self.plant.step(u);
-        }
-        let now = self.true_counts(0.0).round() as i64;
-        self.counts = now + self.zero;
-        let (first, pitch) = self.index_at?;
-        if pitch <= 0 || now == before {
-            return None;
-        }
-        let (lo, hi) = (before.min(now), before.max(now));
-        // The mark k with first + k·pitch in (lo, hi] (or [lo, hi) moving down).
-        let k = (hi - first).div_euclid(pitch);
-        let mark = first + k * pitch;
-        let crossed = if now > before {
-            mark > lo && mark <= hi
-        } else {
-            mark >= lo && mark < hi
-        };
-        crossed.then_some(mark + self.zero)
-    }
-
-    /// Encoder reading, counts.
-    pub fn counts(&self) -> i64 {
-        self.counts
-    }
-
-    /// True position, counts from the joint's zero.
-    pub fn position(&self) -> i64 {
-        self.counts - self.zero
-    }
-
-    /// Jams the axis where it is (an injected following error).
-    pub fn jam(&mut self) {
-        self.jammed = Some((self.counts - self.zero) as f64);
-    }
-}
-
-/// A fault injected into the simulator (`nc-send --inject KIND[:JOINT]@SECONDS`).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Injection {
-    /// What.
-    pub kind: FaultKind,
-    /// Joint concerned (limit switch, drive fault, following error), 0-based.
-    pub joint: Option<usize>,
-    /// Simulated time, s.
-    pub at_s: f64,
-}
-
-/// Kinds of injectable faults.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FaultKind {
-    /// The e-stop input becomes active and stays so.
-    EStop,
-    /// A joint's limit switch trips and stays tripped.
-    Limit,
-    /// A joint's drive (or servo amplifier) reports a fault and goes on reporting it.
-    DriveFault,
-    /// A servo joint jams: it stops moving, so its following error grows.
-    FollowingError,
-    /// The line goes dead both ways for [`LINK_CUT`] (wall time).
-    LinkLoss,
-}
-
-/// How long an injected link loss lasts: longer than the controller's limit
-/// ([`pkmc::controller::LINK_LOSS_TICKS`], 1 s), shorter than the time after which
-/// nc-send gives the link up (3 s), so the host hears the alarm afterwards.
-pub const LINK_CUT: std::time::Duration = std::time::Duration::from_millis(1500);
-
-impl std::str::FromStr for Injection {
-    type Err = String;
-    fn from_str(text: &str) -> Result<Self, String> {
-        let bad = |why: &str| {
-            format!("--inject {text:?}: {why} (KIND[:JOINT]@SECONDS, KIND one of estop, limit, drive-fault, following-error, link-loss)")
-        };
-        let (what, at) = text.split_once('@').ok_or_else(|| bad("no @SECONDS"))?;
-        let at_s: f64 = at
-            .parse()
-            .ok()
-            .filter(|t: &f64| t.is_finite() && *t >= 0.0)
-            .ok_or_else(|| bad("SECONDS must be a non-negative number"))?;
-        let (kind, joint) = match what.split_once(':') {
-            Some((k, j)) => (
-                k,
-                Some(
-                    j.parse::<usize>()
-                        .map_err(|_| bad("JOINT must be a joint index (0-based)"))?,
-                ),
-            ),
-            None => (what, None),
-        };
-        let kind = match kind {
-            "estop" | "e-stop" => FaultKind::EStop,
-            "limit" => FaultKind::Limit,
-            "drive-fault" => FaultKind::DriveFault,
-            "following-error" => FaultKind::FollowingError,
-            "link-loss" => FaultKind::LinkLoss,
-            other => return Err(bad(&format!("unknown fault {other:?}"))),
-        };
-        if joint.is_some() && matches!(kind, FaultKind::EStop | FaultKind::LinkLoss) {
-            return Err(bad("this fault names no joint"));
-        }
-        Ok(Injection { kind, joint, at_s })
-    }
-}
-
-/// Encoder reading of each servo channel (zero where none).
-fn counts_of(servos: &[Option<SimServo>; MAX_SERVOS]) -> [i64; MAX_SERVOS] {
-    servos
-        .each_ref()
-        .map(|s| s.as_ref().map_or(0, SimServo::counts))
-}
-
-/// One trace row, in user units.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TraceRow {
-    /// Time at the end of the tick, s.
-    pub t_s: f64,
-    /// NC line executing.
-    pub line: u32,
-    /// Commanded pose, mm and degrees.
-    pub pose: [f64; 6],
-    /// Commanded joints, mm or degrees.
-    pub joints: Vec<f64>,
-    /// Joint positions the drives report (steps or encoder counts scaled back).
-    pub feedback: Vec<f64>,
-}
+/// What the simulator's fallible calls return.
+pub type Result<T, E = SimError> = std::result::Result<T, E>;
 
 /// The controller with its simulated hardware.
 pub struct Simulator {
@@ -437,8 +159,7 @@ impl Simulator {
         plants: Vec<Option<PlantFile>>,
         power_up_offset: [i64; MAX_JOINTS],
     ) -> Result<Self> {
-        let ctrl = Controller::new(machine)
-            .map_err(|e| anyhow::anyhow!("machine refused by the controller: {e:?}"))?;
+        let ctrl = Controller::new(machine).map_err(SimError::Refused)?;
         let mut sim = Self {
             ctrl,
             steppers: Default::default(),
@@ -466,40 +187,6 @@ impl Simulator {
         Ok(sim)
     }
 
-    /// Injects faults at their times; refuses one that cannot happen on this machine.
-    pub fn inject(&mut self, injections: &[Injection]) -> Result<()> {
-        let m = self.ctrl.machine();
-        for i in injections {
-            let joint = i.joint.unwrap_or_else(|| match i.kind {
-                FaultKind::FollowingError => m
-                    .joints
-                    .iter()
-                    .position(|j| matches!(j.drive, Drive::Servo { .. }))
-                    .unwrap_or(0),
-                _ => 0,
-            });
-            let Some(jc) = m.joints.get(joint) else {
-                bail!(
-                    "--inject: joint {joint} does not exist ({} has {} joints, 0-based)",
-                    m.name,
-                    m.joints.len()
-                );
-            };
-            if i.kind == FaultKind::FollowingError && !matches!(jc.drive, Drive::Servo { .. }) {
-                bail!(
-                    "--inject following-error: joint {joint} of {} is a stepper: no encoder, \
-                     no following error (name a servo joint: following-error:J@SECONDS)",
-                    m.name
-                );
-            }
-            self.injections.push(Injection {
-                joint: Some(joint),
-                ..*i
-            });
-        }
-        Ok(())
-    }
-
     /// The inputs the last [`Simulator::tick`] passed to the controller (for harnesses
     /// that replay a run call by call: `perf/m4count`).
     pub fn last_inputs(&self) -> &Inputs {
@@ -516,29 +203,20 @@ impl Simulator {
         self.ticks as f64 * TICK_NS as f64 * 1e-9
     }
 
-    /// Is an injected link cut due (its start time reached)? True once per injection:
-    /// the server then cuts the line for [`LINK_CUT`].
-    pub fn take_link_cut(&mut self) -> bool {
-        let now = self.time_s();
-        if let Some(k) = self
-            .injections
-            .iter()
-            .position(|i| i.kind == FaultKind::LinkLoss && i.at_s <= now)
-        {
-            self.injections.remove(k);
-            return true;
-        }
-        false
-    }
-
     /// A simulator whose controller boots from the machine stored in `flash` (as the
-    /// firmware boots from its flash page), or from `fallback` when none is stored.
-    /// Machines the host loads later are written back to `flash`.
-    pub fn with_flash(flash: std::path::PathBuf, fallback: MachineConfig) -> Result<Self> {
+    /// firmware boots from its flash page), or from `fallback` when none is stored,
+    /// its servo joints driving `plants` (the machine file's, as in
+    /// [`Simulator::with_plants`]). Machines the host loads later are written back to
+    /// `flash`.
+    pub fn with_flash(
+        flash: std::path::PathBuf,
+        fallback: MachineConfig,
+        plants: Vec<Option<PlantFile>>,
+    ) -> Result<Self> {
         let stored = std::fs::read(&flash)
             .ok()
             .and_then(|b| pkmc::store::read_record(&b).ok());
-        let mut sim = Self::new(stored.unwrap_or(fallback))?;
+        let mut sim = Self::with_plants(stored.unwrap_or(fallback), plants, [0; MAX_JOINTS])?;
         sim.flash = Some(flash);
         Ok(sim)
     }
@@ -550,8 +228,7 @@ impl Simulator {
             return Ok(());
         };
         let mut rec = [0u8; pkmc::store::HEADER_BYTES + pkmc::store::MAX_CONFIG_BYTES];
-        let n = pkmc::store::record(config, &mut rec)
-            .ok_or_else(|| anyhow::anyhow!("machine configuration too large to store"))?;
+        let n = pkmc::store::record(config, &mut rec).ok_or(SimError::TooLarge)?;
         std::fs::write(path, &rec[..n])?;
         Ok(())
     }
@@ -599,29 +276,6 @@ impl Simulator {
 
     fn encoder_counts(&self) -> [i64; MAX_SERVOS] {
         counts_of(&self.servos)
-    }
-
-    /// Writes a CSV trace row per tick to `out` from now on (header first).
-    pub fn trace_to(&mut self, mut out: Box<dyn Write + Send>) -> Result<()> {
-        let n = self.ctrl.machine().joints.len();
-        let mut header = String::from("t_s,line,x,y,z,a,b,c");
-        for j in 1..=n {
-            header += &format!(",q{j}");
-        }
-        for j in 1..=n {
-            header += &format!(",fb{j}");
-        }
-        writeln!(out, "{header}")?;
-        self.trace = Some(out);
-        Ok(())
-    }
-
-    /// Flushes the trace, if any.
-    pub fn finish_trace(&mut self) -> Result<()> {
-        if let Some(t) = self.trace.as_mut() {
-            t.flush()?;
-        }
-        Ok(())
     }
 
     /// Position of joint `j` as its drive reports it, axis units.
@@ -727,33 +381,6 @@ impl Simulator {
             }
         }
         (home, limit)
-    }
-
-    fn apply_injections(&mut self) {
-        let now = self.time_s();
-        let mut k = 0;
-        while k < self.injections.len() {
-            let i = self.injections[k];
-            if i.kind == FaultKind::LinkLoss || i.at_s > now {
-                k += 1;
-                continue;
-            }
-            self.injections.remove(k);
-            let j = i.joint.unwrap_or(0);
-            match i.kind {
-                FaultKind::EStop => self.forced.estop = true,
-                FaultKind::Limit => self.forced.limit |= 1 << j,
-                FaultKind::DriveFault => self.forced.drive_fault |= 1 << j,
-                FaultKind::FollowingError => {
-                    if let Drive::Servo { channel } = self.ctrl.machine().joints[j].drive {
-                        if let Some(s) = self.servos[channel as usize].as_mut() {
-                            s.jam();
-                        }
-                    }
-                }
-                FaultKind::LinkLoss => {}
-            }
-        }
     }
 
     /// Each servo channel's amplifier fault input, from the injected drive faults of
@@ -876,35 +503,6 @@ impl Simulator {
         }
         Ok(())
     }
-
-    /// The trace row of the current state.
-    pub fn trace_row(&self) -> TraceRow {
-        let m = self.ctrl.machine();
-        let mut pose = [0.0; 6];
-        for (i, p) in pose.iter_mut().enumerate() {
-            *p = to_user(self.ctrl.pose()[i], pkmc::config::axis_is_rotary(i));
-        }
-        let n = m.joints.len().min(MAX_JOINTS);
-        TraceRow {
-            t_s: self.ticks as f64 * TICK_NS as f64 * 1e-9,
-            line: self.ctrl.line(),
-            pose,
-            joints: (0..n)
-                .map(|j| to_user(self.ctrl.joints()[j], m.joints[j].rotary))
-                .collect(),
-            feedback: (0..n)
-                .map(|j| to_user(self.feedback(j), m.joints[j].rotary))
-                .collect(),
-        }
-    }
-}
-
-fn write_row(out: &mut dyn Write, r: &TraceRow) -> std::io::Result<()> {
-    write!(out, "{:.6},{}", r.t_s, r.line)?;
-    for v in r.pose.iter().chain(&r.joints).chain(&r.feedback) {
-        write!(out, ",{v:.9}")?;
-    }
-    writeln!(out)
 }
 
 #[cfg(test)]
@@ -933,51 +531,28 @@ mod tests {
     }
 
     #[test]
-    fn a_step_too_soon_after_a_dir_change_is_a_violation() {
-        let mut d = SimStepper::new(0, StepTiming::PACSCI_6410, true);
-        d.dir(1_000, false);
-        d.pulse(20_000, 500);
-        assert_eq!(d.violation_count, 1);
-        assert_eq!(d.violations[0].rule, "DIR setup before STEP");
-        d.pulse(20_100, 100);
-        assert_eq!(d.violation_count, 4); // setup still short, rate, pulse width
-        assert_eq!(d.position, -2);
-    }
-
-    #[test]
-    fn injections_parse_and_bad_ones_say_why() {
-        let i: Injection = "limit:2@1.5".parse().unwrap();
-        assert_eq!(
-            i,
-            Injection {
-                kind: FaultKind::Limit,
-                joint: Some(2),
-                at_s: 1.5
-            }
-        );
-        assert_eq!(
-            "estop@0".parse::<Injection>().unwrap().kind,
-            FaultKind::EStop
-        );
-        let e = "smoke@1".parse::<Injection>().unwrap_err();
-        assert!(e.contains("unknown fault \"smoke\""), "{e}");
-        assert!("estop:1@1".parse::<Injection>().is_err());
-        assert!("limit@-1".parse::<Injection>().is_err());
-        assert!("limit"
-            .parse::<Injection>()
-            .unwrap_err()
-            .contains("no @SECONDS"));
-    }
-
-    #[test]
-    fn a_following_error_cannot_be_injected_into_a_stepper() {
-        let mut sim = Simulator::new(MachineConfig::cartesian_xyz()).unwrap();
-        let e = sim
-            .inject(&["following-error:1@1".parse().unwrap()])
-            .unwrap_err();
+    fn a_simulator_booting_from_its_flash_file_keeps_the_machine_files_plants() {
+        use crate::analysis::contour_study::SEED_B;
+        let file: crate::machine_file::MachineFile = toml::from_str(SEED_B).unwrap();
+        let machine = file.to_config().unwrap();
+        let plants: Vec<_> = file.joints.iter().map(|j| j.plant.clone()).collect();
         assert!(
-            format!("{e}").contains("joint 1 of cartesian-xyz is a stepper"),
-            "{e}"
+            plants.iter().any(Option::is_some),
+            "seed B has servo plants"
         );
+        let flash = std::env::temp_dir().join(format!("pkmc-flash-{}.bin", std::process::id()));
+        let _ = std::fs::remove_file(&flash);
+        let booted = Simulator::with_flash(flash.clone(), machine.clone(), plants.clone()).unwrap();
+        let direct = Simulator::with_plants(machine.clone(), plants, [0; MAX_JOINTS]).unwrap();
+        let default = Simulator::new(machine).unwrap();
+        let plant_of = |s: &Simulator| {
+            s.servos
+                .iter()
+                .map(|d| d.as_ref().map(SimServo::plant).cloned())
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(plant_of(&booted), plant_of(&direct));
+        assert_ne!(plant_of(&booted), plant_of(&default));
+        let _ = std::fs::remove_file(&flash);
     }
 }

@@ -23,8 +23,22 @@
 //! the same damping ratio, normalised so the low-frequency response changes by the
 //! gain factor alone.
 
-use anyhow::{bail, Result};
 use serde::Deserialize;
+
+/// Why a transfer function is refused; each message names its field of the machine
+/// file's `plant` table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum PlantError {
+    /// A coefficient is NaN or infinite.
+    #[error("plant: coefficients must be finite numbers")]
+    NotFinite,
+    /// The denominator's order is 0 or above [`MAX_ORDER`].
+    #[error("plant.den: order must be 1..={MAX_ORDER}")]
+    Order,
+    /// The numerator is zero or of higher order than the denominator.
+    #[error("plant.num: must be non-zero and of order at most the denominator's")]
+    Numerator,
+}
 
 /// A servo joint's `plant = { ... }` table in a machine file.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
@@ -171,16 +185,16 @@ impl Mismatch {
 impl TransferFunction {
     /// Checks the coefficients: finite, a non-zero denominator of order 1..=
     /// [`MAX_ORDER`], and a proper numerator.
-    pub fn new(num: &[f64], den: &[f64]) -> Result<Self> {
+    pub fn new(num: &[f64], den: &[f64]) -> Result<Self, PlantError> {
         if num.iter().chain(den).any(|c| !c.is_finite()) {
-            bail!("plant: coefficients must be finite numbers");
+            return Err(PlantError::NotFinite);
         }
         let (num, den) = (trim(num), trim(den));
         if den.len() < 2 || den.len() > MAX_ORDER + 1 {
-            bail!("plant.den: order must be 1..={MAX_ORDER}");
+            return Err(PlantError::Order);
         }
         if num.is_empty() || num.len() > den.len() {
-            bail!("plant.num: must be non-zero and of order at most the denominator's");
+            return Err(PlantError::Numerator);
         }
         Ok(Self { num, den })
     }
