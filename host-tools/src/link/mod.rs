@@ -58,6 +58,7 @@ mod client;
 mod error;
 mod stream;
 mod transport;
+mod window;
 
 use client::PendingControl;
 pub use client::{ClientStats, JobEnd, JobHooks, LinkView, NakCounts, NoHooks};
