@@ -1,0 +1,170 @@
+//! The machine-readable summary of a job (`--report json`) and its exit code.
+
+use super::{exit, SimOutcome};
+use crate::analysis::plot::lines_digest;
+use crate::link::{ClientStats, JobEnd};
+use crate::sim::faults::FaultReport;
+use pkmc::config::{axis_is_rotary, MachineConfig, AXIS_NAMES};
+use pkmc::protocol::{Alarm, Status};
+use pkmc::units::{to_user, TICK_NS};
+use serde::Serialize;
+
+/// The NC lines a simulated job executed.
+#[derive(Clone, Debug, Serialize, PartialEq, Eq)]
+pub struct LinesExecuted {
+    /// Distinct lines in execution order (consecutive repeats merged).
+    pub count: usize,
+    /// FNV-1a digest of that sequence ([`lines_digest`]).
+    pub digest: String,
+}
+
+/// The machine-readable summary of a job.
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// Machine name.
+    pub machine: String,
+    /// Program file (or the MDI line).
+    pub program: String,
+    /// "done", "alarm", "aborted" or "stopped".
+    pub result: String,
+    /// Controller state at the end.
+    pub final_state: String,
+    /// Final commanded pose: X Y Z in mm, A B C in degrees.
+    pub final_pose: std::collections::BTreeMap<String, f64>,
+    /// Final commanded joints, mm or degrees.
+    pub final_joints: Vec<f64>,
+    /// Final drive positions (simulator only), steps or counts.
+    pub final_joint_steps: Option<Vec<i64>>,
+    /// Blocks sent.
+    pub blocks_sent: usize,
+    /// Blocks the controller executed.
+    pub blocks_executed: u32,
+    /// Motion time on the controller, s (for `--check`, the planned run time).
+    pub run_time_s: f64,
+    /// Alarms, described.
+    pub alarms: Vec<String>,
+    /// NC line of the alarm, if any.
+    pub alarm_line: Option<u32>,
+    /// Cause of the alarm, if any (`EStop`, `LimitSwitch`, `DriveFault`, …).
+    pub alarm_cause: Option<String>,
+    /// Joint the alarm names, 1-based, if any.
+    pub alarm_joint: Option<u8>,
+    /// Simulated time the alarm was raised, s (simulator only).
+    pub alarm_time_s: Option<f64>,
+    /// Drive timing breaches (simulator only).
+    pub drive_violations: Option<u64>,
+    /// Link counters of the client.
+    pub link: ClientStats,
+    /// Frames the (simulated) controller found corrupt.
+    pub controller_corrupt_frames: Option<u32>,
+    /// Injected faults and what became of them (`--link-faults`).
+    pub faults: Option<FaultReport>,
+    /// NC lines executed (simulator only).
+    pub lines_executed: Option<LinesExecuted>,
+    /// Pre-flight (`--check`): poses sampled along the path and the smallest
+    /// singularity margin met, with its NC line (see [`crate::analysis::preflight`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub preflight: Option<PreflightSummary>,
+}
+
+/// What `--check` reports of the pre-flight.
+#[derive(Clone, Debug, Serialize)]
+pub struct PreflightSummary {
+    /// Poses checked through the kinematics.
+    pub samples: usize,
+    /// Smallest singularity margin met (1 for a Cartesian machine, 0 at a singularity).
+    pub min_singularity_margin: Option<f64>,
+    /// NC line where it was met.
+    pub min_margin_line: Option<u32>,
+}
+
+impl Report {
+    /// Builds the report from the final status.
+    pub fn new(
+        machine: &MachineConfig,
+        program: &str,
+        blocks: usize,
+        end: &JobEnd,
+        status: &Status,
+        sim: Option<&SimOutcome>,
+        link: ClientStats,
+    ) -> Self {
+        let final_pose = (0..6)
+            .map(|i| {
+                (
+                    AXIS_NAMES[i].to_ascii_lowercase().to_string(),
+                    to_user(status.pose[i], axis_is_rotary(i)),
+                )
+            })
+            .collect();
+        let final_joints = machine
+            .joints
+            .iter()
+            .enumerate()
+            .map(|(j, jc)| to_user(status.joints[j], jc.rotary))
+            .collect();
+        let alarm = match end {
+            JobEnd::Alarm(a) => Some(*a),
+            _ => status.alarm,
+        };
+        Report {
+            machine: machine.name.to_string(),
+            program: program.to_string(),
+            result: match end {
+                JobEnd::Done => "done",
+                JobEnd::Alarm(_) => "alarm",
+                JobEnd::Aborted => "aborted",
+                JobEnd::Stopped => "stopped",
+                JobEnd::Paused(_) => "paused",
+            }
+            .into(),
+            final_state: format!("{:?}", status.state),
+            final_pose,
+            final_joints,
+            final_joint_steps: sim.map(|s| s.joint_steps.clone()),
+            blocks_sent: blocks,
+            blocks_executed: status.blocks_done,
+            run_time_s: status.motion_ticks as f64 * TICK_NS as f64 * 1e-9,
+            alarms: alarm.iter().map(describe_alarm).collect(),
+            alarm_line: alarm.map(|a| a.line),
+            alarm_cause: alarm.map(|a| format!("{:?}", a.cause)),
+            alarm_joint: alarm
+                .filter(|a| a.joint != pkmc::protocol::NO_JOINT)
+                .map(|a| a.joint + 1),
+            alarm_time_s: sim.and_then(|s| s.alarm_time_s),
+            drive_violations: sim.map(|s| s.violation_count),
+            link,
+            controller_corrupt_frames: sim.map(|s| s.corrupt_frames),
+            faults: sim.and_then(|s| s.faults),
+            lines_executed: sim.map(|s| LinesExecuted {
+                count: s.recorder.lines.len(),
+                digest: lines_digest(&s.recorder.lines),
+            }),
+            preflight: None,
+        }
+    }
+
+    /// The exit code this outcome implies.
+    pub fn exit_code(&self) -> i32 {
+        match self.result.as_str() {
+            "alarm" => exit::ALARM,
+            "aborted" | "stopped" => exit::STOPPED,
+            "paused" => exit::HELD,
+            _ if self.drive_violations.unwrap_or(0) > 0 => exit::ALARM,
+            _ if self.final_state != "Idle" => exit::ALARM,
+            _ => exit::OK,
+        }
+    }
+}
+
+/// An alarm in words: cause, joint and NC line.
+pub fn describe_alarm(a: &Alarm) -> String {
+    let mut s = format!("{:?}", a.cause);
+    if a.joint != pkmc::protocol::NO_JOINT {
+        s += &format!(" on joint {}", a.joint as usize + 1);
+    }
+    if a.line != 0 {
+        s += &format!(" at line {}", a.line);
+    }
+    s
+}
