@@ -88,6 +88,9 @@ pub const HELLO_RESEND_AFTER: Duration = Duration::from_millis(300);
 pub const MIN_WINDOW: usize = 2;
 /// Longest wait in one read while nothing else is due.
 const READ_WAIT: Duration = Duration::from_millis(5);
+/// Simulated time, ticks (10 s), that a simulated controller may say it is moving
+/// without progress before the job is stopped as stalled. The longest legitimate
+/// standstill while moving is about 1 s (the slowest feed, 1 nm/s, moves the pose one
 /// nm a second); a dwell's own time is added to this; servo settling happens at rest.
 pub const STALL_TICKS: u64 = 10 * pkmc::units::TICK_HZ as u64;
 

@@ -54,9 +54,6 @@ pub const PACE_BELOW_MS: u32 = 500;
 /// How far a paced [`serve`] that fell behind the wall clock catches up, ticks run
 /// back to back; beyond that simulated time lags (as a slower clock would).
 pub const PACE_CATCH_UP: Duration = Duration::from_millis(3);
-/// Simulated time, ticks (10 s), that a simulated controller may say it is moving
-/// without progress before the job is stopped as stalled. The longest legitimate
-/// standstill while moving is about 1 s (the slowest feed, 1 nm/s, moves the pose one
 
 /// The simulator in this process, on its simulated clock, without a port: bytes
 /// written go straight into the controller; a read runs ticks until the controller
