@@ -20,6 +20,9 @@ pub const MAX_SERVOS: usize = 4;
 /// counters), 3–5 on TIM15/TIM16/TIM17 and 6 on HRTIM1 timer A (8-bit). A machine
 /// needing more is refused rather than losing steps.
 pub const BOARD_STEPS_PER_TICK: [u32; MAX_STEPPERS] = [65_536, 65_536, 65_536, 256, 256, 256, 256];
+/// Most ticks of smoothing, the interpolator's moving-average window
+/// ([`MotionConfig::smoothing_ticks`], [`crate::interp`]).
+pub const MAX_WINDOW: usize = 32;
 /// Axis names in pose order.
 pub const AXIS_NAMES: [char; AXES] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
 
@@ -611,7 +614,7 @@ pub struct MachineConfig {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct MotionConfig {
     /// Jerk limitation: the path distance is averaged over this many ticks (a power
-    /// of two, at most [`crate::interp::MAX_WINDOW`]); 1 gives plain trapezoids. With
+    /// of two, at most [`MAX_WINDOW`]); 1 gives plain trapezoids. With
     /// a window of w ticks every axis's and joint's jerk stays below 3·aᵢ/(w·T).
     pub smoothing_ticks: u8,
 }
@@ -703,7 +706,7 @@ impl MachineConfig {
             return Err(ConfigError::NoJoints);
         }
         let w = self.motion.smoothing_ticks as usize;
-        if !w.is_power_of_two() || w > crate::interp::MAX_WINDOW {
+        if !w.is_power_of_two() || w > MAX_WINDOW {
             return Err(ConfigError::Smoothing);
         }
         for (i, l) in self.axes.iter().enumerate() {
