@@ -27,6 +27,15 @@ mod trig;
 pub use root::{isqrt, isqrt_floor, isqrt_wide, sqrt_f32, sqrt_f32_soft, u128_to_f32};
 pub use trig::{mulhr, shr_round, sincos, ONE_Q31};
 
+/// The tests' pseudo-random sequence (Knuth's MMIX LCG): the next value of `state`.
+#[cfg(test)]
+fn lcg(state: &mut u64) -> u64 {
+    *state = state
+        .wrapping_mul(6_364_136_223_846_793_005)
+        .wrapping_add(1_442_695_040_888_963_407);
+    *state
+}
+
 /// Square root, correctly rounded (the FPU's `vsqrt.f32` on the MCU).
 #[inline(always)]
 pub fn sqrtf(x: f32) -> f32 {

@@ -172,13 +172,7 @@ pub fn isqrt_floor(x: u128) -> u128 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn lcg(state: &mut u64) -> u64 {
-        *state = state
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        *state
-    }
+    use crate::math::lcg;
 
     #[test]
     fn the_square_root_is_within_0_51_of_the_true_root() {

@@ -130,13 +130,7 @@ fn sincos_octant(r: i64) -> (i32, i32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn lcg(state: &mut u64) -> u64 {
-        *state = state
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1_442_695_040_888_963_407);
-        *state
-    }
+    use crate::math::lcg;
 
     #[test]
     fn sine_and_cosine_are_within_7e_10_everywhere() {
