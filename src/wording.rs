@@ -4,9 +4,10 @@
 //! The phrases are short and lower-case, those the host tools print (the machine
 //! file's refusals, the pre-flight findings), so that a message reads the same from
 //! the simulator, the pre-flight check, the link and the firmware's log. Joints are
-//! named q1, q2, ... as in the pre-flight findings, except in [`ConfigError`], whose
-//! texts name the machine file's fields (`joints[0]`, 0-based;
-//! [`ConfigError::with_joint_names`] adds the file's joint names).
+//! named q1, q2, ... as in the pre-flight findings, except in an [`Alarm`] (`joint 2`,
+//! 1-based, as the job report writes it) and in [`ConfigError`], whose texts name the
+//! machine file's fields (`joints[0]`, 0-based; [`ConfigError::with_joint_names`] adds
+//! the file's joint names).
 //!
 //! Only formatting: nothing here runs on the tick or receive paths. Each text is
 //! written once, against [`Out`], which either formatter implements.
@@ -139,14 +140,13 @@ impl Words for AlarmCause {
     }
 }
 
-/// Cause, joint (1-based, as `q`) and NC line: `following error on joint q2 at line
-/// 40`.
+/// Cause, joint (1-based) and NC line: `following error on joint 2 at line 40`.
 impl Words for Alarm {
     fn words(&self, o: &mut dyn Out) -> fmt::Result {
         self.cause.words(o)?;
         if self.joint != NO_JOINT {
             o.str(" on joint ")?;
-            joint_q(o, self.joint as i64)?;
+            o.num(self.joint as i64 + 1)?;
         }
         if self.line != 0 {
             o.str(" at line ")?;
@@ -512,7 +512,7 @@ mod tests {
         ]);
         assert_eq!(
             alarm(1, 40).to_string(),
-            "following error on joint q2 at line 40"
+            "following error on joint 2 at line 40"
         );
     }
 
