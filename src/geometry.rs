@@ -8,7 +8,7 @@
 //! start radius to the end radius (an end within tolerance of the circle makes a gentle
 //! spiral, as LinuxCNC does), and the helix axis and A B C move linearly with s. The
 //! in-plane position is centre + r·(cos φ, sin φ) with the kinematics' fixed-point
-//! [`crate::kinematics::fixed::sincos`] (Q31, within 7·10⁻¹⁰).
+//! [`crate::math::sincos`] (Q31, within 7·10⁻¹⁰).
 //!
 //! Path length S is measured over X Y Z (arc: sqrt((r̄·|sweep|)² + helix²)); a move of
 //! rotary axes only is measured in n° instead.
@@ -570,7 +570,7 @@ impl Course {
                 // The angle as a signed fraction of a turn, then in n° within ±180°
                 // (the sine's fast path).
                 let turn = (phi as i64 as i128 * 360_000_000_000) >> 64;
-                let (sin, cos) = crate::kinematics::fixed::sincos(turn as i64);
+                let (sin, cos) = crate::math::sincos(turn as i64);
                 let (i, j, _) = plane.axes();
                 pose[i] = center[0] + ((r as i128 * cos as i128 + (1 << 30)) >> 31) as i64;
                 pose[j] = center[1] + ((r as i128 * sin as i128 + (1 << 30)) >> 31) as i64;
@@ -611,8 +611,8 @@ impl Path {
                 let dphi_ds = phi_rate as f64 / 65_536.0 / TURN_Q64 * core::f64::consts::TAU;
                 let phi = phi0.wrapping_add(((phi_rate * s as i128) >> 32) as u64);
                 let turn = (phi as i64 as i128 * 360_000_000_000) >> 64;
-                let (sin, cos) = crate::kinematics::fixed::sincos(turn as i64);
-                let q31 = 2_147_483_648.0;
+                let (sin, cos) = crate::math::sincos(turn as i64);
+                let q31 = crate::math::ONE_Q31 as f64;
                 let (i, j, _) = plane.axes();
                 t[i] = (-r * dphi_ds * (sin as f64 / q31)) as f32;
                 t[j] = (r * dphi_ds * (cos as f64 / q31)) as f32;

@@ -23,6 +23,7 @@
 //! travel fails the cycle.
 
 use crate::config::{Homing, JointConfig, MAX_JOINTS, MAX_SERVOS};
+use crate::math::isqrt_floor;
 use crate::units::TICK_HZ;
 
 /// Where one joint is in the cycle.
@@ -92,22 +93,6 @@ struct Axis {
 pub struct Homer {
     axes: [Axis; MAX_JOINTS],
     active: bool,
-}
-
-/// ⌊√x⌋.
-pub fn isqrt(x: u128) -> u128 {
-    if x < 2 {
-        return x;
-    }
-    // Newton from above converges monotonically.
-    let mut r = 1u128 << (128 - x.leading_zeros()).div_ceil(2);
-    loop {
-        let next = (r + x / r) / 2;
-        if next >= r {
-            return r;
-        }
-        r = next;
-    }
 }
 
 impl Homer {
@@ -218,8 +203,9 @@ impl Homer {
                     } else {
                         (jc.limits.max_velocity / 10).max(1)
                     };
-                    let brake = isqrt(2 * jc.limits.max_accel as u128 * d.unsigned_abs() as u128)
-                        .min(i64::MAX as u128) as i64;
+                    let brake =
+                        isqrt_floor(2 * jc.limits.max_accel as u128 * d.unsigned_abs() as u128)
+                            .min(i64::MAX as u128) as i64;
                     d.signum() * vmax.min(brake)
                 }
                 _ => 0,
@@ -276,26 +262,6 @@ impl Homer {
 mod tests {
     use super::*;
     use crate::config::MachineConfig;
-
-    #[test]
-    fn the_integer_square_root_is_exact() {
-        for x in [
-            0u128,
-            1,
-            2,
-            3,
-            4,
-            15,
-            16,
-            17,
-            1 << 70,
-            (1 << 70) - 1,
-            u64::MAX as u128,
-        ] {
-            let r = isqrt(x);
-            assert!(r * r <= x && (r + 1) * (r + 1) > x, "{x}: {r}");
-        }
-    }
 
     /// Home switches: active beyond `switch_at` in the search direction, where the
     /// joints really are (`q + offset`).

@@ -99,8 +99,9 @@ pub struct Executor {
     block_start: i64,
 }
 
-/// Most ticks of smoothing (the moving-average window).
-pub const MAX_WINDOW: usize = 32;
+/// Most ticks of smoothing (the moving-average window); defined with the machine
+/// configuration that it bounds (`motion.smoothing_ticks`).
+pub use crate::config::MAX_WINDOW;
 
 /// The smoothing window in force for a request of `ticks`: a power of two, at most
 /// [`MAX_WINDOW`] (1: none).

@@ -35,3 +35,4 @@ pub mod servo;
 pub mod stepper;
 pub mod store;
 pub mod units;
+pub mod wording;

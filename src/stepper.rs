@@ -158,8 +158,7 @@ impl StepScheduler {
 /// many fit and the train.
 fn plan_train(want: u64, start_ns: u32, timing: &StepTiming) -> (u32, StepTrain) {
     let window = TICK_NS.saturating_sub(start_ns);
-    let min_interval = timing.min_interval_ns().max(2 * timing.min_pulse_ns).max(1);
-    let fits = (window / min_interval) as u64;
+    let fits = timing.steps_in_tick_after(start_ns) as u64;
     let count = want.min(fits) as u32;
     if count == 0 {
         return (0, StepTrain::default());

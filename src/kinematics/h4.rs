@@ -35,10 +35,11 @@
 //! after a step of at most [`FINAL_STEP`]: 2 iterations from the pose of the previous
 //! 1 ms period.
 
-use super::fixed::{i64_to_f32, isqrt, isqrt_wide, round_f32, sincos, NDEG_PER_RAD, ONE_Q31};
+use super::fixed::{round_f32, NDEG_PER_RAD};
 use super::solve::solve;
 use super::{Joints, Pose, Unreachable, FINAL_STEP, MAX_ITERATIONS};
 use crate::config::H4TableGeometry;
+use crate::math::{i64_to_f32, isqrt, isqrt_wide, sincos, ONE_Q31};
 
 /// Sub-nanometre bits of the intermediate positions: half nanometres.
 const SUB: u32 = 1;

@@ -32,10 +32,11 @@
 //! nm), solves with partial pivoting, applies the rounded step and stops after a step of
 //! at most [`FINAL_STEP`]: 2 iterations from the pose of the previous 1 ms period.
 
-use super::fixed::{self, i64_to_f32, isqrt, isqrt_wide, mulhr, round_f32, sincos, NDEG_PER_RAD};
+use super::fixed::{self, round_f32, NDEG_PER_RAD};
 use super::solve::solve;
 use super::{Joints, Pose, Unreachable, FINAL_STEP, MAX_ITERATIONS};
 use crate::config::HexapodGeometry;
+use crate::math::{i64_to_f32, isqrt, isqrt_wide, mulhr, sincos};
 
 /// Sub-nanometre bits of the leg vectors: half nanometres.
 const SUB: u32 = 1;

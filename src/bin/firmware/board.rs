@@ -67,13 +67,11 @@ use embassy_stm32::timer::{
 };
 use embassy_stm32::usb::{self, Driver};
 use embassy_stm32::{bind_interrupts, Config, Peri, Peripherals};
-use pkmc::config::MAX_SERVOS;
+use pkmc::config::{BOARD_STEPS_PER_TICK, MAX_SERVOS};
 use pkmc::servo::{DAC_MID, SERVO_HZ};
 
 use crate::encoders::Encoders;
-use crate::steppers::{
-    HrStepTimer, StepChannel, StepOutput, StepTimer, Steppers, REP_ADVANCED, REP_COMPACT,
-};
+use crate::steppers::{periods, HrStepTimer, StepChannel, StepOutput, StepTimer, Steppers};
 
 /// USB vendor ID: pid.codes, the open-source vendor ID.
 pub const USB_VID: u16 = 0x1209;
@@ -272,6 +270,30 @@ pub const CONFIG_PAGE_OFFSET: u32 = 508 * 1024;
 /// Size of that region (two 2 KB pages, erased together).
 pub const CONFIG_PAGE_BYTES: u32 = 4 * 1024;
 
+/// Steps per tick of stepper channel `$channel`, whose timer's repetition-counter
+/// register `$reg` returns: [`capacity`] evaluated at compile time (a constant item,
+/// which `cargo check` evaluates too).
+macro_rules! steps_per_tick {
+    ($channel:literal, $reg:expr) => {{
+        const STEPS: u32 = capacity($channel, periods(|| $reg));
+        STEPS
+    }};
+}
+
+/// Steps per tick of stepper channel `channel`, whose timer's repetition counter
+/// counts `periods` ([`periods`]): checked, at compile time, against the core's
+/// [`BOARD_STEPS_PER_TICK`], by which machines are validated.
+const fn capacity(channel: usize, periods: u32) -> u32 {
+    assert!(
+        periods == BOARD_STEPS_PER_TICK[channel],
+        "a stepper channel's timer disagrees with pkmc::config::BOARD_STEPS_PER_TICK"
+    );
+    periods
+}
+
+/// Stepper channel 6 is HRTIM1 timer A ([`hrtim_step`]).
+const _: u32 = capacity(6, periods(|| pac::HRTIM1.tim(0).rep()));
+
 /// Sets up every pin, timer and converter of the pin map, the embassy time base and
 /// the watchdog.
 ///
@@ -287,32 +309,32 @@ pub fn init(p: Peripherals) -> Board {
     let channels = [
         // 0: TIM1_CH1 on PA8 (AF6).
         StepChannel::new(
-            step_timer::<_, Ch1>(p.TIM1, p.PA8, REP_ADVANCED),
+            step_timer::<_, Ch1>(p.TIM1, p.PA8, steps_per_tick!(0, pac::TIM1.rcr())),
             dir(p.PC0.into()),
         ),
         // 1: TIM8_CH4 on PC9 (AF4).
         StepChannel::new(
-            step_timer::<_, Ch4>(p.TIM8, p.PC9, REP_ADVANCED),
+            step_timer::<_, Ch4>(p.TIM8, p.PC9, steps_per_tick!(1, pac::TIM8.rcr())),
             dir(p.PC1.into()),
         ),
         // 2: TIM20_CH3 on PC8 (AF6).
         StepChannel::new(
-            step_timer::<_, Ch3>(p.TIM20, p.PC8, REP_ADVANCED),
+            step_timer::<_, Ch3>(p.TIM20, p.PC8, steps_per_tick!(2, pac::TIM20.rcr())),
             dir(p.PC2.into()),
         ),
         // 3: TIM15_CH1 on PB14 (AF1).
         StepChannel::new(
-            step_timer::<_, Ch1>(p.TIM15, p.PB14, REP_COMPACT),
+            step_timer::<_, Ch1>(p.TIM15, p.PB14, steps_per_tick!(3, pac::TIM15.rcr())),
             dir(p.PC3.into()),
         ),
         // 4: TIM16_CH1 on PB4 (AF1).
         StepChannel::new(
-            step_timer::<_, Ch1>(p.TIM16, p.PB4, REP_COMPACT),
+            step_timer::<_, Ch1>(p.TIM16, p.PB4, steps_per_tick!(4, pac::TIM16.rcr())),
             dir(p.PC4.into()),
         ),
         // 5: TIM17_CH1 on PA7 (AF1).
         StepChannel::new(
-            step_timer::<_, Ch1>(p.TIM17, p.PA7, REP_COMPACT),
+            step_timer::<_, Ch1>(p.TIM17, p.PA7, steps_per_tick!(5, pac::TIM17.rcr())),
             dir(p.PC5.into()),
         ),
         // 6: HRTIM1 timer A output 2 on PA9 (AF13).

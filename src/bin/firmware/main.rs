@@ -423,7 +423,7 @@ mod firmware {
         let servo = servo_period::stats();
         info!(
             "state {} ticks {} link corrupt {} tx_dropped {} steps {} servo periods {} late_ticks {} fault {}",
-            state_name(state),
+            state,
             ticks,
             link.corrupt,
             link.tx_dropped,
@@ -437,19 +437,6 @@ mod firmware {
                 "inputs active: e-stop {} limit/home {=u16:#b}",
                 inputs.estop, inputs.limit
             );
-        }
-    }
-
-    /// A short name of `state` for the log (`State` has no defmt formatting).
-    fn state_name(state: State) -> &'static str {
-        if state == State::Idle {
-            "idle"
-        } else if state == State::Running {
-            "running"
-        } else if state == State::Alarm {
-            "alarm"
-        } else {
-            "other"
         }
     }
 }

@@ -83,26 +83,58 @@
 //! edge lies further out starts its first edge at that bound instead
 //! (`late_first_edges`, shortening the DIR-setup time seen by the drive; the core
 //! plans every train to fit, so this is counted in case);
-//! (2) a channel takes at most its repetition-counter capacity per tick (65 536 on
-//! TIM1/8/20, 256 on TIM15/16/17 and HRTIM1), the excess is not emitted
-//! (`capped_steps`); the core refuses machines that could need more
-//! (`pkmc::config::BOARD_STEPS_PER_TICK`); (3) channel 6 emits nothing if the HRTIM's
-//! DLL did not calibrate at start-up (`unsupported_steps`).
+//! (2) a channel takes at most its repetition-counter capacity per tick
+//! ([`REP_ADVANCED`] on TIM1/8/20, [`REP_COMPACT`] on TIM15/16/17, [`REP_HRTIM`] on
+//! HRTIM1), the excess is not emitted (`capped_steps`); the core refuses machines that
+//! could need more (`pkmc::config::BOARD_STEPS_PER_TICK`, whose values these are and
+//! which `board.rs` checks channel by channel at compile time); (3) channel 6 emits
+//! nothing if the HRTIM's DLL did not calibrate at start-up (`unsupported_steps`).
 
 use embassy_stm32::gpio::{Level, Output};
-use embassy_stm32::pac::hrtim::{regs::Timxsetr, Hrtim};
+use embassy_stm32::pac::common::{Reg, RW};
+use embassy_stm32::pac::hrtim::regs::{Timxrep, Timxsetr};
+use embassy_stm32::pac::hrtim::Hrtim;
+use embassy_stm32::pac::timer::regs::{Rcr1chCmp, RcrAdv};
 use embassy_stm32::pac::timer::vals::{Ocm, Urs};
 use embassy_stm32::pac::timer::TimAdv;
 use pkmc::config::MAX_STEPPERS;
 use pkmc::controller::Outputs;
 use pkmc::stepper::StepTrain;
 
-/// Periods the repetition counter of TIM1, TIM8 and TIM20 can count (16-bit RCR).
-pub const REP_ADVANCED: u32 = 1 << 16;
+/// Periods the repetition counter of TIM1, TIM8 and TIM20 can count (16-bit RCR): the
+/// core's steps per tick of these channels.
+pub const REP_ADVANCED: u32 = pkmc::config::STEPS_PER_TICK_ADVANCED;
 /// Periods the repetition counter of TIM15, TIM16 and TIM17 can count (8-bit RCR).
-pub const REP_COMPACT: u32 = 1 << 8;
+pub const REP_COMPACT: u32 = pkmc::config::STEPS_PER_TICK_COMPACT;
 /// Periods the repetition counter of an HRTIM timing unit can count (8-bit REPxR).
-pub const REP_HRTIM: u32 = 1 << 8;
+pub const REP_HRTIM: u32 = pkmc::config::STEPS_PER_TICK_HRTIM;
+
+/// A repetition-counter register of the PAC: its field of all ones, plus one, is how
+/// many periods (steps) one train can count.
+pub trait RepCounter: Copy {
+    /// Periods the counter counts.
+    const PERIODS: u32;
+}
+impl RepCounter for RcrAdv {
+    const PERIODS: u32 = RcrAdv(u32::MAX).rep() as u32 + 1;
+}
+impl RepCounter for Rcr1chCmp {
+    const PERIODS: u32 = Rcr1chCmp(u32::MAX).rep() as u32 + 1;
+}
+impl RepCounter for Timxrep {
+    const PERIODS: u32 = Timxrep(u32::MAX).rep() as u32 + 1;
+}
+
+/// [`RepCounter::PERIODS`] of the register that `reg` returns: `reg` is never called,
+/// only its type counts (`periods(|| pac::TIM1.rcr())`).
+pub const fn periods<R: RepCounter>(_reg: fn() -> Reg<R, RW>) -> u32 {
+    R::PERIODS
+}
+
+// The core's capacities are the widths of the PAC's repetition counters.
+const _: () = assert!(RcrAdv::PERIODS == REP_ADVANCED);
+const _: () = assert!(Rcr1chCmp::PERIODS == REP_COMPACT);
+const _: () = assert!(Timxrep::PERIODS == REP_HRTIM);
 
 /// Counter span of the 16-bit timers, ticks.
 const COUNTER_SPAN_TICKS: u32 = 1 << 16;

@@ -13,6 +13,28 @@
 //!   the same numbers every tick, so each gets its reciprocal when the machine loads.
 //! * [`fmin`], [`fmax`]: comparisons inline (ARMv7E-M has no `vminnm`; `f32::min`
 //!   would call a library routine). Neither argument is ever NaN where they are used.
+//! * [`sincos`] (`trig.rs`): sine and cosine of an angle in n° as Q31, for the
+//!   kinematics and the arcs of [`crate::geometry`].
+//! * [`isqrt`], [`isqrt_wide`] (`root.rs`): integer square roots to ±0.51 from the
+//!   correctly rounded single-precision root [`sqrt_f32`]; [`isqrt_floor`], the exact
+//!   floor root off the hot path.
+//! * Conversions between 64-bit integers and `f32` ([`f32_to_i64`], [`i64_to_f32`],
+//!   ...) in one or two hardware conversions.
+
+mod root;
+mod trig;
+
+pub use root::{isqrt, isqrt_floor, isqrt_wide, sqrt_f32, sqrt_f32_soft, u128_to_f32};
+pub use trig::{mulhr, shr_round, sincos, ONE_Q31};
+
+/// The tests' pseudo-random sequence (Knuth's MMIX LCG): the next value of `state`.
+#[cfg(test)]
+fn lcg(state: &mut u64) -> u64 {
+    *state = state
+        .wrapping_mul(6_364_136_223_846_793_005)
+        .wrapping_add(1_442_695_040_888_963_407);
+    *state
+}
 
 /// Square root, correctly rounded (the FPU's `vsqrt.f32` on the MCU).
 #[inline(always)]
@@ -324,5 +346,25 @@ mod conversion_tests {
         }
         assert_eq!(u64_to_f32(u64::MAX), 1.8446744e19);
         assert_eq!(i64_to_f32(-40), -40.0);
+    }
+
+    #[test]
+    fn integer_to_float_conversions_are_accurate_for_any_sign_and_size() {
+        for v in [
+            0i64,
+            1,
+            -1,
+            -40,
+            40,
+            -(1 << 32) + 7,
+            (1 << 40) + 3,
+            i64::MIN,
+            i64::MAX,
+        ] {
+            let want = v as f64;
+            let got = i64_to_f32(v) as f64;
+            assert!((got - want).abs() <= want.abs() * 2.4e-7, "{v}: {got}");
+        }
+        assert_eq!(u64_to_f32(u64::MAX), 1.8446744e19);
     }
 }
