@@ -48,7 +48,7 @@
 
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
 use crate::geometry::{Bend, Course, Form, GeometryError, Path, Shape};
-use crate::kinematics::{Kinematics, MachineKinematics, Unreachable};
+use crate::kinematics::{Jacobian, Kinematics, MachineKinematics, Unreachable};
 use crate::math::{f32_to_i64, fmax, fmin, i64_to_f32, sqrtf, u64_to_f32};
 use crate::protocol::{Aux, Block, Motion, Plan, PlannedBlock};
 use crate::units::TICK_HZ;
@@ -889,24 +889,19 @@ pub enum PushError {
     Geometry(GeometryError),
 }
 
-/// Joint rates per unit of path along `tangent` at `pose`: (IK(p + h·t) − IK(p)) / h.
+/// Joint rates per unit of path along `tangent` at `pose`: q′ = J·t, with the
+/// kinematics' analytic Jacobian J = ∂q/∂p.
 fn joint_rates(
     pose: &[i64; AXES],
     tangent: &[f32; AXES],
     kin: &MachineKinematics,
     n: usize,
 ) -> Result<[f32; MAX_JOINTS], Unreachable> {
-    const H: f32 = 10_000.0; // 10 µm (or 10 µ°) step
-    let mut ahead = *pose;
-    for (a, t) in ahead.iter_mut().zip(tangent) {
-        *a += libm::roundf(t * H) as i64;
-    }
-    let (mut q0, mut q1) = ([0i64; MAX_JOINTS], [0i64; MAX_JOINTS]);
-    kin.inverse(pose, &mut q0)?;
-    kin.inverse(&ahead, &mut q1)?;
+    let mut jac: Jacobian = [[0.0; AXES]; MAX_JOINTS];
+    kin.jacobian(pose, &mut jac)?;
     let mut r = [0f32; MAX_JOINTS];
-    for j in 0..n {
-        r[j] = (q1[j] - q0[j]) as f32 / H;
+    for (r, row) in r.iter_mut().zip(&jac).take(n) {
+        *r = row.iter().zip(tangent).map(|(j, t)| j * t).sum();
     }
     Ok(r)
 }
@@ -916,11 +911,13 @@ fn joint_rates(
 /// curvature.
 ///
 /// A joint moves at q′·v and accelerates at q′·a + q″·v² (q′, q″ its first and second
-/// derivatives along the path, by central differences of the exact inverse
-/// kinematics). Where the q″·v² term matters at the requested speed, each joint's
-/// acceleration budget is split: half for q′·a, half for q″·v² (v ≤ √(aⱼ/(2|q″|))).
-/// On arcs the pose axes get the same split against the centripetal v²/r. Fails when a
-/// sampled pose is out of reach or outside a joint's travel.
+/// derivatives along the path: q′ = J·t from the kinematics' analytic Jacobian, q″ a
+/// central difference of q′, free of the joints' nm rounding that a second difference
+/// of the inverse would divide by h²). Where the q″·v² term matters at the requested
+/// speed, each joint's acceleration budget is split: half for q′·a, half for q″·v²
+/// (v ≤ √(aⱼ/(2|q″|))). On arcs the pose axes get the same split against the
+/// centripetal v²/r. Fails when a sampled pose is out of reach or outside a joint's
+/// travel.
 fn limits_along(
     start: &[i64; AXES],
     path: &Path,
@@ -933,14 +930,13 @@ fn limits_along(
     let len = path.length << 16;
     // Difference step: 0.25 mm, or a quarter of a short block (nm Q16).
     let h = (len / 4).clamp(1 << 16, 250_000 << 16);
-    let h_nm = (h >> 16) as f32;
     let spacing = path.length as f32 / (LIMIT_SAMPLES - 1) as f32;
-    let (mut q0, mut q1, mut q2) = ([0i64; MAX_JOINTS], [0i64; MAX_JOINTS], [0i64; MAX_JOINTS]);
+    let mut q = [0i64; MAX_JOINTS];
     let mut pose = [0i64; AXES];
     for k in 0..LIMIT_SAMPLES {
         let s = (len as i128 * k as i128 / (LIMIT_SAMPLES as i128 - 1)) as i64;
         path.pose_at(start, s, &mut pose);
-        kin.inverse_checked(&pose, &machine.joints, &mut q1)?;
+        kin.inverse_checked(&pose, &machine.joints, &mut q)?;
         let t = path.tangent_at(s);
         for (rate, l) in t.iter().zip(&machine.axes) {
             let r = rate.abs();
@@ -949,21 +945,20 @@ fn limits_along(
                 a = a.min(per_tick2(l.max_accel) / r);
             }
         }
-        // Central differences inside the block.
+        let rate = joint_rates(&pose, &t, kin, n)?;
+        // q″: central difference of the rates inside the block.
         let mid = s.clamp(h.min(len / 2), (len - h).max(len / 2));
-        path.pose_at(start, mid - h.min(mid), &mut pose);
-        kin.inverse(&pose, &mut q0)?;
-        let mut centre = [0i64; AXES];
-        path.pose_at(start, mid, &mut centre);
-        let mut qc = [0i64; MAX_JOINTS];
-        kin.inverse(&centre, &mut qc)?;
-        path.pose_at(start, mid + h, &mut pose);
-        kin.inverse(&pose, &mut q2)?;
+        let (s0, s2) = (mid - h.min(mid), mid + h);
+        path.pose_at(start, s0, &mut pose);
+        let r0 = joint_rates(&pose, &path.tangent_at(s0), kin, n)?;
+        path.pose_at(start, s2, &mut pose);
+        let r2 = joint_rates(&pose, &path.tangent_at(s2), kin, n)?;
+        let span = (s2 - s0) as f32 / 65_536.0;
         for j in 0..n {
             let jc = &machine.joints[j];
-            let d2 = ((q2[j] - 2 * qc[j] + q0[j]) as f32 / (h_nm * h_nm)).abs();
+            let d2 = ((r2[j] - r0[j]) / span).abs();
             // The rate may grow between samples by up to |q″| × half the spacing.
-            let d1 = ((q2[j] - q0[j]) as f32 / (2.0 * h_nm)).abs() + d2 * spacing / 2.0;
+            let d1 = rate[j].abs() + d2 * spacing / 2.0;
             let (vmax, amax) = (
                 per_tick(jc.limits.max_velocity),
                 per_tick2(jc.limits.max_accel),

@@ -32,13 +32,16 @@
 //! the same intermediate values (rows
 //! (−dx/h, −dy/h, 1)·Rx(A) for X Y Z and the bar lever term for θ, scaled to nm at the
 //! lever d), solves it with partial pivoting and applies the rounded step, and stops
-//! after a step of at most [`FINAL_STEP`]: 2 iterations from the pose of the previous
-//! 1 ms period.
+//! after a step of at most [`FINAL_STEP`](super::FINAL_STEP): 2 iterations from the
+//! pose of the previous 1 ms period ([`super::solve::newton`]).
+//!
+//! Jacobian ([`H4Table::jacobian`], for the planner's joint rates): the same rows, θ
+//! rescaled to n°, plus the A column (E turns with the table) and q5 = A.
 
 use super::fixed::{round_f32, NDEG_PER_RAD};
-use super::solve::solve;
-use super::{Joints, Pose, Unreachable, FINAL_STEP, MAX_ITERATIONS};
-use crate::config::H4TableGeometry;
+use super::solve::newton;
+use super::{Joints, Pose, Unreachable};
+use crate::config::{H4TableGeometry, AXES, MAX_JOINTS};
 use crate::math::{i64_to_f32, isqrt, isqrt_wide, sincos, ONE_Q31};
 
 /// Sub-nanometre bits of the intermediate positions: half nanometres.
@@ -114,9 +117,11 @@ impl H4Table {
         }
     }
 
-    /// Joints of `pose`.
-    pub fn inverse(&self, pose: &Pose, joints: &mut Joints) -> Result<(), Unreachable> {
-        let [x, y, z, a, _, theta] = *pose;
+    /// Y and Z of `pose` from the table axis, nm; out of reach beyond the pose range
+    /// (see the module doc).
+    #[inline(always)]
+    fn relative_to_pivot(&self, pose: &Pose) -> Result<(i64, i64), Unreachable> {
+        let [x, y, z, ..] = *pose;
         let (py, pz) = (y.wrapping_sub(self.pivot[0]), z.wrapping_sub(self.pivot[1]));
         if x.unsigned_abs() > self.x_max
             || py.unsigned_abs() > self.yz_max
@@ -124,6 +129,13 @@ impl H4Table {
         {
             return Err(Unreachable::OutOfReach);
         }
+        Ok((py, pz))
+    }
+
+    /// Joints of `pose`.
+    pub fn inverse(&self, pose: &Pose, joints: &mut Joints) -> Result<(), Unreachable> {
+        let [x, _, _, a, _, theta] = *pose;
+        let (py, pz) = self.relative_to_pivot(pose)?;
         let (sa, ca) = sincos(a);
         let (st, ct) = sincos(theta);
         // Rx(A)(p − r) and the bar ends d·(cos θ, sin θ), hn; the products are nm·2^31.
@@ -165,14 +177,8 @@ impl H4Table {
         pose: &Pose,
         mut arm: impl FnMut(usize, [i64; 4]),
     ) -> Result<[i32; 4], Unreachable> {
-        let [x, y, z, a, _, theta] = *pose;
-        let (py, pz) = (y.wrapping_sub(self.pivot[0]), z.wrapping_sub(self.pivot[1]));
-        if x.unsigned_abs() > self.x_max
-            || py.unsigned_abs() > self.yz_max
-            || pz.unsigned_abs() > self.yz_max
-        {
-            return Err(Unreachable::OutOfReach);
-        }
+        let [x, _, _, a, _, theta] = *pose;
+        let (py, pz) = self.relative_to_pivot(pose)?;
         let (sa, ca) = sincos(a);
         let (st, ct) = sincos(theta);
         const SH: u32 = 31 - FINE;
@@ -203,6 +209,65 @@ impl H4Table {
         Ok([sa, ca, st, ct])
     }
 
+    /// One Newton system at `p`: `jac` the analytic Jacobian of carriages q1..q4 over
+    /// X Y Z (nm/nm) and θ (nm per nm of arc at the bar end), `r` the residual
+    /// `joints − q(p)`, nm, from [`Self::eval_fine`]. Returns (sin A, cos A, sin θ,
+    /// cos θ) and per arm ∂q/∂E_x, ∂q/∂E_y (−dx/h, −dy/h).
+    #[inline(always)]
+    fn linearize(
+        &self,
+        p: &Pose,
+        joints: &Joints,
+        jac: &mut [[f32; 4]; 4],
+        r: &mut [f32; 4],
+    ) -> Result<([f32; 4], [[f32; 2]; 4]), Unreachable> {
+        let unit = 1.0 / (1u32 << FINE) as f32;
+        let mut g = [[0.0f32; 2]; 4];
+        let trig = self.eval_fine(p, |i, [dx, dy, h, q]| {
+            let h = i64_to_f32(h);
+            g[i] = [-i64_to_f32(dx) / h, -i64_to_f32(dy) / h];
+            let target = joints[i].wrapping_shl(FINE);
+            r[i] = i64_to_f32(target.wrapping_sub(q)) * unit;
+        })?;
+        let [sa, ca, st, ct] = trig.map(|v| v as f32 / ONE_Q31);
+        for ((row, [gx, gy]), arm) in jac.iter_mut().zip(g).zip(&self.arms) {
+            // ∂q/∂E = (gx, gy, 1); ∂E/∂p = Rx(A); ∂q/∂(dθ) per nm at the bar end.
+            *row = [
+                gx,
+                gy * ca + sa,
+                ca - gy * sa,
+                arm.side as f32 * (gy * ct - gx * st),
+            ];
+        }
+        Ok(([sa, ca, st, ct], g))
+    }
+
+    /// The analytic Jacobian ∂q/∂p at `pose` (see [`super::Jacobian`]): the forward
+    /// kinematics' rows, θ scaled from the bar end to n°, and the A column: E moves by
+    /// ∂(Rx(A)(p − r))/∂A = (0, −E_z, E_y) (E from the table axis) per radian; q5 = A.
+    pub fn jacobian(&self, pose: &Pose, jac: &mut super::Jacobian) -> Result<(), Unreachable> {
+        let (py, pz) = self.relative_to_pivot(pose)?;
+        let (mut rows, mut r) = ([[0.0f32; 4]; 4], [0.0f32; 4]);
+        let ([sa, ca, ..], g) = self.linearize(pose, &[0; MAX_JOINTS], &mut rows, &mut r)?;
+        let (py, pz) = (i64_to_f32(py), i64_to_f32(pz));
+        let (ey, ez) = (ca * py - sa * pz, sa * py + ca * pz);
+        let per_rad = 1.0 / NDEG_PER_RAD as f32;
+        let theta_per_ndeg = self.bar_half as f32 * per_rad;
+        *jac = [[0.0; AXES]; MAX_JOINTS];
+        for ((j, row), [_, gy]) in jac.iter_mut().zip(rows).zip(g) {
+            *j = [
+                row[0],
+                row[1],
+                row[2],
+                (ey - gy * ez) * per_rad,
+                0.0,
+                row[3] * theta_per_ndeg,
+            ];
+        }
+        jac[4][3] = 1.0;
+        Ok(())
+    }
+
     /// Pose of `joints` by Newton iteration from `guess`; returns the iterations used.
     pub fn forward(
         &self,
@@ -210,130 +275,33 @@ impl H4Table {
         guess: &Pose,
         pose: &mut Pose,
     ) -> Result<u8, Unreachable> {
-        let mut p = *guess;
-        p[3] = joints[4];
+        let mut start = *guess;
+        start[3] = joints[4];
         let ndeg_per_nm = NDEG_PER_RAD as f32 / self.bar_half as f32;
-        let unit = 1.0 / (1u32 << FINE) as f32;
-        for it in 1..=MAX_ITERATIONS {
-            let mut g = [[0.0f32; 2]; 4];
-            let mut r = [0.0f32; 4];
-            let trig = self.eval_fine(&p, |i, [dx, dy, h, q]| {
-                let h = i64_to_f32(h);
-                g[i] = [-i64_to_f32(dx) / h, -i64_to_f32(dy) / h];
-                let target = joints[i].wrapping_shl(FINE);
-                r[i] = i64_to_f32(target.wrapping_sub(q)) * unit;
-            })?;
-            let [sa, ca, st, ct] = trig.map(|v| v as f32 / ONE_Q31);
-            let mut jac = [[0.0f32; 4]; 4];
-            for ((row, [gx, gy]), arm) in jac.iter_mut().zip(g).zip(&self.arms) {
-                // ∂q/∂E = (gx, gy, 1); ∂E/∂p = Rx(A); ∂q/∂(dθ) per nm at the bar end.
-                *row = [
-                    gx,
-                    gy * ca + sa,
-                    ca - gy * sa,
-                    arm.side as f32 * (gy * ct - gx * st),
-                ];
-            }
-            solve(&mut jac, &mut r)?;
-            p[0] += round_f32(r[0]);
-            p[1] += round_f32(r[1]);
-            p[2] += round_f32(r[2]);
-            p[5] += round_f32(r[3] * ndeg_per_nm);
-            if r.iter().all(|s| s.abs() <= FINAL_STEP) {
-                *pose = p;
-                return Ok(it);
-            }
-        }
-        Err(Unreachable::NoConvergence)
+        newton(
+            &start,
+            pose,
+            |p, jac, r| self.linearize(p, joints, jac, r).map(|_| ()),
+            |p, r| {
+                p[0] += round_f32(r[0]);
+                p[1] += round_f32(r[1]);
+                p[2] += round_f32(r[2]);
+                p[5] += round_f32(r[3] * ndeg_per_nm);
+            },
+        )
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::{KinematicsConfig, MachineConfig, MAX_JOINTS};
-    use crate::kinematics::reference::{self as re, lcg, real};
+    use crate::config::{MachineConfig, MAX_JOINTS};
+    use crate::kinematics::reference::{self as re, real};
+    use crate::kinematics::suite;
     use proptest::prelude::*;
 
     fn geometry() -> H4TableGeometry {
-        match MachineConfig::h4_table().kinematics {
-            KinematicsConfig::H4Table(g) => g,
-            _ => unreachable!(),
-        }
-    }
-
-    /// Largest joint error (nm) of the fixed-point inverse against the f64 reference.
-    fn ik_error(g: &H4TableGeometry, k: &H4Table, pose: &Pose) -> f64 {
-        let want = re::h4_inverse(g, &real(pose)).expect("reference: reachable");
-        let mut q = [0; MAX_JOINTS];
-        k.inverse(pose, &mut q).expect("fixed point: reachable");
-        assert_eq!(q[4], pose[3]);
-        (0..4)
-            .map(|i| (q[i] as f64 - want[i]).abs())
-            .fold(0.0, f64::max)
-    }
-
-    /// Random pose over the usable box: E within |x|, |y| ≤ 100 mm, |z| ≤ 50 mm of home,
-    /// |θ| ≤ 45°, A in 0..90°.
-    fn random_pose(g: &H4TableGeometry, s: &mut u64) -> Pose {
-        let mut u = |lo: f64, hi: f64| lo + (hi - lo) * lcg(s);
-        let e = [u(-100.0, 100.0), u(-100.0, 100.0), u(-50.0, 50.0)];
-        re::h4_pose_from_head(g, e, u(-45.0, 45.0), u(0.0, 90.0))
-    }
-
-    #[test]
-    fn home_puts_every_carriage_at_475_815_mm() {
-        let m = MachineConfig::h4_table();
-        let k = H4Table::new(&geometry());
-        let mut q = [0; MAX_JOINTS];
-        k.inverse(&m.home, &mut q).unwrap();
-        // sqrt(550² − (190² + 200²)) mm = 475.8150901… mm
-        assert_eq!(
-            q[..5],
-            [475_815_090, 475_815_090, 475_815_090, 475_815_090, 0]
-        );
-    }
-
-    #[test]
-    fn the_inverse_is_within_5_nm_of_the_reference_over_the_usable_box() {
-        let g = geometry();
-        let k = H4Table::new(&g);
-        let mut seed = 1;
-        let mut worst = 0.0f64;
-        let n = 100_000;
-        for _ in 0..n {
-            let p = random_pose(&g, &mut seed);
-            worst = worst.max(ik_error(&g, &k, &p));
-        }
-        eprintln!("H-4 + table inverse: max joint error {worst:.3} nm over {n} poses");
-        assert!(worst <= 5.0, "{worst} nm");
-    }
-
-    proptest! {
-        #![proptest_config(ProptestConfig::with_cases(20_000))]
-        #[test]
-        fn inverse_error_is_at_most_5_nm(
-            x in -100.0..100.0f64, y in -100.0..100.0f64, z in -50.0..50.0f64,
-            theta in -45.0..45.0f64, a in 0.0..90.0f64,
-        ) {
-            let g = geometry();
-            let p = re::h4_pose_from_head(&g, [x, y, z], theta, a);
-            prop_assert!(ik_error(&g, &H4Table::new(&g), &p) <= 5.0);
-        }
-    }
-
-    #[test]
-    fn a_flat_forearm_is_too_near_a_singularity_and_a_far_one_out_of_reach() {
-        let g = geometry();
-        let k = H4Table::new(&g);
-        let mut q = [0; MAX_JOINTS];
-        // E at x = +280 mm: arm 1 (rail at x −250) has ρ ≈ 511 mm: 22° elevation.
-        let flat = re::h4_pose_from_head(&g, [280.0, 0.0, 0.0], 0.0, 0.0);
-        assert_eq!(k.inverse(&flat, &mut q), Err(Unreachable::Singular));
-        let far = re::h4_pose_from_head(&g, [400.0, 0.0, 0.0], 0.0, 0.0);
-        assert_eq!(k.inverse(&far, &mut q), Err(Unreachable::OutOfReach));
-        let absurd = [i64::MAX, 0, 0, 0, 0, 0];
-        assert_eq!(k.inverse(&absurd, &mut q), Err(Unreachable::OutOfReach));
+        suite::h4_geometry(&MachineConfig::h4_table())
     }
 
     proptest! {
@@ -409,65 +377,5 @@ mod tests {
         k.inverse(&[p[0], p[1], p[2], p[3], 0, p[5] - turns], &mut q2)
             .unwrap();
         assert_eq!(q1, q2);
-    }
-
-    /// Runs forward kinematics from a guess one 1 ms period of motion away (200 mm/s in
-    /// a random direction, 90 °/s on θ) and from the true pose, into `stats`.
-    fn fk_case(g: &H4TableGeometry, k: &H4Table, s: &mut u64, stats: &mut re::FkStats) {
-        let p = random_pose(g, s);
-        let mut q = [0; MAX_JOINTS];
-        k.inverse(&p, &mut q).unwrap();
-        let dir = [lcg(s) - 0.5, lcg(s) - 0.5, lcg(s) - 0.5];
-        let norm = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
-        let mut guess = p;
-        for i in 0..3 {
-            guess[i] -= (200_000.0 * dir[i] / norm).round() as i64;
-        }
-        guess[5] -= if lcg(s) < 0.5 {
-            90_000_000
-        } else {
-            -90_000_000
-        };
-        let (mut out, mut at) = ([0; 6], [0; 6]);
-        let it = k.forward(&q, &guess, &mut out).expect("converges");
-        k.forward(&q, &p, &mut at).unwrap();
-        assert_eq!(out[3], p[3]);
-        let mut want = real(&p);
-        let target = [q[0], q[1], q[2], q[3]].map(|v| v as f64);
-        re::newton(
-            |x| re::h4_inverse(g, x).unwrap()[..4].try_into().unwrap(),
-            &target,
-            &mut want,
-            [0, 1, 2, 5],
-        );
-        stats.add(it, &out, &at, &p, &want, &[5]);
-    }
-
-    #[test]
-    fn forward_converges_in_3_iterations_from_the_previous_period() {
-        let g = geometry();
-        let k = H4Table::new(&g);
-        let mut seed = 5;
-        let mut st = re::FkStats::default();
-        let n = 5_000;
-        for _ in 0..n {
-            fk_case(&g, &k, &mut seed, &mut st);
-        }
-        eprintln!(
-            "H-4 + table forward ({n} cases): iterations histogram {:?}; converged to within \
-             {} nm, {} n° of the answer started at the true pose; against the f64 solution \
-             {:.3} nm, {:.0} n°; round trip {} nm",
-            st.hist, st.conv_lin, st.conv_ang, st.lin, st.ang, st.round_trip
-        );
-        assert!(st.max_iterations() <= 3);
-        // Within 1 nm of the answer from any nearby start, and of the exact solution
-        // (C: 954 n° moves a bar end by 1 nm).
-        assert!(
-            st.conv_lin <= 1 && st.conv_ang <= 954,
-            "{} {}",
-            st.conv_lin,
-            st.conv_ang
-        );
-        assert!(st.lin <= 1.0 && st.ang <= 954.0, "{} {}", st.lin, st.ang);
     }
 }

@@ -30,12 +30,14 @@
 //! (row i: the leg direction n_i and (R·b_i × n_i)·u_k for the rotation axes
 //! u_A = R·x̂, u_B = Rz(C)·ŷ, u_C = ẑ, divided by the lever |b|max so all columns are
 //! nm), solves with partial pivoting, applies the rounded step and stops after a step of
-//! at most [`FINAL_STEP`]: 2 iterations from the pose of the previous 1 ms period.
+//! at most [`FINAL_STEP`](super::FINAL_STEP): 2 iterations from the pose of the
+//! previous 1 ms period ([`super::solve::newton`]). [`Hexapod::jacobian`] (for the
+//! planner's joint rates) gives the same rows with the angle columns in nm/n°.
 
 use super::fixed::{self, round_f32, NDEG_PER_RAD};
-use super::solve::solve;
-use super::{Joints, Pose, Unreachable, FINAL_STEP, MAX_ITERATIONS};
-use crate::config::HexapodGeometry;
+use super::solve::newton;
+use super::{Joints, Pose, Unreachable};
+use crate::config::{HexapodGeometry, AXES, MAX_JOINTS};
 use crate::math::{i64_to_f32, isqrt, isqrt_wide, mulhr, sincos};
 
 /// Sub-nanometre bits of the leg vectors: half nanometres.
@@ -93,15 +95,23 @@ impl Hexapod {
         }
     }
 
-    /// Joints of `pose`.
-    pub fn inverse(&self, pose: &Pose, joints: &mut Joints) -> Result<(), Unreachable> {
-        let [x, y, z, a, b, c] = *pose;
+    /// Out of reach beyond the pose range (see the module doc).
+    #[inline(always)]
+    fn in_range(&self, pose: &Pose) -> Result<(), Unreachable> {
+        let [x, y, z, ..] = *pose;
         if x.unsigned_abs() > self.p_max
             || y.unsigned_abs() > self.p_max
             || z.unsigned_abs() > self.p_max
         {
             return Err(Unreachable::OutOfReach);
         }
+        Ok(())
+    }
+
+    /// Joints of `pose`.
+    pub fn inverse(&self, pose: &Pose, joints: &mut Joints) -> Result<(), Unreachable> {
+        self.in_range(pose)?;
+        let [x, y, z, a, b, c] = *pose;
         let (sa, ca) = sincos(a);
         let (sb, cb) = sincos(b);
         let (sc, cc) = sincos(c);
@@ -148,13 +158,8 @@ impl Hexapod {
         pose: &Pose,
         mut leg: impl FnMut(usize, [i64; 3], i64),
     ) -> Result<([[i32; 3]; 3], [i32; 2]), Unreachable> {
+        self.in_range(pose)?;
         let [x, y, z, a, b, c] = *pose;
-        if x.unsigned_abs() > self.p_max
-            || y.unsigned_abs() > self.p_max
-            || z.unsigned_abs() > self.p_max
-        {
-            return Err(Unreachable::OutOfReach);
-        }
         let (sa, ca) = sincos(a);
         let (sb, cb) = sincos(b);
         let (sc, cc) = sincos(c);
@@ -193,6 +198,66 @@ impl Hexapod {
         Ok((r, [sc, cc]))
     }
 
+    /// One Newton system at `p`: `rows` the analytic Jacobian of the legs over X Y Z
+    /// (nm/nm) and A B C (nm per nm of arc at the lever |b|max), `res` the residual
+    /// `joints − q(p)`, nm, from [`Self::eval_fine`].
+    #[inline(always)]
+    fn linearize(
+        &self,
+        p: &Pose,
+        joints: &Joints,
+        rows: &mut [[f32; 6]; 6],
+        res: &mut [f32; 6],
+    ) -> Result<(), Unreachable> {
+        let lever = self.lever as f32;
+        let unit = 1.0 / (1u32 << FINE) as f32;
+        let (rq, [sc, cc]) = self.eval_fine(p, |i, v, len| {
+            let inv = 1.0 / i64_to_f32(len);
+            rows[i][..3].copy_from_slice(&v.map(|c| i64_to_f32(c) * inv));
+            let t = joints[i].wrapping_shl(FINE).wrapping_sub(len);
+            res[i] = i64_to_f32(t) * unit;
+        })?;
+        let rf = rq.map(|row| row.map(|v| v as f32 / fixed::ONE_Q31));
+        let (sc, cc) = (sc as f32 / fixed::ONE_Q31, cc as f32 / fixed::ONE_Q31);
+        for (row, b) in rows.iter_mut().zip(&self.platform) {
+            // R·b / lever (b is stored in quarter nm), then m = (R·b × n); row =
+            // (n, m·u_A, m·u_B, m·u_C) with u_A = R x̂, u_B = Rz(C) ŷ =
+            // (−sin C, cos C, 0), u_C = ẑ.
+            let bf = b.map(|c| c as f32 / (4.0 * lever));
+            let rb = rf.map(|r| r[0] * bf[0] + r[1] * bf[1] + r[2] * bf[2]);
+            let n = [row[0], row[1], row[2]];
+            let m = [
+                rb[1] * n[2] - rb[2] * n[1],
+                rb[2] * n[0] - rb[0] * n[2],
+                rb[0] * n[1] - rb[1] * n[0],
+            ];
+            row[3] = m[0] * rf[0][0] + m[1] * rf[1][0] + m[2] * rf[2][0];
+            row[4] = m[1] * cc - m[0] * sc;
+            row[5] = m[2];
+        }
+        Ok(())
+    }
+
+    /// The analytic Jacobian ∂q/∂p at `pose` (see [`super::Jacobian`]): the forward
+    /// kinematics' rows with the angle columns scaled from arc length at the lever to n°.
+    pub fn jacobian(&self, pose: &Pose, jac: &mut super::Jacobian) -> Result<(), Unreachable> {
+        let (mut rows, mut res) = ([[0.0f32; 6]; 6], [0.0f32; 6]);
+        self.linearize(pose, &[0; MAX_JOINTS], &mut rows, &mut res)?;
+        let nm_per_ndeg = self.lever as f32 / NDEG_PER_RAD as f32;
+        *jac = [[0.0; AXES]; MAX_JOINTS];
+        for (j, row) in jac.iter_mut().zip(rows) {
+            *j = [
+                row[0],
+                row[1],
+                row[2],
+                row[3] * nm_per_ndeg,
+                row[4] * nm_per_ndeg,
+                row[5] * nm_per_ndeg,
+            ];
+        }
+        Ok(())
+    }
+
     /// Pose of `joints` by Newton iteration from `guess`; returns the iterations used.
     pub fn forward(
         &self,
@@ -200,133 +265,34 @@ impl Hexapod {
         guess: &Pose,
         pose: &mut Pose,
     ) -> Result<u8, Unreachable> {
-        let mut p = *guess;
-        let lever = self.lever as f32;
-        let ndeg_per_nm = NDEG_PER_RAD as f32 / lever;
-        let unit = 1.0 / (1u32 << FINE) as f32;
-        for it in 1..=MAX_ITERATIONS {
-            let mut rows = [[0.0f32; 6]; 6];
-            let mut res = [0.0f32; 6];
-            let (rq, [sc, cc]) = self.eval_fine(&p, |i, v, len| {
-                let inv = 1.0 / i64_to_f32(len);
-                rows[i][..3].copy_from_slice(&v.map(|c| i64_to_f32(c) * inv));
-                let t = joints[i].wrapping_shl(FINE).wrapping_sub(len);
-                res[i] = i64_to_f32(t) * unit;
-            })?;
-            let rf = rq.map(|row| row.map(|v| v as f32 / fixed::ONE_Q31));
-            let (sc, cc) = (sc as f32 / fixed::ONE_Q31, cc as f32 / fixed::ONE_Q31);
-            for (row, b) in rows.iter_mut().zip(&self.platform) {
-                // R·b / lever (b is stored in quarter nm), then m = (R·b × n); row =
-                // (n, m·u_A, m·u_B, m·u_C) with u_A = R x̂, u_B = Rz(C) ŷ =
-                // (−sin C, cos C, 0), u_C = ẑ.
-                let bf = b.map(|c| c as f32 / (4.0 * lever));
-                let rb = rf.map(|r| r[0] * bf[0] + r[1] * bf[1] + r[2] * bf[2]);
-                let n = [row[0], row[1], row[2]];
-                let m = [
-                    rb[1] * n[2] - rb[2] * n[1],
-                    rb[2] * n[0] - rb[0] * n[2],
-                    rb[0] * n[1] - rb[1] * n[0],
-                ];
-                row[3] = m[0] * rf[0][0] + m[1] * rf[1][0] + m[2] * rf[2][0];
-                row[4] = m[1] * cc - m[0] * sc;
-                row[5] = m[2];
-            }
-            solve(&mut rows, &mut res)?;
-            for k in 0..3 {
-                p[k] += round_f32(res[k]);
-                p[k + 3] += round_f32(res[k + 3] * ndeg_per_nm);
-            }
-            if res.iter().all(|s| s.abs() <= FINAL_STEP) {
-                *pose = p;
-                return Ok(it);
-            }
-        }
-        Err(Unreachable::NoConvergence)
+        let ndeg_per_nm = NDEG_PER_RAD as f32 / self.lever as f32;
+        newton(
+            guess,
+            pose,
+            |p, rows, res| self.linearize(p, joints, rows, res),
+            |p, res| {
+                for k in 0..3 {
+                    p[k] += round_f32(res[k]);
+                    p[k + 3] += round_f32(res[k + 3] * ndeg_per_nm);
+                }
+            },
+        )
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::{KinematicsConfig, MachineConfig, MAX_JOINTS};
-    use crate::kinematics::reference::{self as re, lcg, real};
-    use proptest::prelude::*;
-
-    fn geometry() -> HexapodGeometry {
-        match MachineConfig::hexapod().kinematics {
-            KinematicsConfig::Hexapod(g) => g,
-            _ => unreachable!(),
-        }
-    }
-
-    fn ik_error(g: &HexapodGeometry, k: &Hexapod, pose: &Pose) -> f64 {
-        let want = re::hexapod_inverse(g, &real(pose));
-        let mut q = [0; MAX_JOINTS];
-        k.inverse(pose, &mut q).expect("reachable");
-        (0..6)
-            .map(|i| (q[i] as f64 - want[i]).abs())
-            .fold(0.0, f64::max)
-    }
-
-    /// Random pose: translations within ±50 mm of home (0, 0, 450 mm), A B C ±10°.
-    fn random_pose(s: &mut u64) -> Pose {
-        let mut u = |half: f64, scale: f64| ((lcg(s) * 2.0 - 1.0) * half * scale).round() as i64;
-        [
-            u(50.0, 1e6),
-            u(50.0, 1e6),
-            450_000_000 + u(50.0, 1e6),
-            u(10.0, 1e9),
-            u(10.0, 1e9),
-            u(10.0, 1e9),
-        ]
-    }
-
-    #[test]
-    fn home_legs_match_the_geometry() {
-        let m = MachineConfig::hexapod();
-        let k = Hexapod::new(&geometry());
-        let mut q = [0; MAX_JOINTS];
-        k.inverse(&m.home, &mut q).unwrap();
-        // |(0, 0, 450) + b_1 − a_1| = 492.126… mm, the same for all six legs.
-        let want = re::hexapod_inverse(&geometry(), &real(&m.home));
-        for i in 0..6 {
-            assert!((q[i] as f64 - want[i]).abs() <= 1.0);
-            assert!((q[i] - 492_126_000).abs() < 1_000, "{q:?}");
-        }
-    }
-
-    #[test]
-    fn the_inverse_is_within_5_nm_of_the_reference_over_the_workspace() {
-        let g = geometry();
-        let k = Hexapod::new(&g);
-        let mut seed = 3;
-        let mut worst = 0.0f64;
-        let n = 100_000;
-        for _ in 0..n {
-            worst = worst.max(ik_error(&g, &k, &random_pose(&mut seed)));
-        }
-        eprintln!("hexapod inverse: max joint error {worst:.3} nm over {n} poses");
-        assert!(worst <= 5.0, "{worst} nm");
-    }
-
-    proptest! {
-        #![proptest_config(ProptestConfig::with_cases(20_000))]
-        #[test]
-        fn inverse_error_is_at_most_5_nm(
-            x in -50_000_000i64..50_000_000, y in -50_000_000i64..50_000_000,
-            z in 400_000_000i64..500_000_000,
-            a in -10_000_000_000i64..10_000_000_000, b in -10_000_000_000i64..10_000_000_000,
-            c in -10_000_000_000i64..10_000_000_000,
-        ) {
-            let g = geometry();
-            prop_assert!(ik_error(&g, &Hexapod::new(&g), &[x, y, z, a, b, c]) <= 5.0);
-        }
-    }
+    use crate::config::{MachineConfig, MAX_JOINTS};
+    use crate::kinematics::{suite, MachineKinematics};
 
     #[test]
     fn poses_at_the_fixed_point_range_are_exact_and_beyond_it_out_of_reach() {
-        let g = geometry();
-        let k = Hexapod::new(&g);
+        let machine = MachineConfig::hexapod();
+        let kin = MachineKinematics::new(&machine);
+        let MachineKinematics::Hexapod(k) = kin else {
+            unreachable!()
+        };
         let m = k.p_max as i64;
         assert!(m > 600_000_000, "{m}");
         let deg = 1_000_000_000;
@@ -336,7 +302,7 @@ mod tests {
             [-m, m, -m, 45 * deg, -30 * deg, 120 * deg],
             [0, -m, m, -90 * deg, 0, 7 * deg],
         ] {
-            worst = worst.max(ik_error(&g, &k, &p));
+            worst = worst.max(suite::ik_error(&machine, &kin, &p));
         }
         assert!(worst <= 5.0, "{worst}");
         let mut q = [0; MAX_JOINTS];
@@ -347,61 +313,5 @@ mod tests {
         ] {
             assert_eq!(k.inverse(&p, &mut q), Err(Unreachable::OutOfReach));
         }
-    }
-
-    fn fk_case(g: &HexapodGeometry, k: &Hexapod, s: &mut u64, stats: &mut re::FkStats) {
-        let p = random_pose(s);
-        let mut q = [0; MAX_JOINTS];
-        k.inverse(&p, &mut q).unwrap();
-        let dir = [lcg(s) - 0.5, lcg(s) - 0.5, lcg(s) - 0.5];
-        let norm = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
-        let mut guess = p;
-        for i in 0..3 {
-            guess[i] -= (200_000.0 * dir[i] / norm).round() as i64;
-            guess[i + 3] -= ((lcg(s) * 2.0 - 1.0) * 90_000_000.0).round() as i64;
-        }
-        let (mut out, mut at) = ([0; 6], [0; 6]);
-        let it = match k.forward(&q, &guess, &mut out) {
-            Ok(it) => it,
-            Err(e) => panic!("{e:?}: p {p:?} guess {guess:?}"),
-        };
-        k.forward(&q, &p, &mut at).unwrap();
-        let mut want = real(&p);
-        let target: [f64; 6] = std::array::from_fn(|i| q[i] as f64);
-        re::newton(
-            |x| re::hexapod_inverse(g, x),
-            &target,
-            &mut want,
-            [0, 1, 2, 3, 4, 5],
-        );
-        stats.add(it, &out, &at, &p, &want, &[3, 4, 5]);
-    }
-
-    #[test]
-    fn forward_converges_in_3_iterations_from_the_previous_period() {
-        let g = geometry();
-        let k = Hexapod::new(&g);
-        let mut seed = 9;
-        let mut st = re::FkStats::default();
-        let n = 5_000;
-        for _ in 0..n {
-            fk_case(&g, &k, &mut seed, &mut st);
-        }
-        eprintln!(
-            "hexapod forward ({n} cases): iterations histogram {:?}; converged to within \
-             {} nm, {} n° of the answer started at the true pose; against the f64 solution \
-             {:.3} nm, {:.0} n°; round trip {} nm",
-            st.hist, st.conv_lin, st.conv_ang, st.lin, st.ang, st.round_trip
-        );
-        assert!(st.max_iterations() <= 3);
-        // Within 1 nm of the answer from any nearby start, and of the exact solution
-        // (angles: 382 n° moves a platform joint by 1 nm).
-        assert!(
-            st.conv_lin <= 1 && st.conv_ang <= 382,
-            "{} {}",
-            st.conv_lin,
-            st.conv_ang
-        );
-        assert!(st.lin <= 1.0 && st.ang <= 382.0, "{} {}", st.lin, st.ang);
     }
 }

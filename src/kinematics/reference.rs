@@ -4,7 +4,9 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::Pose;
-use crate::config::{H4TableGeometry, HexapodGeometry};
+use crate::config::{
+    H4TableGeometry, HexapodGeometry, KinematicsConfig, MachineConfig, MAX_JOINTS,
+};
 
 const NDEG: f64 = 1e9;
 
@@ -75,49 +77,46 @@ pub fn hexapod_inverse(g: &HexapodGeometry, pose: &[f64; 6]) -> [f64; 6] {
 }
 
 /// Solves `f(x) = target` for the unknown axes `free` of `x` by Newton's method with a
-/// central-difference Jacobian, all in `f64` (to ~1e-6 nm).
-pub fn newton<const N: usize>(
-    f: impl Fn(&[f64; 6]) -> [f64; N],
-    target: &[f64; N],
-    x: &mut [f64; 6],
-    free: [usize; N],
-) {
+/// central-difference Jacobian, all in `f64` (to ~1e-6 nm); `f` gives at least as many
+/// values as there are unknowns, the first of which are matched to `target`.
+pub fn newton(f: impl Fn(&[f64; 6]) -> Vec<f64>, target: &[f64], x: &mut [f64; 6], free: &[usize]) {
+    let n = free.len();
     for _ in 0..50 {
         let y = f(x);
-        let r: Vec<f64> = (0..N).map(|i| target[i] - y[i]).collect();
+        let r: Vec<f64> = (0..n).map(|i| target[i] - y[i]).collect();
         if r.iter().all(|v| v.abs() < 1e-6) {
             return;
         }
-        let mut jac = vec![vec![0.0; N + 1]; N];
+        let mut jac = vec![vec![0.0; n + 1]; n];
         for (k, &ax) in free.iter().enumerate() {
             let h = if ax >= 3 { 1e3 } else { 1.0 };
             let (mut xp, mut xm) = (*x, *x);
             xp[ax] += h;
             xm[ax] -= h;
             let (yp, ym) = (f(&xp), f(&xm));
-            for i in 0..N {
+            for i in 0..n {
                 jac[i][k] = (yp[i] - ym[i]) / (2.0 * h);
             }
         }
-        for i in 0..N {
-            jac[i][N] = r[i];
+        for i in 0..n {
+            jac[i][n] = r[i];
         }
-        for k in 0..N {
-            let p = (k..N)
+        for k in 0..n {
+            let p = (k..n)
                 .max_by(|&a, &b| jac[a][k].abs().total_cmp(&jac[b][k].abs()))
                 .unwrap();
             jac.swap(k, p);
-            for i in k + 1..N {
+            for i in k + 1..n {
                 let m = jac[i][k] / jac[k][k];
-                for j in k..=N {
+                for j in k..=n {
                     jac[i][j] -= m * jac[k][j];
                 }
             }
         }
-        let mut dx = [0.0; N];
-        for k in (0..N).rev() {
-            let s: f64 = (k + 1..N).map(|j| jac[k][j] * dx[j]).sum();
-            dx[k] = (jac[k][N] - s) / jac[k][k];
+        let mut dx = vec![0.0; n];
+        for k in (0..n).rev() {
+            let s: f64 = (k + 1..n).map(|j| jac[k][j] * dx[j]).sum();
+            dx[k] = (jac[k][n] - s) / jac[k][k];
         }
         for (k, &ax) in free.iter().enumerate() {
             x[ax] += dx[k];
@@ -127,6 +126,23 @@ pub fn newton<const N: usize>(
         }
     }
     panic!("reference Newton did not converge");
+}
+
+/// The joints of `pose` in real numbers for the machine `m`, in joint units; `None`
+/// when out of reach (H-4: flatter than the minimum elevation). Cartesian: each joint
+/// is its axis.
+pub fn inverse(m: &MachineConfig, pose: &[f64; 6]) -> Option<[f64; MAX_JOINTS]> {
+    let mut q = [0.0; MAX_JOINTS];
+    match &m.kinematics {
+        KinematicsConfig::Cartesian { axis_of_joint } => {
+            for j in 0..m.joints.len() {
+                q[j] = pose[axis_of_joint[j] as usize];
+            }
+        }
+        KinematicsConfig::H4Table(g) => q[..5].copy_from_slice(&h4_inverse(g, pose)?),
+        KinematicsConfig::Hexapod(g) => q[..6].copy_from_slice(&hexapod_inverse(g, pose)),
+    }
+    Some(q)
 }
 
 /// Next uniform number in [0, 1) of a 64-bit linear congruential generator (Knuth's

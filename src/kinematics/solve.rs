@@ -9,7 +9,7 @@
 //! directions, angles as arc lengths at the platform's lever arm), so a fixed pivot
 //! threshold [`PIVOT_MIN`] means "too near a singularity".
 
-use super::Unreachable;
+use super::{Pose, Unreachable, FINAL_STEP, MAX_ITERATIONS};
 
 /// Smallest pivot accepted; below it the pose counts as too near a singularity.
 pub const PIVOT_MIN: f32 = 1e-4;
@@ -48,6 +48,33 @@ pub fn solve<const N: usize>(a: &mut [[f32; N]; N], b: &mut [f32; N]) -> Result<
         b[k] = s / a[k][k];
     }
     Ok(())
+}
+
+/// Newton's method from `guess`: each iteration builds the system at the current pose
+/// (`linearize`: Jacobian and residual, scaled as above), solves it, applies the step
+/// (`step`: rounded onto the pose), and stops after a step of at most [`FINAL_STEP`]
+/// on every unknown; returns the iterations used. Inlined into each caller, so each
+/// machine's forward kinematics compiles to its own loop.
+#[inline(always)]
+pub fn newton<const N: usize>(
+    guess: &Pose,
+    pose: &mut Pose,
+    mut linearize: impl FnMut(&Pose, &mut [[f32; N]; N], &mut [f32; N]) -> Result<(), Unreachable>,
+    step: impl Fn(&mut Pose, &[f32; N]),
+) -> Result<u8, Unreachable> {
+    let mut p = *guess;
+    for it in 1..=MAX_ITERATIONS {
+        let mut jac = [[0.0f32; N]; N];
+        let mut r = [0.0f32; N];
+        linearize(&p, &mut jac, &mut r)?;
+        solve(&mut jac, &mut r)?;
+        step(&mut p, &r);
+        if r.iter().all(|s| s.abs() <= FINAL_STEP) {
+            *pose = p;
+            return Ok(it);
+        }
+    }
+    Err(Unreachable::NoConvergence)
 }
 
 #[cfg(test)]
