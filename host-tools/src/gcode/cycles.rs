@@ -24,7 +24,7 @@
 //! Source: LinuxCNC G-code reference (canned cycles) and its interpreter's
 //! `interp_cycles.cc` (`convert_cycle_xy`, `CYCLE_MACRO`, `convert_cycle_g83`).
 
-use super::interp::{check_range, fail, whole_in, Cycle, Interp, LineError, Motion, Res};
+use super::interp::{check_range, dwell_ms, fail, whole_in, Cycle, Interp, Motion, Res};
 use super::lexer::Words;
 use super::{arcs, MAX_CYCLE_REPEATS, MAX_PECKS};
 use crate::gcode::canon::{Canon, Feed, PathMode, Plane};
@@ -82,18 +82,7 @@ impl Interp<'_> {
             None => 1,
         };
         let p_ms = match (kind, w.get(b'P')) {
-            (Cycle::G82 | Cycle::G89, Some(p)) => {
-                if p.num.is_negative() {
-                    return fail(p.col, format!("negative dwell time P{}", p.num));
-                }
-                p.num
-                    .scaled(1000, 1)
-                    .and_then(|v| u32::try_from(v).ok())
-                    .ok_or_else(|| LineError {
-                        col: p.col,
-                        message: format!("dwell time P{} s out of range", p.num),
-                    })?
-            }
+            (Cycle::G82 | Cycle::G89, Some(p)) => dwell_ms(p)?,
             (Cycle::G82 | Cycle::G89, None) if !same => {
                 return fail(col, format!("{name} needs P (dwell time, seconds)"))
             }
