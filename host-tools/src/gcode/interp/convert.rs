@@ -430,7 +430,7 @@ impl Interp<'_> {
             }
             Motion::Arc { clockwise } => {
                 b.used |= bit(b'I') | bit(b'J') | bit(b'K') | bit(b'R') | bit(b'P');
-                self.arc(w, clockwise, line, b.inverse, col, out)?;
+                self.arc(w, clockwise, b, col, out)?;
             }
             Motion::Cycle(kind) => {
                 b.used |= bit(b'R') | bit(b'L') | bit(b'P') | bit(b'Q');

@@ -10,6 +10,7 @@
 //! Source: LinuxCNC G-code reference (G0, G1, G2/G3, polar coordinates, G93/G94) and its
 //! interpreter's `interp_convert.cc` (`convert_arc`, `convert_straight`).
 
+use super::convert::Block;
 use super::{
     bounded_round, check_range, fail, whole_in, FeedRate, Interp, LineError, Res, NM_PER_INCH,
 };
@@ -151,18 +152,17 @@ impl Interp<'_> {
         })
     }
 
-    /// A G2/G3 move.
+    /// A G2/G3 move of line `b` (`col`: where an error about the whole arc is shown).
     pub(super) fn arc(
         &mut self,
         w: &Words,
         clockwise: bool,
-        line: u32,
-        line_inverse: Option<u64>,
+        b: &Block,
         col: u32,
         out: &mut Vec<Canon>,
     ) -> Res<()> {
         let end = self.target(w, false)?;
-        let done = self.arc_to(end, w, clockwise, line, line_inverse, col, out);
+        let done = self.arc_to(end, w, clockwise, b, col, out);
         if done.is_err() {
             // A refused arc still ends where it was programmed to: later lines (their
             // G91 moves, their arc centres) start there, so one bad arc is one message,
@@ -172,17 +172,16 @@ impl Interp<'_> {
         done
     }
 
-    #[allow(clippy::too_many_arguments)]
     fn arc_to(
         &mut self,
         end: [i64; AXES],
         w: &Words,
         clockwise: bool,
-        line: u32,
-        line_inverse: Option<u64>,
+        block: &Block,
         col: u32,
         out: &mut Vec<Canon>,
     ) -> Res<()> {
+        let (line, line_inverse) = (block.line, block.inverse);
         let name = if clockwise { "G2" } else { "G3" };
         let (a, b, h) = self.plane.axes();
         let offset_letter = |axis: usize| b"IJK"[axis];
@@ -227,38 +226,7 @@ impl Interp<'_> {
                     .map_err(|m| LineError { col, message: m })?;
                 [bounded_round(c[0], col)?, bounded_round(c[1], col)?]
             }
-            (None, true) => {
-                let mut c = [0i64; 2];
-                for (k, (axis, word)) in [(a, wa), (b, wb)].into_iter().enumerate() {
-                    let v = match word {
-                        Some(word) => self.length(word)?,
-                        None if self.arc_absolute => {
-                            return fail(
-                                col,
-                                format!(
-                                    "{} word missing for an absolute centre (G90.1)",
-                                    offset_letter(axis) as char
-                                ),
-                            )
-                        }
-                        None => 0,
-                    };
-                    let base = if self.arc_absolute {
-                        self.off[axis]
-                    } else {
-                        start[axis]
-                    };
-                    c[k] = check_range(base + v, axis, word.map_or(col, |x| x.col))?;
-                }
-                let abs = if self.inch {
-                    arcs::CENTRE_ARC_ABS_NM_INCH
-                } else {
-                    arcs::CENTRE_ARC_ABS_NM_MM
-                };
-                arcs::check_end(s, e, [c[0] as f64, c[1] as f64], abs)
-                    .map_err(|m| LineError { col, message: m })?;
-                c
-            }
+            (None, true) => self.centre_from_offsets([(a, wa), (b, wb)], s, e, col)?,
         };
         let radius = (s[0] - centre[0] as f64).hypot(s[1] - centre[1] as f64);
         if radius > pkmc::geometry::MAX_ARC_RADIUS_NM as f64 {
@@ -289,5 +257,46 @@ impl Interp<'_> {
         });
         self.pos = end;
         Ok(())
+    }
+
+    /// The centre of a centre-format arc from `s` to `e` in the plane's axes `axes`
+    /// (each with its I J K word, if given), checked against the arc's end.
+    fn centre_from_offsets(
+        &self,
+        axes: [(usize, Option<Word>); 2],
+        s: [f64; 2],
+        e: [f64; 2],
+        col: u32,
+    ) -> Res<[i64; 2]> {
+        let mut c = [0i64; 2];
+        for (k, (axis, word)) in axes.into_iter().enumerate() {
+            let v = match word {
+                Some(word) => self.length(word)?,
+                None if self.arc_absolute => {
+                    return fail(
+                        col,
+                        format!(
+                            "{} word missing for an absolute centre (G90.1)",
+                            b"IJK"[axis] as char
+                        ),
+                    )
+                }
+                None => 0,
+            };
+            let base = if self.arc_absolute {
+                self.off[axis]
+            } else {
+                self.pos[axis]
+            };
+            c[k] = check_range(base + v, axis, word.map_or(col, |x| x.col))?;
+        }
+        let abs = if self.inch {
+            arcs::CENTRE_ARC_ABS_NM_INCH
+        } else {
+            arcs::CENTRE_ARC_ABS_NM_MM
+        };
+        arcs::check_end(s, e, [c[0] as f64, c[1] as f64], abs)
+            .map_err(|m| LineError { col, message: m })?;
+        Ok(c)
     }
 }
