@@ -24,7 +24,7 @@
 //! Source: LinuxCNC G-code reference (canned cycles) and its interpreter's
 //! `interp_cycles.cc` (`convert_cycle_xy`, `CYCLE_MACRO`, `convert_cycle_g83`).
 
-use super::interp::{check_range, fail, whole_in, Cycle, Interp, LineError, Motion, Res};
+use super::interp::{check_range, dwell_ms, fail, whole_in, Cycle, Interp, Motion, Res};
 use super::lexer::Words;
 use super::{arcs, MAX_CYCLE_REPEATS, MAX_PECKS};
 use crate::gcode::canon::{Canon, Feed, PathMode, Plane};
@@ -33,6 +33,47 @@ use pkmc::config::{AXES, AXIS_NAMES};
 /// How far above the last depth G83 rapids back down, and G73 backs off, nm
 /// (LinuxCNC's 0.010 in, also used in mm programs as 0.254 mm).
 pub const PECK_CLEARANCE_NM: i64 = 254_000;
+
+/// The words of one cycle line, with those not given taken from the cycle's memory.
+struct CycleWords {
+    /// Feed of the drilling moves.
+    feed: Feed,
+    /// R as given, axis units.
+    r: i64,
+    /// Cycle-axis word (hole bottom) as given, axis units.
+    z: i64,
+    /// L.
+    repeats: i64,
+    /// P, ms.
+    p_ms: u32,
+    /// Q, axis units.
+    q: i64,
+}
+
+/// Where the holes of one line are: the hole axes' values before the first hole, and
+/// what each repeat adds (G91: a step along the axes, or in polar terms).
+struct Holes {
+    a: i64,
+    b: i64,
+    step_a: i64,
+    step_b: i64,
+    /// G91 `@` and `^`: radius (axis units) and angle (radians) added per hole.
+    polar_step: Option<(f64, f64)>,
+}
+
+/// One hole's drilling, between the approach to R and the retract.
+struct Drill {
+    kind: Cycle,
+    line: u32,
+    feed: Feed,
+    /// Hole axes and cycle axis.
+    axes: (usize, usize, usize),
+    /// Retract plane and hole bottom, cycle-axis positions.
+    r: i64,
+    bottom: i64,
+    p_ms: u32,
+    q: i64,
+}
 
 impl Interp<'_> {
     /// Runs canned cycle `kind` for one line; `previous` is the motion mode before it.
@@ -45,6 +86,69 @@ impl Interp<'_> {
         col: u32,
         out: &mut Vec<Canon>,
     ) -> Res<()> {
+        let words = self.cycle_words(w, kind, previous == Motion::Cycle(kind), col)?;
+        let (ia, ib, ic) = self.plane.axes();
+        let current = self.pos[ic];
+        let initial = *self.cycle.initial_level.get_or_insert(current);
+        let (r, bottom) = self.cycle_levels(kind, &words, initial, col)?;
+        let mut holes = self.holes(w, col)?;
+
+        let restore = self.path != PathMode::ExactStop;
+        if restore {
+            out.push(Canon::PathMode {
+                line,
+                mode: PathMode::ExactStop,
+            });
+        }
+        let mut level = current;
+        let mut old = initial;
+        if old < r {
+            let t = self.at(ia, ib, ic, self.pos[ia], self.pos[ib], r);
+            self.rapid(line, t, out);
+            old = r;
+            level = r;
+        }
+        let clear = if self.retract_to_r { r } else { old };
+        let drill = Drill {
+            kind,
+            line,
+            feed: words.feed,
+            axes: (ia, ib, ic),
+            r,
+            bottom,
+            p_ms: words.p_ms,
+            q: words.q,
+        };
+        for rep in 0..words.repeats {
+            let (aa, bb) = self.next_hole(&mut holes, (ia, ib), col)?;
+            if rep == 0 && level > r {
+                self.rapid(line, self.at(ia, ib, ic, aa, bb, level), out);
+                self.rapid(line, self.at(ia, ib, ic, aa, bb, r), out);
+            } else {
+                self.rapid(line, self.at(ia, ib, ic, aa, bb, clear), out);
+                if clear > r {
+                    self.rapid(line, self.at(ia, ib, ic, aa, bb, r), out);
+                }
+            }
+            self.drill(&drill, aa, bb, out);
+            self.rapid(line, self.at(ia, ib, ic, aa, bb, clear), out);
+        }
+        if restore {
+            out.push(Canon::PathMode {
+                line,
+                mode: self.path,
+            });
+        }
+        self.cycle.r = words.r;
+        self.cycle.z = words.z;
+        self.cycle.p_ms = words.p_ms;
+        self.cycle.q = words.q;
+        Ok(())
+    }
+
+    /// Checks that cycle `kind` can run and reads its words (`same`: the same cycle
+    /// was in force before the line, so missing words are remembered ones).
+    fn cycle_words(&self, w: &Words, kind: Cycle, same: bool, col: u32) -> Res<CycleWords> {
         let name = kind.name();
         if self.inverse_time {
             return fail(
@@ -55,7 +159,6 @@ impl Interp<'_> {
         let Some(rate) = self.feed else {
             return fail(col, format!("{name} without a feed (F)"));
         };
-        let feed = Feed::PerSecond(rate.linear);
         for l in [b'A', b'B', b'C'] {
             if let Some(x) = w.get(l) {
                 return fail(
@@ -64,15 +167,13 @@ impl Interp<'_> {
                 );
             }
         }
-        let same = previous == Motion::Cycle(kind);
-        let (ia, ib, ic) = self.plane.axes();
-        let cc_letter = AXIS_NAMES[ic];
-        let r_val = match w.get(b'R') {
+        let cc_letter = AXIS_NAMES[self.plane.axes().2];
+        let r = match w.get(b'R') {
             Some(r) => self.length(r)?,
             None if same => self.cycle.r,
             None => return fail(col, format!("{name} needs R (retract plane)")),
         };
-        let z_val = match w.get(cc_letter as u8) {
+        let z = match w.get(cc_letter as u8) {
             Some(z) => self.length(z)?,
             None if same => self.cycle.z,
             None => return fail(col, format!("{name} needs {cc_letter} (hole bottom)")),
@@ -82,18 +183,7 @@ impl Interp<'_> {
             None => 1,
         };
         let p_ms = match (kind, w.get(b'P')) {
-            (Cycle::G82 | Cycle::G89, Some(p)) => {
-                if p.num.is_negative() {
-                    return fail(p.col, format!("negative dwell time P{}", p.num));
-                }
-                p.num
-                    .scaled(1000, 1)
-                    .and_then(|v| u32::try_from(v).ok())
-                    .ok_or_else(|| LineError {
-                        col: p.col,
-                        message: format!("dwell time P{} s out of range", p.num),
-                    })?
-            }
+            (Cycle::G82 | Cycle::G89, Some(p)) => dwell_ms(p)?,
             (Cycle::G82 | Cycle::G89, None) if !same => {
                 return fail(col, format!("{name} needs P (dwell time, seconds)"))
             }
@@ -112,13 +202,31 @@ impl Interp<'_> {
             }
             _ => self.cycle.q,
         };
+        Ok(CycleWords {
+            feed: Feed::PerSecond(rate.linear),
+            r,
+            z,
+            repeats,
+            p_ms,
+            q,
+        })
+    }
 
-        let current = self.pos[ic];
-        let initial = *self.cycle.initial_level.get_or_insert(current);
+    /// The retract plane and the hole bottom on the cycle axis (`initial`: its level
+    /// before the run of cycle lines), checked against each other and the peck limit.
+    fn cycle_levels(
+        &self,
+        kind: Cycle,
+        words: &CycleWords,
+        initial: i64,
+        col: u32,
+    ) -> Res<(i64, i64)> {
+        let name = kind.name();
+        let ic = self.plane.axes().2;
         let (r, bottom) = if self.absolute {
-            (r_val + self.off[ic], z_val + self.off[ic])
+            (words.r + self.off[ic], words.z + self.off[ic])
         } else {
-            (r_val + initial, r_val + initial + z_val)
+            (words.r + initial, words.r + initial + words.z)
         };
         let r = check_range(r, ic, col)?;
         let bottom = check_range(bottom, ic, col)?;
@@ -126,37 +234,46 @@ impl Interp<'_> {
             return fail(
                 col,
                 format!(
-                    "{name}: the retract plane R is below the hole bottom {cc_letter} \
+                    "{name}: the retract plane R is below the hole bottom {} \
                      ({} mm under it)",
+                    AXIS_NAMES[ic],
                     arcs::mm((bottom - r) as f64)
                 ),
             );
         }
         if matches!(kind, Cycle::G73 | Cycle::G83)
-            && ((r - bottom) / q.max(1)).saturating_mul(repeats) > MAX_PECKS
+            && ((r - bottom) / words.q.max(1)).saturating_mul(words.repeats) > MAX_PECKS
         {
             return fail(
                 col,
                 format!("{name} would peck more than {MAX_PECKS} times on one line"),
             );
         }
+        Ok((r, bottom))
+    }
 
-        // Hole positions: absolute once, or increments per repeat.
+    /// Hole positions: absolute once, or increments per repeat.
+    fn holes(&self, w: &Words, col: u32) -> Res<Holes> {
+        let (ia, ib, _) = self.plane.axes();
         let polar = w.polar_radius.is_some() || w.polar_angle.is_some();
-        let (mut aa, mut bb) = (self.pos[ia], self.pos[ib]);
-        let (mut inc_a, mut inc_b) = (0, 0);
-        let mut polar_step = None;
+        let mut h = Holes {
+            a: self.pos[ia],
+            b: self.pos[ib],
+            step_a: 0,
+            step_b: 0,
+            polar_step: None,
+        };
         if self.absolute {
             if polar {
                 let (x, y) = self.polar(w, self.pos[0] - self.off[0], self.pos[1] - self.off[1])?;
-                aa = check_range(x + self.off[0], 0, col)?;
-                bb = check_range(y + self.off[1], 1, col)?;
+                h.a = check_range(x + self.off[0], 0, col)?;
+                h.b = check_range(y + self.off[1], 1, col)?;
             } else {
                 if let Some(x) = w.get(AXIS_NAMES[ia] as u8) {
-                    aa = check_range(self.length(x)? + self.off[ia], ia, x.col)?;
+                    h.a = check_range(self.length(x)? + self.off[ia], ia, x.col)?;
                 }
                 if let Some(y) = w.get(AXIS_NAMES[ib] as u8) {
-                    bb = check_range(self.length(y)? + self.off[ib], ib, y.col)?;
+                    h.b = check_range(self.length(y)? + self.off[ib], ib, y.col)?;
                 }
             }
         } else if polar {
@@ -171,106 +288,83 @@ impl Interp<'_> {
                 None => 0.0,
             };
             let dt = w.polar_angle.map_or(0.0, |a| a.num.to_f64().to_radians());
-            polar_step = Some((dr, dt));
+            h.polar_step = Some((dr, dt));
         } else {
             if let Some(x) = w.get(AXIS_NAMES[ia] as u8) {
-                inc_a = self.length(x)?;
+                h.step_a = self.length(x)?;
             }
             if let Some(y) = w.get(AXIS_NAMES[ib] as u8) {
-                inc_b = self.length(y)?;
+                h.step_b = self.length(y)?;
             }
         }
+        Ok(h)
+    }
 
-        let restore = self.path != PathMode::ExactStop;
-        if restore {
-            out.push(Canon::PathMode {
+    /// Advances `h` to the next hole and returns its position on the hole axes.
+    fn next_hole(&self, h: &mut Holes, (ia, ib): (usize, usize), col: u32) -> Res<(i64, i64)> {
+        h.a = check_range(h.a + h.step_a, ia, col)?;
+        h.b = check_range(h.b + h.step_b, ib, col)?;
+        if let Some((dr, dt)) = h.polar_step {
+            let (x, y) = ((h.a - self.off[0]) as f64, (h.b - self.off[1]) as f64);
+            if x == 0.0 && y == 0.0 {
+                return fail(
+                    col,
+                    "incremental polar motion (G91 @ ^) is undefined at the origin",
+                );
+            }
+            let radius = x.hypot(y) + dr;
+            let theta = y.atan2(x) + dt;
+            h.a = self.round_at(radius * theta.cos(), 0, col)? + self.off[0];
+            h.b = self.round_at(radius * theta.sin(), 1, col)? + self.off[1];
+            h.a = check_range(h.a, 0, col)?;
+            h.b = check_range(h.b, 1, col)?;
+        }
+        Ok((h.a, h.b))
+    }
+
+    /// Drills one hole from R: down to the bottom (in pecks for G73/G83), with the
+    /// dwell of G82/G89 and the feed out of G85/G89.
+    fn drill(&mut self, d: &Drill, aa: i64, bb: i64, out: &mut Vec<Canon>) {
+        let (ia, ib, ic) = d.axes;
+        let line = d.line;
+        let feed_to = |s: &mut Self, depth: i64, out: &mut Vec<Canon>| {
+            let target = s.at(ia, ib, ic, aa, bb, depth);
+            out.push(Canon::Linear {
                 line,
-                mode: PathMode::ExactStop,
+                target,
+                feed: d.feed,
             });
-        }
-        let mut level = current;
-        let mut old = initial;
-        if old < r {
-            let t = self.at(ia, ib, ic, self.pos[ia], self.pos[ib], r);
-            self.rapid(line, t, out);
-            old = r;
-            level = r;
-        }
-        let clear = if self.retract_to_r { r } else { old };
-        for rep in 0..repeats {
-            aa = check_range(aa + inc_a, ia, col)?;
-            bb = check_range(bb + inc_b, ib, col)?;
-            if let Some((dr, dt)) = polar_step {
-                let (x, y) = ((aa - self.off[0]) as f64, (bb - self.off[1]) as f64);
-                if x == 0.0 && y == 0.0 {
-                    return fail(
-                        col,
-                        "incremental polar motion (G91 @ ^) is undefined at the origin",
-                    );
-                }
-                let radius = x.hypot(y) + dr;
-                let theta = y.atan2(x) + dt;
-                aa = self.round_at(radius * theta.cos(), 0, col)? + self.off[0];
-                bb = self.round_at(radius * theta.sin(), 1, col)? + self.off[1];
-                aa = check_range(aa, 0, col)?;
-                bb = check_range(bb, 1, col)?;
+            s.pos = target;
+        };
+        match d.kind {
+            Cycle::G81 => feed_to(self, d.bottom, out),
+            Cycle::G82 => {
+                feed_to(self, d.bottom, out);
+                out.push(Canon::Dwell { line, ms: d.p_ms });
             }
-            if rep == 0 && level > r {
-                self.rapid(line, self.at(ia, ib, ic, aa, bb, level), out);
-                self.rapid(line, self.at(ia, ib, ic, aa, bb, r), out);
-            } else {
-                self.rapid(line, self.at(ia, ib, ic, aa, bb, clear), out);
-                if clear > r {
-                    self.rapid(line, self.at(ia, ib, ic, aa, bb, r), out);
-                }
+            Cycle::G85 => {
+                feed_to(self, d.bottom, out);
+                feed_to(self, d.r, out);
             }
-            let feed_to = |s: &mut Self, depth: i64, out: &mut Vec<Canon>| {
-                let target = s.at(ia, ib, ic, aa, bb, depth);
-                out.push(Canon::Linear { line, target, feed });
-                s.pos = target;
-            };
-            match kind {
-                Cycle::G81 => feed_to(self, bottom, out),
-                Cycle::G82 => {
-                    feed_to(self, bottom, out);
-                    out.push(Canon::Dwell { line, ms: p_ms });
-                }
-                Cycle::G85 => {
-                    feed_to(self, bottom, out);
-                    feed_to(self, r, out);
-                }
-                Cycle::G89 => {
-                    feed_to(self, bottom, out);
-                    out.push(Canon::Dwell { line, ms: p_ms });
-                    feed_to(self, r, out);
-                }
-                Cycle::G73 | Cycle::G83 => {
-                    let mut depth = r - q;
-                    while depth > bottom {
-                        feed_to(self, depth, out);
-                        if kind == Cycle::G83 {
-                            self.rapid(line, self.at(ia, ib, ic, aa, bb, r), out);
-                        }
-                        let back = (depth + PECK_CLEARANCE_NM).min(r);
-                        self.rapid(line, self.at(ia, ib, ic, aa, bb, back), out);
-                        depth -= q;
+            Cycle::G89 => {
+                feed_to(self, d.bottom, out);
+                out.push(Canon::Dwell { line, ms: d.p_ms });
+                feed_to(self, d.r, out);
+            }
+            Cycle::G73 | Cycle::G83 => {
+                let mut depth = d.r - d.q;
+                while depth > d.bottom {
+                    feed_to(self, depth, out);
+                    if d.kind == Cycle::G83 {
+                        self.rapid(line, self.at(ia, ib, ic, aa, bb, d.r), out);
                     }
-                    feed_to(self, bottom, out);
+                    let back = (depth + PECK_CLEARANCE_NM).min(d.r);
+                    self.rapid(line, self.at(ia, ib, ic, aa, bb, back), out);
+                    depth -= d.q;
                 }
+                feed_to(self, d.bottom, out);
             }
-            self.rapid(line, self.at(ia, ib, ic, aa, bb, clear), out);
         }
-        if restore {
-            out.push(Canon::PathMode {
-                line,
-                mode: self.path,
-            });
-        }
-        self.cycle.r = r_val;
-        self.cycle.z = z_val;
-        self.cycle.p_ms = p_ms;
-        self.cycle.q = q;
-        Ok(())
     }
 
     /// The current pose with the hole axes at `aa`, `bb` and the cycle axis at `cc`.

@@ -1,0 +1,216 @@
+//! Modal groups: which modal group each G and M code is in, and the codes of one line
+//! sorted into their groups.
+//!
+//! Invariants: [`group_of`] is the one place that knows a code's group, or why the code
+//! is refused (unknown, or a LinuxCNC feature not implemented, by name); a line holds at
+//! most one code per group, except G80 beside another motion code (LinuxCNC's safety
+//! lines `G0 G17 G40 G49 G80 G90`: the other code is the motion) and M7 with M8 (mist
+//! and flood). Codes are checked in line order, G codes before M codes, so the first
+//! error of a line is the same whatever else the line holds.
+//!
+//! Source: LinuxCNC G-code overview (modal groups) and its interpreter's
+//! `interp_array.cc` (`_gees`, `_ems`).
+
+use super::{fail, LineError, Res};
+use crate::gcode::lexer::{Code, Words};
+use crate::gcode::unsupported;
+
+/// A modal group of G codes (the first 14) or M codes (the last 4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Group {
+    /// G4 G10 G28 G28.1 G30 G30.1 G53 G92 G92.1 G92.2 G92.3.
+    NonModal,
+    /// G0 G1 G2 G3 G73 G80 G81 G82 G83 G85 G89.
+    Motion,
+    /// G17 G18 G19.
+    Plane,
+    /// G90 G91.
+    Distance,
+    /// G90.1 G91.1.
+    ArcDistance,
+    /// G93 G94.
+    FeedMode,
+    /// G20 G21.
+    Units,
+    /// G40.
+    Cutter,
+    /// G43 G49.
+    ToolLength,
+    /// G98 G99.
+    Retract,
+    /// G54 … G59.3.
+    System,
+    /// G61 G61.1 G64.
+    Path,
+    /// G97.
+    SpindleMode,
+    /// G8.
+    LatheMode,
+    /// M0 M1 M2 M30.
+    Stop,
+    /// M6 M61.
+    ToolChange,
+    /// M3 M4 M5.
+    Spindle,
+    /// M7 M8 M9.
+    Coolant,
+}
+
+/// Number of groups.
+const GROUPS: usize = 18;
+
+/// Names of the groups, in the order of [`Group`].
+const GROUP_NAMES: [&str; GROUPS] = [
+    "non-modal",
+    "motion",
+    "plane",
+    "distance-mode",
+    "arc-distance-mode",
+    "feed-mode",
+    "units",
+    "cutter-compensation",
+    "tool-length-offset",
+    "canned-cycle-return",
+    "coordinate-system",
+    "path-control",
+    "spindle-speed-mode",
+    "lathe-diameter-mode",
+    "stopping",
+    "tool-change",
+    "spindle",
+    "coolant",
+];
+
+/// `G28.1` from ten times the number.
+pub(crate) fn code_name(letter: char, tenths: i32) -> String {
+    if tenths % 10 == 0 {
+        format!("{letter}{}", tenths / 10)
+    } else {
+        format!("{letter}{}.{}", tenths / 10, tenths % 10)
+    }
+}
+
+/// The modal group of code `letter` (`G` or `M`) `tenths` (ten times its number), or
+/// why it is refused.
+pub(crate) fn group_of(letter: char, tenths: i32) -> Result<Group, String> {
+    use Group::*;
+    Ok(match (letter, tenths) {
+        ('G', 0 | 10 | 20 | 30 | 730 | 800 | 810 | 820 | 830 | 850 | 890) => Motion,
+        ('G', 170 | 180 | 190) => Plane,
+        ('G', 900 | 910) => Distance,
+        ('G', 901 | 911) => ArcDistance,
+        ('G', 930 | 940) => FeedMode,
+        ('G', 200 | 210) => Units,
+        ('G', 400) => Cutter,
+        ('G', 430 | 490) => ToolLength,
+        ('G', 980 | 990) => Retract,
+        ('G', 540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593) => System,
+        ('G', 610 | 611 | 640) => Path,
+        ('G', 40 | 100 | 280 | 281 | 300 | 301 | 530 | 920 | 921 | 922 | 923) => NonModal,
+        ('G', 970) => SpindleMode,
+        ('G', 80) => LatheMode,
+        ('M', 0 | 10 | 20 | 300) => Stop,
+        ('M', 60 | 610) => ToolChange,
+        ('M', 30 | 40 | 50) => Spindle,
+        ('M', 70 | 80 | 90) => Coolant,
+        _ => return Err(refusal(letter, tenths)),
+    })
+}
+
+/// Why code `letter` `tenths`, which is in no group here, is refused.
+fn refusal(letter: char, tenths: i32) -> String {
+    let feature = match (letter, tenths) {
+        ('G', 50) => "G5 cubic splines",
+        ('G', 51) => "G5.1 quadratic B-splines",
+        ('G', 52) => "G5.2 NURBS blocks",
+        ('G', 53) => "G5.3 NURBS blocks",
+        ('G', 70) => "G7 lathe diameter mode",
+        ('G', 171 | 181 | 191) => "G17.1 G18.1 G19.1 (UVW planes)",
+        ('G', 330 | 331) => "G33 spindle-synchronized motion",
+        ('G', 382..=385) => "G38 probing",
+        ('G', 410 | 411 | 420 | 421) => "G41/G42 cutter radius compensation",
+        ('G', 431) => "G43.1 dynamic tool length offset",
+        ('G', 432) => "G43.2 additional tool length offset",
+        ('G', 520) => "G52 local coordinate offsets",
+        ('G', 700 | 710 | 711 | 712 | 720 | 721 | 722) => "G70-G72 lathe cycles",
+        ('G', 740 | 840) => "G74/G84 tapping cycles",
+        ('G', 760) => "G76 threading cycle",
+        ('G', 860 | 870 | 880) => "G86-G88 boring cycles",
+        ('G', 950) => "G95 feed per revolution",
+        ('G', 960) => "G96 constant surface speed",
+        ('M', 190) => "M19 spindle orientation",
+        ('M', 480..=530) => "M48-M53 override control",
+        ('M', 600) => "M60 pallet change",
+        ('M', 620..=680) => "M62-M68 digital and analog I/O",
+        ('M', 700..=730) => "M70-M73 modal state save and restore",
+        ('M', 1000..=1990) => "M100-M199 user-defined M codes",
+        ('M', 980 | 990) => "M98/M99 subprogram calls (Fanuc style)",
+        ('M', 270) => "M27 (a machine-specific code some posts write; not in LinuxCNC)",
+        _ => return format!("unknown code {}", code_name(letter, tenths)),
+    };
+    unsupported(feature)
+}
+
+/// Which of two codes of `group` on one line the group keeps, or `None` when they
+/// conflict.
+fn kept(group: Group, first: Code, next: Code) -> Option<Code> {
+    match (group, first.tenths, next.tenths) {
+        // G80 with another motion code: the other code is the motion.
+        (Group::Motion, 800, _) => Some(next),
+        (Group::Motion, _, 800) => Some(first),
+        // M7 and M8 may share a line.
+        (Group::Coolant, 70, 80) | (Group::Coolant, 80, 70) => Some(next),
+        _ => None,
+    }
+}
+
+/// The G and M codes of one line, by modal group.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Modal([Option<Code>; GROUPS]);
+
+impl Modal {
+    /// Sorts the line's G codes, then its M codes, into their groups; a refused code or
+    /// a second code of one group is an error at its column.
+    pub(crate) fn of(w: &Words) -> Res<Self> {
+        let mut codes = Modal([None; GROUPS]);
+        for (letter, list) in [('G', &w.g), ('M', &w.m)] {
+            for &c in list {
+                codes.add(letter, c)?;
+            }
+        }
+        Ok(codes)
+    }
+
+    fn add(&mut self, letter: char, c: Code) -> Res<()> {
+        let group = group_of(letter, c.tenths).map_err(|message| LineError {
+            col: c.col,
+            message,
+        })?;
+        let slot = &mut self.0[group as usize];
+        *slot = match *slot {
+            None => Some(c),
+            Some(first) => match kept(group, first, c) {
+                Some(keep) => Some(keep),
+                None => {
+                    return fail(
+                        c.col,
+                        format!(
+                            "{} conflicts with {} at column {} (both in the {} modal group)",
+                            code_name(letter, c.tenths),
+                            code_name(letter, first.tenths),
+                            first.col,
+                            GROUP_NAMES[group as usize]
+                        ),
+                    )
+                }
+            },
+        };
+        Ok(())
+    }
+
+    /// The line's code of `group`, if it has one.
+    #[inline]
+    pub(crate) fn get(&self, group: Group) -> Option<Code> {
+        self.0[group as usize]
+    }
+}
