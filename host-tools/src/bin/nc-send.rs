@@ -5,11 +5,11 @@
 
 use clap::{Parser, Subcommand};
 use pkmc::config::{axis_is_rotary, MachineConfig, AXIS_NAMES};
-use pkmc::protocol::{Control, Status};
+use pkmc::protocol::{Control, HeldJob, Status};
 use pkmc::units::to_user;
 use pkmc_host::cli::progress::{Interrupts, Operator, Progress, RawKeys, Style};
 use pkmc_host::job::{self, exit, Failure, Report, RunOptions, SimSetup, Target};
-use pkmc_host::link::{JobEnd, LinkOptions};
+use pkmc_host::link::{JobEnd, Link, LinkOptions, Transport};
 use pkmc_host::sim::faults::FaultConfig;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -451,26 +451,7 @@ fn command(
                 axis,
                 distance,
                 feed,
-            } => {
-                let i = axis_index(axis)?;
-                let rotary = axis_is_rotary(i);
-                let scale = pkmc::units::units_per_user(rotary) as f64;
-                if !feed.is_finite() || *feed <= 0.0 {
-                    return Err(bad(format!(
-                        "jog: --feed {feed}: must be a positive number"
-                    )));
-                }
-                if !distance.is_finite() {
-                    return Err(bad(format!("jog: distance {distance}: must be a number")));
-                }
-                let cmd = job::jog_command(
-                    link,
-                    i,
-                    (distance * scale).round() as i64,
-                    (feed / 60.0 * scale).round() as i64,
-                )?;
-                (job::move_and_wait(link, cmd, &mut op)?, None)
-            }
+            } => (jog(link, axis, *distance, *feed, &mut op)?, None),
             Command::Mdi { line } => {
                 let (blocks, end) = job::mdi(link, machine, line, &mut op)?;
                 (end, Some(blocks.len()))
@@ -480,33 +461,7 @@ fn command(
                 link.release_held();
                 (link.wait_idle(&mut op)?, None)
             }
-            Command::Resume => {
-                let s = link.request_status()?;
-                // A held job, or another host's job still running out its queue.
-                let running_orphan =
-                    s.state == pkmc::protocol::State::Running && link.held().is_some();
-                if s.state != pkmc::protocol::State::Hold && !running_orphan {
-                    return Err(Failure::new(
-                        exit::ALARM,
-                        format!(
-                            "{}: nothing to resume: the controller is {:?}{}",
-                            pkmc_host::link::Transport::name(link.transport()),
-                            s.state,
-                            s.alarm
-                                .map(|a| format!(" ({})", job::describe_alarm(&a)))
-                                .unwrap_or_default()
-                        ),
-                    ));
-                }
-                link.control(Control::Resume)?;
-                link.release_held();
-                let end = link.wait_resumed(&mut op)?;
-                if end == JobEnd::Done {
-                    // What was queued has run: the job is complete on the controller.
-                    link.control(Control::EndJob)?;
-                }
-                (end, None)
-            }
+            Command::Resume => (resume(link, &mut op)?, None),
         };
         let status = link.request_status()?;
         let (result, code) = match &end {
@@ -524,9 +479,79 @@ fn command(
         let held = held.filter(|_| matches!(cmd, Command::Status | Command::Reset));
         Ok((status, result, code, extra, held))
     })?;
+    print_status(&status, machine, result, extra, held, quiet);
+    Ok(code)
+}
+
+/// `jog AXIS DISTANCE --feed F`: mm (or degrees) and mm/min (or °/min) to axis units.
+fn jog<T: Transport>(
+    link: &mut Link<T>,
+    axis: &str,
+    distance: f64,
+    feed: f64,
+    op: &mut Operator,
+) -> Result<JobEnd, Failure> {
+    let i = axis_index(axis)?;
+    let rotary = axis_is_rotary(i);
+    let scale = pkmc::units::units_per_user(rotary) as f64;
+    if !feed.is_finite() || feed <= 0.0 {
+        return Err(bad(format!(
+            "jog: --feed {feed}: must be a positive number"
+        )));
+    }
+    if !distance.is_finite() {
+        return Err(bad(format!("jog: distance {distance}: must be a number")));
+    }
+    let cmd = job::jog_command(
+        link,
+        i,
+        (distance * scale).round() as i64,
+        (feed / 60.0 * scale).round() as i64,
+    )?;
+    job::move_and_wait(link, cmd, op)
+}
+
+/// `resume`: a held job, or another host's job still running out its queue.
+fn resume<T: Transport>(link: &mut Link<T>, op: &mut Operator) -> Result<JobEnd, Failure> {
+    let s = link.request_status()?;
+    // A held job, or another host's job still running out its queue.
+    let running_orphan = s.state == pkmc::protocol::State::Running && link.held().is_some();
+    if s.state != pkmc::protocol::State::Hold && !running_orphan {
+        return Err(Failure::new(
+            exit::ALARM,
+            format!(
+                "{}: nothing to resume: the controller is {:?}{}",
+                pkmc_host::link::Transport::name(link.transport()),
+                s.state,
+                s.alarm
+                    .map(|a| format!(" ({})", job::describe_alarm(&a)))
+                    .unwrap_or_default()
+            ),
+        ));
+    }
+    link.control(Control::Resume)?;
+    link.release_held();
+    let end = link.wait_resumed(op)?;
+    if end == JobEnd::Done {
+        // What was queued has run: the job is complete on the controller.
+        link.control(Control::EndJob)?;
+    }
+    Ok(end)
+}
+
+/// What `status` (and the other single commands) print: a line, the alarm and a held
+/// job in words, or the JSON report.
+fn print_status(
+    status: &Status,
+    machine: &MachineConfig,
+    result: &str,
+    extra: Option<usize>,
+    held: Option<HeldJob>,
+    quiet: bool,
+) {
     let mut out = std::io::stdout().lock();
     if quiet {
-        let mut v = status_json(&status, machine, result);
+        let mut v = status_json(status, machine, result);
         if let Some(n) = extra {
             v["blocks_sent"] = n.into();
         }
@@ -551,7 +576,7 @@ fn command(
             "{:?}, line {}, {}, feed {:.0} mm/min, override {}%",
             status.state,
             status.line,
-            pose_text(&status),
+            pose_text(status),
             status.speed as f64 * 60.0 / 1e6,
             status.feed_override
         );
@@ -568,5 +593,4 @@ fn command(
             );
         }
     }
-    Ok(code)
 }
