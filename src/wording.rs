@@ -371,7 +371,7 @@ impl fmt::Display for NamedConfigError<'_> {
 }
 
 /// The text of `e`, joints named from `names` if given (the machine file's wording,
-/// `host-tools/src/machine_file.rs`).
+/// `host-tools/src/machine_file`).
 fn config_words(e: &ConfigError, o: &mut dyn Out, names: Option<&[&str]>) -> fmt::Result {
     let name = |o: &mut dyn Out, j: u8| -> fmt::Result {
         o.str("joints[")?;

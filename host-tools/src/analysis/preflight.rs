@@ -6,14 +6,14 @@
 //! check, and every failure is reported with its NC line (one finding per line and
 //! reason). The singularity margin at a sample comes from the singular values of the
 //! Jacobian J = ∂q/∂p of the axes the machine uses (joints per mm, rotary axes counted
-//! per [`ROTARY_MM_PER_DEG`]), found by finite differences of the exact inverse
-//! kinematics and the Jacobi eigenvalue method on JᵀJ: min(σ_min, 1/σ_max), which is 1
-//! for a Cartesian machine and falls to zero at either kind of singularity. The
+//! per [`ROTARY_MM_PER_DEG`]): the kinematics' analytic Jacobian
+//! ([`Kinematics::jacobian`], the one the planner uses), and the Jacobi eigenvalue
+//! method on JᵀJ: min(σ_min, 1/σ_max), which is 1 for a Cartesian machine and falls to zero at either kind of singularity. The
 //! smallest margin met, and where, is reported.
 
 use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
 use pkmc::geometry::Path;
-use pkmc::kinematics::{Kinematics, MachineKinematics, Unreachable};
+use pkmc::kinematics::{Jacobian, Kinematics, MachineKinematics, Unreachable};
 use pkmc::protocol::Block;
 use std::collections::BTreeSet;
 
@@ -57,12 +57,10 @@ fn describe(why: Unreachable, machine: &MachineConfig) -> String {
                     pkmc::units::to_user(jc.min, jc.rotary),
                     pkmc::units::to_user(jc.max, jc.rotary)
                 ),
-                None => format!("joint q{} would leave its travel", j + 1),
+                None => why.to_string(),
             }
         }
-        Unreachable::Singular => "too near a singularity".into(),
-        Unreachable::OutOfReach => "out of the machine's reach".into(),
-        other => format!("{other:?}"),
+        other => other.to_string(),
     }
 }
 
@@ -133,29 +131,24 @@ pub fn margin(pose: &[i64; AXES], machine: &MachineConfig, kin: &MachineKinemati
         .filter(|&i| machine.axes[i].max_velocity > 0)
         .collect();
     let n = machine.joints.len();
-    let mut q0 = [0i64; MAX_JOINTS];
-    kin.inverse(pose, &mut q0).ok()?;
-    // Columns: dq/dp per mm (or per ROTARY_MM_PER_DEG of a rotary axis).
+    // The kinematics' analytic ∂q/∂p, rescaled: columns per mm (or per
+    // ROTARY_MM_PER_DEG of a rotary axis), rows in mm (or ROTARY_MM_PER_DEG per degree).
+    let mut dq: Jacobian = [[0.0; AXES]; MAX_JOINTS];
+    kin.jacobian(pose, &mut dq).ok()?;
     let mut jac = vec![vec![0.0f64; axes.len()]; n];
     for (c, &i) in axes.iter().enumerate() {
-        let rotary = pkmc::config::axis_is_rotary(i);
-        let step = if rotary { 1_000_000 } else { 1_000 }; // 0.001° or 1 µm
-        let per = if rotary {
-            step as f64 / 1e9 * ROTARY_MM_PER_DEG
+        let per_unit = if pkmc::config::axis_is_rotary(i) {
+            1e9 / ROTARY_MM_PER_DEG
         } else {
-            step as f64 / 1e6
+            1e6
         };
-        let mut p = *pose;
-        p[i] += step;
-        let mut q1 = [0i64; MAX_JOINTS];
-        kin.inverse(&p, &mut q1).ok()?;
         for j in 0..n {
             let scale = if machine.joints[j].rotary {
                 1e-9 * ROTARY_MM_PER_DEG
             } else {
                 1e-6
             };
-            jac[j][c] = (q1[j] - q0[j]) as f64 * scale / per;
+            jac[j][c] = dq[j][i] as f64 * scale * per_unit;
         }
     }
     // JᵀJ (axes × axes); σ_min = sqrt(λ_min).
@@ -188,7 +181,7 @@ pub fn check(blocks: &[Block], machine: &MachineConfig, start: [i64; AXES]) -> P
             Err(e) => {
                 out.findings.push(Finding {
                     line: b.line,
-                    what: format!("malformed path ({e:?})"),
+                    what: format!("malformed path ({e})"),
                     at: user_pose(&from),
                 });
                 continue;

@@ -520,7 +520,7 @@ fn resume<T: Transport>(link: &mut Link<T>, op: &mut Operator) -> Result<JobEnd,
         return Err(Failure::new(
             exit::ALARM,
             format!(
-                "{}: nothing to resume: the controller is {:?}{}",
+                "{}: nothing to resume: the controller is {}{}",
                 pkmc_host::link::Transport::name(link.transport()),
                 s.state,
                 s.alarm
@@ -573,7 +573,7 @@ fn print_status(
     } else {
         let _ = writeln!(
             out,
-            "{:?}, line {}, {}, feed {:.0} mm/min, override {}%",
+            "{}, line {}, {}, feed {:.0} mm/min, override {}%",
             status.state,
             status.line,
             pose_text(status),

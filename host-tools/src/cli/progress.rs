@@ -110,7 +110,7 @@ impl Progress {
             "--:--".into()
         };
         let mut text = format!(
-            "{:5.1}%  line {:>6}  {:>7.0} mm/min  ETA {eta}  {:?}",
+            "{:5.1}%  line {:>6}  {:>7.0} mm/min  ETA {eta}  {}",
             frac * 100.0,
             s.line,
             feed,

@@ -27,7 +27,7 @@ pub fn home_command<T: Transport>(link: &mut Link<T>) -> Result<Control, Failure
     let planned = pkmc::planner::plan_move(&block, from, &machine, &kin).map_err(|e| {
         Failure::new(
             exit::PREFLIGHT,
-            format!("home: the move home cannot be planned: {e:?}"),
+            format!("home: the move home cannot be planned: {e}"),
         )
     })?;
     Ok(Control::Jog(planned))
@@ -60,7 +60,7 @@ pub fn jog_command<T: Transport>(
     let from = link.request_status()?.pose;
     let kin = MachineKinematics::new(&machine);
     let planned = pkmc::planner::plan_jog(&machine, &kin, &from, axis, distance, feed)
-        .map_err(|e| Failure::new(exit::PREFLIGHT, format!("jog: cannot be planned: {e:?}")))?;
+        .map_err(|e| Failure::new(exit::PREFLIGHT, format!("jog: cannot be planned: {e}")))?;
     Ok(Control::Jog(planned))
 }
 
@@ -81,7 +81,7 @@ pub fn prepare<T: Transport>(
             return Err(Failure::new(
                 exit::ALARM,
                 format!(
-                    "{}: cannot home: the controller is {:?}{}",
+                    "{}: cannot home: the controller is {}{}",
                     link.transport().name(),
                     s.state,
                     s.alarm
@@ -166,7 +166,7 @@ pub fn move_and_wait<T: Transport>(
         return Err(Failure::new(
             exit::ALARM,
             format!(
-                "{}: the controller is {:?}{}; it moves only when idle",
+                "{}: the controller is {}{}; it moves only when idle",
                 link.transport().name(),
                 before.state,
                 before

@@ -365,7 +365,7 @@ impl<T: Transport> Link<T> {
                 Some(CtrlMsg::MachineRefused { error }) => {
                     return Err(LinkError::MachineRefused {
                         port: self.port(),
-                        error: format!("{error:?}"),
+                        error: error.to_string(),
                     })
                 }
                 _ => {}

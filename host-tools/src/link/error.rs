@@ -156,7 +156,7 @@ impl fmt::Display for LinkError {
             LinkError::JobHeld { port, job } => write!(
                 f,
                 "{port}: the controller holds an unfinished job of another host (process {}, \
-                 gone): {:?} at line {}, {} blocks done, {} still queued; `nc-send resume` \
+                 gone): {} at line {}, {} blocks done, {} still queued; `nc-send resume` \
                  continues it, `nc-send abort` drops it",
                 job.host, job.state, job.line, job.done, job.queued
             ),

@@ -21,10 +21,7 @@ pub use sections::{
 
 use convert::{axis_index, to_units};
 use locate::{field_at, line_col, line_of_field};
-use pkmc::config::{
-    GeometryField, KinematicsConfig, Limits, MachineConfig, ServoConfig, AXES, AXIS_NAMES,
-    MAX_JOINTS,
-};
+use pkmc::config::{KinematicsConfig, Limits, MachineConfig, ServoConfig, AXES, MAX_JOINTS};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -235,78 +232,12 @@ impl MachineFile {
 /// pose.
 pub const MIN_HOME_MARGIN: f64 = 0.01;
 
-/// Names the field a core configuration error points at.
+/// Names the field a core configuration error points at, its joints as the file
+/// names them (the core's wording, `pkmc::wording`).
 pub fn describe(e: &pkmc::config::ConfigError, m: &MachineFile) -> String {
-    use pkmc::config::ConfigError as E;
-    let jn = |j: &u8| {
-        let name = m.joints.get(*j as usize).map_or("?", |jf| jf.name.as_str());
-        format!("joints[{j}] ({name})")
-    };
-    match e {
-        E::NoJoints => "joints: the machine has no joints".into(),
-        E::BoardChannel { joint } => format!(
-            "{}.channel: the board's timer on this channel cannot emit the steps its max_velocity needs (channels 3–6 take at most 256 steps per ms)",
-            jn(joint)
-        ),
-        E::Smoothing => "motion: the smoothing window must be a power of two up to 32 ticks".into(),
-        E::JointLimits { joint } => {
-            format!("{}: speed and acceleration must be positive", jn(joint))
-        }
-        E::JointTravel { joint } => format!("{}.min must be below max", jn(joint)),
-        E::JointScale { joint } => format!("{}.steps_per_unit rounds to zero", jn(joint)),
-        E::JointChannel { joint } => {
-            format!("{}.channel: beyond the board or used twice", jn(joint))
-        }
-        E::StepRate { joint } => format!(
-            "{}.max_velocity: needs more steps per second than the drive timing allows",
-            jn(joint)
-        ),
-        E::JointAxis { joint } => {
-            format!("{}.axis: names no axis with limits in [axes]", jn(joint))
-        }
-        E::AxisLimits { axis } => format!("axes.{}: bad limits", AXIS_NAMES[*axis as usize]),
-        E::HomeOutsideTravel { joint } => format!("home: outside the travel of {}", jn(joint)),
-        E::ServoGains { channel } => format!(
-            "servo channel {channel}: gains must be finite, limits non-negative, \
-             dac_per_unit non-zero and min_ferror <= ferror"
-        ),
-        E::Homing { joint } => format!(
-            "{}.homing: switch_at must lie in the travel, speeds within max_velocity, \
-             latch_velocity > 0, and use_index only on a servo joint",
-            jn(joint)
-        ),
-        E::Contour => "contour: gains must be finite, clamps non-negative, and coupling needs a \
-             Cartesian machine"
-            .into(),
-        E::Geometry { field } => {
-            let (name, what) = match field {
-                GeometryField::Joints => (
-                    "joints",
-                    "the h4-table needs q1..q4 linear and q5 rotary (5 joints), the hexapod \
-                     six linear legs",
-                ),
-                GeometryField::Rails => ("h4_table.rails", "out of range (±1073 mm)"),
-                GeometryField::Forearm => ("h4_table.forearm", "out of range (0..1073 mm)"),
-                GeometryField::BarHalf => ("h4_table.bar_half", "out of range (0..1073 mm)"),
-                GeometryField::Sides => ("h4_table.sides", "each must be -1 or +1"),
-                GeometryField::Attach => ("h4_table.attach", "out of range (±1073 mm)"),
-                GeometryField::ToolLength => ("h4_table.tool_length", "out of range (±1073 mm)"),
-                GeometryField::TablePivot => ("h4_table.table_pivot", "out of range (±1073 mm)"),
-                GeometryField::MinElevation => (
-                    "h4_table.min_elevation",
-                    "must lie between 0 and 90 degrees",
-                ),
-                GeometryField::Base => ("hexapod.base", "out of range (±537 mm)"),
-                GeometryField::Platform => (
-                    "hexapod.platform",
-                    "a joint farther than 268 mm from the platform origin, or all at it",
-                ),
-                _ => ("kinematics", "bad geometry"),
-            };
-            format!("{name}: {what}")
-        }
-        _ => format!("{e:?}"),
-    }
+    let names: Vec<&str> = m.joints.iter().map(|j| j.name.as_str()).collect();
+    let text = e.with_joint_names(&names).to_string();
+    text
 }
 
 /// Reads and converts a machine file.

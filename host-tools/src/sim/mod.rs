@@ -59,7 +59,7 @@ use std::io::Write;
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {
     /// The controller refused the machine.
-    #[error("machine refused by the controller: {0:?}")]
+    #[error("machine refused by the controller: {0}")]
     Refused(pkmc::config::ConfigError),
     /// A servo joint's plant model is malformed.
     #[error(transparent)]
