@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
 """Structure budget of the host tools (issue 15): no source file in host-tools/src
-over 700 lines and no function over 120 lines, except where the file says why.
+over 700 lines and no function over 120 lines, except where the file says why; and
+the rooms import only what docs/architecture.md allows (ALLOWED below: the client
+never imports the simulator, the front end nothing but itself).
 
 A file opts out of a limit with a line `// structure: <reason>` (the reason is
 printed). Functions are measured from their `fn` line to the line of the brace
@@ -13,6 +15,18 @@ import sys
 MAX_FILE = 700
 MAX_FN = 120
 ROOT = pathlib.Path(__file__).resolve().parent.parent
+# Room -> the rooms of the crate its code (tests aside) may name.
+ALLOWED = {
+    "gcode": set(),
+    "link": set(),
+    "input": set(),
+    "cli": {"link"},
+    "sim": {"link"},
+    "machine_file": {"input", "sim", "analysis"},
+    "analysis": {"sim", "machine_file"},
+    "job": {"gcode", "link", "sim", "analysis", "machine_file", "input"},
+}
+CRATE_PATH = re.compile(r"\bcrate::([a-z_]+)")
 FN = re.compile(r"^\s*(pub(\([a-z]+\))?\s+)?(const\s+)?(async\s+)?(unsafe\s+)?fn\s+(\w+)")
 
 
@@ -43,12 +57,32 @@ def functions(lines):
         i += 1
 
 
+def imports_ok(path, rel, lines):
+    """Is every `crate::room` that `path`'s code (before its tests) names allowed?"""
+    parts = rel.parts[2:]  # host-tools/src/<room>/...
+    room = parts[0].removesuffix(".rs")
+    if room not in ALLOWED:
+        return True  # lib.rs, the binaries
+    ok = True
+    for n, line in enumerate(lines, 1):
+        if line.startswith("#[cfg(test)]"):
+            break
+        code = line.split("//")[0]
+        for other in CRATE_PATH.findall(code):
+            if other != room and other not in ALLOWED[room]:
+                print(f"{rel}:{n}: the {room} room may not import crate::{other}")
+                ok = False
+    return ok
+
+
 def main():
     failed = False
     for path in sorted((ROOT / "host-tools" / "src").rglob("*.rs")):
         text = path.read_text()
         lines = text.splitlines()
         rel = path.relative_to(ROOT)
+        if not imports_ok(path, rel, lines):
+            failed = True
         why = re.search(r"// structure: (.*)", text)
         if why:
             print(f"{rel}: exempt ({why.group(1).strip()})")
@@ -62,7 +96,10 @@ def main():
                 failed = True
     if failed:
         sys.exit(1)
-    print(f"host-tools/src: no file over {MAX_FILE} lines, no function over {MAX_FN}")
+    print(
+        f"host-tools/src: no file over {MAX_FILE} lines, no function over {MAX_FN}, "
+        "every room imports only what it may"
+    )
 
 
 if __name__ == "__main__":

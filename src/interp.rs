@@ -101,13 +101,7 @@ pub struct Executor {
 
 /// Most ticks of smoothing (the moving-average window); defined with the machine
 /// configuration that it bounds (`motion.smoothing_ticks`).
-pub use crate::config::MAX_WINDOW;
-
-/// The smoothing window in force for a request of `ticks`: a power of two, at most
-/// [`MAX_WINDOW`] (1: none).
-pub fn window_of(ticks: u32) -> u32 {
-    ticks.max(1).next_power_of_two().min(MAX_WINDOW as u32)
-}
+pub use crate::config::{window_of, MAX_WINDOW};
 /// Blocks remembered for the smoothed position to fall in.
 pub const HISTORY: usize = 48;
 

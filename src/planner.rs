@@ -445,7 +445,7 @@ pub fn forward_pass(blocks: &mut [PlanBlock], first_entry: f32) {
 /// Plans a whole program from `start` at rest, with unlimited look-ahead (the host's
 /// job): `out[i]` receives block `i`'s plan ([`PlanBlock::plan`] is what is streamed).
 /// `smoothing` is the controller's jerk-limitation window in ticks
-/// ([`crate::interp::window_of`] of the machine's). Fails with the index of a block
+/// ([`crate::config::window_of`] of the machine's). Fails with the index of a block
 /// whose geometry is malformed.
 pub fn plan_into(
     blocks: &[Block],
@@ -505,7 +505,7 @@ pub fn plan_move(
     kin: &MachineKinematics,
 ) -> Result<PlannedBlock, GeometryError> {
     let mut out = [PlanBlock::default()];
-    let window = crate::interp::window_of(machine.motion.smoothing_ticks as u32);
+    let window = crate::config::window_of(machine.motion.smoothing_ticks as u32);
     plan_into(
         core::slice::from_ref(block),
         start,

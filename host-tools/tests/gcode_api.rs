@@ -1,5 +1,5 @@
 //! The public face of the G-code front end: options, diagnostics, the tool table, and
-//! the temporary block-returning form of `compile` that `job.rs` still uses.
+//! the temporary block-returning form of `compile` that `job::compile_text` still uses.
 
 use pkmc_host::gcode::canon::{Canon, Feed};
 use pkmc_host::gcode::{compile, Diagnostic, Options, Tool, ToolTable, DEFAULT_ARC_TOLERANCE_NM};

@@ -51,6 +51,12 @@ pub const BOARD_STEPS_PER_TICK: [u32; MAX_STEPPERS] = [
 /// Most ticks of smoothing, the interpolator's moving-average window
 /// ([`MotionConfig::smoothing_ticks`], [`crate::interp`]).
 pub const MAX_WINDOW: usize = 32;
+
+/// The smoothing window in force for a request of `ticks`: a power of two, at most
+/// [`MAX_WINDOW`] (1: none).
+pub fn window_of(ticks: u32) -> u32 {
+    ticks.max(1).next_power_of_two().min(MAX_WINDOW as u32)
+}
 /// Axis names in pose order.
 pub const AXIS_NAMES: [char; AXES] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
 

@@ -2,7 +2,7 @@
 //! given rate, in both directions, and checks that no damaged frame got through.
 //!
 //! [`FaultyLine`] sits in the simulator's server thread between the pseudo-terminal
-//! and the controller ([`crate::link::serve`]). Each byte entering either direction is
+//! and the controller ([`crate::sim::serve::serve`]). Each byte entering either direction is
 //! hit with probability `rate`; a hit is one of three faults, chosen with equal odds:
 //! the byte is replaced by another value (XOR with a random non-zero byte), dropped,
 //! or sent twice. The random number generator is seeded, so a run is repeatable for a

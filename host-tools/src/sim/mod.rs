@@ -13,8 +13,8 @@
 //! so runs are deterministic however fast the host computer is. Who calls it decides
 //! how simulated time relates to the wall clock: the in-process `--check` ticks when
 //! the client reads, until the controller has something to say; the server on a pseudo-terminal
-//! ([`crate::link::serve`], `--sim`) paces it to the wall clock while the host
-//! streams into a short queue, as a board's 1 kHz tick is (see `link`'s module
+//! ([`serve::serve`], `--sim`) paces it to the wall clock while the host
+//! streams into a short queue, as a board's 1 kHz tick is (see `serve`'s module
 //! documentation).
 //!
 //! The controller is paced exactly as on the board, by the same core code
