@@ -164,12 +164,8 @@ impl Executor {
     /// An idle executor at `pose` (on the host; the controller builds its own in place
     /// with [`Executor::init_at`]).
     pub fn new(pose: [i64; AXES]) -> Self {
-        let mut slot = core::mem::MaybeUninit::<Self>::uninit();
         // SAFETY: `init_at` writes every field of the slot.
-        unsafe {
-            Self::init_at(slot.as_mut_ptr(), pose);
-            slot.assume_init()
-        }
+        unsafe { crate::place::built(|p| Self::init_at(p, pose)) }
     }
 
     /// Writes an idle executor at `pose`, without smoothing, into `p`, field by field

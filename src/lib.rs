@@ -27,6 +27,7 @@ pub mod interp;
 pub mod kinematics;
 pub mod math;
 pub mod pacing;
+pub mod place;
 pub mod planner;
 pub mod profile;
 pub mod protocol;

@@ -665,12 +665,8 @@ impl Planner {
     /// An empty planner at `pose` (on the host; the controller builds its own in place
     /// with [`Planner::init_at`]).
     pub fn new(pose: [i64; AXES]) -> Self {
-        let mut slot = core::mem::MaybeUninit::<Self>::uninit();
         // SAFETY: `init_at` writes every field of the slot.
-        unsafe {
-            Self::init_at(slot.as_mut_ptr(), pose);
-            slot.assume_init()
-        }
+        unsafe { crate::place::built(|p| Self::init_at(p, pose)) }
     }
 
     /// Writes an empty planner at `pose` into `p`, field by field (the queue is tens of

@@ -520,12 +520,9 @@ fn resume<T: Transport>(link: &mut Link<T>, op: &mut Operator) -> Result<JobEnd,
         return Err(Failure::new(
             exit::ALARM,
             format!(
-                "{}: nothing to resume: the controller is {}{}",
+                "{}: nothing to resume: the controller is {}",
                 pkmc_host::link::Transport::name(link.transport()),
-                s.state,
-                s.alarm
-                    .map(|a| format!(" ({})", job::describe_alarm(&a)))
-                    .unwrap_or_default()
+                job::state_text(&s)
             ),
         ));
     }

@@ -5,7 +5,7 @@ use super::{compile_text, describe_alarm, exit, open_port, open_target, Failure,
 use crate::link::{JobEnd, JobHooks, Link, LinkOptions, PortTransport, Transport};
 use pkmc::config::{MachineConfig, AXES, AXIS_NAMES};
 use pkmc::kinematics::MachineKinematics;
-use pkmc::protocol::{Block, Control, Motion, State};
+use pkmc::protocol::{Block, Control, Motion, State, Status};
 
 /// What `home` sends: the homing cycle on a machine with home switches; on one
 /// without, the rapid move to its home pose, planned here from where the controller
@@ -81,12 +81,9 @@ pub fn prepare<T: Transport>(
             return Err(Failure::new(
                 exit::ALARM,
                 format!(
-                    "{}: cannot home: the controller is {}{}",
+                    "{}: cannot home: the controller is {}",
                     link.transport().name(),
-                    s.state,
-                    s.alarm
-                        .map(|a| format!(" ({})", describe_alarm(&a)))
-                        .unwrap_or_default()
+                    state_text(&s)
                 ),
             ));
         }
@@ -166,13 +163,9 @@ pub fn move_and_wait<T: Transport>(
         return Err(Failure::new(
             exit::ALARM,
             format!(
-                "{}: the controller is {}{}; it moves only when idle",
+                "{}: the controller is {}; it moves only when idle",
                 link.transport().name(),
-                before.state,
-                before
-                    .alarm
-                    .map(|a| format!(" ({})", describe_alarm(&a)))
-                    .unwrap_or_default()
+                state_text(&before)
             ),
         ));
     }
@@ -194,4 +187,12 @@ pub fn move_and_wait<T: Transport>(
         }
     }
     Ok(end)
+}
+
+/// A controller's state in words, with its alarm when it has one: `alarm (Unhomed)`.
+pub fn state_text(s: &Status) -> String {
+    match s.alarm {
+        Some(a) => format!("{} ({})", s.state, describe_alarm(&a)),
+        None => s.state.to_string(),
+    }
 }

@@ -25,7 +25,9 @@ mod compile;
 mod report;
 mod sim_server;
 
-pub use commands::{connect, home_command, jog_command, mdi, move_and_wait, prepare, with_link};
+pub use commands::{
+    connect, home_command, jog_command, mdi, move_and_wait, prepare, state_text, with_link,
+};
 pub use compile::{compile_program, compile_text, machine_axes};
 pub use report::{describe_alarm, LinesExecuted, PreflightSummary, Report};
 use sim_server::outcome_of;
