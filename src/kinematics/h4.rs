@@ -172,6 +172,7 @@ impl H4Table {
     /// in 1/16 nm, squares in 128 bits and [`fixed::isqrt_wide`], so the residual is
     /// smooth to ~0.1 nm instead of the inverse's half-nm roundings. Reports per arm
     /// (dx, dy, h, q), 1/16 nm; returns (sin A, cos A, sin θ, cos θ), Q31.
+    #[inline(always)]
     fn eval_fine(
         &self,
         pose: &Pose,
