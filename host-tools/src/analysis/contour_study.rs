@@ -22,11 +22,24 @@
 
 use crate::machine_file::MachineFile;
 use crate::sim::plant::{DiscretePlant, Mismatch, TransferFunction};
-use anyhow::{anyhow, bail, Result};
 use pkmc::config::{ContourMode, Drive, KinematicsConfig, MachineConfig, MAX_SERVOS};
 use pkmc::contour::{PeriodInputs, ServoBank};
 use pkmc::servo::{extend_counter, target_q16, DAC_MID, SERVO_HZ, SERVO_PER_TICK};
 use pkmc::units::{NM_PER_MM, TICK_HZ};
+
+/// Why the study cannot run on a machine.
+#[derive(Debug, thiserror::Error)]
+pub enum StudyError {
+    /// The machine file's values are refused.
+    #[error(transparent)]
+    Machine(#[from] crate::machine_file::FieldError),
+    /// Seed B's machine file does not parse.
+    #[error(transparent)]
+    Toml(#[from] toml::de::Error),
+    /// The machine is not one the study can use, in words.
+    #[error("{0}")]
+    Unsuitable(String),
+}
 
 /// The four controllers compared.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -248,10 +261,12 @@ pub struct StudyMachine {
 impl StudyMachine {
     /// From a machine file whose X, Y and Z joints are Cartesian servo joints with a
     /// `plant` table each.
-    pub fn new(file: &MachineFile) -> Result<Self> {
+    pub fn new(file: &MachineFile) -> Result<Self, StudyError> {
         let config = file.to_config()?;
         let KinematicsConfig::Cartesian { axis_of_joint } = config.kinematics else {
-            bail!("contour study: the machine must be Cartesian");
+            return Err(StudyError::Unsuitable(
+                "contour study: the machine must be Cartesian".into(),
+            ));
         };
         let mut models = Vec::new();
         for (j, (jc, jf)) in config.joints.iter().zip(&file.joints).enumerate() {
@@ -262,12 +277,11 @@ impl StudyMachine {
             if axis >= 3 {
                 continue;
             }
-            let p = jf
-                .plant
-                .as_ref()
-                .ok_or_else(|| anyhow!("joints[{j}] ({}): no plant table", jf.name))?;
+            let p = jf.plant.as_ref().ok_or_else(|| {
+                StudyError::Unsuitable(format!("joints[{j}] ({}): no plant table", jf.name))
+            })?;
             let tf = TransferFunction::new(&p.num, &p.den)
-                .map_err(|e| anyhow!("joints[{j}] ({}).{e}", jf.name))?;
+                .map_err(|e| StudyError::Unsuitable(format!("joints[{j}] ({}).{e}", jf.name)))?;
             let counts_per_mm =
                 jc.scale.steps as f64 / jc.scale.per_units as f64 * NM_PER_MM as f64;
             models.push((
@@ -282,7 +296,9 @@ impl StudyMachine {
         let mut axes: Vec<usize> = models.iter().map(|m| m.1).collect();
         axes.sort();
         if axes != [0, 1, 2] {
-            bail!("contour study: X, Y and Z must each be a servo joint with a plant");
+            return Err(StudyError::Unsuitable(
+                "contour study: X, Y and Z must each be a servo joint with a plant".into(),
+            ));
         }
         Ok(Self { config, models })
     }
@@ -450,7 +466,7 @@ impl StudyMachine {
 pub const SEED_B: &str = include_str!("../../../examples/machines/seed-b.toml");
 
 /// Runs all four schemes on the bundled `seed-b` machine under [`Conditions::STUDY`].
-pub fn run_study() -> Result<Vec<RunResult>> {
+pub fn run_study() -> Result<Vec<RunResult>, StudyError> {
     let file: MachineFile = toml::from_str(SEED_B)?;
     let m = StudyMachine::new(&file)?;
     Ok(Scheme::ALL

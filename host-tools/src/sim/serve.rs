@@ -123,7 +123,7 @@ impl Transport for InProcess {
 /// effect on the next tick (an `Abort` finishing a hold) does: the simulator otherwise
 /// ticks only while [`pkmc::controller::Controller::has_work`], which is false for a
 /// held, stopped controller even with an abort pending. Returns whether it ticked.
-fn settle(sim: &mut Simulator) -> anyhow::Result<bool> {
+fn settle(sim: &mut Simulator) -> crate::sim::Result<bool> {
     if sim.ctrl.state() == State::Hold && !sim.ctrl.has_work() {
         sim.tick()?;
         return Ok(true);
