@@ -23,7 +23,8 @@ ALLOWED = {
     "cli": {"link"},
     "sim": {"link"},
     "machine_file": {"input", "sim", "analysis"},
-    "analysis": {"sim", "machine_file"},
+    "analysis": {"sim"},
+    "contour_study": {"sim", "machine_file"},
     "job": {"gcode", "link", "sim", "analysis", "machine_file", "input"},
 }
 CRATE_PATH = re.compile(r"\bcrate::([a-z_]+)")

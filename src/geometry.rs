@@ -15,75 +15,8 @@
 
 use crate::config::AXES;
 use crate::protocol::{Block, Motion, Plane};
-use serde::{Deserialize, Serialize};
 
-/// Shape of a path. Computed by the host ([`Path::new`]) and sent with each block;
-/// the controller checks it against the block ([`Path::from_plan`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub enum Shape {
-    /// Straight line; `unit[i]` = Δᵢ/S in Q20.44.
-    Line {
-        /// Direction per axis, Q20.44.
-        unit: [i64; AXES],
-    },
-    /// Arc or helix.
-    Arc {
-        /// Plane. Not sent: the block has it ([`Path::from_plan`] takes it from there).
-        #[serde(skip)]
-        plane: Plane,
-        /// Centre (first, second in-plane axis), nm. Not sent, as `plane`.
-        #[serde(skip)]
-        center: [i64; 2],
-        /// Start radius, nm.
-        r0: i64,
-        /// End radius minus start radius, nm.
-        dr: i64,
-        /// Start angle, turns Q64 (wrapping). Sent as 8 bytes (its varint would be 10,
-        /// and slower to read).
-        #[serde(with = "fixed_width::u64_le")]
-        phi0: u64,
-        /// Angle per path distance: sweep·2¹⁶ / length (sweep: the signed angle, turns
-        /// Q64, more than one turn for multi-turn arcs), so that φ(s) = φ₀ + (k·s) ≫ 32
-        /// for s in nm Q16 (no division per tick). The sweep itself is not stored: it
-        /// is (k·length) ≫ 16 to within length/2¹⁶ + 1 units of 2⁻⁶⁴ turn.
-        #[serde(with = "fixed_width::i128_le")]
-        phi_rate: i128,
-        /// Radius change per path distance: (dr·2⁴⁰) / length, used as (k·s) ≫ 56 (fine
-        /// enough that the radius lands within a nanometre of the end on any arc).
-        r_rate: i64,
-        /// Per-axis direction of the linear part (helix axis and A B C), Q20.44;
-        /// in-plane entries are 0.
-        unit: [i64; AXES],
-    },
-    /// No motion (dwell, auxiliary function, zero-length move).
-    Point,
-}
-
-/// Little-endian fixed-width encodings for fields whose varint is long (random bits):
-/// cheaper for the controller to read than their varints.
-mod fixed_width {
-    use serde::{Deserialize, Deserializer, Serialize, Serializer};
-
-    pub mod u64_le {
-        use super::*;
-        pub fn serialize<S: Serializer>(v: &u64, s: S) -> Result<S::Ok, S::Error> {
-            v.to_le_bytes().serialize(s)
-        }
-        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
-            <[u8; 8]>::deserialize(d).map(u64::from_le_bytes)
-        }
-    }
-
-    pub mod i128_le {
-        use super::*;
-        pub fn serialize<S: Serializer>(v: &i128, s: S) -> Result<S::Ok, S::Error> {
-            v.to_le_bytes().serialize(s)
-        }
-        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<i128, D::Error> {
-            <[u8; 16]>::deserialize(d).map(i128::from_le_bytes)
-        }
-    }
-}
+pub use crate::protocol::Shape;
 
 /// What a path is, an arc's in-plane part aside.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

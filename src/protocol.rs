@@ -19,6 +19,76 @@
 use crate::config::{AXES, MAX_JOINTS};
 use serde::{Deserialize, Serialize};
 
+/// Shape of a path, as the wire carries it: computed by the host
+/// ([`crate::geometry::Path::new`]) and sent with each block; the controller checks it
+/// against the block ([`crate::geometry::Path::from_plan`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Shape {
+    /// Straight line; `unit[i]` = Δᵢ/S in Q20.44.
+    Line {
+        /// Direction per axis, Q20.44.
+        unit: [i64; AXES],
+    },
+    /// Arc or helix.
+    Arc {
+        /// Plane. Not sent: the block has it ([`crate::geometry::Path::from_plan`] takes
+        /// it from there).
+        #[serde(skip)]
+        plane: Plane,
+        /// Centre (first, second in-plane axis), nm. Not sent, as `plane`.
+        #[serde(skip)]
+        center: [i64; 2],
+        /// Start radius, nm.
+        r0: i64,
+        /// End radius minus start radius, nm.
+        dr: i64,
+        /// Start angle, turns Q64 (wrapping). Sent as 8 bytes (its varint would be 10,
+        /// and slower to read).
+        #[serde(with = "fixed_width::u64_le")]
+        phi0: u64,
+        /// Angle per path distance: sweep·2¹⁶ / length (sweep: the signed angle, turns
+        /// Q64, more than one turn for multi-turn arcs), so that φ(s) = φ₀ + (k·s) ≫ 32
+        /// for s in nm Q16 (no division per tick). The sweep itself is not stored: it
+        /// is (k·length) ≫ 16 to within length/2¹⁶ + 1 units of 2⁻⁶⁴ turn.
+        #[serde(with = "fixed_width::i128_le")]
+        phi_rate: i128,
+        /// Radius change per path distance: (dr·2⁴⁰) / length, used as (k·s) ≫ 56 (fine
+        /// enough that the radius lands within a nanometre of the end on any arc).
+        r_rate: i64,
+        /// Per-axis direction of the linear part (helix axis and A B C), Q20.44;
+        /// in-plane entries are 0.
+        unit: [i64; AXES],
+    },
+    /// No motion (dwell, auxiliary function, zero-length move).
+    Point,
+}
+
+/// Little-endian fixed-width encodings for fields whose varint is long (random bits):
+/// cheaper for the controller to read than their varints.
+mod fixed_width {
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    pub mod u64_le {
+        use super::*;
+        pub fn serialize<S: Serializer>(v: &u64, s: S) -> Result<S::Ok, S::Error> {
+            v.to_le_bytes().serialize(s)
+        }
+        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<u64, D::Error> {
+            <[u8; 8]>::deserialize(d).map(u64::from_le_bytes)
+        }
+    }
+
+    pub mod i128_le {
+        use super::*;
+        pub fn serialize<S: Serializer>(v: &i128, s: S) -> Result<S::Ok, S::Error> {
+            v.to_le_bytes().serialize(s)
+        }
+        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<i128, D::Error> {
+            <[u8; 16]>::deserialize(d).map(i128::from_le_bytes)
+        }
+    }
+}
+
 /// Protocol version, exchanged in the handshake; both sides must agree.
 pub const PROTOCOL_VERSION: u16 = 6;
 /// Largest unencoded frame body (sequence number, message and CRC), bytes: a planned
@@ -125,7 +195,7 @@ pub struct Plan {
     /// Path length, nm (n° for a move of rotary axes only).
     pub length: i64,
     /// Geometry.
-    pub shape: crate::geometry::Shape,
+    pub shape: Shape,
     /// Hard speed limit along the block, nm/tick.
     pub v_limit: f32,
     /// Acceleration of the block's profile, nm/tick².
@@ -906,8 +976,8 @@ impl Cursor<'_> {
         }
     }
 
-    fn shape(&mut self) -> crate::geometry::Shape {
-        use crate::geometry::Shape;
+    fn shape(&mut self) -> Shape {
+        use Shape;
         match self.u32() {
             0 => Shape::Line { unit: self.i64s() },
             1 => Shape::Arc {
@@ -1211,7 +1281,7 @@ mod tests {
             // Every field at its widest: the largest block message there is.
             plan: Plan {
                 length: i64::MIN,
-                shape: crate::geometry::Shape::Arc {
+                shape: Shape::Arc {
                     // Not sent (the block has them): they decode as the defaults.
                     plane: Plane::Xy,
                     center: [0, 0],
@@ -1400,8 +1470,8 @@ mod tests {
                 _ => Motion::Linear,
             };
             let shape = match k % 5 {
-                0 => crate::geometry::Shape::Point,
-                1 | 2 => crate::geometry::Shape::Arc {
+                0 => Shape::Point,
+                1 | 2 => Shape::Arc {
                     plane: [Plane::Xy, Plane::Zx, Plane::Yz][k % 3],
                     center: [w(), w()],
                     r0: w(),
@@ -1411,7 +1481,7 @@ mod tests {
                     r_rate: w(),
                     unit: [w(), w(), w(), w(), w(), w()],
                 },
-                _ => crate::geometry::Shape::Line {
+                _ => Shape::Line {
                     unit: [w(), w(), w(), w(), w(), w()],
                 },
             };

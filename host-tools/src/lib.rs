@@ -13,7 +13,9 @@
 //! - [`sim`]: the simulated controller (the core's `Controller` against simulated
 //!   drives, plants and injected faults) and its board loop, served over a
 //!   pseudo-terminal or in process.
-//! - [`analysis`]: pre-flight checks, plots and the contour-error study.
+//! - [`analysis`]: pre-flight checks and plots.
+//! - [`contour_study`]: the contour-error study of the seeds' controller schemes on a
+//!   machine file's servo axes and plants.
 //! - [`job`]: the application layer shared by the binaries and the tests — compile,
 //!   check, start a simulator when asked, stream, report.
 //! - [`cli`]: the operator's terminal (progress, keys, Ctrl-C) and board discovery.
@@ -21,6 +23,7 @@
 
 pub mod analysis;
 pub mod cli;
+pub mod contour_study;
 pub mod gcode;
 pub mod input;
 pub mod job;

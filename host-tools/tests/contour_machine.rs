@@ -2,7 +2,7 @@
 //! that are the models' low-frequency inverses.
 
 use pkmc::config::{ContourMode, Drive};
-use pkmc_host::analysis::contour_study::{StudyMachine, SEED_B};
+use pkmc_host::contour_study::{StudyMachine, SEED_B};
 use pkmc_host::machine_file::{parse, MachineFile};
 
 #[test]

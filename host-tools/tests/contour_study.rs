@@ -2,7 +2,7 @@
 //! plants 10 % off the models and a periodic cutting force, under the four controllers
 //! that share the same PID gains (see `docs/contour.md`). Runs in simulated time.
 
-use pkmc_host::analysis::contour_study::{run_study, Scheme};
+use pkmc_host::contour_study::{run_study, Scheme};
 
 #[test]
 fn ccpm_keeps_the_contour_error_below_a_tenth_of_uncoupled_and_below_feed_forward() {

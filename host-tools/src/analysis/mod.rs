@@ -1,7 +1,5 @@
-//! Analyses of a program or a machine that move nothing: the pre-flight check against
-//! the machine ([`preflight`]), plots of a run ([`plot`]) and the contour-error study of
-//! the seeds' controller schemes ([`contour_study`]).
+//! Analyses of a program and its run that move nothing: the pre-flight check against
+//! the machine ([`preflight`]) and plots of a run ([`plot`]).
 
-pub mod contour_study;
 pub mod plot;
 pub mod preflight;

@@ -3,9 +3,7 @@
 
 use anyhow::Result;
 use clap::Parser;
-use pkmc_host::analysis::contour_study::{
-    Conditions, Disturbance, RunResult, Scheme, StudyMachine, SEED_B,
-};
+use pkmc_host::contour_study::{Conditions, Disturbance, RunResult, Scheme, StudyMachine, SEED_B};
 use pkmc_host::machine_file::MachineFile;
 use pkmc_host::sim::plant::Mismatch;
 use std::path::PathBuf;

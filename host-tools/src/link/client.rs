@@ -1,7 +1,7 @@
 //! The protocol client: handshake, machine transfer, frames in and out, control
 //! commands, status requests, and waiting for the controller to come to rest.
 
-use super::stream::StallGuard;
+use super::stall::StallGuard;
 use super::{
     Link, LinkError, LinkOptions, Transport, CONTROL_RESEND_AFTER, HELLO_RESEND_AFTER, READ_WAIT,
     STALL_TICKS,

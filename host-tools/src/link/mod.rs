@@ -56,6 +56,7 @@
 
 mod client;
 mod error;
+mod stall;
 mod stream;
 mod transport;
 mod window;

@@ -2,7 +2,7 @@
 //! the `u16` wrap, credits (free slots, free bends, motion buffered), the congestion
 //! window (halved on a rewind, grown by acknowledgements) and the go-back-N guard.
 
-use super::stream::StallGuard;
+use super::stall::StallGuard;
 use super::{ClientStats, MIN_WINDOW};
 use pkmc::protocol::{Control, Status};
 use std::time::Instant;

@@ -3,10 +3,11 @@
 //! between kinds (`drive`, `kinematics`, `contour.mode`, `motion.profile`) are enums:
 //! serde refuses any other word where it is written.
 
-use super::convert::{positive, positive_units, to_units};
+use super::convert::{mm_points, positive, positive_units, to_units};
 use super::{exact, refused, FieldError};
 use pkmc::config::{
-    ContourConfig, Drive, Homing, JointConfig, Limits, MotionConfig, Scale, ServoGains, StepTiming,
+    ContourConfig, Drive, H4TableGeometry, HexapodGeometry, Homing, JointConfig, Limits,
+    MotionConfig, Scale, ServoGains, StepTiming,
 };
 use pkmc::units::units_per_user;
 use serde::Deserialize;
@@ -431,6 +432,67 @@ impl HomingFile {
             search_velocity: to_units(self.search_velocity, rotary, &f("homing.search_velocity"))?,
             latch_velocity: to_units(self.latch_velocity, rotary, &f("homing.latch_velocity"))?,
             use_index: self.use_index,
+        })
+    }
+}
+
+impl H4TableFile {
+    /// The core's geometry of the H-4 with rolling table.
+    pub(super) fn to_geometry(&self) -> Result<H4TableGeometry, FieldError> {
+        let f = |s: &str| format!("h4_table.{s}");
+        Ok(H4TableGeometry {
+            rails: mm_points(&self.rails, &f("rails"))?,
+            forearm: to_units(positive(self.forearm, &f("forearm"))?, false, &f("forearm"))?,
+            bar_half: to_units(
+                positive(self.bar_half, &f("bar_half"))?,
+                false,
+                &f("bar_half"),
+            )?,
+            sides: self.sides,
+            attach: mm_points(&self.attach, &f("attach"))?,
+            tool_length: to_units(self.tool_length, false, &f("tool_length"))?,
+            table_pivot: mm_points(&[self.table_pivot], &f("table_pivot"))?[0],
+            min_elevation: to_units(self.min_elevation, true, &f("min_elevation"))?,
+        })
+    }
+}
+
+/// One set of hexapod joints from coordinates or from a radius and angles.
+fn hexapod_joints(
+    points: &Option<[[f64; 3]; 6]>,
+    radius: Option<f64>,
+    angles: &Option<[f64; 6]>,
+    name: &str,
+) -> Result<[[i64; 3]; 6], FieldError> {
+    match (points, radius, angles) {
+        (Some(p), None, None) => mm_points(p, &format!("hexapod.{name}")),
+        (None, Some(r), Some(a)) => {
+            let r = positive(r, &format!("hexapod.{name}_radius"))?;
+            let mut p = [[0.0; 3]; 6];
+            for (pi, deg) in p.iter_mut().zip(a) {
+                let t = deg.to_radians();
+                *pi = [r * t.cos(), r * t.sin(), 0.0];
+            }
+            mm_points(&p, &format!("hexapod.{name}_angles"))
+        }
+        _ => Err(refused!(
+            "hexapod.{name}: give either {name} = [[x, y, z], ...] (six joints) or \
+             {name}_radius and {name}_angles"
+        )),
+    }
+}
+
+impl HexapodFile {
+    /// The core's geometry of the hexapod.
+    pub(super) fn to_geometry(&self) -> Result<HexapodGeometry, FieldError> {
+        Ok(HexapodGeometry {
+            base: hexapod_joints(&self.base, self.base_radius, &self.base_angles, "base")?,
+            platform: hexapod_joints(
+                &self.platform,
+                self.platform_radius,
+                &self.platform_angles,
+                "platform",
+            )?,
         })
     }
 }

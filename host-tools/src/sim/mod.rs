@@ -532,7 +532,7 @@ mod tests {
 
     #[test]
     fn a_simulator_booting_from_its_flash_file_keeps_the_machine_files_plants() {
-        use crate::analysis::contour_study::SEED_B;
+        use crate::contour_study::SEED_B;
         let file: crate::machine_file::MachineFile = toml::from_str(SEED_B).unwrap();
         let machine = file.to_config().unwrap();
         let plants: Vec<_> = file.joints.iter().map(|j| j.plant.clone()).collect();

@@ -47,6 +47,7 @@
 //! interrupt runs inside a global critical section, which holds off every other
 //! interrupt, whatever its priority, for its whole run.
 
+use crate::time_driver::{BASIC_TIMER_COUNT_HZ, TIME_BASE};
 use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::gpio::{AfType, AnyPin, Flex, Input, Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::interrupt;
@@ -111,11 +112,6 @@ pub type UsbDriver = Driver<'static, peripherals::USB>;
 
 /// The servo-period timer (basic timer TIM7, IRQ `TIM7_DAC`), at [`SERVO_HZ`].
 const SERVO_TIMER: pac::timer::TimBasic = pac::TIM7;
-/// The embassy time base (basic timer TIM6, IRQ `TIM6_DAC`), read by
-/// [`crate::time_driver`].
-pub const TIME_BASE: pac::timer::TimBasic = pac::TIM6;
-/// Counting rate of both basic timers, Hz.
-pub const BASIC_TIMER_COUNT_HZ: u32 = 1_000_000;
 
 /// Priority of the servo-period interrupt: the most urgent.
 const SERVO_PRIORITY: Priority = Priority::P0;

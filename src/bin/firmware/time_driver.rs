@@ -2,7 +2,7 @@
 //!
 //! Every timer that embassy-stm32 can use as its time driver (TIM1-5, TIM8, TIM15,
 //! TIM20) is taken by the pin map, so the firmware brings its own driver on the basic
-//! timer [`crate::board::TIME_BASE`] (TIM6): it counts at 1 MHz (embassy-time's
+//! timer [`TIME_BASE`] (TIM6): it counts at 1 MHz (embassy-time's
 //! `tick-hz-1_000_000`) and overflows every millisecond. `now()` is the overflow count
 //! × 1000 + the counter, read atomically through the counter's copy of the overflow
 //! flag (UIFREMAP), so it is monotonic and exact to 1 µs. Timers are not given their
@@ -17,7 +17,13 @@ use critical_section::{CriticalSection, Mutex};
 use embassy_time_driver::Driver;
 use embassy_time_queue_utils::Queue;
 
-use crate::board::{BASIC_TIMER_COUNT_HZ, TIME_BASE};
+use embassy_stm32::pac;
+
+/// The embassy time base (basic timer TIM6, IRQ `TIM6_DAC`); `crate::board` programs
+/// it (and takes its interrupt) with the other basic timer.
+pub const TIME_BASE: pac::timer::TimBasic = pac::TIM6;
+/// Counting rate of both basic timers (this one and the servo-period timer), Hz.
+pub const BASIC_TIMER_COUNT_HZ: u32 = 1_000_000;
 
 /// Overflow rate of the time base, Hz.
 pub const PERIOD_HZ: u32 = 1_000;

@@ -463,7 +463,7 @@ impl StudyMachine {
 }
 
 /// The bundled study machine file.
-pub const SEED_B: &str = include_str!("../../../examples/machines/seed-b.toml");
+pub const SEED_B: &str = include_str!("../../examples/machines/seed-b.toml");
 
 /// Runs all four schemes on the bundled `seed-b` machine under [`Conditions::STUDY`].
 pub fn run_study() -> Result<Vec<RunResult>, StudyError> {
