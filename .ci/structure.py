@@ -22,7 +22,7 @@ ALLOWED = {
     "input": set(),
     "cli": {"link"},
     "sim": {"link"},
-    "machine_file": {"input", "sim", "analysis"},
+    "machine_file": {"input", "sim", "analysis", "gcode"},
     "analysis": {"sim"},
     "contour_study": {"sim", "machine_file"},
     "job": {"gcode", "link", "sim", "analysis", "machine_file", "input"},

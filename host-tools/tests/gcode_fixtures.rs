@@ -208,6 +208,10 @@ fixtures!(
     a_refused_arc_ends_where_programmed_so_later_lines_are_not_refused_too,
     predefined_and_ini_parameters_are_read_only,
     coordinates_without_a_motion_mode_are_rejected,
+    g52_local_offsets_share_g92s_registers,
+    g43_1_takes_the_tool_length_from_the_line,
+    g10_l1_l10_l11_rewrite_the_tool_table_for_the_run,
+    tool_table_edits_and_local_offsets_are_checked,
 );
 
 #[test]

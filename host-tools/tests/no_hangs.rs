@@ -186,6 +186,7 @@ fn a_simulation_that_makes_no_progress_exits_as_stalled_at_its_line() {
             sim: SimSetup::default(),
             link: LinkOptions::default(),
             home: false,
+            tools: Default::default(),
         };
         let blocks = blocks_moving_a_missing_axis();
         job::run_blocks(&machine, "stall", &blocks, &opts, &mut NoHooks)
@@ -208,6 +209,7 @@ fn a_simulated_jog_that_cannot_move_stops_as_stalled() {
             sim: SimSetup::default(),
             link: LinkOptions::default(),
             home: false,
+            tools: Default::default(),
         };
         job::with_link(&machine, &opts, |link| {
             link.control(Control::AlarmReset)?;

@@ -29,6 +29,10 @@ struct Args {
     /// Machine file (TOML); default: the built-in Cartesian X Y Z stepper machine.
     #[arg(long, global = true, value_name = "FILE.toml")]
     machine: Option<PathBuf>,
+    /// Tool table in LinuxCNC's tool-file form (`T1 P1 Z12.5 D6 ;comment`, mm); replaces
+    /// the machine file's `[[tools]]`.
+    #[arg(long, global = true, value_name = "FILE")]
+    tools: Option<PathBuf>,
     /// Print the summary as JSON on stdout (and no progress).
     #[arg(long, global = true, value_name = "FORMAT", value_parser = ["json"])]
     report: Option<String>,
@@ -132,6 +136,21 @@ fn bad(message: impl Into<String>) -> Failure {
     Failure::new(exit::BAD_INPUT, message)
 }
 
+/// The tool table: `--tools FILE` (LinuxCNC's tool-file form), else the machine file's
+/// `[[tools]]`, else none.
+fn load_tools(args: &Args) -> Result<pkmc_host::gcode::ToolTable, Failure> {
+    if let Some(p) = &args.tools {
+        let text = pkmc_host::input::read_text(p, pkmc_host::input::MAX_MACHINE_FILE_BYTES)
+            .map_err(bad)?;
+        return pkmc_host::gcode::ToolTable::parse(&text, &p.display().to_string())
+            .map_err(|d| bad(d.to_string()));
+    }
+    match &args.machine {
+        Some(p) => pkmc_host::machine_file::load_tools(p).map_err(|e| bad(e.to_string())),
+        None => Ok(pkmc_host::gcode::ToolTable::new()),
+    }
+}
+
 fn load_machine(args: &Args) -> Result<MachineConfig, Failure> {
     match &args.machine {
         Some(p) => pkmc_host::machine_file::load(p),
@@ -221,6 +240,7 @@ fn run(args: &Args) -> Result<i32, Failure> {
         Some(p) => pkmc_host::machine_file::load_plants(p).map_err(|e| bad(format!("{e:#}")))?,
         None => Vec::new(),
     };
+    let tools = load_tools(args)?;
     let opts = RunOptions {
         target,
         sim: SimSetup {
@@ -233,6 +253,7 @@ fn run(args: &Args) -> Result<i32, Failure> {
         },
         link,
         home: args.home,
+        tools,
     };
     let interrupts = Interrupts::install().map_err(|e| Failure::new(exit::LINK, e))?;
     match &args.command {
@@ -255,7 +276,7 @@ fn run_program(
     interrupts: Interrupts,
     quiet: bool,
 ) -> Result<i32, Failure> {
-    let blocks = job::compile_program(program, machine)?;
+    let blocks = job::compile_program(program, machine, &opts.tools)?;
     let style = Style::for_stderr(quiet);
     let keys = if quiet || args.check {
         None
@@ -453,7 +474,7 @@ fn command(
                 feed,
             } => (jog(link, axis, *distance, *feed, &mut op)?, None),
             Command::Mdi { line } => {
-                let (blocks, end) = job::mdi(link, machine, line, &mut op)?;
+                let (blocks, end) = job::mdi(link, machine, line, &opts.tools, &mut op)?;
                 (end, Some(blocks.len()))
             }
             Command::Abort => {

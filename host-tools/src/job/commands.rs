@@ -1,7 +1,7 @@
 //! The single commands (`home`, `jog`, `mdi`, `reset`, `status`) and what a job
 //! does before it starts (homing or unlocking).
 
-use super::{compile_text, describe_alarm, exit, open_port, open_target, Failure, RunOptions};
+use super::{describe_alarm, exit, open_port, open_target, Failure, RunOptions};
 use crate::link::{JobEnd, JobHooks, Link, LinkOptions, PortTransport, Transport};
 use pkmc::config::{MachineConfig, AXES, AXIS_NAMES};
 use pkmc::kinematics::MachineKinematics;
@@ -142,10 +142,11 @@ pub fn mdi<T: Transport>(
     link: &mut Link<T>,
     machine: &MachineConfig,
     line: &str,
+    tools: &crate::gcode::ToolTable,
     hooks: &mut dyn JobHooks,
 ) -> Result<(Vec<Block>, JobEnd), Failure> {
     let status = link.request_status()?;
-    let blocks = compile_text(line, "MDI", machine, status.pose)?;
+    let blocks = super::compile::compile_text_with(line, "MDI", machine, status.pose, tools)?;
     let end = link.run_job(&blocks, hooks)?;
     Ok((blocks, end))
 }

@@ -9,11 +9,15 @@ use std::path::Path;
 
 /// Reads and compiles a program for `machine`; checks every block end against the
 /// machine's reach.
-pub fn compile_program(path: &Path, machine: &MachineConfig) -> Result<Vec<Block>, Failure> {
+pub fn compile_program(
+    path: &Path,
+    machine: &MachineConfig,
+    tools: &gcode::ToolTable,
+) -> Result<Vec<Block>, Failure> {
     let text = crate::input::read_text(path, crate::input::MAX_PROGRAM_BYTES)
         .map_err(|m| Failure::new(exit::BAD_INPUT, m))?;
     let name = path.display().to_string();
-    compile_text(&text, &name, machine, machine.home)
+    compile_text_with(&text, &name, machine, machine.home, tools)
 }
 
 /// Compiles program text named `name` for `machine`, starting from pose `start`;
@@ -26,9 +30,21 @@ pub fn compile_text(
     machine: &MachineConfig,
     start: [i64; AXES],
 ) -> Result<Vec<Block>, Failure> {
+    compile_text_with(text, name, machine, start, &gcode::ToolTable::new())
+}
+
+/// [`compile_text`] with the tool table `tools`.
+pub fn compile_text_with(
+    text: &str,
+    name: &str,
+    machine: &MachineConfig,
+    start: [i64; AXES],
+    tools: &gcode::ToolTable,
+) -> Result<Vec<Block>, Failure> {
     let options = gcode::Options {
         start,
         axes: machine_axes(machine),
+        tools: tools.clone(),
         ..gcode::Options::default()
     };
     let canon = gcode::compile_canon(text, name, &options).map_err(|errs| {

@@ -28,7 +28,7 @@ mod sim_server;
 pub use commands::{
     connect, home_command, jog_command, mdi, move_and_wait, prepare, state_text, with_link,
 };
-pub use compile::{compile_program, compile_text, machine_axes};
+pub use compile::{compile_program, compile_text, compile_text_with, machine_axes};
 pub use report::{describe_alarm, LinesExecuted, PreflightSummary, Report};
 use sim_server::outcome_of;
 pub use sim_server::{SimOutcome, SimServer, SimSetup};
@@ -114,6 +114,8 @@ pub struct RunOptions<'a> {
     pub link: LinkOptions,
     /// Home the machine before the job.
     pub home: bool,
+    /// The tool table the G-code front end uses (G43, #5400–#5410, G10 L1/L10/L11).
+    pub tools: crate::gcode::ToolTable,
 }
 
 /// What a run produced besides the report: the simulator's outcome, for plots.
@@ -208,7 +210,7 @@ pub fn run(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
-    let blocks = compile_program(program, machine)?;
+    let blocks = compile_program(program, machine, &opts.tools)?;
     run_blocks(
         machine,
         &program.display().to_string(),
@@ -230,7 +232,7 @@ pub fn check(
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
     let setup = &opts.sim;
-    let blocks = compile_program(program, machine)?;
+    let blocks = compile_program(program, machine, &opts.tools)?;
     let pre = crate::analysis::preflight::check(&blocks, machine, machine.home);
     let sim = setup.simulator(machine.clone(), exit::BAD_INPUT)?;
     let recorder = std::rc::Rc::new(std::cell::RefCell::new(Recorder::new(

@@ -10,26 +10,29 @@ pub(super) fn line_of_field(text: &str, message: &str) -> Option<usize> {
     let path = message.split(": ").next()?;
     let strip = |k: &str| k.split('[').next().unwrap_or(k).trim().to_string();
     // (table, index among tables of that name, key)
-    let (table, index, key): (Option<String>, usize, Option<String>) =
-        if let Some(rest) = path.strip_prefix("joints[") {
-            let j: usize = rest.split(']').next()?.parse().ok()?;
-            let key = rest.split(").").nth(1).or_else(|| rest.split("].").nth(1));
-            (Some("joints".into()), j, key.map(strip))
-        } else {
-            let parts: Vec<&str> = path.split('.').collect();
-            match parts.as_slice() {
-                ["axes", axis, key, ..] => (Some(format!("axes.{axis}")), 0, Some(strip(key))),
-                ["axes", axis] => (Some(format!("axes.{axis}")), 0, None),
-                [t @ ("h4_table" | "hexapod" | "motion" | "contour"), key, ..] => {
-                    (Some((*t).into()), 0, Some(strip(key)))
-                }
-                [t @ ("h4_table" | "hexapod" | "motion" | "contour" | "joints")] => {
-                    (Some((*t).into()), 0, None)
-                }
-                [key] if !key.contains(' ') => (None, 0, Some(strip(key))),
-                _ => return None,
+    let (table, index, key): (Option<String>, usize, Option<String>) = if let Some((array, rest)) =
+        ["joints", "tools"]
+            .iter()
+            .find_map(|a| path.strip_prefix(&format!("{a}[")).map(|r| (*a, r)))
+    {
+        let j: usize = rest.split(']').next()?.parse().ok()?;
+        let key = rest.split(").").nth(1).or_else(|| rest.split("].").nth(1));
+        (Some(array.into()), j, key.map(strip))
+    } else {
+        let parts: Vec<&str> = path.split('.').collect();
+        match parts.as_slice() {
+            ["axes", axis, key, ..] => (Some(format!("axes.{axis}")), 0, Some(strip(key))),
+            ["axes", axis] => (Some(format!("axes.{axis}")), 0, None),
+            [t @ ("h4_table" | "hexapod" | "motion" | "contour"), key, ..] => {
+                (Some((*t).into()), 0, Some(strip(key)))
             }
-        };
+            [t @ ("h4_table" | "hexapod" | "motion" | "contour" | "joints")] => {
+                (Some((*t).into()), 0, None)
+            }
+            [key] if !key.contains(' ') => (None, 0, Some(strip(key))),
+            _ => return None,
+        }
+    };
     let mut current: Option<String> = None;
     let mut seen = std::collections::HashMap::<String, usize>::new();
     let mut header_line = None;

@@ -16,7 +16,7 @@ pub mod sections;
 
 pub use sections::{
     ContourFile, ContourMode, DriveKind, H4TableFile, HexapodFile, HomingFile, JointFile,
-    KinematicsKind, LimitsFile, MotionFile, Profile, ServoFile, TimingFile,
+    KinematicsKind, LimitsFile, MotionFile, Profile, ServoFile, TimingFile, ToolFile,
 };
 
 use convert::{axis_index, to_units};
@@ -95,6 +95,9 @@ pub struct MachineFile {
     pub contour: Option<ContourFile>,
     /// Speed-profile shape; trapezoidal when absent.
     pub motion: Option<MotionFile>,
+    /// The tool table (`[[tools]]`); empty when absent.
+    #[serde(default)]
+    pub tools: Vec<ToolFile>,
 }
 
 impl MachineFile {
@@ -228,6 +231,38 @@ impl MachineFile {
     }
 }
 
+impl MachineFile {
+    /// The `[[tools]]` table for the G-code front end; each refusal names its entry
+    /// (`tools[1].diameter: ...`).
+    pub fn tool_table(&self) -> Result<crate::gcode::ToolTable, FieldError> {
+        let mut table = crate::gcode::ToolTable::new();
+        for (i, t) in self.tools.iter().enumerate() {
+            let f = |s: &str| format!("tools[{i}].{s}");
+            if table.get(t.number).is_some() {
+                return Err(refused!(
+                    "{}: tool {} is listed twice",
+                    f("number"),
+                    t.number
+                ));
+            }
+            let diameter = to_units(t.diameter, false, &f("diameter"))?;
+            if diameter < 0 {
+                return Err(refused!(
+                    "{}: must not be negative, got {}",
+                    f("diameter"),
+                    t.diameter
+                ));
+            }
+            let tool = crate::gcode::Tool {
+                length_nm: to_units(t.length, false, &f("length"))?,
+                diameter_nm: diameter,
+            };
+            table.insert(t.number, tool);
+        }
+        Ok(table)
+    }
+}
+
 /// Smallest singularity margin ([`crate::analysis::preflight::margin`]) accepted at the home
 /// pose.
 pub const MIN_HOME_MARGIN: f64 = 0.01;
@@ -269,6 +304,19 @@ pub fn read_file(text: &str, origin: &str) -> Result<MachineFile, MachineFileErr
             message,
         }
     })
+}
+
+/// The tool table of the machine file at `path` (`[[tools]]`; empty when it has none).
+pub fn load_tools(path: &Path) -> Result<crate::gcode::ToolTable, MachineFileError> {
+    let text = read(path)?;
+    let origin = path.display().to_string();
+    let file = read_file(&text, &origin)?;
+    file.tool_table()
+        .map_err(|error| MachineFileError::Invalid {
+            line: line_of_field(&text, &error.0),
+            origin,
+            error,
+        })
 }
 
 /// The simulator's plant of each joint in the machine file at `path` (`None` for a
@@ -460,5 +508,34 @@ mod tests {
         let text = H4_TABLE_MACHINE.replacen("kinematics = \"h4-table\"", "kinematics = \"h4\"", 1);
         let e = parse(&text, "m.toml").unwrap_err().to_string();
         assert!(e.contains(": kinematics: unknown variant `h4`"), "{e}");
+    }
+
+    #[test]
+    fn a_machine_files_tool_table_is_read_and_its_mistakes_name_their_entry() {
+        let text = format!(
+            "{DEFAULT_MACHINE}\n[[tools]]\nnumber = 1\nlength = 12.5\ndiameter = 6\n\n\
+             [[tools]]\nnumber = 2\nlength = -3.25\n"
+        );
+        let file = read_file(&text, "m.toml").unwrap();
+        let t = file.tool_table().unwrap();
+        assert_eq!(t.get(1).unwrap().length_nm, 12_500_000);
+        assert_eq!(t.get(1).unwrap().diameter_nm, 6_000_000);
+        assert_eq!(t.get(2).unwrap().length_nm, -3_250_000);
+        let bad = text.replace("diameter = 6", "diameter = -6");
+        let file = read_file(&bad, "m.toml").unwrap();
+        let e = file.tool_table().unwrap_err().0;
+        assert!(
+            e.starts_with("tools[0].diameter: must not be negative"),
+            "{e}"
+        );
+        let line = 1 + bad.lines().position(|l| l == "diameter = -6").unwrap();
+        assert_eq!(locate::line_of_field(&bad, &e), Some(line));
+        let twice = text.replace("number = 2", "number = 1");
+        let e = read_file(&twice, "m.toml")
+            .unwrap()
+            .tool_table()
+            .unwrap_err()
+            .0;
+        assert!(e.contains("tools[1].number: tool 1 is listed twice"), "{e}");
     }
 }

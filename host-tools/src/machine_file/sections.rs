@@ -496,3 +496,20 @@ impl HexapodFile {
         })
     }
 }
+
+/// One `[[tools]]` entry: a tool of the machine's tool table, mm (the table
+/// `nc-send --tools FILE` replaces).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ToolFile {
+    /// Tool number (T).
+    pub number: u32,
+    /// Length offset along Z that G43 applies, mm.
+    #[serde(default)]
+    pub length: f64,
+    /// Diameter, mm (≥ 0).
+    #[serde(default)]
+    pub diameter: f64,
+    /// What the tool is (not used).
+    pub comment: Option<String>,
+}

@@ -209,7 +209,7 @@ impl Interp<'_> {
         }
     }
 
-    /// Tool length offset G43 [H] / G49.
+    /// Tool length offset G43 [H], G43.1 (given on the line) / G49.
     pub(super) fn convert_tool_length(&mut self, w: &Words, b: &mut Block) -> Res<()> {
         let Some(c) = b.codes.get(Group::ToolLength) else {
             return Ok(());
@@ -220,7 +220,7 @@ impl Interp<'_> {
                 Some(h) => whole_in(h, 0, i64::from(u32::MAX), "tool number H")? as u32,
                 None => self.current_tool,
             };
-            self.tool_length = match self.opts.tools.get(n) {
+            self.tool_length = match self.tools.get(n) {
                 Some(t) => t.length_nm,
                 None if n == 0 => 0,
                 None => {
@@ -228,6 +228,9 @@ impl Interp<'_> {
                     return fail(at, format!("G43: tool {n} is not in the tool table"));
                 }
             };
+        } else if c.tenths == 431 {
+            self.tool_length = self.dynamic_tool_length(w, c.col)?;
+            b.used |= super::AXIS_BITS;
         } else {
             self.tool_length = 0;
         }
@@ -302,7 +305,7 @@ impl Interp<'_> {
         }
     }
 
-    /// Non-modal codes: G10, G28/G30, G28.1/G30.1, G92 and G92.1–G92.3 (G4 is the dwell
+    /// Non-modal codes: G10, G28/G30, G28.1/G30.1, G52, G92 and G92.1–G92.3 (G4 is the dwell
     /// phase, G53 goes with the motion).
     pub(super) fn convert_nonmodal(
         &mut self,
@@ -320,6 +323,7 @@ impl Interp<'_> {
                 self.store_home(c);
                 Ok(())
             }
+            520 => self.g52(w, c),
             920 => self.g92(w, c),
             921..=923 => self.g92_switch(c),
             _ => Ok(()),
@@ -335,7 +339,9 @@ impl Interp<'_> {
         out: &mut Vec<Canon>,
     ) -> Res<()> {
         let nonmodal = b.codes.get(Group::NonModal);
-        let nm_axes = nonmodal.filter(|c| matches!(c.tenths, 100 | 280 | 300 | 920));
+        let nm_axes = nonmodal
+            .filter(|c| matches!(c.tenths, 100 | 280 | 300 | 520 | 920))
+            .or(b.codes.get(Group::ToolLength).filter(|c| c.tenths == 431));
         let g53 = nonmodal.filter(|c| c.tenths == 530);
         let explicit = b.codes.get(Group::Motion);
         if let (Some(c), Some(n)) = (explicit.filter(|c| c.tenths != 800), nm_axes) {

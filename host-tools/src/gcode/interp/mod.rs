@@ -36,6 +36,7 @@ mod convert;
 mod modal;
 mod motion;
 mod offsets;
+mod tooling;
 
 use super::lexer::{bit, f64_to_i64, Word, Words};
 use super::params::Params;
@@ -165,6 +166,8 @@ pub struct Interp<'o> {
     selected_tool: u32,
     current_tool: u32,
     tool_length: i64,
+    /// The tool table for this run: the options' table, as G10 L1/L10/L11 rewrite it.
+    tools: super::ToolTable,
     g5x: [i64; AXES],
     g92: [i64; AXES],
     pub(crate) off: [i64; AXES],
@@ -195,6 +198,7 @@ impl<'o> Interp<'o> {
             selected_tool: 0,
             current_tool: 0,
             tool_length: 0,
+            tools: opts.tools.clone(),
             g5x: [0; AXES],
             g92: [0; AXES],
             off: [0; AXES],

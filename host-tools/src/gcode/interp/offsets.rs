@@ -1,5 +1,5 @@
 //! Offsets and parameters: the parameter settings of a line, G10 L2/L20, G28/G30 (and
-//! their stored positions), G92, the offsets in force and the parameters the
+//! their stored positions), G52, G92, the offsets in force and the parameters the
 //! interpreter maintains (tool, position).
 //!
 //! The offsets in force are recomputed from the parameters ([`Interp::refresh_offsets`])
@@ -156,19 +156,41 @@ impl Interp<'_> {
         self.refresh_offsets(c.col)
     }
 
+    /// G52: the local offsets, which share G92's registers (#5211–#5216): each axis
+    /// named gets the value given (program units), the others keep theirs; #5210 is
+    /// set, as by G92. `G52 X0 Y0` takes the X and Y offsets away.
+    pub(super) fn g52(&mut self, w: &Words, c: Code) -> Res<()> {
+        if w.present() & AXIS_BITS == 0 {
+            return fail(c.col, "G52 needs axis words");
+        }
+        for (i, &letter) in AXIS_NAMES.iter().enumerate() {
+            let o = match w.get(letter as u8) {
+                Some(word) => check_range(self.axis_value(i, word)?, i, word.col)?,
+                None => self.g92[i],
+            };
+            self.params
+                .set_numbered(params::G92_OFFSETS + i, to_user(o, i));
+        }
+        self.params.set_numbered(params::G92_ACTIVE, 1.0);
+        self.refresh_offsets(c.col)
+    }
+
     /// G10 L2 / L20: set a coordinate system's offsets.
     pub(super) fn g10(&mut self, w: &Words, c: Code, used: &mut u32) -> Res<()> {
         *used |= bit(b'L') | bit(b'P') | bit(b'R');
         let Some(l) = w.get(b'L') else {
-            return fail(c.col, "G10 needs L2 or L20");
+            return fail(c.col, "G10 needs L1, L2, L10, L11 or L20");
         };
         let l20 = match l.num.whole() {
             Some(2) => false,
             Some(20) => true,
-            Some(1 | 10 | 11) => {
-                return fail(l.col, unsupported("G10 L1/L10/L11 tool table editing"))
+            Some(n @ (1 | 10 | 11)) => return self.g10_tool(w, c, n as u8),
+            _ => {
+                return fail(
+                    l.col,
+                    format!("G10 L{}: only L1, L2, L10, L11 and L20 exist", l.num),
+                )
             }
-            _ => return fail(l.col, format!("G10 L{}: only L2 and L20 exist here", l.num)),
         };
         let Some(p) = w.get(b'P') else {
             return fail(
@@ -252,7 +274,6 @@ impl Interp<'_> {
         p.set_numbered(params::TOOL_NUMBER, f64::from(self.current_tool));
         p.set_numbered(params::TOOL_LENGTH, to_user(self.tool_length, 2));
         let d = self
-            .opts
             .tools
             .get(self.current_tool)
             .map_or(0, |t| t.diameter_nm);
