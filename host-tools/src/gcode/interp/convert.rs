@@ -20,6 +20,7 @@ use super::{dwell_ms, fail, whole_in, Cycle, Interp, Motion, Res};
 use crate::gcode::canon::{Canon, Coolant, PathMode, Plane, Spindle};
 use crate::gcode::lexer::{bit, f64_to_i64, Code, Word, Words};
 use crate::gcode::params;
+use crate::gcode::unsupported;
 
 /// What the phases of one line share.
 pub(super) struct Block {
@@ -270,6 +271,11 @@ impl Interp<'_> {
             return Ok(());
         };
         let mode = if c.tenths == 640 {
+            // LinuxCNC's G64 R (the planner's peak-scale mode), unless the line's own
+            // motion code (an R arc or cycle) takes the R.
+            if let (Some(r), None) = (w.get(b'R'), b.codes.get(Group::Motion)) {
+                return fail(r.col, unsupported("G64 R (trajectory planner mode)"));
+            }
             b.used |= bit(b'P') | bit(b'Q');
             match w.get(b'P') {
                 Some(p) => {

@@ -284,7 +284,7 @@ impl Cursor<'_> {
             return Err(self.unexpected(&format!("expected '[' after {shown}")));
         }
         if name == b"EXISTS" {
-            return self.exists();
+            return self.exists(depth);
         }
         let x = self.bracket(depth)?;
         let v = self.call(name, &shown, x, at, depth)?;
@@ -295,25 +295,36 @@ impl Cursor<'_> {
         }
     }
 
-    /// `EXISTS[#<name>]` or `EXISTS[#n]`, at the `[`: 1 when the parameter exists.
-    fn exists(&mut self) -> Result<f64, LexError> {
+    /// `EXISTS[#<name>]`, `EXISTS[#n]` or `EXISTS[##n]` (the number read from a
+    /// parameter, which must itself be in range), at the `[`: 1 when the parameter
+    /// exists.
+    fn exists(&mut self, depth: usize) -> Result<f64, LexError> {
         let open = self.i;
         self.i += 1;
         if self.peek() != Some(b'#') {
             return Err(self.unexpected("expected #<name> or #number in EXISTS[…]"));
         }
         self.i += 1;
-        if self.peek().is_some_and(|c| c.is_ascii_digit()) {
+        let digit = self.peek().is_some_and(|c| c.is_ascii_digit());
+        if digit || self.peek() == Some(b'#') {
             // A numbered parameter: #1 … #5601 always exist (they read as 0 until
-            // set), as in LinuxCNC.
-            let start = self.i;
-            while self.peek().is_some_and(|c| c.is_ascii_digit()) {
-                self.i += 1;
-            }
-            let n: u64 = std::str::from_utf8(&self.b[start..self.i])
-                .ok()
-                .and_then(|d| d.parse().ok())
-                .unwrap_or(u64::MAX);
+            // set), as in LinuxCNC; an indirect number out of range does not exist.
+            let n: u64 = if digit {
+                let start = self.i;
+                while self.peek().is_some_and(|c| c.is_ascii_digit()) {
+                    self.i += 1;
+                }
+                std::str::from_utf8(&self.b[start..self.i])
+                    .ok()
+                    .and_then(|d| d.parse().ok())
+                    .unwrap_or(u64::MAX)
+            } else {
+                let v = self.operand(depth)?;
+                Num::Real(v)
+                    .whole()
+                    .and_then(|n| u64::try_from(n).ok())
+                    .unwrap_or(0)
+            };
             return match self.peek() {
                 Some(b']') => {
                     self.i += 1;
@@ -425,7 +436,11 @@ impl Cursor<'_> {
         let at = self.i;
         let v = match self.peek() {
             Some(b'0'..=b'9' | b'.') => self.literal(at)?,
-            Some(b'[' | b'#') => Num::Real(self.operand(depth)?),
+            // An expression, a parameter or a function call (`#ATAN[1]/[1]` is #45): any
+            // value, as in LinuxCNC.
+            Some(c) if c == b'[' || c == b'#' || c.is_ascii_alphabetic() => {
+                Num::Real(self.operand(depth)?)
+            }
             _ => return Err(self.unexpected("expected a parameter number or <name> after '#'")),
         };
         match v.whole() {
