@@ -70,8 +70,8 @@ fn arcspiral_with_radius_arcs_in_inches_compiles() {
 }
 
 #[test]
-fn cone_is_refused_for_its_subroutines() {
-    refused_for("cone.ngc", "O-word");
+fn cone_is_refused_only_for_the_w_axis_not_its_subroutines_or_g43_1() {
+    refused_for("cone.ngc", "U V W axes");
 }
 
 #[test]
@@ -85,8 +85,8 @@ fn polar_with_polar_canned_cycles_compiles() {
 }
 
 #[test]
-fn spiral_is_refused_for_its_loop() {
-    refused_for("spiral.ngc", "O-word");
+fn spiral_with_a_repeat_loop_of_polar_moves_compiles() {
+    compiles("spiral.ngc");
 }
 
 #[test]
@@ -109,5 +109,55 @@ fn every_corpus_file_has_a_test_here() {
                 "corpus file {name} has no test in gcode_corpus.rs"
             );
         }
+    }
+}
+
+/// LinuxCNC's own interpreter tests for O-words (`shared/corpus/linuxcnc-tests`), read
+/// in place; skipped with a note when absent.
+fn linuxcnc_test(path: &str) -> Option<String> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/corpus/linuxcnc-tests");
+    let file = dir.join(path);
+    if !file.is_file() {
+        eprintln!("note: {path}: shared/corpus/linuxcnc-tests not found; skipped");
+        return None;
+    }
+    Some(std::fs::read_to_string(file).expect("test program readable"))
+}
+
+#[test]
+fn linuxcnc_sub_0_restores_the_callers_parameters_after_a_nested_call() {
+    let Some(text) = linuxcnc_test("oword/sub.0/test.ngc") else {
+        return;
+    };
+    let commands = compile(&text, "sub.0/test.ngc", &Options::default())
+        .unwrap_or_else(|e| panic!("sub.0 should compile: {}", e[0]));
+    // Its expected output: STRAIGHT_TRAVERSE(1, 2, 3, …) twice, then the program end.
+    let mm = 1_000_000;
+    let targets: Vec<[i64; 6]> = commands
+        .iter()
+        .filter_map(|c| match c {
+            pkmc_host::gcode::canon::Canon::Rapid { target, .. } => Some(*target),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(targets, vec![[mm, 2 * mm, 3 * mm, 0, 0, 0]; 2]);
+    assert!(matches!(
+        commands.last(),
+        Some(pkmc_host::gcode::canon::Canon::End { .. })
+    ));
+}
+
+#[test]
+fn linuxcnc_m98_m99_basics_is_refused_by_name() {
+    let Some(text) = linuxcnc_test("interp/m98m99/01-basics/test.ngc") else {
+        return;
+    };
+    let errors = compile(&text, "01-basics/test.ngc", &Options::default())
+        .expect_err("M98/M99 are not supported");
+    for d in &errors {
+        assert!(
+            d.message.starts_with(UNSUPPORTED),
+            "not a refusal by name: {d}"
+        );
     }
 }

@@ -215,6 +215,22 @@ fixtures!(
     g43_1_takes_the_tool_length_from_the_line,
     g10_l1_l10_l11_rewrite_the_tool_table_for_the_run,
     tool_table_edits_and_local_offsets_are_checked,
+    // O-word subroutines and control flow.
+    subroutine_arguments_are_local_and_restored_on_return,
+    named_subroutines_have_their_own_local_named_parameters,
+    subroutines_return_values_and_may_recurse,
+    if_elseif_and_else_run_exactly_one_branch,
+    while_do_while_and_repeat_loops_repeat_their_bodies,
+    break_and_continue_leave_or_restart_their_loop,
+    m2_inside_a_subroutine_ends_the_program,
+    o_word_lines_take_n_numbers_comments_and_any_case,
+    unmatched_and_unterminated_o_word_blocks_are_rejected,
+    calls_to_undefined_subroutines_are_rejected,
+    return_break_and_continue_outside_their_blocks_are_rejected,
+    calls_nested_more_than_ten_deep_are_rejected,
+    a_subroutine_is_called_only_after_its_definition,
+    an_endless_loop_stops_with_an_error_at_its_line,
+    errors_in_loops_and_subroutines_are_reported_once_per_line,
 );
 
 #[test]

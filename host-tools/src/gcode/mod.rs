@@ -8,7 +8,9 @@
 //! [`interp`] applies the words to the modal state in LinuxCNC's order of execution and
 //! emits [`Canon`] commands; [`cycles`] expands canned drilling cycles into rapids, feeds
 //! and dwells, [`arcs`] computes arc centres and checks arc ends, [`params`] holds the
-//! numbered and named parameters and [`tools`] the tool table.
+//! numbered and named parameters and [`tools`] the tool table. [`flow`] indexes the
+//! program's O-word lines (subroutines, branches, loops) before it runs and then
+//! decides which line runs next; plain lines are executed as they come.
 //!
 //! Invariants:
 //! - Every position in the output is absolute, in axis units (nm for X Y Z, n° for
@@ -19,20 +21,24 @@
 //! - No input makes [`compile`] panic: user numbers go through checked arithmetic, every
 //!   axis value is bounded by [`MAX_AXIS_UNITS`], lines by [`MAX_LINE`], bracket nesting
 //!   by [`MAX_NESTING`] and the commands one line may expand into by
-//!   [`MAX_CYCLE_REPEATS`] and [`MAX_PECKS`].
+//!   [`MAX_CYCLE_REPEATS`] and [`MAX_PECKS`]; no input makes it hang: subroutine calls
+//!   nest at most [`flow::MAX_CALL_DEPTH`] deep and a run executes at most
+//!   [`flow::MAX_REPEATED_LINES`] lines beyond the program's length.
 //! - Every error names `file:line:col` and what is wrong; the whole program is checked
-//!   (at most one error per line, then the next line), and a program with any error
+//!   (at most one error per line, then the next line; with O-words, every line that
+//!   runs, once the blocks match up), and a program with any error
 //!   yields no commands. Legal LinuxCNC features that are not implemented are refused by
 //!   name with a message starting `unsupported: `.
 //!
-//! Source: the LinuxCNC G-code reference (overview, G codes, M codes, O codes for what is
-//! refused) and the RS-274/NGC interpreter's order of execution. The dialect as
-//! implemented is described in `docs/gcode.md`.
+//! Source: the LinuxCNC G-code reference (overview, G codes, M codes, O codes) and
+//! the RS-274/NGC interpreter's order of execution. The dialect as implemented is
+//! described in `docs/gcode.md`.
 
 pub mod arcs;
 pub mod blocks;
 pub mod canon;
 pub mod cycles;
+pub mod flow;
 pub mod interp;
 pub mod lexer;
 pub mod params;
@@ -134,79 +140,33 @@ pub fn compile_canon(
     options: &Options,
 ) -> Result<Vec<Canon>, Vec<Diagnostic>> {
     let mut interp = interp::Interp::new(options);
-    let mut words = lexer::Words::default();
+    let program = flow::Program::index(source, options.block_delete, &interp.params);
     let mut out = Vec::with_capacity(source.len() / 24);
     let mut errors = Vec::new();
-    let mut error = |line: usize, col: usize, message: String| {
+    for (line, col, message) in &program.errors {
+        let text = program.text_of(source, *line);
         errors.push(Diagnostic {
             file: file.to_string(),
-            line,
-            col,
-            message,
-        })
-    };
-    // `%` demarcation: the first non-blank line may be `%`; the next `%` line ends the
-    // program and what follows is ignored.
-    let mut opening_percent: Option<usize> = None;
-    let mut seen_text = false;
-    let mut closed = false;
-    for (n, raw) in source.split('\n').enumerate() {
-        let line = n + 1;
-        let text = raw.trim_end_matches('\r');
-        let bytes = text.as_bytes();
-        let Some(first) = bytes.iter().position(|&b| b != b' ' && b != b'\t') else {
-            continue; // blank line
-        };
-        if bytes[first] == b'%' && bytes[first + 1..].iter().all(|&b| b == b' ' || b == b'\t') {
-            if !seen_text {
-                seen_text = true;
-                opening_percent = Some(line);
-                continue;
-            }
-            closed = true;
-            break;
-        }
-        seen_text = true;
-        if text.len() > MAX_LINE && text.chars().count() > MAX_LINE {
-            error(
-                line,
-                MAX_LINE + 1,
-                format!("line longer than {MAX_LINE} characters"),
-            );
-            continue;
-        }
-        // Block delete: `/` first on the line (after blanks).
-        let mut start = first;
-        if bytes[first] == b'/' {
-            if options.block_delete {
-                continue;
-            }
-            start += 1;
-        }
-        if let Err(e) = lexer::scan_line(text, start, &interp.params, &mut words) {
-            error(line, lexer::char_col(text, e.col), e.message);
-            continue;
-        }
-        let nc_line = u32::try_from(line).unwrap_or(u32::MAX);
-        let before = out.len();
-        if let Err(e) = interp.execute(&mut words, nc_line, &mut out) {
-            out.truncate(before);
-            error(line, lexer::char_col(text, e.col), e.message);
-            continue;
-        }
-        if interp.ended() {
-            break;
+            line: *line as usize,
+            col: lexer::char_col(text, *col),
+            message: message.clone(),
+        });
+    }
+    if !program.broken {
+        flow::run(&program, source, file, &mut interp, &mut out, &mut errors);
+    }
+    if let Some(open) = program.opening_percent {
+        if !program.closed && !interp.ended() {
+            errors.push(Diagnostic {
+                file: file.to_string(),
+                line: open,
+                col: 1,
+                message: "program opened with '%' is never closed by a '%' line".into(),
+            });
         }
     }
-    if let Some(open) = opening_percent {
-        if !closed && !interp.ended() {
-            error(
-                open,
-                1,
-                "program opened with '%' is never closed by a '%' line".into(),
-            );
-        }
-    }
+    // Subroutines and loops run lines out of order: report in line order.
+    errors.sort_by_key(|d| (d.line, d.col));
     if errors.is_empty() {
         Ok(out)
     } else {

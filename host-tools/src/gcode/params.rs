@@ -3,8 +3,10 @@
 //! Numbered parameters #1–#5601 hold `f64` and read as 0 until set, as in LinuxCNC
 //! (which would load them from its variable file; this interpreter starts from zero
 //! every run). Named parameters (`#<name>`, and globals `#<_name>`) must be set before
-//! they are read; names are case-insensitive and blanks in them are ignored. With no
-//! subroutines there is a single scope, so local and global names behave alike.
+//! they are read; names are case-insensitive and blanks in them are ignored. Names
+//! without a leading underscore are local: each subroutine call starts with none and
+//! the caller's come back when it returns ([`Params::enter_scope`],
+//! [`Params::leave_scope`]); globals (`#<_name>`) are shared by every level.
 //!
 //! Parameters the interpreter maintains (see [`crate::gcode::interp`]), in mm for X Y Z
 //! and degrees for A B C whatever G20/G21 is in force:
@@ -75,8 +77,17 @@ pub struct Params {
     pub(crate) position: [i64; 6],
     /// G20 in force (the unit of #5420–#5422).
     pub(crate) inch: bool,
-    named: HashMap<Box<[u8]>, f64, BuildHasherDefault<Fnv>>,
+    /// Local named parameters of the running (sub)program.
+    locals: Names,
+    /// Global named parameters (`_` first).
+    globals: Names,
 }
+
+type Names = HashMap<Box<[u8]>, f64, BuildHasherDefault<Fnv>>;
+
+/// A caller's local named parameters, kept while a subroutine runs.
+#[derive(Clone, Debug, Default)]
+pub struct Scope(Names);
 
 impl Default for Params {
     fn default() -> Self {
@@ -89,11 +100,16 @@ impl Params {
     pub fn new() -> Self {
         let mut numbered = vec![0.0; NUM_PARAMS];
         numbered[CURRENT_SYSTEM] = 1.0;
+        let mut globals = Names::default();
+        // Subroutine return values (LinuxCNC's predefined parameters): none yet.
+        globals.insert(b"_value"[..].into(), 0.0);
+        globals.insert(b"_value_returned"[..].into(), 0.0);
         Self {
             numbered,
             position: [0; 6],
             inch: false,
-            named: HashMap::default(),
+            locals: Names::default(),
+            globals,
         }
     }
 
@@ -128,7 +144,27 @@ impl Params {
     /// Value of `#<name>` (normalised name), if set.
     #[inline]
     pub fn named(&self, name: &[u8]) -> Option<f64> {
-        self.named.get(name).copied()
+        self.names(name).get(name).copied()
+    }
+
+    /// The table `name` lives in.
+    #[inline]
+    fn names(&self, name: &[u8]) -> &Names {
+        if name.first() == Some(&b'_') {
+            &self.globals
+        } else {
+            &self.locals
+        }
+    }
+
+    /// Starts a subroutine's scope: no local named parameters; returns the caller's.
+    pub fn enter_scope(&mut self) -> Scope {
+        Scope(std::mem::take(&mut self.locals))
+    }
+
+    /// Ends a subroutine's scope: its locals are dropped and the caller's come back.
+    pub fn leave_scope(&mut self, caller: Scope) {
+        self.locals = caller.0;
     }
 
     /// Is `#<name>` (normalised name) one LinuxCNC maintains itself, so that a program
@@ -201,10 +237,15 @@ impl Params {
 
     /// Sets `#<name>` (normalised name).
     pub fn set_named(&mut self, name: &[u8], v: f64) {
-        match self.named.get_mut(name) {
+        let names = if name.first() == Some(&b'_') {
+            &mut self.globals
+        } else {
+            &mut self.locals
+        };
+        match names.get_mut(name) {
             Some(slot) => *slot = v,
             None => {
-                self.named.insert(name.into(), v);
+                names.insert(name.into(), v);
             }
         }
     }

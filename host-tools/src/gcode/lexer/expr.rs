@@ -83,7 +83,7 @@ impl Cursor<'_> {
     }
 
     /// `[ expr ]`, at the `[`.
-    fn bracket(&mut self, depth: usize) -> Result<f64, LexError> {
+    pub(super) fn bracket(&mut self, depth: usize) -> Result<f64, LexError> {
         let open = self.i;
         self.i += 1;
         let v = self.binary(0, depth, open)?;

@@ -22,9 +22,11 @@
 
 mod expr;
 mod number;
+mod oword;
 
 pub(crate) use number::f64_to_i64;
 pub use number::{Num, MAX_DECIMALS};
+pub use oword::{oword_args, scan_oword, Keyword, Label, OHeader, MAX_ARGS};
 
 use super::params::Params;
 use super::unsupported;
@@ -306,7 +308,10 @@ impl Cursor<'_> {
         self.i += 1;
         match letter {
             b'O' => {
-                return Err(self.err(at, unsupported("O-word subroutines and control flow (O…)")))
+                return Err(self.err(
+                    at,
+                    "an O-word must begin its line (only an N number may come before it)",
+                ))
             }
             b'U' | b'V' | b'W' => {
                 return Err(self.err(at, unsupported(&format!("U V W axes ({})", letter as char))))
