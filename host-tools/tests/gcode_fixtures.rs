@@ -231,6 +231,7 @@ fixtures!(
     a_subroutine_is_called_only_after_its_definition,
     an_endless_loop_stops_with_an_error_at_its_line,
     errors_in_loops_and_subroutines_are_reported_once_per_line,
+    a_post_s_program_name_line_is_ignored,
 );
 
 #[test]

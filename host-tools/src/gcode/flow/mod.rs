@@ -192,6 +192,9 @@ impl Program {
                 }
                 from += 1;
             }
+            if program_name(&bytes[from..]) {
+                continue; // `OMyProgram`: a post's program name, ignored as by LinuxCNC
+            }
             let mut line = Line {
                 start,
                 end: start + text.len(),
@@ -601,4 +604,11 @@ fn opening_name(kw: Keyword) -> &'static str {
         Keyword::Endrepeat => "repeat",
         _ => "do",
     }
+}
+
+/// Is this line a program name as some posts write it (SprutCAM's Mach post: `O` and a
+/// name, `OMyProgram`)? LinuxCNC runs such a program, treating the line as nothing
+/// (its `sprutcam-mach-post-bug` test); an O-word proper has a number or `<name>`.
+fn program_name(words: &[u8]) -> bool {
+    matches!(words, [b'o' | b'O', l, ..] if l.is_ascii_alphabetic())
 }
