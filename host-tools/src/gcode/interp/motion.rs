@@ -228,8 +228,11 @@ impl Interp<'_> {
             }
             (None, true) => self.centre_from_offsets([(a, wa), (b, wb)], s, e, col)?,
         };
-        let radius = (s[0] - centre[0] as f64).hypot(s[1] - centre[1] as f64);
-        if radius > pkmc::geometry::MAX_ARC_RADIUS_NM as f64 {
+        let (dx, dy) = (s[0] - centre[0] as f64, s[1] - centre[1] as f64);
+        let max = pkmc::geometry::MAX_ARC_RADIUS_NM as f64;
+        // Compared squared: no square root on the path of every arc.
+        if dx * dx + dy * dy > max * max {
+            let radius = dx.hypot(dy);
             let at = w.get(b'R').map_or(col, |r| r.col);
             return fail(
                 at,
