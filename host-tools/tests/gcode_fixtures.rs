@@ -232,6 +232,7 @@ fixtures!(
     an_endless_loop_stops_with_an_error_at_its_line,
     errors_in_loops_and_subroutines_are_reported_once_per_line,
     a_post_s_program_name_line_is_ignored,
+    a_peck_cycle_without_any_q_given_is_refused_after_a_failed_line,
 );
 
 #[test]

@@ -197,7 +197,10 @@ impl Interp<'_> {
                 }
                 v
             }
-            (Cycle::G73 | Cycle::G83, None) if !same => {
+            // A remembered Q only counts if one was ever given (a line that failed
+            // may have left the cycle in force without one): a zero peck would never
+            // reach the bottom.
+            (Cycle::G73 | Cycle::G83, None) if !same || self.cycle.q <= 0 => {
                 return fail(col, format!("{name} needs Q (peck depth)"))
             }
             _ => self.cycle.q,
@@ -360,7 +363,9 @@ impl Interp<'_> {
                     }
                     let back = (depth + PECK_CLEARANCE_NM).min(d.r);
                     self.rapid(line, self.at(ia, ib, ic, aa, bb, back), out);
-                    depth -= d.q;
+                    // Q > 0 is checked when the words are read; max(1) keeps the loop
+                    // finite whatever reaches here.
+                    depth -= d.q.max(1);
                 }
                 feed_to(self, d.bottom, out);
             }
