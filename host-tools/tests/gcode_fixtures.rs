@@ -233,6 +233,8 @@ fixtures!(
     errors_in_loops_and_subroutines_are_reported_once_per_line,
     a_post_s_program_name_line_is_ignored,
     a_peck_cycle_without_any_q_given_is_refused_after_a_failed_line,
+    coordinate_rotation_turns_moves_arcs_and_offsets,
+    rotated_systems_refuse_other_planes_and_cycles_by_name,
 );
 
 #[test]

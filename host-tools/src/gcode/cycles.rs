@@ -86,6 +86,14 @@ impl Interp<'_> {
         col: u32,
         out: &mut Vec<Canon>,
     ) -> Res<()> {
+        if self.rotated() {
+            return fail(
+                col,
+                crate::gcode::unsupported(
+                    "canned cycles in a rotated coordinate system (G10 L2 R)",
+                ),
+            );
+        }
         let words = self.cycle_words(w, kind, previous == Motion::Cycle(kind), col)?;
         let (ia, ib, ic) = self.plane.axes();
         let current = self.pos[ic];

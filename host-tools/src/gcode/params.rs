@@ -36,6 +36,9 @@ pub const G92_OFFSETS: usize = 5211;
 pub const CURRENT_SYSTEM: usize = 5220;
 /// First parameter of coordinate system 1 (G54); system n starts 20 further per step.
 pub const SYSTEM_BASE: usize = 5221;
+/// Offset of a coordinate system's rotation about Z (degrees) from its X parameter:
+/// #5230 for G54.
+pub const ROTATION: usize = 9;
 /// First parameter at or above which settings are refused (read-only).
 pub const READ_ONLY_FROM: usize = 5400;
 /// Tool in the spindle.

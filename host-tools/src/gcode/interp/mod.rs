@@ -36,6 +36,7 @@ mod convert;
 mod modal;
 mod motion;
 mod offsets;
+mod rotation;
 mod tooling;
 
 use super::lexer::{bit, f64_to_i64, Word, Words};
@@ -170,6 +171,8 @@ pub struct Interp<'o> {
     tools: super::ToolTable,
     g5x: [i64; AXES],
     g92: [i64; AXES],
+    /// Rotation of the coordinate system in force about Z, degrees (G10 L2 R).
+    rot_deg: f64,
     pub(crate) off: [i64; AXES],
     pub(crate) pos: [i64; AXES],
     pub(crate) path: PathMode,
@@ -201,6 +204,7 @@ impl<'o> Interp<'o> {
             tools: opts.tools.clone(),
             g5x: [0; AXES],
             g92: [0; AXES],
+            rot_deg: 0.0,
             off: [0; AXES],
             pos: opts.start.map(|v| v.clamp(-MAX_AXIS_UNITS, MAX_AXIS_UNITS)),
             path: PathMode::Blend(None),

@@ -24,6 +24,9 @@ use pkmc::units::NM_PER_MM;
 impl Interp<'_> {
     /// End pose of a straight move from the axis and polar words.
     pub(crate) fn target(&self, w: &Words, machine: bool) -> Res<[i64; AXES]> {
+        if !machine && self.rotated() {
+            return self.rotated_target(w);
+        }
         let mut t = self.pos;
         for (i, slot) in t.iter_mut().enumerate() {
             let Some(word) = w.get(AXIS_NAMES[i] as u8) else {
@@ -44,6 +47,46 @@ impl Interp<'_> {
             let col = w.polar_radius.or(w.polar_angle).map_or(1, |p| p.col);
             t[0] = check_range(x + self.off[0], 0, col)?;
             t[1] = check_range(y + self.off[1], 1, col)?;
+        }
+        Ok(t)
+    }
+
+    /// [`Self::target`] in a rotated coordinate system: X and Y (and polar words) are
+    /// read in the program frame and turned together; the other axes as usual; an
+    /// axis the line does not name keeps its machine position exactly.
+    fn rotated_target(&self, w: &Words) -> Res<[i64; AXES]> {
+        let mut t = self.pos;
+        let (mut x, mut y) = self.xy_to_program(self.pos[0], self.pos[1]);
+        let mut xy_col = None;
+        for (i, slot) in t.iter_mut().enumerate() {
+            let Some(word) = w.get(AXIS_NAMES[i] as u8) else {
+                continue;
+            };
+            let v = self.axis_value(i, word)?;
+            match i {
+                0 | 1 => {
+                    let p = if i == 0 { &mut x } else { &mut y };
+                    *p = if self.absolute { v } else { *p + v };
+                    xy_col = Some(xy_col.map_or(word.col, |c: u32| c.min(word.col)));
+                }
+                _ => {
+                    let p = if self.absolute {
+                        v + self.off[i]
+                    } else {
+                        *slot + v
+                    };
+                    *slot = check_range(p, i, word.col)?;
+                }
+            }
+        }
+        if w.polar_radius.is_some() || w.polar_angle.is_some() {
+            (x, y) = self.polar(w, x, y)?;
+            xy_col = Some(w.polar_radius.or(w.polar_angle).map_or(1, |p| p.col));
+        }
+        if let Some(col) = xy_col {
+            let (mx, my) = self.xy_to_machine(x, y, col)?;
+            t[0] = check_range(mx, 0, col)?;
+            t[1] = check_range(my, 1, col)?;
         }
         Ok(t)
     }
@@ -190,6 +233,14 @@ impl Interp<'_> {
             Plane::Zx => "XZ plane (G18)",
             Plane::Yz => "YZ plane (G19)",
         };
+        if self.rotated() && self.plane != Plane::Xy {
+            return fail(
+                col,
+                crate::gcode::unsupported(&format!(
+                    "arcs in the {plane_name} of a rotated coordinate system (G10 L2 R)"
+                )),
+            );
+        }
         if let Some(k) = w.get(offset_letter(h)) {
             return fail(
                 k.col,
@@ -272,6 +323,7 @@ impl Interp<'_> {
         col: u32,
     ) -> Res<[i64; 2]> {
         let mut c = [0i64; 2];
+        let mut offsets = [0i64; 2];
         for (k, (axis, word)) in axes.into_iter().enumerate() {
             let v = match word {
                 Some(word) => self.length(word)?,
@@ -292,6 +344,20 @@ impl Interp<'_> {
                 self.pos[axis]
             };
             c[k] = check_range(base + v, axis, word.map_or(col, |x| x.col))?;
+            offsets[k] = v;
+        }
+        if self.rotated() {
+            // I J are in the program frame (the plane is XY: see `arc_to`).
+            c = if self.arc_absolute {
+                let (x, y) = self.xy_to_machine(offsets[0], offsets[1], col)?;
+                [check_range(x, 0, col)?, check_range(y, 1, col)?]
+            } else {
+                let (dx, dy) = self.turn_vector(offsets[0] as f64, offsets[1] as f64);
+                [
+                    check_range(bounded_round(s[0] + dx, col)?, 0, col)?,
+                    check_range(bounded_round(s[1] + dy, col)?, 1, col)?,
+                ]
+            };
         }
         let abs = if self.inch {
             arcs::CENTRE_ARC_ABS_NM_INCH

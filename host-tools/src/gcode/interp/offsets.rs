@@ -20,7 +20,7 @@ use super::{check_range, fail, to_user, whole_in, Interp, Res, AXIS_BITS};
 use crate::gcode::canon::Canon;
 use crate::gcode::lexer::{bit, f64_to_i64, Code, ParamRef, Words};
 use crate::gcode::params;
-use crate::gcode::{unsupported, MAX_AXIS_UNITS};
+use crate::gcode::MAX_AXIS_UNITS;
 use pkmc::config::{AXES, AXIS_NAMES};
 use pkmc::units::{NDEG_PER_DEG, NM_PER_MM};
 
@@ -84,6 +84,9 @@ impl Interp<'_> {
             *s = self.param_units(base + i, i, c.col)?;
         }
         if w.present() & AXIS_BITS == 0 {
+            // The intermediate point is the current one, as LinuxCNC emits it (a move of
+            // length zero): the canonical output stays move for move LinuxCNC's.
+            self.rapid(line, self.pos, out);
             self.rapid(line, stored, out);
             return Ok(());
         }
@@ -132,16 +135,23 @@ impl Interp<'_> {
         if w.present() & AXIS_BITS == 0 {
             return fail(c.col, "G92 needs axis words");
         }
+        // Where the current point is, offsets but G92's taken away: in the rotated
+        // frame for X and Y.
+        let mut here = [0i64; AXES];
+        for (i, h) in here.iter_mut().enumerate() {
+            *h = self.pos[i] - self.g5x[i] - self.tool_offset(i);
+        }
+        if self.rotated() {
+            let (x, y) = self.xy_to_program(self.pos[0], self.pos[1]);
+            here[0] = x + self.g92[0];
+            here[1] = y + self.g92[1];
+        }
         for (i, &letter) in AXIS_NAMES.iter().enumerate() {
             let Some(word) = w.get(letter as u8) else {
                 continue;
             };
             let v = self.axis_value(i, word)?;
-            let o = check_range(
-                self.pos[i] - self.g5x[i] - self.tool_offset(i) - v,
-                i,
-                word.col,
-            )?;
+            let o = check_range(here[i] - v, i, word.col)?;
             self.params
                 .set_numbered(params::G92_OFFSETS + i, to_user(o, i));
         }
@@ -202,19 +212,29 @@ impl Interp<'_> {
         if n == 0 {
             n = self.system();
         }
-        if let Some(r) = w.get(b'R') {
-            if !r.num.is_zero() {
-                return fail(r.col, unsupported("coordinate system rotation (G10 L2 R)"));
-            }
-        }
         if w.polar_radius.is_some() || w.polar_angle.is_some() {
             return fail(c.col, "G10 cannot take polar coordinates (@ ^)");
         }
         let base = params::SYSTEM_BASE + 20 * (n - 1);
+        if let Some(r) = w.get(b'R') {
+            let deg = r.num.to_f64();
+            if !deg.is_finite() || deg.abs() > 1e9 {
+                return fail(r.col, format!("rotation R{} out of range", r.num));
+            }
+            self.params.set_numbered(base + params::ROTATION, deg);
+        }
+        let xy_given = w.get(b'X').is_some() || w.get(b'Y').is_some();
+        let rotation = self.params.numbered(base + params::ROTATION);
+        if l20 && xy_given && (self.rotated() || rotation != 0.0) {
+            self.g20_rotated_xy(w, base, rotation, c.col)?;
+        }
         for (i, &letter) in AXIS_NAMES.iter().enumerate() {
             let Some(word) = w.get(letter as u8) else {
                 continue;
             };
+            if l20 && i < 2 && xy_given && (self.rotated() || rotation != 0.0) {
+                continue; // set above, X and Y together
+            }
             let v = self.axis_value(i, word)?;
             let o = if l20 {
                 check_range(
@@ -266,6 +286,14 @@ impl Interp<'_> {
             };
             self.off[i] = self.g5x[i] + self.g92[i] + self.tool_offset(i);
         }
+        let r = self.params.numbered(base + params::ROTATION);
+        if !r.is_finite() || r.abs() > 1e9 {
+            return fail(
+                col,
+                format!("parameter #{} = {r} out of range", base + params::ROTATION),
+            );
+        }
+        self.rot_deg = r;
         Ok(())
     }
 
@@ -284,6 +312,11 @@ impl Interp<'_> {
     pub(super) fn update_position_params(&mut self) {
         for i in 0..AXES {
             self.params.position[i] = self.pos[i] - self.off[i];
+        }
+        if self.rotated() {
+            let (x, y) = self.xy_to_program(self.pos[0], self.pos[1]);
+            self.params.position[0] = x;
+            self.params.position[1] = y;
         }
         self.params.inch = self.inch;
     }
