@@ -1,7 +1,7 @@
-//! Coordinate-system rotation about Z (`G10 L2 P R`): machine X Y = R(θ)·(program X Y
-//! + G92 X Y) + G5x X Y, as LinuxCNC composes them (its `rotate_and_offset_pos`); the
-//! other axes are not turned. θ is the rotation of the system in force (#5230 for G54,
-//! +20 per system).
+//! Coordinate-system rotation about Z (`G10 L2 P R`): machine X Y is
+//! R(θ)·(program X Y plus G92 X Y) plus G5x X Y, as LinuxCNC composes them (its
+//! `rotate_and_offset_pos`); the other axes are not turned. θ is the rotation of the
+//! system in force (#5230 for G54, 20 more per system).
 //!
 //! Straight moves (absolute, incremental in the program frame, polar), arc end points
 //! and centres in the XY plane, G92, G10 L20 and the position parameters #5420–#5421
