@@ -33,16 +33,7 @@ impl Interp<'_> {
         if w.polar_radius.is_some() || w.polar_angle.is_some() {
             return fail(c.col, "G10 cannot take polar coordinates (@ ^)");
         }
-        for (i, &letter) in AXIS_NAMES.iter().enumerate() {
-            if let Some(word) = w.get(letter as u8).filter(|_| i != Z) {
-                if !word.num.is_zero() {
-                    let feature = format!(
-                        "tool offsets along {letter} (only the Z length offset is applied)"
-                    );
-                    return fail(word.col, unsupported(&feature));
-                }
-            }
-        }
+        only_z_offset(w)?;
         let mut tool = self.tools.get(n).unwrap_or_default();
         if let Some(z) = w.get(b'Z') {
             let v = self.axis_value(Z, z)?;
@@ -84,19 +75,25 @@ impl Interp<'_> {
         if w.present() & AXIS_BITS == 0 {
             return fail(col, "G43.1 needs Z (the tool length offset)");
         }
-        for (i, &letter) in AXIS_NAMES.iter().enumerate() {
-            if let Some(word) = w.get(letter as u8).filter(|_| i != Z) {
-                if !word.num.is_zero() {
-                    let feature = format!(
-                        "tool offsets along {letter} (only the Z length offset is applied)"
-                    );
-                    return fail(word.col, unsupported(&feature));
-                }
-            }
-        }
+        only_z_offset(w)?;
         match w.get(b'Z') {
             Some(z) => check_range(self.axis_value(Z, z)?, Z, z.col),
             None => Ok(0),
         }
     }
+}
+
+/// Refuses by name a nonzero tool offset along any axis but Z (only the Z length offset
+/// is applied).
+fn only_z_offset(w: &Words) -> Res<()> {
+    for (i, &letter) in AXIS_NAMES.iter().enumerate() {
+        if let Some(word) = w.get(letter as u8).filter(|_| i != Z) {
+            if !word.num.is_zero() {
+                let feature =
+                    format!("tool offsets along {letter} (only the Z length offset is applied)");
+                return fail(word.col, unsupported(&feature));
+            }
+        }
+    }
+    Ok(())
 }
