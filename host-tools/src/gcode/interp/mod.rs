@@ -235,10 +235,11 @@ impl<'o> Interp<'o> {
         self.check_axes(w)?;
         let mut b = Block {
             line,
-            codes: Modal::of(w)?,
+            codes: Modal::EMPTY,
             used: bit(b'N') | AXIS_BITS,
             inverse: None,
         };
+        b.codes.fill(w)?;
         // LinuxCNC's order of execution (`Interp::execute_block` and the `convert_*`
         // functions of emc/rs274ngc/interp_convert.cc), with units moved first (see the
         // module doc). Overrides (M48-M53) are refused, and cutter compensation is only
