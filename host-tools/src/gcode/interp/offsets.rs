@@ -225,15 +225,17 @@ impl Interp<'_> {
         }
         let xy_given = w.get(b'X').is_some() || w.get(b'Y').is_some();
         let rotation = self.params.numbered(base + params::ROTATION);
-        if l20 && xy_given && (self.rotated() || rotation != 0.0) {
+        // L20's X and Y, when a rotation is involved, are set together (see rotation.rs).
+        let turned_xy = l20 && xy_given && (self.rotated() || rotation != 0.0);
+        if turned_xy {
             self.g20_rotated_xy(w, base, rotation, c.col)?;
         }
         for (i, &letter) in AXIS_NAMES.iter().enumerate() {
             let Some(word) = w.get(letter as u8) else {
                 continue;
             };
-            if l20 && i < 2 && xy_given && (self.rotated() || rotation != 0.0) {
-                continue; // set above, X and Y together
+            if turned_xy && i < 2 {
+                continue;
             }
             let v = self.axis_value(i, word)?;
             let o = if l20 {
@@ -264,7 +266,7 @@ impl Interp<'_> {
     }
 
     /// Parameter `n` (mm or degrees for axis `i`) in axis units, bounded.
-    fn param_units(&self, n: usize, i: usize, col: u32) -> Res<i64> {
+    pub(super) fn param_units(&self, n: usize, i: usize, col: u32) -> Res<i64> {
         let v = self.params.numbered(n);
         let per = if i >= 3 { NDEG_PER_DEG } else { NM_PER_MM };
         match f64_to_i64(v * per as f64) {

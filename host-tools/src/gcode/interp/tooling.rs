@@ -61,12 +61,7 @@ impl Interp<'_> {
 
     /// Z offset of coordinate system 9 (G59.3), axis units.
     fn g59_3_z(&self, col: u32) -> Res<i64> {
-        let n = params::SYSTEM_BASE + 20 * 8 + Z;
-        let v = self.params.numbered(n);
-        match crate::gcode::lexer::f64_to_i64(v * pkmc::units::NM_PER_MM as f64) {
-            Some(u) if u.abs() <= crate::gcode::MAX_AXIS_UNITS => Ok(u),
-            _ => fail(col, format!("parameter #{n} = {v} out of range")),
-        }
+        self.param_units(params::SYSTEM_BASE + 20 * 8 + Z, Z, col)
     }
 
     /// G43.1 Z<..>: the tool length offset given on the line (program units); axis
