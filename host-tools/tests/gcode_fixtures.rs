@@ -215,6 +215,8 @@ fixtures!(
     g43_1_takes_the_tool_length_from_the_line,
     g10_l1_l10_l11_rewrite_the_tool_table_for_the_run,
     tool_table_edits_and_local_offsets_are_checked,
+    cutter_compensation_offsets_the_outline_rounds_outside_corners_and_trims_inside_ones,
+    cutter_compensation_mistakes_are_rejected,
     // O-word subroutines and control flow.
     subroutine_arguments_are_local_and_restored_on_return,
     named_subroutines_have_their_own_local_named_parameters,

@@ -25,7 +25,8 @@
 //! (y, z, x) in YZ. The programs run on a six-axis Cartesian machine with ±1000 mm of
 //! travel (`machine`), starting at 0, with tools 1–99 in the table at zero length
 //! (LinuxCNC's tests bring their own tool tables, which the corpus omits; every
-//! USE_TOOL_LENGTH_OFFSET before a G10 L1/L10/L11 in the expected output is zero).
+//! USE_TOOL_LENGTH_OFFSET before a G10 L1/L10/L11 in the expected output is zero) and
+//! the diameters of the cutter compensation tests' table (`TEST_TBL_DIAMETERS_MM`).
 //!
 //! `cargo test -p pkmc-host --test linuxcnc_tests -- --nocapture` prints the table that
 //! `docs/gcode.md` ("LinuxCNC's interpreter tests") holds.
@@ -97,8 +98,21 @@ fn machine() -> MachineConfig {
     m
 }
 
+/// Tool diameters of the tool table LinuxCNC's cutter compensation tests use
+/// (`tests/ccomp/*/test.tbl` and `tests/interp/cam-nisley/test.tbl`: T1 D0.0625,
+/// T2 D0.125, T3 D0.25, T4 D1.0, in inches, the standalone interpreter's units), mm.
+const TEST_TBL_DIAMETERS_MM: [(u32, f64); 4] = [(1, 1.5875), (2, 3.175), (3, 6.35), (4, 25.4)];
+
 fn options(machine: &MachineConfig) -> Options {
-    let table: String = (1..100).map(|t| format!("T{t} P{t} Z0 D0\n")).collect();
+    let diameter = |t: u32| {
+        TEST_TBL_DIAMETERS_MM
+            .iter()
+            .find(|(n, _)| *n == t)
+            .map_or(0.0, |(_, d)| *d)
+    };
+    let table: String = (1..100)
+        .map(|t| format!("T{t} P{t} Z0 D{}\n", diameter(t)))
+        .collect();
     Options {
         tools: ToolTable::parse(&table, "tools").expect("tool table"),
         start: [0; AXES],

@@ -154,6 +154,15 @@ pub fn compile_canon(
     }
     if !program.broken {
         flow::run(&program, source, file, &mut interp, &mut out, &mut errors);
+        if let Err(e) = interp.finish(&mut out) {
+            let line = program.lines.len().max(1);
+            errors.push(Diagnostic {
+                file: file.to_string(),
+                line,
+                col: e.col as usize,
+                message: e.message,
+            });
+        }
     }
     if let Some(open) = program.opening_percent {
         if !program.closed && !interp.ended() {

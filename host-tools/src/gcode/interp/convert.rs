@@ -15,6 +15,7 @@
 //! `convert_distance_mode`, `convert_retract_mode`, `convert_modal_0`, `convert_motion`,
 //! `convert_stop`).
 
+use super::comp::Straight;
 use super::modal::{code_name, Group, Modal};
 use super::{dwell_ms, fail, whole_in, Cycle, Interp, Motion, Res};
 use crate::gcode::canon::{Canon, Coolant, PathMode, Plane, Spindle};
@@ -428,17 +429,12 @@ impl Interp<'_> {
             }
             Motion::Rapid => {
                 let t = self.target(w, machine)?;
-                self.rapid(line, t, out);
+                self.straight(line, Straight::Rapid, t, col, out)?;
             }
             Motion::Linear => {
                 let t = self.target(w, machine)?;
                 let feed = self.feed_for(&t, false, b.inverse, "G1", col)?;
-                out.push(Canon::Linear {
-                    line,
-                    target: t,
-                    feed,
-                });
-                self.pos = t;
+                self.straight(line, Straight::Feed(feed), t, col, out)?;
             }
             Motion::Arc { clockwise } => {
                 b.used |= bit(b'I') | bit(b'J') | bit(b'K') | bit(b'R') | bit(b'P');
@@ -464,11 +460,12 @@ impl Interp<'_> {
 
     /// Stops M0/M1 (pause, optional pause) and M2/M30 (end), after the line's motion
     /// and only once nothing on the line can fail.
-    pub(super) fn convert_stop(&mut self, b: &Block, out: &mut Vec<Canon>) {
+    pub(super) fn convert_stop(&mut self, b: &Block, out: &mut Vec<Canon>) -> Res<()> {
         let Some(c) = b.codes.get(Group::Stop) else {
-            return;
+            return Ok(());
         };
         let line = b.line;
+        self.comp_stop(matches!(c.tenths, 20 | 300), c.col, out)?;
         match c.tenths {
             0 | 10 => out.push(Canon::Pause {
                 line,
@@ -479,6 +476,7 @@ impl Interp<'_> {
                 self.ended = true;
             }
         }
+        Ok(())
     }
 }
 

@@ -32,6 +32,7 @@
 //! (`interp_convert.cc`, `interp_find.cc`) for offsets, G28/G30, G10, G92 and polar
 //! coordinates.
 
+mod comp;
 mod convert;
 mod modal;
 mod motion;
@@ -177,6 +178,8 @@ pub struct Interp<'o> {
     pub(crate) pos: [i64; AXES],
     pub(crate) path: PathMode,
     pub(crate) cycle: CycleMemory,
+    /// Cutter radius compensation (G40/G41/G42) and its held moves.
+    comp: comp::Comp,
     ended: bool,
 }
 
@@ -209,6 +212,7 @@ impl<'o> Interp<'o> {
             pos: opts.start.map(|v| v.clamp(-MAX_AXIS_UNITS, MAX_AXIS_UNITS)),
             path: PathMode::Blend(None),
             cycle: CycleMemory::default(),
+            comp: comp::Comp::new(),
             ended: false,
         };
         s.update_position_params();
@@ -240,10 +244,11 @@ impl<'o> Interp<'o> {
             inverse: None,
         };
         b.codes.fill(w)?;
+        self.comp.start_line(out);
+        self.comp_guard(w, &b, true)?;
         // LinuxCNC's order of execution (`Interp::execute_block` and the `convert_*`
         // functions of emc/rs274ngc/interp_convert.cc), with units moved first (see the
-        // module doc). Overrides (M48-M53) are refused, and cutter compensation is only
-        // G40, which changes nothing, so neither has a phase.
+        // module doc). Overrides (M48-M53) are refused, so they have no phase.
         self.convert_comments(w, &b, out);
         self.convert_units(&b);
         self.convert_feed_mode(&b);
@@ -255,6 +260,8 @@ impl<'o> Interp<'o> {
         self.convert_coolant(w, &b, out);
         self.convert_dwell(w, &mut b, out)?;
         self.convert_plane(&b);
+        self.convert_cutter_comp(w, &mut b, out)?;
+        self.comp_guard(w, &b, false)?;
         self.convert_tool_length(w, &mut b)?;
         self.convert_coordinate_system(&b)?;
         self.convert_path_mode(w, &mut b, out)?;
@@ -262,11 +269,18 @@ impl<'o> Interp<'o> {
         self.convert_retract_mode(&b);
         self.convert_nonmodal(w, &mut b, out)?;
         self.convert_motion(w, &mut b, out)?;
+        self.comp.hold(out);
         check_unused(w, &b)?;
         self.convert_assignments(w)?;
-        self.convert_stop(&b, out);
+        self.convert_stop(&b, out)?;
         self.update_position_params();
         Ok(())
+    }
+
+    /// The end of the program text: what cutter compensation still holds is emitted.
+    pub fn finish(&mut self, out: &mut Vec<Canon>) -> Res<()> {
+        self.comp.start_line(out);
+        self.comp_stop(true, 1, out)
     }
 
     /// Length word in the units in force → nm, bounded.

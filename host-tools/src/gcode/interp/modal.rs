@@ -32,7 +32,7 @@ pub(crate) enum Group {
     FeedMode,
     /// G20 G21.
     Units,
-    /// G40.
+    /// G40 G41 G41.1 G42 G42.1.
     Cutter,
     /// G43 G49.
     ToolLength,
@@ -101,7 +101,7 @@ pub(crate) fn group_of(letter: char, tenths: i32) -> Result<Group, String> {
         ('G', 901 | 911) => ArcDistance,
         ('G', 930 | 940) => FeedMode,
         ('G', 200 | 210) => Units,
-        ('G', 400) => Cutter,
+        ('G', 400 | 410 | 411 | 420 | 421) => Cutter,
         ('G', 430 | 431 | 490) => ToolLength,
         ('G', 980 | 990) => Retract,
         ('G', 540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593) => System,
@@ -128,7 +128,6 @@ fn refusal(letter: char, tenths: i32) -> String {
         ('G', 171 | 181 | 191) => "G17.1 G18.1 G19.1 (UVW planes)",
         ('G', 330 | 331) => "G33 spindle-synchronized motion",
         ('G', 382..=385) => "G38 probing",
-        ('G', 410 | 411 | 420 | 421) => "G41/G42 cutter radius compensation",
         ('G', 432) => "G43.2 additional tool length offset",
         ('G', 700 | 710 | 711 | 712 | 720 | 721 | 722) => "G70-G72 lathe cycles",
         ('G', 740 | 840) => "G74/G84 tapping cycles",

@@ -204,6 +204,7 @@ impl Interp<'_> {
         col: u32,
         out: &mut Vec<Canon>,
     ) -> Res<()> {
+        self.comp_arc_allowed(col)?;
         let end = self.target(w, false)?;
         let done = self.arc_to(end, w, clockwise, b, col, out);
         if done.is_err() {
@@ -300,17 +301,7 @@ impl Interp<'_> {
             None => 0,
         };
         let feed = self.feed_for(&end, true, line_inverse, name, col)?;
-        out.push(Canon::Arc {
-            line,
-            target: end,
-            center: centre,
-            plane: self.plane,
-            clockwise,
-            turns,
-            feed,
-        });
-        self.pos = end;
-        Ok(())
+        self.arc_move(line, end, centre, clockwise, turns, feed, col, out)
     }
 
     /// The centre of a centre-format arc from `s` to `e` in the plane's axes `axes`
