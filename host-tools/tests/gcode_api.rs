@@ -94,7 +94,7 @@ fn tool_table_entries_can_be_built_in_code() {
     t.insert(
         4,
         Tool {
-            length_nm: 50_000_000,
+            offset: [0, 0, 50_000_000, 0, 0, 0],
             diameter_nm: 3_000_000,
         },
     );

@@ -217,6 +217,8 @@ fixtures!(
     tool_table_edits_and_local_offsets_are_checked,
     cutter_compensation_offsets_the_outline_rounds_outside_corners_and_trims_inside_ones,
     cutter_compensation_mistakes_are_rejected,
+    tool_offsets_along_every_axis_shift_the_program,
+    debug_comments_show_parameters_in_their_format,
     // O-word subroutines and control flow.
     subroutine_arguments_are_local_and_restored_on_return,
     named_subroutines_have_their_own_local_named_parameters,

@@ -117,6 +117,9 @@ fn options(machine: &MachineConfig) -> Options {
         tools: ToolTable::parse(&table, "tools").expect("tool table"),
         start: [0; AXES],
         axes: machine_axes(machine),
+        // LinuxCNC's standalone interpreter keeps parameters in inches (its external
+        // length units), and the tests print them.
+        inch_parameters: true,
         ..Options::default()
     }
 }
@@ -253,6 +256,10 @@ struct Run {
     completed: bool,
     /// Motion we have no counterpart for (RIGID_TAP, STRAIGHT_PROBE, …), first one.
     other_motion: Option<String>,
+    /// Operator messages (MESSAGE: MSG and DEBUG comments), text and trace line.
+    messages: Vec<(String, usize)>,
+    /// The test's script kept only its messages: the moves are not known.
+    moves_filtered: bool,
 }
 
 /// State of LinuxCNC's canon while reading a trace.
@@ -339,16 +346,26 @@ fn call(line: &str) -> Option<(&str, &str)> {
 }
 
 /// The runs in a trace file (a new run starts at each `USE_LENGTH_UNITS` that follows
-/// the end of a run), or `None` when the file is not a canonical trace at all (a test's
-/// filtered output, such as only its debug messages).
+/// the end of a run); a file of messages only (a test script that keeps only them, and
+/// fails when the program does) is one completed run whose moves are unknown; `None`
+/// when the file is neither.
 fn read_trace(text: &str) -> Option<Vec<Run>> {
     let mut runs: Vec<Run> = Vec::new();
     let mut st = CanonState::default();
     let mut seen_units = false;
+    let mut loose_messages = Vec::new();
     for (n, line) in text.lines().enumerate() {
         let Some((name, args)) = call(line) else {
             continue;
         };
+        if name == "MESSAGE" {
+            let message = args.trim().trim_matches('"').trim().to_string();
+            match runs.last_mut() {
+                Some(run) => run.messages.push((message, n + 1)),
+                None => loose_messages.push((message, n + 1)),
+            }
+            continue;
+        }
         let list: Vec<&str> = args.split(',').map(str::trim).collect();
         if name == "USE_LENGTH_UNITS" {
             if !seen_units || runs.last().is_some_and(|r| r.completed) {
@@ -445,6 +462,14 @@ fn read_trace(text: &str) -> Option<Vec<Run>> {
             _ => {}
         }
     }
+    if !seen_units && !loose_messages.is_empty() {
+        return Some(vec![Run {
+            completed: true,
+            messages: loose_messages,
+            moves_filtered: true,
+            ..Run::default()
+        }]);
+    }
     seen_units.then_some(runs)
 }
 
@@ -521,8 +546,29 @@ fn off(ours: &[i64; AXES], reference: &[Approx; AXES]) -> Option<String> {
     None
 }
 
+/// Compares our messages (`(MSG, …)`, `(DEBUG, …)`) with a reference run's, in order
+/// (runs of blanks count as one): `None` when they agree.
+fn compare_messages(ours: &[&str], run: &Run) -> Option<String> {
+    for (k, (o, (r, line))) in ours.iter().zip(&run.messages).enumerate() {
+        // The tests' scripts pass the trace through awk, which joins words with one
+        // blank.
+        let words = |t: &str| t.split_whitespace().collect::<Vec<_>>().join(" ");
+        if words(o) != words(r) {
+            return Some(format!(
+                "message {}: ours `{o}`, LinuxCNC (trace line {line}) `{r}`",
+                k + 1
+            ));
+        }
+    }
+    (ours.len() != run.messages.len())
+        .then(|| format!("{} messages, LinuxCNC {}", ours.len(), run.messages.len()))
+}
+
 /// Compares our moves with one reference run: `None` when they agree.
 fn compare(ours: &[OurMove], run: &Run) -> Option<String> {
+    if run.moves_filtered {
+        return None;
+    }
     if let Some(m) = &run.other_motion {
         return Some(format!(
             "LinuxCNC moves with `{m}`, which we have no counterpart for"
@@ -576,9 +622,21 @@ fn compare(ours: &[OurMove], run: &Run) -> Option<String> {
     off(&ours_final, &ref_final).map(|what| format!("final position: {what}"))
 }
 
+/// Does the case's expected output hold only messages?
+fn case_moves_filtered(case: &Case) -> bool {
+    match &case.reference {
+        Reference::Trace(path) => std::fs::read_to_string(path)
+            .ok()
+            .and_then(|t| read_trace(&t))
+            .is_some_and(|runs| runs.iter().any(|r| r.moves_filtered)),
+        Reference::Refused => false,
+    }
+}
+
 #[derive(Debug)]
 enum Outcome {
-    Pass(usize),
+    /// Moves and messages compared.
+    Pass(usize, usize),
     Refused(String),
     ExpectedError(String),
     Mismatch(String),
@@ -625,8 +683,16 @@ fn run_case(case: &Case, options: &Options) -> Outcome {
         }
         Ok(canon) => {
             let ours = our_moves(&canon);
+            let messages: Vec<&str> = canon
+                .iter()
+                .filter_map(|c| match c {
+                    Canon::Message { text, .. } => Some(text.as_str()),
+                    _ => None,
+                })
+                .collect();
             for (i, run) in runs.iter().flatten().enumerate() {
-                if let Some(diff) = compare(&ours, run) {
+                let diff = compare(&ours, run).or_else(|| compare_messages(&messages, run));
+                if let Some(diff) = diff {
                     let which = if runs.as_ref().is_some_and(|r| r.len() > 1) {
                         format!("run {}: ", i + 1)
                     } else {
@@ -635,7 +701,7 @@ fn run_case(case: &Case, options: &Options) -> Outcome {
                     return Outcome::Mismatch(format!("{which}{diff}"));
                 }
             }
-            Outcome::Pass(ours.len())
+            Outcome::Pass(ours.len(), messages.len())
         }
     }
 }
@@ -657,12 +723,19 @@ fn linuxcnc_interpreter_tests_pass_or_are_refused_by_name() {
     for case in &cases {
         let outcome = run_case(case, &options);
         let (result, reason) = match &outcome {
-            Outcome::Pass(n) => {
+            Outcome::Pass(n, m) => {
                 counts[0] += 1;
-                (
-                    "pass".to_string(),
-                    format!("{n} move{}", if *n == 1 { "" } else { "s" }),
-                )
+                let moves = if case_moves_filtered(case) {
+                    "moves not in its expected output".to_string()
+                } else {
+                    format!("{n} move{}", if *n == 1 { "" } else { "s" })
+                };
+                let messages = match m {
+                    0 => String::new(),
+                    1 => ", 1 message".to_string(),
+                    m => format!(", {m} messages"),
+                };
+                ("pass".to_string(), format!("{moves}{messages}"))
             }
             Outcome::Refused(m) => {
                 counts[1] += 1;

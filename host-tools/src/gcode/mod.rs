@@ -82,6 +82,11 @@ pub struct Options {
     /// other is an error at its column, since the machine could never move there.
     /// Default: all six.
     pub axes: [bool; AXES],
+    /// Keep the parameters that hold lengths (work, G92 and tool offsets, stored
+    /// positions, #5081–#5086, #5401–#5410) in inches, as a LinuxCNC machine
+    /// configured in inches does (its INI `LINEAR_UNITS`); default false: millimetres.
+    /// Whatever this is, G20/G21 only change how the program's words are read.
+    pub inch_parameters: bool,
 }
 
 impl Default for Options {
@@ -92,6 +97,7 @@ impl Default for Options {
             arc_tolerance_nm: DEFAULT_ARC_TOLERANCE_NM,
             start: [0; AXES],
             axes: [true; AXES],
+            inch_parameters: false,
         }
     }
 }

@@ -8,13 +8,16 @@
 //! the caller's come back when it returns ([`Params::enter_scope`],
 //! [`Params::leave_scope`]); globals (`#<_name>`) are shared by every level.
 //!
-//! Parameters the interpreter maintains (see [`crate::gcode::interp`]), in mm for X Y Z
-//! and degrees for A B C whatever G20/G21 is in force:
-//! #5161–#5166 G28 position, #5181–#5186 G30 position (machine frame),
+//! Parameters the interpreter maintains (see [`crate::gcode::interp`]), in mm (or
+//! inches: `Options::inch_parameters`) for X Y Z and degrees for A B C whatever G20/G21
+//! is in force:
+//! #5021–#5026 the current machine position (the G53 frame: no work, G92 or tool
+//! offset; in program units, read-only), #5161–#5166 G28 position, #5181–#5186 G30 position (machine frame),
 //! #5210 G92 offsets active (1/0), #5211–#5216 G92 offsets, #5220 coordinate system in
 //! force (1–9), #5221 + 20·(n − 1) + axis: offsets of coordinate system n (G54 = 1 …
-//! G59.3 = 9; +9 is the rotation, always 0), #5400 tool in the spindle, #5403 its length
-//! offset in force, #5410 its diameter, #5420–#5425 the current position in program
+//! G59.3 = 9; +9 is its rotation about Z, degrees), #5400 tool in the spindle,
+//! #5401–#5406 its offsets in the table (#5403 its length), #5410 its diameter,
+//! #5081–#5086 the tool offsets in force (G43, G43.1), #5420–#5425 the current position in program
 //! units (read-only).
 //!
 //! Invariants: every value is finite; names are stored normalised.
@@ -43,12 +46,17 @@ pub const ROTATION: usize = 9;
 pub const READ_ONLY_FROM: usize = 5400;
 /// Tool in the spindle.
 pub const TOOL_NUMBER: usize = 5400;
-/// Tool length offset in force (Z), mm.
-pub const TOOL_LENGTH: usize = 5403;
+/// #5401–#5406: the table offsets along X Y Z A B C of the tool in the spindle
+/// (#5403 is its length).
+pub const TOOL_OFFSETS: usize = 5401;
+/// #5081–#5086: the tool offsets in force (G43, G43.1) along X Y Z A B C.
+pub const APPLIED_TOOL_OFFSETS: usize = 5081;
 /// Diameter of the tool in the spindle, mm.
 pub const TOOL_DIAMETER: usize = 5410;
 /// First parameter of the current position.
 pub const POSITION: usize = 5420;
+/// First parameter of the current machine position (G53 frame).
+pub const MACHINE_POSITION: usize = 5021;
 
 /// FNV-1a: names are short, and the table is never exposed to adversarial sizes.
 #[derive(Default)]
@@ -78,6 +86,8 @@ pub struct Params {
     numbered: Vec<f64>,
     /// Current position in the program frame, axis units (for #5420–#5425).
     pub(crate) position: [i64; 6],
+    /// Current machine position (G53 frame), axis units (for #5021–#5026).
+    pub(crate) machine: [i64; 6],
     /// G20 in force (the unit of #5420–#5422).
     pub(crate) inch: bool,
     /// Local named parameters of the running (sub)program.
@@ -110,6 +120,7 @@ impl Params {
         Self {
             numbered,
             position: [0; 6],
+            machine: [0; 6],
             inch: false,
             locals: Names::default(),
             globals,
@@ -120,14 +131,17 @@ impl Params {
     #[inline]
     pub fn numbered(&self, n: usize) -> f64 {
         if (POSITION..POSITION + 6).contains(&n) {
-            return self.position_param(n - POSITION);
+            return self.position_param(self.position[n - POSITION], n - POSITION);
+        }
+        if (MACHINE_POSITION..MACHINE_POSITION + 6).contains(&n) {
+            return self.position_param(self.machine[n - MACHINE_POSITION], n - MACHINE_POSITION);
         }
         self.numbered.get(n).copied().unwrap_or(0.0)
     }
 
     #[cold]
-    fn position_param(&self, i: usize) -> f64 {
-        let v = self.position[i] as f64;
+    fn position_param(&self, units: i64, i: usize) -> f64 {
+        let v = units as f64;
         if i >= 3 {
             v / 1e9
         } else if self.inch {

@@ -1,27 +1,29 @@
-//! Tool table: tool number → length offset and diameter.
+//! Tool table: tool number → offsets and diameter.
 //!
-//! Read from a simple LinuxCNC-style tool file, one tool per line:
-//! `T1 P1 Z12.5 D6.0 ;comment`, values in mm. `T` (required) is the tool number, `P`
-//! the pocket (ignored: there is no changer to drive), `Z` the length offset that G43
-//! applies, `D` the diameter (#5410). Offsets along other axes (`X Y A B C U V W`) are
-//! refused unless zero, since only Z length compensation is implemented; the lathe
-//! fields `I J Q` (front and back angle, orientation) are accepted and ignored. Blank
-//! lines and `;` comments are skipped.
+//! Read from a LinuxCNC-style tool file (`tool.tbl`), one tool per line:
+//! `T1 P1 Z12.5 D6.0 ;comment`, lengths in mm, angles in degrees. `T` (required) is the
+//! tool number, `P` the pocket (ignored: there is no changer to drive), `X Y Z A B C`
+//! the offsets G43 applies (`Z` is the tool length), `D` the diameter (#5410, and the
+//! radius of cutter compensation). `U V W` are refused by name (the machines have no
+//! such axes); the lathe fields `I J Q` (front and back angle,
+//! orientation) are accepted and ignored. Blank lines and `;` comments are skipped.
 //!
-//! Invariants: lengths and diameters are in nm and bounded by
+//! Invariants: offsets are in axis units (nm, n°) and diameters in nm, bounded by
 //! [`super::MAX_AXIS_UNITS`]; diameters are not negative; each tool appears once.
 
 use super::lexer::{char_col, scan_line, Num, Words};
 use super::params::Params;
 use super::{Diagnostic, MAX_AXIS_UNITS, MAX_LINE};
-use pkmc::units::NM_PER_MM;
+use pkmc::config::AXES;
+use pkmc::units::{NDEG_PER_DEG, NM_PER_MM};
 use std::collections::BTreeMap;
 
 /// One tool.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Tool {
-    /// Length offset applied to Z by G43, nm.
-    pub length_nm: i64,
+    /// Offsets G43 applies, per pose axis: X Y Z in nm (Z is the tool length), A B C in
+    /// n°.
+    pub offset: [i64; AXES],
     /// Diameter, nm.
     pub diameter_nm: i64,
 }
@@ -88,7 +90,10 @@ impl ToolTable {
             scan_line(text, 0, &params, &mut words).map_err(|e| err(e.col, e.message))?;
             let stray = words.g.first().or(words.m.first()).map(|c| c.col);
             if let Some(col) = stray.or(words.assigns.first().map(|a| a.col)) {
-                return Err(err(col, "a tool line holds T P Z D words only".into()));
+                return Err(err(
+                    col,
+                    "a tool line holds T P X Y Z A B C D I J Q words only".into(),
+                ));
             }
             if words.present() == 0 {
                 continue;
@@ -109,32 +114,30 @@ impl ToolTable {
             if table.tools.contains_key(&number) {
                 return Err(err(t.col, format!("tool T{number} listed twice")));
             }
-            let mm = |num: Num, col: u32, what: &str| {
-                num.scaled(NM_PER_MM, 1)
+            let units = |num: Num, col: u32, what: &str, per: i64, unit: &str| {
+                num.scaled(per, 1)
                     .filter(|v| v.abs() <= MAX_AXIS_UNITS)
-                    .ok_or_else(|| err(col, format!("{what} {num} mm out of range")))
+                    .ok_or_else(|| err(col, format!("{what} {num} {unit} out of range")))
             };
+            let mm = |num: Num, col: u32, what: &str| units(num, col, what, NM_PER_MM, "mm");
             let mut tool = Tool::default();
             for letter in b'A'..=b'Z' {
                 let Some(w) = words.get(letter) else { continue };
                 match letter {
                     b'T' | b'P' | b'I' | b'J' | b'Q' => {}
-                    b'Z' => tool.length_nm = mm(w.num, w.col, "length Z")?,
+                    b'X' | b'Y' | b'Z' => {
+                        let i = usize::from(letter - b'X');
+                        tool.offset[i] = mm(w.num, w.col, &format!("offset {}", letter as char))?;
+                    }
+                    b'A' | b'B' | b'C' => {
+                        let i = 3 + usize::from(letter - b'A');
+                        let what = format!("offset {}", letter as char);
+                        tool.offset[i] = units(w.num, w.col, &what, NDEG_PER_DEG, "°")?;
+                    }
                     b'D' => {
                         tool.diameter_nm = mm(w.num, w.col, "diameter D")?;
                         if tool.diameter_nm < 0 {
                             return Err(err(w.col, format!("negative diameter D{}", w.num)));
-                        }
-                    }
-                    b'X' | b'Y' | b'A' | b'B' | b'C' => {
-                        if !w.num.is_zero() {
-                            return Err(err(
-                                w.col,
-                                super::unsupported(&format!(
-                                    "tool offsets along {} (only Z length offsets)",
-                                    letter as char
-                                )),
-                            ));
                         }
                     }
                     _ => {
@@ -165,11 +168,11 @@ mod tests {
         assert_eq!(
             t.get(1),
             Some(Tool {
-                length_nm: 12_500_000,
+                offset: [0, 0, 12_500_000, 0, 0, 0],
                 diameter_nm: 6_000_000
             })
         );
-        assert_eq!(t.get(2).unwrap().length_nm, -500);
+        assert_eq!(t.get(2).unwrap().offset[2], -500);
         assert_eq!(t.len(), 2);
     }
 
@@ -184,14 +187,27 @@ mod tests {
         let e = ToolTable::parse("T1 Z1\nG0 X1\n", "tools").unwrap_err();
         assert_eq!(
             e.to_string(),
-            "tools:2:1: a tool line holds T P Z D words only"
+            "tools:2:1: a tool line holds T P X Y Z A B C D I J Q words only"
         );
     }
 
     #[test]
-    fn offsets_along_x_are_refused_by_name() {
-        let e = ToolTable::parse("T3 X1 Z1\n", "tools").unwrap_err();
-        assert!(e.message.starts_with("unsupported: tool offsets along X"));
+    fn offsets_along_every_pose_axis_are_read_and_uvw_refused_by_name() {
+        let t = ToolTable::parse("T3 X1 Y-2 Z3 A4 B5.5 C-6\n", "tools").unwrap();
+        let off = t.get(3).unwrap().offset;
+        assert_eq!(
+            off,
+            [
+                1_000_000,
+                -2_000_000,
+                3_000_000,
+                4_000_000_000,
+                5_500_000_000,
+                -6_000_000_000
+            ]
+        );
+        let e = ToolTable::parse("T3 U1 Z1\n", "tools").unwrap_err();
+        assert!(e.message.starts_with("unsupported: U V W axes"), "{e}");
         assert_eq!(e.col, 4);
     }
 }

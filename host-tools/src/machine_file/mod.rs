@@ -254,7 +254,14 @@ impl MachineFile {
                 ));
             }
             let tool = crate::gcode::Tool {
-                length_nm: to_units(t.length, false, &f("length"))?,
+                offset: [
+                    to_units(t.x, false, &f("x"))?,
+                    to_units(t.y, false, &f("y"))?,
+                    to_units(t.length, false, &f("length"))?,
+                    to_units(t.a, true, &f("a"))?,
+                    to_units(t.b, true, &f("b"))?,
+                    to_units(t.c, true, &f("c"))?,
+                ],
                 diameter_nm: diameter,
             };
             table.insert(t.number, tool);
@@ -518,9 +525,9 @@ mod tests {
         );
         let file = read_file(&text, "m.toml").unwrap();
         let t = file.tool_table().unwrap();
-        assert_eq!(t.get(1).unwrap().length_nm, 12_500_000);
+        assert_eq!(t.get(1).unwrap().offset, [0, 0, 12_500_000, 0, 0, 0]);
         assert_eq!(t.get(1).unwrap().diameter_nm, 6_000_000);
-        assert_eq!(t.get(2).unwrap().length_nm, -3_250_000);
+        assert_eq!(t.get(2).unwrap().offset[2], -3_250_000);
         let bad = text.replace("diameter = 6", "diameter = -6");
         let file = read_file(&bad, "m.toml").unwrap();
         let e = file.tool_table().unwrap_err().0;

@@ -507,6 +507,21 @@ pub struct ToolFile {
     /// Length offset along Z that G43 applies, mm.
     #[serde(default)]
     pub length: f64,
+    /// Offset along X that G43 applies, mm.
+    #[serde(default)]
+    pub x: f64,
+    /// Offset along Y, mm.
+    #[serde(default)]
+    pub y: f64,
+    /// Offset about A, degrees.
+    #[serde(default)]
+    pub a: f64,
+    /// Offset about B, degrees.
+    #[serde(default)]
+    pub b: f64,
+    /// Offset about C, degrees.
+    #[serde(default)]
+    pub c: f64,
     /// Diameter, mm (≥ 0).
     #[serde(default)]
     pub diameter: f64,

@@ -19,9 +19,10 @@ use super::comp::Straight;
 use super::modal::{code_name, Group, Modal};
 use super::{dwell_ms, fail, whole_in, Cycle, Interp, Motion, Res};
 use crate::gcode::canon::{Canon, Coolant, PathMode, Plane, Spindle};
-use crate::gcode::lexer::{bit, f64_to_i64, Code, Word, Words};
+use crate::gcode::lexer::{bit, f64_to_i64, Code, Note, Word, Words};
 use crate::gcode::params;
 use crate::gcode::unsupported;
+use pkmc::config::AXES;
 
 /// What the phases of one line share.
 pub(super) struct Block {
@@ -36,9 +37,13 @@ pub(super) struct Block {
 }
 
 impl Interp<'_> {
-    /// Comments: the line's `(MSG, …)` texts, in order.
+    /// Comments: the line's `(MSG, …)` and `(DEBUG, …)` texts, in order.
     pub(super) fn convert_comments(&mut self, w: &mut Words, b: &Block, out: &mut Vec<Canon>) {
-        for text in w.messages.drain(..) {
+        for note in w.messages.drain(..) {
+            let text = match note {
+                Note::Msg(text) => text,
+                Note::Debug(text) => super::debug::expand(&self.params, &text),
+            };
             out.push(Canon::Message { line: b.line, text });
         }
     }
@@ -222,19 +227,19 @@ impl Interp<'_> {
                 Some(h) => whole_in(h, 0, i64::from(u32::MAX), "tool number H")? as u32,
                 None => self.current_tool,
             };
-            self.tool_length = match self.tools.get(n) {
-                Some(t) => t.length_nm,
-                None if n == 0 => 0,
+            self.tool_offsets = match self.tools.get(n) {
+                Some(t) => t.offset,
+                None if n == 0 => [0; AXES],
                 None => {
                     let at = w.get(b'H').map_or(c.col, |h| h.col);
                     return fail(at, format!("G43: tool {n} is not in the tool table"));
                 }
             };
         } else if c.tenths == 431 {
-            self.tool_length = self.dynamic_tool_length(w, c.col)?;
+            self.tool_offsets = self.dynamic_tool_offsets(w, c.col)?;
             b.used |= super::AXIS_BITS;
         } else {
-            self.tool_length = 0;
+            self.tool_offsets = [0; AXES];
         }
         self.update_tool_params();
         self.refresh_offsets(c.col)

@@ -34,6 +34,7 @@
 
 mod comp;
 mod convert;
+mod debug;
 mod modal;
 mod motion;
 mod offsets;
@@ -167,7 +168,8 @@ pub struct Interp<'o> {
     spindle: Spindle,
     selected_tool: u32,
     current_tool: u32,
-    tool_length: i64,
+    /// Tool offsets in force (G43, G43.1), per pose axis, axis units.
+    tool_offsets: [i64; AXES],
     /// The tool table for this run: the options' table, as G10 L1/L10/L11 rewrite it.
     tools: super::ToolTable,
     g5x: [i64; AXES],
@@ -203,7 +205,7 @@ impl<'o> Interp<'o> {
             spindle: Spindle::Off,
             selected_tool: 0,
             current_tool: 0,
-            tool_length: 0,
+            tool_offsets: [0; AXES],
             tools: opts.tools.clone(),
             g5x: [0; AXES],
             g92: [0; AXES],
@@ -320,6 +322,23 @@ impl<'o> Interp<'o> {
         )
     }
 
+    /// Axis units of axis `i` per parameter unit (mm or inch, see
+    /// [`Options::inch_parameters`]; degrees for A B C).
+    pub(crate) fn per_user(&self, i: usize) -> i64 {
+        if i >= 3 {
+            NDEG_PER_DEG
+        } else if self.opts.inch_parameters {
+            NM_PER_INCH
+        } else {
+            NM_PER_MM
+        }
+    }
+
+    /// Axis units of axis `i` → the parameters' units.
+    pub(crate) fn to_user(&self, v: i64, i: usize) -> f64 {
+        v as f64 / self.per_user(i) as f64
+    }
+
     /// Axis word `i` → axis units (nm, or n° for A B C), bounded.
     #[inline]
     pub(crate) fn axis_value(&self, i: usize, w: Word) -> Res<i64> {
@@ -328,15 +347,6 @@ impl<'o> Interp<'o> {
         } else {
             self.length(w)
         }
-    }
-}
-
-/// Axis units → mm or degrees, for parameters.
-pub(crate) fn to_user(v: i64, i: usize) -> f64 {
-    if i >= 3 {
-        v as f64 / NDEG_PER_DEG as f64
-    } else {
-        v as f64 / NM_PER_MM as f64
     }
 }
 

@@ -16,13 +16,12 @@
 //! its interpreter's `interp_convert.cc` (`convert_setup`, `convert_home`,
 //! `convert_axis_offsets`).
 
-use super::{check_range, fail, to_user, whole_in, Interp, Res, AXIS_BITS};
+use super::{check_range, fail, whole_in, Interp, Res, AXIS_BITS};
 use crate::gcode::canon::Canon;
 use crate::gcode::lexer::{bit, f64_to_i64, Code, ParamRef, Words};
 use crate::gcode::params;
 use crate::gcode::MAX_AXIS_UNITS;
 use pkmc::config::{AXES, AXIS_NAMES};
-use pkmc::units::{NDEG_PER_DEG, NM_PER_MM};
 
 impl Interp<'_> {
     /// Applies the line's parameter settings, in order.
@@ -111,7 +110,8 @@ impl Interp<'_> {
             params::G30_POSITION
         };
         for i in 0..AXES {
-            self.params.set_numbered(base + i, to_user(self.pos[i], i));
+            self.params
+                .set_numbered(base + i, self.to_user(self.pos[i], i));
         }
     }
 
@@ -153,13 +153,13 @@ impl Interp<'_> {
             let v = self.axis_value(i, word)?;
             let o = check_range(here[i] - v, i, word.col)?;
             self.params
-                .set_numbered(params::G92_OFFSETS + i, to_user(o, i));
+                .set_numbered(params::G92_OFFSETS + i, self.to_user(o, i));
         }
         // Axes not named keep their offsets (active ones, as stored).
         for (i, &letter) in AXIS_NAMES.iter().enumerate() {
             if w.get(letter as u8).is_none() {
                 self.params
-                    .set_numbered(params::G92_OFFSETS + i, to_user(self.g92[i], i));
+                    .set_numbered(params::G92_OFFSETS + i, self.to_user(self.g92[i], i));
             }
         }
         self.params.set_numbered(params::G92_ACTIVE, 1.0);
@@ -179,7 +179,7 @@ impl Interp<'_> {
                 None => self.g92[i],
             };
             self.params
-                .set_numbered(params::G92_OFFSETS + i, to_user(o, i));
+                .set_numbered(params::G92_OFFSETS + i, self.to_user(o, i));
         }
         self.params.set_numbered(params::G92_ACTIVE, 1.0);
         self.refresh_offsets(c.col)
@@ -247,7 +247,7 @@ impl Interp<'_> {
             } else {
                 v
             };
-            self.params.set_numbered(base + i, to_user(o, i));
+            self.params.set_numbered(base + i, self.to_user(o, i));
         }
         self.refresh_offsets(c.col)
     }
@@ -258,18 +258,13 @@ impl Interp<'_> {
     }
 
     pub(super) fn tool_offset(&self, i: usize) -> i64 {
-        if i == 2 {
-            self.tool_length
-        } else {
-            0
-        }
+        self.tool_offsets[i]
     }
 
-    /// Parameter `n` (mm or degrees for axis `i`) in axis units, bounded.
+    /// Parameter `n` (in the parameters' units for axis `i`) in axis units, bounded.
     pub(super) fn param_units(&self, n: usize, i: usize, col: u32) -> Res<i64> {
         let v = self.params.numbered(n);
-        let per = if i >= 3 { NDEG_PER_DEG } else { NM_PER_MM };
-        match f64_to_i64(v * per as f64) {
+        match f64_to_i64(v * self.per_user(i) as f64) {
             Some(u) if u.abs() <= MAX_AXIS_UNITS => Ok(u),
             _ => fail(col, format!("parameter #{n} = {v} out of range")),
         }
@@ -299,22 +294,31 @@ impl Interp<'_> {
         Ok(())
     }
 
+    /// #5400 the tool in the spindle, #5401–#5406 and #5410 its table entry (as
+    /// stored: refreshed by M6, M61 and G10 L1/L10/L11), #5081–#5086 the offsets in
+    /// force (G43, G43.1), as LinuxCNC keeps them.
     pub(super) fn update_tool_params(&mut self) {
+        let entry = self.tools.get(self.current_tool).unwrap_or_default();
+        for i in 0..AXES {
+            let stored = self.to_user(entry.offset[i], i);
+            let applied = self.to_user(self.tool_offsets[i], i);
+            self.params.set_numbered(params::TOOL_OFFSETS + i, stored);
+            self.params
+                .set_numbered(params::APPLIED_TOOL_OFFSETS + i, applied);
+        }
+        let d = self.to_user(entry.diameter_nm, 0);
         let p = &mut self.params;
         p.set_numbered(params::TOOL_NUMBER, f64::from(self.current_tool));
-        p.set_numbered(params::TOOL_LENGTH, to_user(self.tool_length, 2));
-        let d = self
-            .tools
-            .get(self.current_tool)
-            .map_or(0, |t| t.diameter_nm);
-        p.set_numbered(params::TOOL_DIAMETER, to_user(d, 0));
+        p.set_numbered(params::TOOL_DIAMETER, d);
     }
 
-    /// #5420–#5425: the current position in program units (computed when read).
+    /// #5420–#5425 and #5021–#5026: the current position in program units, in the
+    /// program and the machine frame (computed when read).
     pub(super) fn update_position_params(&mut self) {
         for i in 0..AXES {
             self.params.position[i] = self.pos[i] - self.off[i];
         }
+        self.params.machine = self.pos;
         if self.rotated() {
             let (x, y) = self.xy_to_program(self.pos[0], self.pos[1]);
             self.params.position[0] = x;

@@ -1,6 +1,6 @@
 //! Coordinate-system rotation about Z (`G10 L2 P R`): machine X Y is
-//! R(θ)·(program X Y plus G92 X Y) plus G5x X Y, as LinuxCNC composes them (its
-//! `rotate_and_offset_pos`); the other axes are not turned. θ is the rotation of the
+//! R(θ)·(program X Y plus G92 X Y) plus G5x X Y plus the tool offset X Y, as LinuxCNC
+//! composes them (its `rotate_and_offset_pos`); the other axes are not turned. θ is the rotation of the
 //! system in force (#5230 for G54, 20 more per system).
 //!
 //! Straight moves (absolute, incremental in the program frame, polar), arc end points
@@ -28,20 +28,26 @@ impl Interp<'_> {
         let (s, c) = self.rot_deg.to_radians().sin_cos();
         let (px, py) = ((x + self.g92[0]) as f64, (y + self.g92[1]) as f64);
         Ok((
-            bounded_round(c * px - s * py, col)? + self.g5x[0],
-            bounded_round(s * px + c * py, col)? + self.g5x[1],
+            bounded_round(c * px - s * py, col)? + self.shift(0),
+            bounded_round(s * px + c * py, col)? + self.shift(1),
         ))
     }
 
     /// Machine X Y to program X Y in the system in force.
     pub(super) fn xy_to_program(&self, mx: i64, my: i64) -> (i64, i64) {
         let (s, c) = self.rot_deg.to_radians().sin_cos();
-        let (dx, dy) = ((mx - self.g5x[0]) as f64, (my - self.g5x[1]) as f64);
+        let (dx, dy) = ((mx - self.shift(0)) as f64, (my - self.shift(1)) as f64);
         let round = |v: f64| crate::gcode::lexer::f64_to_i64(v).unwrap_or(0);
         (
             round(c * dx + s * dy) - self.g92[0],
             round(-s * dx + c * dy) - self.g92[1],
         )
+    }
+
+    /// What is added after the rotation along X or Y (`i`): the work offset and the
+    /// tool offset (LinuxCNC's `rotate_and_offset_pos`).
+    fn shift(&self, i: usize) -> i64 {
+        self.g5x[i] + self.tool_offset(i)
     }
 
     /// A vector of the program frame (an arc's I J) in the machine frame.
@@ -69,12 +75,12 @@ impl Interp<'_> {
         }
         let (s, c) = rotation.to_radians().sin_cos();
         let (px, py) = ((x + self.g92[0]) as f64, (y + self.g92[1]) as f64);
-        let ox = self.pos[0] - bounded_round(c * px - s * py, col)?;
-        let oy = self.pos[1] - bounded_round(s * px + c * py, col)?;
+        let ox = self.pos[0] - bounded_round(c * px - s * py, col)? - self.tool_offset(0);
+        let oy = self.pos[1] - bounded_round(s * px + c * py, col)? - self.tool_offset(1);
         let ox = super::check_range(ox, 0, col)?;
         let oy = super::check_range(oy, 1, col)?;
-        self.params.set_numbered(base, super::to_user(ox, 0));
-        self.params.set_numbered(base + 1, super::to_user(oy, 1));
+        self.params.set_numbered(base, self.to_user(ox, 0));
+        self.params.set_numbered(base + 1, self.to_user(oy, 1));
         Ok(())
     }
 }

@@ -85,10 +85,20 @@ pub struct Words {
     pub polar_angle: Option<Word>,
     /// Parameter settings in order.
     pub assigns: Vec<Assign>,
-    /// `(MSG, …)` texts in order.
-    pub messages: Vec<String>,
+    /// `(MSG, …)` and `(DEBUG, …)` texts in order.
+    pub messages: Vec<Note>,
     /// Column of the first axis, I J K or polar word (0: none).
     pub first_motion_col: u32,
+}
+
+/// An operator note in a comment.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Note {
+    /// `(MSG, text)`: shown as written.
+    Msg(String),
+    /// `(DEBUG, text)`: shown with its parameters (`#n`, `#<name>`) filled in, in the
+    /// format set by `%d`, `%f`, `%.Nf` before them (LinuxCNC's rules).
+    Debug(String),
 }
 
 impl Default for Words {
@@ -366,7 +376,7 @@ impl Cursor<'_> {
         Ok(())
     }
 
-    /// `( … )`: plain comment, or `(MSG, text)`.
+    /// `( … )`: plain comment, `(MSG, text)` or `(DEBUG, text)` (case-insensitive).
     fn comment(&mut self, words: &mut Words) -> Result<(), LexError> {
         let open = self.i;
         let mut j = open + 1;
@@ -384,10 +394,17 @@ impl Cursor<'_> {
         self.i = j + 1;
         let body = self.text.get(open + 1..j).unwrap_or("");
         let t = body.trim_start();
-        if t.len() >= 3 && t.as_bytes()[..3].eq_ignore_ascii_case(b"MSG") {
-            if let Some(rest) = t[3..].trim_start().strip_prefix(',') {
-                words.messages.push(rest.trim().to_string());
+        let after = |key: &[u8]| {
+            let head = t.as_bytes().get(..key.len())?;
+            if !head.eq_ignore_ascii_case(key) {
+                return None;
             }
+            t[key.len()..].trim_start().strip_prefix(',')
+        };
+        if let Some(rest) = after(b"MSG") {
+            words.messages.push(Note::Msg(rest.trim().to_string()));
+        } else if let Some(rest) = after(b"DEBUG") {
+            words.messages.push(Note::Debug(rest.trim().to_string()));
         }
         Ok(())
     }
