@@ -38,6 +38,7 @@ fn run(text: &str, name: &str) -> Result<job::RunResult, job::Failure> {
         link: LinkOptions::default(),
         home: false,
         tools: Default::default(),
+        statics: None,
     };
     job::check(&machine, &path, &opts, &mut NoHooks)
 }

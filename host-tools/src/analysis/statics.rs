@@ -231,11 +231,12 @@ fn solve(mut a: Vec<Vec<f64>>) -> Option<Vec<f64>> {
             return None;
         }
         a.swap(c, p);
-        for r in 0..n {
+        let pivot = a[c].clone();
+        for (r, row) in a.iter_mut().enumerate() {
             if r != c {
-                let k = a[r][c] / a[c][c];
-                for col in c..=n {
-                    a[r][col] -= k * a[c][col];
+                let k = row[c] / pivot[c];
+                for (x, p) in row[c..].iter_mut().zip(&pivot[c..]) {
+                    *x -= k * p;
                 }
             }
         }
@@ -339,6 +340,7 @@ mod tests {
     /// The hexapod's leg forces from the legs' geometry alone (an independent f64
     /// computation): Σ f_i n_i + F = 0 and Σ f_i (R b_i × n_i) + M = 0, with n_i the
     /// unit vector from base joint a_i to platform joint p + R b_i.
+    #[allow(clippy::needless_range_loop)]
     fn hexapod_by_geometry(m: &MachineConfig, pose: [f64; 6], w: Wrench) -> [f64; 6] {
         let KinematicsConfig::Hexapod(g) = &m.kinematics else {
             unreachable!()

@@ -33,6 +33,22 @@ struct Args {
     /// the machine file's `[[tools]]`.
     #[arg(long, global = true, value_name = "FILE")]
     tools: Option<PathBuf>,
+    /// A cutting load on the tool for the whole program, `Fx,Fy,Fz[,Mx,My,Mz]` (N and
+    /// N·m about the tool point, machine frame): each joint's largest force is
+    /// reported, and a joint over its `force_limit` in the machine file refuses the
+    /// program.
+    #[arg(
+        long,
+        global = true,
+        value_name = "F",
+        conflicts_with = "wrench_file",
+        allow_hyphen_values = true
+    )]
+    wrench: Option<String>,
+    /// As `--wrench`, one per NC line: each line of FILE is `LINE Fx Fy Fz [Mx My Mz]`,
+    /// the load from NC line LINE on.
+    #[arg(long, global = true, value_name = "FILE")]
+    wrench_file: Option<PathBuf>,
     /// Print the summary as JSON on stdout (and no progress).
     #[arg(long, global = true, value_name = "FORMAT", value_parser = ["json"])]
     report: Option<String>,
@@ -134,6 +150,31 @@ fn main() {
 
 fn bad(message: impl Into<String>) -> Failure {
     Failure::new(exit::BAD_INPUT, message)
+}
+
+/// The cutting load (`--wrench`, `--wrench-file`) with the machine file's force
+/// limits, if a load is given.
+fn load_statics(
+    args: &Args,
+    machine: &pkmc::config::MachineConfig,
+) -> Result<Option<pkmc_host::job::StaticsSpec>, Failure> {
+    use pkmc_host::analysis::statics::Loads;
+    let loads = match (&args.wrench, &args.wrench_file) {
+        (Some(w), _) => {
+            Loads::constant(Loads::parse_wrench(w).map_err(|m| bad(format!("--wrench {w}: {m}")))?)
+        }
+        (None, Some(p)) => {
+            let text = std::fs::read_to_string(p)
+                .map_err(|e| bad(format!("{}: cannot read the loads ({e})", p.display())))?;
+            Loads::parse_file(&text, &p.display().to_string()).map_err(bad)?
+        }
+        (None, None) => return Ok(None),
+    };
+    let limits = match &args.machine {
+        Some(p) => pkmc_host::machine_file::load_force_limits(p).map_err(|e| bad(e.to_string()))?,
+        None => vec![None; machine.joints.len()],
+    };
+    Ok(Some(pkmc_host::job::StaticsSpec { loads, limits }))
 }
 
 /// The tool table: `--tools FILE` (LinuxCNC's tool-file form), else the machine file's
@@ -241,6 +282,7 @@ fn run(args: &Args) -> Result<i32, Failure> {
         None => Vec::new(),
     };
     let tools = load_tools(args)?;
+    let statics = load_statics(args, &machine)?;
     let opts = RunOptions {
         target,
         sim: SimSetup {
@@ -254,6 +296,7 @@ fn run(args: &Args) -> Result<i32, Failure> {
         link,
         home: args.home,
         tools,
+        statics,
     };
     let interrupts = Interrupts::install().map_err(|e| Failure::new(exit::LINK, e))?;
     match &args.command {
@@ -349,6 +392,33 @@ fn print_report(report: &Report, json: bool, check: bool) {
             "pre-flight: {} poses checked through the kinematics, all reachable; {margin}",
             pre.samples
         );
+    }
+    if let Some(s) = &report.statics {
+        let peaks: Vec<String> = s
+            .peaks
+            .iter()
+            .map(|p| {
+                let limit = p.limit.map_or(String::new(), |l| format!(" of {l:.0}"));
+                format!(
+                    "q{} {:+.0} N{limit} (line {})",
+                    p.joint + 1,
+                    p.force,
+                    p.line
+                )
+            })
+            .collect();
+        let _ = writeln!(
+            out,
+            "statics: {} poses; largest joint forces (+ pushes): {}",
+            s.samples,
+            peaks.join(", ")
+        );
+        if let Some(l) = s.singular_at {
+            let _ = writeln!(
+                out,
+                "statics: the joints cannot hold the load at a singular pose (line {l})"
+            );
+        }
     }
     if let Some(steps) = &report.final_joint_steps {
         let _ = writeln!(

@@ -116,6 +116,65 @@ pub struct RunOptions<'a> {
     pub home: bool,
     /// The tool table the G-code front end uses (G43, #5400–#5410, G10 L1/L10/L11).
     pub tools: crate::gcode::ToolTable,
+    /// A cutting load whose joint forces are checked before anything runs.
+    pub statics: Option<StaticsSpec>,
+}
+
+/// A cutting load and the joints' force limits ([`crate::analysis::statics`]).
+#[derive(Clone, Debug, Default)]
+pub struct StaticsSpec {
+    /// The wrench on the tool, by NC line.
+    pub loads: crate::analysis::statics::Loads,
+    /// Each joint's force limit (N, N·m), from the machine file.
+    pub limits: Vec<Option<f64>>,
+}
+
+/// The statics of `blocks` under `opts.statics`, if any: a joint over its limit, or a
+/// machine statics does not cover, refuses the program (nothing runs).
+fn statics_gate(
+    blocks: &[pkmc::protocol::Block],
+    machine: &MachineConfig,
+    program: &str,
+    opts: &RunOptions<'_>,
+) -> Result<Option<crate::analysis::statics::Statics>, Failure> {
+    let Some(spec) = &opts.statics else {
+        return Ok(None);
+    };
+    let s =
+        crate::analysis::statics::check(blocks, machine, machine.home, &spec.loads, &spec.limits)
+            .map_err(|m| Failure::new(exit::BAD_INPUT, format!("{program}: {m}")))?;
+    let over: Vec<String> = s
+        .over_limit()
+        .map(|p| {
+            format!(
+                "{program}:{}: joint q{} would carry {:.0} N, over its limit of {:.0} N",
+                p.line,
+                p.joint + 1,
+                p.force.abs(),
+                p.limit.unwrap_or(0.0)
+            )
+        })
+        .collect();
+    let limited = spec.limits.iter().any(Option::is_some);
+    let mut over = over;
+    if let (Some(line), true) = (s.singular_at, limited) {
+        over.push(format!(
+            "{program}:{line}: the joints cannot hold the load at a singular pose (the \
+             forces are unbounded)"
+        ));
+    }
+    if !over.is_empty() {
+        return Err(Failure::new(
+            exit::PREFLIGHT,
+            format!(
+                "{}
+{} joint(s) over their force limit; nothing was sent",
+                over.join("\n"),
+                over.len()
+            ),
+        ));
+    }
+    Ok(Some(s))
 }
 
 /// What a run produced besides the report: the simulator's outcome, for plots.
@@ -211,13 +270,11 @@ pub fn run(
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
     let blocks = compile_program(program, machine, &opts.tools)?;
-    run_blocks(
-        machine,
-        &program.display().to_string(),
-        &blocks,
-        opts,
-        hooks,
-    )
+    let name = program.display().to_string();
+    let statics = statics_gate(&blocks, machine, &name, opts)?;
+    let mut result = run_blocks(machine, &name, &blocks, opts, hooks)?;
+    result.report.statics = statics;
+    Ok(result)
 }
 
 /// Dry run: compiles `program`, pre-checks it and runs it through the controller in
@@ -233,6 +290,7 @@ pub fn check(
 ) -> Result<RunResult, Failure> {
     let setup = &opts.sim;
     let blocks = compile_program(program, machine, &opts.tools)?;
+    let statics = statics_gate(&blocks, machine, &program.display().to_string(), opts)?;
     let pre = crate::analysis::preflight::check(&blocks, machine, machine.home);
     let sim = setup.simulator(machine.clone(), exit::BAD_INPUT)?;
     let recorder = std::rc::Rc::new(std::cell::RefCell::new(Recorder::new(
@@ -278,6 +336,7 @@ pub fn check(
         min_singularity_margin: pre.min_margin.map(|(m, _)| m),
         min_margin_line: pre.min_margin.map(|(_, l)| l),
     });
+    report.statics = statics;
     Ok(RunResult {
         report,
         sim: Some(outcome),

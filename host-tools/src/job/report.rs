@@ -65,6 +65,9 @@ pub struct Report {
     /// singularity margin met, with its NC line (see [`crate::analysis::preflight`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub preflight: Option<PreflightSummary>,
+    /// The joint forces of the cutting load (`--wrench`, `--wrench-file`), when one
+    /// was given.
+    pub statics: Option<crate::analysis::statics::Statics>,
 }
 
 /// What `--check` reports of the pre-flight.
@@ -141,6 +144,7 @@ impl Report {
                 digest: lines_digest(&s.recorder.lines),
             }),
             preflight: None,
+            statics: None,
         }
     }
 

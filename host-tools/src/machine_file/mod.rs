@@ -98,6 +98,9 @@ pub struct MachineFile {
     /// The tool table (`[[tools]]`); empty when absent.
     #[serde(default)]
     pub tools: Vec<ToolFile>,
+    /// Hydraulic supply pressure, MPa (the force limit of a joint with a
+    /// `cylinder_area`).
+    pub supply_pressure: Option<f64>,
 }
 
 impl MachineFile {
@@ -232,6 +235,42 @@ impl MachineFile {
 }
 
 impl MachineFile {
+    /// Each joint's force limit, N (N·m for a rotary joint): `force_limit`, or
+    /// `cylinder_area` (mm²) × `supply_pressure` (MPa); each refusal names its field.
+    pub fn force_limits(&self) -> Result<Vec<Option<f64>>, FieldError> {
+        let positive = |v: f64, field: String| {
+            if v.is_finite() && v > 0.0 && v <= 1e12 {
+                Ok(v)
+            } else {
+                Err(refused!("{field}: must be above 0, got {v}"))
+            }
+        };
+        self.joints
+            .iter()
+            .enumerate()
+            .map(|(i, j)| {
+                let f = |s: &str| format!("joints[{i}].{s}");
+                match (j.force_limit, j.cylinder_area, self.supply_pressure) {
+                    (Some(_), Some(_), _) => Err(refused!(
+                        "{}: give force_limit or cylinder_area, not both",
+                        f("cylinder_area")
+                    )),
+                    (Some(l), None, _) => positive(l, f("force_limit")).map(Some),
+                    (None, Some(_), None) => Err(refused!(
+                        "{}: a cylinder area needs the machine's supply_pressure (MPa)",
+                        f("cylinder_area")
+                    )),
+                    (None, Some(a), Some(p)) => {
+                        let a = positive(a, f("cylinder_area"))?;
+                        let p = positive(p, "supply_pressure".into())?;
+                        Ok(Some(a * p))
+                    }
+                    (None, None, _) => Ok(None),
+                }
+            })
+            .collect()
+    }
+
     /// The `[[tools]]` table for the G-code front end; each refusal names its entry
     /// (`tools[1].diameter: ...`).
     pub fn tool_table(&self) -> Result<crate::gcode::ToolTable, FieldError> {
@@ -311,6 +350,20 @@ pub fn read_file(text: &str, origin: &str) -> Result<MachineFile, MachineFileErr
             message,
         }
     })
+}
+
+/// The force limit of each joint of the machine file at `path` (`None` for a joint
+/// without one).
+pub fn load_force_limits(path: &Path) -> Result<Vec<Option<f64>>, MachineFileError> {
+    let text = read(path)?;
+    let origin = path.display().to_string();
+    let file = read_file(&text, &origin)?;
+    file.force_limits()
+        .map_err(|error| MachineFileError::Invalid {
+            line: line_of_field(&text, &error.0),
+            origin,
+            error,
+        })
 }
 
 /// The tool table of the machine file at `path` (`[[tools]]`; empty when it has none).

@@ -127,6 +127,12 @@ pub struct JointFile {
     pub homing: Option<HomingFile>,
     /// Servo: the plant's transfer function, for simulation ([`crate::sim::plant`]).
     pub plant: Option<crate::sim::plant::PlantFile>,
+    /// Largest force the joint may carry, N (N·m for a rotary joint), for the statics
+    /// of a cutting load ([`crate::analysis::statics`]).
+    pub force_limit: Option<f64>,
+    /// A hydraulic joint's cylinder area, mm²: its force limit is this times the
+    /// machine's `supply_pressure`.
+    pub cylinder_area: Option<f64>,
 }
 
 /// A servo joint's `servo = { ... }` table: [`pkmc::config::ServoGains`] in file units
