@@ -15,6 +15,9 @@
 //! LinuxCNC's 0.05 rad counts as tangent (no corner arc, no cut-back, as there), which
 //! may bring the tool closer by up to r·(1 − cos 0.05) ≈ 0.00125·r (7.5 µm for a 12 mm
 //! tool). Every compensated program must compile.
+//!
+//! And compensation commutes with the G10 L2 R rotation of the coordinate system: a
+//! part cut in a system turned by 37° is the unturned cut, turned.
 
 use pkmc_host::gcode::canon::Canon;
 use pkmc_host::gcode::{compile_canon, Options};
@@ -306,4 +309,48 @@ proptest! {
         prop_assume!(x1 < w - 10.0 && d > tool_mm + 0.5 && d < h - 2.0 * tool_mm - 1.0);
         check(&notch_case(w, h, [x0, x1, d], tool_mm))?;
     }
+}
+
+/// A part of lines and arcs with convex and concave corners, cut with G41 (the
+/// fixture's outline); `{rot}` is the rotation of G54.
+const OUTLINE: &str = "G21 G17 G90 G94 F300\nG10 L1 P1 R3\nT1 M6\nG10 L2 P1 R{rot}\n\
+    G0 X-10 Y-10 Z5\nG1 Z-1\nG41 D1 G1 X0 Y0\nY20\nX30\nG2 X40 Y10 R10\nG1 Y0\nX20\nY5\n\
+    X10\nY0\nX0\nG40\nG1 X-10 Y-10\nM2\n";
+
+#[test]
+fn compensation_in_a_rotated_coordinate_system_is_the_rotated_compensation() {
+    let compile = |rot: f64| {
+        let text = OUTLINE.replace("{rot}", &rot.to_string());
+        compile_canon(&text, "rot.ngc", &Options::default()).expect("compiles")
+    };
+    let (plain, turned) = (compile(0.0), compile(37.0));
+    assert_eq!(plain.len(), turned.len());
+    let (s, c) = 37f64.to_radians().sin_cos();
+    let rot = |x: i64, y: i64| {
+        let (x, y) = (x as f64, y as f64);
+        [c * x - s * y, s * x + c * y]
+    };
+    let mut compared = 0;
+    for (a, b) in plain.iter().zip(&turned) {
+        let (Some(ta), Some(tb)) = (a.target(), b.target()) else {
+            continue;
+        };
+        let want = rot(ta[0], ta[1]);
+        for k in 0..2 {
+            assert!(
+                (want[k] - tb[k] as f64).abs() <= 2.0,
+                "line {}: {:?} turned is {want:?}, got {:?}",
+                a.line(),
+                &ta[..2],
+                &tb[..2]
+            );
+        }
+        assert_eq!(ta[2], tb[2]);
+        if let (Canon::Arc { center: ca, .. }, Canon::Arc { center: cb, .. }) = (a, b) {
+            let want = rot(ca[0], ca[1]);
+            assert!((want[0] - cb[0] as f64).abs() <= 2.0 && (want[1] - cb[1] as f64).abs() <= 2.0);
+        }
+        compared += 1;
+    }
+    assert!(compared > 15, "{compared} moves compared");
 }
