@@ -39,7 +39,7 @@ mod offsets;
 mod rotation;
 mod tooling;
 
-use super::lexer::{bit, f64_to_i64, Word, Words};
+use super::lexer::{bit, f64_to_i64, Word, Words, DEGREE, INCH, MM};
 use super::params::Params;
 use super::{Options, MAX_AXIS_UNITS};
 use crate::gcode::canon::Canon;
@@ -272,8 +272,8 @@ impl<'o> Interp<'o> {
     /// Length word in the units in force → nm, bounded.
     #[inline]
     pub(crate) fn length(&self, w: Word) -> Res<i64> {
-        let per = if self.inch { NM_PER_INCH } else { NM_PER_MM };
-        bounded(w.num.scaled(per, 1), w)
+        let per = if self.inch { INCH } else { MM };
+        bounded(w.num.times(per), w)
     }
 
     /// Refuses the leftmost axis word for an axis the machine lacks, naming the axes
@@ -310,7 +310,7 @@ impl<'o> Interp<'o> {
     #[inline]
     pub(crate) fn axis_value(&self, i: usize, w: Word) -> Res<i64> {
         if i >= 3 {
-            bounded(w.num.scaled(NDEG_PER_DEG, 1), w)
+            bounded(w.num.times(DEGREE), w)
         } else {
             self.length(w)
         }

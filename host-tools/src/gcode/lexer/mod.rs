@@ -25,7 +25,7 @@ mod number;
 mod oword;
 
 pub(crate) use number::f64_to_i64;
-pub use number::{Num, MAX_DECIMALS};
+pub use number::{Factor, Num, DEGREE, INCH, MAX_DECIMALS, MM};
 pub use oword::{oword_args, scan_oword, Keyword, Label, OHeader, MAX_ARGS};
 
 use super::params::Params;
