@@ -141,15 +141,15 @@ impl Num {
     #[inline(always)]
     pub fn times(self, factor: Factor) -> Option<i64> {
         if let Num::Lit { mant, scale } = self {
-            let exact = if scale <= factor.exp {
+            if scale <= factor.exp {
                 // `mult × 10^(exp - scale)` divides the factor, so it fits an i64.
-                mant.checked_mul(factor.mult * POW10[(factor.exp - scale) as usize])
-            } else {
-                mant.checked_mul(factor.mult)
-                    .map(|n| div_round_pow10(n, scale - factor.exp))
-            };
-            if exact.is_some() {
-                return exact;
+                let exact = mant.checked_mul(factor.mult * POW10[(factor.exp - scale) as usize]);
+                if exact.is_some() {
+                    return exact;
+                }
+            } else if let Some(n) = mant.checked_mul(factor.mult) {
+                // Not `Option::map`: its closure would not be inlined.
+                return Some(div_round_pow10(n, scale - factor.exp));
             }
         }
         // A computed value, or a product beyond an i64 (which `scaled` takes in i128).
