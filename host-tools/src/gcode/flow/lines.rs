@@ -3,9 +3,9 @@
 //!
 //! A G-code line is some 30 bytes; `str::split` looks for each line end with a call of
 //! `memchr` (whose set-up outweighs so short a search) and compares the match with a
-//! call of `memcmp`, a sixth of the time the index takes. Here the bytes are
-//! loaded eight at a time and a carry-free test tells whether any of them is a line
-//! feed (and which is the first).
+//! call of `memcmp`: about half the time of the index in a profile of arcspiral.ngc.
+//! Here the bytes are loaded eight at a time and a carry-free test tells whether any
+//! of them is a line feed (and which is the first).
 //!
 //! Invariants: the pieces are exactly those of `source.split('\n')` (the last one,
 //! after the last line feed, included even when empty); no byte past the end is read.
