@@ -236,12 +236,17 @@ impl fmt::Display for Num {
 /// Rounds `n / d` to the nearest integer, ties away from zero; `d > 0`.
 #[inline(always)]
 fn div_round_i64(n: i64, d: i64) -> i64 {
-    let q = n / d;
-    let r = n % d;
-    // |r| >= d/2 rounds away from zero; compare without overflow. Added without a
-    // branch: which way a value rounds is as good as random, a branch on it mispredicts.
-    let away = r.unsigned_abs() >= d.unsigned_abs() - r.unsigned_abs();
-    q + i64::from(away) * n.signum()
+    // On the magnitude: (|n| + ⌊d/2⌋) / d rounds half up (no tie when d is odd), and
+    // cannot overflow (|n| ≤ 2^63, d/2 < 2^62). Without a branch: which way a value
+    // rounds is as good as random, a branch on it would mispredict.
+    let d = d.unsigned_abs();
+    let q = ((n.unsigned_abs() + d / 2) / d) as i64;
+    // Wrapping: only n = i64::MIN, d = 1 gives q = 2^63, which wraps back to n.
+    if n < 0 {
+        q.wrapping_neg()
+    } else {
+        q
+    }
 }
 
 /// [`div_round_i64`] by a constant, which the compiler turns into a multiplication.
@@ -293,21 +298,33 @@ impl Cursor<'_> {
     /// `self.i` (already at the sign or first digit). `col_at` is where a malformed
     /// number is reported.
     pub(super) fn literal(&mut self, col_at: usize) -> Result<Num, LexError> {
+        if let Some(num) = self.quick_literal() {
+            return Ok(num);
+        }
         let start = self.i;
-        let mut negative = false;
-        if let Some(&s @ (b'+' | b'-')) = self.b.get(self.i) {
-            negative = s == b'-';
+        let negative = self.b.get(start) == Some(&b'-');
+        if let Some(b'+' | b'-') = self.b.get(start) {
             self.i += 1;
         }
-        let (mant, scale) = match self.plain_literal(self.i) {
-            Some((mant, scale, end)) => {
-                self.i = end;
-                (mant, scale)
-            }
-            None => self.spaced_literal(start, col_at)?,
-        };
+        let (mant, scale) = self.spaced_literal(start, col_at)?;
         Ok(Num::Lit {
             mant: if negative { -mant } else { mant },
+            scale,
+        })
+    }
+
+    /// [`Self::literal`] for the common literal ([`Self::plain_literal`] after an
+    /// optional sign), inlined where values are read; `None`, the cursor unmoved, for
+    /// any other.
+    #[inline(always)]
+    pub(super) fn quick_literal(&mut self) -> Option<Num> {
+        let start = self.i;
+        let sign = self.b.get(start).copied();
+        let from = start + usize::from(matches!(sign, Some(b'+' | b'-')));
+        let (mant, scale, end) = self.plain_literal(from)?;
+        self.i = end;
+        Some(Num::Lit {
+            mant: if sign == Some(b'-') { -mant } else { mant },
             scale,
         })
     }
@@ -318,7 +335,7 @@ impl Cursor<'_> {
     /// mantissa, the decimals and where the number ends (after its blanks); `None`
     /// for anything else (blanks inside the number, a second point, no digit, too many
     /// digits), which [`Self::spaced_literal`] reads or reports.
-    #[inline]
+    #[inline(always)]
     fn plain_literal(&self, from: usize) -> Option<(i64, u32, usize)> {
         let b = self.b;
         let mut i = from;
@@ -453,6 +470,50 @@ mod tests {
         for v in [0.5, -2.5e-7, 1.234_567_5, 9.3e12, f64::NAN, f64::INFINITY] {
             assert_eq!(Num::Real(v).times(INCH), Num::Real(v).scaled(25_400_000, 1));
         }
+    }
+
+    #[test]
+    fn rounded_division_is_that_of_i128() {
+        let values = [
+            0,
+            1,
+            4,
+            5,
+            6,
+            14,
+            15,
+            25,
+            99_999,
+            1_000_005,
+            i64::MAX,
+            i64::MIN + 1,
+        ];
+        let random = pseudo_random(500).map(|x| x as i64);
+        for n in values.into_iter().chain(random) {
+            for d in [
+                1,
+                2,
+                3,
+                7,
+                10,
+                60,
+                1_000,
+                1_000_000,
+                600_000_000,
+                1_000_000_000_000_000_000,
+            ] {
+                for n in [n, n.wrapping_neg()] {
+                    let exact = pkmc::units::div_round(i128::from(n), i128::from(d));
+                    assert_eq!(i128::from(div_round_i64(n, d)), exact, "{n} / {d}");
+                }
+            }
+            for s in 0..=MAX_DECIMALS {
+                let exact = pkmc::units::div_round(i128::from(n), i128::from(POW10[s as usize]));
+                assert_eq!(i128::from(div_round_pow10(n, s)), exact, "{n} / 10^{s}");
+            }
+        }
+        assert_eq!(div_round_i64(i64::MIN, 1), i64::MIN);
+        assert_eq!(div_round_i64(i64::MIN, 10), -922_337_203_685_477_581);
     }
 
     /// `literal` on `text`: its value and where it ends, or the error's column.
