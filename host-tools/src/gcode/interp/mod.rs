@@ -270,7 +270,7 @@ impl<'o> Interp<'o> {
     }
 
     /// Length word in the units in force → nm, bounded.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn length(&self, w: Word) -> Res<i64> {
         let per = if self.inch { INCH } else { MM };
         bounded(w.num.times(per), w)
@@ -307,7 +307,7 @@ impl<'o> Interp<'o> {
     }
 
     /// Axis word `i` → axis units (nm, or n° for A B C), bounded.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn axis_value(&self, i: usize, w: Word) -> Res<i64> {
         if i >= 3 {
             bounded(w.num.times(DEGREE), w)
@@ -327,7 +327,7 @@ pub(crate) fn to_user(v: i64, i: usize) -> f64 {
 }
 
 /// Rounds an `f64` position to axis units, bounded.
-#[inline]
+#[inline(always)]
 pub(crate) fn bounded_round(v: f64, col: u32) -> Res<i64> {
     match f64_to_i64(v) {
         Some(u) if u.abs() <= MAX_AXIS_UNITS => Ok(u),
@@ -336,7 +336,7 @@ pub(crate) fn bounded_round(v: f64, col: u32) -> Res<i64> {
 }
 
 /// A scaled word value inside the bounds, or an error at the word.
-#[inline]
+#[inline(always)]
 pub(crate) fn bounded(v: Option<i64>, w: Word) -> Res<i64> {
     match v {
         Some(u) if u.abs() <= MAX_AXIS_UNITS => Ok(u),
@@ -345,7 +345,7 @@ pub(crate) fn bounded(v: Option<i64>, w: Word) -> Res<i64> {
 }
 
 /// A position for axis `i` inside the bounds.
-#[inline]
+#[inline(always)]
 pub(crate) fn check_range(v: i64, i: usize, col: u32) -> Res<i64> {
     if v.abs() <= MAX_AXIS_UNITS {
         Ok(v)
