@@ -165,9 +165,9 @@ fn kept(group: Group, first: Code, next: Code) -> Option<Code> {
 /// The G and M codes of one line, by modal group.
 ///
 /// A bit per group says whether it has a code; the code itself is only read when it
-/// does. An empty line's groups are then one zeroed word, read back from the store that
-/// wrote it (an array of `Option<Code>` took a `memset` call per line, whose wide
-/// stores the processor does not forward to the narrow loads of the tags).
+/// does, so a line's twenty-odd questions "is there a code of this group?" read one
+/// word. (An array of `Option<Code>`, each tag tested, was cleared by a `memset` call
+/// per line and cost about 3 % more of the compile time of arcspiral.ngc.)
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Modal {
     /// Groups with a code on the line, bit `group as usize`.
