@@ -80,10 +80,19 @@ impl Hasher for Fnv {
     }
 }
 
+/// Numbered parameters per block of storage. A block is allocated when one of its
+/// parameters is first set: a run pays for the parameters it uses (a program a few of
+/// #1–#30, the interpreter a few of #5161–#5410), not for zeroing all 5 602 (45 KB, a
+/// few per cent of compiling a short program).
+const BLOCK: usize = 256;
+/// Blocks of all numbered parameters.
+const BLOCKS: usize = NUM_PARAMS.div_ceil(BLOCK);
+
 /// The parameter store.
 #[derive(Clone, Debug)]
 pub struct Params {
-    numbered: Vec<f64>,
+    /// #n is `numbered[n / BLOCK][n % BLOCK]`; a block never set reads as zeros.
+    numbered: [Option<Box<[f64; BLOCK]>>; BLOCKS],
     /// Current position in the program frame, axis units (for #5420–#5425).
     pub(crate) position: [i64; 6],
     /// Current machine position (G53 frame), axis units (for #5021–#5026).
@@ -111,20 +120,20 @@ impl Default for Params {
 impl Params {
     /// All numbered parameters 0, no named ones; coordinate system 1 in force.
     pub fn new() -> Self {
-        let mut numbered = vec![0.0; NUM_PARAMS];
-        numbered[CURRENT_SYSTEM] = 1.0;
         let mut globals = Names::default();
         // Subroutine return values (LinuxCNC's predefined parameters): none yet.
         globals.insert(b"_value"[..].into(), 0.0);
         globals.insert(b"_value_returned"[..].into(), 0.0);
-        Self {
-            numbered,
+        let mut params = Self {
+            numbered: std::array::from_fn(|_| None),
             position: [0; 6],
             machine: [0; 6],
             inch: false,
             locals: Names::default(),
             globals,
-        }
+        };
+        params.set_numbered(CURRENT_SYSTEM, 1.0);
+        params
     }
 
     /// Value of #`n` (`n` already checked to be in 1..NUM_PARAMS; 0 otherwise).
@@ -136,7 +145,10 @@ impl Params {
         if (MACHINE_POSITION..MACHINE_POSITION + 6).contains(&n) {
             return self.position_param(self.machine[n - MACHINE_POSITION], n - MACHINE_POSITION);
         }
-        self.numbered.get(n).copied().unwrap_or(0.0)
+        match self.numbered.get(n / BLOCK) {
+            Some(Some(block)) if n < NUM_PARAMS => block[n % BLOCK],
+            _ => 0.0,
+        }
     }
 
     #[cold]
@@ -153,8 +165,11 @@ impl Params {
 
     /// Sets #`n` (ignored out of range; the lexer checks the range).
     pub fn set_numbered(&mut self, n: usize, v: f64) {
-        if let Some(slot) = self.numbered.get_mut(n) {
-            *slot = v;
+        if n >= NUM_PARAMS {
+            return;
+        }
+        if let Some(block) = self.numbered.get_mut(n / BLOCK) {
+            block.get_or_insert_with(|| Box::new([0.0; BLOCK]))[n % BLOCK] = v;
         }
     }
 
@@ -265,5 +280,33 @@ impl Params {
                 names.insert(name.into(), v);
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbered_parameters_read_zero_until_set_in_every_block() {
+        let mut p = Params::new();
+        assert_eq!(p.numbered(CURRENT_SYSTEM), 1.0);
+        for n in [1, 30, BLOCK - 1, BLOCK, 5161, 5399, NUM_PARAMS - 1] {
+            assert_eq!(p.numbered(n), 0.0, "#{n}");
+            p.set_numbered(n, n as f64 + 0.5);
+        }
+        for n in [1, 30, BLOCK - 1, BLOCK, 5161, 5399, NUM_PARAMS - 1] {
+            assert_eq!(p.numbered(n), n as f64 + 0.5, "#{n}");
+        }
+        assert_eq!(p.numbered(2), 0.0);
+        assert_eq!(p.numbered(BLOCK + 1), 0.0);
+        // Beyond the range: ignored, and read as 0.
+        p.set_numbered(NUM_PARAMS, 7.0);
+        p.set_numbered(BLOCKS * BLOCK, 7.0);
+        assert_eq!(p.numbered(NUM_PARAMS), 0.0);
+        assert_eq!(p.numbered(usize::MAX), 0.0);
+        // The position parameters are computed, never stored.
+        p.position[0] = 2_000_000;
+        assert_eq!(p.numbered(POSITION), 2.0);
     }
 }

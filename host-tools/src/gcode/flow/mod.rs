@@ -22,6 +22,7 @@
 //! Source: LinuxCNC G-code reference, O codes (numbering, subroutines, looping,
 //! conditional, repeat, return values, errors).
 
+mod lines;
 mod run;
 
 pub(crate) use run::run;
@@ -29,6 +30,7 @@ pub(crate) use run::run;
 use super::lexer::{self, Keyword, Label};
 use super::params::Params;
 use super::MAX_LINE;
+use lines::Lines;
 use std::collections::HashMap;
 
 /// Deepest nesting of subroutine calls (LinuxCNC's).
@@ -166,11 +168,13 @@ impl Program {
         };
         let mut seen_text = false;
         let mut offset = 0;
-        for (n, raw) in source.split('\n').enumerate() {
+        for (n, raw) in Lines::new(source).enumerate() {
             let start = offset;
             offset += raw.len() + 1;
             let number = u32::try_from(n + 1).unwrap_or(u32::MAX);
-            let text = raw.trim_end_matches('\r');
+            // Without its carriage returns (`trim_end_matches('\r')`, by bytes).
+            let kept = raw.bytes().rposition(|b| b != b'\r').map_or(0, |p| p + 1);
+            let text = raw.get(..kept).unwrap_or(raw);
             let bytes = text.as_bytes();
             let Some(first) = bytes.iter().position(|&b| b != b' ' && b != b'\t') else {
                 continue; // blank line

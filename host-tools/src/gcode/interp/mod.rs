@@ -41,7 +41,7 @@ mod offsets;
 mod rotation;
 mod tooling;
 
-use super::lexer::{bit, f64_to_i64, Word, Words};
+use super::lexer::{bit, f64_to_i64, Word, Words, DEGREE, INCH, MM};
 use super::params::Params;
 use super::{Options, MAX_AXIS_UNITS};
 use crate::gcode::canon::Canon;
@@ -286,10 +286,10 @@ impl<'o> Interp<'o> {
     }
 
     /// Length word in the units in force → nm, bounded.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn length(&self, w: Word) -> Res<i64> {
-        let per = if self.inch { NM_PER_INCH } else { NM_PER_MM };
-        bounded(w.num.scaled(per, 1), w)
+        let per = if self.inch { INCH } else { MM };
+        bounded(w.num.times(per), w)
     }
 
     /// Refuses the leftmost axis word for an axis the machine lacks, naming the axes
@@ -340,10 +340,10 @@ impl<'o> Interp<'o> {
     }
 
     /// Axis word `i` → axis units (nm, or n° for A B C), bounded.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn axis_value(&self, i: usize, w: Word) -> Res<i64> {
         if i >= 3 {
-            bounded(w.num.scaled(NDEG_PER_DEG, 1), w)
+            bounded(w.num.times(DEGREE), w)
         } else {
             self.length(w)
         }
@@ -351,7 +351,7 @@ impl<'o> Interp<'o> {
 }
 
 /// Rounds an `f64` position to axis units, bounded.
-#[inline]
+#[inline(always)]
 pub(crate) fn bounded_round(v: f64, col: u32) -> Res<i64> {
     match f64_to_i64(v) {
         Some(u) if u.abs() <= MAX_AXIS_UNITS => Ok(u),
@@ -360,7 +360,7 @@ pub(crate) fn bounded_round(v: f64, col: u32) -> Res<i64> {
 }
 
 /// A scaled word value inside the bounds, or an error at the word.
-#[inline]
+#[inline(always)]
 pub(crate) fn bounded(v: Option<i64>, w: Word) -> Res<i64> {
     match v {
         Some(u) if u.abs() <= MAX_AXIS_UNITS => Ok(u),
@@ -369,7 +369,7 @@ pub(crate) fn bounded(v: Option<i64>, w: Word) -> Res<i64> {
 }
 
 /// A position for axis `i` inside the bounds.
-#[inline]
+#[inline(always)]
 pub(crate) fn check_range(v: i64, i: usize, col: u32) -> Res<i64> {
     if v.abs() <= MAX_AXIS_UNITS {
         Ok(v)

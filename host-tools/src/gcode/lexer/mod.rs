@@ -25,7 +25,7 @@ mod number;
 mod oword;
 
 pub(crate) use number::f64_to_i64;
-pub use number::{Num, MAX_DECIMALS};
+pub use number::{Factor, Num, DEGREE, INCH, MAX_DECIMALS, MM};
 pub use oword::{oword_args, scan_oword, Keyword, Label, OHeader, MAX_ARGS};
 
 use super::params::Params;
@@ -220,6 +220,7 @@ impl Cursor<'_> {
         }
     }
 
+    #[inline(always)]
     fn skip_blanks(&mut self) {
         while let Some(b' ' | b'\t') = self.b.get(self.i) {
             self.i += 1;
@@ -473,11 +474,11 @@ impl Cursor<'_> {
     /// The value after a word letter (or `=`): a literal (exact), or anything else
     /// computed in `f64`.
     fn value(&mut self, after: char, depth: usize) -> Result<Num, LexError> {
-        if self.peek().is_none() {
-            return Err(self.unexpected(&format!("expected a value after '{after}'")));
-        }
+        self.skip_blanks();
         let start = self.i;
-        let c = self.b[start];
+        let Some(&c) = self.b.get(start) else {
+            return Err(self.unexpected(&format!("expected a value after '{after}'")));
+        };
         let literal = match c {
             b'0'..=b'9' | b'.' => true,
             b'+' | b'-' => {
@@ -491,7 +492,11 @@ impl Cursor<'_> {
             _ => false,
         };
         if literal {
-            return self.literal(start);
+            // The common literal read here, any other by `literal`.
+            return match self.quick_literal() {
+                Some(num) => Ok(num),
+                None => self.literal(start),
+            };
         }
         match c {
             b'[' | b'#' | b'+' | b'-' => Ok(Num::Real(self.operand(depth)?)),
