@@ -87,6 +87,10 @@ pub struct Options {
     /// configured in inches does (its INI `LINEAR_UNITS`); default false: millimetres.
     /// Whatever this is, G20/G21 only change how the program's words are read.
     pub inch_parameters: bool,
+    /// Most lines a run may execute beyond the program's own length (loops and
+    /// subroutine calls) before it is stopped as endless; default
+    /// [`flow::MAX_REPEATED_LINES`].
+    pub repeated_lines: usize,
 }
 
 impl Default for Options {
@@ -98,6 +102,7 @@ impl Default for Options {
             start: [0; AXES],
             axes: [true; AXES],
             inch_parameters: false,
+            repeated_lines: flow::MAX_REPEATED_LINES,
         }
     }
 }

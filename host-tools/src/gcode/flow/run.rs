@@ -10,9 +10,12 @@
 //! fails to evaluate counts as false (the branch is skipped, the loop ends), a call
 //! whose arguments fail is skipped, a return value that fails is not returned; each
 //! line reports at most one error; the run stops at M2/M30, at the end of the
-//! program, or when [`MAX_REPEATED_LINES`] lines have run beyond the program's length.
+//! program, or when `Options::repeated_lines` (default [`MAX_REPEATED_LINES`]) lines
+//! have run beyond the program's length.
 
-use super::{Line, Op, Program, MAX_CALL_DEPTH, MAX_REPEATED_LINES, PLAIN};
+#[cfg(doc)]
+use super::MAX_REPEATED_LINES;
+use super::{Line, Op, Program, MAX_CALL_DEPTH, PLAIN};
 use crate::gcode::canon::Canon;
 use crate::gcode::interp::Interp;
 use crate::gcode::lexer::{self, Words, MAX_ARGS};
@@ -82,7 +85,7 @@ pub(crate) fn run(
         errors,
         failed: HashSet::new(),
     };
-    let budget = p.lines.len().saturating_add(MAX_REPEATED_LINES);
+    let budget = p.lines.len().saturating_add(r.interp.opts.repeated_lines);
     let mut executed = 0usize;
     let mut i = 0;
     while let Some(line) = p.lines.get(i) {
@@ -402,8 +405,9 @@ impl Runner<'_, '_> {
             |o| format!("{} {}", o.label, o.keyword.name()),
         );
         let message = format!(
-            "{what}: stopped after running {MAX_REPEATED_LINES} lines more than the program \
-             has (an endless loop?)"
+            "{what}: stopped after running {} lines more than the program \
+             has (an endless loop?)",
+            self.interp.opts.repeated_lines
         );
         self.failed
             .remove(&self.p.lines.get(at).map_or(0, |l| l.number));
