@@ -221,10 +221,7 @@ impl Interp<'_> {
             self.comp.release(out, col)?;
             self.comp.queue.set_start(c);
         }
-        if joined.is_err() {
-            self.comp.queue.discard();
-        }
-        self.comp.queue.push(Held {
+        let next = Held {
             line,
             shape: Shape::Straight {
                 kind,
@@ -232,8 +229,18 @@ impl Interp<'_> {
             },
             end,
             pose: target,
-        });
-        self.comp.current = end;
+        };
+        self.hold_next(joined, next)
+    }
+
+    /// Holds `next` after its join (`joined`); a failed join forgets what it held, so
+    /// the moves after it join `next`'s offset end (one mistake, one message).
+    fn hold_next(&mut self, joined: Res<()>, next: Held) -> Res<()> {
+        if joined.is_err() {
+            self.comp.queue.discard();
+        }
+        self.comp.current = next.end;
+        self.comp.queue.push(next);
         joined
     }
 
@@ -439,10 +446,7 @@ impl Interp<'_> {
             self.comp.release(out, col)?;
             self.comp.queue.set_start(c);
         }
-        if joined.is_err() {
-            self.comp.queue.discard();
-        }
-        self.comp.queue.push(Held {
+        let next = Held {
             line,
             shape: Shape::Arc {
                 centre: arc.centre,
@@ -452,9 +456,8 @@ impl Interp<'_> {
             },
             end,
             pose: arc.end,
-        });
-        self.comp.current = end;
-        joined
+        };
+        self.hold_next(joined, next)
     }
 
     /// Where the held move ends in a concave corner before `arc` (`theta`: the
