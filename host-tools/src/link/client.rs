@@ -96,6 +96,14 @@ pub trait JobHooks {
     fn ends_at_pause(&self) -> bool {
         false
     }
+    /// Asked on every turn of the loop while the job is open: blocks to add to the
+    /// job (a job fed line by line, as the Grbl bridge does), appended to `out`.
+    /// Returns whether more may come; once it returns `false` it is not asked again,
+    /// and the job ends when every block has executed. By default a job is closed: it
+    /// is the blocks [`Link::run_job`] was given.
+    fn feed(&mut self, _link: &LinkView, _out: &mut Vec<pkmc::protocol::Block>) -> bool {
+        false
+    }
 }
 
 /// Hooks that do nothing.
@@ -109,8 +117,10 @@ pub struct LinkView {
     pub status: Option<Status>,
     /// Blocks acknowledged so far in this job.
     pub acked: usize,
-    /// Blocks in the job.
+    /// Blocks in the job (so far, while it is fed).
     pub total: usize,
+    /// Blocks of this job the controller has executed (by its last status).
+    pub executed: usize,
     /// Is a control command still waiting for its acknowledgement?
     pub control_pending: bool,
 }

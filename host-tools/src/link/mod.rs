@@ -56,6 +56,7 @@
 
 mod client;
 mod error;
+mod plans;
 mod stall;
 mod stream;
 mod transport;
@@ -64,7 +65,7 @@ mod window;
 use client::PendingControl;
 pub use client::{ClientStats, JobEnd, JobHooks, LinkView, NakCounts, NoHooks};
 pub use error::LinkError;
-pub use stream::estimate_ms;
+pub use stream::{estimate_ms, TAIL_AFTER};
 pub use transport::{is_timeout, PortTransport, SimClock, Transport};
 
 use pkmc::config::MachineConfig;

@@ -3,16 +3,21 @@
 //! [`crate::link`]).
 
 use super::client::{JobEnd, JobHooks, LinkView, PendingControl};
+use super::plans::Plans;
 use super::stall::dwell_ticks;
 use super::window::{Ending, Guard, JobState};
 use super::{Link, LinkError, Transport, CONTROL_RESEND_AFTER, READ_WAIT};
 use pkmc::geometry::Path;
 use pkmc::kinematics::MachineKinematics;
-use pkmc::planner::{plan_into, PlanBlock};
-use pkmc::protocol::{
-    Block, Control, CtrlMsg, HostMsg, Motion, NakReason, PlannedBlock, State, Status,
-};
+use pkmc::protocol::{Block, Control, CtrlMsg, HostMsg, Motion, NakReason, State, Status};
 use std::time::{Duration, Instant};
+
+/// While a job is fed, the last block known is sent without its successor once no
+/// block has come for this long.
+pub const TAIL_AFTER: Duration = Duration::from_millis(40);
+/// ... or once the controller holds less motion than this, ms (with the blocks in
+/// flight): better a stop at the next corner than running dry before it.
+const LOW_WATER_MS: f64 = 150.0;
 
 /// Estimated duration of `b` starting from pose `from`, ms, at its feed (rapids at
 /// the slowest axis's `axis_vmax`, units/s), ignoring acceleration: a lower bound
@@ -37,10 +42,26 @@ pub fn estimate_ms(from: &[i64; 6], b: &Block, axis_vmax: &[i64; 6]) -> f64 {
     }
 }
 
+/// A job's blocks as they are known: all of them at the start, or more fed while it
+/// runs ([`JobHooks::feed`]).
+pub(super) struct Fed {
+    pub(super) blocks: Vec<Block>,
+    plans: Plans,
+    kin: MachineKinematics,
+    /// Pose at the end of the last block known (for the motion estimates).
+    end: [i64; 6],
+    /// More blocks may come.
+    pub(super) open: bool,
+    /// When blocks last came.
+    last_fed: Instant,
+}
+
 impl<T: Transport> Link<T> {
     /// Streams `blocks` and waits until they have all executed, the controller raises
     /// an alarm, or the operator's abort or stop has taken effect; on a simulator, a
     /// controller moving without progress is an error ([`LinkError::Stalled`]).
+    /// [`JobHooks::feed`] may add blocks while the job runs: the job then ends when
+    /// the feed is closed and every block has executed.
     pub fn run_job(
         &mut self,
         blocks: &[Block],
@@ -54,79 +75,104 @@ impl<T: Transport> Link<T> {
                 return Ok(JobEnd::Alarm(a));
             }
         }
-        let planned = self.plan(blocks, start_status.pose)?;
         let mut job = JobState::new(self.next_seq, self.capacity, &start_status);
-        // Cumulative estimated motion, ms: `planned_ms[i]` covers blocks before `i`.
-        let mut from = start_status.pose;
-        job.planned_ms = Vec::with_capacity(blocks.len() + 1);
         job.planned_ms.push(0.0);
-        job.arcs_before = Vec::with_capacity(blocks.len() + 1);
         job.arcs_before.push(0);
-        for b in blocks {
+        let mut fed = Fed {
+            blocks: Vec::with_capacity(blocks.len()),
+            plans: Plans::new(start_status.pose, &self.machine),
+            kin: MachineKinematics::new(&self.machine),
+            end: start_status.pose,
+            open: true,
+            last_fed: Instant::now(),
+        };
+        self.append(&mut fed, &mut job, blocks)?;
+        let result = self.job_loop(&mut fed, hooks, &mut job);
+        self.stats.plan_time_s = fed.plans.time_s();
+        self.next_seq = job.seq_of(job.acked.max(job.high));
+        result
+    }
+
+    /// Adds `new` to the job: motion estimates, arcs, and plans (the blocks not yet
+    /// sent are planned again with the new ones in view).
+    fn append(
+        &mut self,
+        fed: &mut Fed,
+        job: &mut JobState,
+        new: &[Block],
+    ) -> Result<(), LinkError> {
+        for b in new {
             let arcs = job.arcs_before.last().copied().unwrap_or(0);
             job.arcs_before
                 .push(arcs + matches!(b.motion, Motion::Arc { .. }) as usize);
             let total = job.planned_ms.last().copied().unwrap_or(0.0);
             job.planned_ms
-                .push(total + estimate_ms(&from, b, &self.axis_vmax));
+                .push(total + estimate_ms(&fed.end, b, &self.axis_vmax));
             if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
-                from = b.target;
+                fed.end = b.target;
             }
         }
-        let result = self.job_loop(blocks, &planned, hooks, &mut job);
-        self.next_seq = job.seq_of(job.acked.max(job.high));
-        result
+        let first = fed.blocks.len();
+        fed.plans
+            .extend(new, job.high, &self.machine, &fed.kin)
+            .map_err(|i| LinkError::BadBlock {
+                port: self.port(),
+                line: new[i - first].line,
+            })?;
+        fed.blocks.extend_from_slice(new);
+        if !new.is_empty() {
+            fed.last_fed = Instant::now();
+        }
+        Ok(())
     }
 
-    /// Plans `blocks` from `start` with the whole job in view: the core's planner, as
-    /// the controller would with unlimited look-ahead ([`pkmc::planner::plan_into`]).
-    pub(super) fn plan(
-        &mut self,
-        blocks: &[Block],
-        start: [i64; 6],
-    ) -> Result<Vec<PlannedBlock>, LinkError> {
-        let kin = MachineKinematics::new(&self.machine);
-        let mut out = vec![PlanBlock::default(); blocks.len()];
-        let window = pkmc::interp::window_of(self.machine.motion.smoothing_ticks as u32);
-        plan_into(blocks, start, &self.machine, &kin, window, &mut out).map_err(|(i, _)| {
-            LinkError::BadBlock {
-                port: self.port(),
-                line: blocks[i].line,
-            }
-        })?;
-        self.stats.plan_time_s =
-            pkmc::planner::planned_ticks(&out) * pkmc::units::TICK_NS as f64 * 1e-9;
-        Ok(blocks
-            .iter()
-            .zip(&out)
-            .map(|(b, p)| PlannedBlock {
-                block: *b,
-                plan: p.plan(),
-            })
-            .collect())
+    /// How many of the job's blocks may be sent now: all of them, but while the feed
+    /// is open the last one known waits for its successor (so that the corner between
+    /// them can be blended) unless the feed has been quiet for [`TAIL_AFTER`] or the
+    /// controller is about to run out of motion.
+    fn sendable(&self, fed: &Fed, job: &JobState) -> usize {
+        let total = fed.blocks.len();
+        if !fed.open || total == 0 {
+            return total;
+        }
+        let low = (job.buffered_ms as f64 + job.in_flight_ms()) < LOW_WATER_MS;
+        if low || fed.last_fed.elapsed() >= TAIL_AFTER {
+            total
+        } else {
+            total - 1
+        }
     }
 
     pub(super) fn job_loop(
         &mut self,
-        blocks: &[Block],
-        planned: &[PlannedBlock],
+        fed: &mut Fed,
         hooks: &mut dyn JobHooks,
         job: &mut JobState,
     ) -> Result<JobEnd, LinkError> {
-        let total = blocks.len();
+        let mut new = Vec::new();
         loop {
             let now = Instant::now();
-            // Operator commands.
+            // Operator commands, and blocks fed while the job runs.
             let view = LinkView {
                 status: self.status.clone(),
                 acked: job.acked,
-                total,
+                total: fed.blocks.len(),
+                executed: self
+                    .status
+                    .as_ref()
+                    .map_or(0, |s| s.blocks_done.wrapping_sub(job.done_before) as usize),
                 control_pending: self.control.is_some() || !self.controls.is_empty(),
             };
             if let Some(cmd) = hooks.control(&view) {
                 self.controls.push_back(cmd);
             }
-            if job.acked == total && !job.end_sent && job.ending.is_none() {
+            if fed.open && job.ending.is_none() {
+                new.clear();
+                fed.open = hooks.feed(&view, &mut new);
+                self.append(fed, job, &new)?;
+            }
+            let total = fed.blocks.len();
+            if !fed.open && job.acked == total && !job.end_sent && job.ending.is_none() {
                 // Every block is on the controller: the job is complete there (a host
                 // lost before this leaves an unfinished job, an alarm).
                 job.end_sent = true;
@@ -135,7 +181,8 @@ impl<T: Transport> Link<T> {
             self.service_controls(now, job)?;
             // Blocks, within credits and the buffered-motion limit.
             if job.ending.is_none() && self.tx.is_empty() {
-                while job.sent < total
+                let sendable = self.sendable(fed, job);
+                while job.sent < sendable
                     && job.sent - job.acked < job.free.min(job.window)
                     && job.bend_free_for(job.sent)
                     && job.buffered_ms < self.opts.max_buffered_ms
@@ -144,7 +191,7 @@ impl<T: Transport> Link<T> {
                             < self.opts.max_buffered_ms as f64)
                 {
                     let seq = job.seq_of(job.sent);
-                    self.queue(seq, &HostMsg::Block(planned[job.sent]))?;
+                    self.queue(seq, &HostMsg::Block(fed.plans.planned[job.sent]))?;
                     if job.sent < job.high {
                         self.stats.resent += 1;
                     } else {
@@ -172,7 +219,7 @@ impl<T: Transport> Link<T> {
                 Duration::ZERO
             };
             for m in self.pump(wait)? {
-                if let Some(end) = self.handle(m, blocks, hooks, job)? {
+                if let Some(end) = self.handle(m, fed, hooks, job)? {
                     return Ok(end);
                 }
             }
@@ -245,10 +292,11 @@ impl<T: Transport> Link<T> {
     pub(super) fn handle(
         &mut self,
         m: CtrlMsg,
-        blocks: &[Block],
+        fed: &Fed,
         hooks: &mut dyn JobHooks,
         job: &mut JobState,
     ) -> Result<Option<JobEnd>, LinkError> {
+        let blocks = &fed.blocks[..];
         match m {
             CtrlMsg::Ack {
                 seq,
@@ -276,7 +324,7 @@ impl<T: Transport> Link<T> {
                     }
                 }
             }
-            CtrlMsg::Status(s) => return self.on_status(&s, blocks, hooks, job),
+            CtrlMsg::Status(s) => return self.on_status(&s, fed, hooks, job),
             CtrlMsg::HelloAck { .. }
             | CtrlMsg::MachineLoaded { .. }
             | CtrlMsg::MachineRefused { .. } => {}
@@ -370,11 +418,11 @@ impl<T: Transport> Link<T> {
     fn on_status(
         &mut self,
         s: &Status,
-        blocks: &[Block],
+        fed: &Fed,
         hooks: &mut dyn JobHooks,
         job: &mut JobState,
     ) -> Result<Option<JobEnd>, LinkError> {
-        let total = blocks.len();
+        let (blocks, total) = (&fed.blocks[..], fed.blocks.len());
         // Blocks executed were accepted: a lost final `Ack` need not be waited for.
         let executed = s.blocks_done.wrapping_sub(job.done_before) as usize;
         if executed > job.acked && executed <= job.high {
@@ -412,6 +460,7 @@ impl<T: Transport> Link<T> {
             }
         }
         if job.ending.is_none()
+            && !fed.open
             && job.acked == total
             && job.end_sent
             && self.control.is_none()

@@ -1,0 +1,89 @@
+//! A job's plans, extended while it runs: the blocks of a job that is fed line by line
+//! (the Grbl bridge) are planned as they arrive, with the look-ahead of what is known.
+//!
+//! A plan once sent is never changed (a resend carries the same bytes), so only the
+//! blocks not yet sent are planned again when more arrive: the reverse pass over them
+//! ends at rest after the last block known, and the forward pass starts from the last
+//! sent block's planned entry and what it can reach over its length. The controller
+//! never leaves a block faster than it can stop within the blocks it holds
+//! ([`pkmc::planner::Planner::exit_target`]), so a block sent before its successor was
+//! known is safe; the corner after it is planned as a stop, because a blended corner
+//! takes part of the acceleration of the block before it, which is already sent.
+//!
+//! Fed all at once, this is [`pkmc::planner::plan_into`] exactly: the same calls in the
+//! same order.
+
+use pkmc::config::{MachineConfig, AXES};
+use pkmc::kinematics::MachineKinematics;
+use pkmc::math::sqrtf;
+use pkmc::planner::{forward_pass, reverse_pass, Lookahead, PlanBlock};
+use pkmc::protocol::{Block, PlannedBlock};
+
+pub(super) struct Plans {
+    la: Lookahead,
+    /// One per block, as the passes leave them.
+    work: Vec<PlanBlock>,
+    /// What is (or will be) streamed: `planned[i]` is fixed once block `i` was sent.
+    pub(super) planned: Vec<PlannedBlock>,
+}
+
+impl Plans {
+    pub(super) fn new(start: [i64; AXES], machine: &MachineConfig) -> Self {
+        let smoothing = pkmc::interp::window_of(machine.motion.smoothing_ticks as u32);
+        Self {
+            la: Lookahead::new(start, smoothing),
+            work: Vec::new(),
+            planned: Vec::new(),
+        }
+    }
+
+    /// Plans `blocks` after those already planned, then plans again every block from
+    /// `frozen` (the first never sent) on. Fails with the index of a block whose
+    /// geometry is malformed.
+    pub(super) fn extend(
+        &mut self,
+        blocks: &[Block],
+        frozen: usize,
+        machine: &MachineConfig,
+        kin: &MachineKinematics,
+    ) -> Result<(), usize> {
+        for b in blocks {
+            let i = self.work.len();
+            // The block before, unless it is sent (its acceleration is final).
+            let prev = match i.checked_sub(1) {
+                Some(p) if p >= frozen => self.work.get_mut(p),
+                _ => None,
+            };
+            let p = self.la.plan(b, prev, machine, kin).map_err(|_| i)?;
+            self.work.push(p);
+            self.planned.push(PlannedBlock {
+                block: *b,
+                plan: p.plan(),
+            });
+        }
+        let frozen = frozen.min(self.work.len());
+        let first_entry = match frozen.checked_sub(1) {
+            None => 0.0,
+            Some(last) => {
+                let sent = &self.work[last];
+                let e = self.planned[last].plan.entry;
+                sqrtf(e * e + 2.0 * sent.accel * sent.length())
+            }
+        };
+        let tail = &mut self.work[frozen..];
+        reverse_pass(tail, 100, false);
+        if let Some(first) = tail.first() {
+            let entry = first.entry.min(first_entry);
+            forward_pass(tail, entry);
+        }
+        for (i, p) in self.work.iter().enumerate().skip(frozen) {
+            self.planned[i].plan = p.plan();
+        }
+        Ok(())
+    }
+
+    /// Motion time of everything planned at 100 % feed, s.
+    pub(super) fn time_s(&self) -> f64 {
+        pkmc::planner::planned_ticks(&self.work) * pkmc::units::TICK_NS as f64 * 1e-9
+    }
+}
