@@ -26,6 +26,7 @@ ALLOWED = {
     "analysis": {"sim"},
     "contour_study": {"sim", "machine_file"},
     "job": {"gcode", "link", "sim", "analysis", "machine_file", "input"},
+    "grbl": {"gcode", "link", "analysis", "job"},
 }
 CRATE_PATH = re.compile(r"\bcrate::([a-z_]+)")
 FN = re.compile(r"^\s*(pub(\([a-z]+\))?\s+)?(const\s+)?(async\s+)?(unsafe\s+)?fn\s+(\w+)")

@@ -25,6 +25,7 @@ pub mod analysis;
 pub mod cli;
 pub mod contour_study;
 pub mod gcode;
+pub mod grbl;
 pub mod input;
 pub mod job;
 pub mod link;

@@ -6,7 +6,6 @@
 use clap::{Parser, Subcommand};
 use pkmc::config::{axis_is_rotary, MachineConfig, AXIS_NAMES};
 use pkmc::protocol::{Control, HeldJob, Status};
-use pkmc::units::to_user;
 use pkmc_host::cli::progress::{Interrupts, Operator, Progress, RawKeys, Style};
 use pkmc_host::job::{self, exit, Failure, Report, RunOptions, SimSetup, Target};
 use pkmc_host::link::{JobEnd, Link, LinkOptions, Transport};
@@ -125,6 +124,16 @@ enum Command {
     /// Continue the job the controller holds (another host's unfinished job, or a
     /// job paused or held) and wait until it ends or pauses again.
     Resume,
+    /// Serve Grbl 1.1's text protocol to a sender (CNCjs, UGS, bCNC) on a
+    /// pseudo-terminal, and with --tcp on a TCP port, until Ctrl-C (docs/senders.md).
+    Grbl {
+        /// Listen on this TCP address too (bCNC and UGS open socket://HOST:PORT).
+        #[arg(long, value_name = "ADDRESS")]
+        tcp: Option<String>,
+        /// Link the pseudo-terminal at this path too.
+        #[arg(long, value_name = "PATH")]
+        link: Option<PathBuf>,
+    },
 }
 
 fn main() {
@@ -291,7 +300,11 @@ fn run(args: &Args) -> Result<i32, Failure> {
             record_path: args.plot.is_some(),
             plants,
             inject: args.inject.clone(),
-            clock: Default::default(),
+            // A sender watches the machine move: the simulator keeps real time.
+            clock: match args.command {
+                Some(Command::Grbl { .. }) => pkmc_host::sim::serve::ServeClock::RealTime,
+                _ => Default::default(),
+            },
         },
         link,
         home: args.home,
@@ -300,6 +313,14 @@ fn run(args: &Args) -> Result<i32, Failure> {
     };
     let interrupts = Interrupts::install().map_err(|e| Failure::new(exit::LINK, e))?;
     match &args.command {
+        Some(Command::Grbl { tcp, link }) => {
+            let bridge = pkmc_host::grbl::BridgeOptions {
+                link: link.clone(),
+                tcp: tcp.clone(),
+                tools: opts.tools.clone(),
+            };
+            pkmc_host::grbl::run(&machine, &opts, &bridge, &|| interrupts.count() > 0)
+        }
         Some(cmd) => command(args, cmd, &machine, &opts, interrupts),
         None => {
             let program = args
@@ -465,50 +486,6 @@ fn axis_index(name: &str) -> Result<usize, Failure> {
         .ok_or_else(|| bad(format!("jog: unknown axis {name:?} (X Y Z A B C)")))
 }
 
-fn pose_text(s: &Status) -> String {
-    (0..6)
-        .map(|i| {
-            format!(
-                "{} {:.4}",
-                AXIS_NAMES[i],
-                to_user(s.pose[i], axis_is_rotary(i))
-            )
-        })
-        .collect::<Vec<_>>()
-        .join(" ")
-}
-
-fn status_json(s: &Status, machine: &MachineConfig, result: &str) -> serde_json::Value {
-    let pose: serde_json::Map<String, serde_json::Value> = (0..6)
-        .map(|i| {
-            (
-                AXIS_NAMES[i].to_ascii_lowercase().to_string(),
-                to_user(s.pose[i], axis_is_rotary(i)).into(),
-            )
-        })
-        .collect();
-    let joints: Vec<f64> = machine
-        .joints
-        .iter()
-        .enumerate()
-        .map(|(j, jc)| to_user(s.joints[j], jc.rotary))
-        .collect();
-    serde_json::json!({
-        "result": result,
-        "state": format!("{:?}", s.state),
-        "line": s.line,
-        "pose": pose,
-        "joints": joints,
-        "feed_mm_min": s.speed as f64 * 60.0 / 1e6,
-        "feed_override": s.feed_override,
-        "buffered_ms": s.buffered_ms,
-        "free_slots": s.free_slots,
-        "free_bends": s.free_bends,
-        "alarm": s.alarm.map(|a| job::describe_alarm(&a)),
-        "homed": s.homed,
-    })
-}
-
 fn command(
     args: &Args,
     cmd: &Command,
@@ -553,6 +530,7 @@ fn command(
                 (link.wait_idle(&mut op)?, None)
             }
             Command::Resume => (resume(link, &mut op)?, None),
+            Command::Grbl { .. } => unreachable!("served by grbl::run"),
         };
         let status = link.request_status()?;
         let (result, code) = match &end {
@@ -639,7 +617,7 @@ fn print_status(
 ) {
     let mut out = std::io::stdout().lock();
     if quiet {
-        let mut v = status_json(status, machine, result);
+        let mut v = job::status_json(status, machine, result);
         if let Some(n) = extra {
             v["blocks_sent"] = n.into();
         }
@@ -664,7 +642,7 @@ fn print_status(
             "{}, line {}, {}, feed {:.0} mm/min, override {}%",
             status.state,
             status.line,
-            pose_text(status),
+            job::pose_text(status),
             status.speed as f64 * 60.0 / 1e6,
             status.feed_override
         );

@@ -42,8 +42,11 @@ pub mod flow;
 pub mod interp;
 pub mod lexer;
 pub mod params;
+mod session;
 pub mod tools;
 
+pub use interp::state::Offsets;
+pub use session::LineSession;
 pub use tools::{Tool, ToolTable};
 
 use crate::gcode::canon::Canon;

@@ -29,7 +29,7 @@ pub use commands::{
     connect, home_command, jog_command, mdi, move_and_wait, prepare, state_text, with_link,
 };
 pub use compile::{compile_program, compile_text, compile_text_with, machine_axes};
-pub use report::{describe_alarm, LinesExecuted, PreflightSummary, Report};
+pub use report::{describe_alarm, pose_text, status_json, LinesExecuted, PreflightSummary, Report};
 use sim_server::outcome_of;
 pub use sim_server::{SimOutcome, SimServer, SimSetup};
 

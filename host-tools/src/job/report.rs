@@ -172,3 +172,49 @@ pub fn describe_alarm(a: &Alarm) -> String {
     }
     s
 }
+
+/// A pose in words: `X 1.0000 Y …` (mm, degrees).
+pub fn pose_text(s: &Status) -> String {
+    (0..6)
+        .map(|i| {
+            format!(
+                "{} {:.4}",
+                AXIS_NAMES[i],
+                to_user(s.pose[i], axis_is_rotary(i))
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// A status as `nc-send status --report json` prints it.
+pub fn status_json(s: &Status, machine: &MachineConfig, result: &str) -> serde_json::Value {
+    let pose: serde_json::Map<String, serde_json::Value> = (0..6)
+        .map(|i| {
+            (
+                AXIS_NAMES[i].to_ascii_lowercase().to_string(),
+                to_user(s.pose[i], axis_is_rotary(i)).into(),
+            )
+        })
+        .collect();
+    let joints: Vec<f64> = machine
+        .joints
+        .iter()
+        .enumerate()
+        .map(|(j, jc)| to_user(s.joints[j], jc.rotary))
+        .collect();
+    serde_json::json!({
+        "result": result,
+        "state": format!("{:?}", s.state),
+        "line": s.line,
+        "pose": pose,
+        "joints": joints,
+        "feed_mm_min": s.speed as f64 * 60.0 / 1e6,
+        "feed_override": s.feed_override,
+        "buffered_ms": s.buffered_ms,
+        "free_slots": s.free_slots,
+        "free_bends": s.free_bends,
+        "alarm": s.alarm.map(|a| describe_alarm(&a)),
+        "homed": s.homed,
+    })
+}

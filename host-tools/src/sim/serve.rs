@@ -164,6 +164,9 @@ pub enum ServeClock {
     /// Always as fast as possible while the controller has work (benches of the
     /// link itself).
     Free,
+    /// Always one tick per millisecond of wall time, as a board: for senders that
+    /// watch the machine move (`nc-send grbl`).
+    RealTime,
 }
 
 /// The board loop's memory between turns.
@@ -334,9 +337,10 @@ pub fn serve(
             board.fed = now;
         }
         let paced = busy
-            && clock == ServeClock::Paced
-            && status.buffered_ms < PACE_BELOW_MS
-            && now.duration_since(board.fed) < PACE_AFTER_BLOCKS;
+            && (clock == ServeClock::RealTime
+                || clock == ServeClock::Paced
+                    && status.buffered_ms < PACE_BELOW_MS
+                    && now.duration_since(board.fed) < PACE_AFTER_BLOCKS);
         // Paced, the tick is due at its deadline (at once when pacing starts); free,
         // at once.
         let due = if paced {

@@ -179,6 +179,11 @@ impl Interp<'_> {
                 90 => Coolant::Off,
                 _ => continue,
             };
+            self.coolant = match state {
+                Coolant::Mist => (true, self.coolant.1),
+                Coolant::Flood => (self.coolant.0, true),
+                Coolant::Off => (false, false),
+            };
             out.push(Canon::Coolant {
                 line: b.line,
                 state,

@@ -39,6 +39,7 @@ mod modal;
 mod motion;
 mod offsets;
 mod rotation;
+pub mod state;
 mod tooling;
 
 use super::lexer::{bit, f64_to_i64, Word, Words, DEGREE, INCH, MM};
@@ -166,6 +167,8 @@ pub struct Interp<'o> {
     feed_zero: bool,
     rpm: u32,
     spindle: Spindle,
+    /// Mist (M7) and flood (M8) coolant on.
+    coolant: (bool, bool),
     selected_tool: u32,
     current_tool: u32,
     /// Tool offsets in force (G43, G43.1), per pose axis, axis units.
@@ -203,6 +206,7 @@ impl<'o> Interp<'o> {
             feed_zero: false,
             rpm: 0,
             spindle: Spindle::Off,
+            coolant: (false, false),
             selected_tool: 0,
             current_tool: 0,
             tool_offsets: [0; AXES],

@@ -1,0 +1,121 @@
+//! G-code one line at a time, with the modal state kept between lines: what a sender
+//! streaming a program line by line (the Grbl bridge) or an operator typing MDI
+//! lines needs. A line is read and executed exactly as a line of a program file is;
+//! O-word flow control needs the whole program and is refused here.
+
+use super::canon::Canon;
+use super::interp::Interp;
+use super::lexer::{self, Words};
+use super::{flow, Diagnostic, Options, MAX_LINE};
+use pkmc::config::AXES;
+
+/// An interpreter fed line by line.
+pub struct LineSession<'o> {
+    opts: &'o Options,
+    interp: Interp<'o>,
+    words: Words,
+    file: String,
+}
+
+impl<'o> LineSession<'o> {
+    /// A session at program start (see [`Interp::new`]); errors name `file`.
+    pub fn new(opts: &'o Options, file: &str) -> Self {
+        Self {
+            opts,
+            interp: Interp::new(opts),
+            words: Words::default(),
+            file: file.to_string(),
+        }
+    }
+
+    /// The interpreter, for its state.
+    pub fn interp(&self) -> &Interp<'o> {
+        &self.interp
+    }
+
+    /// Moves the interpreter to `pose` (machine frame), where the machine now is.
+    pub fn set_position(&mut self, pose: [i64; AXES]) {
+        self.interp.set_position(pose);
+    }
+
+    /// Has M2 or M30 ended the program?
+    pub fn ended(&self) -> bool {
+        self.interp.ended()
+    }
+
+    /// Back to the state at program start at `pose`, keeping the parameters (work
+    /// offsets, G92, stored positions): a soft reset, or the line after M2/M30.
+    pub fn restart(&mut self, pose: [i64; AXES]) {
+        let params = std::mem::take(&mut self.interp.params);
+        self.interp = Interp::new(self.opts);
+        self.interp.params = params;
+        let mut out = Vec::new();
+        // Selecting G54 loads the offsets from the parameters kept.
+        let _ = self.line("G54", 0, &mut out);
+        self.interp.set_position(pose);
+    }
+
+    /// Executes one line (without its line break), numbered `number` in messages;
+    /// appends its commands to `out`. On an error nothing of the line is appended.
+    pub fn line(
+        &mut self,
+        text: &str,
+        number: u32,
+        out: &mut Vec<Canon>,
+    ) -> Result<(), Diagnostic> {
+        let fail = |col: usize, message: String| Diagnostic {
+            file: self.file.clone(),
+            line: number as usize,
+            col,
+            message,
+        };
+        if text.len() > MAX_LINE && text.chars().count() > MAX_LINE {
+            return Err(fail(
+                MAX_LINE + 1,
+                format!("line longer than {MAX_LINE} characters"),
+            ));
+        }
+        let program = flow::Program::index(text, false, &self.interp.params);
+        if let Some((_, col, message)) = program.errors.first() {
+            return Err(fail(lexer::char_col(text, *col), message.clone()));
+        }
+        if !program.owords.is_empty() {
+            let col = text
+                .find(['o', 'O'])
+                .map_or(1, |c| lexer::char_col(text, c as u32));
+            return Err(fail(
+                col,
+                "O-word flow control (subroutines, loops, branches) works only in a whole \
+                 program (nc-send FILE), not line by line"
+                    .into(),
+            ));
+        }
+        let Some(line) = program.lines.first() else {
+            return Ok(());
+        };
+        lexer::scan_line(
+            text,
+            line.from as usize,
+            &self.interp.params,
+            &mut self.words,
+        )
+        .map_err(|e| fail(lexer::char_col(text, e.col), e.message))?;
+        let before = out.len();
+        self.interp
+            .execute(&mut self.words, number, out)
+            .map_err(|e| {
+                out.truncate(before);
+                fail(lexer::char_col(text, e.col), e.message)
+            })
+    }
+
+    /// Emits what cutter compensation still holds (the end of the stream).
+    pub fn finish(&mut self, number: u32, out: &mut Vec<Canon>) -> Result<(), Diagnostic> {
+        self.interp.finish(out).map_err(|e| Diagnostic {
+            file: self.file.clone(),
+            line: number as usize,
+            col: e.col as usize,
+            message: e.message,
+        })
+    }
+}

@@ -1,0 +1,277 @@
+//! Grbl's `$` commands: those answered from the bridge's own state (`$`, `$$`, `$#`,
+//! `$G`, `$I`, `$N`, `$Nx=`, settings), and those that act on the controller and run
+//! only between jobs (`$H`, `$X`, `$C`, `$J=`).
+
+use super::bridge::{Bridge, Needs};
+use super::words;
+use crate::job::{home_command, Failure};
+use crate::link::{JobEnd, Link, Transport};
+use pkmc::config::{AXES, AXIS_NAMES};
+use pkmc::kinematics::MachineKinematics;
+use pkmc::protocol::{Block, Control, Motion};
+
+/// Where `line` may run.
+pub(super) fn needs(line: &str) -> Needs {
+    let t = line.trim().to_ascii_uppercase();
+    if t == "$H" || t == "$X" || t == "$C" || t.starts_with("$J=") {
+        Needs::Link
+    } else {
+        Needs::Nothing
+    }
+}
+
+/// Answers a `$` line that needs only the bridge's state.
+pub(super) fn answer_local(b: &mut Bridge<'_>, line: &str) {
+    let t = line.trim();
+    let upper = t.to_ascii_uppercase();
+    match upper.as_str() {
+        "$" => {
+            b.say(words::help());
+            b.say("ok");
+        }
+        "$$" => {
+            for (n, v) in words::settings(b.machine) {
+                b.say(&format!("${n}={v}"));
+            }
+            b.say("ok");
+        }
+        "$#" => {
+            let n = words::reported_axes(b.machine);
+            for l in words::offsets(&b.session.interp().offsets(), n) {
+                b.say(&l);
+            }
+            b.say("ok");
+        }
+        "$G" => {
+            let gc = b.session.interp().modal_words();
+            b.say(&format!("[GC:{gc}]"));
+            b.say("ok");
+        }
+        "$I" => {
+            for l in words::build_info(b.machine) {
+                b.say(&l);
+            }
+            b.say("ok");
+        }
+        "$N" => {
+            for i in 0..2 {
+                let l = b.startup[i].clone();
+                b.say(&format!("$N{i}={l}"));
+            }
+            b.say("ok");
+        }
+        _ if upper.starts_with("$N0=") || upper.starts_with("$N1=") => {
+            let i = (upper.as_bytes()[2] - b'0') as usize;
+            b.startup[i] = t[4..].to_string();
+            b.say("ok");
+        }
+        _ if upper.starts_with('$') && upper[1..].split('=').next().is_some_and(is_number) => {
+            let n = &upper[1..upper.find('=').unwrap_or(upper.len())];
+            if upper.contains('=') {
+                b.refuse(
+                    3,
+                    &format!(
+                        "${n} is read-only here: the machine's limits come from its machine file"
+                    ),
+                );
+            } else {
+                match words::settings(b.machine)
+                    .iter()
+                    .find(|(k, _)| k.to_string() == n)
+                {
+                    Some((k, v)) => {
+                        b.say(&format!("${k}={v}"));
+                        b.say("ok");
+                    }
+                    None => b.refuse(3, &format!("no setting ${n}")),
+                }
+            }
+        }
+        _ if needs(t) == Needs::Link => {
+            b.refuse(8, &format!("{t} runs only when the machine is idle"));
+        }
+        _ => b.refuse(3, &format!("unknown or unsupported command {t}")),
+    }
+}
+
+fn is_number(s: &str) -> bool {
+    !s.is_empty() && s.bytes().all(|c| c.is_ascii_digit())
+}
+
+/// Runs a `$` line that acts on the controller (the machine is not in a job).
+pub(super) fn run_link<T: Transport>(
+    b: &mut Bridge<'_>,
+    link: &mut Link<T>,
+    line: &str,
+) -> Result<(), Failure> {
+    let t = line.trim();
+    let upper = t.to_ascii_uppercase();
+    match upper.as_str() {
+        "$X" => {
+            link.control(Control::AlarmReset)?;
+            b.status = Some(link.request_status()?);
+            b.say("[MSG:Caution: Unlocked]");
+            b.say("ok");
+        }
+        "$H" => {
+            let cmd = home_command(link)?;
+            link.control(cmd)?;
+            let end = link.wait_idle(b)?;
+            after_move(b, link, end)?;
+            if !b.locked() {
+                b.say("ok");
+            }
+        }
+        "$C" => {
+            b.mode.check = !b.mode.check;
+            b.say(if b.mode.check {
+                "[MSG:Enabled]"
+            } else {
+                "[MSG:Disabled]"
+            });
+            b.say("ok");
+            if !b.mode.check {
+                let pose = link.request_status()?.pose;
+                b.session.restart(pose);
+            }
+        }
+        _ => jog(b, link, &t[3..])?,
+    }
+    Ok(())
+}
+
+/// After homing or a jog: the interpreter moves to where the machine now is; an
+/// alarm is reported.
+fn after_move<T: Transport>(
+    b: &mut Bridge<'_>,
+    link: &mut Link<T>,
+    end: JobEnd,
+) -> Result<(), Failure> {
+    let s = link.request_status()?;
+    b.session.set_position(s.pose);
+    b.status = Some(s);
+    if let JobEnd::Alarm(a) = end {
+        super::report_alarm(b, &a);
+    }
+    Ok(())
+}
+
+/// `$J=…`: G20/G21, G90/G91, G53, axis words and F (required). The target is
+/// checked against the machine's reach (error:15 beyond it); the move is planned
+/// here and sent as one jog; 0x85 cancels it.
+fn jog<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>, body: &str) -> Result<(), Failure> {
+    let s = link.request_status()?;
+    let target = match jog_target(b, body, &s.pose) {
+        Ok(t) => t,
+        Err((code, why)) => {
+            b.refuse(code, &format!("$J={body}: {why}"));
+            return Ok(());
+        }
+    };
+    let (target, feed) = target;
+    let block = Block {
+        line: b.line_no,
+        motion: Motion::Linear,
+        target,
+        feed,
+        tolerance_nm: 0,
+    };
+    let report = crate::analysis::preflight::check(&[block], b.machine, s.pose);
+    if let Some(f) = report.findings.first() {
+        b.refuse(15, &format!("$J={body}: {}", f.what));
+        return Ok(());
+    }
+    let kin = MachineKinematics::new(b.machine);
+    let planned = match pkmc::planner::plan_move(&block, s.pose, b.machine, &kin) {
+        Ok(p) => p,
+        Err(e) => {
+            b.refuse(16, &format!("$J={body}: cannot be planned: {e}"));
+            return Ok(());
+        }
+    };
+    link.control(Control::Jog(planned))?;
+    b.say("ok");
+    b.mode.jogging = true;
+    let end = link.wait_idle(b);
+    b.mode.jogging = false;
+    after_move(b, link, end?)
+}
+
+type Jog = ([i64; AXES], i64);
+
+/// The jog's target (machine frame) and feed (axis units/s) from its words.
+fn jog_target(b: &Bridge<'_>, body: &str, pose: &[i64; AXES]) -> Result<Jog, (u8, String)> {
+    let interp = b.session.interp();
+    let mut inch = interp.inch;
+    let mut absolute = interp.absolute;
+    let mut machine_frame = false;
+    let mut axes: [Option<f64>; AXES] = [None; AXES];
+    let mut feed = None;
+    let text = body.to_ascii_uppercase();
+    let mut rest = text.trim();
+    while !rest.is_empty() {
+        let letter = rest.as_bytes()[0] as char;
+        let tail = rest[1..].trim_start();
+        let end = tail
+            .find(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-' || c == '+'))
+            .unwrap_or(tail.len());
+        let num: f64 = tail[..end]
+            .parse()
+            .map_err(|_| (2, format!("bad number after {letter}")))?;
+        rest = tail[end..].trim_start();
+        match letter {
+            'G' => match (num * 10.0).round() as i64 {
+                200 => inch = true,
+                210 => inch = false,
+                900 => absolute = true,
+                910 => absolute = false,
+                530 => machine_frame = true,
+                _ => return Err((16, format!("G{num} is not allowed in a jog"))),
+            },
+            'F' => feed = Some(num),
+            _ => match AXIS_NAMES.iter().position(|a| *a == letter) {
+                Some(i) if b.machine.axes[i].max_velocity > 0 => axes[i] = Some(num),
+                Some(_) => return Err((37, format!("the machine has no {letter} axis"))),
+                None => return Err((16, format!("{letter} is not allowed in a jog"))),
+            },
+        }
+    }
+    let Some(f) = feed.filter(|f| *f > 0.0) else {
+        return Err((22, "a jog needs a feed rate F".into()));
+    };
+    if axes.iter().all(Option::is_none) {
+        return Err((26, "a jog needs an axis word".into()));
+    }
+    let unit = |i: usize| -> f64 {
+        if i >= 3 {
+            pkmc::units::NDEG_PER_DEG as f64
+        } else if inch {
+            25_400_000.0
+        } else {
+            pkmc::units::NM_PER_MM as f64
+        }
+    };
+    let wco = interp.work_offset();
+    let target: [i64; AXES] = std::array::from_fn(|i| match axes[i] {
+        None => pose[i],
+        Some(v) => {
+            let v = (v * unit(i)).round() as i64;
+            if !absolute {
+                pose[i] + v
+            } else if machine_frame {
+                v
+            } else {
+                v + wco[i]
+            }
+        }
+    });
+    // F in units per minute along the XYZ path; degrees per minute (to µ°/s) when
+    // only rotary axes move, as the front end reads it.
+    let linear = (0..3).any(|i| target[i] != pose[i]);
+    let feed = if linear {
+        (f * unit(0) / 60.0).round() as i64
+    } else {
+        (f * 1e6 / 60.0).round() as i64
+    };
+    Ok((target, feed))
+}

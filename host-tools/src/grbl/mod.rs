@@ -1,0 +1,224 @@
+//! The Grbl bridge (`nc-send grbl`): Grbl 1.1's text protocol for the senders
+//! machinists use (CNCjs, UGS, bCNC, gSender), served on a pseudo-terminal and a
+//! local TCP port, in front of the controller's binary link (CRC, credits, resends).
+//!
+//! Every line a sender writes is read by our own G-code front end with its modal
+//! state kept across lines ([`crate::gcode::LineSession`]), checked against the
+//! machine's reach (pre-flight), and its blocks are fed into a running job
+//! ([`crate::link::JobHooks::feed`]), planned as they come. `ok` means the line was
+//! accepted into the bridge's buffer ([`words::BLOCK_BUFFER`] blocks ahead of the
+//! controller; lines wait unanswered while it is full, which is how a sender is held
+//! back). Real-time bytes act at once. See `docs/senders.md`.
+
+mod bridge;
+mod commands;
+mod input;
+mod ports;
+mod words;
+
+pub use input::{Input, Item, RealTime};
+
+use crate::gcode;
+use crate::job::{exit, state_text, Failure, RunOptions, Target};
+use crate::link::{JobEnd, Link, Transport};
+use bridge::{Bridge, Needs};
+use pkmc::config::MachineConfig;
+use pkmc::protocol::{Alarm, Control};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// Where the bridge listens.
+#[derive(Clone, Debug, Default)]
+pub struct BridgeOptions {
+    /// Also link the pseudo-terminal at this path.
+    pub link: Option<PathBuf>,
+    /// Listen on this TCP address (`127.0.0.1:23` …); `None`: no TCP.
+    pub tcp: Option<String>,
+    /// Tool table for G43 and cutter compensation.
+    pub tools: gcode::ToolTable,
+}
+
+/// How often the bridge asks the controller for its status between jobs.
+const IDLE_STATUS: Duration = Duration::from_millis(50);
+
+/// `nc-send grbl`: connects to the controller as `run` says (`--sim`, `--port`, or
+/// the board on USB), prints where senders connect on stdout (`pty PATH`, and
+/// `tcp ADDRESS`), and serves until `stop` says so (Ctrl-C).
+pub fn run(
+    machine: &MachineConfig,
+    run: &RunOptions<'_>,
+    opts: &BridgeOptions,
+    stop: &dyn Fn() -> bool,
+) -> Result<i32, Failure> {
+    crate::job::with_link(machine, run, |link| {
+        if matches!(run.target, Target::Sim) {
+            // A fresh simulator is locked after its reset: unlock it where it stands.
+            crate::job::prepare(link, false, true, &mut crate::link::NoHooks)?;
+        }
+        let mut announce = |pty: &str, tcp: Option<std::net::SocketAddr>| {
+            use std::io::Write;
+            let mut out = std::io::stdout().lock();
+            let _ = writeln!(out, "pty {pty}");
+            if let Some(a) = tcp {
+                let _ = writeln!(out, "tcp {a}");
+            }
+            let _ = out.flush();
+        };
+        serve(link, machine, opts, stop, &mut announce)?;
+        Ok(exit::OK)
+    })
+}
+
+/// Serves senders until `stop` says so. `announce` receives the pseudo-terminal's
+/// path and the TCP address once they are open.
+pub fn serve<T: Transport>(
+    link: &mut Link<T>,
+    machine: &MachineConfig,
+    opts: &BridgeOptions,
+    stop: &dyn Fn() -> bool,
+    announce: &mut dyn FnMut(&str, Option<std::net::SocketAddr>),
+) -> Result<(), Failure> {
+    let ports = ports::Ports::open(opts.link.as_deref(), opts.tcp.as_deref())
+        .map_err(|m| Failure::new(exit::LINK, m))?;
+    announce(&ports.pty_path, ports.tcp_addr);
+    let start = link.request_status()?;
+    let options = gcode::Options {
+        start: start.pose,
+        axes: crate::job::machine_axes(machine),
+        tools: opts.tools.clone(),
+        ..gcode::Options::default()
+    };
+    let session = gcode::LineSession::new(&options, "sender");
+    let mut b = Bridge::new(machine, ports, session);
+    b.status = Some(start);
+    let mut asked = Instant::now();
+    while !stop() {
+        b.poll(Duration::from_millis(5));
+        while let Some(cmd) = b.controls.pop_front() {
+            // Between jobs: hold and resume of nothing, overrides kept for the next
+            // job, a reset or jog cancel of nothing.
+            if !matches!(cmd, Control::Abort) {
+                link.control(cmd)?;
+            }
+        }
+        if b.reset {
+            soft_reset(&mut b, link)?;
+        }
+        if asked.elapsed() >= IDLE_STATUS {
+            b.status = Some(link.request_status()?);
+            asked = Instant::now();
+        }
+        next_line(&mut b, link)?;
+    }
+    Ok(())
+}
+
+/// Takes the next queued line between jobs: a G-code line with motion starts a job
+/// (which then takes the lines that follow); `$` lines are answered.
+fn next_line<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(), Failure> {
+    let Some((item, _)) = b.lines.pop_front() else {
+        return Ok(());
+    };
+    let text = match item {
+        input::Item::Refused { code, why } => {
+            b.line_no += 1;
+            let n = b.line_no;
+            b.refuse(code, &format!("sender:{n}: {why}"));
+            return Ok(());
+        }
+        input::Item::RealTime(_) => return Ok(()),
+        input::Item::Line(t) => t,
+    };
+    if text.trim_start().starts_with('$') {
+        b.line_no += 1;
+        return if commands::needs(&text) == Needs::Link {
+            commands::run_link(b, link, &text)
+        } else {
+            commands::answer_local(b, &text);
+            Ok(())
+        };
+    }
+    if b.locked() {
+        b.line_no += 1;
+        b.refuse(
+            9,
+            "G-code is locked out during an alarm: $X unlocks, $H homes",
+        );
+        return Ok(());
+    }
+    let Some(blocks) = b.compile(&text) else {
+        return Ok(());
+    };
+    if blocks.is_empty() {
+        return Ok(());
+    }
+    b.set_job(Some((blocks.len(), 0)));
+    let end = link.run_job(&blocks, b);
+    b.set_job(None);
+    let end = end?;
+    let s = link.request_status()?;
+    b.status = Some(s.clone());
+    match end {
+        JobEnd::Alarm(a) => report_alarm(b, &a),
+        JobEnd::Aborted | JobEnd::Stopped => {}
+        JobEnd::Done | JobEnd::Paused(_) => {}
+    }
+    if b.session.interp().pos != s.pose && !b.reset {
+        // Stopped short (an alarm): the next line starts where the machine is.
+        b.session.set_position(s.pose);
+    }
+    Ok(())
+}
+
+/// `ALARM:N` and our cause, joint and line.
+fn report_alarm(b: &mut Bridge<'_>, a: &Alarm) {
+    b.say(&format!("ALARM:{}", words::alarm_code(a.cause)));
+    b.say(&format!("[MSG:{}]", crate::job::describe_alarm(a)));
+}
+
+/// Ctrl-X: motion was stopped (the job aborted); lines not yet answered are dropped
+/// as a Grbl board drops its serial buffer; the modal state starts afresh; the banner
+/// and the start-up lines follow.
+fn soft_reset<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(), Failure> {
+    b.reset = false;
+    b.mode.jogging = false;
+    b.lines.clear();
+    let s = link.request_status()?;
+    b.session.restart(s.pose);
+    b.status = Some(s.clone());
+    b.say(&words::banner());
+    if b.locked() {
+        b.say(&format!(
+            "[MSG:'$H'|'$X' to unlock: the controller is {}]",
+            state_text(&s)
+        ));
+        return Ok(());
+    }
+    for i in 0..2 {
+        let line = b.startup[i].clone();
+        if line.trim().is_empty() {
+            continue;
+        }
+        b.say(&format!(">{line}:"));
+        if let Some(blocks) = b.compile(&line) {
+            if !blocks.is_empty() {
+                b.set_job(Some((blocks.len(), 0)));
+                let end = link.run_job(&blocks, &mut NoFeed(b));
+                b.set_job(None);
+                if let JobEnd::Alarm(a) = end? {
+                    report_alarm(b, &a);
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Hooks for a start-up line's job: status kept, no lines taken.
+struct NoFeed<'a, 'o>(&'a mut Bridge<'o>);
+
+impl crate::link::JobHooks for NoFeed<'_, '_> {
+    fn status(&mut self, s: &pkmc::protocol::Status) {
+        self.0.status = Some(s.clone());
+    }
+}

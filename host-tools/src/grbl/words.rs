@@ -1,0 +1,223 @@
+//! What the bridge says, in Grbl 1.1's words: status reports, alarm and error codes,
+//! settings (`$$`), offsets (`$#`), build information (`$I`) and help (`$`).
+//! Lengths are in millimetres and angles in degrees, three decimals.
+
+use crate::gcode::Offsets;
+use pkmc::config::{MachineConfig, AXES, AXIS_NAMES};
+use pkmc::protocol::{AlarmCause, State, Status};
+
+/// The version string of `$I` and of the banner.
+pub const VERSION: &str = "1.1h";
+/// Blocks the bridge holds ahead of the controller (the first number of `Bf:`).
+pub const BLOCK_BUFFER: usize = 128;
+/// Receive buffer the bridge offers a character-counting sender, bytes (the second
+/// number of `Bf:` when empty).
+pub const RX_BUFFER: usize = 1024;
+
+/// The start-up banner.
+pub fn banner() -> String {
+    format!("Grbl {VERSION} ['$' for help]")
+}
+
+/// One axis value in the sender's units: mm for X Y Z, degrees for A B C.
+pub fn value(axis: usize, v: i64) -> String {
+    let per = if axis < 3 {
+        pkmc::units::NM_PER_MM
+    } else {
+        pkmc::units::NDEG_PER_DEG
+    };
+    format!("{:.3}", v as f64 / per as f64)
+}
+
+/// Axes reported: X Y Z, and up to the last rotary axis the machine has (a machine
+/// with B but not A reports A as 0, so that every value keeps its place).
+pub fn reported_axes(machine: &MachineConfig) -> usize {
+    (3..AXES)
+        .filter(|&i| machine.axes[i].max_velocity > 0)
+        .map(|i| i + 1)
+        .max()
+        .unwrap_or(3)
+}
+
+/// `x,y,z[,a,b,c]` of `pose`.
+pub fn list(pose: &[i64; AXES], n: usize) -> String {
+    (0..n)
+        .map(|i| value(i, pose[i]))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// What the bridge adds to a controller's state for a report.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Mode {
+    /// A `$J=` jog is under way.
+    pub jogging: bool,
+    /// Check mode (`$C`): lines are compiled and checked, nothing moves.
+    pub check: bool,
+}
+
+/// The state word: `Idle`, `Run`, `Hold:0` (stopped) or `Hold:1` (stopping), `Jog`,
+/// `Home`, `Alarm`, `Check`.
+pub fn state_word(s: &Status, mode: Mode) -> &'static str {
+    match s.state {
+        _ if mode.check && matches!(s.state, State::Idle) => "Check",
+        State::Idle => "Idle",
+        State::Running if mode.jogging => "Jog",
+        State::Running => "Run",
+        State::Hold if s.speed == 0 => "Hold:0",
+        State::Hold => "Hold:1",
+        State::Homing => "Home",
+        State::Alarm | State::EStop => "Alarm",
+    }
+}
+
+/// What a status report shows besides the controller's status.
+pub struct Report<'a> {
+    /// The machine.
+    pub machine: &'a MachineConfig,
+    /// Jogging, check mode.
+    pub mode: Mode,
+    /// Free blocks and free receive bytes.
+    pub free: (usize, usize),
+    /// Work offset in force, machine units.
+    pub wco: [i64; AXES],
+    /// Rapid and spindle overrides as the sender set them (they do not act; see
+    /// `docs/senders.md`).
+    pub rapid_spindle: (u8, u8),
+}
+
+/// `<State|MPos:…|FS:feed,speed|Bf:blocks,bytes|Ln:line|Ov:f,r,s|WCO:…|Pn:…>`.
+pub fn status_report(s: &Status, r: &Report<'_>) -> String {
+    let n = reported_axes(r.machine);
+    // Path speed, nm/s: shown in mm/min.
+    let feed = s.speed as f64 * 60.0 / 1e6;
+    let mut out = format!(
+        "<{}|MPos:{}|FS:{:.0},0|Bf:{},{}|Ln:{}|Ov:{},{},{}|WCO:{}",
+        state_word(s, r.mode),
+        list(&s.pose, n),
+        feed,
+        r.free.0,
+        r.free.1,
+        s.line,
+        s.feed_override,
+        r.rapid_spindle.0,
+        r.rapid_spindle.1,
+        list(&r.wco, n),
+    );
+    if s.state == State::EStop {
+        out.push_str("|Pn:E");
+    } else if s.alarm.is_some_and(|a| a.cause == AlarmCause::LimitSwitch) {
+        let axis = s.alarm.map_or(0, |a| a.joint as usize);
+        out.push_str("|Pn:");
+        out.push(
+            ['X', 'Y', 'Z', 'A', 'B', 'C']
+                .get(axis)
+                .copied()
+                .unwrap_or('X'),
+        );
+    }
+    out.push('>');
+    out
+}
+
+/// Grbl's alarm number for our cause (grblHAL's numbers beyond Grbl's own 1–9); the
+/// `[MSG:…]` after it names our cause, joint and line.
+pub fn alarm_code(cause: AlarmCause) -> u8 {
+    match cause {
+        AlarmCause::LimitSwitch => 1,
+        AlarmCause::Unreachable | AlarmCause::JointLimit | AlarmCause::Singularity => 2,
+        AlarmCause::Aborted | AlarmCause::LinkLoss | AlarmCause::Watchdog => 3,
+        AlarmCause::HomingFailed => 9,
+        AlarmCause::EStop => 10,
+        AlarmCause::Unhomed => 11,
+        AlarmCause::DriveFault | AlarmCause::FollowingError | AlarmCause::JointSpeed => 17,
+        _ => 3,
+    }
+}
+
+/// Grbl's error number for a front-end message (20: unsupported or invalid command,
+/// unless a closer one exists); the `[MSG:…]` before it gives file, line, column
+/// and our words.
+pub fn error_code(message: &str) -> u8 {
+    let m = message.to_ascii_lowercase();
+    if m.contains("feed") && (m.contains("no feed") || m.contains("f word") || m.contains("zero")) {
+        22
+    } else if m.contains("arc") && m.contains("radius") {
+        34
+    } else if m.contains("modal group") || m.contains("same modal") {
+        21
+    } else if m.contains("bad number") || m.contains("number") && m.contains("expected") {
+        2
+    } else if m.contains("expected a letter") || m.contains("not a word") {
+        1
+    } else {
+        20
+    }
+}
+
+/// `$$`: the machine's limits as settings. All are read-only here: they come from
+/// the machine file. `$110`+i max rate (mm or °/min), `$120`+i acceleration (mm or
+/// °/s²); and per joint, `$200`+10·j … `$203`+10·j: travel min, max (mm or °), max speed (/min) and
+/// acceleration (/s²).
+pub fn settings(machine: &MachineConfig) -> Vec<(u32, String)> {
+    let homing = machine.joints.iter().any(|j| j.homing.enabled());
+    let mut out = vec![
+        (10, "511".to_string()),
+        (13, "0".to_string()),
+        (20, "1".to_string()),
+        (21, "0".to_string()),
+        (22, (homing as u8).to_string()),
+    ];
+    let n = reported_axes(machine);
+    for i in 0..n {
+        let l = machine.axes[i];
+        out.push((110 + i as u32, per_minute(i, l.max_velocity.max(0))));
+        out.push((120 + i as u32, value(i, l.max_accel.max(0))));
+    }
+    for (j, joint) in machine.joints.iter().enumerate() {
+        let axis = if joint.rotary { 3 } else { 0 };
+        let base = 200 + 10 * j as u32;
+        out.push((base, value(axis, joint.min)));
+        out.push((base + 1, value(axis, joint.max)));
+        out.push((base + 2, per_minute(axis, joint.limits.max_velocity)));
+        out.push((base + 3, value(axis, joint.limits.max_accel)));
+    }
+    out
+}
+
+fn per_minute(axis: usize, v: i64) -> String {
+    value(axis, v.saturating_mul(60))
+}
+
+/// `$#`: work systems, stored positions, G92, tool length offset, probe.
+pub fn offsets(o: &Offsets, n: usize) -> Vec<String> {
+    let mut out = Vec::new();
+    for (k, s) in o.systems.iter().enumerate().take(6) {
+        out.push(format!("[G{}:{}]", 54 + k, list(s, n)));
+    }
+    out.push(format!("[G28:{}]", list(&o.g28, n)));
+    out.push(format!("[G30:{}]", list(&o.g30, n)));
+    out.push(format!("[G92:{}]", list(&o.g92, n)));
+    out.push(format!("[TLO:{}]", value(2, o.tool[2])));
+    out.push(format!("[PRB:{}:0]", list(&[0; AXES], n)));
+    out
+}
+
+/// `$I`: version and the buffer sizes.
+pub fn build_info(machine: &MachineConfig) -> Vec<String> {
+    vec![
+        format!("[VER:{VERSION}.pkmc:{}]", machine.name),
+        format!("[OPT:V,{BLOCK_BUFFER},{RX_BUFFER}]"),
+        format!(
+            "[MSG:pkmc bridge; axes {}]",
+            AXIS_NAMES[..reported_axes(machine)]
+                .iter()
+                .collect::<String>()
+        ),
+    ]
+}
+
+/// `$`: the commands understood.
+pub fn help() -> &'static str {
+    "[HLP:$$ $# $G $I $N $x=val $Nx=line $J=line $C $X $H ~ ! ? ctrl-x]"
+}
