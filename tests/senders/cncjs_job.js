@@ -264,15 +264,20 @@ class Job {
         '--config', configFile, '--controller', 'Grbl',
       ];
       if (this.opts.verbose) args.push('-vvv');
-      const logFd = fs.openSync(this.serverLog, 'a');
       this.childExited = false;
       const child = childProcess.spawn(process.execPath, args, {
         cwd: this.tmp,
         env: { ...process.env, HOME: this.tmp, NODE_ENV: 'production', FORCE_COLOR: '0' },
-        stdio: ['pipe', logFd, logFd],
+        stdio: ['pipe', 'pipe', 'pipe'],
       });
-      fs.closeSync(logFd);
       this.child = child;
+      // the server's output goes to its log file (and, with --verbose, to our stderr)
+      for (const stream of [child.stdout, child.stderr]) {
+        stream.on('data', (chunk) => {
+          try { fs.appendFileSync(this.serverLog, chunk); } catch (e) { /* ignore */ }
+          if (this.opts.verbose) process.stderr.write(String(chunk).replace(/^(?=.)/gm, '[cncjs-server] '));
+        });
+      }
       child.on('exit', (code, sig) => {
         this.childExited = true;
         this.log(`CNCjs server exited code=${code} signal=${sig}`);
@@ -637,7 +642,7 @@ class Job {
       serial_read_tail: this.toRel(this.reads.slice(-60)),
       elapsed_s: this.tStart === null ? null : Math.round(Date.now() - this.tStart) / 1000,
     };
-    if (code !== EXIT_OK) {
+    if (code !== EXIT_OK || this.opts.verbose) {
       r.server_log_tail = this.serverLogTail();
     }
     return r;
@@ -673,7 +678,6 @@ class Job {
     const out = this.result(code, message);
     if (code !== EXIT_OK) {
       process.stderr.write(`cncjs_job: ${message}\n`);
-      if (this.serverLog) process.stderr.write(`cncjs_job: CNCjs server log: ${this.serverLog}\n`);
     }
     if (this.socket) {
       try {
@@ -683,10 +687,10 @@ class Job {
       } catch (e) { /* ignore */ }
     }
     await this.killServer();
-    if (code === EXIT_OK && !this.opts.keepTmp) {
+    if (this.opts.keepTmp) {
+      process.stderr.write(`cncjs_job: temp dir kept (config, CNCjs server log): ${this.tmp}\n`);
+    } else {
       fs.rmSync(this.tmp, { recursive: true, force: true });
-    } else if (code !== EXIT_OK) {
-      process.stderr.write(`cncjs_job: temp dir kept: ${this.tmp}\n`);
     }
     process.stdout.write(`${JSON.stringify(out)}\n`, () => process.exit(code));
   }

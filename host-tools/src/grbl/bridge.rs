@@ -54,6 +54,21 @@ pub(super) struct Bridge<'o> {
     last_busy: Instant,
     pub(super) startup: [String; 2],
     busy_told: Option<Instant>,
+    /// Counters for the summary at exit.
+    pub(super) counts: Counts,
+}
+
+/// What the bridge did, printed when it stops.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub(super) struct Counts {
+    /// Lines answered `ok`.
+    pub(super) ok: u64,
+    /// Lines answered `error:N`.
+    pub(super) errors: u64,
+    /// Blocks fed to the controller.
+    pub(super) blocks: u64,
+    /// Blocks the controller reported executed.
+    pub(super) executed: u64,
 }
 
 impl<'o> Bridge<'o> {
@@ -77,6 +92,7 @@ impl<'o> Bridge<'o> {
             last_busy: Instant::now(),
             startup: [String::new(), String::new()],
             busy_told: None,
+            counts: Counts::default(),
         }
     }
 
@@ -240,9 +256,13 @@ impl<'o> Bridge<'o> {
         let ahead = self
             .job
             .map_or(0, |(total, done)| total.saturating_sub(done));
+        let mode = Mode {
+            pending: ahead > 0,
+            ..self.mode
+        };
         let report = words::Report {
             machine: self.machine,
-            mode: self.mode,
+            mode,
             free: (
                 BLOCK_BUFFER.saturating_sub(ahead),
                 RX_BUFFER.saturating_sub(queued_bytes),
@@ -255,6 +275,7 @@ impl<'o> Bridge<'o> {
 
     /// A refused line: `[MSG:where: why]` then `error:N`.
     pub(super) fn refuse(&mut self, code: u8, why: &str) {
+        self.counts.errors += 1;
         self.say(&format!("[MSG:{why}]"));
         self.say(&format!("error:{code}"));
     }
@@ -303,6 +324,12 @@ impl<'o> Bridge<'o> {
         } else {
             program.blocks
         })
+    }
+
+    /// `ok`.
+    pub(super) fn ok(&mut self) {
+        self.counts.ok += 1;
+        self.say("ok");
     }
 
     /// Is the controller locked (alarm, e-stop)? Then G-code is refused (error:9).
@@ -362,7 +389,16 @@ impl<'o> Bridge<'o> {
         true
     }
 
+    /// The job ended with every block executed.
+    pub(super) fn job_done(&mut self) {
+        self.job = self.job.map(|(total, _)| (total, total));
+    }
+
+    /// A job starts (`Some`) or has ended (`None`: its executed blocks are counted).
     pub(super) fn set_job(&mut self, job: Option<(usize, usize)>) {
+        if job.is_none() {
+            self.counts.executed += self.job.map_or(0, |(_, done)| done as u64);
+        }
         self.job = job;
     }
 }

@@ -27,43 +27,43 @@ pub(super) fn answer_local(b: &mut Bridge<'_>, line: &str) {
     match upper.as_str() {
         "$" => {
             b.say(words::help());
-            b.say("ok");
+            b.ok();
         }
         "$$" => {
             for (n, v) in words::settings(b.machine) {
                 b.say(&format!("${n}={v}"));
             }
-            b.say("ok");
+            b.ok();
         }
         "$#" => {
             let n = words::reported_axes(b.machine);
             for l in words::offsets(&b.session.interp().offsets(), n) {
                 b.say(&l);
             }
-            b.say("ok");
+            b.ok();
         }
         "$G" => {
             let gc = b.session.interp().modal_words();
             b.say(&format!("[GC:{gc}]"));
-            b.say("ok");
+            b.ok();
         }
         "$I" => {
             for l in words::build_info(b.machine) {
                 b.say(&l);
             }
-            b.say("ok");
+            b.ok();
         }
         "$N" => {
             for i in 0..2 {
                 let l = b.startup[i].clone();
                 b.say(&format!("$N{i}={l}"));
             }
-            b.say("ok");
+            b.ok();
         }
         _ if upper.starts_with("$N0=") || upper.starts_with("$N1=") => {
             let i = (upper.as_bytes()[2] - b'0') as usize;
             b.startup[i] = t[4..].to_string();
-            b.say("ok");
+            b.ok();
         }
         _ if upper.starts_with('$') && upper[1..].split('=').next().is_some_and(is_number) => {
             let n = &upper[1..upper.find('=').unwrap_or(upper.len())];
@@ -81,7 +81,7 @@ pub(super) fn answer_local(b: &mut Bridge<'_>, line: &str) {
                 {
                     Some((k, v)) => {
                         b.say(&format!("${k}={v}"));
-                        b.say("ok");
+                        b.ok();
                     }
                     None => b.refuse(3, &format!("no setting ${n}")),
                 }
@@ -111,7 +111,7 @@ pub(super) fn run_link<T: Transport>(
             link.control(Control::AlarmReset)?;
             b.status = Some(link.request_status()?);
             b.say("[MSG:Caution: Unlocked]");
-            b.say("ok");
+            b.ok();
         }
         "$H" => {
             let cmd = home_command(link)?;
@@ -119,7 +119,7 @@ pub(super) fn run_link<T: Transport>(
             let end = link.wait_idle(b)?;
             after_move(b, link, end)?;
             if !b.locked() {
-                b.say("ok");
+                b.ok();
             }
         }
         "$C" => {
@@ -129,7 +129,7 @@ pub(super) fn run_link<T: Transport>(
             } else {
                 "[MSG:Disabled]"
             });
-            b.say("ok");
+            b.ok();
             if !b.mode.check {
                 let pose = link.request_status()?.pose;
                 b.session.restart(pose);
@@ -190,7 +190,7 @@ fn jog<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>, body: &str) -> Resu
         }
     };
     link.control(Control::Jog(planned))?;
-    b.say("ok");
+    b.ok();
     b.mode.jogging = true;
     let end = link.wait_idle(b);
     b.mode.jogging = false;

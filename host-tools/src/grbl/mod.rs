@@ -110,6 +110,17 @@ pub fn serve<T: Transport>(
         }
         next_line(&mut b, link)?;
     }
+    let s = link.request_status()?;
+    let summary = serde_json::json!({
+        "lines": b.line_no,
+        "ok": b.counts.ok,
+        "errors": b.counts.errors,
+        "blocks_fed": b.counts.blocks,
+        "blocks_executed": b.counts.executed,
+        "link": link.stats,
+        "status": crate::job::status_json(&s, machine, "served"),
+    });
+    println!("summary {summary}");
     Ok(())
 }
 
@@ -154,6 +165,9 @@ fn next_line<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(),
     }
     b.set_job(Some((blocks.len(), 0)));
     let end = link.run_job(&blocks, b);
+    if matches!(end, Ok(JobEnd::Done)) {
+        b.job_done();
+    }
     b.set_job(None);
     let end = end?;
     let s = link.request_status()?;

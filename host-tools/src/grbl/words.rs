@@ -54,6 +54,9 @@ pub struct Mode {
     pub jogging: bool,
     /// Check mode (`$C`): lines are compiled and checked, nothing moves.
     pub check: bool,
+    /// Blocks accepted (`ok`) are not all executed yet: `Run` even while the
+    /// controller has not started them.
+    pub pending: bool,
 }
 
 /// The state word: `Idle`, `Run`, `Hold:0` (stopped) or `Hold:1` (stopping), `Jog`,
@@ -61,6 +64,7 @@ pub struct Mode {
 pub fn state_word(s: &Status, mode: Mode) -> &'static str {
     match s.state {
         _ if mode.check && matches!(s.state, State::Idle) => "Check",
+        State::Idle if mode.pending => "Run",
         State::Idle => "Idle",
         State::Running if mode.jogging => "Jog",
         State::Running => "Run",

@@ -1,0 +1,190 @@
+//! A running `nc-send --sim grbl` and a plain TCP client of it, for the bridge's tests.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A bridge on the simulator; killed (Ctrl-C first, for its summary) when dropped.
+pub struct Bridge {
+    child: Option<Child>,
+    pub pty: String,
+    pub tcp: String,
+}
+
+impl Bridge {
+    /// `nc-send --sim ARGS… grbl --tcp 127.0.0.1:0`.
+    pub fn start(sim_args: &[&str]) -> Self {
+        let mut args: Vec<&str> = vec!["--sim"];
+        args.extend_from_slice(sim_args);
+        args.extend_from_slice(&["grbl", "--tcp", "127.0.0.1:0"]);
+        let mut child = Command::new(env!("CARGO_BIN_EXE_nc-send"))
+            .args(&args)
+            .current_dir(super::common::repo())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("nc-send starts");
+        let mut out = BufReader::new(child.stdout.take().unwrap());
+        let (mut pty, mut tcp) = (String::new(), String::new());
+        for _ in 0..2 {
+            let mut l = String::new();
+            out.read_line(&mut l)
+                .expect("nc-send grbl announces its ports");
+            if let Some(p) = l.strip_prefix("pty ") {
+                pty = p.trim().into();
+            }
+            if let Some(t) = l.strip_prefix("tcp ") {
+                tcp = t.trim().into();
+            }
+        }
+        assert!(
+            !pty.is_empty() && !tcp.is_empty(),
+            "ports announced: {pty:?} {tcp:?}"
+        );
+        child.stdout = Some(out.into_inner());
+        Self {
+            child: Some(child),
+            pty,
+            tcp,
+        }
+    }
+
+    /// Stops the bridge with Ctrl-C and returns its summary (JSON).
+    pub fn stop(mut self) -> serde_json::Value {
+        let mut child = self.child.take().unwrap();
+        unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+        let mut text = String::new();
+        child
+            .stdout
+            .take()
+            .unwrap()
+            .read_to_string(&mut text)
+            .unwrap();
+        let status = child.wait().unwrap();
+        assert!(
+            status.success(),
+            "nc-send grbl exits cleanly: {status}\n{text}"
+        );
+        let line = text
+            .lines()
+            .find_map(|l| l.strip_prefix("summary "))
+            .unwrap_or_else(|| panic!("a summary line in {text:?}"));
+        serde_json::from_str(line).unwrap()
+    }
+}
+
+impl Drop for Bridge {
+    fn drop(&mut self) {
+        if let Some(mut c) = self.child.take() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// A sender written for the tests: sends bytes, reads lines.
+pub struct Client {
+    s: TcpStream,
+    buf: Vec<u8>,
+}
+
+impl Client {
+    pub fn connect(addr: &str) -> Self {
+        let s = TcpStream::connect(addr).expect("connects");
+        s.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
+        let mut c = Self { s, buf: Vec::new() };
+        let banner = c.line_until(|l| l.starts_with("Grbl "), Duration::from_secs(5));
+        assert!(banner.contains("1.1"), "{banner}");
+        c
+    }
+
+    pub fn send(&mut self, bytes: &[u8]) {
+        self.s.write_all(bytes).unwrap();
+    }
+
+    /// The next line, waiting up to `limit`.
+    pub fn line(&mut self, limit: Duration) -> Option<String> {
+        let end = Instant::now() + limit;
+        loop {
+            if let Some(i) = self.buf.iter().position(|&b| b == b'\n') {
+                let l: Vec<u8> = self.buf.drain(..=i).collect();
+                return Some(String::from_utf8_lossy(&l).trim().to_string());
+            }
+            if Instant::now() > end {
+                return None;
+            }
+            let mut chunk = [0u8; 4096];
+            match self.s.read(&mut chunk) {
+                Ok(0) => return None,
+                Ok(n) => self.buf.extend_from_slice(&chunk[..n]),
+                Err(_) => {}
+            }
+        }
+    }
+
+    /// Lines until one satisfies `done` (returned); panics after `limit`.
+    pub fn line_until(&mut self, done: impl Fn(&str) -> bool, limit: Duration) -> String {
+        let end = Instant::now() + limit;
+        let mut seen = Vec::new();
+        while Instant::now() < end {
+            if let Some(l) = self.line(end - Instant::now()) {
+                if done(&l) {
+                    return l;
+                }
+                seen.push(l);
+            }
+        }
+        panic!("no such line within {limit:?}; saw {seen:?}");
+    }
+
+    /// Sends `line` and returns every line up to its answer (`ok` or `error:N`),
+    /// answer last; status reports in between are left out.
+    pub fn command(&mut self, line: &str) -> Vec<String> {
+        self.send(format!("{line}\n").as_bytes());
+        let mut got = Vec::new();
+        loop {
+            let l = self
+                .line(Duration::from_secs(20))
+                .unwrap_or_else(|| panic!("an answer to {line:?}; got {got:?}"));
+            if l.starts_with('<') {
+                continue;
+            }
+            let end = l == "ok" || l.starts_with("error:");
+            got.push(l);
+            if end {
+                return got;
+            }
+        }
+    }
+
+    /// A status report.
+    pub fn status(&mut self) -> String {
+        self.send(b"?");
+        self.line_until(|l| l.starts_with('<'), Duration::from_secs(5))
+    }
+
+    /// Waits until a status report shows `state` (polling as senders do).
+    pub fn wait_state(&mut self, state: &str, limit: Duration) -> String {
+        let end = Instant::now() + limit;
+        loop {
+            let s = self.status();
+            if s.starts_with(&format!("<{state}")) {
+                return s;
+            }
+            assert!(Instant::now() < end, "state {state} not reached: {s}");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+/// The value list of a report field: `MPos:1.000,2.000` → [1.0, 2.0].
+pub fn field(report: &str, name: &str) -> Vec<f64> {
+    let body = report.trim_matches(['<', '>']);
+    body.split('|')
+        .find_map(|f| f.strip_prefix(&format!("{name}:")))
+        .unwrap_or_else(|| panic!("{name} in {report}"))
+        .split(',')
+        .map(|v| v.parse().unwrap())
+        .collect()
+}

@@ -1,0 +1,157 @@
+//! `nc-send grbl` spoken to directly: Grbl 1.1's answers, jogging, holds and
+//! overrides, alarms, and hostile bytes (the real senders' tests are in
+//! `grbl_senders.rs`).
+
+mod common;
+mod grbl;
+
+use grbl::{field, Bridge, Client};
+use std::time::Duration;
+
+#[test]
+fn answers_as_grbl_one_one_does() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::connect(&bridge.tcp);
+    let s = c.status();
+    assert!(
+        s.starts_with("<Idle|MPos:0.000,0.000,0.000|FS:0,0|Bf:128,1024|"),
+        "{s}"
+    );
+    assert_eq!(field(&s, "Ov"), vec![100.0, 100.0, 100.0]);
+    let info = c.command("$I");
+    assert!(info[0].starts_with("[VER:1.1h"), "{info:?}");
+    assert_eq!(info[1], "[OPT:V,128,1024]");
+    assert_eq!(
+        c.command("$G"),
+        vec!["[GC:G80 G54 G17 G21 G90 G94 M5 M9 T0 F0 S0]", "ok"]
+    );
+    let settings = c.command("$$");
+    assert!(
+        settings.contains(&"$110=6000.000".to_string()),
+        "{settings:?}"
+    );
+    assert_eq!(c.command("$110=100").last().unwrap(), "error:3");
+    assert_eq!(c.command("G10 L2 P1 X5 Y-2"), vec!["ok"]);
+    let offsets = c.command("$#");
+    assert_eq!(offsets[0], "[G54:5.000,-2.000,0.000]");
+    assert_eq!(c.command("G20 G91 G1 F60 M8"), vec!["ok"]);
+    let gc = c.command("$G");
+    assert!(
+        gc[0].contains("G1 G54 G17 G20 G91 G94 M5 M8") && gc[0].contains("F60"),
+        "{gc:?}"
+    );
+    assert_eq!(c.command("$N0=G21 G90"), vec!["ok"]);
+    assert_eq!(c.command("$N"), vec!["$N0=G21 G90", "$N1=", "ok"]);
+    // A soft reset: banner, then the start-up line, run and answered.
+    c.send(&[0x18]);
+    c.line_until(|l| l.starts_with("Grbl 1.1h"), Duration::from_secs(5));
+    assert_eq!(c.line(Duration::from_secs(5)).unwrap(), ">G21 G90:");
+    assert_eq!(c.line(Duration::from_secs(5)).unwrap(), "ok");
+    let gc = c.command("$G");
+    assert!(
+        gc[0].contains("G0 G54 G17 G21 G90") || gc[0].contains("G80 G54 G17 G21 G90"),
+        "{gc:?}"
+    );
+    let s = c.status();
+    assert_eq!(
+        field(&s, "WCO"),
+        vec![5.0, -2.0, 0.0],
+        "work offsets outlive a reset: {s}"
+    );
+    let summary = bridge.stop();
+    assert_eq!(summary["errors"], 1, "{summary}");
+}
+
+#[test]
+fn moves_jogs_holds_resumes_and_overrides_the_feed() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::connect(&bridge.tcp);
+    assert_eq!(c.command("$J=G91 X2 Y-1 F600"), vec!["ok"]);
+    let s = c.wait_state("Idle", Duration::from_secs(10));
+    assert_eq!(field(&s, "MPos"), vec![2.0, -1.0, 0.0], "{s}");
+    // A jog beyond the travel is refused before anything moves.
+    assert_eq!(c.command("$J=G90 X1000 F600").last().unwrap(), "error:15");
+    // A long feed move: hold stops it on the path, resume finishes it.
+    assert_eq!(c.command("G1 X60 F1200"), vec!["ok"]);
+    c.wait_state("Run", Duration::from_secs(5));
+    c.send(b"!");
+    let held = c.wait_state("Hold:0", Duration::from_secs(5));
+    let x_held = field(&held, "MPos")[0];
+    assert!(x_held > 2.0 && x_held < 60.0, "{held}");
+    std::thread::sleep(Duration::from_millis(300));
+    let still = c.status();
+    assert_eq!(
+        field(&still, "MPos")[0],
+        x_held,
+        "a hold keeps the machine still"
+    );
+    c.send(b"~");
+    c.wait_state("Run", Duration::from_secs(5));
+    // Feed override +10 % twice: the controller's override and the path speed follow.
+    c.send(&[0x91, 0x91]);
+    std::thread::sleep(Duration::from_millis(400));
+    let s = c.status();
+    assert_eq!(field(&s, "Ov")[0], 120.0, "{s}");
+    let fs = field(&s, "FS")[0];
+    assert!((fs - 1440.0).abs() < 15.0, "1200 mm/min at 120 %: {s}");
+    let s = c.wait_state("Idle", Duration::from_secs(10));
+    assert_eq!(field(&s, "MPos")[0], 60.0);
+    bridge.stop();
+}
+
+#[test]
+fn hostile_bytes_get_errors_or_are_filtered_and_the_bridge_goes_on() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::connect(&bridge.tcp);
+    // Binary (without the bytes that are real-time commands: those act, as on Grbl).
+    let bin: Vec<u8> = (0u8..=255)
+        .filter(|b| !b"\r\n?!~\x18".contains(b) && !(0x84..=0xa1).contains(b))
+        .collect();
+    c.send(&bin);
+    c.send(b"\n");
+    let got = c.line_until(|l| l.starts_with("error:"), Duration::from_secs(5));
+    assert_eq!(got, "error:1");
+    // A 10 KB line.
+    let mut long = vec![b'G'; 10_240];
+    long.push(b'\n');
+    c.send(&long);
+    let got = c.line_until(|l| l.starts_with("error:"), Duration::from_secs(5));
+    assert_eq!(got, "error:11");
+    // Real-time bytes inside a number: taken out; the line reads as written without.
+    c.send(b"G0 X1?2.5\n");
+    c.line_until(|l| l.starts_with('<'), Duration::from_secs(5));
+    c.line_until(|l| l == "ok", Duration::from_secs(5));
+    let s = c.wait_state("Idle", Duration::from_secs(10));
+    assert_eq!(field(&s, "MPos")[0], 12.5, "{s}");
+    // Bad G-code: an error naming the line and column; the stream goes on.
+    let bad = c.command("G1 X1 Q");
+    assert!(
+        bad[0].starts_with("[MSG:sender:") && bad.last().unwrap().starts_with("error:"),
+        "{bad:?}"
+    );
+    let axis = c.command("G0 A10");
+    assert!(
+        axis.last().unwrap().starts_with("error:"),
+        "no A axis: {axis:?}"
+    );
+    assert_eq!(c.command("G0 X0"), vec!["ok"]);
+    let summary = bridge.stop();
+    assert_eq!(summary["status"]["pose"]["x"], 0.0, "{summary}");
+}
+
+#[test]
+fn an_alarm_is_reported_with_its_cause_and_locks_g_code_until_unlocked() {
+    let bridge = Bridge::start(&["--inject", "limit:0@1.0"]);
+    let mut c = Client::connect(&bridge.tcp);
+    assert_eq!(c.command("G1 X80 F600"), vec!["ok"]);
+    let alarm = c.line_until(|l| l.starts_with("ALARM:"), Duration::from_secs(10));
+    assert_eq!(alarm, "ALARM:1", "a limit switch");
+    let msg = c.line(Duration::from_secs(2)).unwrap();
+    assert!(
+        msg.starts_with("[MSG:") && msg.to_lowercase().contains("limit"),
+        "{msg}"
+    );
+    c.wait_state("Alarm", Duration::from_secs(5));
+    assert_eq!(c.command("G0 X0").last().unwrap(), "error:9");
+    bridge.stop();
+}
