@@ -406,7 +406,10 @@ class Job {
       this.workflow = ws;
       this.workflowTimeline.push({ t: this.t(), state: ws });
       this.log(`workflow ${ws}`);
-      if (ws === 'running') this.sawRunning = true;
+      if (ws === 'running') {
+        this.sawRunning = true;
+        this.requestedPause = false;
+      }
       this.wake();
     });
   }
@@ -566,10 +569,8 @@ class Job {
         if (pause) this.requestedPause = true;
         this.emitCommand(pause ? 'gcode:pause' : 'feedhold');
       });
-      this.schedule(o.resumeAt, () => {
-        this.emitCommand(pause ? 'gcode:resume' : 'cyclestart');
-        this.requestedPause = false;
-      });
+      // requestedPause is cleared when CNCjs reports the workflow running again
+      this.schedule(o.resumeAt, () => this.emitCommand(pause ? 'gcode:resume' : 'cyclestart'));
     }
     for (const f of o.feedOverrides) this.schedule(f.at, () => this.feedOverrideTo(f.percent));
 
@@ -594,7 +595,7 @@ class Job {
       let why = reason ? (reason.msg || reason.data || JSON.stringify(reason)) : null;
       if (!why && this.errors.length > 0) why = this.errors[0].line;
       throw Object.assign(new Error(`CNCjs paused the program: ${why || 'unknown reason'}` +
-        (reason && !reason.err ? ' (M0/M1/M6 or %wait in the program need a user to resume)' : '')),
+        (reason && !reason.err ? ' (M0/M1/M6 in the program wait for a user to resume)' : '')),
       { exitCode: EXIT_JOB_ERROR });
     }
     if (this.errors.length > 0) {

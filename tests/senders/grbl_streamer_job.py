@@ -114,6 +114,7 @@ class Job:
         self.job_completed_t = None
         self.status_reports = []  # (mono t, raw, cmode)
         self.last_cmode = None
+        self.last_ov = None
         self.streamer = None
         self.version = None
         self.thread_crash = None
@@ -196,6 +197,9 @@ class Job:
     def on_status(self, raw, cmode):
         with self.lock:
             self.status_reports.append((self.now(), raw, cmode))
+            ov = parse_status_fields(raw)["ov"]
+            if ov is not None:
+                self.last_ov = ov
             del self.status_reports[:-50]
             self.lock.notify_all()
 
@@ -322,6 +326,8 @@ class Job:
         gs = self.streamer
         last = self.status_reports[-1] if self.status_reports else None
         extra = parse_status_fields(last[1] if last else None)
+        if extra["ov"] is None:
+            extra["ov"] = self.last_ov   # Grbl sends Ov: only every 10-20 reports
 
         def rel_list(lst):
             return [dict(e, t=self.rel(e["t"])) for e in lst]

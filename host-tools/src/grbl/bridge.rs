@@ -318,12 +318,12 @@ impl<'o> Bridge<'o> {
         for text in program.messages.values() {
             self.say(&format!("[MSG:{text}]"));
         }
-        self.say("ok");
-        Some(if self.mode.check {
-            Vec::new()
-        } else {
-            program.blocks
-        })
+        self.ok();
+        if self.mode.check {
+            return Some(Vec::new());
+        }
+        self.counts.blocks += program.blocks.len() as u64;
+        Some(program.blocks)
     }
 
     /// `ok`.

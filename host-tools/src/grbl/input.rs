@@ -57,31 +57,50 @@ pub struct Input {
     bad: Option<(u8, usize)>,
     /// The last byte ended a line with `\r` (a `\n` after it ends nothing more).
     after_cr: bool,
+    /// The last byte was 0xC2, which with a real-time byte ≥ 0x80 after it is that
+    /// command written as UTF-8 (CNCjs sends its override bytes so).
+    after_c2: bool,
 }
 
 impl Input {
     /// Reads `bytes`, appending what they complete to `out`.
     pub fn push(&mut self, bytes: &[u8], out: &mut Vec<Item>) {
         for &b in bytes {
+            if std::mem::take(&mut self.after_c2) {
+                if let Some(rt) = real_time(b).filter(|_| b >= 0x80) {
+                    out.push(Item::RealTime(rt));
+                    continue;
+                }
+                // A lone 0xC2 is a byte of the line like any other.
+                self.byte(0xc2, out);
+            }
+            if b == 0xc2 {
+                self.after_c2 = true;
+                continue;
+            }
             if let Some(rt) = real_time(b) {
                 out.push(Item::RealTime(rt));
                 continue;
             }
-            let after_cr = std::mem::replace(&mut self.after_cr, b == b'\r');
-            match b {
-                b'\n' if after_cr => {}
-                b'\n' | b'\r' => {
-                    if let Some(item) = self.take() {
-                        out.push(item);
-                    }
+            self.byte(b, out);
+        }
+    }
+
+    fn byte(&mut self, b: u8, out: &mut Vec<Item>) {
+        let after_cr = std::mem::replace(&mut self.after_cr, b == b'\r');
+        match b {
+            b'\n' if after_cr => {}
+            b'\n' | b'\r' => {
+                if let Some(item) = self.take() {
+                    out.push(item);
                 }
-                _ if self.line.len() >= MAX_LINE => self.overflow += 1,
-                b'\t' | 0x20..=0x7e => self.line.push(b),
-                _ => {
-                    let col = self.line.len() + self.overflow + 1;
-                    self.bad.get_or_insert((b, col));
-                    self.line.push(b'?');
-                }
+            }
+            _ if self.line.len() >= MAX_LINE => self.overflow += 1,
+            b'\t' | 0x20..=0x7e => self.line.push(b),
+            _ => {
+                let col = self.line.len() + self.overflow + 1;
+                self.bad.get_or_insert((b, col));
+                self.line.push(b'?');
             }
         }
     }
@@ -197,6 +216,14 @@ mod tests {
         assert!(matches!(&items[0], Item::Refused { code: 11, why } if why.contains("10000")));
         assert_eq!(items[1], Item::Line("G0 X1".into()));
         assert_eq!(items.len(), 2);
+    }
+
+    #[test]
+    fn real_time_bytes_written_as_utf8_act_and_a_lone_c2_refuses_its_line() {
+        let items = read(b"G1 X1\xc2\x91 F10\n\xc2G0\n");
+        assert_eq!(items[0], Item::RealTime(RealTime::Feed(10)));
+        assert_eq!(items[1], Item::Line("G1 X1 F10".into()));
+        assert!(matches!(&items[2], Item::Refused { code: 1, why } if why.contains("0xC2")));
     }
 
     #[test]

@@ -1,3 +1,4 @@
+#![allow(dead_code)] // shared by several test binaries, each using a part
 //! A running `nc-send --sim grbl` and a plain TCP client of it, for the bridge's tests.
 
 use std::io::{BufRead, BufReader, Read, Write};

@@ -1,0 +1,275 @@
+//! Real senders that nobody on this project wrote, against `nc-send --sim grbl`:
+//! CNCjs (npm) on the pseudo-terminal through its own server API, and grbl-streamer
+//! (PyPI) over TCP. The drivers are `tests/senders/` (see its README); `.ci/run`
+//! installs both senders. Without them these tests say so and pass only outside CI.
+
+mod common;
+mod grbl;
+
+use grbl::Bridge;
+use std::path::PathBuf;
+use std::process::Command;
+
+fn senders() -> PathBuf {
+    common::repo().join("tests/senders")
+}
+
+/// Is the sender there? Outside CI a missing sender skips the test with a message;
+/// in CI (`CI` set) it fails it, since `.ci/run` installs them.
+fn have(what: &str, ok: bool) -> bool {
+    if !ok {
+        let msg = format!(
+            "{what} is not installed: run `npm ci` in tests/senders and \
+             `pip install -r tests/senders/requirements.txt` (as .ci/run does)"
+        );
+        assert!(std::env::var_os("CI").is_none(), "{msg}");
+        eprintln!("skipped: {msg}");
+    }
+    ok
+}
+
+fn have_cncjs() -> bool {
+    have(
+        "CNCjs",
+        senders().join("node_modules/cncjs/package.json").exists(),
+    )
+}
+
+fn have_grbl_streamer() -> bool {
+    let ok = Command::new("python3")
+        .args(["-c", "import grbl_streamer"])
+        .status()
+        .is_ok_and(|s| s.success());
+    have("grbl-streamer", ok)
+}
+
+/// Runs a driver; returns its JSON.
+fn driver(program: &str, args: &[&str]) -> serde_json::Value {
+    let out = Command::new(program)
+        .args(args)
+        .current_dir(senders())
+        .output()
+        .expect("the driver runs");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{program} {args:?} failed: {}\n{text}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(text.trim()).unwrap_or_else(|e| panic!("{e}: {text}"))
+}
+
+/// `nc-send --sim` of the same program: the reference.
+fn reference(machine: &[&str], program: &str) -> serde_json::Value {
+    let mut args = vec!["--sim", "--report", "json"];
+    args.extend_from_slice(machine);
+    args.push(program);
+    common::ok(&common::nc_send(&args))
+}
+
+fn assert_same_end(summary: &serde_json::Value, reference: &serde_json::Value) {
+    let status = &summary["status"];
+    for axis in ["x", "y", "z", "a", "b", "c"] {
+        let (got, want) = (
+            status["pose"][axis].as_f64().unwrap(),
+            reference["final_pose"][axis].as_f64().unwrap(),
+        );
+        assert!(
+            (got - want).abs() < 1e-6,
+            "{axis}: {got} vs nc-send --sim {want}"
+        );
+    }
+    let got: Vec<f64> = serde_json::from_value(status["joints"].clone()).unwrap();
+    let want: Vec<f64> = serde_json::from_value(reference["final_joints"].clone()).unwrap();
+    assert_eq!(got.len(), want.len());
+    for (j, (g, w)) in got.iter().zip(&want).enumerate() {
+        assert!(
+            (g - w).abs() < 1e-6,
+            "joint {}: {g} vs nc-send --sim {w}",
+            j + 1
+        );
+    }
+}
+
+fn states(job: &serde_json::Value) -> Vec<String> {
+    job["state_timeline"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["state"].as_str().unwrap().to_string())
+        .collect()
+}
+
+#[test]
+fn cncjs_runs_the_h4_program_on_the_pseudo_terminal_and_ends_where_nc_send_does() {
+    if !have_cncjs() {
+        return;
+    }
+    let machine = ["--machine", "examples/machines/h4-table.toml"];
+    let program = common::repo().join("examples/h4-table-tilt.ngc");
+    let program = program.to_str().unwrap();
+    let bridge = Bridge::start(&machine);
+    let job = driver(
+        "node",
+        &[
+            "cncjs_job.js",
+            "--port",
+            &bridge.pty,
+            "--program",
+            program,
+            "--timeout",
+            "120",
+        ],
+    );
+    let summary = bridge.stop();
+    assert_eq!(job["result"], "completed", "{job}");
+    assert_eq!(job["errors"].as_array().unwrap().len(), 0, "{job}");
+    assert_eq!(job["lines_sent"], job["lines_received"], "{job}");
+    assert_eq!(summary["errors"], 0, "{summary}");
+    assert_eq!(
+        summary["blocks_executed"], summary["blocks_fed"],
+        "{summary}"
+    );
+    assert_same_end(&summary, &reference(&machine, program));
+}
+
+#[test]
+fn cncjs_hold_resume_and_feed_override_act_on_the_path() {
+    if !have_cncjs() {
+        return;
+    }
+    // 80 mm at 600 mm/min: 8 s at 100 %.
+    let program = common::tmp("cncjs_long_move.ngc");
+    std::fs::write(&program, "G21 G90\nG1 X80 F600\nG1 X0\n").unwrap();
+    let program = program.to_str().unwrap();
+    let bridge = Bridge::start(&[]);
+    let held = driver(
+        "node",
+        &[
+            "cncjs_job.js",
+            "--port",
+            &bridge.pty,
+            "--program",
+            program,
+            "--hold-at",
+            "2",
+            "--resume-at",
+            "5",
+            "--timeout",
+            "60",
+        ],
+    );
+    assert_eq!(held["result"], "completed", "{held}");
+    assert!(
+        states(&held).iter().any(|s| s.starts_with("Hold")),
+        "{held}"
+    );
+    let t_held = held["elapsed_s"].as_f64().unwrap();
+    // Feed override 200 % from the second second: 2 s + 14 s / 2 ≈ 9 s instead of 16 s.
+    let fast = driver(
+        "node",
+        &[
+            "cncjs_job.js",
+            "--port",
+            &bridge.pty,
+            "--program",
+            program,
+            "--feed-override-at",
+            "2:200",
+            "--timeout",
+            "60",
+        ],
+    );
+    let summary = bridge.stop();
+    assert_eq!(fast["result"], "completed", "{fast}");
+    let t_fast = fast["elapsed_s"].as_f64().unwrap();
+    assert_eq!(fast["last_status"]["ov"][0], 200, "{fast}");
+    assert!(
+        t_held > 16.0 + 2.5,
+        "a 3 s hold makes the 16 s job longer: {t_held} s"
+    );
+    assert!(
+        t_fast < 12.0,
+        "200 % from t = 2 s: {t_fast} s, 16 s without"
+    );
+    assert_eq!(summary["status"]["pose"]["x"], 0.0, "{summary}");
+}
+
+#[test]
+fn grbl_streamer_streams_a_thousand_lines_over_tcp_through_a_faulty_line_losing_nothing() {
+    if !have_grbl_streamer() {
+        return;
+    }
+    let program = common::tmp("spiral_1000.ngc");
+    let mut text = String::from("G21 G90 G64 P0.01\nG0 X0 Y0 Z0\nF1500\n");
+    for i in 1..998 {
+        let (a, r) = (i as f64 * 0.05, 5.0 + 0.02 * i as f64);
+        text += &format!("G1 X{:.3} Y{:.3}\n", r * a.cos(), r * a.sin());
+    }
+    std::fs::write(&program, text).unwrap();
+    let program = program.to_str().unwrap();
+    let bridge = Bridge::start(&["--link-faults", "0.001", "--seed", "5"]);
+    let url = format!("socket://{}", bridge.tcp);
+    let job = driver(
+        "python3",
+        &[
+            "grbl_streamer_job.py",
+            "--port",
+            &url,
+            "--program",
+            program,
+            "--timeout",
+            "150",
+        ],
+    );
+    let summary = bridge.stop();
+    assert_eq!(job["result"], "completed", "{job}");
+    assert_eq!(job["errors"].as_array().unwrap().len(), 0, "{job}");
+    assert_eq!(summary["errors"], 0, "{summary}");
+    // 1 000 lines: 997 moves and a rapid are blocks; every block executed once.
+    assert_eq!(summary["blocks_fed"], 998, "{summary}");
+    assert_eq!(summary["blocks_executed"], 998, "{summary}");
+    assert_eq!(summary["link"]["blocks_sent"], 998, "{summary}");
+    assert!(
+        summary["link"]["resent"].as_u64().unwrap() > 0,
+        "the faults bit: {summary}"
+    );
+    assert_same_end(&summary, &reference(&[], program));
+}
+
+#[test]
+fn grbl_streamer_hold_and_resume_over_tcp_stop_and_restart_the_machine() {
+    if !have_grbl_streamer() {
+        return;
+    }
+    let program = common::tmp("streamer_long_move.ngc");
+    std::fs::write(&program, "G21 G90\nG1 X40 F600\nG1 X0\n").unwrap();
+    let program = program.to_str().unwrap();
+    let bridge = Bridge::start(&[]);
+    let url = format!("socket://{}", bridge.tcp);
+    let job = driver(
+        "python3",
+        &[
+            "grbl_streamer_job.py",
+            "--port",
+            &url,
+            "--program",
+            program,
+            "--hold-at",
+            "1.5",
+            "--resume-at",
+            "4",
+            "--timeout",
+            "60",
+        ],
+    );
+    let summary = bridge.stop();
+    assert_eq!(job["result"], "completed", "{job}");
+    assert!(states(&job).iter().any(|s| s.starts_with("Hold")), "{job}");
+    assert!(
+        job["elapsed_s"].as_f64().unwrap_or(0.0) > 8.0 + 2.0,
+        "{job}"
+    );
+    assert_eq!(summary["status"]["pose"]["x"], 0.0, "{summary}");
+}
