@@ -118,7 +118,11 @@ pub(super) fn run_link<T: Transport>(
             link.control(cmd)?;
             let end = link.wait_idle(b)?;
             after_move(b, link, end)?;
-            if !b.locked() {
+            // One answer for the line, as for every line: homing ended in an alarm
+            // (reported above) is a refusal.
+            if b.locked() {
+                b.refuse(9, "$H: homing did not complete");
+            } else {
                 b.ok();
             }
         }
