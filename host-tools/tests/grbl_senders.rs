@@ -60,6 +60,21 @@ fn driver(program: &str, args: &[&str]) -> serde_json::Value {
     serde_json::from_str(text.trim()).unwrap_or_else(|e| panic!("{e}: {text}"))
 }
 
+/// CNCjs runs `program` on the bridge's pseudo-terminal; `more`: the driver's options.
+fn cncjs(bridge: &Bridge, program: &str, more: &[&str]) -> serde_json::Value {
+    let mut args = vec!["cncjs_job.js", "--port", &bridge.pty, "--program", program];
+    args.extend_from_slice(more);
+    driver("node", &args)
+}
+
+/// grbl-streamer runs `program` over the bridge's TCP port; `more`: the driver's options.
+fn streamer(bridge: &Bridge, program: &str, more: &[&str]) -> serde_json::Value {
+    let url = format!("socket://{}", bridge.tcp);
+    let mut args = vec!["grbl_streamer_job.py", "--port", &url, "--program", program];
+    args.extend_from_slice(more);
+    driver("python3", &args)
+}
+
 /// `nc-send --sim` of the same program: the reference.
 fn reference(machine: &[&str], program: &str) -> serde_json::Value {
     let mut args = vec!["--sim", "--report", "json"];
@@ -110,18 +125,7 @@ fn cncjs_runs_the_h4_program_on_the_pseudo_terminal_and_ends_where_nc_send_does(
     let program = common::repo().join("examples/h4-table-tilt.ngc");
     let program = program.to_str().unwrap();
     let bridge = Bridge::start(&machine);
-    let job = driver(
-        "node",
-        &[
-            "cncjs_job.js",
-            "--port",
-            &bridge.pty,
-            "--program",
-            program,
-            "--timeout",
-            "120",
-        ],
-    );
+    let job = cncjs(&bridge, program, &["--timeout", "120"]);
     let summary = bridge.stop();
     assert_eq!(job["result"], "completed", "{job}");
     assert_eq!(job["errors"].as_array().unwrap().len(), 0, "{job}");
@@ -144,21 +148,10 @@ fn cncjs_hold_resume_and_feed_override_act_on_the_path() {
     std::fs::write(&program, "G21 G90\nG1 X80 F600\nG1 X0\n").unwrap();
     let program = program.to_str().unwrap();
     let bridge = Bridge::start(&[]);
-    let held = driver(
-        "node",
-        &[
-            "cncjs_job.js",
-            "--port",
-            &bridge.pty,
-            "--program",
-            program,
-            "--hold-at",
-            "2",
-            "--resume-at",
-            "5",
-            "--timeout",
-            "60",
-        ],
+    let held = cncjs(
+        &bridge,
+        program,
+        &["--hold-at", "2", "--resume-at", "5", "--timeout", "60"],
     );
     assert_eq!(held["result"], "completed", "{held}");
     assert!(
@@ -167,19 +160,10 @@ fn cncjs_hold_resume_and_feed_override_act_on_the_path() {
     );
     let t_held = held["elapsed_s"].as_f64().unwrap();
     // Feed override 200 % from the second second: 2 s + 14 s / 2 ≈ 9 s instead of 16 s.
-    let fast = driver(
-        "node",
-        &[
-            "cncjs_job.js",
-            "--port",
-            &bridge.pty,
-            "--program",
-            program,
-            "--feed-override-at",
-            "2:200",
-            "--timeout",
-            "60",
-        ],
+    let fast = cncjs(
+        &bridge,
+        program,
+        &["--feed-override-at", "2:200", "--timeout", "60"],
     );
     let summary = bridge.stop();
     assert_eq!(fast["result"], "completed", "{fast}");
@@ -210,19 +194,7 @@ fn grbl_streamer_streams_a_thousand_lines_over_tcp_through_a_faulty_line_losing_
     std::fs::write(&program, text).unwrap();
     let program = program.to_str().unwrap();
     let bridge = Bridge::start(&["--link-faults", "0.001", "--seed", "5"]);
-    let url = format!("socket://{}", bridge.tcp);
-    let job = driver(
-        "python3",
-        &[
-            "grbl_streamer_job.py",
-            "--port",
-            &url,
-            "--program",
-            program,
-            "--timeout",
-            "150",
-        ],
-    );
+    let job = streamer(&bridge, program, &["--timeout", "150"]);
     let summary = bridge.stop();
     assert_eq!(job["result"], "completed", "{job}");
     assert_eq!(job["errors"].as_array().unwrap().len(), 0, "{job}");
@@ -247,22 +219,10 @@ fn grbl_streamer_hold_and_resume_over_tcp_stop_and_restart_the_machine() {
     std::fs::write(&program, "G21 G90\nG1 X40 F600\nG1 X0\n").unwrap();
     let program = program.to_str().unwrap();
     let bridge = Bridge::start(&[]);
-    let url = format!("socket://{}", bridge.tcp);
-    let job = driver(
-        "python3",
-        &[
-            "grbl_streamer_job.py",
-            "--port",
-            &url,
-            "--program",
-            program,
-            "--hold-at",
-            "1.5",
-            "--resume-at",
-            "4",
-            "--timeout",
-            "60",
-        ],
+    let job = streamer(
+        &bridge,
+        program,
+        &["--hold-at", "1.5", "--resume-at", "4", "--timeout", "60"],
     );
     let summary = bridge.stop();
     assert_eq!(job["result"], "completed", "{job}");

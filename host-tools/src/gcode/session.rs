@@ -6,7 +6,7 @@
 use super::canon::Canon;
 use super::interp::Interp;
 use super::lexer::{self, Words};
-use super::{flow, Diagnostic, Options, MAX_LINE};
+use super::{flow, Diagnostic, Options};
 use pkmc::config::AXES;
 
 /// An interpreter fed line by line.
@@ -69,12 +69,6 @@ impl<'o> LineSession<'o> {
             col,
             message,
         };
-        if text.len() > MAX_LINE && text.chars().count() > MAX_LINE {
-            return Err(fail(
-                MAX_LINE + 1,
-                format!("line longer than {MAX_LINE} characters"),
-            ));
-        }
         let program = flow::Program::index(text, false, &self.interp.params);
         if let Some((_, col, message)) = program.errors.first() {
             return Err(fail(lexer::char_col(text, *col), message.clone()));
@@ -93,20 +87,15 @@ impl<'o> LineSession<'o> {
         let Some(line) = program.lines.first() else {
             return Ok(());
         };
-        lexer::scan_line(
+        flow::run::execute_line(
+            &mut self.interp,
+            &mut self.words,
             text,
             line.from as usize,
-            &self.interp.params,
-            &mut self.words,
+            number,
+            out,
         )
-        .map_err(|e| fail(lexer::char_col(text, e.col), e.message))?;
-        let before = out.len();
-        self.interp
-            .execute(&mut self.words, number, out)
-            .map_err(|e| {
-                out.truncate(before);
-                fail(lexer::char_col(text, e.col), e.message)
-            })
+        .map_err(|(col, message)| fail(col, message))
     }
 
     /// Emits what cutter compensation still holds (the end of the stream).

@@ -418,22 +418,21 @@ impl JobHooks for Bridge<'_> {
         if self.reset {
             return false;
         }
-        let open = self.take_lines(view, out);
+        if !self.take_lines(view, out) {
+            return false;
+        }
         if !out.is_empty() || !self.lines.is_empty() {
             self.last_busy = Instant::now();
+            return true;
         }
+        // Closed once everything has executed, the controller is at rest and no line
+        // has come for a while.
         let at_rest = self
             .status
             .as_ref()
             .is_some_and(|s| s.state == State::Idle && s.speed == 0)
             && view.acked == view.total
             && view.executed >= view.total;
-        if !open {
-            return false;
-        }
-        !(at_rest
-            && out.is_empty()
-            && self.lines.is_empty()
-            && self.last_busy.elapsed() > CLOSE_AFTER)
+        !(at_rest && self.last_busy.elapsed() > CLOSE_AFTER)
     }
 }

@@ -172,10 +172,8 @@ fn next_line<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(),
     let end = end?;
     let s = link.request_status()?;
     b.status = Some(s.clone());
-    match end {
-        JobEnd::Alarm(a) => report_alarm(b, &a),
-        JobEnd::Aborted | JobEnd::Stopped => {}
-        JobEnd::Done | JobEnd::Paused(_) => {}
+    if let JobEnd::Alarm(a) = end {
+        report_alarm(b, &a);
     }
     if b.session.interp().pos != s.pose && !b.reset {
         // Stopped short (an alarm): the next line starts where the machine is.

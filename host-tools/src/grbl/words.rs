@@ -3,7 +3,8 @@
 //! Lengths are in millimetres and angles in degrees, three decimals.
 
 use crate::gcode::Offsets;
-use pkmc::config::{MachineConfig, AXES, AXIS_NAMES};
+use pkmc::config::{axis_is_rotary, MachineConfig, AXES, AXIS_NAMES};
+use pkmc::units::to_user;
 use pkmc::protocol::{AlarmCause, State, Status};
 
 /// The version string of `$I` and of the banner.
@@ -21,12 +22,7 @@ pub fn banner() -> String {
 
 /// One axis value in the sender's units: mm for X Y Z, degrees for A B C.
 pub fn value(axis: usize, v: i64) -> String {
-    let per = if axis < 3 {
-        pkmc::units::NM_PER_MM
-    } else {
-        pkmc::units::NDEG_PER_DEG
-    };
-    format!("{:.3}", v as f64 / per as f64)
+    format!("{:.3}", to_user(v, axis_is_rotary(axis)))
 }
 
 /// Axes reported: X Y Z, and up to the last rotary axis the machine has (a machine

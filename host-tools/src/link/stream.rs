@@ -120,9 +120,7 @@ impl<T: Transport> Link<T> {
                 line: new[i - first].line,
             })?;
         fed.blocks.extend_from_slice(new);
-        if !new.is_empty() {
-            fed.last_fed = Instant::now();
-        }
+        fed.last_fed = Instant::now();
         Ok(())
     }
 
@@ -169,7 +167,9 @@ impl<T: Transport> Link<T> {
             if fed.open && job.ending.is_none() {
                 new.clear();
                 fed.open = hooks.feed(&view, &mut new);
-                self.append(fed, job, &new)?;
+                if !new.is_empty() {
+                    self.append(fed, job, &new)?;
+                }
             }
             let total = fed.blocks.len();
             if !fed.open && job.acked == total && !job.end_sent && job.ending.is_none() {

@@ -23,7 +23,7 @@
 //! conditional, repeat, return values, errors).
 
 mod lines;
-mod run;
+pub(crate) mod run;
 
 pub(crate) use run::run;
 

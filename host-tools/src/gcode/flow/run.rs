@@ -143,24 +143,15 @@ impl Runner<'_, '_> {
     #[inline]
     fn plain(&mut self, line: &Line) {
         let text = self.source.get(line.start..line.end).unwrap_or("");
-        if text.len() > MAX_LINE && text.chars().count() > MAX_LINE {
-            let message = format!("line longer than {MAX_LINE} characters");
-            self.error(line.number, MAX_LINE + 1, message);
-            return;
-        }
-        if let Err(e) = lexer::scan_line(
+        if let Err((col, message)) = execute_line(
+            self.interp,
+            &mut self.words,
             text,
             line.from as usize,
-            &self.interp.params,
-            &mut self.words,
+            line.number,
+            self.out,
         ) {
-            self.error(line.number, lexer::char_col(text, e.col), e.message);
-            return;
-        }
-        let before = self.out.len();
-        if let Err(e) = self.interp.execute(&mut self.words, line.number, self.out) {
-            self.out.truncate(before);
-            self.error(line.number, lexer::char_col(text, e.col), e.message);
+            self.error(line.number, col, message);
         }
     }
 
@@ -413,4 +404,31 @@ impl Runner<'_, '_> {
             .remove(&self.p.lines.get(at).map_or(0, |l| l.number));
         self.oword_error(at, message);
     }
+}
+
+/// Reads and executes one plain line (`text`, its words from byte `from`), numbered
+/// `number`: its commands are appended to `out`, or, on an error, nothing of it and
+/// the error's character column and message are returned. Shared by whole programs
+/// and by [`crate::gcode::LineSession`].
+pub(crate) fn execute_line(
+    interp: &mut Interp<'_>,
+    words: &mut Words,
+    text: &str,
+    from: usize,
+    number: u32,
+    out: &mut Vec<Canon>,
+) -> Result<(), (usize, String)> {
+    if text.len() > MAX_LINE && text.chars().count() > MAX_LINE {
+        return Err((
+            MAX_LINE + 1,
+            format!("line longer than {MAX_LINE} characters"),
+        ));
+    }
+    lexer::scan_line(text, from, &interp.params, words)
+        .map_err(|e| (lexer::char_col(text, e.col), e.message))?;
+    let before = out.len();
+    interp.execute(words, number, out).map_err(|e| {
+        out.truncate(before);
+        (lexer::char_col(text, e.col), e.message)
+    })
 }

@@ -9,7 +9,7 @@
 use super::queue::{Held, Shape};
 use super::{ArcMove, Side, Straight};
 use crate::gcode::arcs;
-use crate::gcode::canon::Canon;
+use crate::gcode::canon::{Canon, Feed};
 use crate::gcode::interp::{fail, Interp, Res};
 use pkmc::config::AXES;
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
@@ -195,31 +195,23 @@ impl Interp<'_> {
         } else if beta > SMALL {
             // Convex: the held move ends where it is; the tool rolls about the corner.
             self.comp.end_held_at(c, out, col)?;
-            let mid = along(op, r, n);
             let shape = match kind {
-                Straight::Feed(feed) => Shape::Arc {
-                    centre: op,
-                    turn: if side == Side::Left { -1 } else { 1 },
-                    swept: 0.0,
-                    feed,
-                },
+                Straight::Feed(feed) => corner_arc(side, op, feed),
                 // No rapid arc exists: a rapid to the start of the offset line.
                 Straight::Rapid => Shape::Straight {
                     kind,
                     dir: [0.0; 2],
                 },
             };
-            self.comp.queue.push(Held {
+            let corner = Held {
                 line,
                 shape,
-                end: mid,
+                end: along(op, r, n),
                 pose: self.corner_pose(&target),
-            });
-            self.comp.release(out, col)?;
-            self.comp.queue.set_start(mid);
+            };
+            self.start_after(Some(corner), c, out, col)?;
         } else {
-            self.comp.release(out, col)?;
-            self.comp.queue.set_start(c);
+            self.start_after(None, c, out, col)?;
         }
         let next = Held {
             line,
@@ -231,6 +223,29 @@ impl Interp<'_> {
             pose: target,
         };
         self.hold_next(joined, next)
+    }
+
+    /// After a convex join, `corner` (the move about the programmed corner) goes out
+    /// with everything held, and the next move starts at its end; after a tangent one
+    /// (`None`), what is held goes out and the next move starts at `c`.
+    fn start_after(
+        &mut self,
+        corner: Option<Held>,
+        c: [f64; 2],
+        out: &mut Vec<Canon>,
+        col: u32,
+    ) -> Res<()> {
+        let start = match corner {
+            Some(m) => {
+                let end = m.end;
+                self.comp.queue.push(m);
+                end
+            }
+            None => c,
+        };
+        self.comp.release(out, col)?;
+        self.comp.queue.set_start(start);
+        Ok(())
     }
 
     /// Holds `next` after its join (`joined`); a failed join forgets what it held, so
@@ -427,24 +442,16 @@ impl Interp<'_> {
                 .and_then(|at| self.comp.end_held_at(at, out, col));
         } else if beta > SMALL {
             // Convex: a corner arc about the programmed corner first.
-            let mid = along(op, r, unit(delta));
             self.comp.release(out, col)?;
-            self.comp.queue.push(Held {
+            let corner = Held {
                 line,
-                shape: Shape::Arc {
-                    centre: op,
-                    turn: if side == Side::Left { -1 } else { 1 },
-                    swept: 0.0,
-                    feed: arc.feed,
-                },
-                end: mid,
+                shape: corner_arc(side, op, arc.feed),
+                end: along(op, r, unit(delta)),
                 pose: self.corner_pose(&arc.end),
-            });
-            self.comp.release(out, col)?;
-            self.comp.queue.set_start(mid);
+            };
+            self.start_after(Some(corner), c, out, col)?;
         } else {
-            self.comp.release(out, col)?;
-            self.comp.queue.set_start(c);
+            self.start_after(None, c, out, col)?;
         }
         let next = Held {
             line,
@@ -519,5 +526,16 @@ impl Interp<'_> {
             towards - pullback
         };
         Ok(along(pc, oldrad, unit(dir)))
+    }
+}
+
+/// The corner arc about the programmed corner `op` that keeps a tool on `side`
+/// rolling round a convex corner (its sweep is set when it is released).
+fn corner_arc(side: Side, op: [f64; 2], feed: Feed) -> Shape {
+    Shape::Arc {
+        centre: op,
+        turn: if side == Side::Left { -1 } else { 1 },
+        swept: 0.0,
+        feed,
     }
 }
