@@ -29,7 +29,7 @@
 //! when it starts, from the speed the previous one left at). No pass over the queue.
 
 use crate::config::AXES;
-use crate::geometry::{Form, Path};
+use crate::geometry::Path;
 use crate::kinematics::Unreachable;
 use crate::planner::{Kind, Planner};
 use crate::profile::{from_q32, Profile, HELD, TICK_Q32};
@@ -333,7 +333,7 @@ impl Executor {
                     past.start = self.s_raw;
                     past.from = *planner.front_start();
                     past.path.course = b.course;
-                    if b.course.form == Form::Arc {
+                    if b.course.form.bends() {
                         past.path.bend = *planner.bend();
                     }
                     past.line = b.line;

@@ -304,7 +304,7 @@ impl Lookahead {
             }
             _ => (0.0, 1.0),
         };
-        let start_tangent = path.tangent_at(0);
+        let start_tangent = direction(&path, 0);
         let moving = matches!(kind, Kind::Rapid | Kind::Feed);
         let accel = accel.max(1e-9);
         let need = if self.end_stops || !moving {
@@ -363,7 +363,7 @@ impl Lookahead {
             }
         }
         self.end = path.end;
-        self.end_tangent = path.tangent_at(path.length << 16);
+        self.end_tangent = direction(&path, path.length << 16);
         self.end_stops = !moving || block.tolerance_nm == 0;
         self.end_tolerance = block.tolerance_nm;
         Ok(PlanBlock {
@@ -381,11 +381,27 @@ impl Lookahead {
     }
 }
 
+/// The unit direction of `path` at `s` (nm Q16): its tangent, which a spline's
+/// parameter makes shorter than 1 where the curve is slower than its fastest point,
+/// scaled to unit length over X Y Z (corners compare directions).
+fn direction(path: &Path, s: i64) -> [f32; AXES] {
+    let mut t = path.tangent_at(s);
+    if path.form == Form::Spline {
+        let n = sqrtf(t[..3].iter().map(|x| x * x).sum::<f32>());
+        if n > 1e-12 {
+            t.iter_mut().for_each(|x| *x /= n);
+        }
+    }
+    t
+}
+
 /// What a block does, given its geometry (a move of length 0 is a dwell of 0 ticks).
 fn kind_of(block: &Block, path: &Course) -> Kind {
     let kind = match block.motion {
         Motion::Rapid => Kind::Rapid,
-        Motion::Linear | Motion::Arc { .. } => Kind::Feed,
+        Motion::Linear | Motion::Arc { .. } | Motion::Cubic { .. } | Motion::Quadratic { .. } => {
+            Kind::Feed
+        }
         Motion::Dwell(ms) => Kind::Dwell(((ms as u64 * TICK_HZ as u64).div_ceil(1000)) as u32),
         Motion::Aux(a) => Kind::Aux(a),
     };
@@ -602,7 +618,7 @@ impl Ring {
     }
     fn pop_front(&mut self) {
         if self.len > 0 {
-            if self.slots[self.head].course.form == Form::Arc {
+            if self.slots[self.head].course.form.bends() {
                 self.bend_head = (self.bend_head + 1) % BEND_CAPACITY;
                 self.bend_len -= 1;
             }
@@ -623,7 +639,7 @@ impl Ring {
         if self.slots[(self.head + self.len) % QUEUE_CAPACITY]
             .course
             .form
-            == Form::Arc
+            .bends()
         {
             self.bend_len += 1;
         }
@@ -818,7 +834,7 @@ impl Planner {
         machine: &MachineConfig,
         kin: &MachineKinematics,
     ) -> Result<(), PushError> {
-        let arc = matches!(pb.plan.shape, Shape::Arc { .. });
+        let arc = matches!(pb.plan.shape, Shape::Arc { .. } | Shape::Spline { .. });
         if self.free() == 0 || (arc && self.free_bends() == 0) {
             return Err(PushError::Full);
         }
@@ -977,6 +993,23 @@ fn limits_along(
         // v²/r: an axis then never sees more than a.
         a /= 2.0;
         v = v.min(crate::math::sqrtf(a * r as f32));
+    }
+    if let crate::geometry::Bend::Spline(c) = &path.bend {
+        // An axis moves at x′·v and accelerates at x′·a + x″·v², with x′ and x″ its
+        // exact largest first and second derivatives along the curve: half of its
+        // acceleration for each term, as for joints.
+        let (d1, d2) = path.course.spline_bounds(c);
+        for i in 0..AXES {
+            let l = &machine.axes[i];
+            if d2[i] > 1e-20 && l.max_accel > 0 {
+                let amax = per_tick2(l.max_accel);
+                a = a.min(amax / (2.0 * d1[i].max(1e-12)));
+                v = v.min(crate::math::sqrtf(amax / (2.0 * d2[i])));
+            }
+            if d1[i] > 1e-12 && l.max_velocity > 0 {
+                v = v.min(per_tick(l.max_velocity) / d1[i]);
+            }
+        }
     }
     // Single-precision planning rounds to about 10⁻⁷: stay that far inside.
     Ok((v * LIMIT_MARGIN, a * LIMIT_MARGIN))
@@ -1208,7 +1241,7 @@ mod tests {
         assert_eq!(p.pop().map(|b| b.course.form), Some(Form::Line));
         assert_eq!(p.free_bends(), 0);
         assert!(p.start());
-        assert_eq!(p.bend().r0, 10_000_000);
+        assert_eq!(p.bend().circle().r0, 10_000_000);
         p.finish();
         assert_eq!(p.free_bends(), 1);
         assert_eq!(p.push_planned(extra, &m, &k), Ok(()));
@@ -1216,7 +1249,7 @@ mod tests {
         for i in 1..=BEND_CAPACITY {
             assert!(p.start());
             let want = if i % 2 == 0 { 10_000_000 } else { 5_000_000 };
-            assert_eq!(p.bend().r0, want, "arc {i}");
+            assert_eq!(p.bend().circle().r0, want, "arc {i}");
             let mut pose = [0; AXES];
             let b = *p.executing().unwrap();
             b.course

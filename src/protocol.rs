@@ -61,6 +61,16 @@ pub enum Shape {
     },
     /// No motion (dwell, auxiliary function, zero-length move).
     Point,
+    /// Cubic or quadratic spline ([`Motion::Cubic`], [`Motion::Quadratic`]): the
+    /// curve itself follows from the block; the parameter advances linearly with path
+    /// distance, u = s / length, where `length` is the largest |dP/du| over X Y Z (so
+    /// the tool never moves faster than the path speed).
+    Spline {
+        /// ⌊2⁶⁴ / length⌋, so that u (Q24) = (s·rate) ≫ 56 for s in nm Q16 (no
+        /// division per tick). Sent as 8 bytes.
+        #[serde(with = "fixed_width::u64_le")]
+        rate: u64,
+    },
 }
 
 /// Little-endian fixed-width encodings for fields whose varint is long (random bits):
@@ -90,7 +100,7 @@ mod fixed_width {
 }
 
 /// Protocol version, exchanged in the handshake; both sides must agree.
-pub const PROTOCOL_VERSION: u16 = 6;
+pub const PROTOCOL_VERSION: u16 = 7;
 /// Largest unencoded frame body (sequence number, message and CRC), bytes: a planned
 /// helix with every field at its widest fits.
 pub const MAX_BODY: usize = 384;
@@ -163,6 +173,32 @@ pub enum Motion {
     Dwell(u32),
     /// Auxiliary function; `target` must equal the current pose.
     Aux(Aux),
+    /// Cubic Bézier feed move (G5, and runs of short moves the host merged into one
+    /// curve): from the start through the control points start + `c1` and `target` +
+    /// `c2` to `target` (axis units; offsets, so that they are short on the wire).
+    Cubic {
+        /// First control point minus the start.
+        c1: [i64; AXES],
+        /// Second control point minus the target.
+        c2: [i64; AXES],
+    },
+    /// Quadratic (parabolic) Bézier feed move (G5.1): from the start through the
+    /// control point start + `c` to `target`.
+    Quadratic {
+        /// Control point minus the start.
+        c: [i64; AXES],
+    },
+}
+
+impl Motion {
+    /// Does the controller keep a bend for this motion (arcs and splines: their
+    /// curved part is held apart from the queue's line-sized slots)?
+    pub const fn curved(&self) -> bool {
+        matches!(
+            self,
+            Motion::Arc { .. } | Motion::Cubic { .. } | Motion::Quadratic { .. }
+        )
+    }
 }
 
 /// One canonical block, in absolute workpiece pose (axis units, see
@@ -969,6 +1005,11 @@ impl Cursor<'_> {
             },
             3 => Motion::Dwell(self.u32()),
             4 => Motion::Aux(self.aux()),
+            5 => Motion::Cubic {
+                c1: self.i64s(),
+                c2: self.i64s(),
+            },
+            6 => Motion::Quadratic { c: self.i64s() },
             _ => {
                 self.fail::<()>();
                 Motion::Rapid
@@ -991,6 +1032,9 @@ impl Cursor<'_> {
                 unit: self.i64s(),
             },
             2 => Shape::Point,
+            3 => Shape::Spline {
+                rate: self.u64_le(),
+            },
             _ => {
                 self.fail::<()>();
                 Shape::Point
@@ -1467,9 +1511,17 @@ mod tests {
                     clockwise: k % 2 == 1,
                     turns: w() as u16,
                 },
+                6 => Motion::Cubic {
+                    c1: [w(), w(), w(), w(), w(), w()],
+                    c2: [w(), w(), w(), w(), w(), w()],
+                },
+                7 if k % 2 == 0 => Motion::Quadratic {
+                    c: [w(), w(), w(), w(), w(), w()],
+                },
                 _ => Motion::Linear,
             };
-            let shape = match k % 5 {
+            let shape = match k % 7 {
+                5 => Shape::Spline { rate: w() as u64 },
                 0 => Shape::Point,
                 1 | 2 => Shape::Arc {
                     plane: [Plane::Xy, Plane::Zx, Plane::Yz][k % 3],

@@ -204,6 +204,9 @@ impl Words for GeometryError {
             GeometryError::ArcEndOffCircle => "arc end is off its circle",
             GeometryError::ArcWithoutRadius => "arc without a radius",
             GeometryError::PlanMismatch => "the path sent does not describe its block",
+            GeometryError::SplineOutOfRange => {
+                "spline out of range (no X Y Z motion, or control points too far apart)"
+            }
         })
     }
 }

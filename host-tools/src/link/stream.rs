@@ -33,10 +33,14 @@ pub fn estimate_ms(from: &[i64; 6], b: &Block, axis_vmax: &[i64; 6]) -> f64 {
                 .fold(0.0, f64::max)
                 * 1000.0
         }
-        Motion::Linear | Motion::Arc { .. } if b.feed > 0 => {
+        Motion::Linear | Motion::Arc { .. } | Motion::Cubic { .. } | Motion::Quadratic { .. }
+            if b.feed > 0 =>
+        {
             Path::new(b, from).map_or(0.0, |p| p.length as f64 / b.feed as f64 * 1000.0)
         }
-        Motion::Linear | Motion::Arc { .. } => 0.0,
+        Motion::Linear | Motion::Arc { .. } | Motion::Cubic { .. } | Motion::Quadratic { .. } => {
+            0.0
+        }
         Motion::Dwell(ms) => ms as f64,
         Motion::Aux(_) => 0.0,
     }
@@ -103,8 +107,7 @@ impl<T: Transport> Link<T> {
     ) -> Result<(), LinkError> {
         for b in new {
             let arcs = job.arcs_before.last().copied().unwrap_or(0);
-            job.arcs_before
-                .push(arcs + matches!(b.motion, Motion::Arc { .. }) as usize);
+            job.arcs_before.push(arcs + b.motion.curved() as usize);
             let total = job.planned_ms.last().copied().unwrap_or(0.0);
             job.planned_ms
                 .push(total + estimate_ms(&fed.end, b, &self.axis_vmax));

@@ -16,6 +16,9 @@
 use crate::config::AXES;
 use crate::protocol::{Block, Motion, Plane};
 
+mod spline;
+pub use spline::{coefficients, Curve, MAX_SPLINE_SPAN, MIN_SPLINE_NM};
+
 pub use crate::protocol::Shape;
 
 /// What a path is, an arc's in-plane part aside.
@@ -26,8 +29,18 @@ pub enum Form {
     Point,
     /// Straight line.
     Line,
-    /// Arc or helix; its in-plane part is a [`Bend`].
+    /// Arc or helix; its in-plane part is a [`Circle`], in the path's [`Bend`].
     Arc,
+    /// Cubic or quadratic spline ([`spline`]); a₁ is in the course's `unit`, the rest a
+    /// [`Curve`], in the path's [`Bend`].
+    Spline,
+}
+
+impl Form {
+    /// Does a path of this form have a [`Bend`] (arcs and splines)?
+    pub const fn bends(self) -> bool {
+        matches!(self, Form::Arc | Form::Spline)
+    }
 }
 
 /// What every path has: where it ends, its length, and its direction per axis. An
@@ -45,13 +58,13 @@ pub struct Course {
     /// Point, line or arc.
     pub form: Form,
     /// Direction per axis, Q20.44: a line's, or an arc's linear part (helix axis and
-    /// A B C; in-plane entries are 0).
+    /// A B C; in-plane entries are 0); a spline's a₁ (axis units).
     pub unit: [i64; AXES],
 }
 
 /// An arc's in-plane part, as in [`Shape::Arc`] (which see).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Bend {
+pub struct Circle {
     /// Plane.
     pub plane: Plane,
     /// Centre (first, second in-plane axis), nm.
@@ -68,8 +81,34 @@ pub struct Bend {
     pub r_rate: i64,
 }
 
-/// A block's geometry: its [`Course`] and, for an arc, its [`Bend`] (ignored
-/// otherwise). Its start is not kept: it is the previous block's end, which every user
+/// The curved part of a path, kept apart from its [`Course`]: an arc's [`Circle`] or a
+/// spline's [`Curve`] (ignored for lines and points).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Bend {
+    /// An arc's in-plane part.
+    Arc(Circle),
+    /// A spline's a₂, a₃ and rate.
+    Spline(Curve),
+}
+
+impl Default for Bend {
+    fn default() -> Self {
+        Bend::Arc(Circle::default())
+    }
+}
+
+impl Bend {
+    /// The arc's in-plane part (a default circle for a spline's bend).
+    pub fn circle(&self) -> Circle {
+        match self {
+            Bend::Arc(c) => *c,
+            Bend::Spline(_) => Circle::default(),
+        }
+    }
+}
+
+/// A block's geometry: its [`Course`] and, for an arc or a spline, its [`Bend`]
+/// (ignored otherwise). Its start is not kept: it is the previous block's end, which every user
 /// has at hand. Reads of the course's fields go through (`path.end`, `path.length`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Path {
@@ -112,6 +151,10 @@ pub enum GeometryError {
     /// A geometry sent with a block does not describe that block (wrong length,
     /// direction, centre, sweep or rates).
     PlanMismatch,
+    /// A spline whose coefficients exceed [`MAX_SPLINE_SPAN`], or that does not move
+    /// X Y Z at all (rotary-only curves are sent as lines), or shorter than
+    /// [`MIN_SPLINE_NM`].
+    SplineOutOfRange,
 }
 
 /// How far a host-computed path may miss the block's start or end, axis units (the
@@ -254,7 +297,7 @@ impl Path {
                         form: Form::Arc,
                         unit,
                     },
-                    bend: Bend {
+                    bend: Bend::Arc(Circle {
                         plane,
                         center,
                         r0: libm::round(r0) as i64,
@@ -262,7 +305,30 @@ impl Path {
                         phi0: turn_of(wrap(a0, tau)) as u64,
                         phi_rate: (sweep << 16) / len as i128,
                         r_rate: (((dr as i128) << 40) / len as i128) as i64,
+                    }),
+                })
+            }
+            Motion::Cubic { .. } | Motion::Quadratic { .. } => {
+                let a = spline::coefficients(&block.motion, start, &end)
+                    .ok_or(GeometryError::SplineOutOfRange)?;
+                let length = spline::host_length(&a);
+                if a[..].iter().all(|c| c[..3] == [0; 3]) || length > MAX_SPLINE_SPAN as f64 {
+                    return Err(GeometryError::SplineOutOfRange);
+                }
+                let length = (length as i64).max(MIN_SPLINE_NM);
+                Ok(Path {
+                    course: Course {
+                        end,
+                        length,
+                        rotary_only: false,
+                        form: Form::Spline,
+                        unit: a[0],
                     },
+                    bend: Bend::Spline(Curve {
+                        a2: a[1],
+                        a3: a[2],
+                        rate: spline::rate_of(length),
+                    }),
                 })
             }
         }
@@ -289,7 +355,7 @@ impl Path {
 
     /// The shape the host sends for this path.
     pub fn shape(&self) -> Shape {
-        let b = &self.bend;
+        let b = &self.bend.circle();
         match self.form {
             Form::Point => Shape::Point,
             Form::Line => Shape::Line { unit: self.unit },
@@ -302,6 +368,10 @@ impl Path {
                 phi_rate: b.phi_rate,
                 r_rate: b.r_rate,
                 unit: self.unit,
+            },
+            Form::Spline => match self.bend {
+                Bend::Spline(c) => Shape::Spline { rate: c.rate },
+                Bend::Arc(_) => Shape::Point,
             },
         }
     }
@@ -428,7 +498,7 @@ impl Course {
                 self.form = Form::Arc;
                 self.unit = *unit;
                 // The plane and centre are the block's (they are not sent twice).
-                *bend = Bend {
+                *bend = Bend::Arc(Circle {
                     plane,
                     center,
                     r0,
@@ -436,7 +506,7 @@ impl Course {
                     phi0,
                     phi_rate,
                     r_rate,
-                };
+                });
                 let mut at = [0; AXES];
                 self.eval(bend, start, 0, &mut at);
                 if !near(&at, start) {
@@ -448,6 +518,12 @@ impl Course {
                 } else {
                     bad
                 }
+            }
+            (Motion::Cubic { .. } | Motion::Quadratic { .. }, &Shape::Spline { rate }) => {
+                let mut curve = Curve::default();
+                self.set_spline(&mut curve, &block.motion, start, length, rate)?;
+                *bend = Bend::Spline(curve);
+                Ok(())
             }
             _ => bad,
         }
@@ -479,8 +555,12 @@ impl Course {
         match self.form {
             Form::Point => *pose = self.end,
             Form::Line => linear(&self.unit, pose),
+            Form::Spline => match bend {
+                Bend::Spline(c) => self.eval_spline(c, start, s, pose),
+                Bend::Arc(_) => *pose = self.end,
+            },
             Form::Arc => {
-                let &Bend {
+                let Bend::Arc(Circle {
                     plane,
                     center,
                     r0,
@@ -488,7 +568,11 @@ impl Course {
                     phi_rate,
                     r_rate,
                     ..
-                } = bend;
+                }) = *bend
+                else {
+                    *pose = self.end;
+                    return;
+                };
                 linear(&self.unit, pose);
                 // At the start (the plan check's first point) no product is needed.
                 let (phi, r) = if s == 0 {
@@ -523,15 +607,20 @@ impl Path {
                     *t = (*u as f64 / Q44) as f32;
                 }
             }
+            Form::Spline => {
+                if let Bend::Spline(c) = &self.bend {
+                    t = self.course.spline_tangent(c, s);
+                }
+            }
             Form::Arc => {
-                let Bend {
+                let Circle {
                     plane,
                     phi0,
                     phi_rate,
                     r0,
                     dr,
                     ..
-                } = self.bend;
+                } = self.bend.circle();
                 for (t, u) in t.iter_mut().zip(&self.unit) {
                     *t = (*u as f64 / Q44) as f32;
                 }
@@ -556,7 +645,7 @@ impl Path {
 
     /// Smallest radius of curvature, nm (`None` for straight paths).
     pub fn radius(&self) -> Option<i64> {
-        let Bend { r0, dr, .. } = self.bend;
+        let Circle { r0, dr, .. } = self.bend.circle();
         (self.form == Form::Arc).then_some(r0.min(r0 + dr))
     }
 }

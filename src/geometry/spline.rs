@@ -1,0 +1,250 @@
+//! Spline paths: cubic ([`Motion::Cubic`]) and quadratic ([`Motion::Quadratic`])
+//! Bézier curves, in exact integers.
+//!
+//! A block's curve P(u), u ∈ [0, 1], from its start P₀ to its target P₃, is kept in the
+//! power basis P(u) = P₀ + a₁u + a₂u² + a₃u³ with integer coefficients formed exactly
+//! from the control points (so P(1) is the target exactly): for a cubic with control
+//! points C₁ = P₀ + c₁ and C₂ = P₃ + c₂ and Δ = P₃ − P₀, a₁ = 3c₁, a₂ = 3(Δ + c₂ − 2c₁),
+//! a₃ = 3(c₁ − c₂) − 2Δ; for a quadratic with control point P₀ + c, a₁ = 2c,
+//! a₂ = Δ − 2c, a₃ = 0 — a parabola, exactly.
+//!
+//! The parameter advances linearly with the path distance: u = s / S, where the
+//! block's length S is the largest |dP/du| over X Y Z along the curve. The tool's
+//! speed is then |dP/ds| = |dP/du| / S ≤ 1 times the path speed everywhere: the
+//! planned path speed is an upper bound of the real one (equal where the curve is
+//! fastest), and a curve the host fitted with a near-uniform parameter runs within a
+//! few per cent of it. Per tick the controller forms u in Q24 with one multiplication
+//! by ⌊2⁶⁴/S⌋ (sent with the plan, checked without a division) and evaluates the cubic
+//! per axis by Horner's rule in 64-bit integers: the parameter's step of S·2⁻²⁴ moves
+//! the tool by at most that (6 nm on a 100 mm curve), and the end is snapped to the
+//! target.
+
+use super::{Course, Form, GeometryError};
+use crate::config::AXES;
+use crate::protocol::Motion;
+
+/// The part of a spline beyond its [`Course`] (whose `unit` holds a₁).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Curve {
+    /// a₂ per axis, axis units.
+    pub a2: [i64; AXES],
+    /// a₃ per axis, axis units.
+    pub a3: [i64; AXES],
+    /// ⌊2⁶⁴ / length⌋: u (Q24) = (s·rate) ≫ 56 for s in nm Q16.
+    pub rate: u64,
+}
+
+/// Largest |a₁| + |a₂| + |a₃| of any axis (2³⁹ units: 550 m, or 550° on a rotary
+/// axis): Horner's rule in Q24 then never leaves 64 bits.
+pub const MAX_SPLINE_SPAN: i64 = 1 << 39;
+
+/// Shortest spline, nm (a shorter curve is sent as a line).
+pub const MIN_SPLINE_NM: i64 = 2;
+
+/// The power-basis coefficients (a₁, a₂, a₃) of a spline block from `start` to `end`,
+/// exactly; `None` for other motions or coefficients beyond [`MAX_SPLINE_SPAN`].
+pub fn coefficients(
+    motion: &Motion,
+    start: &[i64; AXES],
+    end: &[i64; AXES],
+) -> Option<[[i64; AXES]; 3]> {
+    let mut a = [[0i64; AXES]; 3];
+    for i in 0..AXES {
+        let d = end[i] as i128 - start[i] as i128;
+        let (a1, a2, a3) = match motion {
+            Motion::Cubic { c1, c2 } => {
+                let (c1, c2) = (c1[i] as i128, c2[i] as i128);
+                (3 * c1, 3 * (d + c2 - 2 * c1), 3 * (c1 - c2) - 2 * d)
+            }
+            Motion::Quadratic { c } => {
+                let c = c[i] as i128;
+                (2 * c, d - 2 * c, 0)
+            }
+            _ => return None,
+        };
+        if a1.abs() + a2.abs() + a3.abs() >= MAX_SPLINE_SPAN as i128 {
+            return None;
+        }
+        a[0][i] = a1 as i64;
+        a[1][i] = a2 as i64;
+        a[2][i] = a3 as i64;
+    }
+    Some(a)
+}
+
+/// |dP/du| over X Y Z at `u` (f64, host).
+fn speed_at(a: &[[i64; AXES]; 3], u: f64) -> f64 {
+    libm::sqrt(
+        (0..3)
+            .map(|i| {
+                let d = a[0][i] as f64 + 2.0 * a[1][i] as f64 * u + 3.0 * a[2][i] as f64 * u * u;
+                d * d
+            })
+            .sum::<f64>(),
+    )
+}
+
+/// The length the host gives a spline: the largest |dP/du| over X Y Z, found on a grid
+/// and refined around the best point, then raised by 10⁻⁶ (and a unit) so that the
+/// refinement's residue cannot make the tool faster than the path speed.
+pub fn host_length(a: &[[i64; AXES]; 3]) -> f64 {
+    const GRID: usize = 64;
+    let (mut best, mut at) = (0.0f64, 0.0f64);
+    for k in 0..=GRID {
+        let u = k as f64 / GRID as f64;
+        let v = speed_at(a, u);
+        if v > best {
+            best = v;
+            at = u;
+        }
+    }
+    // |dP/du|² is a quartic: golden-section search within the grid cell each side.
+    let (mut lo, mut hi) = (
+        (at - 1.0 / GRID as f64).max(0.0),
+        (at + 1.0 / GRID as f64).min(1.0),
+    );
+    for _ in 0..60 {
+        let m1 = lo + (hi - lo) * 0.381_966;
+        let m2 = hi - (hi - lo) * 0.381_966;
+        if speed_at(a, m1) < speed_at(a, m2) {
+            lo = m1;
+        } else {
+            hi = m2;
+        }
+    }
+    let best = best.max(speed_at(a, (lo + hi) / 2.0));
+    libm::ceil(best * (1.0 + 1e-6)) + 1.0
+}
+
+/// ⌊2⁶⁴ / length⌋ (length ≥ [`MIN_SPLINE_NM`]).
+pub fn rate_of(length: i64) -> u64 {
+    ((1u128 << 64) / length.max(MIN_SPLINE_NM) as u128) as u64
+}
+
+/// The spline's derivative control points per axis: dP/du is the Bézier of these
+/// (the curve's own hull bounds it); cubic: 3c₁, 3(Δ + c₂ − c₁), −3c₂; quadratic:
+/// 2c, 2(Δ − c) (the third repeats the second).
+fn hull(motion: &Motion, start: &[i64; AXES], end: &[i64; AXES]) -> [[f32; AXES]; 3] {
+    let f = crate::math::i64_to_f32;
+    let mut h = [[0f32; AXES]; 3];
+    for i in 0..AXES {
+        let d = f(end[i].wrapping_sub(start[i]));
+        match motion {
+            Motion::Cubic { c1, c2 } => {
+                h[0][i] = 3.0 * f(c1[i]);
+                h[1][i] = 3.0 * (d + f(c2[i]) - f(c1[i]));
+                h[2][i] = -3.0 * f(c2[i]);
+            }
+            Motion::Quadratic { c } => {
+                h[0][i] = 2.0 * f(c[i]);
+                h[1][i] = 2.0 * (d - f(c[i]));
+                h[2][i] = h[1][i];
+            }
+            _ => {}
+        }
+    }
+    h
+}
+
+impl Course {
+    /// The controller's check of a spline plan (see [`Course::set_from_plan`]): exact
+    /// coefficients within range, some motion over X Y Z, a length between the chord
+    /// and the derivative's hull (which bound the largest |dP/du| from below and above),
+    /// and the rate ⌊2⁶⁴/length⌋; no `f64`, no division. Fills `self` and `curve`.
+    pub(super) fn set_spline(
+        &mut self,
+        curve: &mut Curve,
+        motion: &Motion,
+        start: &[i64; AXES],
+        length: i64,
+        rate: u64,
+    ) -> Result<(), GeometryError> {
+        let bad = Err(GeometryError::PlanMismatch);
+        let Some(a) = coefficients(motion, start, &self.end) else {
+            return Err(GeometryError::SplineOutOfRange);
+        };
+        if !(MIN_SPLINE_NM..MAX_SPLINE_SPAN).contains(&length) {
+            return bad;
+        }
+        let l = length as u128;
+        let e = (rate as u128 * l).abs_diff(1u128 << 64);
+        if e >= l {
+            return bad;
+        }
+        let f = crate::math::i64_to_f32;
+        let norm = |v: &[f32; AXES]| crate::math::sqrtf(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        let delta: [f32; AXES] = core::array::from_fn(|i| f(self.end[i].wrapping_sub(start[i])));
+        let h = hull(motion, start, &self.end);
+        let top = h.iter().map(norm).fold(0.0, crate::math::fmax);
+        let (chord, len) = (norm(&delta), f(length));
+        if top == 0.0 || len < chord * (1.0 - 1e-5) - 2.0 || len > top * (1.0 + 1e-5) + 2.0 {
+            return bad;
+        }
+        self.length = length;
+        self.rotary_only = false;
+        self.form = Form::Spline;
+        self.unit = a[0];
+        *curve = Curve {
+            a2: a[1],
+            a3: a[2],
+            rate,
+        };
+        Ok(())
+    }
+
+    /// The spline's pose at `s` (nm Q16, 0 ≤ s ≤ length·2¹⁶) from `start`.
+    pub(super) fn eval_spline(
+        &self,
+        curve: &Curve,
+        start: &[i64; AXES],
+        s: i64,
+        pose: &mut [i64; AXES],
+    ) {
+        const HALF: i64 = 1 << 23;
+        let u = ((s as i128 * curve.rate as i128) >> 56) as i64;
+        for i in 0..AXES {
+            let (a1, a2, a3) = (self.unit[i], curve.a2[i], curve.a3[i]);
+            pose[i] = if a1 | a2 | a3 == 0 {
+                start[i]
+            } else {
+                let t = a2 + ((a3 * u + HALF) >> 24);
+                let t = a1 + ((t * u + HALF) >> 24);
+                start[i] + ((t * u + HALF) >> 24)
+            };
+        }
+    }
+
+    /// dP/ds at `s` (nm Q16) per axis (per nm of path; at most 1 over X Y Z), host.
+    pub(super) fn spline_tangent(&self, curve: &Curve, s: i64) -> [f32; AXES] {
+        let len = self.length.max(1) as f64;
+        let u = (s as f64 / 65_536.0 / len).clamp(0.0, 1.0);
+        core::array::from_fn(|i| {
+            let d = self.unit[i] as f64
+                + 2.0 * curve.a2[i] as f64 * u
+                + 3.0 * curve.a3[i] as f64 * u * u;
+            (d / len) as f32
+        })
+    }
+
+    /// Per axis, the largest |dP/ds| and |d²P/ds²| along the spline (per nm and nm²),
+    /// exactly: dP/du = a₁ + 2a₂u + 3a₃u² peaks at an end or at its vertex, and
+    /// d²P/du² = 2a₂ + 6a₃u at an end.
+    pub fn spline_bounds(&self, curve: &Curve) -> ([f32; AXES], [f32; AXES]) {
+        let len = self.length.max(1) as f64;
+        let (mut d1, mut d2) = ([0f32; AXES], [0f32; AXES]);
+        for i in 0..AXES {
+            let (a1, a2, a3) = (self.unit[i] as f64, curve.a2[i] as f64, curve.a3[i] as f64);
+            let at = |u: f64| (a1 + 2.0 * a2 * u + 3.0 * a3 * u * u).abs();
+            let mut m = at(0.0).max(at(1.0));
+            if a3 != 0.0 {
+                let v = -a2 / (3.0 * a3);
+                if (0.0..=1.0).contains(&v) {
+                    m = m.max(at(v));
+                }
+            }
+            d1[i] = (m / len) as f32;
+            d2[i] = ((2.0 * a2).abs().max((2.0 * a2 + 6.0 * a3).abs()) / (len * len)) as f32;
+        }
+        (d1, d2)
+    }
+}
