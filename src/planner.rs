@@ -70,6 +70,17 @@ pub const LIMIT_MARGIN: f32 = 1.0 - 4e-6;
 /// Points sampled along a block for its speed limits.
 pub const LIMIT_SAMPLES: usize = 5;
 
+/// Most of an axis's or joint's acceleration a spline's bend may take (a half on
+/// lines and arcs, see [`split`]): a curve that stands for a run of short moves is
+/// taken at a near-constant speed, so its profile needs the smaller share; the
+/// chords it stands for, with a corner every few hundred micrometres, would turn
+/// with about as much.
+pub const SPLINE_BEND_SHARE: f32 = 2.0 / 3.0;
+
+/// Points sampled along a spline (whose bend varies along it: the joints' rates
+/// between samples are bounded by their change, which closer samples keep tight).
+pub const SPLINE_SAMPLES: usize = 17;
+
 /// What a queued block does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
@@ -940,13 +951,33 @@ fn limits_along(
     let (mut v, mut a) = (f32::INFINITY, f32::INFINITY);
     let n = machine.joints.len();
     let len = path.length << 16;
+    // The speed a bend's share of the acceleration is sized for: the requested one,
+    // but on a spline the programmed feed (as at a blended corner, whose limit is
+    // sized for the programmed speed: a curve that stands for chords keeps their
+    // acceleration, and the override cannot take it faster than its bend allows);
+    // and on a spline the bend may take up to [`SPLINE_BEND_SHARE`].
+    let bend_feed = if path.form == Form::Spline {
+        feed / 2.0
+    } else {
+        feed
+    };
+    let bend_most = if path.form == Form::Spline {
+        SPLINE_BEND_SHARE
+    } else {
+        0.5
+    };
     // Difference step: 0.25 mm, or a quarter of a short block (nm Q16).
     let h = (len / 4).clamp(1 << 16, 250_000 << 16);
-    let spacing = path.length as f32 / (LIMIT_SAMPLES - 1) as f32;
+    let samples = if path.form == Form::Spline {
+        SPLINE_SAMPLES
+    } else {
+        LIMIT_SAMPLES
+    };
+    let spacing = path.length as f32 / (samples - 1) as f32;
     let mut q = [0i64; MAX_JOINTS];
     let mut pose = [0i64; AXES];
-    for k in 0..LIMIT_SAMPLES {
-        let s = (len as i128 * k as i128 / (LIMIT_SAMPLES as i128 - 1)) as i64;
+    for k in 0..samples {
+        let s = (len as i128 * k as i128 / (samples as i128 - 1)) as i64;
         path.pose_at(start, s, &mut pose);
         kin.inverse_checked(&pose, &machine.joints, &mut q)?;
         let t = path.tangent_at(s);
@@ -978,14 +1009,7 @@ fn limits_along(
             if d1 > 1e-12 {
                 v = v.min(vmax / d1);
             }
-            let speed = feed.min(v);
-            let curved = d2 * speed * speed > 0.05 * amax;
-            if d1 > 1e-12 {
-                a = a.min(if curved { amax / (2.0 * d1) } else { amax / d1 });
-            }
-            if curved {
-                v = v.min(crate::math::sqrtf(amax / (2.0 * d2)));
-            }
+            split(&mut v, &mut a, bend_feed, d1, d2, amax, bend_most);
         }
     }
     if let Some(r) = path.radius() {
@@ -1001,18 +1025,45 @@ fn limits_along(
         let (d1, d2) = path.course.spline_bounds(c);
         for i in 0..AXES {
             let l = &machine.axes[i];
-            if d2[i] > 1e-20 && l.max_accel > 0 {
-                let amax = per_tick2(l.max_accel);
-                a = a.min(amax / (2.0 * d1[i].max(1e-12)));
-                v = v.min(crate::math::sqrtf(amax / (2.0 * d2[i])));
-            }
             if d1[i] > 1e-12 && l.max_velocity > 0 {
                 v = v.min(per_tick(l.max_velocity) / d1[i]);
+            }
+            if l.max_accel > 0 {
+                split(
+                    &mut v,
+                    &mut a,
+                    bend_feed,
+                    d1[i],
+                    d2[i],
+                    per_tick2(l.max_accel),
+                    bend_most,
+                );
             }
         }
     }
     // Single-precision planning rounds to about 10⁻⁷: stay that far inside.
     Ok((v * LIMIT_MARGIN, a * LIMIT_MARGIN))
+}
+
+/// Splits an axis's or joint's acceleration budget `amax` between the two terms of
+/// its acceleration along a path, x′·a + x″·v² (x′, x″ its largest first and second
+/// derivatives along the path): the share ρ the bend needs at the speed asked for
+/// (`feed`, or the limit `v` found so far when lower), at most `most`, goes to
+/// x″·v² — which caps `v` there — and the rest to the profile's x′·a. A straight
+/// path keeps its whole budget; together never more than `amax`.
+fn split(v: &mut f32, a: &mut f32, feed: f32, d1: f32, d2: f32, amax: f32, most: f32) {
+    let speed = feed.min(*v);
+    let rho = if d2 > 0.0 {
+        (d2 * speed * speed / amax).min(most)
+    } else {
+        0.0
+    };
+    if d1 > 1e-12 {
+        *a = a.min((1.0 - rho) * amax / d1);
+    }
+    if d2 > 0.0 && rho > 0.0 {
+        *v = v.min(crate::math::sqrtf(rho * amax / d2));
+    }
 }
 
 /// What turning from `u1` to `u2` at `pose` costs: the largest |Δuᵢ| / aᵢ over every

@@ -39,6 +39,7 @@ fn run(text: &str, name: &str) -> Result<job::RunResult, job::Failure> {
         home: false,
         tools: Default::default(),
         statics: None,
+        compress: None,
     };
     job::check(&machine, &path, &opts, &mut NoHooks)
 }

@@ -188,6 +188,7 @@ fn a_simulation_that_makes_no_progress_exits_as_stalled_at_its_line() {
             home: false,
             tools: Default::default(),
             statics: None,
+            compress: None,
         };
         let blocks = blocks_moving_a_missing_axis();
         job::run_blocks(&machine, "stall", &blocks, &opts, &mut NoHooks)
@@ -212,6 +213,7 @@ fn a_simulated_jog_that_cannot_move_stops_as_stalled() {
             home: false,
             tools: Default::default(),
             statics: None,
+            compress: None,
         };
         job::with_link(&machine, &opts, |link| {
             link.control(Control::AlarmReset)?;

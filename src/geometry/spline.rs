@@ -248,3 +248,169 @@ impl Course {
         (d1, d2)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::Path;
+    use crate::config::AXES;
+    use crate::protocol::{Block, Motion};
+
+    fn cubic(target: [i64; AXES], c1: [i64; AXES], c2: [i64; AXES]) -> Block {
+        Block {
+            line: 1,
+            motion: Motion::Cubic { c1, c2 },
+            target,
+            feed: 1_000_000,
+            tolerance_nm: 1000,
+        }
+    }
+
+    /// The Bézier in f64 from its control points.
+    fn bezier(p: [[f64; AXES]; 4], u: f64) -> [f64; AXES] {
+        let w = [
+            (1.0 - u).powi(3),
+            3.0 * (1.0 - u).powi(2) * u,
+            3.0 * (1.0 - u) * u * u,
+            u.powi(3),
+        ];
+        core::array::from_fn(|i| (0..4).map(|k| w[k] * p[k][i]).sum())
+    }
+
+    fn controls(start: [i64; AXES], b: &Block) -> [[f64; AXES]; 4] {
+        let f = |a: [i64; AXES]| a.map(|x| x as f64);
+        let (s, e) = (f(start), f(b.target));
+        match b.motion {
+            Motion::Cubic { c1, c2 } => [
+                s,
+                core::array::from_fn(|i| s[i] + c1[i] as f64),
+                core::array::from_fn(|i| e[i] + c2[i] as f64),
+                e,
+            ],
+            Motion::Quadratic { c } => {
+                // Degree elevation: the same parabola as a cubic.
+                let q: [f64; AXES] = core::array::from_fn(|i| s[i] + c[i] as f64);
+                [
+                    s,
+                    core::array::from_fn(|i| s[i] + 2.0 / 3.0 * (q[i] - s[i])),
+                    core::array::from_fn(|i| e[i] + 2.0 / 3.0 * (q[i] - e[i])),
+                    e,
+                ]
+            }
+            _ => unreachable!(),
+        }
+    }
+
+    proptest::proptest! {
+        /// The controller accepts what the host computes; the curve it interpolates
+        /// is the Bézier (within 2 nm plus the parameter's step), ends exactly on the
+        /// target, and the tool never moves faster than the path distance.
+        #[test]
+        fn splines_follow_their_bezier_end_exactly_and_never_outrun_the_path(
+            d in proptest::array::uniform6(-50_000_000i64..50_000_000),
+            c1 in proptest::array::uniform6(-20_000_000i64..20_000_000),
+            c2 in proptest::array::uniform6(-20_000_000i64..20_000_000),
+            start in proptest::array::uniform6(-100_000_000i64..100_000_000),
+            quadratic in proptest::bool::ANY,
+        ) {
+            let mut target = start;
+            for i in 0..AXES {
+                target[i] += d[i];
+            }
+            let mut b = cubic(target, c1, c2);
+            if quadratic {
+                b.motion = Motion::Quadratic { c: c1 };
+            }
+            let host = Path::new(&b, &start).unwrap();
+            let ctl = Path::from_plan(&b, &start, host.length, host.shape());
+            proptest::prop_assert_eq!(ctl, Ok(host));
+            let p = host;
+            let ctrl = controls(start, &b);
+            let n = 400i64;
+            let mut prev = start;
+            let mut pose = [0; AXES];
+            // The parameter's step moves an axis by at most |dP/du|·2⁻²⁴ (X Y Z: at
+            // most length·2⁻²⁴), Horner's roundings by 1.5.
+            let super::super::Bend::Spline(cv) = p.bend else { panic!("not a spline") };
+            let step_of = |i: usize| {
+                (p.unit[i].abs() as f64 + 2.0 * cv.a2[i].abs() as f64 + 3.0 * cv.a3[i].abs() as f64)
+                    / 16_777_216.0 + 1.5
+            };
+            let step = p.length as f64 / 16_777_216.0 + 1.5;
+            for k in 0..=n {
+                let s = (p.length << 16) / n * k;
+                p.pose_at(&start, s, &mut pose);
+                let want = bezier(ctrl, s as f64 / 65_536.0 / p.length as f64);
+                for i in 0..AXES {
+                    // Quadratics are compared with their degree elevation (exact in
+                    // f64 up to its rounding).
+                    proptest::prop_assert!((pose[i] as f64 - want[i]).abs() <= step_of(i) + 1.0,
+                        "axis {} at {}: {} vs {}", i, k, pose[i], want[i]);
+                }
+                if k > 0 {
+                    let ds = (p.length as f64) / n as f64;
+                    let moved = (0..3).map(|i| ((pose[i] - prev[i]) as f64).powi(2)).sum::<f64>().sqrt();
+                    proptest::prop_assert!(moved <= ds * (1.0 + 1e-6) + 2.0 * step + 2.0,
+                        "moved {} over {}", moved, ds);
+                }
+                prev = pose;
+            }
+            p.pose_at(&start, p.length << 16, &mut pose);
+            proptest::prop_assert_eq!(pose, target);
+        }
+    }
+
+    #[test]
+    fn a_quadratic_is_a_parabola_exactly() {
+        let start = [0; AXES];
+        let b = Block {
+            motion: Motion::Quadratic {
+                c: [5_000_000, 10_000_000, 0, 0, 0, 0],
+            },
+            ..cubic([10_000_000, 0, 0, 0, 0, 0], [0; AXES], [0; AXES])
+        };
+        let p = Path::new(&b, &start).unwrap();
+        let super::super::Bend::Spline(c) = p.bend else {
+            panic!("not a spline")
+        };
+        assert_eq!(c.a3, [0; AXES]);
+        // y = 2·10⁷·u(1 − u), x = 10⁷·u: y = 2x(1 − x/10⁷), at u = ½: (5, 5) mm.
+        let mut pose = [0; AXES];
+        let half = super::host_length(&[p.unit, c.a2, c.a3]);
+        assert!((half - p.length as f64).abs() <= 1.0);
+        // Find u = ½ through the rate (s = length/2 gives u within a step of ½).
+        p.pose_at(&start, p.length << 15, &mut pose);
+        assert!((pose[0] - 5_000_000).abs() <= 2, "{pose:?}");
+        assert!((pose[1] - 5_000_000).abs() <= 2, "{pose:?}");
+    }
+
+    #[test]
+    fn a_plan_for_another_curve_or_length_is_refused() {
+        use crate::geometry::GeometryError;
+        let start = [0; AXES];
+        let b = cubic(
+            [10_000_000, 0, 0, 0, 0, 0],
+            [3_000_000, 3_000_000, 0, 0, 0, 0],
+            [-3_000_000, 3_000_000, 0, 0, 0, 0],
+        );
+        let p = Path::new(&b, &start).unwrap();
+        let bad = Err(GeometryError::PlanMismatch);
+        // Shorter than the chord, longer than the hull, or a wrong rate.
+        assert_eq!(Path::from_plan(&b, &start, 9_000_000, p.shape()), bad);
+        assert_eq!(Path::from_plan(&b, &start, p.length * 4, p.shape()), bad);
+        let wrong = crate::protocol::Shape::Spline {
+            rate: super::rate_of(p.length) + (1 << 20),
+        };
+        assert_eq!(Path::from_plan(&b, &start, p.length, wrong), bad);
+        // A rotary-only curve, or one whose control points are out of range.
+        let rot = cubic([0, 0, 0, 1_000_000_000, 0, 0], [0; AXES], [0; AXES]);
+        assert_eq!(
+            Path::new(&rot, &start),
+            Err(GeometryError::SplineOutOfRange)
+        );
+        let far = cubic([1, 0, 0, 0, 0, 0], [1 << 40, 0, 0, 0, 0, 0], [0; AXES]);
+        assert_eq!(
+            Path::from_plan(&far, &start, 1000, p.shape()),
+            Err(GeometryError::SplineOutOfRange)
+        );
+    }
+}

@@ -36,6 +36,8 @@ pub struct Recorder {
     keep_path: bool,
     stride: u64,
     seen: u64,
+    /// How far merged curves stray from their chords, when measured.
+    pub deviation: Option<super::deviation::Meter>,
 }
 
 impl Recorder {
@@ -52,6 +54,9 @@ impl Recorder {
 
     /// Records the simulator's state after a tick.
     pub fn record(&mut self, sim: &crate::sim::Simulator) {
+        if let Some(m) = &mut self.deviation {
+            m.record(sim.ctrl.status().blocks_done, sim.ctrl.pose());
+        }
         // Every block started, from the controller's log (not the line at the end of
         // the tick, which misses blocks that start and end within one).
         for &line in sim.lines_started() {

@@ -88,6 +88,13 @@ struct Args {
     /// Write one CSV row per interpolation period (--sim or --check only).
     #[arg(long, value_name = "FILE.csv")]
     trace: Option<PathBuf>,
+    /// Stream every move as programmed: do not merge runs of short G1 moves into
+    /// curves (merging is on wherever the program blends within G64 P).
+    #[arg(long)]
+    no_compress: bool,
+    /// Merging: a turn sharper than this between two moves stays a corner, degrees.
+    #[arg(long, value_name = "DEGREES", default_value_t = 30.0)]
+    corner_deg: f64,
     /// The G-code program.
     program: Option<PathBuf>,
     #[command(subcommand)]
@@ -188,6 +195,23 @@ fn load_statics(
 
 /// The tool table: `--tools FILE` (LinuxCNC's tool-file form), else the machine file's
 /// `[[tools]]`, else none.
+/// The compressor's settings from the command line (`None` with --no-compress).
+fn compress_settings(args: &Args) -> Result<Option<pkmc_host::gcode::compress::Settings>, Failure> {
+    if args.no_compress {
+        return Ok(None);
+    }
+    if !(args.corner_deg > 0.0 && args.corner_deg < 180.0) {
+        return Err(bad(format!(
+            "--corner-deg {}: give an angle between 0 and 180 degrees",
+            args.corner_deg
+        )));
+    }
+    Ok(Some(pkmc_host::gcode::compress::Settings {
+        corner_deg: args.corner_deg,
+        ..Default::default()
+    }))
+}
+
 fn load_tools(args: &Args) -> Result<pkmc_host::gcode::ToolTable, Failure> {
     if let Some(p) = &args.tools {
         let text = pkmc_host::input::read_text(p, pkmc_host::input::MAX_MACHINE_FILE_BYTES)
@@ -300,6 +324,7 @@ fn run(args: &Args) -> Result<i32, Failure> {
             record_path: args.plot.is_some(),
             plants,
             inject: args.inject.clone(),
+            deviation: None,
             // A sender watches the machine move: the simulator keeps real time.
             clock: match args.command {
                 Some(Command::Grbl { .. }) => pkmc_host::sim::serve::ServeClock::RealTime,
@@ -310,6 +335,7 @@ fn run(args: &Args) -> Result<i32, Failure> {
         home: args.home,
         tools,
         statics,
+        compress: compress_settings(args)?,
     };
     let interrupts = Interrupts::install().map_err(|e| Failure::new(exit::LINK, e))?;
     match &args.command {
@@ -340,7 +366,8 @@ fn run_program(
     interrupts: Interrupts,
     quiet: bool,
 ) -> Result<i32, Failure> {
-    let blocks = job::compile_program(program, machine, &opts.tools)?;
+    let compiled = job::compile_job(program, machine, &opts.tools, opts.compress.as_ref())?;
+    let blocks = &compiled.blocks;
     let style = Style::for_stderr(quiet);
     let keys = if quiet || args.check {
         None
@@ -355,13 +382,20 @@ fn run_program(
     let result = if args.check {
         job::check(machine, program, opts, &mut op)
     } else {
+        let mut opts = opts.clone();
+        opts.sim.deviation = Some(compiled.deviation_meter());
         job::run_blocks(
             machine,
             &program.display().to_string(),
-            &blocks,
-            opts,
+            blocks,
+            &opts,
             &mut op,
         )
+        .map(|mut r| {
+            let summary = job::CompressionSummary::of(&compiled, r.sim.as_ref());
+            r.report.compression = Some(summary);
+            r
+        })
     };
     op.progress.finish();
     drop(op);
@@ -412,6 +446,21 @@ fn print_report(report: &Report, json: bool, check: bool) {
             out,
             "pre-flight: {} poses checked through the kinematics, all reachable; {margin}",
             pre.samples
+        );
+    }
+    if let Some(c) = report.compression.as_ref().filter(|c| c.curves > 0) {
+        let dev = match &c.deviation {
+            Some(d) if d.samples > 0 => format!(
+                "; largest deviation of the interpolated path from the programmed moves {:.4} mm \
+                 (line {}, {} poses measured)",
+                d.deviation_mm, d.line, d.samples
+            ),
+            _ => String::new(),
+        };
+        let _ = writeln!(
+            out,
+            "compression: {} blocks programmed, {} streamed ({} curves){dev}",
+            c.blocks_programmed, c.blocks_streamed, c.curves
         );
     }
     if let Some(s) = &report.statics {

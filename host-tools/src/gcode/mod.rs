@@ -37,6 +37,7 @@
 pub mod arcs;
 pub mod blocks;
 pub mod canon;
+pub mod compress;
 pub mod cycles;
 pub mod flow;
 pub mod interp;

@@ -14,10 +14,56 @@ pub fn compile_program(
     machine: &MachineConfig,
     tools: &gcode::ToolTable,
 ) -> Result<Vec<Block>, Failure> {
+    compile_job(path, machine, tools, None).map(|c| c.blocks)
+}
+
+/// A program compiled for streaming: its blocks, and what they stand for when the
+/// compressor merged chords into curves.
+#[derive(Clone, Debug, Default)]
+pub struct Compiled {
+    /// The blocks to stream.
+    pub blocks: Vec<Block>,
+    /// The blocks as programmed (before compression).
+    pub programmed: Vec<Block>,
+    /// For each streamed block, the programmed blocks it stands for.
+    pub source: Vec<std::ops::Range<usize>>,
+    /// Where the program starts.
+    pub start: [i64; AXES],
+}
+
+impl Compiled {
+    /// A meter of how far the merged curves stray from their chords.
+    pub fn deviation_meter(&self) -> crate::analysis::deviation::Meter {
+        crate::analysis::deviation::Meter::new(
+            &self.programmed,
+            &self.blocks,
+            &self.source,
+            self.start,
+        )
+    }
+
+    /// Curves among the streamed blocks.
+    pub fn curves(&self) -> usize {
+        self.blocks
+            .iter()
+            .filter(|b| matches!(b.motion, pkmc::protocol::Motion::Cubic { .. }))
+            .count()
+    }
+}
+
+/// Reads and compiles a program for `machine`, merging runs of short moves into curves
+/// with `compress` ([`gcode::compress`]; `None`: as programmed); the pre-flight checks
+/// the blocks that will be streamed.
+pub fn compile_job(
+    path: &Path,
+    machine: &MachineConfig,
+    tools: &gcode::ToolTable,
+    compress: Option<&gcode::compress::Settings>,
+) -> Result<Compiled, Failure> {
     let text = crate::input::read_text(path, crate::input::MAX_PROGRAM_BYTES)
         .map_err(|m| Failure::new(exit::BAD_INPUT, m))?;
     let name = path.display().to_string();
-    compile_text_with(&text, &name, machine, machine.home, tools)
+    compile_compressed(&text, &name, machine, machine.home, tools, compress)
 }
 
 /// Compiles program text named `name` for `machine`, starting from pose `start`;
@@ -41,6 +87,18 @@ pub fn compile_text_with(
     start: [i64; AXES],
     tools: &gcode::ToolTable,
 ) -> Result<Vec<Block>, Failure> {
+    compile_compressed(text, name, machine, start, tools, None).map(|c| c.blocks)
+}
+
+/// [`compile_text_with`], merging chords into curves with `compress`.
+fn compile_compressed(
+    text: &str,
+    name: &str,
+    machine: &MachineConfig,
+    start: [i64; AXES],
+    tools: &gcode::ToolTable,
+    compress: Option<&gcode::compress::Settings>,
+) -> Result<Compiled, Failure> {
     let options = gcode::Options {
         start,
         axes: machine_axes(machine),
@@ -59,7 +117,25 @@ pub fn compile_text_with(
         )
     })?;
     let program = crate::gcode::blocks::from_canon(&canon, start);
-    let report = crate::analysis::preflight::check(&program.blocks, machine, start);
+    let compiled = match compress {
+        Some(settings) => {
+            let settings = for_machine(settings, machine);
+            let c = gcode::compress::compress(&program.blocks, start, &settings);
+            Compiled {
+                blocks: c.blocks,
+                programmed: program.blocks,
+                source: c.source,
+                start,
+            }
+        }
+        None => Compiled {
+            source: (0..program.blocks.len()).map(|i| i..i + 1).collect(),
+            blocks: program.blocks.clone(),
+            programmed: program.blocks,
+            start,
+        },
+    };
+    let report = crate::analysis::preflight::check(&compiled.blocks, machine, start);
     if !report.findings.is_empty() {
         let lines = findings_text(name, &report.findings);
         return Err(Failure::new(
@@ -71,7 +147,7 @@ pub fn compile_text_with(
             ),
         ));
     }
-    Ok(program.blocks)
+    Ok(compiled)
 }
 
 /// The pre-flight findings as lines of text: a run of the same problem on consecutive
@@ -108,6 +184,25 @@ fn findings_text(name: &str, findings: &[crate::analysis::preflight::Finding]) -
         i = j;
     }
     out
+}
+
+/// The compressor's settings with `machine`'s smallest X Y Z acceleration and speed
+/// (what a curve's time is weighed with).
+fn for_machine(
+    settings: &gcode::compress::Settings,
+    machine: &MachineConfig,
+) -> gcode::compress::Settings {
+    let xyz = || machine.axes[..3].iter().filter(|a| a.max_accel > 0);
+    gcode::compress::Settings {
+        accel: xyz()
+            .map(|a| a.max_accel as f64)
+            .fold(f64::INFINITY, f64::min),
+        max_speed: xyz()
+            .map(|a| a.max_velocity as f64)
+            .fold(f64::INFINITY, f64::min),
+        ..*settings
+    }
+    .finite()
 }
 
 /// The axes `machine` has: those with limits in its `[axes]`. Any other axis has no

@@ -28,8 +28,13 @@ mod sim_server;
 pub use commands::{
     connect, home_command, jog_command, mdi, move_and_wait, prepare, state_text, with_link,
 };
-pub use compile::{compile_program, compile_text, compile_text_with, machine_axes};
-pub use report::{describe_alarm, pose_text, status_json, LinesExecuted, PreflightSummary, Report};
+pub use compile::{
+    compile_job, compile_program, compile_text, compile_text_with, machine_axes, Compiled,
+};
+pub use report::{
+    describe_alarm, pose_text, status_json, CompressionSummary, LinesExecuted, PreflightSummary,
+    Report,
+};
 use sim_server::outcome_of;
 pub use sim_server::{SimOutcome, SimServer, SimSetup};
 
@@ -118,6 +123,9 @@ pub struct RunOptions<'a> {
     pub tools: crate::gcode::ToolTable,
     /// A cutting load whose joint forces are checked before anything runs.
     pub statics: Option<StaticsSpec>,
+    /// Merge runs of short moves into curves ([`crate::gcode::compress`]); `None`:
+    /// stream the program as written.
+    pub compress: Option<crate::gcode::compress::Settings>,
 }
 
 /// A cutting load and the joints' force limits ([`crate::analysis::statics`]).
@@ -269,11 +277,14 @@ pub fn run(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
-    let blocks = compile_program(program, machine, &opts.tools)?;
+    let compiled = compile_job(program, machine, &opts.tools, opts.compress.as_ref())?;
     let name = program.display().to_string();
-    let statics = statics_gate(&blocks, machine, &name, opts)?;
-    let mut result = run_blocks(machine, &name, &blocks, opts, hooks)?;
+    let statics = statics_gate(&compiled.blocks, machine, &name, opts)?;
+    let mut opts = opts.clone();
+    opts.sim.deviation = Some(compiled.deviation_meter());
+    let mut result = run_blocks(machine, &name, &compiled.blocks, &opts, hooks)?;
     result.report.statics = statics;
+    result.report.compression = Some(CompressionSummary::of(&compiled, result.sim.as_ref()));
     Ok(result)
 }
 
@@ -289,20 +300,22 @@ pub fn check(
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
     let setup = &opts.sim;
-    let blocks = compile_program(program, machine, &opts.tools)?;
-    let statics = statics_gate(&blocks, machine, &program.display().to_string(), opts)?;
+    let compiled = compile_job(program, machine, &opts.tools, opts.compress.as_ref())?;
+    let blocks = &compiled.blocks;
+    let statics = statics_gate(blocks, machine, &program.display().to_string(), opts)?;
     let pre = crate::analysis::preflight::check(&blocks, machine, machine.home);
     let sim = setup.simulator(machine.clone(), exit::BAD_INPUT)?;
     let recorder = std::rc::Rc::new(std::cell::RefCell::new(Recorder::new(
         machine.joints.len(),
         setup.record_path,
     )));
+    recorder.borrow_mut().deviation = Some(compiled.deviation_meter());
     let rec = recorder.clone();
     let io = InProcess::new(sim, Box::new(move |s| rec.borrow_mut().record(s)));
     let mut link = Link::connect(io, machine, LinkOptions::default())?;
     let end = match prepare(&mut link, opts.home, true, hooks)? {
         Some(end) => end,
-        None => link.run_job(&blocks, hooks)?,
+        None => link.run_job(blocks, hooks)?,
     };
     let status = link.request_status()?;
     let stats = link.stats;
@@ -337,6 +350,7 @@ pub fn check(
         min_margin_line: pre.min_margin.map(|(_, l)| l),
     });
     report.statics = statics;
+    report.compression = Some(CompressionSummary::of(&compiled, Some(&outcome)));
     Ok(RunResult {
         report,
         sim: Some(outcome),

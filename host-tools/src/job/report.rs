@@ -68,6 +68,37 @@ pub struct Report {
     /// The joint forces of the cutting load (`--wrench`, `--wrench-file`), when one
     /// was given.
     pub statics: Option<crate::analysis::statics::Statics>,
+    /// What the chord compressor did, and how far the interpolated path strayed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub compression: Option<CompressionSummary>,
+}
+
+/// What the compressor made of a program (`--check`, `--sim`, runs on a board).
+#[derive(Clone, Debug, Serialize)]
+pub struct CompressionSummary {
+    /// Blocks as programmed.
+    pub blocks_programmed: usize,
+    /// Blocks streamed.
+    pub blocks_streamed: usize,
+    /// Curves among them.
+    pub curves: usize,
+    /// The largest deviation of the interpolated path from the programmed chords,
+    /// where curves stand for them (simulated runs only).
+    pub deviation: Option<crate::analysis::deviation::Worst>,
+}
+
+impl CompressionSummary {
+    /// The summary of `compiled` after a run whose simulator side is `sim`.
+    pub fn of(compiled: &super::Compiled, sim: Option<&super::SimOutcome>) -> Self {
+        Self {
+            blocks_programmed: compiled.programmed.len(),
+            blocks_streamed: compiled.blocks.len(),
+            curves: compiled.curves(),
+            deviation: sim
+                .and_then(|s| s.recorder.deviation.as_ref())
+                .map(|m| m.worst.clone()),
+        }
+    }
 }
 
 /// What `--check` reports of the pre-flight.
@@ -145,6 +176,7 @@ impl Report {
             }),
             preflight: None,
             statics: None,
+            compression: None,
         }
     }
 

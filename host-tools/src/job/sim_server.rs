@@ -73,6 +73,8 @@ pub struct SimSetup<'a> {
     /// How the served simulator advances its clock (paced to the wall clock while
     /// the host streams, by default).
     pub clock: ServeClock,
+    /// Measure how far merged curves stray from their chords.
+    pub deviation: Option<crate::analysis::deviation::Meter>,
 }
 
 impl SimSetup<'_> {
@@ -127,6 +129,7 @@ impl SimServer {
         let serve_clock = setup.clock;
         let joints = sim.ctrl.machine().joints.len();
         let mut recorder = Recorder::new(joints, setup.record_path);
+        recorder.deviation = setup.deviation.clone();
         let clock = SimClock::default();
         let ticks = clock.clone();
         let handle = std::thread::spawn(move || -> Result<SimOutcome, String> {

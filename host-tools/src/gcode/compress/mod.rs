@@ -1,0 +1,372 @@
+//! The chord compressor: runs of short `G1` moves (CAM output for surfaces: thousands
+//! of chords of a fraction of a millimetre) become cubic spline blocks
+//! ([`Motion::Cubic`]) that stay within the program's `G64 P` tolerance of the
+//! programmed polyline and pass through its real corners.
+//!
+//! **Which moves.** Consecutive feed moves (`G1`) with the same feed and the same
+//! finite blending tolerance (`G64 P`; never in `G61`, nor in `G64` without P, which
+//! has no tolerance to keep) that move X Y Z form a run. A run ends where the path
+//! turns by more than [`Settings::corner_deg`] between two moves — a real corner stays
+//! a corner: a curve ends exactly on it and the planner blends or stops there as it
+//! does for lines — and at anything else (a rapid, an arc, an auxiliary function, a
+//! feed change).
+//!
+//! **Pieces.** A run is cut into curves from its start: each curve reaches as far
+//! along the run as one cubic can follow within the tolerance ([`fit`]), found by
+//! doubling, then bisection. Consecutive curves share their tangent at the point
+//! where they meet (the second leaves along the first's end direction), so the tool
+//! path is tangent-continuous along the run. Where no curve of two chords or more can
+//! leave along that direction, one may leave along its own, turning at that point by
+//! no more than the program's own corner there (the planner blends it as it blends
+//! chords); where none can, the chord stays a line.
+//!
+//! **Time.** The controller plans one speed limit per block, from its tightest bend, and
+//! runs a curve's parameter at a uniform rate (so the tool is slower where |dP/du| is
+//! below its largest). A curve that turns more than [`Settings::max_turn_deg`] is kept
+//! only if its estimated time at that limit is no longer than its chords' own
+//! (the chords' time is estimated as the planner takes them: each vertex at the speed
+//! its turn allows in one tick and its bend allows, from the machine's smallest X Y Z
+//! acceleration, [`Settings::accel`]): dense chords of a gentle curve, which already
+//! run fast, are merged into curves of a few degrees each; coarse chords, which stop
+//! at every vertex, into long ones.
+//!
+//! Rotary axes take part in the fit with 1° counted as 1 mm (a curve then keeps them
+//! within the tolerance as well). The fit tolerance is [`Settings::fit_share`] of `P`.
+
+mod fit;
+#[cfg(test)]
+mod tests;
+
+use fit::{fit, fit_free, Goal};
+use pkmc::config::AXES;
+use pkmc::protocol::{Block, Motion};
+use std::ops::Range;
+
+pub use fit::to_polyline;
+
+/// What the compressor may do.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    /// A turn sharper than this between two moves is a corner, degrees.
+    pub corner_deg: f64,
+    /// Longer moves are never merged, nm.
+    pub max_chord_nm: f64,
+    /// Share of the `G64 P` tolerance a curve may use (the rest is margin for the
+    /// rounding of control points to whole units).
+    pub fit_share: f64,
+    /// Most moves in one curve.
+    pub max_chords: usize,
+    /// Smallest ratio of the slowest to the fastest |dP/du| along a curve.
+    pub min_speed_ratio: f64,
+    /// A curve turning more than this, degrees, is weighed for time (module doc).
+    pub max_turn_deg: f64,
+    /// Tangents at the moves' ends are taken from points at least this many fit
+    /// tolerances away (the rounding of short moves would turn them otherwise).
+    pub tangent_reach: f64,
+    /// Reweighted least-squares rounds of a fit with a free end tangent.
+    pub reweights: usize,
+    /// A fit with a free end tangent is preferred when it reaches this many times as
+    /// far as one along the data's tangent.
+    pub free_gain: f64,
+    /// The machine's smallest X Y Z acceleration, nm/s² (0: unknown: curves are not
+    /// weighed for time).
+    pub accel: f64,
+    /// The machine's smallest X Y Z speed, nm/s (0: unknown).
+    pub max_speed: f64,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self {
+            corner_deg: 30.0,
+            max_chord_nm: 100_000_000.0,
+            fit_share: 0.95,
+            max_chords: 400,
+            min_speed_ratio: 0.5,
+            max_turn_deg: 3.0,
+            tangent_reach: 3.0,
+            reweights: 4,
+            free_gain: 1.2,
+            accel: 0.0,
+            max_speed: 0.0,
+        }
+    }
+}
+
+impl Settings {
+    /// Unknown (infinite) machine figures as 0.
+    pub fn finite(self) -> Self {
+        let f = |x: f64| if x.is_finite() { x } else { 0.0 };
+        Self {
+            accel: f(self.accel),
+            max_speed: f(self.max_speed),
+            ..self
+        }
+    }
+}
+
+/// A compressed program.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Compressed {
+    /// The blocks to stream.
+    pub blocks: Vec<Block>,
+    /// For each block, the input blocks it stands for.
+    pub source: Vec<Range<usize>>,
+}
+
+/// A point in fit space: X Y Z in nm, A B C with 1° as 1 mm.
+type V = [f64; AXES];
+
+/// Axis units to fit space.
+fn to_v(p: &[i64; AXES]) -> V {
+    core::array::from_fn(|i| {
+        if i < 3 {
+            p[i] as f64
+        } else {
+            p[i] as f64 / 1000.0
+        }
+    })
+}
+
+fn from_v(i: usize, x: f64) -> i64 {
+    (if i < 3 { x } else { x * 1000.0 }).round() as i64
+}
+
+fn sub(a: &V, b: &V) -> V {
+    core::array::from_fn(|i| a[i] - b[i])
+}
+
+fn dot(a: &V, b: &V) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+fn norm(a: &V) -> f64 {
+    dot(a, a).sqrt()
+}
+
+fn unit(a: &V) -> V {
+    let n = norm(a);
+    if n > 0.0 {
+        a.map(|x| x / n)
+    } else {
+        *a
+    }
+}
+
+/// May `b`, starting at `from`, be part of a run?
+fn mergeable(b: &Block, from: &[i64; AXES], s: &Settings) -> bool {
+    if b.motion != Motion::Linear || b.tolerance_nm == 0 || b.tolerance_nm == u32::MAX {
+        return false;
+    }
+    let d = sub(&to_v(&b.target), &to_v(from));
+    let xyz = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    xyz >= 1.0 && norm(&d) <= s.max_chord_nm
+}
+
+/// Compresses `blocks` (starting at `start`) with settings `s`.
+pub fn compress(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compressed {
+    let mut out = Compressed::default();
+    let mut pose = start;
+    let cos_corner = s.corner_deg.to_radians().cos();
+    let mut i = 0;
+    while i < blocks.len() {
+        let b = &blocks[i];
+        if !mergeable(b, &pose, s) {
+            out.blocks.push(*b);
+            out.source.push(i..i + 1);
+            if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
+                pose = b.target;
+            }
+            i += 1;
+            continue;
+        }
+        // The run: blocks i..j, points pts[0] (the start) ..= pts[j − i].
+        let mut pts = vec![to_v(&pose), to_v(&b.target)];
+        let mut j = i + 1;
+        while j < blocks.len() {
+            let n = &blocks[j];
+            let last = &blocks[j - 1];
+            if n.feed != b.feed
+                || n.tolerance_nm != b.tolerance_nm
+                || !mergeable(n, &last.target, s)
+            {
+                break;
+            }
+            let k = pts.len();
+            let d0 = unit(&sub(&pts[k - 1], &pts[k - 2]));
+            let d1 = unit(&sub(&to_v(&n.target), &pts[k - 1]));
+            if dot(&d0, &d1) < cos_corner {
+                break;
+            }
+            pts.push(to_v(&n.target));
+            j += 1;
+        }
+        let speed = if s.max_speed > 0.0 {
+            (b.feed as f64).min(s.max_speed)
+        } else {
+            b.feed as f64
+        };
+        let goal = Goal {
+            tol: b.tolerance_nm as f64 * s.fit_share,
+            speed,
+        };
+        fit_run(&blocks[i..j], i, &pts, &goal, s, &mut out);
+        pose = blocks[j - 1].target;
+        i = j;
+    }
+    out
+}
+
+/// Unit tangents at the points of a run: from the nearest points at least `reach`
+/// away on either side (so that the rounding of short chords does not turn them),
+/// weighted for unequal distances (the tangent of the parabola through the three
+/// points); one-sided at the run's ends.
+fn tangents(pts: &[V], reach: f64) -> Vec<V> {
+    let m = pts.len() - 1;
+    let away = |k: usize, step: isize| -> usize {
+        let mut j = k as isize;
+        loop {
+            let n = j + step;
+            if n < 0 || n > m as isize {
+                return j as usize;
+            }
+            j = n;
+            if norm(&sub(&pts[j as usize], &pts[k])) >= reach {
+                return j as usize;
+            }
+        }
+    };
+    (0..=m)
+        .map(|k| {
+            let (i, j) = (away(k, -1), away(k, 1));
+            if i == k {
+                return unit(&sub(&pts[j], &pts[k]));
+            }
+            if j == k {
+                return unit(&sub(&pts[k], &pts[i]));
+            }
+            let (a, b) = (sub(&pts[k], &pts[i]), sub(&pts[j], &pts[k]));
+            let (la, lb) = (norm(&a).max(1e-9), norm(&b).max(1e-9));
+            unit(&core::array::from_fn(|x| a[x] * lb / la + b[x] * la / lb))
+        })
+        .collect()
+}
+
+/// Fits the run `run` (input blocks from index `first`, points `pts`) piece by piece
+/// (see the module doc).
+fn fit_run(run: &[Block], first: usize, pts: &[V], g: &Goal, s: &Settings, out: &mut Compressed) {
+    let m = pts.len() - 1;
+    let t = tangents(pts, g.tol * s.tangent_reach);
+    let mut lead: Option<V> = None;
+    let mut a = 0;
+    while a < m {
+        let mut found = farthest(pts, &t, a, lead.as_ref(), g, s);
+        if let Some(l) = lead {
+            // Leaving along its own direction, turning no more than the program does
+            // at this point.
+            let own = dot(
+                &unit(&sub(&pts[a], &pts[a - 1])),
+                &unit(&sub(&pts[a + 1], &pts[a])),
+            );
+            if let Some(o) = farthest(pts, &t, a, None, g, s) {
+                let turn_ok = dot(&l, &unit(&sub(&o.1, &pts[a]))) >= own.min(1.0);
+                if turn_ok && found.as_ref().map_or(true, |f| o.0 > f.0) {
+                    found = Some(o);
+                }
+            }
+        }
+        match found {
+            Some((b, c1, c2)) => {
+                let end = &run[b - 1];
+                let start = &pts[a];
+                let target = to_v(&end.target);
+                out.blocks.push(Block {
+                    line: run[a].line,
+                    motion: Motion::Cubic {
+                        c1: core::array::from_fn(|i| from_v(i, c1[i] - start[i])),
+                        c2: core::array::from_fn(|i| from_v(i, c2[i] - target[i])),
+                    },
+                    ..*end
+                });
+                out.source.push(first + a..first + b);
+                lead = Some(unit(&sub(&target, &c2)));
+                a = b;
+            }
+            None => {
+                out.blocks.push(run[a]);
+                out.source.push(first + a..first + a + 1);
+                lead = Some(unit(&sub(&pts[a + 1], &pts[a])));
+                a += 1;
+            }
+        }
+    }
+}
+
+/// The farthest one curve from `a` leaving along `lead` (or the data's tangent)
+/// reaches, with either end tangent fixed to the data's or the far end's free
+/// (preferred when it reaches [`Settings::free_gain`] times as far).
+fn farthest(
+    pts: &[V],
+    t: &[V],
+    a: usize,
+    lead: Option<&V>,
+    g: &Goal,
+    s: &Settings,
+) -> Option<(usize, V, V)> {
+    let fixed = reach(pts, t, a, lead, g, s, false);
+    let free = reach(pts, t, a, lead, g, s, true);
+    match (fixed, free) {
+        (Some(f), Some(o)) if (o.0 - a) as f64 > s.free_gain * (f.0 - a) as f64 => Some(o),
+        (Some(f), _) => Some(f),
+        (None, o) => o,
+    }
+}
+
+/// The farthest point `b` (two chords or more from `a`) one curve from `a` reaches,
+/// leaving along `lead` (or its own best direction), with its inner control points:
+/// by doubling, then bisection.
+fn reach(
+    pts: &[V],
+    t: &[V],
+    a: usize,
+    lead: Option<&V>,
+    g: &Goal,
+    s: &Settings,
+    free: bool,
+) -> Option<(usize, V, V)> {
+    let top = (pts.len() - 1).min(a + s.max_chords);
+    let try_to = |b: usize| {
+        if free && b - a >= 4 {
+            fit_free(&pts[a..=b], lead, g, s)
+        } else {
+            fit(&pts[a..=b], lead.unwrap_or(&t[a]), &t[b], g, s)
+        }
+    };
+    let (mut good, mut best, mut bad) = (a + 1, None, None);
+    let mut step = 2;
+    while a + step <= top {
+        match try_to(a + step) {
+            Some(c) => (good, best, step) = (a + step, Some(c), step * 2),
+            None => {
+                bad = Some(a + step);
+                break;
+            }
+        }
+    }
+    if bad.is_none() && good < top {
+        match try_to(top) {
+            Some(c) => (good, best) = (top, Some(c)),
+            None => bad = Some(top),
+        }
+    }
+    if let Some(mut hi) = bad {
+        while hi - good > 1 {
+            let mid = (good + hi) / 2;
+            match try_to(mid) {
+                Some(c) => (good, best) = (mid, Some(c)),
+                None => hi = mid,
+            }
+        }
+    }
+    best.map(|(c1, c2)| (good, c1, c2))
+}

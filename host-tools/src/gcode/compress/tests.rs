@@ -1,0 +1,94 @@
+//! The compressor on a fine sine and on a corner.
+
+use super::*;
+
+fn line(x: f64, y: f64, line: u32, tol: u32) -> Block {
+    Block {
+        line,
+        motion: Motion::Linear,
+        target: [
+            (x * 1e6).round() as i64,
+            (y * 1e6).round() as i64,
+            0,
+            0,
+            0,
+            0,
+        ],
+        feed: 100_000_000,
+        tolerance_nm: tol,
+    }
+}
+
+/// The sine y = 5 sin(2πx/40) mm in chords of `chord` mm over `len` mm.
+fn sine(chord: f64, len: f64, tol: u32) -> Vec<Block> {
+    let n = (len / chord) as usize;
+    (1..=n)
+        .map(|k| {
+            let x = k as f64 * chord;
+            line(
+                x,
+                5.0 * (x * std::f64::consts::TAU / 40.0).sin(),
+                k as u32,
+                tol,
+            )
+        })
+        .collect()
+}
+
+/// Largest distance of the curves (sampled finely, exactly as the core evaluates
+/// them) from the input polyline, mm.
+fn deviation(input: &[Block], c: &Compressed) -> f64 {
+    let mut pose = [0i64; AXES];
+    let mut worst = 0.0f64;
+    for (b, src) in c.blocks.iter().zip(&c.source) {
+        let mut poly = vec![to_v(&pose)];
+        poly.extend(input[src.clone()].iter().map(|b| to_v(&b.target)));
+        let p = pkmc::geometry::Path::new(b, &pose).unwrap();
+        let mut at = [0i64; AXES];
+        for k in 0..=200 {
+            p.pose_at(&pose, (p.length << 16) / 200 * k, &mut at);
+            worst = worst.max(to_polyline(&to_v(&at), &poly));
+        }
+        pose = b.target;
+    }
+    worst / 1e6
+}
+
+#[test]
+fn a_fine_sine_becomes_few_curves_within_the_tolerance() {
+    let input = sine(0.05, 200.0, 10_000);
+    let c = compress(&input, [0; AXES], &Settings::default());
+    assert!(
+        c.blocks.len() * 10 <= input.len(),
+        "{} blocks from {}",
+        c.blocks.len(),
+        input.len()
+    );
+    let d = deviation(&input, &c);
+    assert!(d <= 0.010, "deviation {d} mm");
+    // Every input block is covered once, in order.
+    let covered: Vec<usize> = c.source.iter().flat_map(|r| r.clone()).collect();
+    assert_eq!(covered, (0..input.len()).collect::<Vec<_>>());
+    assert_eq!(
+        c.blocks.last().unwrap().target,
+        input.last().unwrap().target
+    );
+}
+
+#[test]
+fn a_real_corner_stays_and_exact_stop_is_not_compressed() {
+    // Two fine straight stretches meeting at 90°.
+    let mut input: Vec<Block> = (1..=100)
+        .map(|k| line(k as f64 * 0.1, 0.0, k, 10_000))
+        .collect();
+    input.extend((1..=100).map(|k| line(10.0, k as f64 * 0.1, 100 + k, 10_000)));
+    let c = compress(&input, [0; AXES], &Settings::default());
+    assert!(c
+        .blocks
+        .iter()
+        .any(|b| b.target == [10_000_000, 0, 0, 0, 0, 0]));
+    assert!(c.blocks.len() <= 4, "{}", c.blocks.len());
+    assert!(deviation(&input, &c) <= 0.008);
+    let g61: Vec<Block> = sine(0.05, 20.0, 0);
+    assert_eq!(compress(&g61, [0; AXES], &Settings::default()).blocks, g61);
+}
