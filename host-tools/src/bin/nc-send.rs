@@ -448,20 +448,8 @@ fn print_report(report: &Report, json: bool, check: bool) {
             pre.samples
         );
     }
-    if let Some(c) = report.compression.as_ref().filter(|c| c.curves > 0) {
-        let dev = match &c.deviation {
-            Some(d) if d.samples > 0 => format!(
-                "; largest deviation of the interpolated path from the programmed moves {:.4} mm \
-                 (line {}, {} poses measured)",
-                d.deviation_mm, d.line, d.samples
-            ),
-            _ => String::new(),
-        };
-        let _ = writeln!(
-            out,
-            "compression: {} blocks programmed, {} streamed ({} curves){dev}",
-            c.blocks_programmed, c.blocks_streamed, c.curves
-        );
+    if let Some(line) = report.compression.as_ref().and_then(|c| c.text()) {
+        let _ = writeln!(out, "{line}");
     }
     if let Some(s) = &report.statics {
         let peaks: Vec<String> = s

@@ -88,6 +88,25 @@ pub struct CompressionSummary {
 }
 
 impl CompressionSummary {
+    /// The summary in words, when the compressor merged anything.
+    pub fn text(&self) -> Option<String> {
+        if self.curves == 0 {
+            return None;
+        }
+        let dev = match &self.deviation {
+            Some(d) if d.samples > 0 => format!(
+                "; largest deviation of the interpolated path from the programmed moves \
+                 {:.4} mm (line {}, {} poses measured)",
+                d.deviation_mm, d.line, d.samples
+            ),
+            _ => String::new(),
+        };
+        Some(format!(
+            "compression: {} blocks programmed, {} streamed ({} curves){dev}",
+            self.blocks_programmed, self.blocks_streamed, self.curves
+        ))
+    }
+
     /// The summary of `compiled` after a run whose simulator side is `sim`.
     pub fn of(compiled: &super::Compiled, sim: Option<&super::SimOutcome>) -> Self {
         Self {
