@@ -41,6 +41,17 @@ fn pose(t: &[i64; 6]) -> String {
     s
 }
 
+/// A spline's control point offset: X and Y, and any other axis that is not zero.
+fn offset(t: &[i64; 6]) -> String {
+    let full = pose(t);
+    full.split(' ')
+        .enumerate()
+        .filter(|(i, word)| *i < 2 || !word[1..].eq("0"))
+        .map(|(_, word)| word)
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
 fn feed(f: &Feed) -> String {
     match f {
         Feed::PerSecond(v) => format!("F{v}/s"),
@@ -77,6 +88,22 @@ fn listing(c: &Canon) -> String {
             turns,
             feed(f)
         ),
+        Canon::Cubic {
+            target,
+            c1,
+            c2,
+            feed: f,
+            ..
+        } => format!(
+            "cubic {} c1 {} c2 {} {}",
+            pose(target),
+            offset(c1),
+            offset(c2),
+            feed(f)
+        ),
+        Canon::Quadratic {
+            target, c, feed: f, ..
+        } => format!("quadratic {} c {} {}", pose(target), offset(c), feed(f)),
         Canon::Dwell { ms, .. } => format!("dwell {ms}ms"),
         Canon::PathMode { mode, .. } => match mode {
             PathMode::ExactStop => "path exact-stop".into(),
@@ -239,6 +266,11 @@ fixtures!(
     a_peck_cycle_without_any_q_given_is_refused_after_a_failed_line,
     coordinate_rotation_turns_moves_arcs_and_offsets,
     rotated_systems_refuse_other_planes_and_cycles_by_name,
+    // G5 and G5.1 splines.
+    cubic_splines_continue_a_series_with_mirrored_control_points,
+    splines_in_inches_and_incremental_distances,
+    splines_turn_with_a_rotated_coordinate_system,
+    spline_mistakes_are_rejected,
 );
 
 #[test]

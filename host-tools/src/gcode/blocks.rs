@@ -1,8 +1,10 @@
 //! Canonical commands to protocol blocks: what is streamed to the controller.
 //!
-//! Motion keeps its geometry (lines, native arcs); G93 inverse-time feeds become path
-//! speeds from the block's exact length (measured with the core's own geometry, so host
-//! and controller agree); the path mode (G61/G64 P) becomes each block's blending
+//! Motion keeps its geometry (lines, native arcs, G5/G5.1 splines as Bézier blocks);
+//! G93 inverse-time feeds become path speeds from the block's exact length (measured
+//! with the core's own geometry, so host and controller agree; for a spline that length
+//! is the one the controller runs the curve's parameter over, so the move takes the
+//! time G93 asked for); the path mode (G61/G64 P) becomes each block's blending
 //! tolerance; spindle, coolant, tool changes and pauses become auxiliary blocks that
 //! execute in order. Operator messages stay on the host, keyed by NC line, and are
 //! shown when that line starts executing.
@@ -40,42 +42,11 @@ pub fn from_canon(commands: &[Canon], start: [i64; AXES]) -> Program {
     };
     for c in commands {
         let block = match c {
-            Canon::Rapid { line, target } => Some(Block {
-                line: *line,
-                motion: Motion::Rapid,
-                target: *target,
-                feed: 0,
-                tolerance_nm: tolerance,
-            }),
-            Canon::Linear { line, target, feed } => Some(feed_block(
-                *line,
-                Motion::Linear,
-                *target,
-                *feed,
-                tolerance,
-                &pose,
-            )),
-            Canon::Arc {
-                line,
-                target,
-                center,
-                plane,
-                clockwise,
-                turns,
-                feed,
-            } => Some(feed_block(
-                *line,
-                Motion::Arc {
-                    center: *center,
-                    plane: *plane,
-                    clockwise: *clockwise,
-                    turns: (*turns).min(u16::MAX as u32) as u16,
-                },
-                *target,
-                *feed,
-                tolerance,
-                &pose,
-            )),
+            Canon::Rapid { .. }
+            | Canon::Linear { .. }
+            | Canon::Arc { .. }
+            | Canon::Cubic { .. }
+            | Canon::Quadratic { .. } => move_block(c, tolerance, &pose),
             Canon::Dwell { line, ms } => Some(Block {
                 line: *line,
                 motion: Motion::Dwell(*ms),
@@ -120,7 +91,11 @@ pub fn from_canon(commands: &[Canon], start: [i64; AXES]) -> Program {
         if let Some(b) = block {
             if matches!(
                 b.motion,
-                Motion::Rapid | Motion::Linear | Motion::Arc { .. }
+                Motion::Rapid
+                    | Motion::Linear
+                    | Motion::Arc { .. }
+                    | Motion::Cubic { .. }
+                    | Motion::Quadratic { .. }
             ) {
                 pose = b.target;
             }
@@ -128,6 +103,103 @@ pub fn from_canon(commands: &[Canon], start: [i64; AXES]) -> Program {
         }
     }
     program
+}
+
+/// The block of a move command (`None` for the others) from `pose`, with the blending
+/// `tolerance` in force.
+fn move_block(c: &Canon, tolerance: u32, pose: &[i64; AXES]) -> Option<Block> {
+    match c {
+        Canon::Rapid { line, target } => Some(Block {
+            line: *line,
+            motion: Motion::Rapid,
+            target: *target,
+            feed: 0,
+            tolerance_nm: tolerance,
+        }),
+        Canon::Linear { line, target, feed } => Some(feed_block(
+            *line,
+            Motion::Linear,
+            *target,
+            *feed,
+            tolerance,
+            pose,
+        )),
+        Canon::Arc {
+            line,
+            target,
+            center,
+            plane,
+            clockwise,
+            turns,
+            feed,
+        } => Some(feed_block(
+            *line,
+            Motion::Arc {
+                center: *center,
+                plane: *plane,
+                clockwise: *clockwise,
+                turns: (*turns).min(u16::MAX as u32) as u16,
+            },
+            *target,
+            *feed,
+            tolerance,
+            pose,
+        )),
+        Canon::Cubic {
+            line,
+            target,
+            c1,
+            c2,
+            feed,
+        } => Some(spline_block(
+            *line,
+            Motion::Cubic { c1: *c1, c2: *c2 },
+            *target,
+            *feed,
+            tolerance,
+            pose,
+        )),
+        Canon::Quadratic {
+            line,
+            target,
+            c,
+            feed,
+        } => Some(spline_block(
+            *line,
+            Motion::Quadratic { c: *c },
+            *target,
+            *feed,
+            tolerance,
+            pose,
+        )),
+        _ => None,
+    }
+}
+
+/// A spline's block. A curve the controller's geometry refuses is sent as a straight
+/// move to its end: that is only a curve that does not move at all (a G5 whose control
+/// points and end are its start), since the interpreter refuses curves too large for
+/// the controller.
+fn spline_block(
+    line: u32,
+    motion: Motion,
+    target: [i64; AXES],
+    feed: Feed,
+    tolerance: u32,
+    from: &[i64; AXES],
+) -> Block {
+    let curve = Block {
+        line,
+        motion,
+        target,
+        feed: 1,
+        tolerance_nm: tolerance,
+    };
+    let motion = match Path::new(&curve, from) {
+        Ok(_) => motion,
+        Err(_) => Motion::Linear,
+    };
+    feed_block(line, motion, target, feed, tolerance, from)
 }
 
 /// A feed move; inverse-time feeds become path speeds over the block's exact length.
@@ -175,6 +247,26 @@ mod tests {
         }];
         let p = from_canon(&c, [0; AXES]);
         assert_eq!(p.blocks[0].feed, 20_000_000);
+    }
+
+    #[test]
+    fn an_inverse_time_spline_runs_its_parameter_length_in_the_time_asked() {
+        // The controller runs a spline's parameter over its length at the feed: G93's
+        // time is length / feed, whatever the curve's shape.
+        let mm = 1_000_000;
+        let c = [Canon::Cubic {
+            line: 1,
+            target: [10 * mm, 0, 0, 0, 0, 0],
+            c1: [0, 5 * mm, 0, 0, 0, 0],
+            c2: [0, 5 * mm, 0, 0, 0, 0],
+            feed: Feed::InverseTime(2_000_000),
+        }];
+        let p = from_canon(&c, [0; AXES]);
+        let b = p.blocks[0];
+        assert!(matches!(b.motion, Motion::Cubic { .. }));
+        let length = Path::new(&b, &[0; AXES]).unwrap().length;
+        assert!(length > 10 * mm, "a curve is longer than its chord");
+        assert_eq!(b.feed, length / 2);
     }
 
     #[test]

@@ -92,6 +92,35 @@ pub enum Canon {
         /// Feed.
         feed: Feed,
     },
+    /// G5: cubic Bézier move (LinuxCNC's cubic spline) from the previous command's end
+    /// through the control points start + `c1` and `target` + `c2` to `target`, as
+    /// [`pkmc::protocol::Motion::Cubic`]. Only X and Y move: `c1` and `c2` are zero on
+    /// the other axes, and `target` keeps them where they were.
+    Cubic {
+        /// NC line.
+        line: u32,
+        /// End pose.
+        target: [i64; AXES],
+        /// First control point minus the start, axis units.
+        c1: [i64; AXES],
+        /// Second control point minus `target`, axis units.
+        c2: [i64; AXES],
+        /// Feed.
+        feed: Feed,
+    },
+    /// G5.1: quadratic Bézier move (LinuxCNC's quadratic B-spline) from the previous
+    /// command's end through the control point start + `c` to `target`, as
+    /// [`pkmc::protocol::Motion::Quadratic`]; only X and Y move.
+    Quadratic {
+        /// NC line.
+        line: u32,
+        /// End pose.
+        target: [i64; AXES],
+        /// Control point minus the start, axis units.
+        c: [i64; AXES],
+        /// Feed.
+        feed: Feed,
+    },
     /// G4: dwell.
     Dwell {
         /// NC line.
@@ -155,6 +184,8 @@ impl Canon {
             Canon::Rapid { line, .. }
             | Canon::Linear { line, .. }
             | Canon::Arc { line, .. }
+            | Canon::Cubic { line, .. }
+            | Canon::Quadratic { line, .. }
             | Canon::Dwell { line, .. }
             | Canon::PathMode { line, .. }
             | Canon::Spindle { line, .. }
@@ -171,7 +202,9 @@ impl Canon {
         match self {
             Canon::Rapid { target, .. }
             | Canon::Linear { target, .. }
-            | Canon::Arc { target, .. } => Some(target),
+            | Canon::Arc { target, .. }
+            | Canon::Cubic { target, .. }
+            | Canon::Quadratic { target, .. } => Some(target),
             _ => None,
         }
     }

@@ -335,7 +335,10 @@ impl Interp<'_> {
         };
         match c.tenths {
             100 => self.g10(w, c, &mut b.used),
-            280 | 300 => self.home(w, c, b.line, out),
+            280 | 300 => {
+                self.g5_tangent = None;
+                self.home(w, c, b.line, out)
+            }
             281 | 301 => {
                 self.store_home(c);
                 Ok(())
@@ -385,7 +388,11 @@ impl Interp<'_> {
             && match explicit {
                 Some(_) => match self.motion {
                     Motion::None | Motion::Rapid | Motion::Linear => has_axes || has_polar,
-                    Motion::Arc { .. } | Motion::Cycle(_) => true,
+                    // G5 and G5.1 without an end point are an error (LinuxCNC's "all
+                    // axes missing with motion code"), named by the spline.
+                    Motion::Arc { .. } | Motion::Cycle(_) | Motion::Cubic | Motion::Quadratic => {
+                        true
+                    }
                 },
                 None => has_axes || has_polar || (ijk && matches!(self.motion, Motion::Arc { .. })),
             };
@@ -428,6 +435,8 @@ impl Interp<'_> {
         let line = b.line;
         let first_motion_col = w.first_motion_col.max(1);
         let col = explicit.map_or(first_motion_col, |c| c.col);
+        // Any move ends a series of G5s; a G5 continues it.
+        let g5_tangent = self.g5_tangent.take();
         match self.motion {
             Motion::None => {
                 let what = if explicit.is_some() {
@@ -449,6 +458,14 @@ impl Interp<'_> {
             Motion::Arc { clockwise } => {
                 b.used |= bit(b'I') | bit(b'J') | bit(b'K') | bit(b'R') | bit(b'P');
                 self.arc(w, clockwise, b, col, out)?;
+            }
+            Motion::Cubic => {
+                b.used |= bit(b'I') | bit(b'J') | bit(b'P') | bit(b'Q');
+                self.spline(w, false, g5_tangent, b, col, out)?;
+            }
+            Motion::Quadratic => {
+                b.used |= bit(b'I') | bit(b'J');
+                self.spline(w, true, None, b, col, out)?;
             }
             Motion::Cycle(kind) => {
                 b.used |= bit(b'R') | bit(b'L') | bit(b'P') | bit(b'Q');
@@ -497,6 +514,8 @@ fn motion_of(tenths: i32) -> Motion {
         10 => Motion::Linear,
         20 => Motion::Arc { clockwise: true },
         30 => Motion::Arc { clockwise: false },
+        50 => Motion::Cubic,
+        51 => Motion::Quadratic,
         730 => Motion::Cycle(Cycle::G73),
         810 => Motion::Cycle(Cycle::G81),
         820 => Motion::Cycle(Cycle::G82),

@@ -3,8 +3,8 @@
 //!
 //! This module holds the state and [`Interp::execute`], a short sequence of phases;
 //! `modal` knows which modal group each G and M code is in, `convert` holds the phases
-//! (`convert_*`, one per step of the order below), `motion` the moves (straight, arcs)
-//! and `offsets` the parameters and offsets (G10, G28/G30, G92, parameter settings);
+//! (`convert_*`, one per step of the order below), `motion` the moves (straight, arcs),
+//! `spline` the G5/G5.1 splines and `offsets` the parameters and offsets (G10, G28/G30, G92, parameter settings);
 //! canned cycles are [`super::cycles`].
 //!
 //! Order of execution within a line (LinuxCNC's, with one deliberate change): comments
@@ -13,7 +13,7 @@
 //! units); feed mode G93/G94; F; S; T; M6/M61; M3/M4/M5; M7/M8/M9; G4 dwell; plane;
 //! cutter compensation G40; tool length G43/G49; coordinate system G54–G59.3; path
 //! control G61/G61.1/G64; distance modes G90/G91 and G90.1/G91.1; retract mode
-//! G98/G99; G10/G28/G30/G92 and friends; motion (G0 G1 G2 G3 G73 G81–G89, or the modal
+//! G98/G99; G10/G28/G30/G92 and friends; motion (G0 G1 G2 G3 G5 G5.1 G73 G81–G89, or the modal
 //! motion when a line has only coordinates); stops M0/M1/M2/M30; then the line's
 //! parameter settings.
 //!
@@ -39,6 +39,7 @@ mod modal;
 mod motion;
 mod offsets;
 mod rotation;
+mod spline;
 pub mod state;
 mod tooling;
 
@@ -119,6 +120,10 @@ pub enum Motion {
         /// G2.
         clockwise: bool,
     },
+    /// G5: cubic spline.
+    Cubic,
+    /// G5.1: quadratic B-spline.
+    Quadratic,
     /// A canned cycle.
     Cycle(Cycle),
 }
@@ -183,6 +188,9 @@ pub struct Interp<'o> {
     pub(crate) pos: [i64; AXES],
     pub(crate) path: PathMode,
     pub(crate) cycle: CycleMemory,
+    /// After a G5 (and until any other move): its −P −Q, program frame, nm — the first
+    /// control point offset of a G5 that follows it without I and J.
+    g5_tangent: Option<[i64; 2]>,
     /// Cutter radius compensation (G40/G41/G42) and its held moves.
     comp: comp::Comp,
     ended: bool,
@@ -218,6 +226,7 @@ impl<'o> Interp<'o> {
             pos: opts.start.map(|v| v.clamp(-MAX_AXIS_UNITS, MAX_AXIS_UNITS)),
             path: PathMode::Blend(None),
             cycle: CycleMemory::default(),
+            g5_tangent: None,
             comp: comp::Comp::new(),
             ended: false,
         };

@@ -20,7 +20,7 @@ use crate::gcode::unsupported;
 pub(crate) enum Group {
     /// G4 G10 G28 G28.1 G30 G30.1 G53 G92 G92.1 G92.2 G92.3.
     NonModal,
-    /// G0 G1 G2 G3 G73 G80 G81 G82 G83 G85 G89.
+    /// G0 G1 G2 G3 G5 G5.1 G73 G80 G81 G82 G83 G85 G89.
     Motion,
     /// G17 G18 G19.
     Plane,
@@ -95,7 +95,7 @@ pub(crate) fn code_name(letter: char, tenths: i32) -> String {
 pub(crate) fn group_of(letter: char, tenths: i32) -> Result<Group, String> {
     use Group::*;
     Ok(match (letter, tenths) {
-        ('G', 0 | 10 | 20 | 30 | 730 | 800 | 810 | 820 | 830 | 850 | 890) => Motion,
+        ('G', 0 | 10 | 20 | 30 | 50 | 51 | 730 | 800 | 810 | 820 | 830 | 850 | 890) => Motion,
         ('G', 170 | 180 | 190) => Plane,
         ('G', 900 | 910) => Distance,
         ('G', 901 | 911) => ArcDistance,
@@ -120,8 +120,6 @@ pub(crate) fn group_of(letter: char, tenths: i32) -> Result<Group, String> {
 /// Why code `letter` `tenths`, which is in no group here, is refused.
 fn refusal(letter: char, tenths: i32) -> String {
     let feature = match (letter, tenths) {
-        ('G', 50) => "G5 cubic splines",
-        ('G', 51) => "G5.1 quadratic B-splines",
         ('G', 52) => "G5.2 NURBS blocks",
         ('G', 53) => "G5.3 NURBS blocks",
         ('G', 70) => "G7 lathe diameter mode",

@@ -34,6 +34,8 @@ impl Interp<'_> {
             Motion::Linear => "G1",
             Motion::Arc { clockwise: true } => "G2",
             Motion::Arc { clockwise: false } => "G3",
+            Motion::Cubic => "G5",
+            Motion::Quadratic => "G5.1",
             Motion::Cycle(c) => c.name(),
         };
         let system = match self.system() {
@@ -94,6 +96,8 @@ impl Interp<'_> {
     /// command (a jog, homing): the next move starts there.
     pub fn set_position(&mut self, pose: [i64; AXES]) {
         self.pos = pose;
+        // A G5 after this is the first of a series.
+        self.g5_tangent = None;
         self.update_position_params();
     }
 }

@@ -409,6 +409,24 @@ impl Interp<'_> {
         Ok(())
     }
 
+    /// Refuses a spline (G5, G5.1: `name`) while compensation is on, as LinuxCNC
+    /// ("Cannot convert spline with cutter radius compensation"). Right after G40 a
+    /// spline leaves from the offset point, as a straight move does (its offsets are
+    /// relative), and an arc may follow it.
+    pub(crate) fn comp_spline_allowed(&mut self, name: &str, col: u32) -> Res<()> {
+        if self.comp.on() {
+            return fail(
+                col,
+                format!(
+                    "{name} while cutter radius compensation is on: splines cannot be \
+                     compensated (G40 first)"
+                ),
+            );
+        }
+        self.comp.arc_not_allowed = false;
+        Ok(())
+    }
+
     /// An arc of line `line` (already checked as programmed) about `centre`:
     /// compensated when compensation is on, emitted as it is otherwise (`clockwise`,
     /// `turns`: as for [`Canon::Arc`]).
