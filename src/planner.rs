@@ -305,7 +305,7 @@ impl Lookahead {
         let requested = feed * 2.0;
         let (v_limit, accel) = match kind {
             Kind::Rapid | Kind::Feed => {
-                match limits_along(&self.end, &path, requested, machine, kin) {
+                match limits_along(&self.end, &path, requested, None, machine, kin) {
                     Ok(l) => l,
                     Err(e) => {
                         kind = Kind::Unreachable(e);
@@ -361,11 +361,21 @@ impl Lookahead {
                 });
                 let prev_v = prev.as_ref().map_or(0.0, |p| p.feed.min(p.v_limit));
                 let want = prev_v.min(feed.min(v_limit)).min(limit);
+                // Blocks shorter than a tick's travel put several corners into one
+                // tick, whose turns add up: at v over blocks of length L, v/L of them,
+                // so the share a corner needs is v·n·max(1, v/L), and v ≤ √(ρ·L/n)
+                // as well as ρ/n.
+                let short = prev
+                    .as_ref()
+                    .map_or(path.length, |p| p.path.length.min(path.length))
+                    .max(1) as f32;
+                let per_tick = fmax(1.0, want / short);
                 // max/min rather than clamp: clamp's panic message formats floats, which
                 // costs the firmware kilobytes of formatting code.
                 #[allow(clippy::manual_clamp)]
-                let rho = (want * n * 1.0001).max(0.0).min(0.5);
-                ((rho / n).min(limit), rho)
+                let rho = (want * n * per_tick * 1.0001).max(0.0).min(0.5);
+                let v = fmin(rho / n, sqrtf(rho * short / n));
+                (v.min(limit), rho)
             }
         };
         if rho > 0.0 {
@@ -492,7 +502,70 @@ pub fn plan_into(
     let out = &mut out[..blocks.len()];
     reverse_pass(out, 100, false);
     forward_pass(out, 0.0);
+    if refine_splines(out, 0, start, machine, kin) {
+        reverse_pass(out, 100, false);
+        forward_pass(out, 0.0);
+    }
     Ok(())
+}
+
+/// A second look at the splines once the passes know how fast each one runs
+/// (`blocks[from..]`; `start`: where `blocks[0]` starts): a spline's bend was given
+/// the acceleration share it needs at its feed ([`split`]), but one that runs slower
+/// (a neighbour's corner, a bend further on, the stop at the end) needs less of it;
+/// its limits are found again for the speed it reaches, which gives its profile the
+/// rest, and its hard speed limit becomes that speed. Nothing else changes; true when
+/// any spline changed (the passes are then run again).
+pub fn refine_splines(
+    blocks: &mut [PlanBlock],
+    from: usize,
+    start: [i64; AXES],
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+) -> bool {
+    let mut changed = false;
+    for i in from..blocks.len() {
+        let b = &blocks[i];
+        if b.path.form != Form::Spline || b.kind != Kind::Feed {
+            continue;
+        }
+        let next = blocks.get(i + 1);
+        let exit = next
+            .filter(|n| matches!(n.kind, Kind::Rapid | Kind::Feed))
+            .map_or(0.0, |n| n.entry);
+        let top = fmin(cap(b, 100, false), b.v_limit);
+        let peak = fmin(
+            sqrtf((b.entry * b.entry + exit * exit) / 2.0 + b.accel * b.length()),
+            top,
+        );
+        if peak >= 0.98 * top || peak <= 0.0 {
+            continue;
+        }
+        let from_pose = if i == 0 {
+            start
+        } else {
+            blocks[i - 1].path.end
+        };
+        let Ok((v, a)) = limits_along(
+            &from_pose,
+            &b.path,
+            b.feed * 2.0,
+            Some(peak * 1.01),
+            machine,
+            kin,
+        ) else {
+            continue;
+        };
+        let rho_out = next.map_or(0.0, |n| n.rho_in);
+        let b = &mut blocks[i];
+        if a > b.accel_full {
+            b.v_limit = fmin(b.v_limit, v);
+            b.accel_full = a;
+            b.accel = a * (1.0 - fmax(b.rho_in, rho_out));
+            changed = true;
+        }
+    }
+    changed
 }
 
 /// Motion time of planned blocks (as [`plan_into`] leaves them) at 100 % feed, ticks:
@@ -945,6 +1018,7 @@ fn limits_along(
     start: &[i64; AXES],
     path: &Path,
     feed: f32,
+    bend_speed: Option<f32>,
     machine: &MachineConfig,
     kin: &MachineKinematics,
 ) -> Result<(f32, f32), Unreachable> {
@@ -956,10 +1030,10 @@ fn limits_along(
     // sized for the programmed speed: a curve that stands for chords keeps their
     // acceleration, and the override cannot take it faster than its bend allows);
     // and on a spline the bend may take up to [`SPLINE_BEND_SHARE`].
-    let bend_feed = if path.form == Form::Spline {
-        feed / 2.0
-    } else {
-        feed
+    let bend_feed = match bend_speed {
+        Some(v) => v,
+        None if path.form == Form::Spline => feed / 2.0,
+        None => feed,
     };
     let bend_most = if path.form == Form::Spline {
         SPLINE_BEND_SHARE

@@ -90,8 +90,9 @@ pub fn compile_text_with(
     compile_compressed(text, name, machine, start, tools, None).map(|c| c.blocks)
 }
 
-/// [`compile_text_with`], merging chords into curves with `compress`.
-fn compile_compressed(
+/// [`compile_text_with`], merging chords into curves with `compress` (the settings
+/// are completed with `machine`'s figures, as for a program file).
+pub fn compile_compressed(
     text: &str,
     name: &str,
     machine: &MachineConfig,

@@ -29,7 +29,8 @@ pub use commands::{
     connect, home_command, jog_command, mdi, move_and_wait, prepare, state_text, with_link,
 };
 pub use compile::{
-    compile_job, compile_program, compile_text, compile_text_with, machine_axes, Compiled,
+    compile_compressed, compile_job, compile_program, compile_text, compile_text_with,
+    machine_axes, Compiled,
 };
 pub use report::{
     describe_alarm, pose_text, status_json, CompressionSummary, LinesExecuted, PreflightSummary,

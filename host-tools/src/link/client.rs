@@ -79,6 +79,44 @@ pub struct ClientStats {
     /// s: what an ideal controller under the same limits takes (jerk smoothing not
     /// counted).
     pub plan_time_s: f64,
+    /// Motion the controller held while the last job streamed (see [`Buffered`]).
+    pub buffered: Buffered,
+}
+
+/// The motion a controller held (its status's `buffered_ms`) while the host still
+/// had blocks of the job to send and the machine ran, from [`Buffered::SETTLE_MS`] of
+/// motion on (the start fills the queue first): what the stream kept in hand in the
+/// steady part of a job. Zero samples for a job too short to have one.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct Buffered {
+    /// Status reports counted.
+    pub samples: u64,
+    /// Least buffered, ms.
+    pub min_ms: u32,
+    /// Tenth percentile, ms.
+    pub p10_ms: u32,
+    /// Median, ms.
+    pub median_ms: u32,
+}
+
+impl Buffered {
+    /// Motion after which the queue counts as filled, ms.
+    pub const SETTLE_MS: u64 = 500;
+
+    /// The figures of `samples` (ms).
+    pub fn of(samples: &mut [u32]) -> Self {
+        samples.sort_unstable();
+        let at = |q: f64| samples[((samples.len() - 1) as f64 * q) as usize];
+        if samples.is_empty() {
+            return Self::default();
+        }
+        Self {
+            samples: samples.len() as u64,
+            min_ms: samples[0],
+            p10_ms: at(0.1),
+            median_ms: at(0.5),
+        }
+    }
 }
 
 /// What the job runner tells its caller, and asks it.

@@ -63,7 +63,7 @@ mod transport;
 mod window;
 
 use client::PendingControl;
-pub use client::{ClientStats, JobEnd, JobHooks, LinkView, NakCounts, NoHooks};
+pub use client::{Buffered, ClientStats, JobEnd, JobHooks, LinkView, NakCounts, NoHooks};
 pub use error::LinkError;
 pub use stream::{estimate_ms, TAIL_AFTER};
 pub use transport::{is_timeout, PortTransport, SimClock, Transport};

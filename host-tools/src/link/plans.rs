@@ -11,16 +11,18 @@
 //! takes part of the acceleration of the block before it, which is already sent.
 //!
 //! Fed all at once, this is [`pkmc::planner::plan_into`] exactly: the same calls in the
-//! same order.
+//! same order (the passes, the second look at the splines, the passes again).
 
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::kinematics::MachineKinematics;
 use pkmc::math::sqrtf;
-use pkmc::planner::{forward_pass, reverse_pass, Lookahead, PlanBlock};
+use pkmc::planner::{forward_pass, refine_splines, reverse_pass, Lookahead, PlanBlock};
 use pkmc::protocol::{Block, PlannedBlock};
 
 pub(super) struct Plans {
     la: Lookahead,
+    /// Where the job starts.
+    start: [i64; AXES],
     /// One per block, as the passes leave them.
     work: Vec<PlanBlock>,
     /// What is (or will be) streamed: `planned[i]` is fixed once block `i` was sent.
@@ -32,6 +34,7 @@ impl Plans {
         let smoothing = pkmc::interp::window_of(machine.motion.smoothing_ticks as u32);
         Self {
             la: Lookahead::new(start, smoothing),
+            start,
             work: Vec::new(),
             planned: Vec::new(),
         }
@@ -70,11 +73,16 @@ impl Plans {
                 sqrtf(e * e + 2.0 * sent.accel * sent.length())
             }
         };
-        let tail = &mut self.work[frozen..];
-        reverse_pass(tail, 100, false);
-        if let Some(first) = tail.first() {
-            let entry = first.entry.min(first_entry);
-            forward_pass(tail, entry);
+        let passes = |tail: &mut [PlanBlock]| {
+            reverse_pass(tail, 100, false);
+            if let Some(first) = tail.first() {
+                let entry = first.entry.min(first_entry);
+                forward_pass(tail, entry);
+            }
+        };
+        passes(&mut self.work[frozen..]);
+        if refine_splines(&mut self.work, frozen, self.start, machine, kin) {
+            passes(&mut self.work[frozen..]);
         }
         for (i, p) in self.work.iter().enumerate().skip(frozen) {
             self.planned[i].plan = p.plan();

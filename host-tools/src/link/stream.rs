@@ -93,6 +93,7 @@ impl<T: Transport> Link<T> {
         self.append(&mut fed, &mut job, blocks)?;
         let result = self.job_loop(&mut fed, hooks, &mut job);
         self.stats.plan_time_s = fed.plans.time_s();
+        self.stats.buffered = super::Buffered::of(&mut job.buffered_samples);
         self.next_seq = job.seq_of(job.acked.max(job.high));
         result
     }
@@ -434,6 +435,12 @@ impl<T: Transport> Link<T> {
         job.free = s.free_slots as usize;
         job.free_bends = s.free_bends as usize;
         job.buffered_ms = s.buffered_ms;
+        if job.sent < total
+            && s.state == State::Running
+            && s.motion_ticks * 1000 >= super::Buffered::SETTLE_MS * pkmc::units::TICK_HZ as u64
+        {
+            job.buffered_samples.push(s.buffered_ms);
+        }
         hooks.status(s);
         if s.state == State::Hold
             && s.speed == 0

@@ -25,6 +25,8 @@ pub(super) struct Ending {
 /// Book-keeping of one streamed job: indices into the job's blocks.
 pub(super) struct JobState {
     pub(super) base_seq: u16,
+    /// `buffered_ms` of the statuses of the steady part ([`super::Buffered`]).
+    pub(super) buffered_samples: Vec<u32>,
     /// Blocks accepted (cumulatively acknowledged).
     pub(super) acked: usize,
     /// Next block to send.
@@ -60,6 +62,7 @@ impl JobState {
             end_sent: false,
             free_bends: status.free_bends as usize,
             arcs_before: Vec::new(),
+            buffered_samples: Vec::new(),
             buffered_ms: status.buffered_ms,
             window: (capacity as usize).max(MIN_WINDOW),
             capacity: (capacity as usize).max(MIN_WINDOW),

@@ -44,7 +44,7 @@ use pkmc::config::MachineConfig;
 use pkmc::controller::Controller;
 use pkmc::protocol::Control;
 use pkmc::protocol::State;
-use pkmc_host::job::{compile_text, prepare};
+use pkmc_host::job::{compile_compressed, prepare};
 use pkmc_host::link::{JobEnd, JobHooks, Link, LinkOptions, LinkView, NoHooks, Transport};
 use pkmc_host::sim::Simulator;
 use pkmc_host::sim::{FaultKind, Injection};
@@ -263,15 +263,77 @@ fn sine(seg: f64, len: f64, x0: f64, z: f64, amp: f64, wave: f64) -> String {
 
 /// [`sine`] at feed `feed` mm/min.
 fn sine_at(feed: u32, seg: f64, len: f64, x0: f64, z: f64, amp: f64, wave: f64) -> String {
+    sine_blend(feed, "G64", seg, len, x0, z, amp, wave)
+}
+
+/// [`sine_at`] in path mode `mode` (`G64 P0.01` lets `nc-send` merge the segments into
+/// curves).
+#[allow(clippy::too_many_arguments)]
+fn sine_blend(
+    feed: u32,
+    mode: &str,
+    seg: f64,
+    len: f64,
+    x0: f64,
+    z: f64,
+    amp: f64,
+    wave: f64,
+) -> String {
     let k = std::f64::consts::TAU / wave;
     let y = |x: f64| amp * (k * (x - x0)).sin();
-    let mut g = format!("G21 G90 G64\nG0 X{} Y0 Z{}\nF{feed}\n", f(x0), f(z));
+    let mut g = format!("G21 G90 {mode}\nG0 X{} Y0 Z{}\nF{feed}\n", f(x0), f(z));
     let mut x = x0;
     while x < x0 + len {
         // The step in X whose chord is `seg` long, to first order.
         let slope = amp * k * (k * (x - x0)).cos();
         x = (x + seg / (1.0 + slope * slope).sqrt()).min(x0 + len);
         g += &format!("G1 X{} Y{}\n", f(x), f(y(x)));
+    }
+    g + "M2\n"
+}
+
+/// The same sine as [`sine`] (0.05 mm segments are not needed: these are the
+/// curves themselves) as a chain of `G5` cubics, one per `step` mm of X, each
+/// leaving along the sine's tangent, alternating with `G5.1` parabolas (one per
+/// `step` mm: the control point where the two end tangents meet) over the second half.
+fn g5_sine(step: f64, len: f64, x0: f64, z: f64, amp: f64, wave: f64) -> String {
+    let k = std::f64::consts::TAU / wave;
+    let y = |x: f64| amp * (k * (x - x0)).sin();
+    let dy = |x: f64| amp * k * (k * (x - x0)).cos();
+    let mut g = format!("G21 G90 G64 G17\nG0 X{} Y0 Z{}\nF6000\n", f(x0), f(z));
+    let n = (len / step).round() as usize;
+    for i in 0..n {
+        let (a, b) = (x0 + i as f64 * step, x0 + (i + 1) as f64 * step);
+        let h = step / 3.0;
+        if i < n / 2 {
+            // Control points a third of the step along each end's tangent.
+            g += &format!(
+                "G5 X{} Y{} I{} J{} P{} Q{}\n",
+                f(b),
+                f(y(b)),
+                f(h),
+                f(h * dy(a)),
+                f(-h),
+                f(-h * dy(b))
+            );
+        } else {
+            // Where the tangents at a and b meet (their slopes differ; parallel ones
+            // give the midpoint).
+            let (sa, sb) = (dy(a), dy(b));
+            let xm = if (sa - sb).abs() > 1e-9 {
+                (y(b) - y(a) + sa * a - sb * b) / (sa - sb)
+            } else {
+                (a + b) / 2.0
+            };
+            let xm = xm.clamp(a, b);
+            g += &format!(
+                "G5.1 X{} Y{} I{} J{}\n",
+                f(b),
+                f(y(b)),
+                f(xm - a),
+                f(sa * (xm - a))
+            );
+        }
     }
     g + "M2\n"
 }
@@ -344,7 +406,7 @@ pub fn programs() -> Vec<Program> {
                 name: format!("{tag}_{what}"),
                 machine: m,
                 text,
-                events: what == "events",
+                events: what.ends_with("events"),
             })
         };
         add("seg0.05mm", sine(0.05, SINE_MM, x0, z, 5.0, 40.0));
@@ -354,6 +416,17 @@ pub fn programs() -> Vec<Program> {
         add("events", sine(0.05, SINE_MM, x0, z, 5.0, 40.0));
         add("seg1mm", sine(1.0, SINE_MM, x0, z, 5.0, 40.0));
         add("seg2mm", sine(2.0, SINE_MM, x0, z, 5.0, 40.0));
+        // The same sine in G64 P0.01: `nc-send` streams it as curves; and a chain of
+        // G5 cubics and G5.1 parabolas.
+        add(
+            "curves0.05mm",
+            sine_blend(6000, "G64 P0.01", 0.05, SINE_MM, x0, z, 5.0, 40.0),
+        );
+        add("g5", g5_sine(2.0, SINE_MM, x0, z, 5.0, 40.0));
+        add(
+            "curves_events",
+            sine_blend(6000, "G64 P0.01", 0.05, SINE_MM, x0, z, 5.0, 40.0),
+        );
         add("arcs", arcs(ARCS, 5.0, 20.0, x0, z));
         let angles: Box<dyn Fn(f64) -> String> = if m == 0 {
             Box::new(|t: f64| {
@@ -448,7 +521,18 @@ pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
             file.display()
         ));
     }
-    let blocks = compile_text(&p.text, &p.name, &machine, machine.home).map_err(|e| e.message)?;
+    // As `nc-send` compiles a file: runs of short moves in G64 P merged into curves.
+    let settings = pkmc_host::gcode::compress::Settings::default();
+    let blocks = compile_compressed(
+        &p.text,
+        &p.name,
+        &machine,
+        machine.home,
+        &Default::default(),
+        Some(&settings),
+    )
+    .map_err(|e| e.message)?
+    .blocks;
     let mut sim = Simulator::new(machine.clone()).map_err(|e| format!("{e:#}"))?;
     if p.events {
         sim.inject(&[Injection {

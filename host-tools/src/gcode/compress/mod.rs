@@ -83,7 +83,7 @@ impl Default for Settings {
             fit_share: 0.95,
             max_chords: 400,
             min_speed_ratio: 0.5,
-            max_turn_deg: 3.0,
+            max_turn_deg: 8.0,
             tangent_reach: 3.0,
             reweights: 4,
             free_gain: 1.2,
