@@ -66,7 +66,7 @@ pub enum Shape {
     /// distance, u = s / length, where `length` is the largest |dP/du| over X Y Z (so
     /// the tool never moves faster than the path speed).
     Spline {
-        /// ⌊2⁶⁴ / length⌋, so that u (Q24) = (s·rate) ≫ 56 for s in nm Q16 (no
+        /// ⌊2⁶⁴ / length⌋, so that u (Q32) = (s·rate) ≫ 48 for s in nm Q16 (no
         /// division per tick). Sent as 8 bytes.
         #[serde(with = "fixed_width::u64_le")]
         rate: u64,

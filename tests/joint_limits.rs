@@ -153,3 +153,121 @@ fn a_joint_limit_tighter_than_the_feed_is_what_binds() {
         "peak {peak} nm/tick, limit {limit}"
     );
 }
+
+/// A spline block to `target` from `from`: cubic (control offsets a fraction of the
+/// chord, each way) or quadratic.
+fn spline_to(from: &[i64; AXES], target: [i64; AXES], k: &[i64; 4], cubic: bool) -> Motion {
+    let chord: [i64; AXES] = core::array::from_fn(|i| target[i] - from[i]);
+    // Offsets in X Y Z only, as G5 and the compressor make them; A B C move with
+    // their ends' straight parameter (c1 = Δ/3, c2 = −Δ/3 for a cubic, c = Δ/2 for a
+    // quadratic) so that they stay within their travel.
+    let side = |f: i64, g: i64| -> [i64; AXES] {
+        core::array::from_fn(|i| match i {
+            0 => chord[0] * f / 8 - chord[1] * g / 8,
+            1 => chord[1] * f / 8 + chord[0] * g / 8,
+            2 => chord[2] * f / 8,
+            _ => 0,
+        })
+    };
+    if cubic {
+        let (a, b) = (side(k[0], k[1]), side(k[2], k[3]));
+        Motion::Cubic {
+            c1: core::array::from_fn(|i| if i < 3 { a[i] } else { chord[i] / 3 }),
+            c2: core::array::from_fn(|i| if i < 3 { -b[i] } else { -chord[i] / 3 }),
+        }
+    } else {
+        let a = side(k[0] + 4, k[1]);
+        Motion::Quadratic {
+            c: core::array::from_fn(|i| if i < 3 { a[i] } else { chord[i] / 2 }),
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+    /// Spline blocks (cubic and quadratic, blended or not) on the H-4 whose joints
+    /// bind: no joint and no Cartesian axis exceeds its speed or acceleration, the
+    /// motion is continuous across blocks, and the last block ends exactly on its
+    /// target.
+    #[test]
+    fn splines_keep_every_joint_and_axis_limit_and_end_exactly(
+        poses in prop::collection::vec(pose_strategy(), 2..6),
+        shape in prop::collection::vec(prop::array::uniform4(1i64..=4), 6),
+        cubic in prop::collection::vec(any::<bool>(), 6),
+        feeds in prop::collection::vec(5i64..=150, 6),
+        blend in any::<bool>(),
+    ) {
+        let m = h4_tight();
+        let kin = MachineKinematics::new(&m);
+        let mut q = [0i64; MAX_JOINTS];
+        let start = MachineConfig::h4_table().home;
+        let mut from = start;
+        let mut blocks = Vec::new();
+        for (i, p) in poses.iter().enumerate() {
+            let chord = ((0..3).map(|k| ((p[k] - from[k]) as f64).powi(2)).sum::<f64>()).sqrt();
+            prop_assume!(chord > 1e5);
+            let b = Block {
+                line: i as u32 + 1,
+                motion: spline_to(&from, *p, &shape[i], cubic[i]),
+                target: *p,
+                feed: feeds[i] * NM_PER_MM,
+                tolerance_nm: if blend { 10_000 } else { 0 },
+            };
+            // The whole curve within reach.
+            let path = pkmc::geometry::Path::new(&b, &from).unwrap();
+            let mut at = [0i64; AXES];
+            for k in 0..=40 {
+                path.pose_at(&from, (path.length << 16) / 40 * k, &mut at);
+                prop_assume!(kin.inverse_checked(&at, &m.joints, &mut q).is_ok());
+            }
+            blocks.push(b);
+            from = *p;
+        }
+        let mut c = Controller::new(m.clone()).unwrap();
+        c.unlock();
+        prop_assert_eq!(*c.pose(), start);
+        c.receive(&frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id(), host: 1 }));
+        for (i, b) in common::planned(&m, *c.pose(), 1, &blocks).into_iter().enumerate() {
+            c.receive(&frame(i as u16 + 1, &HostMsg::Block(b)));
+        }
+        let n = m.joints.len();
+        let t = 1.0 / TICK_HZ as f64;
+        let mut joints: Vec<[i64; MAX_JOINTS]> = vec![*c.joints()];
+        let mut pose: Vec<[i64; AXES]> = vec![*c.pose()];
+        let mut sink = [0u8; 4096];
+        for tick_no in 0..200_000 {
+            if tick_no % 100 == 0 {
+                c.receive(&frame(0, &HostMsg::StatusRequest));
+            }
+            c.tick(&Inputs::default());
+            while c.transmit(&mut sink) > 0 {}
+            joints.push(*c.joints());
+            pose.push(*c.pose());
+            if c.state() != State::Running {
+                break;
+            }
+        }
+        prop_assert_eq!(c.state(), State::Idle, "alarm: {:?}", c.status().alarm);
+        prop_assert_eq!(c.pose(), poses.last().unwrap());
+        let check = |x: Vec<f64>, v_lim: f64, a_lim: f64, what: &str| -> Result<(), TestCaseError> {
+            let v_max = v_lim * t * (1.0 + 1e-6) + 2.0;
+            let a_max = a_lim * t * t * 1.02 + 4.0;
+            for (k, w) in x.windows(3).enumerate() {
+                let (v, a) = (w[2] - w[1], w[2] - 2.0 * w[1] + w[0]);
+                prop_assert!(v.abs() <= v_max, "{} tick {}: speed {} > {}", what, k, v, v_max);
+                prop_assert!(a.abs() <= a_max, "{} tick {}: accel {} > {}", what, k, a, a_max);
+            }
+            Ok(())
+        };
+        for j in 0..n {
+            let lim = m.joints[j].limits;
+            check(joints.iter().map(|h| h[j] as f64).collect(), lim.max_velocity as f64, lim.max_accel as f64, &format!("joint {j}"))?;
+        }
+        for i in 0..AXES {
+            let lim = m.axes[i];
+            if lim.max_velocity > 0 {
+                check(pose.iter().map(|h| h[i] as f64).collect(), lim.max_velocity as f64, lim.max_accel as f64, &format!("axis {i}"))?;
+            }
+        }
+    }
+}

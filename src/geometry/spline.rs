@@ -13,11 +13,13 @@
 //! speed is then |dP/ds| = |dP/du| / S ≤ 1 times the path speed everywhere: the
 //! planned path speed is an upper bound of the real one (equal where the curve is
 //! fastest), and a curve the host fitted with a near-uniform parameter runs within a
-//! few per cent of it. Per tick the controller forms u in Q24 with one multiplication
+//! few per cent of it. Per tick the controller forms u in Q32 with one multiplication
 //! by ⌊2⁶⁴/S⌋ (sent with the plan, checked without a division) and evaluates the cubic
-//! per axis by Horner's rule in 64-bit integers: the parameter's step of S·2⁻²⁴ moves
-//! the tool by at most that (6 nm on a 100 mm curve), and the end is snapped to the
-//! target.
+//! per axis by Horner's rule, each product a 64-bit coefficient times the 32-bit u
+//! as two 32 × 32-bit multiplications ([`mul_q32`]): the parameter's step of 2⁻³²
+//! moves an axis by at most |dP/du|·2⁻³² (a hundredth of a nanometre on a 100 mm
+//! curve, 7 n° on a 30° swing), far inside the planner's margin on every limit, and
+//! the end is snapped to the target.
 
 use super::{Course, Form, GeometryError};
 use crate::config::AXES;
@@ -30,12 +32,13 @@ pub struct Curve {
     pub a2: [i64; AXES],
     /// a₃ per axis, axis units.
     pub a3: [i64; AXES],
-    /// ⌊2⁶⁴ / length⌋: u (Q24) = (s·rate) ≫ 56 for s in nm Q16.
+    /// ⌊2⁶⁴ / length⌋: u (Q32) = (s·rate) ≫ 48 for s in nm Q16.
     pub rate: u64,
 }
 
 /// Largest |a₁| + |a₂| + |a₃| of any axis (2³⁹ units: 550 m, or 550° on a rotary
-/// axis): Horner's rule in Q24 then never leaves 64 bits.
+/// axis): Horner's partial sums then stay within 2³⁹, and [`mul_q32`]'s high part
+/// within 32 bits.
 pub const MAX_SPLINE_SPAN: i64 = 1 << 39;
 
 /// Shortest spline, nm (a shorter curve is sent as a line).
@@ -48,28 +51,36 @@ pub fn coefficients(
     start: &[i64; AXES],
     end: &[i64; AXES],
 ) -> Option<[[i64; AXES]; 3]> {
+    // Every input below 2³⁹ in size keeps the sums below 2⁴⁵: 64-bit arithmetic
+    // (the controller's receive path has no 128-bit products to spare).
+    let small = |x: i64| x.unsigned_abs() < MAX_SPLINE_SPAN as u64;
     let mut a = [[0i64; AXES]; 3];
     for i in 0..AXES {
-        let d = end[i] as i128 - start[i] as i128;
+        let d = end[i].wrapping_sub(start[i]);
         let (a1, a2, a3) = match motion {
-            Motion::Cubic { c1, c2 } => {
-                let (c1, c2) = (c1[i] as i128, c2[i] as i128);
+            Motion::Cubic { c1, c2 } if small(d) && small(c1[i]) && small(c2[i]) => {
+                let (c1, c2) = (c1[i], c2[i]);
                 (3 * c1, 3 * (d + c2 - 2 * c1), 3 * (c1 - c2) - 2 * d)
             }
-            Motion::Quadratic { c } => {
-                let c = c[i] as i128;
-                (2 * c, d - 2 * c, 0)
-            }
+            Motion::Quadratic { c } if small(d) && small(c[i]) => (2 * c[i], d - 2 * c[i], 0),
             _ => return None,
         };
-        if a1.abs() + a2.abs() + a3.abs() >= MAX_SPLINE_SPAN as i128 {
+        if a1.abs() + a2.abs() + a3.abs() >= MAX_SPLINE_SPAN {
             return None;
         }
-        a[0][i] = a1 as i64;
-        a[1][i] = a2 as i64;
-        a[2][i] = a3 as i64;
+        a[0][i] = a1;
+        a[1][i] = a2;
+        a[2][i] = a3;
     }
     Some(a)
+}
+
+/// (a·u) ≫ 32 rounded, for |a| < 2³⁹ and u a Q32 fraction: a's high and low words
+/// times u, two 32 × 32-bit multiplications (no 128-bit product).
+#[inline(always)]
+pub fn mul_q32(a: i64, u: u32) -> i64 {
+    let (hi, lo) = ((a >> 32) as i32, a as u32);
+    hi as i64 * u as i64 + ((lo as u64 * u as u64 + (1 << 31)) >> 32) as i64
 }
 
 /// |dP/du| over X Y Z at `u` (f64, host).
@@ -121,13 +132,13 @@ pub fn rate_of(length: i64) -> u64 {
     ((1u128 << 64) / length.max(MIN_SPLINE_NM) as u128) as u64
 }
 
-/// The spline's derivative control points per axis: dP/du is the Bézier of these
+/// The spline's derivative control points over X Y Z: dP/du is the Bézier of these
 /// (the curve's own hull bounds it); cubic: 3c₁, 3(Δ + c₂ − c₁), −3c₂; quadratic:
 /// 2c, 2(Δ − c) (the third repeats the second).
-fn hull(motion: &Motion, start: &[i64; AXES], end: &[i64; AXES]) -> [[f32; AXES]; 3] {
+fn hull(motion: &Motion, start: &[i64; AXES], end: &[i64; AXES]) -> [[f32; 3]; 3] {
     let f = crate::math::i64_to_f32;
-    let mut h = [[0f32; AXES]; 3];
-    for i in 0..AXES {
+    let mut h = [[0f32; 3]; 3];
+    for i in 0..3 {
         let d = f(end[i].wrapping_sub(start[i]));
         match motion {
             Motion::Cubic { c1, c2 } => {
@@ -172,8 +183,8 @@ impl Course {
             return bad;
         }
         let f = crate::math::i64_to_f32;
-        let norm = |v: &[f32; AXES]| crate::math::sqrtf(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-        let delta: [f32; AXES] = core::array::from_fn(|i| f(self.end[i].wrapping_sub(start[i])));
+        let norm = |v: &[f32; 3]| crate::math::sqrtf(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        let delta: [f32; 3] = core::array::from_fn(|i| f(self.end[i].wrapping_sub(start[i])));
         let h = hull(motion, start, &self.end);
         let top = h.iter().map(norm).fold(0.0, crate::math::fmax);
         let (chord, len) = (norm(&delta), f(length));
@@ -200,16 +211,15 @@ impl Course {
         s: i64,
         pose: &mut [i64; AXES],
     ) {
-        const HALF: i64 = 1 << 23;
-        let u = ((s as i128 * curve.rate as i128) >> 56) as i64;
+        let u = ((s as i128 * curve.rate as i128) >> 48).min(u32::MAX as i128) as u32;
         for i in 0..AXES {
             let (a1, a2, a3) = (self.unit[i], curve.a2[i], curve.a3[i]);
             pose[i] = if a1 | a2 | a3 == 0 {
                 start[i]
             } else {
-                let t = a2 + ((a3 * u + HALF) >> 24);
-                let t = a1 + ((t * u + HALF) >> 24);
-                start[i] + ((t * u + HALF) >> 24)
+                let t = a2 + mul_q32(a3, u);
+                let t = a1 + mul_q32(t, u);
+                start[i] + mul_q32(t, u)
             };
         }
     }
@@ -328,14 +338,14 @@ mod tests {
             let n = 400i64;
             let mut prev = start;
             let mut pose = [0; AXES];
-            // The parameter's step moves an axis by at most |dP/du|·2⁻²⁴ (X Y Z: at
-            // most length·2⁻²⁴), Horner's roundings by 1.5.
+            // The parameter's step moves an axis by at most |dP/du|·2⁻³² (X Y Z: at
+            // most length·2⁻³²), Horner's roundings by 1.5.
             let super::super::Bend::Spline(cv) = p.bend else { panic!("not a spline") };
             let step_of = |i: usize| {
                 (p.unit[i].abs() as f64 + 2.0 * cv.a2[i].abs() as f64 + 3.0 * cv.a3[i].abs() as f64)
-                    / 16_777_216.0 + 1.5
+                    / 4_294_967_296.0 + 1.5
             };
-            let step = p.length as f64 / 16_777_216.0 + 1.5;
+            let step = p.length as f64 / 4_294_967_296.0 + 1.5;
             for k in 0..=n {
                 let s = (p.length << 16) / n * k;
                 p.pose_at(&start, s, &mut pose);
@@ -359,6 +369,14 @@ mod tests {
         }
     }
 
+    proptest::proptest! {
+        #[test]
+        fn mul_q32_is_the_rounded_product(a in -(1i64 << 39) + 1..(1i64 << 39), u in proptest::num::u32::ANY) {
+            let want = ((a as i128 * u as i128 + (1i128 << 31)) >> 32) as i64;
+            proptest::prop_assert_eq!(super::mul_q32(a, u), want);
+        }
+    }
+
     #[test]
     fn a_quadratic_is_a_parabola_exactly() {
         let start = [0; AXES];
@@ -377,7 +395,7 @@ mod tests {
         let mut pose = [0; AXES];
         let half = super::host_length(&[p.unit, c.a2, c.a3]);
         assert!((half - p.length as f64).abs() <= 1.0);
-        // Find u = ½ through the rate (s = length/2 gives u within a step of ½).
+        // u = ½ through the rate (s = length/2 gives u within a step of ½).
         p.pose_at(&start, p.length << 15, &mut pose);
         assert!((pose[0] - 5_000_000).abs() <= 2, "{pose:?}");
         assert!((pose[1] - 5_000_000).abs() <= 2, "{pose:?}");
