@@ -244,6 +244,8 @@ pub struct Lookahead {
     /// End pose of the last block planned.
     pub end: [i64; AXES],
     end_tangent: [f32; AXES],
+    /// d²P/ds² at the end of the last block (splines; 0 for other paths).
+    end_bend: [f32; AXES],
     end_stops: bool,
     /// Blending tolerance of the last block planned, nm.
     end_tolerance: u32,
@@ -281,6 +283,7 @@ impl Lookahead {
         Self {
             end: pose,
             end_tangent: [0.0; AXES],
+            end_bend: [0.0; AXES],
             end_stops: true,
             end_tolerance: 0,
             smoothing,
@@ -314,6 +317,17 @@ impl Lookahead {
                 }
             }
             _ => (0.0, 1.0),
+        };
+        // With jerk limitation over w ticks the smoothed speed may exceed the
+        // profile's by a·w·T/2 (see below): a spline's bend, sized for its speed
+        // limit, would then take more than its share; its limit is lowered by that.
+        let v_limit = if path.form == Form::Spline && self.smoothing > 1 {
+            fmax(
+                v_limit - accel * self.smoothing as f32 / 2.0,
+                0.25 * v_limit,
+            )
+        } else {
+            v_limit
         };
         let start_tangent = direction(&path, 0);
         let moving = matches!(kind, Kind::Rapid | Kind::Feed);
@@ -383,6 +397,20 @@ impl Lookahead {
                 prev.accel = prev.accel_full * (1.0 - rho.max(prev.rho_in));
             }
         }
+        // Where a spline meets its neighbour its bend jumps: each axis's and joint's
+        // acceleration changes by v²·Δx″ in one tick, which jerk limitation over w
+        // ticks allows a third of its budget for (aᵢ/w per tick, as a corner's turn).
+        let start_bend = path.bend_at(0);
+        let corner = if self.smoothing > 1 && moving && corner > 0.0 {
+            let jump: [f32; AXES] = core::array::from_fn(|i| start_bend[i] - self.end_bend[i]);
+            fmin(
+                corner,
+                bend_jump_limit(&jump, &self.end, self.smoothing, machine, kin),
+            )
+        } else {
+            corner
+        };
+        self.end_bend = path.bend_at(path.length << 16);
         self.end = path.end;
         self.end_tangent = direction(&path, path.length << 16);
         self.end_stops = !moving || block.tolerance_nm == 0;
@@ -1117,6 +1145,40 @@ fn limits_along(
     }
     // Single-precision planning rounds to about 10⁻⁷: stay that far inside.
     Ok((v * LIMIT_MARGIN, a * LIMIT_MARGIN))
+}
+
+/// The speed (nm/tick) at which a jump `jump` of d²P/ds² (per nm²) at `pose` changes
+/// no axis's or joint's acceleration by more than aᵢ/w in one tick (∞ when nothing
+/// jumps; 0 where the kinematics cannot be evaluated).
+fn bend_jump_limit(
+    jump: &[f32; AXES],
+    pose: &[i64; AXES],
+    smoothing: u32,
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+) -> f32 {
+    if jump.iter().all(|j| j.abs() < 1e-20) {
+        return f32::INFINITY;
+    }
+    let w = smoothing.max(1) as f32;
+    let mut v2 = f32::INFINITY;
+    for (j, l) in jump.iter().zip(&machine.axes) {
+        if j.abs() > 1e-20 && l.max_accel > 0 {
+            v2 = v2.min(per_tick2(l.max_accel) / (w * j.abs()));
+        }
+    }
+    // The joints' jump: J·Δx″ (the rest of q″, from the Jacobian's change along the
+    // tangent, is the same on both sides of a tangent-continuous join).
+    let n = machine.joints.len();
+    let Ok(dq) = joint_rates(pose, jump, kin, n) else {
+        return 0.0;
+    };
+    for (d, jc) in dq.iter().zip(&machine.joints) {
+        if d.abs() > 1e-20 {
+            v2 = v2.min(per_tick2(jc.limits.max_accel) / (w * d.abs()));
+        }
+    }
+    sqrtf(v2)
 }
 
 /// Splits an axis's or joint's acceleration budget `amax` between the two terms of

@@ -520,10 +520,14 @@ impl Course {
                 }
             }
             (Motion::Cubic { .. } | Motion::Quadratic { .. }, &Shape::Spline { rate }) => {
-                let mut curve = Curve::default();
-                self.set_spline(&mut curve, &block.motion, start, length, rate)?;
-                *bend = Bend::Spline(curve);
-                Ok(())
+                // Written where it stays (no curve built aside and moved in).
+                if !matches!(bend, Bend::Spline(_)) {
+                    *bend = Bend::Spline(Curve::default());
+                }
+                let Bend::Spline(curve) = bend else {
+                    return bad;
+                };
+                self.set_spline(curve, &block.motion, start, length, rate)
             }
             _ => bad,
         }
@@ -641,6 +645,14 @@ impl Path {
             }
         }
         t
+    }
+
+    /// d²P/ds² at `s` (nm Q16) per axis (per nm²) for a spline; 0 for other paths.
+    pub fn bend_at(&self, s: i64) -> [f32; AXES] {
+        match &self.bend {
+            Bend::Spline(c) if self.form == Form::Spline => self.course.spline_bend(c, s),
+            _ => [0.0; AXES],
+        }
     }
 
     /// Smallest radius of curvature, nm (`None` for straight paths).

@@ -51,28 +51,44 @@ pub fn coefficients(
     start: &[i64; AXES],
     end: &[i64; AXES],
 ) -> Option<[[i64; AXES]; 3]> {
+    let mut a = [[0i64; AXES]; 3];
+    let [a1, a2, a3] = &mut a;
+    coefficients_into(motion, start, end, a1, a2, a3).then_some(a)
+}
+
+/// [`coefficients`] written into `a1`, `a2`, `a3` (the controller's course and curve,
+/// where they stay); false when out of range (they then hold some values).
+fn coefficients_into(
+    motion: &Motion,
+    start: &[i64; AXES],
+    end: &[i64; AXES],
+    a1: &mut [i64; AXES],
+    a2: &mut [i64; AXES],
+    a3: &mut [i64; AXES],
+) -> bool {
     // Every input below 2³⁹ in size keeps the sums below 2⁴⁵: 64-bit arithmetic
     // (the controller's receive path has no 128-bit products to spare).
     let small = |x: i64| x.unsigned_abs() < MAX_SPLINE_SPAN as u64;
-    let mut a = [[0i64; AXES]; 3];
     for i in 0..AXES {
         let d = end[i].wrapping_sub(start[i]);
-        let (a1, a2, a3) = match motion {
+        let (b1, b2, b3) = match motion {
+            Motion::Cubic { c1, c2 } if d == 0 && c1[i] == 0 && c2[i] == 0 => (0, 0, 0),
+            Motion::Quadratic { c } if d == 0 && c[i] == 0 => (0, 0, 0),
             Motion::Cubic { c1, c2 } if small(d) && small(c1[i]) && small(c2[i]) => {
                 let (c1, c2) = (c1[i], c2[i]);
                 (3 * c1, 3 * (d + c2 - 2 * c1), 3 * (c1 - c2) - 2 * d)
             }
             Motion::Quadratic { c } if small(d) && small(c[i]) => (2 * c[i], d - 2 * c[i], 0),
-            _ => return None,
+            _ => return false,
         };
-        if a1.abs() + a2.abs() + a3.abs() >= MAX_SPLINE_SPAN {
-            return None;
+        if b1.abs() + b2.abs() + b3.abs() >= MAX_SPLINE_SPAN {
+            return false;
         }
-        a[0][i] = a1;
-        a[1][i] = a2;
-        a[2][i] = a3;
+        a1[i] = b1;
+        a2[i] = b2;
+        a3[i] = b3;
     }
-    Some(a)
+    true
 }
 
 /// (a·u) ≫ 32 rounded, for |a| < 2³⁹ and u a Q32 fraction: a's high and low words
@@ -171,9 +187,16 @@ impl Course {
         rate: u64,
     ) -> Result<(), GeometryError> {
         let bad = Err(GeometryError::PlanMismatch);
-        let Some(a) = coefficients(motion, start, &self.end) else {
+        if !coefficients_into(
+            motion,
+            start,
+            &self.end,
+            &mut self.unit,
+            &mut curve.a2,
+            &mut curve.a3,
+        ) {
             return Err(GeometryError::SplineOutOfRange);
-        };
+        }
         if !(MIN_SPLINE_NM..MAX_SPLINE_SPAN).contains(&length) {
             return bad;
         }
@@ -194,12 +217,7 @@ impl Course {
         self.length = length;
         self.rotary_only = false;
         self.form = Form::Spline;
-        self.unit = a[0];
-        *curve = Curve {
-            a2: a[1],
-            a3: a[2],
-            rate,
-        };
+        curve.rate = rate;
         Ok(())
     }
 
@@ -233,6 +251,15 @@ impl Course {
                 + 2.0 * curve.a2[i] as f64 * u
                 + 3.0 * curve.a3[i] as f64 * u * u;
             (d / len) as f32
+        })
+    }
+
+    /// d²P/ds² at `s` (nm Q16) per axis (per nm²), host.
+    pub(super) fn spline_bend(&self, curve: &Curve, s: i64) -> [f32; AXES] {
+        let len = self.length.max(1) as f64;
+        let u = (s as f64 / 65_536.0 / len).clamp(0.0, 1.0);
+        core::array::from_fn(|i| {
+            ((2.0 * curve.a2[i] as f64 + 6.0 * curve.a3[i] as f64 * u) / (len * len)) as f32
         })
     }
 
