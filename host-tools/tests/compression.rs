@@ -1,0 +1,181 @@
+//! The chord compressor end to end (issue 10): the real `nc-send --check` on a
+//! 0.05 mm-chord sine at F6000 in `G64 P0.01` (5 mm high, 20 mm waves, as the
+//! micro-segment test of issue 9) and on LinuxCNC's `3D_Chips.ngc` (`G64 P0.1`, from
+//! the shared corpus; skipped without it), on the built-in Cartesian machine and on
+//! the H-4 with its table. Each program is run twice, merged and as written
+//! (`--no-compress`): the merged run streams at least ten times fewer blocks, takes no
+//! longer, and its interpolated path (every 1 ms pose of `--trace`, and the straight
+//! move between two of them) stays within the `G64 P` tolerance of the programmed
+//! polyline — measured here, independently of the report's own figure, against the
+//! moves as the front end compiles them.
+
+mod common;
+
+use common::{nc_send, ok, repo, tmp};
+use std::path::{Path, PathBuf};
+
+/// The sine of `dense_segments.rs` in `G64 P<tol>`.
+fn sine(length: f64, segment: f64, feed: u32, x0: f64, tol: f64) -> String {
+    let k = std::f64::consts::TAU / 20.0;
+    let y = |x: f64| 5.0 * (k * (x - x0)).sin();
+    let end = x0 + length;
+    let mut p = format!("G21 G90 G17 G64 P{tol}\nG0 X{x0} Y0\n");
+    let mut x = x0;
+    let mut first = true;
+    while x < end {
+        let slope = 5.0 * k * (k * (x - x0)).cos();
+        x = (x + segment / (1.0 + slope * slope).sqrt()).min(end);
+        p += &format!("G1 X{x:.4} Y{:.4}", y(x));
+        if first {
+            p += &format!(" F{feed}");
+            first = false;
+        }
+        p += "\n";
+    }
+    p + "M2\n"
+}
+
+/// The programmed path of `program` on `machine` from its home: points in mm (A B C
+/// in degrees, counted as mm), the start first.
+fn polyline(program: &Path, machine: Option<&Path>) -> Vec<[f64; 6]> {
+    let m = match machine {
+        Some(f) => pkmc_host::machine_file::load(f).expect("the machine file loads"),
+        None => pkmc::config::MachineConfig::cartesian_xyz(),
+    };
+    let blocks = pkmc_host::job::compile_program(program, &m, &Default::default())
+        .unwrap_or_else(|f| panic!("{}", f.message));
+    let to = |p: &[i64; 6]| -> [f64; 6] {
+        core::array::from_fn(|i| p[i] as f64 / if i < 3 { 1e6 } else { 1e9 })
+    };
+    let mut pts = vec![to(&m.home)];
+    for b in &blocks {
+        if !matches!(
+            b.motion,
+            pkmc::protocol::Motion::Dwell(_) | pkmc::protocol::Motion::Aux(_)
+        ) {
+            pts.push(to(&b.target));
+        }
+    }
+    pts
+}
+
+fn to_segment(q: &[f64; 6], a: &[f64; 6], b: &[f64; 6]) -> f64 {
+    let ab: Vec<f64> = (0..6).map(|i| b[i] - a[i]).collect();
+    let aq: Vec<f64> = (0..6).map(|i| q[i] - a[i]).collect();
+    let l2: f64 = ab.iter().map(|x| x * x).sum();
+    let t = if l2 > 0.0 {
+        (ab.iter().zip(&aq).map(|(x, y)| x * y).sum::<f64>() / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (0..6)
+        .map(|i| (aq[i] - t * ab[i]).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// The largest distance of the traced poses (and the midpoints between consecutive
+/// ones) from the polyline `pts`, mm: each pose against the segments near the last
+/// nearest one (the path goes forward).
+fn deviation(trace: &Path, pts: &[[f64; 6]]) -> f64 {
+    let text = std::fs::read_to_string(trace).expect("the trace was written");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    let cols: Vec<usize> = ["x", "y", "z", "a", "b", "c"]
+        .iter()
+        .map(|c| header.iter().position(|h| h == c).expect(c))
+        .collect();
+    let mut cursor = 1usize;
+    let mut worst = 0.0f64;
+    let mut prev: Option<[f64; 6]> = None;
+    for row in lines {
+        let f: Vec<&str> = row.split(',').collect();
+        let q: [f64; 6] = core::array::from_fn(|i| f[cols[i]].parse().expect("a number"));
+        let mut probe = vec![q];
+        if let Some(p) = prev {
+            probe.push(core::array::from_fn(|i| (p[i] + q[i]) / 2.0));
+        }
+        for q in probe {
+            let lo = cursor.saturating_sub(50).max(1);
+            let hi = (cursor + 400).min(pts.len());
+            let (d, at) = (lo..hi)
+                .map(|e| (to_segment(&q, &pts[e - 1], &pts[e]), e))
+                .fold(
+                    (f64::INFINITY, cursor),
+                    |a, b| if b.0 < a.0 { b } else { a },
+                );
+            cursor = at;
+            worst = worst.max(d);
+        }
+        prev = Some(q);
+    }
+    worst
+}
+
+/// Runs `program` merged and as written; checks blocks, time and deviation.
+fn merged_and_plain(program: &Path, machine: Option<&str>, tol_mm: f64, name: &str) {
+    let machine = machine.map(|m| repo().join("examples/machines").join(m));
+    let mut args: Vec<String> = vec!["--check".into(), "--report".into(), "json".into()];
+    if let Some(m) = &machine {
+        args.extend(["--machine".into(), m.display().to_string()]);
+    }
+    let run = |extra: &[&str], trace: &PathBuf| {
+        let mut a: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+        a.extend(extra);
+        a.extend([
+            "--trace",
+            trace.to_str().unwrap(),
+            program.to_str().unwrap(),
+        ]);
+        ok(&nc_send(&a))
+    };
+    let (tm, tp) = (
+        tmp(&format!("{name}_merged.csv")),
+        tmp(&format!("{name}_plain.csv")),
+    );
+    let merged = run(&[], &tm);
+    let plain = run(&["--no-compress"], &tp);
+    let c = &merged["compression"];
+    let (programmed, streamed) = (
+        c["blocks_programmed"].as_u64().unwrap(),
+        c["blocks_streamed"].as_u64().unwrap(),
+    );
+    let (t_merged, t_plain) = (
+        merged["run_time_s"].as_f64().unwrap(),
+        plain["run_time_s"].as_f64().unwrap(),
+    );
+    let dev = deviation(&tm, &polyline(program, machine.as_deref()));
+    eprintln!(
+        "{name}: {programmed} blocks programmed, {streamed} streamed; {t_merged:.3} s merged, \
+         {t_plain:.3} s as written; traced deviation {dev:.4} mm (report: {} mm)",
+        c["deviation"]["deviation_mm"]
+    );
+    assert_eq!(merged["result"], "done");
+    assert!(
+        streamed * 10 <= programmed,
+        "{name}: {streamed} of {programmed}"
+    );
+    assert!(t_merged <= t_plain, "{name}: {t_merged} s > {t_plain} s");
+    assert!(dev <= tol_mm, "{name}: deviation {dev} mm > {tol_mm} mm");
+    let reported = c["deviation"]["deviation_mm"].as_f64().unwrap();
+    assert!(reported <= tol_mm && (reported - dev).abs() < 0.2 * tol_mm + 1e-4);
+}
+
+#[test]
+fn a_fine_sine_is_merged_tenfold_within_its_tolerance_and_runs_no_slower() {
+    let p = tmp("compression_sine.ngc");
+    std::fs::write(&p, sine(180.0, 0.05, 6000, -90.0, 0.01)).unwrap();
+    merged_and_plain(&p, None, 0.01, "sine_cartesian");
+    merged_and_plain(&p, Some("h4-table.toml"), 0.01, "sine_h4");
+}
+
+#[test]
+fn three_d_chips_is_merged_tenfold_within_its_tolerance_and_runs_no_slower() {
+    let chips = repo().join("../shared/corpus/linuxcnc/3D_Chips.ngc");
+    if !chips.exists() {
+        eprintln!("skipped: {} is not there", chips.display());
+        return;
+    }
+    merged_and_plain(&chips, None, 0.1, "chips_cartesian");
+    merged_and_plain(&chips, Some("h4-table.toml"), 0.1, "chips_h4");
+}
