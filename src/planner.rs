@@ -55,13 +55,16 @@ use crate::units::TICK_HZ;
 
 /// Blocks the controller buffers: enough that the H-4's stopping distance at its top
 /// speed, along its XYZ diagonal at 346 mm/s (17.3 mm at 3464 mm/s²), fits in 0.05 mm
-/// segments with room for the link's latency; with the bends, about all the RAM allows
-/// (94 of the 96 KiB static budget, see `docs/performance.md`).
-pub const QUEUE_CAPACITY: usize = 384;
+/// segments (346 of them) with 22 to spare for the link's latency; with the bends,
+/// about all the RAM allows (94.2 of the 96 KiB static budget, see
+/// `docs/performance.md`). Programs of dense chords in `G64 P` are streamed as curves,
+/// which need far fewer.
+pub const QUEUE_CAPACITY: usize = 368;
 
-/// Arcs the controller buffers (their in-plane parts, [`Bend`]s, are kept apart from
-/// the queue's slots, which are line-sized).
-pub const BEND_CAPACITY: usize = 80;
+/// Arcs and curves the controller buffers (their curved parts, [`Bend`]s of 112 bytes
+/// on the MCU, are kept apart from the queue's slots, which are line-sized). 56 curves
+/// of a merged 0.05 mm program hold seconds of motion.
+pub const BEND_CAPACITY: usize = 56;
 
 /// Factor applied to every planned limit so that single-precision rounding cannot
 /// take a joint past its own limit.

@@ -304,7 +304,7 @@ pub fn check(
     let compiled = compile_job(program, machine, &opts.tools, opts.compress.as_ref())?;
     let blocks = &compiled.blocks;
     let statics = statics_gate(blocks, machine, &program.display().to_string(), opts)?;
-    let pre = crate::analysis::preflight::check(&blocks, machine, machine.home);
+    let pre = crate::analysis::preflight::check(blocks, machine, machine.home);
     let sim = setup.simulator(machine.clone(), exit::BAD_INPUT)?;
     let recorder = std::rc::Rc::new(std::cell::RefCell::new(Recorder::new(
         machine.joints.len(),

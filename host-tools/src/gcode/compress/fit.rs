@@ -89,7 +89,7 @@ pub(super) fn fit(p: &[V], t0: &V, t1: &V, g: &Goal, s: &Settings) -> Option<(V,
             }
         }
         if let Some(even) = accept(&c, p, &v, g, s) {
-            if best.as_ref().map_or(true, |b| even > b.0) {
+            if best.as_ref().is_none_or(|b| even > b.0) {
                 best = Some((even, c[1], c[2]));
             }
         }

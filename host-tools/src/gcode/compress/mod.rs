@@ -270,7 +270,7 @@ fn fit_run(run: &[Block], first: usize, pts: &[V], g: &Goal, s: &Settings, out: 
             );
             if let Some(o) = farthest(pts, &t, a, None, g, s) {
                 let turn_ok = dot(&l, &unit(&sub(&o.1, &pts[a]))) >= own.min(1.0);
-                if turn_ok && found.as_ref().map_or(true, |f| o.0 > f.0) {
+                if turn_ok && found.as_ref().is_none_or(|f| o.0 > f.0) {
                     found = Some(o);
                 }
             }
