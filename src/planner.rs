@@ -433,18 +433,13 @@ impl Lookahead {
     }
 }
 
-/// The unit direction of `path` at `s` (nm Q16): its tangent, which a spline's
-/// parameter makes shorter than 1 where the curve is slower than its fastest point,
-/// scaled to unit length over X Y Z (corners compare directions).
+/// The velocity per unit of path speed at `s` (nm Q16) along `path`, dP/ds: a line's
+/// or an arc's unit tangent, a spline's tangent scaled by |dP/du|/length (at most 1).
+/// Corners compare these: where two splines meet with one direction but different
+/// |dP/ds|, the tool's speed jumps by the difference at the join, which the corner
+/// limits as it limits a turn.
 fn direction(path: &Path, s: i64) -> [f32; AXES] {
-    let mut t = path.tangent_at(s);
-    if path.form == Form::Spline {
-        let n = sqrtf(t[..3].iter().map(|x| x * x).sum::<f32>());
-        if n > 1e-12 {
-            t.iter_mut().for_each(|x| *x /= n);
-        }
-    }
-    t
+    path.tangent_at(s)
 }
 
 /// What a block does, given its geometry (a move of length 0 is a dwell of 0 ticks).

@@ -7,7 +7,11 @@
 //! longer, and its interpolated path (every 1 ms pose of `--trace`, and the straight
 //! move between two of them) stays within the `G64 P` tolerance of the programmed
 //! polyline — measured here, independently of the report's own figure, against the
-//! moves as the front end compiles them.
+//! moves as the front end compiles them, and no axis or joint accelerates harder than
+//! its limit (second differences of the trace). On the same machines with jerk limitation
+//! (`[motion] profile = "jerk-limited"`), the merged sine keeps every axis's and
+//! joint's acceleration and jerk within the machine's limits (second and third
+//! differences of the trace) and takes no longer than as written.
 
 mod common;
 
@@ -167,6 +171,33 @@ fn a_fine_sine_is_merged_tenfold_within_its_tolerance_and_runs_no_slower() {
     std::fs::write(&p, sine(180.0, 0.05, 6000, -90.0, 0.01)).unwrap();
     merged_and_plain(&p, None, 0.01, "sine_cartesian");
     merged_and_plain(&p, Some("h4-table.toml"), 0.01, "sine_h4");
+    // Merged, no axis and no joint accelerates harder than its limit (trapezoids: the
+    // jerk of these machines is not limited).
+    for (trace, limits) in [
+        (
+            "sine_cartesian_merged.csv",
+            &[("x", 1000.0), ("y", 1000.0)][..],
+        ),
+        (
+            "sine_h4_merged.csv",
+            &[
+                ("x", 2000.0),
+                ("y", 2000.0),
+                ("q1", 5000.0),
+                ("q2", 5000.0),
+                ("q3", 5000.0),
+                ("q4", 5000.0),
+            ][..],
+        ),
+    ] {
+        let cols: Vec<&str> = limits.iter().map(|(c, _)| *c).collect();
+        for ((c, a, _), (_, lim)) in accel_and_jerk(&tmp(trace), &cols).iter().zip(limits) {
+            assert!(
+                *a <= lim * 1.002 + 4.0,
+                "{trace} {c}: acceleration {a} > {lim}"
+            );
+        }
+    }
 }
 
 #[test]
@@ -178,4 +209,104 @@ fn three_d_chips_is_merged_tenfold_within_its_tolerance_and_runs_no_slower() {
     }
     merged_and_plain(&chips, None, 0.1, "chips_cartesian");
     merged_and_plain(&chips, Some("h4-table.toml"), 0.1, "chips_h4");
+}
+
+/// The largest |second| and |third| difference of each named trace column, per s² and
+/// s³ (1 ms period).
+fn accel_and_jerk(trace: &Path, cols: &[&str]) -> Vec<(String, f64, f64)> {
+    let text = std::fs::read_to_string(trace).expect("the trace was written");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    let rows: Vec<Vec<f64>> = lines
+        .map(|r| r.split(',').map(|v| v.parse().expect("a number")).collect())
+        .collect();
+    cols.iter()
+        .map(|c| {
+            let i = header.iter().position(|h| h == c).expect(c);
+            let v: Vec<f64> = rows.iter().map(|r| r[i]).collect();
+            let a = v
+                .windows(3)
+                .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs() * 1e6)
+                .fold(0.0, f64::max);
+            let j = v
+                .windows(4)
+                .map(|w| (w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0]).abs() * 1e9)
+                .fold(0.0, f64::max);
+            (c.to_string(), a, j)
+        })
+        .collect()
+}
+
+#[test]
+fn under_jerk_limitation_the_merged_sine_keeps_every_acceleration_and_jerk_limit() {
+    let p = tmp("compression_jerk_sine.ngc");
+    std::fs::write(&p, sine(180.0, 0.05, 6000, -90.0, 0.01)).unwrap();
+    // (machine file, jerk mm/s³, columns with their acceleration limits, mm/s²)
+    let cases: [(&str, f64, &[(&str, f64)]); 2] = [
+        (
+            "cartesian-xyz.toml",
+            200_000.0,
+            &[("x", 1000.0), ("y", 1000.0), ("q1", 1000.0), ("q2", 1000.0)],
+        ),
+        (
+            "h4-table.toml",
+            500_000.0,
+            &[
+                ("x", 2000.0),
+                ("y", 2000.0),
+                ("q1", 5000.0),
+                ("q2", 5000.0),
+                ("q3", 5000.0),
+                ("q4", 5000.0),
+            ],
+        ),
+    ];
+    for (file, jerk, limits) in cases {
+        let text = std::fs::read_to_string(repo().join("examples/machines").join(file)).unwrap();
+        assert!(
+            !text.contains("[motion]"),
+            "{file} already has a [motion] table"
+        );
+        let m = tmp(&format!("jerk_{file}"));
+        std::fs::write(
+            &m,
+            format!("{text}\n[motion]\nprofile = \"jerk-limited\"\njerk = {jerk}\n"),
+        )
+        .unwrap();
+        let run = |extra: &[&str], trace: &Path| {
+            let mut a = vec![
+                "--check",
+                "--report",
+                "json",
+                "--machine",
+                m.to_str().unwrap(),
+            ];
+            a.extend(extra);
+            a.extend(["--trace", trace.to_str().unwrap(), p.to_str().unwrap()]);
+            ok(&nc_send(&a))
+        };
+        let (tm, tp) = (
+            tmp(&format!("jerk_{file}_m.csv")),
+            tmp(&format!("jerk_{file}_p.csv")),
+        );
+        let merged = run(&[], &tm);
+        let plain = run(&["--no-compress"], &tp);
+        let (t_m, t_p) = (
+            merged["run_time_s"].as_f64().unwrap(),
+            plain["run_time_s"].as_f64().unwrap(),
+        );
+        let cols: Vec<&str> = limits.iter().map(|(c, _)| *c).collect();
+        let got = accel_and_jerk(&tm, &cols);
+        eprintln!("{file} jerk-limited: {t_m:.3} s merged, {t_p:.3} s as written; {got:?}");
+        assert!(t_m <= t_p, "{file}: {t_m} s > {t_p} s");
+        for ((c, a, j), (_, lim)) in got.iter().zip(limits) {
+            // The trace's units are rounded to the nm (10⁻⁶ mm): a tick's second
+            // difference carries up to 4 nm/ms² of rounding, its third 8 nm/ms³.
+            assert!(
+                *a <= lim * 1.002 + 4.0,
+                "{file} {c}: acceleration {a} > {lim}"
+            );
+            assert!(*j <= jerk * 1.002 + 8000.0, "{file} {c}: jerk {j} > {jerk}");
+        }
+    }
 }

@@ -58,6 +58,7 @@ pub struct Settings {
     pub max_chords: usize,
     /// Smallest ratio of the slowest to the fastest |dP/du| along a curve.
     pub min_speed_ratio: f64,
+
     /// A curve turning more than this, degrees, is weighed for time (module doc).
     pub max_turn_deg: f64,
     /// Tangents at the moves' ends are taken from points at least this many fit
