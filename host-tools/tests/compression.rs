@@ -18,25 +18,9 @@ mod common;
 use common::{nc_send, ok, repo, tmp};
 use std::path::{Path, PathBuf};
 
-/// The sine of `dense_segments.rs` in `G64 P<tol>`.
+/// The sine of [`common::sine`] in `G64 P<tol>`.
 fn sine(length: f64, segment: f64, feed: u32, x0: f64, tol: f64) -> String {
-    let k = std::f64::consts::TAU / 20.0;
-    let y = |x: f64| 5.0 * (k * (x - x0)).sin();
-    let end = x0 + length;
-    let mut p = format!("G21 G90 G17 G64 P{tol}\nG0 X{x0} Y0\n");
-    let mut x = x0;
-    let mut first = true;
-    while x < end {
-        let slope = 5.0 * k * (k * (x - x0)).cos();
-        x = (x + segment / (1.0 + slope * slope).sqrt()).min(end);
-        p += &format!("G1 X{x:.4} Y{:.4}", y(x));
-        if first {
-            p += &format!(" F{feed}");
-            first = false;
-        }
-        p += "\n";
-    }
-    p + "M2\n"
+    common::sine(length, segment, feed, x0, &format!("G64 P{tol}"))
 }
 
 /// The programmed path of `program` on `machine` from its home: points in mm (A B C
@@ -309,4 +293,25 @@ fn under_jerk_limitation_the_merged_sine_keeps_every_acceleration_and_jerk_limit
             assert!(*j <= jerk * 1.002 + 8000.0, "{file} {c}: jerk {j} > {jerk}");
         }
     }
+}
+
+/// Through the real link (`--sim`: the pseudo-terminal, the simulator at real time), the
+/// merged 0.05 mm sine keeps the controller supplied: at least 250 ms of motion
+/// buffered in every status report of the steady part (`link.buffered`: while blocks
+/// were still to be sent, after 0.5 s of motion).
+#[test]
+fn streamed_through_the_link_the_merged_sine_keeps_a_quarter_second_buffered() {
+    let p = tmp("compression_link_sine.ngc");
+    std::fs::write(&p, sine(180.0, 0.05, 6000, -90.0, 0.01)).unwrap();
+    let r = ok(&nc_send(&[
+        "--sim",
+        "--report",
+        "json",
+        p.to_str().unwrap(),
+    ]));
+    let b = &r["link"]["buffered"];
+    eprintln!("merged sine through the link: buffered {b}");
+    assert_eq!(r["result"], "done");
+    assert!(b["samples"].as_u64().unwrap() >= 10, "{b}");
+    assert!(b["min_ms"].as_u64().unwrap() >= 250, "{b}");
 }

@@ -145,3 +145,27 @@ pub fn joint_steps(report: &serde_json::Value) -> Vec<i64> {
         .map(|v| v.as_i64().expect("whole steps"))
         .collect()
 }
+
+/// A sine along X, amplitude 5 mm and wavelength 20 mm, `length` mm long from
+/// (`x0`, 0), as `G1` segments `segment` mm long (chords: the step in X shrinks where
+/// the sine is steep) at `feed` mm/min, in path mode `mode` (`G64`, `G64 P0.01`, …);
+/// coordinates to 0.1 µm, as a CAM program.
+pub fn sine(length: f64, segment: f64, feed: u32, x0: f64, mode: &str) -> String {
+    let k = std::f64::consts::TAU / 20.0;
+    let y = |x: f64| 5.0 * (k * (x - x0)).sin();
+    let end = x0 + length;
+    let mut p = format!("G21 G90 G17 {mode}\nG0 X{x0} Y0\n");
+    let mut x = x0;
+    let mut first = true;
+    while x < end {
+        let slope = 5.0 * k * (k * (x - x0)).cos();
+        x = (x + segment / (1.0 + slope * slope).sqrt()).min(end);
+        p += &format!("G1 X{x:.4} Y{:.4}", y(x));
+        if first {
+            p += &format!(" F{feed}");
+            first = false;
+        }
+        p += "\n";
+    }
+    p + "M2\n"
+}

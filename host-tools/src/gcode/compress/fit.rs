@@ -43,14 +43,10 @@ fn deriv2(c: &[V; 4], u: f64) -> V {
     })
 }
 
-/// The cubic through `p[0]` and `p[last]` along `t0` and `t1` that fits the points
-/// between, or `None` when no such cubic stays within `tol` (see the module doc).
-/// Two are tried: the least-squares fit, and the one whose end speeds are the
-/// polyline's length (a near-uniform parameter, which a least-squares fit over few
-/// points may miss). Returns the two inner control points.
-pub(super) fn fit(p: &[V], t0: &V, t1: &V, g: &Goal, s: &Settings) -> Option<(V, V)> {
+/// The points' chord-length parameters (0 to 1) and the polyline's length; `None`
+/// for a polyline of no length.
+fn chord_params(p: &[V]) -> Option<(Vec<f64>, f64)> {
     let n = p.len() - 1;
-    // Chord-length parameters.
     let mut u = vec![0.0; n + 1];
     for k in 1..=n {
         u[k] = u[k - 1] + norm(&sub(&p[k], &p[k - 1]));
@@ -60,6 +56,17 @@ pub(super) fn fit(p: &[V], t0: &V, t1: &V, g: &Goal, s: &Settings) -> Option<(V,
         return None;
     }
     u.iter_mut().for_each(|x| *x /= total);
+    Some((u, total))
+}
+
+/// The cubic through `p[0]` and `p[last]` along `t0` and `t1` that fits the points
+/// between, or `None` when no such cubic stays within `tol` (see the module doc).
+/// Two are tried: the least-squares fit, and the one whose end speeds are the
+/// polyline's length (a near-uniform parameter, which a least-squares fit over few
+/// points may miss). Returns the two inner control points.
+pub(super) fn fit(p: &[V], t0: &V, t1: &V, g: &Goal, s: &Settings) -> Option<(V, V)> {
+    let n = p.len() - 1;
+    let (u, total) = chord_params(p)?;
     let chord = norm(&sub(&p[n], &p[0]));
     let mut c = lengths(p, &u, t0, t1, chord);
     let mut uu = u.clone();
@@ -102,15 +109,7 @@ pub(super) fn fit(p: &[V], t0: &V, t1: &V, g: &Goal, s: &Settings) -> Option<(V,
 /// tangent free (the next curve starts along it).
 pub(super) fn fit_free(p: &[V], t0: Option<&V>, g: &Goal, s: &Settings) -> Option<(V, V)> {
     let n = p.len() - 1;
-    let mut u = vec![0.0; n + 1];
-    for k in 1..=n {
-        u[k] = u[k - 1] + norm(&sub(&p[k], &p[k - 1]));
-    }
-    let total = u[n];
-    if total <= 0.0 {
-        return None;
-    }
-    u.iter_mut().for_each(|x| *x /= total);
+    let (mut u, total) = chord_params(p)?;
     let (p0, p3) = (p[0], p[n]);
     let solve = |u: &[f64], wt: &[f64]| -> Option<[V; 4]> {
         let (mut s11, mut s12, mut s22) = (0.0, 0.0, 0.0);
