@@ -221,12 +221,15 @@ fn accel_and_jerk(trace: &Path, cols: &[&str]) -> Vec<(String, f64, f64)> {
         .collect()
 }
 
+/// Trace columns with their acceleration limits, mm/s² (or °/s²).
+type Limits = &'static [(&'static str, f64)];
+
 #[test]
 fn under_jerk_limitation_the_merged_sine_keeps_every_acceleration_and_jerk_limit() {
     let p = tmp("compression_jerk_sine.ngc");
     std::fs::write(&p, sine(180.0, 0.05, 6000, -90.0, 0.01)).unwrap();
     // (machine file, jerk mm/s³, columns with their acceleration limits, mm/s²)
-    let cases: [(&str, f64, &[(&str, f64)]); 2] = [
+    let cases: [(&str, f64, Limits); 2] = [
         (
             "cartesian-xyz.toml",
             200_000.0,
