@@ -92,3 +92,29 @@ fn a_real_corner_stays_and_exact_stop_is_not_compressed() {
     let g61: Vec<Block> = sine(0.05, 20.0, 0);
     assert_eq!(compress(&g61, [0; AXES], &Settings::default()).blocks, g61);
 }
+
+#[test]
+fn a_run_that_turns_a_rotary_axis_is_merged_with_it_within_the_tolerance() {
+    // A 0.1 mm-chord arc of 20 mm radius in XY while A turns 0.05° a chord: A takes
+    // part in the fit (1° counted as 1 mm) and stays within the tolerance too.
+    let input: Vec<Block> = (1..=600)
+        .map(|k| {
+            let t = k as f64 * 0.005;
+            let mut b = line(20.0 * t.sin(), 20.0 - 20.0 * t.cos(), k, 10_000);
+            b.target[3] = (k as f64 * 0.05 * 1e9).round() as i64;
+            b
+        })
+        .collect();
+    let c = compress(&input, [0; AXES], &Settings::default());
+    assert!(c.blocks.len() * 10 <= input.len(), "{}", c.blocks.len());
+    assert!(c
+        .blocks
+        .iter()
+        .any(|b| matches!(b.motion, Motion::Cubic { c1, .. } if c1[3] != 0)));
+    let d = deviation(&input, &c);
+    assert!(d <= 0.010, "deviation {d} (mm, and degrees as mm)");
+    assert_eq!(
+        c.blocks.last().unwrap().target,
+        input.last().unwrap().target
+    );
+}
