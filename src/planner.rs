@@ -247,7 +247,7 @@ pub struct Lookahead {
     /// End pose of the last block planned.
     pub end: [i64; AXES],
     end_tangent: [f32; AXES],
-    /// d²P/ds² at the end of the last block (splines; 0 for other paths).
+    /// d²P/ds² at the end of the last block (splines and arcs; 0 for lines).
     end_bend: [f32; AXES],
     end_stops: bool,
     /// Blending tolerance of the last block planned, nm.
@@ -322,9 +322,10 @@ impl Lookahead {
             _ => (0.0, 1.0),
         };
         // With jerk limitation over w ticks the smoothed speed may exceed the
-        // profile's by a·w·T/2 (see below): a spline's bend, sized for its speed
-        // limit, would then take more than its share; its limit is lowered by that.
-        let v_limit = if path.form == Form::Spline && self.smoothing > 1 {
+        // profile's by a·w·T/2 (see below): a curve's or an arc's bend, sized for its
+        // speed limit, would then take more than its share; its limit is lowered by
+        // that.
+        let v_limit = if path.form.bends() && self.smoothing > 1 {
             fmax(
                 v_limit - accel * self.smoothing as f32 / 2.0,
                 0.25 * v_limit,
@@ -400,7 +401,7 @@ impl Lookahead {
                 prev.accel = prev.accel_full * (1.0 - rho.max(prev.rho_in));
             }
         }
-        // Where a spline meets its neighbour its bend jumps: each axis's and joint's
+        // Where a spline or an arc meets its neighbour its bend jumps: each axis's and joint's
         // acceleration changes by v²·Δx″ in one tick, which jerk limitation over w
         // ticks allows a third of its budget for (aᵢ/w per tick, as a corner's turn).
         let start_bend = path.bend_at(0);

@@ -192,3 +192,119 @@ proptest! {
         }
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(16))]
+    /// Tangent chains of curves, arcs and lines in XY under jerk limitation: every
+    /// axis keeps its jerk (the bend's jump at a join and the smoothing's overshoot in
+    /// a bend are planned for) and its acceleration, and the program ends on its
+    /// target.
+    #[test]
+    fn jerk_limited_curves_and_arcs_keep_every_axis_within_its_jerk_and_acceleration(
+        moves in prop::collection::vec((0u8..3, 2i64..=20, 10i64..=80, any::<bool>()), 1..8),
+        window_log2 in 1u32..=5,
+    ) {
+        let m = MachineConfig::cartesian_xyz();
+        let w = 1u32 << window_log2;
+        let mut c = Controller::new(m.clone()).unwrap();
+        c.unlock();
+        c.set_smoothing(w);
+        let mut bytes = frame(0, &HostMsg::Hello { version: PROTOCOL_VERSION, machine: c.machine_id(), host: 1 });
+        // A tangent-continuous chain from (−60, 0) heading +X: arcs of radius r mm
+        // turning `deg` degrees either way, cubics bending `deg` degrees, lines r mm
+        // long; where a bend changes (arc to arc the other way, arc to line) the path
+        // keeps its direction and its bend jumps.
+        let (mut p, mut heading) = ([-60.0f64, 0.0], 0.0f64);
+        let nm = |v: f64| (v * 1e6).round() as i64;
+        let mut blocks = vec![Block {
+            line: 100,
+            motion: Motion::Rapid,
+            target: [nm(p[0]), 0, 0, 0, 0, 0],
+            feed: 0,
+            tolerance_nm: 0,
+        }];
+        for (i, (kind, r, deg, left)) in moves.iter().enumerate() {
+            let (r, turn) = (*r as f64, (*deg as f64).to_radians() * if *left { 1.0 } else { -1.0 });
+            let (motion, end, h) = match kind {
+                0 => {
+                    let e = [p[0] + r * heading.cos(), p[1] + r * heading.sin()];
+                    (Motion::Linear, e, heading)
+                }
+                1 => {
+                    let side = turn.signum();
+                    let c = [p[0] - side * r * heading.sin(), p[1] + side * r * heading.cos()];
+                    let (s, co) = turn.sin_cos();
+                    let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
+                    let e = [c[0] + co * dx - s * dy, c[1] + s * dx + co * dy];
+                    let m = Motion::Arc {
+                        center: [nm(c[0]), nm(c[1])],
+                        plane: pkmc::protocol::Plane::Xy,
+                        clockwise: turn < 0.0,
+                        turns: 0,
+                    };
+                    (m, e, heading + turn)
+                }
+                _ => {
+                    let h = heading + turn;
+                    let mid = heading + turn / 2.0;
+                    let e = [p[0] + r * mid.cos(), p[1] + r * mid.sin()];
+                    let m = Motion::Cubic {
+                        c1: [nm(r / 3.0 * heading.cos()), nm(r / 3.0 * heading.sin()), 0, 0, 0, 0],
+                        c2: [nm(-r / 3.0 * h.cos()), nm(-r / 3.0 * h.sin()), 0, 0, 0, 0],
+                    };
+                    (m, e, h)
+                }
+            };
+            blocks.push(Block {
+                line: i as u32 + 1,
+                motion,
+                target: [nm(end[0]), nm(end[1]), 0, 0, 0, 0],
+                feed: 80_000_000,
+                tolerance_nm: u32::MAX,
+            });
+            p = end;
+            heading = h;
+        }
+        // Every curve within the machine's travel.
+        let mut at = *c.pose();
+        let mut start = *c.pose();
+        for b in &blocks {
+            let path = pkmc::geometry::Path::new(b, &start).unwrap();
+            for k in 0..=32 {
+                path.pose_at(&start, (path.length << 16) / 32 * k, &mut at);
+                prop_assume!(at[0].abs() < 95_000_000 && at[1].abs() < 95_000_000);
+            }
+            start = b.target;
+        }
+        for (i, b) in common::planned(&m, *c.pose(), w, &blocks).into_iter().enumerate() {
+            bytes.extend(frame(i as u16 + 1, &HostMsg::Block(b)));
+        }
+        c.receive(&bytes);
+        let mut poses = vec![*c.pose()];
+        let (mut reader, mut replies) = (FrameReader::new(), Vec::new());
+        for tick_no in 0..2_000_000 {
+            if tick_no % 100 == 0 {
+                c.receive(&frame(0, &HostMsg::StatusRequest));
+            }
+            c.tick(&Inputs::default());
+            drain(&mut c, &mut reader, &mut replies);
+            poses.push(*c.pose());
+            if c.state() == State::Idle {
+                break;
+            }
+        }
+        prop_assert_eq!(c.state(), State::Idle, "alarm: {:?}", c.status().alarm);
+        prop_assert_eq!(&c.pose()[..2], &blocks.last().unwrap().target[..2]);
+        let a = m.axes[0].max_accel as f64 / (TICK_HZ as f64 * TICK_HZ as f64);
+        let j_max = 3.0 * a / w as f64 + 8.0;
+        for i in 0..2 {
+            let x: Vec<f64> = poses.iter().map(|p| p[i] as f64).collect();
+            for (k, d) in x.windows(4).enumerate() {
+                let j = d[3] - 3.0 * d[2] + 3.0 * d[1] - d[0];
+                prop_assert!(j.abs() <= j_max, "axis {} tick {}: jerk {} > {} nm/tick³", i, k, j, j_max);
+                let acc = d[2] - 2.0 * d[1] + d[0];
+                prop_assert!(acc.abs() <= a * 1.002 + 4.0, "axis {} tick {}: accel {} > {}", i, k, acc, a);
+            }
+        }
+    }
+}

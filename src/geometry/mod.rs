@@ -647,10 +647,26 @@ impl Path {
         t
     }
 
-    /// d²P/ds² at `s` (nm Q16) per axis (per nm²) for a spline; 0 for other paths.
+    /// d²P/ds² at `s` (nm Q16) per axis (per nm²): a spline's, or an arc's centripetal
+    /// −r·(dφ/ds)²·(cos φ, sin φ) in its plane (its radius's drift ignored); 0 for lines
+    /// and points (host).
     pub fn bend_at(&self, s: i64) -> [f32; AXES] {
         match &self.bend {
             Bend::Spline(c) if self.form == Form::Spline => self.course.spline_bend(c, s),
+            Bend::Arc(c) if self.form == Form::Arc => {
+                let s = s.clamp(0, self.length << 16);
+                let f = (s as f64 / 65_536.0) / (self.length.max(1) as f64);
+                let r = c.r0 as f64 + c.dr as f64 * f;
+                let dphi_ds = c.phi_rate as f64 / 65_536.0 / TURN_Q64 * core::f64::consts::TAU;
+                let phi = c.phi0.wrapping_add(((c.phi_rate * s as i128) >> 32) as u64);
+                let angle = phi as f64 / TURN_Q64 * core::f64::consts::TAU;
+                let k = -r * dphi_ds * dphi_ds;
+                let (i, j, _) = c.plane.axes();
+                let mut b = [0f32; AXES];
+                b[i] = (k * libm::cos(angle)) as f32;
+                b[j] = (k * libm::sin(angle)) as f32;
+                b
+            }
             _ => [0.0; AXES],
         }
     }
