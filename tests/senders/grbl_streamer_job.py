@@ -342,6 +342,13 @@ class Job:
             "program": self.a.program,
             "lines_total": getattr(self, "lines_total", None),
             "lines_sent": self.lines_sent,
+            # Motion lines (G0/G1) grbl-streamer wrote to the port: what the bridge was
+            # sent, whatever the sender's own bookkeeping (a race between its reader
+            # thread and job_run can write a line twice and skip another).
+            "motion_lines_written": sum(
+                1 for w in self.writes
+                if re.match(r"\s*G0*[01](?![0-9.])", w["data"], re.IGNORECASE)
+            ),
             "lines_received": self.lines_acked,
             "errors": rel_list(self.errors),
             "alarms": rel_list(self.alarms),
