@@ -333,7 +333,10 @@ impl Lookahead {
         } else {
             v_limit
         };
-        let start_tangent = direction(&path, 0);
+        // Corners compare dP/ds (a spline's tangent is |dP/du|/length ≤ 1 long): where
+        // two splines meet with one direction but different |dP/ds| the tool's speed
+        // jumps by the difference, which the corner limits as it limits a turn.
+        let start_tangent = path.tangent_at(0);
         let moving = matches!(kind, Kind::Rapid | Kind::Feed);
         let accel = accel.max(1e-9);
         let need = if self.end_stops || !moving {
@@ -416,7 +419,7 @@ impl Lookahead {
         };
         self.end_bend = path.bend_at(path.length << 16);
         self.end = path.end;
-        self.end_tangent = direction(&path, path.length << 16);
+        self.end_tangent = path.tangent_at(path.length << 16);
         self.end_stops = !moving || block.tolerance_nm == 0;
         self.end_tolerance = block.tolerance_nm;
         Ok(PlanBlock {
@@ -432,15 +435,6 @@ impl Lookahead {
             entry: corner,
         })
     }
-}
-
-/// The velocity per unit of path speed at `s` (nm Q16) along `path`, dP/ds: a line's
-/// or an arc's unit tangent, a spline's tangent scaled by |dP/du|/length (at most 1).
-/// Corners compare these: where two splines meet with one direction but different
-/// |dP/ds|, the tool's speed jumps by the difference at the join, which the corner
-/// limits as it limits a turn.
-fn direction(path: &Path, s: i64) -> [f32; AXES] {
-    path.tangent_at(s)
 }
 
 /// What a block does, given its geometry (a move of length 0 is a dwell of 0 ticks).

@@ -137,6 +137,30 @@ fn a_controller_at_rest_emits_no_steps_and_stays_idle() {
     assert_eq!(c.pose(), &[0; AXES]);
 }
 
+/// Ticks `c` (with the host's keepalive: nc-send asks for a status every 100 ms) until
+/// it is idle; the commanded pose of every tick, the first before any.
+fn run_until_idle(c: &mut Controller) -> Vec<[i64; AXES]> {
+    let mut poses = vec![*c.pose()];
+    let (mut reader, mut replies) = (FrameReader::new(), Vec::new());
+    for tick_no in 0..2_000_000 {
+        if tick_no % 100 == 0 {
+            c.receive(&frame(0, &HostMsg::StatusRequest));
+        }
+        c.tick(&Inputs::default());
+        drain(c, &mut reader, &mut replies);
+        poses.push(*c.pose());
+        if c.state() == State::Idle {
+            break;
+        }
+    }
+    poses
+}
+
+/// The third difference of four consecutive positions.
+fn third_difference(d: &[f64]) -> f64 {
+    d[3] - 3.0 * d[2] + 3.0 * d[1] - d[0]
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(16))]
     #[test]
@@ -165,20 +189,7 @@ proptest! {
             bytes.extend(frame(i as u16 + 1, &HostMsg::Block(b)));
         }
         c.receive(&bytes);
-        let mut poses = vec![*c.pose()];
-        let (mut reader, mut replies) = (FrameReader::new(), Vec::new());
-        for tick_no in 0..2_000_000 {
-            // The host's keepalive (nc-send asks for a status every 100 ms).
-            if tick_no % 100 == 0 {
-                c.receive(&frame(0, &HostMsg::StatusRequest));
-            }
-            c.tick(&Inputs::default());
-            drain(&mut c, &mut reader, &mut replies);
-            poses.push(*c.pose());
-            if c.state() == State::Idle {
-                break;
-            }
-        }
+        let poses = run_until_idle(&mut c);
         prop_assert_eq!(&c.pose()[..3], &moves.last().unwrap().0[..]);
         let a = m.axes[0].max_accel as f64 / (TICK_HZ as f64 * TICK_HZ as f64);
         // 3a/w per tick³, plus rounding of the 1 nm positions (8 nm in a third difference).
@@ -186,7 +197,7 @@ proptest! {
         for i in 0..3 {
             let x: Vec<f64> = poses.iter().map(|p| p[i] as f64).collect();
             for (k, d) in x.windows(4).enumerate() {
-                let j = d[3] - 3.0 * d[2] + 3.0 * d[1] - d[0];
+                let j = third_difference(d);
                 prop_assert!(j.abs() <= j_max, "axis {} tick {}: jerk {} > {} nm/tick³", i, k, j, j_max);
             }
         }
@@ -280,19 +291,7 @@ proptest! {
             bytes.extend(frame(i as u16 + 1, &HostMsg::Block(b)));
         }
         c.receive(&bytes);
-        let mut poses = vec![*c.pose()];
-        let (mut reader, mut replies) = (FrameReader::new(), Vec::new());
-        for tick_no in 0..2_000_000 {
-            if tick_no % 100 == 0 {
-                c.receive(&frame(0, &HostMsg::StatusRequest));
-            }
-            c.tick(&Inputs::default());
-            drain(&mut c, &mut reader, &mut replies);
-            poses.push(*c.pose());
-            if c.state() == State::Idle {
-                break;
-            }
-        }
+        let poses = run_until_idle(&mut c);
         prop_assert_eq!(c.state(), State::Idle, "alarm: {:?}", c.status().alarm);
         prop_assert_eq!(&c.pose()[..2], &blocks.last().unwrap().target[..2]);
         let a = m.axes[0].max_accel as f64 / (TICK_HZ as f64 * TICK_HZ as f64);
@@ -300,7 +299,7 @@ proptest! {
         for i in 0..2 {
             let x: Vec<f64> = poses.iter().map(|p| p[i] as f64).collect();
             for (k, d) in x.windows(4).enumerate() {
-                let j = d[3] - 3.0 * d[2] + 3.0 * d[1] - d[0];
+                let j = third_difference(d);
                 prop_assert!(j.abs() <= j_max, "axis {} tick {}: jerk {} > {} nm/tick³", i, k, j, j_max);
                 let acc = d[2] - 2.0 * d[1] + d[0];
                 prop_assert!(acc.abs() <= a * 1.002 + 4.0, "axis {} tick {}: accel {} > {}", i, k, acc, a);

@@ -50,6 +50,54 @@ fn pose_strategy() -> impl Strategy<Value = [i64; AXES]> {
         })
 }
 
+/// Ticks `c` (with the host's keepalive: nc-send asks for a status every 100 ms) while
+/// it runs: the commanded joints and pose of every tick, the first before any.
+fn run(c: &mut Controller) -> (Vec<[i64; MAX_JOINTS]>, Vec<[i64; AXES]>) {
+    let (mut joints, mut pose) = (vec![*c.joints()], vec![*c.pose()]);
+    let mut sink = [0u8; 4096];
+    for tick_no in 0..200_000 {
+        if tick_no % 100 == 0 {
+            c.receive(&frame(0, &HostMsg::StatusRequest));
+        }
+        c.tick(&Inputs::default());
+        while c.transmit(&mut sink) > 0 {}
+        joints.push(*c.joints());
+        pose.push(*c.pose());
+        if c.state() != State::Running {
+            break;
+        }
+    }
+    (joints, pose)
+}
+
+/// Positions `x` (one a tick) never move faster than `v_lim` or accelerate harder than
+/// `a_lim` (units/s, units/s²), beyond rounding.
+fn within(x: Vec<f64>, v_lim: i64, a_lim: i64, what: &str) -> Result<(), TestCaseError> {
+    let t = 1.0 / TICK_HZ as f64;
+    let v_max = v_lim as f64 * t * (1.0 + 1e-6) + 2.0;
+    let a_max = a_lim as f64 * t * t * 1.02 + 4.0;
+    for (k, w) in x.windows(3).enumerate() {
+        let (v, a) = (w[2] - w[1], w[2] - 2.0 * w[1] + w[0]);
+        prop_assert!(
+            v.abs() <= v_max,
+            "{} tick {}: speed {} > {}",
+            what,
+            k,
+            v,
+            v_max
+        );
+        prop_assert!(
+            a.abs() <= a_max,
+            "{} tick {}: accel {} > {}",
+            what,
+            k,
+            a,
+            a_max
+        );
+    }
+    Ok(())
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
     #[test]
@@ -77,34 +125,12 @@ proptest! {
         for (i, b) in common::planned(&m, *c.pose(), 1, &blocks).into_iter().enumerate() {
             c.receive(&frame(i as u16 + 1, &HostMsg::Block(b)));
         }
-        let n = m.joints.len();
-        let t = 1.0 / TICK_HZ as f64;
-        let mut history: Vec<[i64; MAX_JOINTS]> = vec![*c.joints()];
-        let mut sink = [0u8; 4096];
-        for tick_no in 0..200_000 {
-            // The host's keepalive (nc-send asks for a status every 100 ms).
-            if tick_no % 100 == 0 {
-                c.receive(&frame(0, &HostMsg::StatusRequest));
-            }
-            c.tick(&Inputs::default());
-            while c.transmit(&mut sink) > 0 {}
-            history.push(*c.joints());
-            if c.state() != State::Running {
-                break;
-            }
-        }
+        let (history, _) = run(&mut c);
         prop_assert_eq!(c.state(), State::Idle, "alarm: {:?}", c.status().alarm);
         prop_assert_eq!(c.pose(), poses.last().unwrap());
-        for j in 0..n {
-            let lim = m.joints[j].limits;
-            let v_max = lim.max_velocity as f64 * t * (1.0 + 1e-6) + 2.0;
-            let a_max = lim.max_accel as f64 * t * t * 1.02 + 4.0;
-            let x: Vec<f64> = history.iter().map(|h| h[j] as f64).collect();
-            for (k, w) in x.windows(3).enumerate() {
-                let (v, a) = (w[2] - w[1], w[2] - 2.0 * w[1] + w[0]);
-                prop_assert!(v.abs() <= v_max, "joint {} tick {}: speed {} > {}", j, k, v, v_max);
-                prop_assert!(a.abs() <= a_max, "joint {} tick {}: accel {} > {}", j, k, a, a_max);
-            }
+        for (j, jc) in m.joints.iter().enumerate() {
+            let x = history.iter().map(|h| h[j] as f64).collect();
+            within(x, jc.limits.max_velocity, jc.limits.max_accel, &format!("joint {j}"))?;
         }
     }
 }
@@ -230,44 +256,16 @@ proptest! {
         for (i, b) in common::planned(&m, *c.pose(), 1, &blocks).into_iter().enumerate() {
             c.receive(&frame(i as u16 + 1, &HostMsg::Block(b)));
         }
-        let n = m.joints.len();
-        let t = 1.0 / TICK_HZ as f64;
-        let mut joints: Vec<[i64; MAX_JOINTS]> = vec![*c.joints()];
-        let mut pose: Vec<[i64; AXES]> = vec![*c.pose()];
-        let mut sink = [0u8; 4096];
-        for tick_no in 0..200_000 {
-            if tick_no % 100 == 0 {
-                c.receive(&frame(0, &HostMsg::StatusRequest));
-            }
-            c.tick(&Inputs::default());
-            while c.transmit(&mut sink) > 0 {}
-            joints.push(*c.joints());
-            pose.push(*c.pose());
-            if c.state() != State::Running {
-                break;
-            }
-        }
+        let (joints, pose) = run(&mut c);
         prop_assert_eq!(c.state(), State::Idle, "alarm: {:?}", c.status().alarm);
         prop_assert_eq!(c.pose(), poses.last().unwrap());
-        let check = |x: Vec<f64>, v_lim: f64, a_lim: f64, what: &str| -> Result<(), TestCaseError> {
-            let v_max = v_lim * t * (1.0 + 1e-6) + 2.0;
-            let a_max = a_lim * t * t * 1.02 + 4.0;
-            for (k, w) in x.windows(3).enumerate() {
-                let (v, a) = (w[2] - w[1], w[2] - 2.0 * w[1] + w[0]);
-                prop_assert!(v.abs() <= v_max, "{} tick {}: speed {} > {}", what, k, v, v_max);
-                prop_assert!(a.abs() <= a_max, "{} tick {}: accel {} > {}", what, k, a, a_max);
-            }
-            Ok(())
-        };
-        for j in 0..n {
-            let lim = m.joints[j].limits;
-            check(joints.iter().map(|h| h[j] as f64).collect(), lim.max_velocity as f64, lim.max_accel as f64, &format!("joint {j}"))?;
+        for (j, jc) in m.joints.iter().enumerate() {
+            let x = joints.iter().map(|h| h[j] as f64).collect();
+            within(x, jc.limits.max_velocity, jc.limits.max_accel, &format!("joint {j}"))?;
         }
-        for i in 0..AXES {
-            let lim = m.axes[i];
-            if lim.max_velocity > 0 {
-                check(pose.iter().map(|h| h[i] as f64).collect(), lim.max_velocity as f64, lim.max_accel as f64, &format!("axis {i}"))?;
-            }
+        for (i, lim) in m.axes.iter().enumerate().filter(|(_, l)| l.max_velocity > 0) {
+            let x = pose.iter().map(|h| h[i] as f64).collect();
+            within(x, lim.max_velocity, lim.max_accel, &format!("axis {i}"))?;
         }
     }
 }
