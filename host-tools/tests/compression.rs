@@ -175,7 +175,21 @@ fn a_fine_sine_is_merged_tenfold_within_its_tolerance_and_runs_no_slower() {
         ),
     ] {
         let cols: Vec<&str> = limits.iter().map(|(c, _)| *c).collect();
-        for ((c, a, _), (_, lim)) in accel_and_jerk(&tmp(trace), &cols).iter().zip(limits) {
+        let merged = accel_and_jerk(&tmp(trace), &cols);
+        // For the record: the same figures as written (chords), and the largest jerk.
+        let plain = accel_and_jerk(&tmp(&trace.replace("merged", "plain")), &cols);
+        let top = |v: &[(String, f64, f64)], f: fn(&(String, f64, f64)) -> f64| {
+            v.iter().map(f).fold(0.0, f64::max)
+        };
+        eprintln!(
+            "{trace}: largest acceleration merged {:.0} / as written {:.0}, largest jerk \
+             merged {:.0} / as written {:.0} (per s², s³)",
+            top(&merged, |x| x.1),
+            top(&plain, |x| x.1),
+            top(&merged, |x| x.2),
+            top(&plain, |x| x.2)
+        );
+        for ((c, a, _), (_, lim)) in merged.iter().zip(limits) {
             assert!(
                 *a <= lim * 1.002 + 4.0,
                 "{trace} {c}: acceleration {a} > {lim}"
@@ -284,7 +298,11 @@ fn under_jerk_limitation_the_merged_sine_keeps_every_acceleration_and_jerk_limit
         );
         let cols: Vec<&str> = limits.iter().map(|(c, _)| *c).collect();
         let got = accel_and_jerk(&tm, &cols);
-        eprintln!("{file} jerk-limited: {t_m:.3} s merged, {t_p:.3} s as written; {got:?}");
+        let as_written = accel_and_jerk(&tp, &cols);
+        eprintln!(
+            "{file} jerk-limited: {t_m:.3} s merged, {t_p:.3} s as written; merged {got:?}; \
+             as written {as_written:?}"
+        );
         assert!(t_m <= t_p, "{file}: {t_m} s > {t_p} s");
         for ((c, a, j), (_, lim)) in got.iter().zip(limits) {
             // The trace's units are rounded to the nm (10⁻⁶ mm): a tick's second
