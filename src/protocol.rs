@@ -100,7 +100,7 @@ mod fixed_width {
 }
 
 /// Protocol version, exchanged in the handshake; both sides must agree.
-pub const PROTOCOL_VERSION: u16 = 7;
+pub const PROTOCOL_VERSION: u16 = 8;
 /// Largest unencoded frame body (sequence number, message and CRC), bytes: a planned
 /// helix with every field at its widest fits.
 pub const MAX_BODY: usize = 384;
@@ -450,6 +450,10 @@ pub struct Status {
     pub pose: [i64; AXES],
     /// Commanded joint positions, axis units.
     pub joints: [i64; MAX_JOINTS],
+    /// Where each joint's actuator is, steps or encoder counts from the joint's zero
+    /// (its homing offset taken off): a servo's encoder as last read, a stepper's steps
+    /// emitted (open loop). The host scales them to axis units with the machine file.
+    pub measured: [i64; MAX_JOINTS],
     /// Path speed now, nm/s (µ°/s for rotary-only moves).
     pub speed: i64,
     /// Motion buffered in the queue and the executing block, ms.
@@ -488,6 +492,9 @@ pub struct HeldJob {
 }
 
 /// Messages from the controller to the host.
+// A status is the largest message by far, and the one sent most: boxing it is not an
+// option without an allocator, and the others are built in place.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum CtrlMsg {
     /// Answers `Hello`.
@@ -720,7 +727,7 @@ pub fn encode_status(
 ) -> usize {
     // The widest status (every varint at its longest) fits with its CRC.
     const WIDEST: usize =
-        2 + 1 + 1 + 5 + 5 + 10 * (1 + AXES + MAX_JOINTS + 1) + 5 + 3 + 3 + 3 + 8 + 1 + 1;
+        2 + 1 + 1 + 5 + 5 + 10 * (1 + AXES + 2 * MAX_JOINTS + 1) + 5 + 3 + 3 + 3 + 8 + 1 + 1;
     const _: () = assert!(WIDEST + 4 <= MAX_BODY);
     let mut w = Writer { buf: body, len: 0 };
     for b in seq.to_le_bytes() {
@@ -736,6 +743,9 @@ pub fn encode_status(
     }
     for &q in &s.joints {
         w.i64(q);
+    }
+    for &m in &s.measured {
+        w.i64(m);
     }
     w.i64(s.speed);
     w.u32(s.buffered_ms);
@@ -1682,6 +1692,7 @@ mod tests {
                 motion_ticks: wide() as u64,
                 pose: core::array::from_fn(|_| wide()),
                 joints: core::array::from_fn(|_| wide()),
+                measured: core::array::from_fn(|_| wide()),
                 speed: wide(),
                 buffered_ms: wide() as u32,
                 free_slots: wide() as u16,
@@ -1762,6 +1773,7 @@ mod tests {
             motion_ticks: u64::MAX,
             pose: [i64::MIN; AXES],
             joints: [i64::MIN; MAX_JOINTS],
+            measured: [i64::MIN; MAX_JOINTS],
             speed: i64::MIN,
             buffered_ms: u32::MAX,
             free_slots: u16::MAX,

@@ -31,3 +31,4 @@ pub mod job;
 pub mod link;
 pub mod machine_file;
 pub mod sim;
+pub mod station;

@@ -46,6 +46,20 @@ pub struct Outputs {
 }
 
 impl Controller {
+    /// Each joint's actuator position from its zero, steps or counts: the servo
+    /// encoders as last read, the steppers' steps emitted (see `Status::measured`).
+    pub(super) fn measured(&self) -> [i64; crate::config::MAX_JOINTS] {
+        let mut m = [0; crate::config::MAX_JOINTS];
+        for (j, jc) in self.machine.joints.iter().enumerate() {
+            let at = match jc.drive {
+                Drive::Servo { channel } => self.last.encoder_counts[channel as usize],
+                Drive::Stepper { .. } => self.steps.steps(j),
+            };
+            m[j] = at - self.offset[j];
+        }
+        m
+    }
+
     /// Actuator reference of joint `j` (steps or encoder counts) for the position
     /// `q`, counts × 2^16.
     pub(super) fn actuator_q16(&self, j: usize, q: i64) -> i64 {

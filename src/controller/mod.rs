@@ -272,6 +272,12 @@ impl Controller {
         }
     }
 
+    /// Has the controller not yet ticked (read its inputs) since it started or since a
+    /// machine was loaded?
+    pub fn fresh(&self) -> bool {
+        self.fresh
+    }
+
     /// Has every joint with a home switch been homed since the reset?
     pub fn homed(&self) -> bool {
         self.homed

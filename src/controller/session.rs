@@ -423,6 +423,7 @@ impl Controller {
             motion_ticks: self.motion_ticks,
             pose: self.exec.pose,
             joints: self.joints,
+            measured: self.measured(),
             speed: ((self.exec.speed as i128 * TICK_HZ as i128) >> 32) as i64,
             buffered_ms: self.buffered_ms(),
             free_slots: self.planner.free() as u16,

@@ -646,3 +646,31 @@ fn a_plan_faster_than_a_joint_may_move_trips_the_guard_and_the_drives_keep_the_b
     assert_eq!(c.pose()[0], x);
     assert!(c.planner.is_empty());
 }
+
+#[test]
+fn the_status_reports_each_actuator_from_its_zero_encoders_as_read_steps_as_emitted() {
+    let m = MachineConfig::h4_table();
+    let mut c = Controller::new(m.clone()).unwrap();
+    c.unlock();
+    // Power-up: the encoders read 1000 counts; the joints are where the controller
+    // believes (the home pose), so each servo reads its home position.
+    let mut inputs = Inputs {
+        encoder_counts: [1000; crate::config::MAX_SERVOS],
+        ..Inputs::default()
+    };
+    c.tick(&inputs);
+    let home = c.status();
+    for j in 0..4 {
+        assert_eq!(
+            home.measured[j],
+            m.joints[j].scale.steps_at(home.joints[j]),
+            "joint {j}"
+        );
+    }
+    // The carriage of channel 2 lags 37 counts behind: reported as read.
+    inputs.encoder_counts[2] -= 37;
+    c.tick(&inputs);
+    assert_eq!(c.status().measured[2], home.measured[2] - 37);
+    // The table's stepper has emitted no step.
+    assert_eq!(c.status().measured[4], 0);
+}

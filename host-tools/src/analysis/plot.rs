@@ -38,6 +38,8 @@ pub struct Recorder {
     seen: u64,
     /// How far merged curves stray from their chords, when measured.
     pub deviation: Option<super::deviation::Meter>,
+    /// When the controller had completed 1, 2, … blocks, simulated s (with the path).
+    pub done_at: Vec<f64>,
 }
 
 impl Recorder {
@@ -66,6 +68,11 @@ impl Recorder {
         }
         if !self.keep_path {
             return;
+        }
+        let done = sim.ctrl.status().blocks_done as usize;
+        while self.done_at.len() < done {
+            self.done_at
+                .push(sim.ticks as f64 * pkmc::units::TICK_NS as f64 * 1e-9);
         }
         self.seen += 1;
         if self.seen < self.stride {

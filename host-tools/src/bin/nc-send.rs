@@ -7,7 +7,7 @@ use clap::{Parser, Subcommand};
 use pkmc::config::{axis_is_rotary, MachineConfig, AXIS_NAMES};
 use pkmc::protocol::{Control, HeldJob, Status};
 use pkmc_host::cli::progress::{Interrupts, Operator, Progress, RawKeys, Style};
-use pkmc_host::job::{self, exit, Failure, Report, RunOptions, SimSetup, Target};
+use pkmc_host::job::{self, exit, print_report, Failure, RunOptions, SimSetup, Target};
 use pkmc_host::link::{JobEnd, Link, LinkOptions, Transport};
 use pkmc_host::sim::faults::FaultConfig;
 use std::io::Write;
@@ -140,6 +140,19 @@ enum Command {
         /// Link the pseudo-terminal at this path too.
         #[arg(long, value_name = "PATH")]
         link: Option<PathBuf>,
+    },
+    /// Serve the operator station, a web page with the machine in 3-D, the DRO, the
+    /// program editor, jog, MDI and teach, until Ctrl-C (docs/ui.md).
+    Serve {
+        /// Listen on this address (port 0: any free port; the address is printed).
+        #[arg(long, value_name = "ADDRESS", default_value = "127.0.0.1:8180")]
+        listen: String,
+        /// A secret every request must carry (?token=); needed off loopback.
+        #[arg(long)]
+        token: Option<String>,
+        /// Load this program at start.
+        #[arg(long, value_name = "FILE")]
+        program: Option<PathBuf>,
     },
 }
 
@@ -327,7 +340,9 @@ fn run(args: &Args) -> Result<i32, Failure> {
             deviation: None,
             // A sender watches the machine move: the simulator keeps real time.
             clock: match args.command {
-                Some(Command::Grbl { .. }) => pkmc_host::sim::serve::ServeClock::RealTime,
+                Some(Command::Grbl { .. } | Command::Serve { .. }) => {
+                    pkmc_host::sim::serve::ServeClock::RealTime
+                }
                 _ => Default::default(),
             },
         },
@@ -339,13 +354,8 @@ fn run(args: &Args) -> Result<i32, Failure> {
     };
     let interrupts = Interrupts::install().map_err(|e| Failure::new(exit::LINK, e))?;
     match &args.command {
-        Some(Command::Grbl { tcp, link }) => {
-            let bridge = pkmc_host::grbl::BridgeOptions {
-                link: link.clone(),
-                tcp: tcp.clone(),
-                tools: opts.tools.clone(),
-            };
-            pkmc_host::grbl::run(&machine, &opts, &bridge, &|| interrupts.count() > 0)
+        Some(cmd @ (Command::Grbl { .. } | Command::Serve { .. })) => {
+            serve(args, cmd, &machine, &opts, &interrupts)
         }
         Some(cmd) => command(args, cmd, &machine, &opts, interrupts),
         None => {
@@ -355,6 +365,45 @@ fn run(args: &Args) -> Result<i32, Failure> {
                 .ok_or_else(|| bad("no program given (nc-send --help lists the commands)"))?;
             run_program(args, program, &machine, &opts, interrupts, quiet)
         }
+    }
+}
+
+/// `grbl` and `serve`: the bridge or the operator station until Ctrl-C.
+fn serve(
+    args: &Args,
+    cmd: &Command,
+    machine: &MachineConfig,
+    opts: &RunOptions<'_>,
+    interrupts: &Interrupts,
+) -> Result<i32, Failure> {
+    let stop = || interrupts.count() > 0;
+    match cmd {
+        Command::Grbl { tcp, link } => {
+            let bridge = pkmc_host::grbl::BridgeOptions {
+                link: link.clone(),
+                tcp: tcp.clone(),
+                tools: opts.tools.clone(),
+            };
+            pkmc_host::grbl::run(machine, opts, &bridge, &stop)
+        }
+        Command::Serve {
+            listen,
+            token,
+            program,
+        } => {
+            let station = pkmc_host::station::StationOptions {
+                listen: listen.clone(),
+                token: token.clone(),
+                program: program.clone(),
+                joint_names: match &args.machine {
+                    Some(p) => pkmc_host::machine_file::load_joint_names(p)
+                        .map_err(|e| bad(format!("{e:#}")))?,
+                    None => Vec::new(),
+                },
+            };
+            pkmc_host::station::run(machine, opts, &station, &stop)
+        }
+        _ => unreachable!("only grbl and serve serve"),
     }
 }
 
@@ -406,113 +455,6 @@ fn run_program(
     }
     print_report(&result.report, quiet, args.check);
     Ok(result.report.exit_code())
-}
-
-fn print_report(report: &Report, json: bool, check: bool) {
-    let mut out = std::io::stdout().lock();
-    if json {
-        let _ = writeln!(
-            out,
-            "{}",
-            serde_json::to_string_pretty(report).unwrap_or_default()
-        );
-        return;
-    }
-    let p = &report.final_pose;
-    let what = if check { "checked" } else { "ran" };
-    let _ = writeln!(
-        out,
-        "{}: {} ({what}) on {} — {} of {} blocks in {:.3} s{}, state {}",
-        report.program,
-        report.result,
-        report.machine,
-        report.blocks_executed,
-        report.blocks_sent,
-        report.run_time_s,
-        if check { " planned" } else { "" },
-        report.final_state
-    );
-    let _ = writeln!(
-        out,
-        "final pose X {:.4} Y {:.4} Z {:.4} A {:.4} B {:.4} C {:.4}",
-        p["x"], p["y"], p["z"], p["a"], p["b"], p["c"]
-    );
-    if let Some(pre) = &report.preflight {
-        let margin = match (pre.min_singularity_margin, pre.min_margin_line) {
-            (Some(m), Some(l)) => format!("smallest singularity margin {m:.4} (line {l})"),
-            _ => "no singularity margin computed".into(),
-        };
-        let _ = writeln!(
-            out,
-            "pre-flight: {} poses checked through the kinematics, all reachable; {margin}",
-            pre.samples
-        );
-    }
-    if let Some(line) = report.compression.as_ref().and_then(|c| c.text()) {
-        let _ = writeln!(out, "{line}");
-    }
-    if let Some(s) = &report.statics {
-        let peaks: Vec<String> = s
-            .peaks
-            .iter()
-            .map(|p| {
-                let limit = p.limit.map_or(String::new(), |l| format!(" of {l:.0}"));
-                format!(
-                    "q{} {:+.0} N{limit} (line {})",
-                    p.joint + 1,
-                    p.force,
-                    p.line
-                )
-            })
-            .collect();
-        let _ = writeln!(
-            out,
-            "statics: {} poses; largest joint forces (+ pushes): {}",
-            s.samples,
-            peaks.join(", ")
-        );
-        if let Some(l) = s.singular_at {
-            let _ = writeln!(
-                out,
-                "statics: the joints cannot hold the load at a singular pose (line {l})"
-            );
-        }
-    }
-    if let Some(steps) = &report.final_joint_steps {
-        let _ = writeln!(
-            out,
-            "drive positions (steps): {steps:?}; timing violations: {}",
-            report.drive_violations.unwrap_or(0)
-        );
-    }
-    if let Some(f) = &report.faults {
-        let (a, b) = (&f.to_controller, &f.to_host);
-        let _ = writeln!(
-            out,
-            "line faults at {}: corrupted {} dropped {} duplicated {} bytes; frames damaged {}, undetected {}; \
-             {} Naks, {} blocks resent",
-            f.rate,
-            a.corrupted + b.corrupted,
-            a.dropped + b.dropped,
-            a.duplicated + b.duplicated,
-            a.frames_damaged + b.frames_damaged,
-            a.undetected + b.undetected,
-            report.link.naks,
-            report.link.resent
-        );
-    }
-    for a in &report.alarms {
-        let _ = writeln!(out, "ALARM: {a}");
-    }
-    if report.result == "paused" {
-        let _ = writeln!(
-            out,
-            "PAUSED: a program pause or tool change, and no operator here to resume it (stdin \
-             is not a terminal): the job stays held on the controller with the blocks sent \
-             so far ({} of {}); `nc-send resume` continues them, `nc-send abort` drops them",
-            report.link.blocks_sent, report.blocks_sent
-        );
-    }
 }
 
 fn axis_index(name: &str) -> Result<usize, Failure> {
@@ -567,7 +509,9 @@ fn command(
                 (link.wait_idle(&mut op)?, None)
             }
             Command::Resume => (resume(link, &mut op)?, None),
-            Command::Grbl { .. } => unreachable!("served by grbl::run"),
+            Command::Grbl { .. } | Command::Serve { .. } => {
+                unreachable!("served by grbl::run and station::run")
+            }
         };
         let status = link.request_status()?;
         let (result, code) = match &end {

@@ -461,6 +461,7 @@ mod tests {
             motion_ticks: 0,
             pose: [0; 6],
             joints: [0; pkmc::config::MAX_JOINTS],
+            measured: [0; pkmc::config::MAX_JOINTS],
             speed: speed_mm_s * 1_000_000,
             buffered_ms: 0,
             free_slots: 0,

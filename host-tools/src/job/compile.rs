@@ -100,23 +100,50 @@ pub fn compile_compressed(
     tools: &gcode::ToolTable,
     compress: Option<&gcode::compress::Settings>,
 ) -> Result<Compiled, Failure> {
+    let (compiled, report) =
+        compile_located(text, name, machine, start, tools, compress).map_err(|errs| {
+            let lines: Vec<String> = errs.iter().map(|d| d.to_string()).collect();
+            Failure::new(
+                exit::BAD_INPUT,
+                format!(
+                    "{}\n{} error(s); nothing was sent",
+                    lines.join("\n"),
+                    errs.len()
+                ),
+            )
+        })?;
+    if !report.findings.is_empty() {
+        let lines = findings_text(name, &report.findings);
+        return Err(Failure::new(
+            exit::PREFLIGHT,
+            format!(
+                "{}\n{} pre-flight problem(s); nothing was sent",
+                lines.join("\n"),
+                report.findings.len()
+            ),
+        ));
+    }
+    Ok(compiled)
+}
+
+/// [`compile_compressed`] with its results as they are: the front end's errors, each
+/// at its line and column, or the blocks with the pre-flight of the blocks to stream
+/// (for a page that marks them in its editor).
+pub fn compile_located(
+    text: &str,
+    name: &str,
+    machine: &MachineConfig,
+    start: [i64; AXES],
+    tools: &gcode::ToolTable,
+    compress: Option<&gcode::compress::Settings>,
+) -> Result<(Compiled, crate::analysis::preflight::Preflight), Vec<gcode::Diagnostic>> {
     let options = gcode::Options {
         start,
         axes: machine_axes(machine),
         tools: tools.clone(),
         ..gcode::Options::default()
     };
-    let canon = gcode::compile_canon(text, name, &options).map_err(|errs| {
-        let lines: Vec<String> = errs.iter().map(|d| d.to_string()).collect();
-        Failure::new(
-            exit::BAD_INPUT,
-            format!(
-                "{}\n{} error(s); nothing was sent",
-                lines.join("\n"),
-                errs.len()
-            ),
-        )
-    })?;
+    let canon = gcode::compile_canon(text, name, &options)?;
     let program = crate::gcode::blocks::from_canon(&canon, start);
     let compiled = match compress {
         Some(settings) => {
@@ -137,18 +164,7 @@ pub fn compile_compressed(
         },
     };
     let report = crate::analysis::preflight::check(&compiled.blocks, machine, start);
-    if !report.findings.is_empty() {
-        let lines = findings_text(name, &report.findings);
-        return Err(Failure::new(
-            exit::PREFLIGHT,
-            format!(
-                "{}\n{} pre-flight problem(s); nothing was sent",
-                lines.join("\n"),
-                report.findings.len()
-            ),
-        ));
-    }
-    Ok(compiled)
+    Ok((compiled, report))
 }
 
 /// The pre-flight findings as lines of text: a run of the same problem on consecutive

@@ -29,12 +29,12 @@ pub use commands::{
     connect, home_command, jog_command, mdi, move_and_wait, prepare, state_text, with_link,
 };
 pub use compile::{
-    compile_compressed, compile_job, compile_program, compile_text, compile_text_with,
-    machine_axes, Compiled,
+    compile_compressed, compile_job, compile_located, compile_program, compile_text,
+    compile_text_with, machine_axes, Compiled,
 };
 pub use report::{
-    describe_alarm, pose_text, status_json, CompressionSummary, LinesExecuted, PreflightSummary,
-    Report,
+    describe_alarm, pose_text, print_report, status_json, CompressionSummary, LinesExecuted,
+    PreflightSummary, Report,
 };
 use sim_server::outcome_of;
 pub use sim_server::{SimOutcome, SimServer, SimSetup};
@@ -300,10 +300,27 @@ pub fn check(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
-    let setup = &opts.sim;
     let compiled = compile_job(program, machine, &opts.tools, opts.compress.as_ref())?;
+    check_compiled(
+        machine,
+        &program.display().to_string(),
+        &compiled,
+        opts,
+        hooks,
+    )
+}
+
+/// [`check`] of a program already compiled (named `name`).
+pub fn check_compiled(
+    machine: &MachineConfig,
+    name: &str,
+    compiled: &Compiled,
+    opts: &RunOptions<'_>,
+    hooks: &mut dyn JobHooks,
+) -> Result<RunResult, Failure> {
+    let setup = &opts.sim;
     let blocks = &compiled.blocks;
-    let statics = statics_gate(blocks, machine, &program.display().to_string(), opts)?;
+    let statics = statics_gate(blocks, machine, name, opts)?;
     let pre = crate::analysis::preflight::check(blocks, machine, machine.home);
     let sim = setup.simulator(machine.clone(), exit::BAD_INPUT)?;
     let recorder = std::rc::Rc::new(std::cell::RefCell::new(Recorder::new(
@@ -338,7 +355,7 @@ pub fn check(
     let outcome = outcome_of(&io.sim, None, recorder);
     let mut report = Report::new(
         machine,
-        &program.display().to_string(),
+        name,
         blocks.len(),
         &end,
         &status,
@@ -351,7 +368,7 @@ pub fn check(
         min_margin_line: pre.min_margin.map(|(_, l)| l),
     });
     report.statics = statics;
-    report.compression = Some(CompressionSummary::of(&compiled, Some(&outcome)));
+    report.compression = Some(CompressionSummary::of(compiled, Some(&outcome)));
     Ok(RunResult {
         report,
         sim: Some(outcome),

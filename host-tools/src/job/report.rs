@@ -8,6 +8,7 @@ use pkmc::config::{axis_is_rotary, MachineConfig, AXIS_NAMES};
 use pkmc::protocol::{Alarm, Status};
 use pkmc::units::{to_user, TICK_NS};
 use serde::Serialize;
+use std::io::Write;
 
 /// The NC lines a simulated job executed.
 #[derive(Clone, Debug, Serialize, PartialEq, Eq)]
@@ -254,12 +255,19 @@ pub fn status_json(s: &Status, machine: &MachineConfig, result: &str) -> serde_j
         .enumerate()
         .map(|(j, jc)| to_user(s.joints[j], jc.rotary))
         .collect();
+    let measured: Vec<f64> = machine
+        .joints
+        .iter()
+        .enumerate()
+        .map(|(j, jc)| to_user(jc.scale.position_of(s.measured[j]), jc.rotary))
+        .collect();
     serde_json::json!({
         "result": result,
         "state": format!("{:?}", s.state),
         "line": s.line,
         "pose": pose,
         "joints": joints,
+        "measured": measured,
         "feed_mm_min": s.speed as f64 * 60.0 / 1e6,
         "feed_override": s.feed_override,
         "buffered_ms": s.buffered_ms,
@@ -268,4 +276,112 @@ pub fn status_json(s: &Status, machine: &MachineConfig, result: &str) -> serde_j
         "alarm": s.alarm.map(|a| describe_alarm(&a)),
         "homed": s.homed,
     })
+}
+
+/// Prints a run's summary on stdout: as JSON, or in words (`check`: a dry run).
+pub fn print_report(report: &Report, json: bool, check: bool) {
+    let mut out = std::io::stdout().lock();
+    if json {
+        let _ = writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(report).unwrap_or_default()
+        );
+        return;
+    }
+    let p = &report.final_pose;
+    let what = if check { "checked" } else { "ran" };
+    let _ = writeln!(
+        out,
+        "{}: {} ({what}) on {} — {} of {} blocks in {:.3} s{}, state {}",
+        report.program,
+        report.result,
+        report.machine,
+        report.blocks_executed,
+        report.blocks_sent,
+        report.run_time_s,
+        if check { " planned" } else { "" },
+        report.final_state
+    );
+    let _ = writeln!(
+        out,
+        "final pose X {:.4} Y {:.4} Z {:.4} A {:.4} B {:.4} C {:.4}",
+        p["x"], p["y"], p["z"], p["a"], p["b"], p["c"]
+    );
+    if let Some(pre) = &report.preflight {
+        let margin = match (pre.min_singularity_margin, pre.min_margin_line) {
+            (Some(m), Some(l)) => format!("smallest singularity margin {m:.4} (line {l})"),
+            _ => "no singularity margin computed".into(),
+        };
+        let _ = writeln!(
+            out,
+            "pre-flight: {} poses checked through the kinematics, all reachable; {margin}",
+            pre.samples
+        );
+    }
+    if let Some(line) = report.compression.as_ref().and_then(|c| c.text()) {
+        let _ = writeln!(out, "{line}");
+    }
+    if let Some(s) = &report.statics {
+        let peaks: Vec<String> = s
+            .peaks
+            .iter()
+            .map(|p| {
+                let limit = p.limit.map_or(String::new(), |l| format!(" of {l:.0}"));
+                format!(
+                    "q{} {:+.0} N{limit} (line {})",
+                    p.joint + 1,
+                    p.force,
+                    p.line
+                )
+            })
+            .collect();
+        let _ = writeln!(
+            out,
+            "statics: {} poses; largest joint forces (+ pushes): {}",
+            s.samples,
+            peaks.join(", ")
+        );
+        if let Some(l) = s.singular_at {
+            let _ = writeln!(
+                out,
+                "statics: the joints cannot hold the load at a singular pose (line {l})"
+            );
+        }
+    }
+    if let Some(steps) = &report.final_joint_steps {
+        let _ = writeln!(
+            out,
+            "drive positions (steps): {steps:?}; timing violations: {}",
+            report.drive_violations.unwrap_or(0)
+        );
+    }
+    if let Some(f) = &report.faults {
+        let (a, b) = (&f.to_controller, &f.to_host);
+        let _ = writeln!(
+            out,
+            "line faults at {}: corrupted {} dropped {} duplicated {} bytes; frames damaged {}, undetected {}; \
+             {} Naks, {} blocks resent",
+            f.rate,
+            a.corrupted + b.corrupted,
+            a.dropped + b.dropped,
+            a.duplicated + b.duplicated,
+            a.frames_damaged + b.frames_damaged,
+            a.undetected + b.undetected,
+            report.link.naks,
+            report.link.resent
+        );
+    }
+    for a in &report.alarms {
+        let _ = writeln!(out, "ALARM: {a}");
+    }
+    if report.result == "paused" {
+        let _ = writeln!(
+            out,
+            "PAUSED: a program pause or tool change, and no operator here to resume it (stdin \
+             is not a terminal): the job stays held on the controller with the blocks sent \
+             so far ({} of {}); `nc-send resume` continues them, `nc-send abort` drops them",
+            report.link.blocks_sent, report.blocks_sent
+        );
+    }
 }

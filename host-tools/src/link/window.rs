@@ -150,6 +150,7 @@ mod tests {
             motion_ticks: 0,
             pose: [0; 6],
             joints: [0; pkmc::config::MAX_JOINTS],
+            measured: [0; pkmc::config::MAX_JOINTS],
             speed: 0,
             buffered_ms: 0,
             free_slots: 64,

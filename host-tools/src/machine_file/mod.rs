@@ -366,6 +366,13 @@ pub fn load_force_limits(path: &Path) -> Result<Vec<Option<f64>>, MachineFileErr
         })
 }
 
+/// The joints' names in the machine file at `path`, in order.
+pub fn load_joint_names(path: &Path) -> Result<Vec<String>, MachineFileError> {
+    let text = read(path)?;
+    let file = read_file(&text, &path.display().to_string())?;
+    Ok(file.joints.iter().map(|j| j.name.clone()).collect())
+}
+
 /// The tool table of the machine file at `path` (`[[tools]]`; empty when it has none).
 pub fn load_tools(path: &Path) -> Result<crate::gcode::ToolTable, MachineFileError> {
     let text = read(path)?;

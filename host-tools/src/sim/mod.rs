@@ -336,7 +336,13 @@ impl Simulator {
     /// still to run, or a servo joint is still settling on its target (for at most
     /// [`SETTLE_TICKS`] after the work)?
     pub fn busy(&self) -> bool {
-        if self.ctrl.has_work() || self.ctrl.state() == State::Running || self.steps_due() {
+        if self.ctrl.has_work()
+            || self.ctrl.state() == State::Running
+            || self.steps_due()
+            || self.ctrl.fresh()
+        {
+            // (A controller that has not read its inputs since a machine was loaded
+            // does so on its next tick, as a board's would within a period.)
             return true;
         }
         if self.idle_ticks >= SETTLE_TICKS {

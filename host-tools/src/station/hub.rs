@@ -1,0 +1,238 @@
+//! What the pages share: who is connected, who holds the lock, the loaded program,
+//! the teach list, the last status; and the ways out to the pages (one message to
+//! all, or a reply to one).
+
+use super::program::Program;
+use pkmc::protocol::Status;
+use serde_json::{json, Value};
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+use tokio::sync::{broadcast, mpsc};
+
+/// A page that has not been heard from for this long has lost its heartbeat.
+pub const HEARTBEAT_LOST: Duration = Duration::from_secs(1);
+
+/// A connected page.
+struct Page {
+    name: String,
+    tx: mpsc::UnboundedSender<Arc<str>>,
+    heard: Instant,
+}
+
+/// The teach list: positions (mm, degrees) in order, the speed they are run at, and
+/// the next one Run by Step goes to.
+#[derive(Clone, Debug)]
+pub struct Teach {
+    pub points: Vec<[f64; 6]>,
+    pub speed: f64,
+    pub next: Option<usize>,
+}
+
+/// State shared by the web side and the machine thread.
+pub struct Hub {
+    all: broadcast::Sender<Arc<str>>,
+    pages: Mutex<HashMap<u64, Page>>,
+    lock: Mutex<Option<u64>>,
+    next_id: AtomicU64,
+    pub program: Mutex<Program>,
+    pub teach: Mutex<Teach>,
+    pub status: Mutex<Option<Status>>,
+    /// The last `status` and `program` messages, for a page that connects.
+    last_status: Mutex<Option<Arc<str>>>,
+    last_program: Mutex<Option<Arc<str>>>,
+    /// The `hello` message's `machine`.
+    pub machine: Value,
+}
+
+/// Locks a mutex, whatever a panicking holder left.
+pub fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+impl Hub {
+    pub fn new(machine: Value) -> Self {
+        Self {
+            all: broadcast::channel(256).0,
+            pages: Mutex::new(HashMap::new()),
+            lock: Mutex::new(None),
+            next_id: AtomicU64::new(1),
+            program: Mutex::new(Program::default()),
+            teach: Mutex::new(Teach {
+                points: Vec::new(),
+                speed: 1000.0,
+                next: None,
+            }),
+            status: Mutex::new(None),
+            last_status: Mutex::new(None),
+            last_program: Mutex::new(None),
+            machine,
+        }
+    }
+
+    /// A page connects: its id, what it receives, and the messages it starts with.
+    pub fn connect(
+        &self,
+        name: &str,
+    ) -> (
+        u64,
+        mpsc::UnboundedReceiver<Arc<str>>,
+        broadcast::Receiver<Arc<str>>,
+    ) {
+        let id = self.next_id.fetch_add(1, Ordering::Relaxed);
+        let (tx, rx) = mpsc::unbounded_channel();
+        let hello = json!({"type": "hello", "you": id, "machine": self.machine});
+        let _ = tx.send(hello.to_string().into());
+        for m in [&self.last_program, &self.last_status] {
+            if let Some(m) = lock(m).clone() {
+                let _ = tx.send(m);
+            }
+        }
+        let _ = tx.send(self.teach_message().to_string().into());
+        let all = self.all.subscribe();
+        lock(&self.pages).insert(
+            id,
+            Page {
+                name: name.to_string(),
+                tx,
+                heard: Instant::now(),
+            },
+        );
+        (id, rx, all)
+    }
+
+    /// A page went: its lock is released.
+    pub fn disconnect(&self, id: u64) {
+        let name = lock(&self.pages).remove(&id).map(|p| p.name);
+        let mut l = lock(&self.lock);
+        if *l == Some(id) {
+            *l = None;
+            drop(l);
+            self.log(
+                "warn",
+                &format!(
+                    "{} closed its page and gave up control",
+                    name.unwrap_or_default()
+                ),
+            );
+        }
+    }
+
+    pub fn heard(&self, id: u64) {
+        if let Some(p) = lock(&self.pages).get_mut(&id) {
+            p.heard = Instant::now();
+        }
+    }
+
+    /// Is page `id` connected and heard from within [`HEARTBEAT_LOST`]?
+    pub fn alive(&self, id: u64) -> bool {
+        lock(&self.pages)
+            .get(&id)
+            .is_some_and(|p| p.heard.elapsed() < HEARTBEAT_LOST)
+    }
+
+    /// Who holds the lock: id and name.
+    pub fn holder(&self) -> Option<(u64, String)> {
+        let id = (*lock(&self.lock))?;
+        let name = lock(&self.pages).get(&id).map(|p| p.name.clone());
+        Some((id, name.unwrap_or_default()))
+    }
+
+    /// Page `id` takes the lock if nobody holds it; otherwise says who does.
+    pub fn take(&self, id: u64) -> Result<(), String> {
+        let mut l = lock(&self.lock);
+        match *l {
+            Some(h) if h != id => {
+                drop(l);
+                let name = self.holder().map(|h| h.1).unwrap_or_default();
+                Err(format!("{name} holds control of the machine"))
+            }
+            _ => {
+                *l = Some(id);
+                Ok(())
+            }
+        }
+    }
+
+    pub fn release(&self, id: u64) {
+        let mut l = lock(&self.lock);
+        if *l == Some(id) {
+            *l = None;
+        }
+    }
+
+    /// May page `id` command the machine? `Err` names who holds it.
+    pub fn may_command(&self, id: u64) -> Result<(), String> {
+        match self.holder() {
+            Some((h, _)) if h == id => Ok(()),
+            Some((_, name)) => Err(format!(
+                "{name} holds control of the machine: commands from this page are refused"
+            )),
+            None => Err("take control first (nobody holds it)".to_string()),
+        }
+    }
+
+    /// A message to every page (none is lost: the pages' own queues).
+    pub fn broadcast(&self, msg: &Value) {
+        let text: Arc<str> = msg.to_string().into();
+        for p in lock(&self.pages).values() {
+            let _ = p.tx.send(text.clone());
+        }
+    }
+
+    /// A message to one page.
+    pub fn send_to(&self, id: u64, msg: &Value) {
+        if let Some(p) = lock(&self.pages).get(&id) {
+            let _ = p.tx.send(msg.to_string().into());
+        }
+    }
+
+    pub fn reply(&self, page: u64, id: u64, result: Result<String, String>) {
+        let (ok, text) = match result {
+            Ok(t) => (true, t),
+            Err(t) => (false, t),
+        };
+        self.send_to(
+            page,
+            &json!({"type": "reply", "id": id, "ok": ok, "text": text}),
+        );
+    }
+
+    pub fn log(&self, level: &str, text: &str) {
+        self.broadcast(&json!({"type": "log", "level": level, "text": text}));
+    }
+
+    /// A status message to every page (kept for pages that connect later); a page
+    /// too slow for them skips some (each is a whole snapshot).
+    pub fn publish_status(&self, status: &Status, msg: Value) {
+        *lock(&self.status) = Some(status.clone());
+        let text: Arc<str> = msg.to_string().into();
+        *lock(&self.last_status) = Some(text.clone());
+        let _ = self.all.send(text);
+    }
+
+    /// The loaded program to every page.
+    pub fn publish_program(&self) {
+        let msg = lock(&self.program).message();
+        *lock(&self.last_program) = Some(msg.to_string().into());
+        self.broadcast(&msg);
+    }
+
+    pub fn teach_message(&self) -> Value {
+        let t = lock(&self.teach);
+        let points: Vec<Value> = t
+            .points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                json!({"name": format!("P{}", i + 1), "pose": p.map(super::program::round3)})
+            })
+            .collect();
+        json!({"type": "teach", "points": points, "speed": t.speed, "next": t.next})
+    }
+
+    pub fn publish_teach(&self) {
+        self.broadcast(&self.teach_message());
+    }
+}

@@ -1,0 +1,542 @@
+//! The machine thread: the one owner of the link to the controller. Between jobs it
+//! asks for the status 50 times a second and carries out the pages' commands; while
+//! a job runs (a program, Run by Step, MDI, a jog, a joint move, the teach list) the
+//! job's hooks take hold, resume, stop, override and the next step, publish every
+//! status, and stop what a page started when that page's heartbeat is lost.
+
+use super::hub::{lock, Hub};
+use super::{Cmd, Request};
+use crate::job::{self, Failure};
+use crate::link::{JobEnd, JobHooks, Link, LinkView, Transport};
+use pkmc::config::{MachineConfig, AXES, AXIS_NAMES};
+use pkmc::kinematics::{Kinematics, MachineKinematics};
+use pkmc::protocol::{Block, Control, Motion, Status};
+use pkmc::units::{to_user, units_per_user};
+use serde_json::{json, Value};
+use std::collections::VecDeque;
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::time::{Duration, Instant};
+
+/// Between jobs, a status this often.
+const IDLE_STATUS: Duration = Duration::from_millis(20);
+
+/// A continuous jog goes this far (clipped to the joint travel) until released.
+const JOG_FAR_MM: f64 = 10_000.0;
+
+/// What runs, and for whom.
+#[derive(Clone, Debug)]
+pub(super) struct JobInfo {
+    kind: &'static str,
+    /// The page that started it.
+    owner: u64,
+    total: usize,
+    executed: usize,
+    /// Run by Step: the blocks, how many were fed, presses not yet served.
+    steps: Option<(Vec<Block>, usize, usize)>,
+    /// The owner's heartbeat was lost and the motion stopped for it.
+    orphaned: bool,
+    /// Controls to send, in order.
+    controls: VecDeque<Control>,
+}
+
+impl JobInfo {
+    fn new(kind: &'static str, owner: u64, total: usize) -> Self {
+        Self {
+            kind,
+            owner,
+            total,
+            executed: 0,
+            steps: None,
+            orphaned: false,
+            controls: VecDeque::new(),
+        }
+    }
+}
+
+pub(super) struct Machine<'a> {
+    pub(super) hub: &'a Hub,
+    pub(super) machine: &'a MachineConfig,
+    pub(super) rx: Receiver<Request>,
+    pub(super) tools: crate::gcode::ToolTable,
+}
+
+/// The status message: the controller's status in user units, the job, the lock and
+/// the mechanism.
+fn status_message(machine: &MachineConfig, hub: &Hub, s: &Status, job: Option<&JobInfo>) -> Value {
+    let pose: [f64; AXES] = std::array::from_fn(|i| to_user(s.pose[i], i >= 3));
+    let n = machine.joints.len();
+    let joints: Vec<f64> = (0..n)
+        .map(|j| to_user(s.joints[j], machine.joints[j].rotary))
+        .collect();
+    let measured: Vec<f64> = (0..n)
+        .map(|j| {
+            let jc = &machine.joints[j];
+            to_user(jc.scale.position_of(s.measured[j]), jc.rotary)
+        })
+        .collect();
+    let alarm = s.alarm.map(|a| {
+        let joint = (a.joint != pkmc::protocol::NO_JOINT).then(|| {
+            hub.machine["joints"][a.joint as usize]["name"]
+                .as_str()
+                .unwrap_or("?")
+                .to_string()
+        });
+        json!({"cause": format!("{:?}", a.cause), "joint": joint, "line": a.line,
+               "text": job::describe_alarm(&a)})
+    });
+    let job = job.map(|j| {
+        let eta = match j.kind {
+            "program" => lock(&hub.program).eta_s(j.executed, s.feed_override),
+            _ => None,
+        };
+        let waiting = j
+            .steps
+            .as_ref()
+            .is_some_and(|(_, fed, pending)| *pending == 0 && j.executed >= *fed);
+        json!({
+            "kind": j.kind, "executed": j.executed, "total": j.total,
+            "percent": if j.total == 0 { 0.0 } else { 100.0 * j.executed as f64 / j.total as f64 },
+            "eta_s": eta, "step": waiting,
+        })
+    });
+    let holder = hub.holder();
+    let r = super::program::round3;
+    json!({
+        "type": "status",
+        "state": format!("{:?}", s.state),
+        "line": s.line,
+        "homed": s.homed,
+        "pose": pose.map(r),
+        "joints": joints.iter().map(|&v| r(v)).collect::<Vec<_>>(),
+        "measured": measured.iter().map(|&v| r(v)).collect::<Vec<_>>(),
+        "feed": (s.speed as f64 * 60.0 / 1e6).round(),
+        "override": s.feed_override,
+        "buffered_ms": s.buffered_ms,
+        "alarm": alarm,
+        "job": job,
+        "lock": {"holder": holder.as_ref().map(|h| h.0), "name": holder.map(|h| h.1)},
+        "scene": super::scene::scene(machine, &pose, &joints),
+    })
+}
+
+impl Machine<'_> {
+    fn publish(&self, s: &Status, job: Option<&JobInfo>) {
+        let msg = status_message(self.machine, self.hub, s, job);
+        self.hub.publish_status(s, msg);
+    }
+
+    /// Serves until `stop` says so.
+    pub(super) fn serve<T: Transport>(
+        &mut self,
+        link: &mut Link<T>,
+        stop: &dyn Fn() -> bool,
+    ) -> Result<(), Failure> {
+        let mut asked = Instant::now() - IDLE_STATUS;
+        while !stop() {
+            if asked.elapsed() >= IDLE_STATUS {
+                let s = link.request_status()?;
+                self.publish(&s, None);
+                asked = Instant::now();
+            }
+            match self.rx.recv_timeout(Duration::from_millis(5)) {
+                Ok(req) => {
+                    let (page, id) = (req.page, req.id);
+                    let r = self.command(link, req);
+                    match r {
+                        Ok(Some(text)) => self.hub.reply(page, id, Ok(text)),
+                        Ok(None) => {}
+                        Err(f) if f.code == crate::job::exit::LINK => return Err(f),
+                        Err(f) => {
+                            self.hub.reply(page, id, Err(f.message.clone()));
+                            self.hub.log("error", &f.message);
+                        }
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => break,
+            }
+        }
+        Ok(())
+    }
+
+    /// One command between jobs; `Ok(Some(text))` is the reply (a job replies when it
+    /// starts and logs how it ended).
+    fn command<T: Transport>(
+        &mut self,
+        link: &mut Link<T>,
+        req: Request,
+    ) -> Result<Option<String>, Failure> {
+        let (page, id) = (req.page, req.id);
+        let started = |what: &str| {
+            self.hub.reply(page, id, Ok(format!("{what} started")));
+        };
+        let end = match req.cmd {
+            Cmd::Run => {
+                let blocks = {
+                    let p = lock(&self.hub.program);
+                    if !p.runnable() {
+                        return Err(not_runnable(&p));
+                    }
+                    p.blocks().to_vec()
+                };
+                started("program");
+                let mut info = JobInfo::new("program", page, blocks.len());
+                self.run(link, &blocks, &mut info)?
+            }
+            Cmd::Step => {
+                let blocks = {
+                    let p = lock(&self.hub.program);
+                    if !p.runnable() {
+                        return Err(not_runnable(&p));
+                    }
+                    p.programmed().to_vec()
+                };
+                if blocks.is_empty() {
+                    return Ok(Some("nothing to run".into()));
+                }
+                started("run by step");
+                let mut info = JobInfo::new("step", page, blocks.len());
+                let first = vec![blocks[0]];
+                info.steps = Some((blocks, 1, 0));
+                self.run(link, &first, &mut info)?
+            }
+            Cmd::Hold => return self.control(link, Control::Hold),
+            Cmd::Resume => return self.control(link, Control::Resume),
+            Cmd::Stop => return self.control(link, Control::Abort),
+            Cmd::Estop => return self.control(link, Control::Stop),
+            Cmd::Reset => return self.control(link, Control::AlarmReset),
+            Cmd::Override { percent } => {
+                return self.control(link, Control::FeedOverride(override_of(percent)?))
+            }
+            Cmd::JogStop => return Ok(Some("no jog runs".into())),
+            Cmd::Jog {
+                axis,
+                distance,
+                feed,
+            } => {
+                let cmd = jog(link, &axis, distance, feed)?;
+                started("jog");
+                let mut info = JobInfo::new("jog", page, 1);
+                self.wait_move(link, cmd, &mut info)?
+            }
+            Cmd::JogStart { axis, dir, feed } => {
+                let cmd = jog(link, &axis, dir.signum() * JOG_FAR_MM, feed)?;
+                started("continuous jog");
+                let mut info = JobInfo::new("jog_hold", page, 1);
+                self.wait_move(link, cmd, &mut info)?
+            }
+            Cmd::Home => {
+                let cmd = job::home_command(link)?;
+                started("homing");
+                let mut info = JobInfo::new("home", page, 1);
+                self.wait_move(link, cmd, &mut info)?
+            }
+            Cmd::Mdi { text } => {
+                let s = link.request_status()?;
+                let blocks =
+                    job::compile_text_with(&text, "MDI", self.machine, s.pose, &self.tools)?;
+                started("MDI");
+                let mut info = JobInfo::new("mdi", page, blocks.len());
+                self.run(link, &blocks, &mut info)?
+            }
+            Cmd::Joint {
+                joint,
+                distance,
+                feed,
+            } => {
+                let s = link.request_status()?;
+                let blocks = joint_move(self.machine, &s, joint, distance, feed)?;
+                started("joint move");
+                let mut info = JobInfo::new("joint", page, blocks.len());
+                self.run(link, &blocks, &mut info)?
+            }
+            Cmd::TeachRun | Cmd::TeachStep => {
+                let step = matches!(req.cmd, Cmd::TeachStep);
+                let s = link.request_status()?;
+                let (text, total) = self.teach_program(step)?;
+                let blocks =
+                    job::compile_text_with(&text, "teach", self.machine, s.pose, &self.tools)?;
+                started(if step { "teach step" } else { "teach run" });
+                let mut info = JobInfo::new("teach", page, blocks.len().min(total));
+                self.run(link, &blocks, &mut info)?
+            }
+            other => {
+                return Err(Failure::new(
+                    job::exit::BAD_INPUT,
+                    format!("{} is not a machine command", other.name()),
+                ))
+            }
+        };
+        let s = link.request_status()?;
+        self.publish(&s, None);
+        self.report_end(&end);
+        Ok(None)
+    }
+
+    fn control<T: Transport>(
+        &mut self,
+        link: &mut Link<T>,
+        c: Control,
+    ) -> Result<Option<String>, Failure> {
+        link.control(c)?;
+        if c == Control::Abort {
+            link.release_held();
+        }
+        Ok(Some(format!("{c:?} sent")))
+    }
+
+    /// The teach list as a program: all of it, or the next position (Run by Step,
+    /// which then moves on).
+    fn teach_program(&self, step: bool) -> Result<(String, usize), Failure> {
+        let axes: [bool; AXES] = job::machine_axes(self.machine);
+        let mut t = lock(&self.hub.teach);
+        if t.points.is_empty() {
+            return Err(Failure::new(
+                job::exit::BAD_INPUT,
+                "the teach list is empty: Set Position first",
+            ));
+        }
+        let text = if step {
+            let i = t.next.unwrap_or(0).min(t.points.len() - 1);
+            t.next = (i + 1 < t.points.len()).then_some(i + 1);
+            super::program::teach_gcode(&t.points[i..=i], &axes, t.speed)
+        } else {
+            t.next = None;
+            super::program::teach_gcode(&t.points, &axes, t.speed)
+        };
+        let n = if step { 1 } else { t.points.len() };
+        drop(t);
+        self.hub.publish_teach();
+        Ok((text, n))
+    }
+
+    fn run<T: Transport>(
+        &mut self,
+        link: &mut Link<T>,
+        blocks: &[Block],
+        info: &mut JobInfo,
+    ) -> Result<JobEnd, Failure> {
+        let mut hooks = Hooks { m: self, info };
+        Ok(link.run_job(blocks, &mut hooks)?)
+    }
+
+    fn wait_move<T: Transport>(
+        &mut self,
+        link: &mut Link<T>,
+        cmd: Control,
+        info: &mut JobInfo,
+    ) -> Result<JobEnd, Failure> {
+        let mut hooks = Hooks { m: self, info };
+        job::move_and_wait(link, cmd, &mut hooks)
+    }
+
+    fn report_end(&self, end: &JobEnd) {
+        match end {
+            JobEnd::Done => self.hub.log("info", "done"),
+            JobEnd::Alarm(a) => self
+                .hub
+                .log("error", &format!("alarm: {}", job::describe_alarm(a))),
+            JobEnd::Aborted | JobEnd::Stopped => self.hub.log("warn", "stopped"),
+            JobEnd::Paused(_) => self.hub.log("info", "paused: Resume continues"),
+        }
+    }
+}
+
+fn not_runnable(p: &super::program::Program) -> Failure {
+    let why = match (p.compiled.is_some(), p.errors.first()) {
+        (_, Some((l, c, m))) => format!("{}:{l}:{c}: {m}", p.name),
+        (false, None) => "no program is loaded".to_string(),
+        (true, None) => "the program cannot run".to_string(),
+    };
+    Failure::new(job::exit::BAD_INPUT, format!("not started: {why}"))
+}
+
+fn override_of(percent: f64) -> Result<u16, Failure> {
+    if !(1.0..=200.0).contains(&percent) {
+        return Err(Failure::new(
+            job::exit::BAD_INPUT,
+            format!("override {percent}: must be 1 to 200 percent"),
+        ));
+    }
+    Ok(percent.round() as u16)
+}
+
+/// A jog of `distance` (mm or degrees) along `axis` at `feed` (mm/min or °/min).
+fn jog<T: Transport>(
+    link: &mut Link<T>,
+    axis: &str,
+    distance: f64,
+    feed: f64,
+) -> Result<Control, Failure> {
+    let bad = |m: String| Failure::new(job::exit::BAD_INPUT, m);
+    let i = AXIS_NAMES
+        .iter()
+        .position(|n| axis.len() == 1 && axis.starts_with(|c: char| c.eq_ignore_ascii_case(n)))
+        .ok_or_else(|| bad(format!("jog: axis {axis:?}: not one of X Y Z A B C")))?;
+    if !distance.is_finite() || distance == 0.0 {
+        return Err(bad(format!(
+            "jog: distance {distance}: must be a non-zero number"
+        )));
+    }
+    if !feed.is_finite() || feed <= 0.0 {
+        return Err(bad(format!("jog: feed {feed}: must be a positive number")));
+    }
+    let scale = units_per_user(i >= 3) as f64;
+    job::jog_command(
+        link,
+        i,
+        (distance * scale).round() as i64,
+        (feed / 60.0 * scale).round() as i64,
+    )
+}
+
+/// Moves joint `joint` by `distance` (mm or degrees) alone: the straight line in
+/// joint space, cut into pieces of at most half a unit each turned into a pose by the
+/// forward kinematics, so the other joints stay where they are at every piece's end.
+fn joint_move(
+    machine: &MachineConfig,
+    s: &Status,
+    joint: usize,
+    distance: f64,
+    feed: f64,
+) -> Result<Vec<Block>, Failure> {
+    let bad = |m: String| Failure::new(job::exit::BAD_INPUT, m);
+    let jc = machine.joints.get(joint).ok_or_else(|| {
+        bad(format!(
+            "joint {}: the machine has no such joint",
+            joint + 1
+        ))
+    })?;
+    if !distance.is_finite() || !feed.is_finite() || feed <= 0.0 {
+        return Err(bad(format!(
+            "joint move: distance {distance}, feed {feed}: need numbers, feed positive"
+        )));
+    }
+    let scale = units_per_user(jc.rotary) as f64;
+    let from = s.joints[joint];
+    let to = (from + (distance * scale).round() as i64).clamp(jc.min, jc.max);
+    if to == from {
+        return Err(bad(format!(
+            "joint {}: at the end of its travel; nothing to move",
+            joint + 1
+        )));
+    }
+    let pieces = ((to - from).unsigned_abs() as f64 / (scale * 0.5)).ceil() as i64;
+    let pieces = pieces.clamp(1, 400);
+    let kin = MachineKinematics::new(machine);
+    let mut pose = s.pose;
+    let mut blocks = Vec::new();
+    for k in 1..=pieces {
+        let mut q = s.joints;
+        q[joint] = from + (to - from) * k / pieces;
+        let mut next = pose;
+        kin.forward(&q, &pose, &mut next).map_err(|e| {
+            bad(format!(
+                "joint {}: no pose reaches {:.3} ({e:?})",
+                joint + 1,
+                to_user(q[joint], jc.rotary)
+            ))
+        })?;
+        pose = next;
+        blocks.push(Block {
+            line: 0,
+            motion: Motion::Linear,
+            target: pose,
+            feed: (feed / 60.0 * 1e6).round() as i64,
+            tolerance_nm: 0,
+        });
+    }
+    Ok(blocks)
+}
+
+/// The job's hooks: statuses published, the pages' commands while it runs.
+struct Hooks<'m, 'a> {
+    m: &'m mut Machine<'a>,
+    info: &'m mut JobInfo,
+}
+
+impl Hooks<'_, '_> {
+    /// A page's command while a job runs.
+    fn during(&mut self, req: Request) {
+        let reply = match req.cmd {
+            Cmd::Hold => self.queue(Control::Hold),
+            Cmd::Resume => self.queue(Control::Resume),
+            Cmd::Stop => self.queue(Control::Abort),
+            Cmd::Estop => self.queue(Control::Stop),
+            Cmd::JogStop if self.info.kind == "jog_hold" => self.queue(Control::Abort),
+            Cmd::JogStop => Ok("no continuous jog runs".into()),
+            Cmd::Override { percent } => override_of(percent)
+                .map_err(|f| f.message)
+                .and_then(|p| self.queue(Control::FeedOverride(p))),
+            Cmd::Step => match self.info.steps.as_mut() {
+                Some((_, _, pending)) => {
+                    *pending += 1;
+                    Ok("next block".into())
+                }
+                None => Err(format!(
+                    "busy: a {} runs (Run by Step is not on)",
+                    self.info.kind
+                )),
+            },
+            other => Err(format!(
+                "busy: a {} runs; {} waits until it ends (hold or stop it first)",
+                self.info.kind,
+                other.name()
+            )),
+        };
+        self.m.hub.reply(req.page, req.id, reply);
+    }
+
+    fn queue(&mut self, c: Control) -> Result<String, String> {
+        self.info.controls.push_back(c);
+        Ok(format!("{c:?} sent"))
+    }
+
+    /// The page that started the job has gone silent: a continuous jog stops, anything
+    /// else is held on its path for another page to resume or stop.
+    fn watch_heartbeat(&mut self) {
+        if self.info.orphaned || self.m.hub.alive(self.info.owner) {
+            return;
+        }
+        self.info.orphaned = true;
+        let (c, what) = match self.info.kind {
+            "jog_hold" | "jog" | "joint" => (Control::Abort, "stopped"),
+            _ => (Control::Hold, "held"),
+        };
+        self.info.controls.push_back(c);
+        self.m.hub.log(
+            "warn",
+            &format!(
+                "the page that started the {} stopped answering: motion {what}",
+                self.info.kind
+            ),
+        );
+    }
+}
+
+impl JobHooks for Hooks<'_, '_> {
+    fn status(&mut self, s: &Status) {
+        self.m.publish(s, Some(self.info));
+    }
+
+    fn control(&mut self, view: &LinkView) -> Option<Control> {
+        self.info.executed = view.executed.min(self.info.total);
+        self.watch_heartbeat();
+        while let Ok(req) = self.m.rx.try_recv() {
+            self.during(req);
+        }
+        self.info.controls.pop_front()
+    }
+
+    fn feed(&mut self, view: &LinkView, out: &mut Vec<Block>) -> bool {
+        let Some((blocks, fed, pending)) = self.info.steps.as_mut() else {
+            return false;
+        };
+        if *pending > 0 && view.executed >= view.total && *fed < blocks.len() {
+            out.push(blocks[*fed]);
+            *fed += 1;
+            *pending -= 1;
+        }
+        *fed < blocks.len()
+    }
+}

@@ -1,0 +1,1188 @@
+// pkmc operator station: the page's script. Plain ES2020, no libraries.
+// Sections: utilities, shared state, connection, message handlers, DRO, program
+// panel, jog / MDI / joint moves, teach list, log and toast, 3-D view, start-up.
+'use strict';
+(() => {
+
+// ===================================================================== utilities
+
+const $ = (id) => document.getElementById(id);
+const AXES = ['X', 'Y', 'Z', 'A', 'B', 'C'];
+const STATS_CAP = 100000;
+
+/** Sets an element's text only when it changed (status arrives at 50 Hz). */
+function setText(el, s) {
+  if (el && el.textContent !== s) el.textContent = s;
+}
+
+/** A number with 3 decimals, "-0.000" shown as "0.000". */
+function fmt3(v) {
+  if (typeof v !== 'number' || !Number.isFinite(v)) return '—';
+  return Math.abs(v) < 0.0005 ? '0.000' : v.toFixed(3);
+}
+
+/** Seconds as m:ss ("—" when unknown). */
+function mmss(s) {
+  if (typeof s !== 'number' || !Number.isFinite(s)) return '—';
+  const t = Math.max(0, Math.round(s));
+  return `${Math.floor(t / 60)}:${String(t % 60).padStart(2, '0')}`;
+}
+
+function pushCapped(arr, v) {
+  if (arr.length >= STATS_CAP) arr.splice(0, arr.length - STATS_CAP + 1);
+  arr.push(v);
+}
+
+function el(tag, cls, text) {
+  const e = document.createElement(tag);
+  if (cls) e.className = cls;
+  if (text !== undefined) e.textContent = text;
+  return e;
+}
+
+// ================================================================== shared state
+
+const params = new URLSearchParams(location.search);
+const TOKEN = params.get('token');
+const CLIENT_NAME = params.get('name') ||
+  'browser-' + Math.floor(Math.random() * 0x10000).toString(16).padStart(4, '0');
+
+const pkmc = window.pkmc = {
+  stats: { frames: [], status: [] },
+  lastStatus: null, program: null, machine: null, teach: null,
+  you: null, lock: null, log: [],
+};
+
+const conn = {
+  ws: null, nextId: 0, heartbeat: null, pending: new Map(),
+  firstStatus: true, userReleased: false,
+};
+
+// ==================================================================== connection
+
+function wsUrl() {
+  const proto = location.protocol === 'https:' ? 'wss:' : 'ws:';
+  let url = `${proto}//${location.host}/ws?name=${encodeURIComponent(CLIENT_NAME)}`;
+  if (TOKEN !== null) url += `&token=${encodeURIComponent(TOKEN)}`;
+  return url;
+}
+
+function connect() {
+  let ws;
+  try {
+    ws = new WebSocket(wsUrl());
+  } catch (e) {
+    setTimeout(connect, 1000);
+    return;
+  }
+  conn.ws = ws;
+  ws.onopen = () => {
+    conn.firstStatus = true;
+    setConnected(true);
+    conn.heartbeat = setInterval(() => send('heartbeat'), 250);
+  };
+  ws.onmessage = (ev) => onMessage(ev.data);
+  ws.onerror = () => {}; // a close event follows
+  ws.onclose = () => {
+    if (conn.ws !== ws) return;
+    conn.ws = null;
+    clearInterval(conn.heartbeat);
+    jog.active = false;
+    setConnected(false);
+    setTimeout(connect, 1000);
+  };
+}
+
+function setConnected(up) {
+  const c = $('conn');
+  c.classList.toggle('down', !up);
+  c.classList.toggle('up', up);
+  setText(c, up ? 'connected' : 'disconnected — reconnecting…');
+  document.body.classList.toggle('offline', !up);
+}
+
+/** Sends one command with a fresh id; returns the id (null when not connected). */
+function send(cmd, args = {}) {
+  const ws = conn.ws;
+  if (!ws || ws.readyState !== WebSocket.OPEN) {
+    if (cmd !== 'heartbeat') toast(`not connected: ${cmd} not sent`);
+    return null;
+  }
+  const id = ++conn.nextId;
+  ws.send(JSON.stringify({ cmd, id, ...args }));
+  if (cmd === 'heartbeat') return id; // the server does not answer heartbeats
+  conn.pending.set(id, cmd);
+  if (conn.pending.size > 1000) conn.pending.delete(conn.pending.keys().next().value);
+  return id;
+}
+
+const HANDLERS = {
+  hello: onHello, status: onStatus, program: onProgram, teach: onTeach,
+  reply: onReply, log: (m) => addLog(m.level, m.text), file: onFile,
+};
+
+function onMessage(data) {
+  let msg;
+  try {
+    msg = JSON.parse(data);
+  } catch (e) {
+    addLog('error', 'unreadable message from the server');
+    return;
+  }
+  const h = HANDLERS[msg && msg.type];
+  if (!h) return;
+  try {
+    h(msg);
+  } catch (e) {
+    addLog('error', `page error handling "${msg.type}": ${e.message}`);
+  }
+}
+
+// ============================================================== message handlers
+
+function onHello(msg) {
+  const m = msg.machine || {};
+  pkmc.you = msg.you;
+  pkmc.machine = m;
+  setText($('machine-name'), m.name || '—');
+  setText($('machine-kind'), m.kind || '');
+  document.title = `${m.name || 'pkmc'} · operator station`;
+  const axes = m.axes || AXES;
+  buildDro(axes);
+  buildJoints(m.joints || []);
+  buildJogButtons(axes);
+  buildJointSelect(m.joints || []);
+  view.setBounds(m.bounds);
+}
+
+function onStatus(st) {
+  pushCapped(pkmc.stats.status, performance.now());
+  pkmc.lastStatus = st;
+  pkmc.lock = st.lock || null;
+  if (st.scene) view.scene = st.scene;
+  updateDro(st);
+  updateJoints(st);
+  updateMachineState(st);
+  updateLock(st.lock);
+  updateJob(st.job);
+  updateOverride(st.override);
+  highlightLine(st);
+  recordCut(st);
+  if (conn.firstStatus) {
+    conn.firstStatus = false;
+    if (!conn.userReleased && st.lock && st.lock.holder == null) send('take');
+  }
+}
+
+function onReply(r) {
+  const cmd = conn.pending.get(r.id);
+  conn.pending.delete(r.id);
+  if (r.ok) return;
+  const why = r.text || 'refused';
+  const text = cmd && !why.startsWith(cmd) ? `${cmd}: ${why}` : why;
+  addLog('error', text);
+  toast(text);
+}
+
+/** A file the server wants saved (the teach list): download it. */
+function onFile(f) {
+  const blob = new Blob([f.text || ''], { type: 'text/plain' });
+  const a = document.createElement('a');
+  a.href = URL.createObjectURL(blob);
+  a.download = f.name || 'teach.txt';
+  document.body.appendChild(a);
+  a.click();
+  a.remove();
+  setTimeout(() => URL.revokeObjectURL(a.href), 2000);
+  addLog('info', `saved ${a.download}`);
+}
+
+// =========================================================================== DRO
+
+const dro = { cells: [], joints: [] };
+
+function buildDro(axes) {
+  dro.cells = AXES.map((ax) => $('dro-' + ax.toLowerCase()));
+  document.querySelectorAll('#dro .dro-row').forEach((row) => {
+    row.hidden = !axes.includes(row.dataset.axis);
+  });
+}
+
+function buildJoints(joints) {
+  const body = $('dro-joints').tBodies[0];
+  body.replaceChildren();
+  dro.joints = joints.map((j, i) => {
+    const tr = el('tr');
+    tr.dataset.joint = String(i);
+    const bar = el('div', 'bar');
+    const mark = el('div', 'mark');
+    bar.appendChild(mark);
+    const cells = {
+      name: el('td', 'name', j.name), cmd: el('td', 'cmd num', '0.000'),
+      meas: el('td', 'meas num', '0.000'), unit: el('td', 'unit', j.unit || ''),
+      range: el('td', 'range'),
+    };
+    cells.range.appendChild(bar);
+    cells.range.title = `${j.min} … ${j.max} ${j.unit || ''}`;
+    Object.values(cells).forEach((c) => tr.appendChild(c));
+    body.appendChild(tr);
+    return { ...cells, bar, mark, min: j.min, max: j.max, pct: -1 };
+  });
+}
+
+function updateDro(st) {
+  const pose = st.pose || [];
+  dro.cells.forEach((c, i) => setText(c, fmt3(pose[i])));
+  setText($('line'), String(st.line ?? 0));
+  setText($('feed'), typeof st.feed === 'number' ? st.feed.toFixed(0) : '—');
+  setText($('override-value'), `${st.override ?? 100}%`);
+  setText($('buffered'), String(st.buffered_ms ?? 0));
+  setText($('homed'), homedText(st.homed));
+}
+
+function homedText(h) {
+  if (Array.isArray(h)) {
+    const n = h.filter(Boolean).length;
+    return n === h.length ? 'yes' : `${n}/${h.length}`;
+  }
+  return h ? 'yes' : 'no';
+}
+
+function updateJoints(st) {
+  const cmd = st.joints || [];
+  const meas = st.measured || [];
+  dro.joints.forEach((j, i) => {
+    setText(j.cmd, fmt3(cmd[i]));
+    setText(j.meas, fmt3(meas[i]));
+    const span = j.max - j.min;
+    if (!(span > 0) || typeof cmd[i] !== 'number') return;
+    const pct = Math.min(100, Math.max(0, (100 * (cmd[i] - j.min)) / span));
+    if (Math.abs(pct - j.pct) < 0.1) return;
+    j.pct = pct;
+    j.mark.style.left = pct.toFixed(1) + '%';
+    j.bar.classList.toggle('near', pct < 5 || pct > 95);
+  });
+}
+
+function updateMachineState(st) {
+  const s = $('state');
+  setText(s, st.state || '—');
+  const cls = 'badge st-' + String(st.state || 'none').toLowerCase();
+  if (s.className !== cls) s.className = cls;
+  const a = st.alarm;
+  let text = '';
+  if (a) {
+    const parts = [a.cause];
+    if (a.joint != null) parts.push(a.joint);
+    parts.push(a.line != null ? `line ${a.line}: ${a.text}` : a.text);
+    text = parts.filter((p) => p != null && p !== '').join(' — ');
+  }
+  setText($('alarm'), text);
+}
+
+function updateLock(lock) {
+  const l = $('lock');
+  let who = 'nobody';
+  if (lock && lock.holder != null) {
+    who = lock.holder === pkmc.you ? 'you' : (lock.name || `#${lock.holder}`);
+  }
+  setText(l, who);
+  l.className = who === 'you' ? 'mine' : who === 'nobody' ? 'free' : 'other';
+}
+
+function updateJob(job) {
+  const p = $('progress');
+  $('step').classList.toggle('waiting', !!(job && job.step));
+  if (!job) {
+    if (p.value !== 0) p.value = 0;
+    setText($('progress-text'), '—');
+    setText($('eta'), '—');
+    return;
+  }
+  const pct = Number(job.percent) || 0;
+  if (Math.abs(p.value - pct) > 0.05) p.value = pct;
+  setText($('progress-text'), `${job.executed}/${job.total}  ${Math.round(pct)}%`);
+  setText($('eta'), mmss(job.eta_s));
+}
+
+// ================================================================= program panel
+
+const prog = { curLine: 0, overrideTouched: 0, overrideHeld: false };
+
+function countLines(text) {
+  let n = 1;
+  for (let i = text.indexOf('\n'); i !== -1; i = text.indexOf('\n', i + 1)) n++;
+  return n;
+}
+
+/** Keeps one gutter div per editor line, and the gutter scrolled with the editor. */
+function syncGutter() {
+  const gutter = $('gutter');
+  const n = countLines($('editor').value);
+  let have = gutter.childElementCount;
+  if (n > have) {
+    const frag = document.createDocumentFragment();
+    for (let i = have + 1; i <= n; i++) {
+      const d = el('div', '', String(i));
+      d.dataset.line = String(i);
+      frag.appendChild(d);
+    }
+    gutter.appendChild(frag);
+  }
+  while (have > n) {
+    gutter.lastChild.remove();
+    have--;
+  }
+  gutter.scrollTop = $('editor').scrollTop;
+  updateDirty();
+}
+
+function updateDirty() {
+  const loaded = pkmc.program ? pkmc.program.text : '';
+  $('load-editor').classList.toggle('dirty', $('editor').value !== loaded);
+}
+
+function onProgram(p) {
+  pkmc.program = p;
+  setText($('program-name'), p.name || '—');
+  setText($('program-info'), `${p.lines ?? '?'} lines · ${p.blocks ?? '?'} blocks`);
+  const ed = $('editor');
+  if (ed.value !== p.text) {
+    ed.value = p.text || '';
+    ed.scrollTop = 0;
+  }
+  syncGutter();
+  prog.curLine = 0;
+  renderErrors(p);
+  renderCheck(p.check);
+  const bad = (p.errors || []).length > 0;
+  $('run').disabled = bad;
+  $('step').disabled = bad;
+  view.setProgramPath(p.path || []);
+}
+
+function renderErrors(p) {
+  const ul = $('errors');
+  const gutter = $('gutter');
+  gutter.querySelectorAll('.err, .warn').forEach((d) => {
+    d.classList.remove('err', 'warn');
+    d.removeAttribute('title');
+  });
+  const items = [];
+  for (const e of p.errors || []) {
+    const li = el('li', 'error', `${e.line}:${e.col}: ${e.message}`);
+    li.dataset.line = String(e.line);
+    li.dataset.col = String(e.col);
+    items.push(li);
+    markGutter(gutter, e.line, 'err', e.message);
+  }
+  for (const f of (p.check && p.check.findings) || []) {
+    const li = el('li', 'finding', `${f.line}: ${f.message}`);
+    li.dataset.line = String(f.line);
+    items.push(li);
+    markGutter(gutter, f.line, 'warn', f.message);
+  }
+  ul.replaceChildren(...items.slice(0, 1000));
+  ul.classList.toggle('empty', items.length === 0);
+}
+
+function markGutter(gutter, line, cls, message) {
+  const d = gutter.children[line - 1];
+  if (!d || d.classList.contains('err')) return;
+  d.classList.add(cls);
+  d.title = message;
+}
+
+function renderCheck(check) {
+  const res = $('check-result');
+  const mar = $('margin');
+  if (!check) {
+    setText(res, '—');
+    setText(mar, '—');
+    res.className = 'v';
+    return;
+  }
+  const first = (check.findings || [])[0];
+  if (check.ok) setText(res, `ok, run time ${mmss(check.run_time_s)}`);
+  else setText(res, first ? `line ${first.line}: ${first.message}` : 'failed');
+  res.className = 'v ' + (check.ok ? 'ok' : 'bad');
+  if (typeof check.min_margin === 'number') {
+    const at = check.margin_line != null ? ` (line ${check.margin_line})` : '';
+    setText(mar, fmt3(check.min_margin) + at);
+  } else {
+    setText(mar, '—');
+  }
+}
+
+/** Selects line/column (1-based) in the editor and scrolls it into view. */
+function selectInEditor(line, col) {
+  const ed = $('editor');
+  const text = ed.value;
+  let start = 0;
+  for (let i = 1; i < line; i++) {
+    const k = text.indexOf('\n', start);
+    if (k < 0) break;
+    start = k + 1;
+  }
+  let end = text.indexOf('\n', start);
+  if (end < 0) end = text.length;
+  const from = col ? Math.min(start + col - 1, end) : start;
+  ed.focus();
+  ed.setSelectionRange(from, Math.max(end, from));
+  scrollEditorTo(line);
+}
+
+function scrollEditorTo(line) {
+  const ed = $('editor');
+  const lh = parseFloat(getComputedStyle(ed).lineHeight) || 18;
+  ed.scrollTop = Math.max(0, (line - 1) * lh - ed.clientHeight / 3);
+  $('gutter').scrollTop = ed.scrollTop;
+}
+
+/** Marks the executing line in the gutter; follows it while running. */
+function highlightLine(st) {
+  const line = st.line || 0;
+  if (line === prog.curLine) return;
+  const g = $('gutter');
+  const old = g.children[prog.curLine - 1];
+  if (old) old.classList.remove('cur');
+  prog.curLine = line;
+  const d = g.children[line - 1];
+  if (!d) return;
+  d.classList.add('cur');
+  const ed = $('editor');
+  const following = st.job && (st.job.kind === 'program' || st.job.kind === 'step');
+  if (following && document.activeElement !== ed) {
+    const lh = parseFloat(getComputedStyle(ed).lineHeight) || 18;
+    const y = (line - 1) * lh;
+    if (y < ed.scrollTop || y > ed.scrollTop + ed.clientHeight - 2 * lh) scrollEditorTo(line);
+  }
+}
+
+function updateOverride(percent) {
+  if (typeof percent !== 'number') return;
+  if (prog.overrideHeld || performance.now() - prog.overrideTouched < 1500) return;
+  const r = $('override');
+  if (Number(r.value) !== percent) r.value = String(percent);
+  setText($('override-set'), `${r.value}%`);
+}
+
+function loadFileInput(input, cmd) {
+  const f = input.files && input.files[0];
+  if (!f) return;
+  f.text().then((text) => {
+    send(cmd, { name: f.name, text });
+    input.value = '';
+  }, (e) => addLog('error', `cannot read ${f.name}: ${e.message}`));
+}
+
+function initProgramPanel() {
+  const ed = $('editor');
+  ed.addEventListener('input', syncGutter);
+  ed.addEventListener('scroll', () => { $('gutter').scrollTop = ed.scrollTop; });
+  $('file').addEventListener('change', () => loadFileInput($('file'), 'load'));
+  $('load-editor').addEventListener('click', () => {
+    const name = (pkmc.program && pkmc.program.name) || 'editor.ngc';
+    send('load', { name, text: ed.value });
+  });
+  $('errors').addEventListener('click', (e) => {
+    const li = e.target.closest('li');
+    if (li) selectInEditor(Number(li.dataset.line), Number(li.dataset.col) || 0);
+  });
+  const ov = $('override');
+  ov.addEventListener('pointerdown', () => { prog.overrideHeld = true; });
+  window.addEventListener('pointerup', () => { prog.overrideHeld = false; });
+  ov.addEventListener('input', () => {
+    prog.overrideTouched = performance.now();
+    setText($('override-set'), `${ov.value}%`);
+  });
+  ov.addEventListener('change', () => {
+    prog.overrideTouched = performance.now();
+    send('override', { percent: Number(ov.value) });
+  });
+  $('override-100').addEventListener('click', () => {
+    ov.value = '100';
+    prog.overrideTouched = performance.now();
+    setText($('override-set'), '100%');
+    send('override', { percent: 100 });
+  });
+  syncGutter();
+}
+
+// ===================================================== jog, MDI and joint moves
+
+const jog = { active: false, button: null };
+const mdiHistory = { list: [], pos: 0 };
+
+function jogFeed() {
+  const f = parseFloat($('jog-feed').value);
+  return f > 0 ? f : 600;
+}
+
+function buildJogButtons(axes) {
+  const box = $('jog-buttons');
+  box.replaceChildren();
+  for (const axis of axes) {
+    for (const dir of [-1, 1]) {
+      const b = el('button', 'jog', `${axis}${dir < 0 ? '−' : '+'}`);
+      b.dataset.axis = axis;
+      b.dataset.dir = String(dir);
+      b.addEventListener('click', () => jogStep(b));
+      b.addEventListener('pointerdown', (e) => jogStart(b, e));
+      for (const ev of ['pointerup', 'pointerleave', 'pointercancel']) b.addEventListener(ev, jogStop);
+      b.addEventListener('contextmenu', (e) => e.preventDefault());
+      box.appendChild(b);
+    }
+  }
+}
+
+function jogStep(b) {
+  if ($('jog-continuous').checked) return;
+  const step = parseFloat($('jog-step').value) || 1;
+  send('jog', { axis: b.dataset.axis, distance: Number(b.dataset.dir) * step, feed: jogFeed() });
+}
+
+function jogStart(b, e) {
+  if (!$('jog-continuous').checked || e.button !== 0) return;
+  e.preventDefault();
+  if (jog.active) jogStop();
+  jog.active = true;
+  jog.button = b;
+  b.classList.add('held');
+  send('jog_start', { axis: b.dataset.axis, dir: Number(b.dataset.dir), feed: jogFeed() });
+}
+
+function jogStop() {
+  if (!jog.active) return;
+  jog.active = false;
+  if (jog.button) jog.button.classList.remove('held');
+  jog.button = null;
+  send('jog_stop');
+}
+
+function buildJointSelect(joints) {
+  const sel = $('joint-select');
+  sel.replaceChildren(...joints.map((j, i) => {
+    const o = el('option', '', j.name);
+    o.value = String(i);
+    return o;
+  }));
+  updateJointUnit();
+}
+
+function updateJointUnit() {
+  const joints = (pkmc.machine && pkmc.machine.joints) || [];
+  const j = joints[Number($('joint-select').value)];
+  setText($('joint-unit'), j ? j.unit : '');
+}
+
+function jointMove(sign) {
+  const d = parseFloat($('joint-distance').value);
+  const joint = parseInt($('joint-select').value, 10);
+  if (!Number.isFinite(d) || !Number.isInteger(joint)) {
+    toast('joint move: choose a joint and a distance');
+    return;
+  }
+  send('joint', { joint, distance: sign * Math.abs(d), feed: jogFeed() });
+}
+
+function sendMdi() {
+  const input = $('mdi');
+  const text = input.value.trim();
+  if (!text) return;
+  send('mdi', { text });
+  const h = mdiHistory.list;
+  if (h[h.length - 1] !== text) h.push(text);
+  if (h.length > 50) h.shift();
+  mdiHistory.pos = h.length;
+  input.value = '';
+}
+
+function mdiKey(e) {
+  const h = mdiHistory.list;
+  if (e.key === 'Enter') {
+    e.preventDefault();
+    sendMdi();
+  } else if (e.key === 'ArrowUp' && h.length) {
+    e.preventDefault();
+    mdiHistory.pos = Math.max(0, mdiHistory.pos - 1);
+    $('mdi').value = h[mdiHistory.pos];
+  } else if (e.key === 'ArrowDown' && h.length) {
+    e.preventDefault();
+    mdiHistory.pos = Math.min(h.length, mdiHistory.pos + 1);
+    $('mdi').value = h[mdiHistory.pos] ?? '';
+  }
+}
+
+function initJogPanel() {
+  window.addEventListener('blur', jogStop);
+  window.addEventListener('pointerup', jogStop);
+  document.addEventListener('visibilitychange', () => { if (document.hidden) jogStop(); });
+  $('jog-continuous').addEventListener('change', jogStop);
+  $('mdi').addEventListener('keydown', mdiKey);
+  $('mdi-send').addEventListener('click', sendMdi);
+  $('joint-select').addEventListener('change', updateJointUnit);
+  $('joint-minus').addEventListener('click', () => jointMove(-1));
+  $('joint-plus').addEventListener('click', () => jointMove(1));
+}
+
+// ==================================================================== teach list
+
+function onTeach(t) {
+  pkmc.teach = t;
+  const points = t.points || [];
+  const items = points.map((p, i) => {
+    const li = el('li', i === t.next ? 'next' : '');
+    li.dataset.index = String(i);
+    li.appendChild(el('span', 'tname', p.name || `P${i + 1}`));
+    li.appendChild(el('span', 'tpose num', (p.pose || []).map(fmt3).join(' ')));
+    const tools = el('span', 'tools');
+    tools.appendChild(el('button', 'up small', '▲'));
+    tools.appendChild(el('button', 'down small', '▼'));
+    tools.appendChild(el('button', 'remove small', '✕'));
+    li.appendChild(tools);
+    return li;
+  });
+  $('teach-list').replaceChildren(...items);
+  const speed = $('teach-speed');
+  if (typeof t.speed === 'number' && document.activeElement !== speed) speed.value = String(t.speed);
+}
+
+function onTeachListClick(e) {
+  const b = e.target.closest('button');
+  const li = e.target.closest('li');
+  if (!b || !li) return;
+  const index = Number(li.dataset.index);
+  const n = $('teach-list').childElementCount;
+  if (b.classList.contains('up') && index > 0) send('teach_move', { index, to: index - 1 });
+  else if (b.classList.contains('down') && index < n - 1) send('teach_move', { index, to: index + 1 });
+  else if (b.classList.contains('remove')) send('teach_remove', { index });
+}
+
+function initTeachPanel() {
+  $('teach-list').addEventListener('click', onTeachListClick);
+  $('teach-speed').addEventListener('change', () => {
+    const speed = parseFloat($('teach-speed').value);
+    if (speed > 0) send('teach_speed', { speed });
+  });
+  $('teach-load').addEventListener('change', () => loadFileInput($('teach-load'), 'teach_load'));
+}
+
+// ================================================================ log and toast
+
+const LOG_KEEP = 200;
+let toastTimer = null;
+
+function addLog(level, text) {
+  const lv = ['info', 'warn', 'error'].includes(level) ? level : 'info';
+  const now = new Date();
+  pkmc.log.push({ level: lv, text, time: now.getTime() });
+  if (pkmc.log.length > LOG_KEEP) pkmc.log.shift();
+  const box = $('log');
+  const atBottom = box.scrollTop + box.clientHeight >= box.scrollHeight - 4;
+  const div = el('div', lv);
+  div.appendChild(el('time', '', now.toTimeString().slice(0, 8)));
+  div.appendChild(document.createTextNode(' ' + text));
+  box.appendChild(div);
+  while (box.childElementCount > LOG_KEEP) box.firstChild.remove();
+  if (atBottom) box.scrollTop = box.scrollHeight;
+}
+
+function toast(text) {
+  const t = $('toast');
+  t.textContent = text;
+  t.classList.add('show');
+  clearTimeout(toastTimer);
+  toastTimer = setTimeout(() => t.classList.remove('show'), 3500);
+}
+
+// ======================================================================= 3-D view
+
+// Line style of each scene KIND: colour, width (CSS px), dash.
+const SEG_STYLE = {
+  frame: ['#3b4858', 1.5], base: ['#6f7d8c', 3], rail: ['#8796a6', 3],
+  carriage: ['#ffab2e', 8], forearm: ['#48b0ff', 2.2], bar: ['#a9d6ff', 4],
+  leg: ['#48b0ff', 3], platform: ['#a9d6ff', 3], table: ['#9fb0c3', 2],
+  axis: ['#ffd34d', 1.2, [6, 4]], tool: ['#ff5a5a', 3.5],
+};
+const SEG_ORDER = Object.keys(SEG_STYLE);
+const POLY_FILL = {
+  table: 'rgba(150,170,195,0.22)', platform: 'rgba(72,176,255,0.20)',
+  base: 'rgba(110,125,140,0.20)', frame: 'rgba(80,95,115,0.15)',
+};
+const PATH_DRAW_MAX = 20000;
+const CUT_MAX = 200000;
+const CUT_DRAW_MAX = 40000;
+const VIEWS = {
+  top: { yaw: 0, pitch: Math.PI / 2 },
+  front: { yaw: 0, pitch: 0 },
+  side: { yaw: Math.PI / 2, pitch: 0 },
+  '3d': { yaw: Math.PI / 6, pitch: 0.5 },
+};
+
+const view = {
+  canvas: null, ctx: null, w: 0, h: 0, dpr: 1, bg: null,
+  mode: '3d', yaw: VIEWS['3d'].yaw, pitch: VIEWS['3d'].pitch, scale: 1, target: [0, 0, 0],
+  r: [1, 0, 0], u: [0, 0, 1], f: [0, 1, 0],
+  bounds: { min: [-500, -500, -300], max: [500, 500, 700] }, fitted: false,
+  scene: null, progFeed: null, progRapid: null, drag: null,
+  setBounds, setProgramPath,
+};
+
+// The camera: right r, up u and forward f (into the screen) from yaw about Z and
+// pitch (elevation) — yaw 0, pitch 0 looks along +Y with X right and Z up.
+function updateBasis() {
+  const cy = Math.cos(view.yaw), sy = Math.sin(view.yaw);
+  const cp = Math.cos(view.pitch), sp = Math.sin(view.pitch);
+  view.r = [cy, sy, 0];
+  view.f = [-sy * cp, cy * cp, -sp];
+  view.u = [-sy * sp, cy * sp, cp];
+}
+
+const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+
+/** The affine map machine point → screen px, as [ax,ay,az,bx, cx,cy,cz,by]. */
+function screenAffine() {
+  const s = view.scale, r = view.r, u = view.u, T = view.target;
+  return [s * r[0], s * r[1], s * r[2], view.w / 2 - s * dot(T, r),
+    -s * u[0], -s * u[1], -s * u[2], view.h / 2 + s * dot(T, u)];
+}
+
+/** Composes the screen map with the row-major 3x4 work matrix W. */
+function withWork(A, W) {
+  if (!W || W.length < 12) return A;
+  const out = new Array(8);
+  for (let row = 0; row < 2; row++) {
+    const o = row * 4;
+    for (let j = 0; j < 4; j++) {
+      out[o + j] = A[o] * W[j] + A[o + 1] * W[4 + j] + A[o + 2] * W[8 + j];
+    }
+    out[o + 3] += A[o + 3];
+  }
+  return out;
+}
+
+function setBounds(b) {
+  if (b && b.min && b.max) view.bounds = { min: b.min.slice(0, 3), max: b.max.slice(0, 3) };
+  fitView();
+}
+
+/** Centres the bounds box and scales it to fill the canvas. */
+function fitView() {
+  const { min, max } = view.bounds;
+  let r0 = Infinity, r1 = -Infinity, u0 = Infinity, u1 = -Infinity;
+  for (let k = 0; k < 8; k++) {
+    const p = [k & 1 ? max[0] : min[0], k & 2 ? max[1] : min[1], k & 4 ? max[2] : min[2]];
+    const pr = dot(p, view.r), pu = dot(p, view.u);
+    r0 = Math.min(r0, pr); r1 = Math.max(r1, pr);
+    u0 = Math.min(u0, pu); u1 = Math.max(u1, pu);
+  }
+  view.target = [0, 1, 2].map((i) => (min[i] + max[i]) / 2);
+  const w = Math.max(view.w - 20, 50), h = Math.max(view.h - 80, 50); // room for the overlays
+  view.scale = Math.min(w / Math.max(r1 - r0, 1e-3), h / Math.max(u1 - u0, 1e-3)) * 0.95;
+  view.fitted = view.w > 0;
+}
+
+function setViewMode(mode) {
+  view.mode = mode;
+  view.yaw = VIEWS[mode].yaw;
+  view.pitch = VIEWS[mode].pitch;
+  updateBasis();
+  fitView();
+  for (const m of Object.keys(VIEWS)) $('view-' + m).classList.toggle('active', m === mode);
+  setText($('view-hint'), mode === '3d'
+    ? 'drag: rotate · shift/right-drag: pan · wheel: zoom'
+    : 'drag: pan · wheel: zoom');
+}
+
+/** Splits the program path into feed and rapid polylines (NaN = pen up), ≤20k points. */
+function setProgramPath(path) {
+  const n = path.length;
+  const stride = Math.max(1, Math.ceil(n / PATH_DRAW_MAX));
+  const keep = (i) => i % stride === 0 || i === n - 1 ||
+    (i > 0 && path[i][4] !== path[i - 1][4]) || (i < n - 1 && path[i][4] !== path[i + 1][4]);
+  const feed = [], rapid = [];
+  let prev = null, prevRapid = null;
+  for (let i = 0; i < n; i++) {
+    if (!keep(i)) continue;
+    const p = path[i];
+    if (prev) {
+      const isRapid = !!p[4];
+      const arr = isRapid ? rapid : feed;
+      if (prevRapid !== isRapid) {
+        if (arr.length) arr.push(NaN, NaN, NaN);
+        arr.push(prev[0], prev[1], prev[2]);
+      }
+      arr.push(p[0], p[1], p[2]);
+      prevRapid = isRapid;
+    }
+    prev = p;
+  }
+  view.progFeed = Float32Array.from(feed);
+  view.progRapid = Float32Array.from(rapid);
+}
+
+// ----- the cut path: the pose while a job runs, in workpiece coordinates
+
+const cut = { buf: new Float32Array(3 * 8192), n: 0, pen: false, last: [NaN, NaN, NaN] };
+
+function recordCut(st) {
+  const active = st.state === 'Running' || st.job != null;
+  if (!active || !st.pose) {
+    cut.pen = false;
+    return;
+  }
+  const [x, y, z] = st.pose;
+  const l = cut.last;
+  if (cut.pen && Math.abs(x - l[0]) + Math.abs(y - l[1]) + Math.abs(z - l[2]) < 0.005) return;
+  if (!cut.pen && cut.n > 0) pushCut(NaN, NaN, NaN);
+  pushCut(x, y, z);
+  cut.last = [x, y, z];
+  cut.pen = true;
+}
+
+function pushCut(x, y, z) {
+  if (cut.n >= CUT_MAX) decimateCut();
+  if (3 * (cut.n + 1) > cut.buf.length) {
+    const bigger = new Float32Array(Math.min(cut.buf.length * 2, 3 * CUT_MAX));
+    bigger.set(cut.buf);
+    cut.buf = bigger;
+  }
+  const o = 3 * cut.n++;
+  cut.buf[o] = x;
+  cut.buf[o + 1] = y;
+  cut.buf[o + 2] = z;
+}
+
+/** Halves the cut path: every second point goes, pen-up markers and the last point stay. */
+function decimateCut() {
+  const b = cut.buf;
+  let w = 0;
+  for (let i = 0; i < cut.n; i++) {
+    const o = 3 * i;
+    if (i % 2 === 0 || b[o] !== b[o] || i === cut.n - 1) {
+      b[3 * w] = b[o]; b[3 * w + 1] = b[o + 1]; b[3 * w + 2] = b[o + 2];
+      w++;
+    }
+  }
+  cut.n = w;
+}
+
+function clearCut() {
+  cut.n = 0;
+  cut.pen = false;
+}
+
+// ----- drawing
+
+/** Strokes a NaN-separated polyline of n points through the affine map M. */
+function tracePolyline(ctx, arr, n, M, maxPoints) {
+  const stride = Math.max(1, Math.ceil(n / maxPoints));
+  let pen = false;
+  for (let i = 0; i < n; i++) {
+    const o = 3 * i;
+    const x = arr[o];
+    if (x !== x) { pen = false; continue; }
+    if (pen && i % stride !== 0 && i !== n - 1 && arr[o + 3] === arr[o + 3]) continue;
+    const y = arr[o + 1], z = arr[o + 2];
+    const sx = M[0] * x + M[1] * y + M[2] * z + M[3];
+    const sy = M[4] * x + M[5] * y + M[6] * z + M[7];
+    if (pen) ctx.lineTo(sx, sy);
+    else { ctx.moveTo(sx, sy); pen = true; }
+  }
+}
+
+function niceStep(span) {
+  const raw = span / 10;
+  const p = Math.pow(10, Math.floor(Math.log10(raw)));
+  return [1, 2, 5, 10].map((k) => k * p).find((s) => s >= raw) || 10 * p;
+}
+
+function drawGrid(ctx, A) {
+  const { min, max } = view.bounds;
+  const step = niceStep(Math.max(max[0] - min[0], max[1] - min[1]));
+  const z = min[2];
+  const x0 = Math.floor(min[0] / step) * step, x1 = Math.ceil(max[0] / step) * step;
+  const y0 = Math.floor(min[1] / step) * step, y1 = Math.ceil(max[1] / step) * step;
+  const P = (x, y) => [A[0] * x + A[1] * y + A[2] * z + A[3], A[4] * x + A[5] * y + A[6] * z + A[7]];
+  ctx.beginPath();
+  for (let x = x0; x <= x1 + 1e-6; x += step) { ctx.moveTo(...P(x, y0)); ctx.lineTo(...P(x, y1)); }
+  for (let y = y0; y <= y1 + 1e-6; y += step) { ctx.moveTo(...P(x0, y)); ctx.lineTo(...P(x1, y)); }
+  ctx.strokeStyle = '#1c2631';
+  ctx.lineWidth = 1;
+  ctx.stroke();
+}
+
+function drawPolys(ctx, A, polys) {
+  const f = view.f;
+  const items = polys.map(([kind, pts]) => {
+    let depth = 0;
+    for (const p of pts) depth += dot(p, f);
+    return { kind, pts, depth: depth / Math.max(pts.length, 1) };
+  }).sort((a, b) => b.depth - a.depth);
+  ctx.lineWidth = 1.2;
+  for (const { kind, pts } of items) {
+    if (pts.length < 2) continue;
+    ctx.beginPath();
+    pts.forEach((p, i) => {
+      const sx = A[0] * p[0] + A[1] * p[1] + A[2] * p[2] + A[3];
+      const sy = A[4] * p[0] + A[5] * p[1] + A[6] * p[2] + A[7];
+      if (i) ctx.lineTo(sx, sy); else ctx.moveTo(sx, sy);
+    });
+    ctx.closePath();
+    ctx.fillStyle = POLY_FILL[kind] || 'rgba(140,150,165,0.18)';
+    ctx.fill();
+    ctx.strokeStyle = (SEG_STYLE[kind] || SEG_STYLE.frame)[0];
+    ctx.stroke();
+  }
+}
+
+function drawSegs(ctx, A, segs, kinds) {
+  ctx.lineCap = 'round';
+  for (const kind of kinds) {
+    const [color, width, dash] = SEG_STYLE[kind];
+    ctx.beginPath();
+    let any = false;
+    for (const s of segs) {
+      if (s[6] !== kind) continue;
+      ctx.moveTo(A[0] * s[0] + A[1] * s[1] + A[2] * s[2] + A[3], A[4] * s[0] + A[5] * s[1] + A[6] * s[2] + A[7]);
+      ctx.lineTo(A[0] * s[3] + A[1] * s[4] + A[2] * s[5] + A[3], A[4] * s[3] + A[5] * s[4] + A[6] * s[5] + A[7]);
+      any = true;
+    }
+    if (!any) continue;
+    ctx.setLineDash(dash || []);
+    ctx.strokeStyle = color;
+    ctx.lineWidth = width;
+    ctx.stroke();
+  }
+  ctx.setLineDash([]);
+  ctx.lineCap = 'butt';
+}
+
+function drawPaths(ctx, M) {
+  if (view.progRapid && view.progRapid.length) {
+    ctx.beginPath();
+    tracePolyline(ctx, view.progRapid, view.progRapid.length / 3, M, PATH_DRAW_MAX);
+    ctx.setLineDash([4, 4]);
+    ctx.strokeStyle = 'rgba(200,210,225,0.35)';
+    ctx.lineWidth = 1;
+    ctx.stroke();
+    ctx.setLineDash([]);
+  }
+  if (view.progFeed && view.progFeed.length) {
+    ctx.beginPath();
+    tracePolyline(ctx, view.progFeed, view.progFeed.length / 3, M, PATH_DRAW_MAX);
+    ctx.strokeStyle = 'rgba(45,212,191,0.85)';
+    ctx.lineWidth = 1.2;
+    ctx.stroke();
+  }
+  if (cut.n > 1) {
+    ctx.beginPath();
+    tracePolyline(ctx, cut.buf, cut.n, M, CUT_DRAW_MAX);
+    ctx.strokeStyle = '#ffe14d';
+    ctx.lineWidth = 2.2;
+    ctx.stroke();
+  }
+}
+
+function drawToolTip(ctx, M, pose) {
+  if (!pose) return;
+  const sx = M[0] * pose[0] + M[1] * pose[1] + M[2] * pose[2] + M[3];
+  const sy = M[4] * pose[0] + M[5] * pose[1] + M[6] * pose[2] + M[7];
+  ctx.beginPath();
+  ctx.arc(sx, sy, 6, 0, 2 * Math.PI);
+  ctx.fillStyle = 'rgba(255,61,242,0.25)';
+  ctx.fill();
+  ctx.strokeStyle = '#ff3df2';
+  ctx.lineWidth = 1.5;
+  ctx.stroke();
+  ctx.beginPath();
+  ctx.moveTo(sx - 10, sy); ctx.lineTo(sx + 10, sy);
+  ctx.moveTo(sx, sy - 10); ctx.lineTo(sx, sy + 10);
+  ctx.stroke();
+}
+
+/** The workpiece origin's axes, len mm long (through `work`): shows the table's tilt. */
+function drawWorkAxes(ctx, M, len) {
+  const o = [M[3], M[7]];
+  const colors = ['#ff5c5c', '#4cd964', '#4c8dff'];
+  ctx.lineWidth = 1.5;
+  for (let k = 0; k < 3; k++) {
+    ctx.beginPath();
+    ctx.moveTo(o[0], o[1]);
+    ctx.lineTo(o[0] + M[k] * len, o[1] + M[4 + k] * len);
+    ctx.strokeStyle = colors[k];
+    ctx.stroke();
+  }
+}
+
+/** The machine axes triad in the lower left corner. */
+function drawTriad(ctx) {
+  const cx = 42, cy = view.h - 42, L = 26;
+  const names = ['X', 'Y', 'Z'];
+  const colors = ['#ff5c5c', '#4cd964', '#4c8dff'];
+  ctx.font = '11px system-ui, sans-serif';
+  ctx.textAlign = 'center';
+  ctx.textBaseline = 'middle';
+  ctx.lineWidth = 2;
+  for (let k = 0; k < 3; k++) {
+    const dx = view.r[k] * L, dy = -view.u[k] * L;
+    ctx.beginPath();
+    ctx.moveTo(cx, cy);
+    ctx.lineTo(cx + dx, cy + dy);
+    ctx.strokeStyle = colors[k];
+    ctx.stroke();
+    if (Math.hypot(dx, dy) > 4) {
+      ctx.fillStyle = colors[k];
+      ctx.fillText(names[k], cx + dx * 1.35, cy + dy * 1.35);
+    }
+  }
+}
+
+function drawScene() {
+  const ctx = view.ctx;
+  ctx.setTransform(view.dpr, 0, 0, view.dpr, 0, 0);
+  ctx.fillStyle = view.bg || '#0d1117';
+  ctx.fillRect(0, 0, view.w, view.h);
+  const A = screenAffine();
+  drawGrid(ctx, A);
+  const scene = view.scene || {};
+  const M = withWork(A, scene.work);
+  if (scene.polys) drawPolys(ctx, A, scene.polys);
+  const segs = scene.segs || [];
+  drawSegs(ctx, A, segs, SEG_ORDER.filter((k) => k !== 'tool'));
+  drawWorkAxes(ctx, M, 40);
+  drawPaths(ctx, M);
+  drawSegs(ctx, A, segs, ['tool']);
+  drawToolTip(ctx, M, pkmc.lastStatus && pkmc.lastStatus.pose);
+  drawTriad(ctx);
+}
+
+// ----- canvas size, render loop and the readout
+
+function resizeCanvas() {
+  const c = view.canvas;
+  const rect = c.getBoundingClientRect();
+  view.dpr = window.devicePixelRatio || 1;
+  view.w = Math.max(1, rect.width);
+  view.h = Math.max(1, rect.height);
+  c.width = Math.round(view.w * view.dpr);
+  c.height = Math.round(view.h * view.dpr);
+  const g = view.ctx.createLinearGradient(0, 0, 0, view.h);
+  g.addColorStop(0, '#131a22');
+  g.addColorStop(1, '#07090c');
+  view.bg = g;
+  if (!view.fitted) fitView();
+}
+
+const loop = { prev: null, lastReadout: 0, drawMs: 0, failed: false };
+
+function frame() {
+  const now = performance.now();
+  if (loop.prev !== null) pushCapped(pkmc.stats.frames, now - loop.prev);
+  loop.prev = now;
+  try {
+    drawScene();
+  } catch (e) {
+    if (!loop.failed) addLog('error', `drawing failed: ${e.message}`);
+    loop.failed = true;
+  }
+  loop.drawMs = 0.9 * loop.drawMs + 0.1 * (performance.now() - now);
+  if (now - loop.lastReadout > 500) {
+    loop.lastReadout = now;
+    updateReadout(now);
+  }
+  requestAnimationFrame(frame);
+}
+
+function updateReadout(now) {
+  const fr = pkmc.stats.frames;
+  let t = 0, n = 0;
+  for (let i = fr.length - 1; i >= 0 && t < 1000; i--, n++) t += fr[i];
+  const fps = t > 0 ? (1000 * n) / t : 0;
+  const st = pkmc.stats.status;
+  let k = 0;
+  for (let i = st.length - 1; i >= 0 && st[i] > now - 1000; i--) k++;
+  setText($('fps'), `${fps.toFixed(0)} fps · status ${k} Hz · draw ${loop.drawMs.toFixed(1)} ms`);
+}
+
+// ----- mouse: orbit, pan, zoom
+
+function onPointerDown(e) {
+  view.drag = { x: e.clientX, y: e.clientY, pan: e.button === 2 || e.button === 1 || e.shiftKey };
+  view.canvas.setPointerCapture(e.pointerId);
+  e.preventDefault();
+}
+
+function onPointerMove(e) {
+  const d = view.drag;
+  if (!d) return;
+  const dx = e.clientX - d.x, dy = e.clientY - d.y;
+  d.x = e.clientX;
+  d.y = e.clientY;
+  if (d.pan || e.shiftKey || view.mode !== '3d') {
+    const s = view.scale;
+    view.target = view.target.map((t, i) => t - (view.r[i] * dx) / s + (view.u[i] * dy) / s);
+  } else {
+    view.yaw -= dx * 0.008;
+    view.pitch = Math.max(-Math.PI / 2, Math.min(Math.PI / 2, view.pitch + dy * 0.008));
+    updateBasis();
+  }
+}
+
+function onWheel(e) {
+  e.preventDefault();
+  const rect = view.canvas.getBoundingClientRect();
+  const mx = e.clientX - rect.left - view.w / 2, my = view.h / 2 - (e.clientY - rect.top);
+  const s1 = view.scale;
+  const s2 = Math.max(1e-4, Math.min(1e4, s1 * Math.exp(-e.deltaY * 0.0015)));
+  const a = mx / s1 - mx / s2, b = my / s1 - my / s2;
+  view.target = view.target.map((t, i) => t + view.r[i] * a + view.u[i] * b);
+  view.scale = s2;
+}
+
+function initView() {
+  view.canvas = $('scene');
+  view.ctx = view.canvas.getContext('2d');
+  updateBasis();
+  const c = view.canvas;
+  c.addEventListener('pointerdown', onPointerDown);
+  c.addEventListener('pointermove', onPointerMove);
+  const end = () => { view.drag = null; };
+  c.addEventListener('pointerup', end);
+  c.addEventListener('pointercancel', end);
+  c.addEventListener('wheel', onWheel, { passive: false });
+  c.addEventListener('contextmenu', (e) => e.preventDefault());
+  c.addEventListener('dblclick', fitView);
+  for (const m of Object.keys(VIEWS)) $('view-' + m).addEventListener('click', () => setViewMode(m));
+  $('view-fit').addEventListener('click', fitView);
+  $('clear-path').addEventListener('click', clearCut);
+  new ResizeObserver(resizeCanvas).observe($('view'));
+  resizeCanvas();
+  requestAnimationFrame(frame);
+}
+
+// ====================================================================== start-up
+
+function initCommandButtons() {
+  document.querySelectorAll('button[data-cmd]').forEach((b) => {
+    b.addEventListener('click', () => {
+      if (b.dataset.cmd === 'release') conn.userReleased = true;
+      if (b.dataset.cmd === 'take') conn.userReleased = false;
+      send(b.dataset.cmd);
+    });
+  });
+}
+
+function init() {
+  setConnected(false);
+  initCommandButtons();
+  initProgramPanel();
+  initJogPanel();
+  initTeachPanel();
+  initView();
+  connect();
+}
+
+init();
+})();

@@ -1,0 +1,260 @@
+//! The loaded program: compiled as the page sends it, every front-end error at its
+//! line and column, and the pre-flight dry run (the controller core in this process,
+//! as `nc-send --check`) that gives the tool path, the run time, the smallest
+//! singularity margin and the times the blocks end (the ETA while it runs).
+
+use crate::gcode;
+use crate::job::{self, Compiled, RunOptions};
+use pkmc::config::MachineConfig;
+use pkmc::protocol::{Block, Motion};
+use serde_json::{json, Value};
+
+/// Points of the tool path sent to the page, at most.
+const PATH_POINTS: usize = 20_000;
+
+/// A program as loaded and checked.
+#[derive(Clone, Debug, Default)]
+pub struct Program {
+    pub name: String,
+    pub text: String,
+    /// The blocks to stream (merged into curves where `G64 P` allows).
+    pub compiled: Option<Compiled>,
+    /// Errors of the front end and pre-flight findings: line, column, message.
+    pub errors: Vec<(usize, usize, String)>,
+    /// The dry run, once made.
+    pub check: Option<CheckResult>,
+}
+
+/// What the dry run found.
+#[derive(Clone, Debug, Default)]
+pub struct CheckResult {
+    pub ok: bool,
+    pub run_time_s: f64,
+    pub min_margin: Option<(f64, u32)>,
+    /// Problems with their NC lines (an alarm of the dry run).
+    pub findings: Vec<(u32, String)>,
+    /// Tool path: x y z (workpiece mm), NC line, rapid.
+    pub path: Vec<[f64; 5]>,
+    /// Simulated time at which block k + 1 had completed.
+    pub done_at: Vec<f64>,
+}
+
+impl Program {
+    /// Compiles `text` for `machine`: the front end's errors, or the blocks and their
+    /// pre-flight findings (each at its line, column 1).
+    pub fn load(name: &str, text: &str, machine: &MachineConfig, opts: &RunOptions<'_>) -> Self {
+        let mut p = Program {
+            name: name.to_string(),
+            text: text.to_string(),
+            ..Program::default()
+        };
+        let compiled = job::compile_located(
+            text,
+            name,
+            machine,
+            machine.home,
+            &opts.tools,
+            opts.compress.as_ref(),
+        );
+        match compiled {
+            Err(diags) => {
+                p.errors = diags
+                    .into_iter()
+                    .map(|d| (d.line, d.col, d.message))
+                    .collect();
+            }
+            Ok((c, pre)) => {
+                p.errors = pre
+                    .findings
+                    .iter()
+                    .map(|f| (f.line as usize, 1, f.what.clone()))
+                    .collect();
+                p.compiled = Some(c);
+            }
+        }
+        p
+    }
+
+    /// Can it run? Compiled without an error.
+    pub fn runnable(&self) -> bool {
+        self.compiled.is_some() && self.errors.is_empty()
+    }
+
+    /// The blocks to stream.
+    pub fn blocks(&self) -> &[Block] {
+        self.compiled.as_ref().map_or(&[], |c| &c.blocks)
+    }
+
+    /// The blocks one by one, as programmed (Run by Step).
+    pub fn programmed(&self) -> &[Block] {
+        self.compiled.as_ref().map_or(&[], |c| &c.programmed)
+    }
+
+    /// The dry run: the controller core in this process on the simulated clock.
+    pub fn dry_run(&mut self, machine: &MachineConfig, opts: &RunOptions<'_>) {
+        let Some(compiled) = self.compiled.as_ref() else {
+            return;
+        };
+        let mut o = opts.clone();
+        o.target = job::Target::Sim;
+        o.sim.trace = None;
+        o.sim.record_path = true;
+        o.sim.inject = Vec::new();
+        o.sim.faults = None;
+        let r = job::check_compiled(machine, &self.name, compiled, &o, &mut crate::link::NoHooks);
+        let rapid_lines: std::collections::HashSet<u32> = compiled
+            .blocks
+            .iter()
+            .filter(|b| matches!(b.motion, Motion::Rapid))
+            .map(|b| b.line)
+            .collect();
+        let mut c = CheckResult::default();
+        match r {
+            Err(f) => {
+                c.findings.push((first_line(&f.message), f.message));
+            }
+            Ok(r) => {
+                let rep = &r.report;
+                c.ok = rep.result == "done";
+                c.run_time_s = rep.run_time_s;
+                if let Some(p) = &rep.preflight {
+                    c.min_margin = p.min_singularity_margin.zip(p.min_margin_line);
+                }
+                if !c.ok {
+                    let why = rep
+                        .alarm_cause
+                        .clone()
+                        .unwrap_or_else(|| rep.result.clone());
+                    c.findings.push((rep.alarm_line.unwrap_or(0), why));
+                }
+                if let Some(sim) = r.sim {
+                    let samples = &sim.recorder.samples;
+                    let stride = samples.len().div_ceil(PATH_POINTS).max(1);
+                    let mut last_line = u32::MAX;
+                    for (i, s) in samples.iter().enumerate() {
+                        if i % stride == 0 || s.line != last_line || i + 1 == samples.len() {
+                            let rapid = rapid_lines.contains(&s.line) as u8 as f64;
+                            c.path
+                                .push([s.xyz[0], s.xyz[1], s.xyz[2], s.line as f64, rapid]);
+                        }
+                        last_line = s.line;
+                    }
+                    c.done_at = sim.recorder.done_at;
+                }
+            }
+        }
+        self.check = Some(c);
+    }
+
+    /// Seconds left, with `executed` blocks of the job done, at `override_pct`.
+    pub fn eta_s(&self, executed: usize, override_pct: u16) -> Option<f64> {
+        let c = self.check.as_ref()?;
+        let total = c.done_at.last().copied()?;
+        let at = match executed {
+            0 => 0.0,
+            n => c.done_at.get(n - 1).copied()?,
+        };
+        Some((total - at).max(0.0) * 100.0 / override_pct.max(1) as f64)
+    }
+
+    /// The `program` message.
+    pub fn message(&self) -> Value {
+        let errors: Vec<Value> = self
+            .errors
+            .iter()
+            .map(|(l, c, m)| json!({"line": l, "col": c, "message": m}))
+            .collect();
+        let check = self.check.as_ref().map(|c| {
+            json!({
+                "ok": c.ok,
+                "run_time_s": c.run_time_s,
+                "min_margin": c.min_margin.map(|m| m.0),
+                "margin_line": c.min_margin.map(|m| m.1),
+                "findings": c.findings.iter()
+                    .map(|(l, m)| json!({"line": l, "message": m}))
+                    .collect::<Vec<_>>(),
+            })
+        });
+        let path: Vec<[f64; 5]> = self
+            .check
+            .as_ref()
+            .map(|c| c.path.iter().map(|p| p.map(round3)).collect())
+            .unwrap_or_default();
+        json!({
+            "type": "program",
+            "name": self.name,
+            "text": self.text,
+            "lines": self.text.lines().count(),
+            "blocks": self.blocks().len(),
+            "errors": errors,
+            "path": path,
+            "check": check,
+        })
+    }
+}
+
+/// A value to 3 decimals (µm), for the page.
+pub fn round3(v: f64) -> f64 {
+    (v * 1000.0).round() / 1000.0
+}
+
+/// The NC line of a message `name:LINE: …`, or 0.
+fn first_line(msg: &str) -> u32 {
+    msg.split(':')
+        .nth(1)
+        .and_then(|l| l.trim().parse().ok())
+        .unwrap_or(0)
+}
+
+/// The teach list's positions as G-code: absolute moves at `speed` mm/min.
+pub fn teach_gcode(points: &[[f64; 6]], axes: &[bool; 6], speed: f64) -> String {
+    let mut out = String::from("(pkmc teach list)\nG21 G90 G64\n");
+    for (i, p) in points.iter().enumerate() {
+        let words: Vec<String> = (0..6)
+            .filter(|&k| axes[k])
+            .map(|k| format!("{}{:.4}", pkmc::config::AXIS_NAMES[k], p[k]))
+            .collect();
+        out += &format!("G1 {} F{speed:.1} (P{})\n", words.join(" "), i + 1);
+    }
+    out += "M2\n";
+    out
+}
+
+/// Positions read back from a teach file: the pose after each line that moves (any
+/// program our front end reads; errors at their line and column).
+pub fn teach_points(
+    name: &str,
+    text: &str,
+    machine: &MachineConfig,
+) -> Result<(Vec<[f64; 6]>, Option<f64>), String> {
+    let canon = gcode::compile_canon(
+        text,
+        name,
+        &gcode::Options {
+            start: machine.home,
+            axes: job::machine_axes(machine),
+            ..gcode::Options::default()
+        },
+    )
+    .map_err(|errs| {
+        errs.iter()
+            .map(|d| d.to_string())
+            .collect::<Vec<_>>()
+            .join("\n")
+    })?;
+    let program = gcode::blocks::from_canon(&canon, machine.home);
+    let mut points = Vec::new();
+    let mut speed = None;
+    for b in &program.blocks {
+        if matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
+            continue;
+        }
+        if b.feed > 0 {
+            speed = Some(b.feed as f64 * 60.0 / 1e6);
+        }
+        points.push(std::array::from_fn(|k| {
+            b.target[k] as f64 / pkmc::units::units_per_user(k >= 3) as f64
+        }));
+    }
+    Ok((points, speed))
+}
