@@ -30,6 +30,10 @@ struct Args {
     /// Inject a fault at a simulated time, KIND[:JOINT]@SECONDS (as `nc-send --inject`).
     #[arg(long, value_name = "FAULT@SECONDS")]
     inject: Vec<pkmc_host::sim::Injection>,
+    /// Keep real time always (one tick per millisecond, as a board), not only while
+    /// the host streams: for a page or a sender that watches the machine move.
+    #[arg(long)]
+    real_time: bool,
 }
 
 fn main() {
@@ -69,7 +73,11 @@ fn serve(args: Args) -> anyhow::Result<()> {
         &mut master,
         &stop,
         line.as_mut(),
-        pkmc_host::sim::serve::ServeClock::Paced,
+        if args.real_time {
+            pkmc_host::sim::serve::ServeClock::RealTime
+        } else {
+            pkmc_host::sim::serve::ServeClock::Paced
+        },
         &mut |_| {},
     )?;
     Ok(())

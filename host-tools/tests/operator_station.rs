@@ -1,0 +1,397 @@
+//! The operator station end to end in a real browser: `pkmc-sim` (real time) on a
+//! pseudo-terminal, `nc-send --port PTY serve` in front of it, and headless Chromium
+//! driven through WebDriver (chromedriver, by fantoccini). The page is clicked and
+//! typed into as an operator would; what it shows is compared with `nc-send status`
+//! on the same controller once the station has let go of it.
+//!
+//! Needs Debian's `chromium` and `chromium-driver` (`.ci/run` installs them); where
+//! they are missing each test says so and passes without running.
+//! Screenshots go to `docs/ui-h4.png` and `docs/ui-hexapod.png` (docs/ui.md).
+
+mod station;
+
+use serde_json::Value;
+use station::{Page, Station, Timeout};
+use std::path::Path;
+use std::time::Duration;
+
+const H4: &str = "examples/machines/h4-table.toml";
+const HEXAPOD: &str = "examples/machines/hexapod.toml";
+
+fn repo(p: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(p)
+}
+
+fn close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol
+}
+
+/// The page's pose and joints as its DRO shows them (the numbers on the screen).
+async fn dro(page: &Page) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let v = page
+        .js(
+            "(() => { const n = id => parseFloat(document.getElementById(id).textContent); \
+             const rows = [...document.querySelectorAll('#dro-joints tr[data-joint]')]; \
+             return { pose: ['x','y','z','a','b','c'].map(a => n('dro-' + a)), \
+             cmd: rows.map(r => parseFloat(r.querySelector('td.cmd').textContent)), \
+             meas: rows.map(r => parseFloat(r.querySelector('td.meas').textContent)) }; })()",
+        )
+        .await;
+    let nums = |k: &str| -> Vec<f64> {
+        v[k].as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap_or(f64::NAN))
+            .collect()
+    };
+    (nums("pose"), nums("cmd"), nums("meas"))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn h4_page_marks_errors_runs_holds_resumes_jogs_teaches_and_agrees_with_nc_send_status() {
+    let Some(mut st) = Station::start(H4).await else {
+        return;
+    };
+    let page = st.page("operator").await;
+    page.wait(
+        "pkmc.machine && pkmc.lastStatus && pkmc.lock && pkmc.lock.holder === pkmc.you",
+        "the page connects and takes control",
+        Timeout::S(10),
+    )
+    .await;
+
+    // A broken program: the error is marked at its line and column before anything runs.
+    let dir = std::env::temp_dir().join(format!("pkmc-ui-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let broken = dir.join("broken.ngc");
+    std::fs::write(
+        &broken,
+        "G21 G90\nG0 X0 Y0 Z-70\nG1 X10 Y5 F600\nG1 X12 Q3\nM2\n",
+    )
+    .unwrap();
+    page.upload("#file", &broken).await;
+    page.wait(
+        "pkmc.program && pkmc.program.name === 'broken.ngc'",
+        "the broken program loads",
+        Timeout::S(10),
+    )
+    .await;
+    let err = page
+        .wait(
+            "(() => { const e = document.querySelector('#errors li.error'); \
+         return e && [e.dataset.line, e.dataset.col, e.textContent]; })()",
+            "an error is listed",
+            Timeout::S(5),
+        )
+        .await;
+    assert_eq!(err[0], "4", "error line: {err}");
+    assert_eq!(err[1], "8", "error column (the Q word): {err}");
+    assert!(err[2].as_str().unwrap().contains("Q word"), "{err}");
+    page.wait(
+        "document.querySelector('#gutter [data-line=\"4\"]').classList.contains('err')",
+        "line 4 is marked in the gutter",
+        Timeout::S(2),
+    )
+    .await;
+    page.wait(
+        "document.getElementById('run').disabled",
+        "Run is disabled with an error",
+        Timeout::S(2),
+    )
+    .await;
+
+    // A controller after its reset is locked until homed: Home.
+    page.click("#home").await;
+    page.wait(
+        "pkmc.lastStatus.homed && pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.job",
+        "the machine homes",
+        Timeout::S(60),
+    )
+    .await;
+
+    // The example program: checked (dry run) and run, held, resumed.
+    page.upload("#file", &repo("examples/h4-table-tilt.ngc"))
+        .await;
+    page.wait(
+        "pkmc.program && pkmc.program.name === 'h4-table-tilt.ngc' && pkmc.program.check \
+        && pkmc.program.errors.length === 0 && !document.getElementById('run').disabled",
+        "the example loads and its dry run ends",
+        Timeout::S(30),
+    )
+    .await;
+    let margin = page
+        .js("document.getElementById('margin').textContent")
+        .await;
+    assert!(
+        margin.as_str().unwrap().contains("line"),
+        "singularity margin shown: {margin}"
+    );
+    page.click("#run").await;
+    page.wait(
+        "pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.line >= 4",
+        "the program runs",
+        Timeout::S(10),
+    )
+    .await;
+    tokio::time::sleep(Duration::from_millis(700)).await;
+    page.click("#hold").await;
+    page.wait(
+        "pkmc.lastStatus.state === 'Hold' && pkmc.lastStatus.feed === 0",
+        "the hold stops the machine",
+        Timeout::S(5),
+    )
+    .await;
+    let held = page.js("pkmc.lastStatus.pose").await;
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert_eq!(
+        page.js("pkmc.lastStatus.pose").await,
+        held,
+        "nothing moves while held"
+    );
+    page.click("#resume").await;
+    page.wait(
+        "pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.feed > 0",
+        "the program resumes",
+        Timeout::S(5),
+    )
+    .await;
+    tokio::time::sleep(Duration::from_millis(600)).await;
+    page.screenshot(&repo("docs/ui-h4.png")).await;
+    page.wait_idle(Timeout::S(30)).await;
+    let log = page.js("pkmc.log.map(e => e.text).join('\\n')").await;
+    assert!(
+        log.as_str().unwrap().contains("done"),
+        "the end is logged: {log}"
+    );
+    let end = page.js("pkmc.lastStatus.pose").await;
+    for (i, want) in [-10.0, -10.0, -60.0, 30.0, 0.0, -10.0].iter().enumerate() {
+        assert!(
+            close(end[i].as_f64().unwrap(), *want, 0.001),
+            "program end pose {end}"
+        );
+    }
+
+    // Jog by a step, and MDI.
+    page.click("button.jog[data-axis='X'][data-dir='1']").await;
+    page.wait(
+        "Math.abs(pkmc.lastStatus.pose[0] - (-9)) < 0.0005 && pkmc.lastStatus.state === 'Idle'",
+        "X+ jogs by the 1 mm step",
+        Timeout::S(10),
+    )
+    .await;
+    page.wait_idle(Timeout::S(5)).await;
+    page.type_into("#mdi", "G1 X0 Y0 Z-70 A10 C0 F1500").await;
+    page.click("#mdi-send").await;
+    page.wait("Math.abs(pkmc.lastStatus.pose[0]) < 0.0005 && Math.abs(pkmc.lastStatus.pose[2] + 70) < 0.0005 \
+        && Math.abs(pkmc.lastStatus.pose[3] - 10) < 0.0005", "the MDI line moves", Timeout::S(15)).await;
+    page.wait_idle(Timeout::S(5)).await;
+
+    // Teach three positions, move away, and run them by step.
+    page.click("#teach-clear").await;
+    let mut taught = Vec::new();
+    for (axis, dir) in [("Y", "1"), ("Z", "-1"), ("X", "-1")] {
+        page.select("#jog-step", "10").await;
+        page.click(&format!("button.jog[data-axis='{axis}'][data-dir='{dir}']"))
+            .await;
+        tokio::time::sleep(Duration::from_millis(150)).await;
+        page.wait_idle(Timeout::S(10)).await;
+        taught.push(page.js("pkmc.lastStatus.pose").await);
+        page.click("#teach-set").await;
+        let n = taught.len();
+        page.wait(
+            &format!("pkmc.teach && pkmc.teach.points.length === {n}"),
+            "the position is set",
+            Timeout::S(5),
+        )
+        .await;
+    }
+    page.type_into("#teach-speed", "1800\t").await;
+    page.wait(
+        "pkmc.teach.speed === 1800",
+        "the teach speed is set",
+        Timeout::S(5),
+    )
+    .await;
+    page.click("button.jog[data-axis='X'][data-dir='1']").await;
+    tokio::time::sleep(Duration::from_millis(150)).await;
+    page.wait_idle(Timeout::S(10)).await;
+    for (i, want) in taught.iter().enumerate() {
+        page.click("#teach-step").await;
+        let cond = format!(
+            "pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.job && \
+             pkmc.lastStatus.pose.every((v, k) => Math.abs(v - {want}[k]) < 0.0005)"
+        );
+        page.wait(
+            &cond,
+            &format!("Run by Step reaches P{}", i + 1),
+            Timeout::S(15),
+        )
+        .await;
+    }
+
+    // The page's numbers against `nc-send status` on the same controller.
+    let (pose, cmd, meas) = dro(&page).await;
+    let status = st.status_after_stopping_the_station().await;
+    let axes = ["x", "y", "z", "a", "b", "c"];
+    for (k, a) in axes.iter().enumerate() {
+        let s = status["pose"][a].as_f64().unwrap();
+        assert!(
+            close(pose[k], s, 0.0011),
+            "{a}: page {} status {s}",
+            pose[k]
+        );
+    }
+    for (j, q) in cmd.iter().enumerate() {
+        let s = status["joints"][j].as_f64().unwrap();
+        assert!(close(*q, s, 0.0011), "joint {}: page {q} status {s}", j + 1);
+        // A live reading: a servo holding its place dithers by a count or two (1 µm).
+        let m = status["measured"][j].as_f64().unwrap();
+        assert!(
+            close(meas[j], m, 0.005),
+            "joint {} measured: page {} status {m}",
+            j + 1,
+            meas[j]
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn hexapod_page_runs_moves_one_arm_shares_its_state_and_stops_a_jog_when_its_page_closes() {
+    let Some(mut st) = Station::start(HEXAPOD).await else {
+        return;
+    };
+    let first = st.page("first").await;
+    first
+        .wait(
+            "pkmc.lastStatus && pkmc.lock && pkmc.lock.holder === pkmc.you",
+            "the first page takes control",
+            Timeout::S(10),
+        )
+        .await;
+    let second = st.page("second").await;
+    second
+        .wait(
+            "pkmc.lastStatus && pkmc.lock && pkmc.lock.name === 'first'",
+            "the second page is told who holds control",
+            Timeout::S(10),
+        )
+        .await;
+    let lock_text = second
+        .js("document.getElementById('lock').textContent")
+        .await;
+    assert!(lock_text.as_str().unwrap().contains("first"), "{lock_text}");
+
+    // The second page may not command: its Reset is refused with the holder's name.
+    second.click("#reset").await;
+    second
+        .wait(
+            "pkmc.log.some(e => e.text.includes('first holds control'))",
+            "the refusal names the holder",
+            Timeout::S(5),
+        )
+        .await;
+
+    // Unlocked where it stands (the simulated hexapod's drives are where it believes).
+    first.click("#reset").await;
+    first
+        .wait(
+            "pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.alarm",
+            "the reset unlocks",
+            Timeout::S(5),
+        )
+        .await;
+
+    // A program on the hexapod; both pages see the same state.
+    first
+        .upload("#file", &repo("examples/hexapod-orbit.ngc"))
+        .await;
+    first
+        .wait(
+            "pkmc.program && pkmc.program.check && !document.getElementById('run').disabled",
+            "the program is checked",
+            Timeout::S(30),
+        )
+        .await;
+    first.click("#run").await;
+    first
+        .wait(
+            "pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.line >= 4",
+            "the program runs",
+            Timeout::S(10),
+        )
+        .await;
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    first.screenshot(&repo("docs/ui-hexapod.png")).await;
+    first.wait_idle(Timeout::S(40)).await;
+    second.wait_idle(Timeout::S(5)).await;
+    let a = first.js("pkmc.lastStatus.pose").await;
+    let b = second.js("pkmc.lastStatus.pose").await;
+    assert_eq!(a, b, "two pages, one state");
+
+    // Arm1 alone: +2 mm, the other legs stay.
+    let before = first.js("pkmc.lastStatus.joints").await;
+    first
+        .type_into("#joint-distance", "\u{e009}a\u{e000}2")
+        .await;
+    first.select("#joint-select", "0").await;
+    first.click("#joint-plus").await;
+    tokio::time::sleep(Duration::from_millis(150)).await;
+    first.wait_idle(Timeout::S(10)).await;
+    let after = first.js("pkmc.lastStatus.joints").await;
+    let leg = |v: &Value, j: usize| v[j].as_f64().unwrap();
+    assert!(
+        close(leg(&after, 0) - leg(&before, 0), 2.0, 0.002),
+        "Arm1 {before} -> {after}"
+    );
+    for j in 1..6 {
+        assert!(
+            close(leg(&after, j), leg(&before, j), 0.002),
+            "leg {} moved: {before} -> {after}",
+            j + 1
+        );
+    }
+
+    // Hold to jog, then the page closes with the button still down: the jog stops.
+    first.click("#jog-continuous").await;
+    first.press("button.jog[data-axis='X'][data-dir='1']").await;
+    second
+        .wait(
+            "pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.feed > 0",
+            "the held jog moves",
+            Timeout::S(5),
+        )
+        .await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    first.close().await;
+    second
+        .wait(
+            "pkmc.lastStatus.state === 'Idle' && pkmc.lastStatus.feed === 0",
+            "the jog stops when its page closes",
+            Timeout::S(3),
+        )
+        .await;
+    let x = second.js("pkmc.lastStatus.pose[0]").await;
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    assert_eq!(
+        second.js("pkmc.lastStatus.pose[0]").await,
+        x,
+        "nothing moves after the stop"
+    );
+    second
+        .wait(
+            "pkmc.lock.holder === null || pkmc.lock.holder === pkmc.you",
+            "the lock is freed",
+            Timeout::S(3),
+        )
+        .await;
+    second.click("#take").await;
+    second
+        .wait(
+            "pkmc.lock.holder === pkmc.you",
+            "the second page takes control",
+            Timeout::S(3),
+        )
+        .await;
+    let _ = st.status_after_stopping_the_station().await;
+}

@@ -1,0 +1,338 @@
+//! Harness of the operator-station tests: the simulator and the station as child
+//! processes, chromedriver, and a page driven through WebDriver.
+
+use fantoccini::actions::{InputSource, MouseActions, PointerAction, MOUSE_BUTTON_LEFT};
+use fantoccini::{Client, ClientBuilder, Locator};
+use serde_json::{json, Value};
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A child process killed when dropped.
+pub struct Proc(pub Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// How long to wait for a condition.
+#[derive(Clone, Copy)]
+pub enum Timeout {
+    S(u64),
+}
+
+/// Where Chromium and its WebDriver are, if installed.
+fn browser() -> Option<(PathBuf, PathBuf)> {
+    let find = |names: &[&str]| {
+        names.iter().find_map(|n| {
+            std::env::var_os("PATH").and_then(|paths| {
+                std::env::split_paths(&paths)
+                    .map(|d| d.join(n))
+                    .find(|p| p.is_file())
+            })
+        })
+    };
+    Some((
+        find(&["chromium", "chromium-browser"])?,
+        find(&["chromedriver"])?,
+    ))
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// The first line a child prints on stdout.
+fn first_line(child: &mut Child, what: &str) -> String {
+    let mut line = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap_or_else(|e| panic!("{what}: {e}"));
+    assert!(!line.trim().is_empty(), "{what} printed nothing");
+    line.trim().to_string()
+}
+
+/// The simulator, the station in front of it, and chromedriver.
+pub struct Station {
+    machine: PathBuf,
+    port: String,
+    url: String,
+    serve: Option<Proc>,
+    _sim: Proc,
+    driver: Proc,
+    driver_port: u16,
+    chromium: PathBuf,
+    profiles: Vec<tempdir::Dir>,
+}
+
+mod tempdir {
+    /// A directory removed when dropped.
+    pub struct Dir(pub std::path::PathBuf);
+    impl Drop for Dir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+}
+
+impl Station {
+    /// Starts everything for the machine file `machine` (relative to the repository);
+    /// `None`, saying why, where no browser is installed.
+    pub async fn start(machine: &str) -> Option<Station> {
+        let Some((chromium, chromedriver)) = browser() else {
+            eprintln!(
+                "SKIPPED: no chromium and chromedriver on PATH (Debian: apt-get install \
+                 chromium chromium-driver); the operator-station tests need a real browser"
+            );
+            return None;
+        };
+        let machine = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("..")
+            .join(machine);
+        let mut sim = Command::new(env!("CARGO_BIN_EXE_pkmc-sim"))
+            .arg("--machine")
+            .arg(&machine)
+            .arg("--real-time")
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let port = first_line(&mut sim, "pkmc-sim");
+        let sim = Proc(sim);
+        let mut serve = Command::new(env!("CARGO_BIN_EXE_nc-send"))
+            .args(["--port", &port, "--machine"])
+            .arg(&machine)
+            .args(["serve", "--listen", "127.0.0.1:0"])
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let url = first_line(&mut serve, "nc-send serve");
+        let driver_port = free_port();
+        let driver = Proc(
+            Command::new(chromedriver)
+                .arg(format!("--port={driver_port}"))
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap(),
+        );
+        let t = Instant::now();
+        while std::net::TcpStream::connect(("127.0.0.1", driver_port)).is_err() {
+            assert!(
+                t.elapsed() < Duration::from_secs(20),
+                "chromedriver did not start"
+            );
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        Some(Station {
+            machine,
+            port,
+            url,
+            serve: Some(Proc(serve)),
+            _sim: sim,
+            driver,
+            driver_port,
+            chromium,
+            profiles: Vec::new(),
+        })
+    }
+
+    /// A new browser (its own profile) on the station's page, as `name`.
+    pub async fn page(&mut self, name: &str) -> Page {
+        let profile = std::env::temp_dir().join(format!(
+            "pkmc-chromium-{}-{}-{name}",
+            std::process::id(),
+            self.profiles.len()
+        ));
+        std::fs::create_dir_all(&profile).unwrap();
+        let args = json!([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--window-size=1400,900",
+            format!("--user-data-dir={}", profile.display()),
+        ]);
+        self.profiles.push(tempdir::Dir(profile));
+        let mut caps = serde_json::Map::new();
+        caps.insert(
+            "goog:chromeOptions".into(),
+            json!({"binary": self.chromium, "args": args}),
+        );
+        let connector = hyper_util::client::legacy::connect::HttpConnector::new();
+        let client = ClientBuilder::new(connector)
+            .capabilities(caps)
+            .connect(&format!("http://127.0.0.1:{}", self.driver_port))
+            .await
+            .expect("a WebDriver session");
+        let sep = if self.url.contains('?') { '&' } else { '?' };
+        client
+            .goto(&format!("{}{sep}name={name}", self.url))
+            .await
+            .unwrap();
+        let _ = &self.driver;
+        Page { client }
+    }
+
+    /// Stops the station (Ctrl-C), waits for it to let go of the controller, and asks
+    /// the controller for its status with `nc-send status`.
+    pub async fn status_after_stopping_the_station(&mut self) -> Value {
+        if let Some(mut p) = self.serve.take() {
+            // SAFETY: a plain signal to our own child.
+            unsafe { libc::kill(p.0.id() as i32, libc::SIGINT) };
+            let t = Instant::now();
+            while p.0.try_wait().unwrap().is_none() {
+                assert!(
+                    t.elapsed() < Duration::from_secs(10),
+                    "the station did not stop"
+                );
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+        }
+        let out = Command::new(env!("CARGO_BIN_EXE_nc-send"))
+            .args(["--port", &self.port, "--machine"])
+            .arg(&self.machine)
+            .args(["status", "--report", "json"])
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "nc-send status: {out:?}");
+        serde_json::from_slice(&out.stdout).unwrap()
+    }
+}
+
+/// A page in its own browser.
+pub struct Page {
+    client: Client,
+}
+
+impl Page {
+    /// The value of a JavaScript expression.
+    pub async fn js(&self, expr: &str) -> Value {
+        self.client
+            .execute(&format!("return {expr};"), vec![])
+            .await
+            .unwrap_or_else(|e| panic!("{expr}: {e}"))
+    }
+
+    /// Waits until `expr` is truthy; returns its value. A timeout names `what` and
+    /// shows the page's last status and log.
+    pub async fn wait(&self, expr: &str, what: &str, timeout: Timeout) -> Value {
+        let Timeout::S(s) = timeout;
+        let t = Instant::now();
+        let guarded =
+            format!("(() => {{ try {{ return {expr}; }} catch (e) {{ return null; }} }})()");
+        loop {
+            let v = self.js(&guarded).await;
+            let truthy = match &v {
+                Value::Null => false,
+                Value::Bool(b) => *b,
+                Value::Number(n) => n.as_f64() != Some(0.0),
+                Value::String(s) => !s.is_empty(),
+                _ => true,
+            };
+            if truthy {
+                return v;
+            }
+            if t.elapsed() > Duration::from_secs(s) {
+                let st = self
+                    .js("JSON.stringify(pkmc.lastStatus && Object.assign({}, pkmc.lastStatus, {scene: null}))")
+                    .await;
+                let log = self.js("JSON.stringify(pkmc.log.slice(-8))").await;
+                panic!("timed out after {s} s waiting for: {what}\n  ({expr})\n  status {st}\n  log {log}");
+            }
+            tokio::time::sleep(Duration::from_millis(40)).await;
+        }
+    }
+
+    /// Waits until the machine is idle with no job.
+    pub async fn wait_idle(&self, timeout: Timeout) {
+        self.wait(
+            "pkmc.lastStatus && pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.job",
+            "the machine is idle",
+            timeout,
+        )
+        .await;
+    }
+
+    async fn find(&self, css: &str) -> fantoccini::elements::Element {
+        self.client
+            .find(Locator::Css(css))
+            .await
+            .unwrap_or_else(|e| panic!("{css}: {e}"))
+    }
+
+    pub async fn click(&self, css: &str) {
+        self.find(css)
+            .await
+            .click()
+            .await
+            .unwrap_or_else(|e| panic!("click {css}: {e}"));
+    }
+
+    /// Types `text` into a field after clearing it.
+    pub async fn type_into(&self, css: &str, text: &str) {
+        let e = self.find(css).await;
+        e.clear().await.unwrap();
+        e.send_keys(text).await.unwrap();
+    }
+
+    pub async fn select(&self, css: &str, value: &str) {
+        self.find(css)
+            .await
+            .select_by_value(value)
+            .await
+            .unwrap_or_else(|e| panic!("select {value} in {css}: {e}"));
+    }
+
+    /// Chooses `file` in a file input.
+    pub async fn upload(&self, css: &str, file: &Path) {
+        let path = file.canonicalize().unwrap();
+        self.find(css)
+            .await
+            .send_keys(&path.display().to_string())
+            .await
+            .unwrap();
+    }
+
+    /// Presses the mouse button on an element and keeps it down.
+    pub async fn press(&self, css: &str) {
+        let r = self
+            .js(&format!(
+                "(() => {{ const r = document.querySelector(\"{css}\").getBoundingClientRect(); \
+                 return [r.x + r.width / 2, r.y + r.height / 2]; }})()"
+            ))
+            .await;
+        let (x, y) = (r[0].as_f64().unwrap(), r[1].as_f64().unwrap());
+        let down = MouseActions::new("mouse".into())
+            .then(PointerAction::MoveTo {
+                duration: None,
+                x: x.round(),
+                y: y.round(),
+            })
+            .then(PointerAction::Down {
+                button: MOUSE_BUTTON_LEFT,
+            });
+        self.client.perform_actions(down).await.unwrap();
+    }
+
+    pub async fn screenshot(&self, to: &Path) {
+        let png = self.client.screenshot().await.unwrap();
+        std::fs::write(to, png).unwrap();
+    }
+
+    /// Closes the browser (its page goes with it, whatever is held down).
+    pub async fn close(self) {
+        let _ = self.client.close().await;
+    }
+}
