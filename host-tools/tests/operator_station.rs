@@ -395,3 +395,172 @@ async fn hexapod_page_runs_moves_one_arm_shares_its_state_and_stops_a_jog_when_i
         .await;
     let _ = st.status_after_stopping_the_station().await;
 }
+
+/// One raw HTTP request to the station; its status line.
+fn http_status(url: &str, path_and_query: &str, extra_headers: &str) -> String {
+    use std::io::{Read, Write};
+    let host = url
+        .trim_start_matches("http://")
+        .split('/')
+        .next()
+        .unwrap()
+        .to_string();
+    let mut s = std::net::TcpStream::connect(&host).unwrap();
+    write!(
+        s,
+        "GET {path_and_query} HTTP/1.1\r\nHost: {host}\r\n{extra_headers}Connection: close\r\n\r\n"
+    )
+    .unwrap();
+    let mut out = String::new();
+    let _ = s.read_to_string(&mut out);
+    out.lines().next().unwrap_or("").to_string()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cartesian_page_steps_overrides_stops_e_stops_saves_and_loads_teach_behind_a_token() {
+    let Some(mut st) = Station::start_with(
+        "examples/machines/cartesian-xyz.toml",
+        &["--token", "s3cret"],
+    )
+    .await
+    else {
+        return;
+    };
+    // The token: nothing without it, and no socket for a page of another origin.
+    assert!(st.url.ends_with("/?token=s3cret"), "{}", st.url);
+    assert!(http_status(&st.url, "/", "").contains("401"), "page without the token");
+    let upgrade = "Upgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Version: 13\r\n\
+                   Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n";
+    assert!(http_status(&st.url, "/ws?token=wrong", upgrade).contains("401"));
+    let evil = format!("{upgrade}Origin: http://example.invalid\r\n");
+    assert!(http_status(&st.url, "/ws?token=s3cret", &evil).contains("403"));
+    assert!(http_status(&st.url, "/?token=s3cret", "").contains("200"));
+
+    let page = st.page("op").await;
+    page.wait("pkmc.lastStatus && pkmc.lock && pkmc.lock.holder === pkmc.you", "the page takes control", Timeout::S(10)).await;
+    page.click("#reset").await;
+    page.wait("pkmc.lastStatus.state === 'Idle'", "the reset unlocks", Timeout::S(5)).await;
+
+    // A program typed into the editor, run by step: one block per press.
+    let text = "G21 G90\nG1 X10 F3000\nG1 Y10\nG1 X0\nG1 Y0\nM2\n";
+    page.type_into("#editor", text).await;
+    page.click("#load-editor").await;
+    page.wait("pkmc.program && pkmc.program.check && pkmc.program.blocks === 4", "the typed program loads", Timeout::S(20)).await;
+    page.click("#step").await;
+    page.wait("Math.abs(pkmc.lastStatus.pose[0] - 10) < 0.0005 && pkmc.lastStatus.job && pkmc.lastStatus.job.step",
+        "the first press runs the first block and waits", Timeout::S(10)).await;
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    assert!(close(page.js("pkmc.lastStatus.pose[1]").await.as_f64().unwrap(), 0.0, 1e-6), "no block without a press");
+    page.click("#step").await;
+    page.wait("Math.abs(pkmc.lastStatus.pose[1] - 10) < 0.0005 && pkmc.lastStatus.job.step && pkmc.lastStatus.job.executed === 2",
+        "the second press runs the second block", Timeout::S(10)).await;
+    page.click("#stop").await;
+    page.wait_idle(Timeout::S(5)).await;
+    assert!(close(page.js("pkmc.lastStatus.pose[0]").await.as_f64().unwrap(), 10.0, 1e-6), "Stop ends run by step");
+
+    // Feed override from the slider (keyboard), then Stop mid-run.
+    let slow = "G21 G90\nG1 X100 F600\nG1 X0\nM2\n";
+    page.type_into("#editor", slow).await;
+    page.click("#load-editor").await;
+    page.wait("pkmc.program && pkmc.program.check && pkmc.program.blocks === 2", "the slow program loads", Timeout::S(20)).await;
+    page.click("#run").await;
+    page.wait("pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.feed > 0", "it runs", Timeout::S(5)).await;
+    page.keys("#override", "\u{e014}\u{e014}\u{e014}\u{e014}").await;
+    page.wait("pkmc.lastStatus.override === 120 && Math.abs(pkmc.lastStatus.feed - 720) < 2",
+        "the override speeds the feed to 120 %", Timeout::S(5)).await;
+    let eta = page.js("pkmc.lastStatus.job.eta_s").await;
+    assert!(eta.as_f64().is_some_and(|e| e > 0.0), "an ETA while it runs: {eta}");
+    page.click("#stop").await;
+    page.wait_idle(Timeout::S(5)).await;
+    let x = page.js("pkmc.lastStatus.pose[0]").await.as_f64().unwrap();
+    assert!(x > 0.0 && x < 100.0, "stopped on the way: X {x}");
+
+    // E-stop: the motion ends at once, the alarm names its cause; Reset clears it.
+    page.click("#run").await;
+    page.wait("pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.feed > 0", "it runs again", Timeout::S(5)).await;
+    page.click("#estop").await;
+    page.wait("pkmc.lastStatus.state === 'Alarm' && document.getElementById('alarm').textContent.includes('Aborted')",
+        "the e-stop raises an alarm shown with its cause", Timeout::S(5)).await;
+    page.wait_idle_or_alarm().await;
+    page.click("#reset").await;
+    page.wait("pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.alarm", "Reset clears it", Timeout::S(5)).await;
+
+    // The teach list saved as G-code by the browser, cleared, and loaded back.
+    page.click("#teach-clear").await;
+    for (axis, n) in [("X", 1), ("Y", 2)] {
+        page.click(&format!("button.jog[data-axis='{axis}'][data-dir='1']")).await;
+        tokio::time::sleep(Duration::from_millis(150)).await;
+        page.wait_idle(Timeout::S(10)).await;
+        page.click("#teach-set").await;
+        page.wait(&format!("pkmc.teach && pkmc.teach.points.length === {n}"), "set", Timeout::S(5)).await;
+    }
+    let taught = page.js("pkmc.teach.points.map(p => p.pose)").await;
+    page.click("#teach-save").await;
+    let saved = page.downloads.join("teach.ngc");
+    let t = std::time::Instant::now();
+    while !saved.is_file() || std::fs::read_to_string(&saved).unwrap_or_default().is_empty() {
+        assert!(t.elapsed() < Duration::from_secs(10), "the browser saved no teach.ngc");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let gcode = std::fs::read_to_string(&saved).unwrap();
+    assert_eq!(gcode.lines().filter(|l| l.starts_with("G1 ")).count(), 2, "{gcode}");
+    page.click("#teach-clear").await;
+    page.wait("pkmc.teach.points.length === 0", "cleared", Timeout::S(5)).await;
+    page.upload("#teach-load", &saved).await;
+    page.wait("pkmc.teach.points.length === 2", "loaded back", Timeout::S(5)).await;
+    assert_eq!(page.js("pkmc.teach.points.map(p => p.pose)").await, taught, "{gcode}");
+
+    // Hold to jog: moves while held, stops on release.
+    page.click("#jog-continuous").await;
+    page.press("button.jog[data-axis='Y'][data-dir='1']").await;
+    page.wait("pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.feed > 0", "the held jog moves", Timeout::S(5)).await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    page.release().await;
+    page.wait_idle(Timeout::S(3)).await;
+    let _ = st.status_after_stopping_the_station().await;
+}
+
+/// The page during a whole 3D_Chips run on the H-4 (from the shared corpus): how often
+/// statuses arrive and how long frames take, as the page itself measures them
+/// (`pkmc.stats`). A report, not a timed test: run it with
+/// `cargo test -p pkmc-host --release --test operator_station -- --ignored --nocapture`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "a report of about two minutes; .ci/run runs it"]
+async fn report_page_responsiveness_during_3d_chips() {
+    let program = repo("../shared/corpus/linuxcnc/3D_Chips.ngc");
+    if !program.is_file() {
+        eprintln!("SKIPPED: {} is not there (the shared corpus)", program.display());
+        return;
+    }
+    let Some(mut st) = Station::start(H4).await else {
+        return;
+    };
+    let page = st.page("report").await;
+    page.wait("pkmc.lastStatus && pkmc.lock && pkmc.lock.holder === pkmc.you", "the page takes control", Timeout::S(10)).await;
+    page.click("#reset").await;
+    page.wait("pkmc.lastStatus.state === 'Idle'", "the reset unlocks", Timeout::S(5)).await;
+    page.upload("#file", &program).await;
+    page.wait("pkmc.program && pkmc.program.name === '3D_Chips.ngc' && pkmc.program.check && !document.getElementById('run').disabled",
+        "3D_Chips is checked", Timeout::S(300)).await;
+    let planned = page.js("pkmc.program.check.run_time_s").await;
+    page.click("#run").await;
+    page.wait("pkmc.lastStatus.state === 'Running'", "it runs", Timeout::S(10)).await;
+    let start = page.js("[performance.now(), pkmc.stats.frames.length, pkmc.stats.status.length, pkmc.stats.draw.length]").await;
+    page.wait("pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.job", "the run ends", Timeout::S(600)).await;
+    let r = page
+        .js(&format!(
+            "(() => {{ const s = {start}; const t = performance.now() - s[0]; \
+             const f = pkmc.stats.frames.slice(s[1]).sort((a, b) => a - b); \
+             const d = pkmc.stats.draw.slice(s[3]).sort((a, b) => a - b); \
+             const st = pkmc.stats.status.slice(s[2]); \
+             let gap = 0; for (let i = 1; i < st.length; i++) gap = Math.max(gap, st[i] - st[i - 1]); \
+             const q = (a, p) => a.length ? a[Math.min(a.length - 1, Math.floor(p * a.length))] : null; \
+             return {{ run_s: t / 1000, frames: f.length, fps: f.length / (t / 1000), \
+                frame_ms: {{ median: q(f, 0.5), p99: q(f, 0.99), max: f[f.length - 1] }}, \
+                draw_ms: {{ median: q(d, 0.5), p99: q(d, 0.99), max: d[d.length - 1] }}, \
+                status_hz: st.length / (t / 1000), status_max_gap_ms: gap }}; }})()"
+        ))
+        .await;
+    println!("3D_Chips on the H-4, planned {planned} s: page {r}");
+    let _ = st.status_after_stopping_the_station().await;
+}

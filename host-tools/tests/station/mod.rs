@@ -62,9 +62,10 @@ fn first_line(child: &mut Child, what: &str) -> String {
 
 /// The simulator, the station in front of it, and chromedriver.
 pub struct Station {
+    /// The page's address as the station printed it.
+    pub url: String,
     machine: PathBuf,
     port: String,
-    url: String,
     serve: Option<Proc>,
     _sim: Proc,
     driver: Proc,
@@ -87,6 +88,11 @@ impl Station {
     /// Starts everything for the machine file `machine` (relative to the repository);
     /// `None`, saying why, where no browser is installed.
     pub async fn start(machine: &str) -> Option<Station> {
+        Self::start_with(machine, &[]).await
+    }
+
+    /// [`Station::start`] with more arguments for `nc-send serve`.
+    pub async fn start_with(machine: &str, serve_args: &[&str]) -> Option<Station> {
         let Some((chromium, chromedriver)) = browser() else {
             eprintln!(
                 "SKIPPED: no chromium and chromedriver on PATH (Debian: apt-get install \
@@ -110,6 +116,7 @@ impl Station {
             .args(["--port", &port, "--machine"])
             .arg(&machine)
             .args(["serve", "--listen", "127.0.0.1:0"])
+            .args(serve_args)
             .stdout(Stdio::piped())
             .spawn()
             .unwrap();
@@ -151,7 +158,7 @@ impl Station {
             std::process::id(),
             self.profiles.len()
         ));
-        std::fs::create_dir_all(&profile).unwrap();
+        std::fs::create_dir_all(profile.join("downloads")).unwrap();
         let args = json!([
             "--headless",
             "--no-sandbox",
@@ -164,11 +171,14 @@ impl Station {
             "--window-size=1400,900",
             format!("--user-data-dir={}", profile.display()),
         ]);
+        let downloads = profile.join("downloads");
         self.profiles.push(tempdir::Dir(profile));
         let mut caps = serde_json::Map::new();
         caps.insert(
             "goog:chromeOptions".into(),
-            json!({"binary": self.chromium, "args": args}),
+            json!({"binary": self.chromium, "args": args,
+                   "prefs": {"download.default_directory": downloads,
+                             "download.prompt_for_download": false}}),
         );
         let connector = hyper_util::client::legacy::connect::HttpConnector::new();
         let client = ClientBuilder::new(connector)
@@ -182,7 +192,10 @@ impl Station {
             .await
             .unwrap();
         let _ = &self.driver;
-        Page { client }
+        Page {
+            client,
+            downloads: self.profiles.last().unwrap().0.join("downloads"),
+        }
     }
 
     /// Stops the station (Ctrl-C), waits for it to let go of the controller, and asks
@@ -214,6 +227,8 @@ impl Station {
 /// A page in its own browser.
 pub struct Page {
     client: Client,
+    /// Where its browser saves downloads.
+    pub downloads: PathBuf,
 }
 
 impl Page {
@@ -261,6 +276,16 @@ impl Page {
             "pkmc.lastStatus && pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.job",
             "the machine is idle",
             timeout,
+        )
+        .await;
+    }
+
+    /// Waits until the machine has stopped, idle or in an alarm.
+    pub async fn wait_idle_or_alarm(&self) {
+        self.wait(
+            "pkmc.lastStatus && ['Idle', 'Alarm'].includes(pkmc.lastStatus.state) && !pkmc.lastStatus.job",
+            "the machine stops",
+            Timeout::S(5),
         )
         .await;
     }
@@ -324,6 +349,19 @@ impl Page {
                 button: MOUSE_BUTTON_LEFT,
             });
         self.client.perform_actions(down).await.unwrap();
+    }
+
+    /// Lets the mouse button go.
+    pub async fn release(&self) {
+        let up = MouseActions::new("mouse".into()).then(PointerAction::Up {
+            button: MOUSE_BUTTON_LEFT,
+        });
+        self.client.perform_actions(up).await.unwrap();
+    }
+
+    /// Presses keys on the element (`\u{e014}` is the right arrow).
+    pub async fn keys(&self, css: &str, keys: &str) {
+        self.find(css).await.send_keys(keys).await.unwrap();
     }
 
     pub async fn screenshot(&self, to: &Path) {

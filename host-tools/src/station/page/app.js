@@ -48,7 +48,7 @@ const CLIENT_NAME = params.get('name') ||
   'browser-' + Math.floor(Math.random() * 0x10000).toString(16).padStart(4, '0');
 
 const pkmc = window.pkmc = {
-  stats: { frames: [], status: [] },
+  stats: { frames: [], status: [], draw: [] },
   lastStatus: null, program: null, machine: null, teach: null,
   you: null, lock: null, log: [],
 };
@@ -1087,7 +1087,9 @@ function frame() {
     if (!loop.failed) addLog('error', `drawing failed: ${e.message}`);
     loop.failed = true;
   }
-  loop.drawMs = 0.9 * loop.drawMs + 0.1 * (performance.now() - now);
+  const drawn = performance.now() - now;
+  pushCapped(pkmc.stats.draw, drawn);
+  loop.drawMs = 0.9 * loop.drawMs + 0.1 * drawn;
   if (now - loop.lastReadout > 500) {
     loop.lastReadout = now;
     updateReadout(now);
