@@ -101,7 +101,7 @@ impl Program {
         o.sim.record_path = true;
         o.sim.inject = Vec::new();
         o.sim.faults = None;
-        let r = job::check_compiled(machine, &self.name, compiled, &o, &mut crate::link::NoHooks);
+        let r = job::check_compiled(machine, &self.name, compiled, &o, &mut DryRun::default());
         let rapid_lines: std::collections::HashSet<u32> = compiled
             .blocks
             .iter()
@@ -193,6 +193,29 @@ impl Program {
     }
 }
 
+/// The dry run's operator: program pauses (M0, M1, M6) are resumed at once, as
+/// `nc-send --check` does; nobody else holds a dry run.
+#[derive(Default)]
+struct DryRun {
+    /// The line of the pause last resumed, while statuses still show it.
+    resumed: Option<u32>,
+}
+
+impl crate::link::JobHooks for DryRun {
+    fn control(&mut self, view: &crate::link::LinkView) -> Option<pkmc::protocol::Control> {
+        let s = view.status.as_ref()?;
+        if s.state != pkmc::protocol::State::Hold {
+            self.resumed = None;
+            return None;
+        }
+        if view.control_pending || s.speed != 0 || self.resumed == Some(s.line) {
+            return None;
+        }
+        self.resumed = Some(s.line);
+        Some(pkmc::protocol::Control::Resume)
+    }
+}
+
 /// A value to 3 decimals (µm), for the page.
 pub fn round3(v: f64) -> f64 {
     (v * 1000.0).round() / 1000.0
@@ -257,4 +280,66 @@ pub fn teach_points(
         }));
     }
     Ok((points, speed))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn opts() -> RunOptions<'static> {
+        RunOptions {
+            target: job::Target::Sim,
+            sim: Default::default(),
+            link: Default::default(),
+            home: false,
+            tools: Default::default(),
+            statics: None,
+            compress: None,
+        }
+    }
+
+    #[test]
+    fn a_program_with_pauses_is_dry_run_to_its_end_with_the_times_its_blocks_end() {
+        let machine = MachineConfig::h4_table();
+        let text = "G21 G90\nG1 X10 F1200\nM0\nG1 Y10\nM1\nG1 X0 Y0\nM2\n";
+        let mut p = Program::load("paused.ngc", text, &machine, &opts());
+        assert!(p.runnable(), "{:?}", p.errors);
+        p.dry_run(&machine, &opts());
+        let c = p.check.clone().unwrap();
+        assert!(c.ok, "{:?}", c.findings);
+        assert_eq!(c.done_at.len(), p.blocks().len());
+        assert!(c.run_time_s > 1.0, "{}", c.run_time_s);
+        let total = p.eta_s(0, 100).unwrap();
+        assert!((total - c.done_at.last().unwrap()).abs() < 1e-9);
+        assert_eq!(p.eta_s(p.blocks().len(), 100), Some(0.0));
+        // At 200 % the time left halves.
+        let half = p.eta_s(1, 200).unwrap();
+        assert!((half * 2.0 - p.eta_s(1, 100).unwrap()).abs() < 1e-9);
+        assert!(!c.path.is_empty());
+    }
+
+    #[test]
+    fn errors_carry_line_and_column_and_nothing_runs() {
+        let machine = MachineConfig::h4_table();
+        let p = Program::load("bad.ngc", "G21\nG1 X1 F100\nG1 X2 Q3\n", &machine, &opts());
+        assert!(!p.runnable());
+        assert_eq!(
+            p.errors.iter().map(|e| (e.0, e.1)).collect::<Vec<_>>(),
+            vec![(3, 7)]
+        );
+    }
+
+    #[test]
+    fn the_teach_list_goes_to_g_code_and_back() {
+        let machine = MachineConfig::h4_table();
+        let axes = job::machine_axes(&machine);
+        let points = vec![
+            [1.0, 2.0, -70.0, 5.0, 0.0, 0.0],
+            [3.5, -2.25, -75.0, 0.0, 0.0, 10.0],
+        ];
+        let text = teach_gcode(&points, &axes, 1500.0);
+        let (back, speed) = teach_points("teach.ngc", &text, &machine).unwrap();
+        assert_eq!(back, points, "{text}");
+        assert_eq!(speed, Some(1500.0));
+    }
 }

@@ -60,6 +60,11 @@ fn first_line(child: &mut Child, what: &str) -> String {
     line.trim().to_string()
 }
 
+/// One station and its browsers at a time: each test runs a simulator in real time, a
+/// station and one or two browsers, and two such at once on a small machine make
+/// each other's page loads time out.
+static ONE_AT_A_TIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
 /// The simulator, the station in front of it, and chromedriver.
 pub struct Station {
     /// The page's address as the station printed it.
@@ -72,13 +77,20 @@ pub struct Station {
     driver_port: u16,
     chromium: PathBuf,
     profiles: Vec<tempdir::Dir>,
+    _turn: tokio::sync::MutexGuard<'static, ()>,
 }
 
 mod tempdir {
-    /// A directory removed when dropped.
+    /// A browser's profile directory: the browser using it is ended and the directory
+    /// removed when dropped (chromedriver's end does not end its browsers, nor does a
+    /// failed test close its sessions).
     pub struct Dir(pub std::path::PathBuf);
     impl Drop for Dir {
         fn drop(&mut self) {
+            let _ = std::process::Command::new("pkill")
+                .args(["-f", "--"])
+                .arg(format!("--user-data-dir={}", self.0.display()))
+                .status();
             let _ = std::fs::remove_dir_all(&self.0);
         }
     }
@@ -100,6 +112,7 @@ impl Station {
             );
             return None;
         };
+        let turn = ONE_AT_A_TIME.lock().await;
         let machine = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("..")
             .join(machine);
@@ -148,6 +161,7 @@ impl Station {
             driver_port,
             chromium,
             profiles: Vec::new(),
+            _turn: turn,
         })
     }
 
@@ -187,10 +201,11 @@ impl Station {
             .await
             .expect("a WebDriver session");
         let sep = if self.url.contains('?') { '&' } else { '?' };
+        let url = format!("{}{sep}name={name}", self.url);
         client
-            .goto(&format!("{}{sep}name={name}", self.url))
+            .goto(&url)
             .await
-            .unwrap();
+            .unwrap_or_else(|e| panic!("{url}: {e}"));
         let _ = &self.driver;
         Page {
             client,

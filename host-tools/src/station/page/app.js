@@ -48,7 +48,7 @@ const CLIENT_NAME = params.get('name') ||
   'browser-' + Math.floor(Math.random() * 0x10000).toString(16).padStart(4, '0');
 
 const pkmc = window.pkmc = {
-  stats: { frames: [], status: [], draw: [] },
+  stats: { frames: [], status: [], draw: [], handle: [], longtasks: [], slow: [] },
   lastStatus: null, program: null, machine: null, teach: null,
   you: null, lock: null, log: [],
 };
@@ -122,20 +122,36 @@ const HANDLERS = {
 };
 
 function onMessage(data) {
+  const t0 = performance.now();
+  const type = handleMessage(data);
+  const ms = performance.now() - t0;
+  pushCapped(pkmc.stats.handle, ms);
+  if (ms > 20) pushCapped(pkmc.stats.slow, { type, ms, at: t0 });
+}
+
+// Tasks of the page over 50 ms, as the browser reports them (where supported).
+try {
+  new PerformanceObserver((list) => {
+    for (const e of list.getEntries()) pushCapped(pkmc.stats.longtasks, e.duration);
+  }).observe({ type: 'longtask', buffered: true });
+} catch (e) { /* no long-task timing in this browser */ }
+
+function handleMessage(data) {
   let msg;
   try {
     msg = JSON.parse(data);
   } catch (e) {
     addLog('error', 'unreadable message from the server');
-    return;
+    return undefined;
   }
   const h = HANDLERS[msg && msg.type];
-  if (!h) return;
+  if (!h) return undefined;
   try {
     h(msg);
   } catch (e) {
     addLog('error', `page error handling "${msg.type}": ${e.message}`);
   }
+  return msg.type;
 }
 
 // ============================================================== message handlers
@@ -307,7 +323,7 @@ function updateJob(job) {
 
 // ================================================================= program panel
 
-const prog = { curLine: 0, overrideTouched: 0, overrideHeld: false };
+const prog = { curLine: 0, overrideTouched: 0, overrideHeld: false, lineAt: 0, lh: 0 };
 
 function countLines(text) {
   let n = 1;
@@ -315,26 +331,41 @@ function countLines(text) {
   return n;
 }
 
-/** Keeps one gutter div per editor line, and the gutter scrolled with the editor. */
+/** The gutter: line count, marks (line -> class and message) and the executing line.
+ * Only the numbers in view are in the page (a CAM program has tens of thousands of
+ * lines, and a div per line made every restyle of the page slow). */
+const gut = { lines: 1, marks: new Map(), cur: 0 };
+
 function syncGutter() {
-  const gutter = $('gutter');
-  const n = countLines($('editor').value);
-  let have = gutter.childElementCount;
-  if (n > have) {
-    const frag = document.createDocumentFragment();
-    for (let i = have + 1; i <= n; i++) {
-      const d = el('div', '', String(i));
-      d.dataset.line = String(i);
-      frag.appendChild(d);
-    }
-    gutter.appendChild(frag);
-  }
-  while (have > n) {
-    gutter.lastChild.remove();
-    have--;
-  }
-  gutter.scrollTop = $('editor').scrollTop;
+  gut.lines = countLines($('editor').value);
+  renderGutter();
   updateDirty();
+}
+
+/** Draws the line numbers in view, scrolled with the editor. */
+function renderGutter() {
+  const gutter = $('gutter');
+  const ed = $('editor');
+  const lh = lineHeight();
+  const first = Math.max(1, Math.floor(ed.scrollTop / lh));
+  const last = Math.min(gut.lines, first + Math.ceil(ed.clientHeight / lh) + 2);
+  const spacer = el('div', 'spacer');
+  spacer.style.height = `${(first - 1) * lh}px`;
+  const frag = document.createDocumentFragment();
+  frag.appendChild(spacer);
+  for (let i = first; i <= last; i++) {
+    const d = el('div', '', String(i));
+    d.dataset.line = String(i);
+    const m = gut.marks.get(i);
+    if (m) {
+      d.classList.add(m.cls);
+      d.title = m.message;
+    }
+    if (i === gut.cur) d.classList.add('cur');
+    frag.appendChild(d);
+  }
+  gutter.replaceChildren(frag);
+  gutter.scrollTop = ed.scrollTop;
 }
 
 function updateDirty() {
@@ -363,34 +394,30 @@ function onProgram(p) {
 
 function renderErrors(p) {
   const ul = $('errors');
-  const gutter = $('gutter');
-  gutter.querySelectorAll('.err, .warn').forEach((d) => {
-    d.classList.remove('err', 'warn');
-    d.removeAttribute('title');
-  });
+  gut.marks.clear();
   const items = [];
   for (const e of p.errors || []) {
     const li = el('li', 'error', `${e.line}:${e.col}: ${e.message}`);
     li.dataset.line = String(e.line);
     li.dataset.col = String(e.col);
     items.push(li);
-    markGutter(gutter, e.line, 'err', e.message);
+    markGutter(e.line, 'err', e.message);
   }
   for (const f of (p.check && p.check.findings) || []) {
     const li = el('li', 'finding', `${f.line}: ${f.message}`);
     li.dataset.line = String(f.line);
     items.push(li);
-    markGutter(gutter, f.line, 'warn', f.message);
+    markGutter(f.line, 'warn', f.message);
   }
   ul.replaceChildren(...items.slice(0, 1000));
+  renderGutter();
   ul.classList.toggle('empty', items.length === 0);
 }
 
-function markGutter(gutter, line, cls, message) {
-  const d = gutter.children[line - 1];
-  if (!d || d.classList.contains('err')) return;
-  d.classList.add(cls);
-  d.title = message;
+function markGutter(line, cls, message) {
+  const m = gut.marks.get(line);
+  if (m && m.cls === 'err') return;
+  gut.marks.set(line, { cls, message });
 }
 
 function renderCheck(check) {
@@ -432,31 +459,38 @@ function selectInEditor(line, col) {
   scrollEditorTo(line);
 }
 
+/** The editor's line height (read once: reading it forces a style pass). */
+function lineHeight() {
+  if (!prog.lh) prog.lh = parseFloat(getComputedStyle($('editor')).lineHeight) || 18;
+  return prog.lh;
+}
+
 function scrollEditorTo(line) {
   const ed = $('editor');
-  const lh = parseFloat(getComputedStyle(ed).lineHeight) || 18;
+  const lh = lineHeight();
   ed.scrollTop = Math.max(0, (line - 1) * lh - ed.clientHeight / 3);
-  $('gutter').scrollTop = ed.scrollTop;
+  renderGutter();
 }
 
 /** Marks the executing line in the gutter; follows it while running. */
 function highlightLine(st) {
   const line = st.line || 0;
   if (line === prog.curLine) return;
-  const g = $('gutter');
-  const old = g.children[prog.curLine - 1];
-  if (old) old.classList.remove('cur');
+  // A CAM program changes line 50 times a second: the gutter and the editor follow
+  // at most 8 times a second.
+  const now = performance.now();
+  if (now - prog.lineAt < 125 && st.state === 'Running') return;
+  prog.lineAt = now;
   prog.curLine = line;
-  const d = g.children[line - 1];
-  if (!d) return;
-  d.classList.add('cur');
+  gut.cur = line;
   const ed = $('editor');
   const following = st.job && (st.job.kind === 'program' || st.job.kind === 'step');
   if (following && document.activeElement !== ed) {
-    const lh = parseFloat(getComputedStyle(ed).lineHeight) || 18;
+    const lh = lineHeight();
     const y = (line - 1) * lh;
     if (y < ed.scrollTop || y > ed.scrollTop + ed.clientHeight - 2 * lh) scrollEditorTo(line);
   }
+  renderGutter();
 }
 
 function updateOverride(percent) {
@@ -479,7 +513,7 @@ function loadFileInput(input, cmd) {
 function initProgramPanel() {
   const ed = $('editor');
   ed.addEventListener('input', syncGutter);
-  ed.addEventListener('scroll', () => { $('gutter').scrollTop = ed.scrollTop; });
+  ed.addEventListener('scroll', renderGutter);
   $('file').addEventListener('change', () => loadFileInput($('file'), 'load'));
   $('load-editor').addEventListener('click', () => {
     const name = (pkmc.program && pkmc.program.name) || 'editor.ngc';
