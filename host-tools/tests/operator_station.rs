@@ -352,8 +352,37 @@ async fn hexapod_page_runs_moves_one_arm_shares_its_state_and_stops_a_jog_when_i
         );
     }
 
-    // Hold to jog, then the page closes with the button still down: the jog stops.
+    // Hold to jog, and the page freezes (its script busy for 4 s: no heartbeat, no
+    // button released): the jog stops.
     first.click("#jog-continuous").await;
+    first
+        .press("button.jog[data-axis='Y'][data-dir='-1']")
+        .await;
+    second
+        .wait(
+            "pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.feed > 0",
+            "the held jog moves",
+            Timeout::S(5),
+        )
+        .await;
+    first.js("(setTimeout(() => { const t = performance.now(); while (performance.now() - t < 4000) {} }, 0), 1)").await;
+    let frozen = std::time::Instant::now();
+    second
+        .wait(
+            "pkmc.lastStatus.state === 'Idle' && pkmc.lastStatus.feed === 0",
+            "the jog of a frozen page stops",
+            Timeout::S(3),
+        )
+        .await;
+    let stopped_after = frozen.elapsed();
+    assert!(
+        stopped_after < Duration::from_millis(3500),
+        "stopped after {stopped_after:?}, while the page was still frozen"
+    );
+    first.release().await;
+    first.wait_idle(Timeout::S(10)).await;
+
+    // Hold to jog, then the page closes with the button still down: the jog stops.
     first.press("button.jog[data-axis='X'][data-dir='1']").await;
     second
         .wait(
@@ -596,6 +625,30 @@ async fn cartesian_page_steps_overrides_stops_e_stops_saves_and_loads_teach_behi
         taught,
         "{gcode}"
     );
+
+    // Reorder (P2 up), Run all: the machine ends on the last, which is now P1; remove.
+    page.click("#teach-list li[data-index='1'] .up").await;
+    page.wait(&format!("JSON.stringify(pkmc.teach.points.map(p => p.pose)) === JSON.stringify([{t}[1], {t}[0]])", t = taught),
+        "P2 moves up", Timeout::S(5)).await;
+    page.click("#teach-run").await;
+    tokio::time::sleep(Duration::from_millis(150)).await;
+    page.wait_idle(Timeout::S(15)).await;
+    let end = page.js("pkmc.lastStatus.pose").await;
+    for k in 0..6 {
+        let (a, b) = (end[k].as_f64().unwrap(), taught[0][k].as_f64().unwrap());
+        assert!(
+            close(a, b, 0.0005),
+            "Run all ends on the last position: {end} vs {}",
+            taught[0]
+        );
+    }
+    page.click("#teach-list li[data-index='0'] .remove").await;
+    page.wait(
+        "pkmc.teach.points.length === 1",
+        "a position is removed",
+        Timeout::S(5),
+    )
+    .await;
 
     // Hold to jog: moves while held, stops on release.
     page.click("#jog-continuous").await;

@@ -11,8 +11,13 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use tokio::sync::{broadcast, mpsc};
 
-/// A page that has not been heard from for this long has lost its heartbeat.
-pub const HEARTBEAT_LOST: Duration = Duration::from_secs(1);
+/// A page that has not been heard from for this long has lost its heartbeat: a jog it
+/// started is stopped (the page sends one every 250 ms; a browser slows the timers of a
+/// page in the background to one a second).
+pub const HEARTBEAT_LOST: Duration = Duration::from_millis(1500);
+
+/// A page silent for this long may be relieved of control by another.
+pub const LOCK_LAPSES: Duration = Duration::from_secs(5);
 
 /// A connected page.
 struct Page {
@@ -125,11 +130,16 @@ impl Hub {
         }
     }
 
-    /// Is page `id` connected and heard from within [`HEARTBEAT_LOST`]?
-    pub fn alive(&self, id: u64) -> bool {
+    /// Is page `id` connected and heard from within `within`?
+    pub fn heard_within(&self, id: u64, within: Duration) -> bool {
         lock(&self.pages)
             .get(&id)
-            .is_some_and(|p| p.heard.elapsed() < HEARTBEAT_LOST)
+            .is_some_and(|p| p.heard.elapsed() < within)
+    }
+
+    /// Is page `id` still connected?
+    pub fn connected(&self, id: u64) -> bool {
+        lock(&self.pages).contains_key(&id)
     }
 
     /// Who holds the lock: id and name.
@@ -139,11 +149,12 @@ impl Hub {
         Some((id, name.unwrap_or_default()))
     }
 
-    /// Page `id` takes the lock if nobody holds it; otherwise says who does.
+    /// Page `id` takes the lock if nobody holds it, or if its holder has been silent
+    /// for [`LOCK_LAPSES`]; otherwise says who holds it.
     pub fn take(&self, id: u64) -> Result<(), String> {
         let mut l = lock(&self.lock);
         match *l {
-            Some(h) if h != id => {
+            Some(h) if h != id && self.heard_within(h, LOCK_LAPSES) => {
                 drop(l);
                 let name = self.holder().map(|h| h.1).unwrap_or_default();
                 Err(format!("{name} holds control of the machine"))
@@ -234,5 +245,53 @@ impl Hub {
 
     pub fn publish_teach(&self) {
         self.broadcast(&self.teach_message());
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    impl Hub {
+        /// Makes page `id` look silent for `by`.
+        fn age(&self, id: u64, by: Duration) {
+            if let Some(p) = lock(&self.pages).get_mut(&id) {
+                p.heard -= by;
+            }
+        }
+    }
+
+    #[test]
+    fn one_page_commands_the_others_are_told_who_and_a_silent_holder_lapses() {
+        let hub = Hub::new(serde_json::json!({}));
+        let (a, _ra, _ba) = hub.connect("first");
+        let (b, _rb, _bb) = hub.connect("second");
+        assert!(hub.may_command(a).is_err(), "nobody holds control yet");
+        hub.take(a).unwrap();
+        assert!(hub.may_command(a).is_ok());
+        let refused = hub.may_command(b).unwrap_err();
+        assert!(refused.contains("first holds control"), "{refused}");
+        assert!(hub.take(b).unwrap_err().contains("first"));
+        // Silent for less than the lapse: still held. Longer: another may take it.
+        hub.age(a, LOCK_LAPSES - Duration::from_millis(500));
+        assert!(hub.take(b).is_err());
+        hub.age(a, Duration::from_secs(1));
+        hub.take(b).unwrap();
+        assert!(hub.may_command(a).is_err());
+        // A page that closes gives control up.
+        hub.disconnect(b);
+        assert_eq!(hub.holder(), None);
+        assert!(!hub.connected(b));
+    }
+
+    #[test]
+    fn a_heartbeat_keeps_a_page_alive_and_silence_loses_it() {
+        let hub = Hub::new(serde_json::json!({}));
+        let (a, _r, _b) = hub.connect("p");
+        assert!(hub.heard_within(a, HEARTBEAT_LOST));
+        hub.age(a, HEARTBEAT_LOST);
+        assert!(!hub.heard_within(a, HEARTBEAT_LOST));
+        hub.heard(a);
+        assert!(hub.heard_within(a, HEARTBEAT_LOST));
     }
 }

@@ -492,22 +492,35 @@ impl Hooks<'_, '_> {
         Ok(format!("{c:?} sent"))
     }
 
-    /// The page that started the job has gone silent: a continuous jog stops, anything
-    /// else is held on its path for another page to resume or stop.
+    /// The page that started the job has gone: a jog (which needs its operator's
+    /// hand on the button) stops once that page is silent for
+    /// [`super::hub::HEARTBEAT_LOST`] or closed; anything else is held on its path when
+    /// the page closes, for another page to resume or stop.
     fn watch_heartbeat(&mut self) {
-        if self.info.orphaned || self.m.hub.alive(self.info.owner) {
+        if self.info.orphaned {
+            return;
+        }
+        let hub = self.m.hub;
+        let jog = matches!(self.info.kind, "jog_hold" | "jog" | "joint");
+        let lost = if jog {
+            !hub.heard_within(self.info.owner, super::hub::HEARTBEAT_LOST)
+        } else {
+            !hub.connected(self.info.owner)
+        };
+        if !lost {
             return;
         }
         self.info.orphaned = true;
-        let (c, what) = match self.info.kind {
-            "jog_hold" | "jog" | "joint" => (Control::Abort, "stopped"),
-            _ => (Control::Hold, "held"),
+        let (c, what) = if jog {
+            (Control::Abort, "stopped")
+        } else {
+            (Control::Hold, "held")
         };
         self.info.controls.push_back(c);
-        self.m.hub.log(
+        hub.log(
             "warn",
             &format!(
-                "the page that started the {} stopped answering: motion {what}",
+                "the page that started the {} is gone: motion {what}",
                 self.info.kind
             ),
         );

@@ -231,6 +231,7 @@ fn h4(
         "bar",
     );
     let mut tops = Vec::new();
+    let mut plate = Vec::new();
     for i in 0..4 {
         let (lo, hi) = travel(machine, i);
         let rail = g.rails[i].map(mm);
@@ -250,8 +251,18 @@ fn h4(
         let side = g.sides[i] as f64 * half;
         let at = add(add(e, [side * c, side * s, 0.0]), g.attach[i].map(mm));
         d.seg(at, carriage, "forearm");
+        plate.push(at);
         d.seg(add(e, [side * c, side * s, 0.0]), at, "bar");
     }
+    // The travelling plate: the four forearm joints, in turn around their middle.
+    let mid = plate
+        .iter()
+        .fold([0.0; 3], |m, p| add(m, p.map(|v| v / 4.0)));
+    plate.sort_by(|a, b| {
+        let angle = |p: &P3| (p[1] - mid[1]).atan2(p[0] - mid[0]);
+        angle(a).total_cmp(&angle(b))
+    });
+    d.poly(&plate, "platform");
     for i in 0..4 {
         d.seg(tops[i], tops[(i + 1) % 4], "frame");
     }
