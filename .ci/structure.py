@@ -27,7 +27,7 @@ ALLOWED = {
     "contour_study": {"sim", "machine_file"},
     "job": {"gcode", "link", "sim", "analysis", "machine_file", "input"},
     "grbl": {"gcode", "link", "analysis", "job"},
-    "station": {"gcode", "link", "job", "input"},
+    "station": {"gcode", "link", "job", "input", "analysis"},
 }
 CRATE_PATH = re.compile(r"\bcrate::([a-z_]+)")
 FN = re.compile(r"^\s*(pub(\([a-z]+\))?\s+)?(const\s+)?(async\s+)?(unsafe\s+)?fn\s+(\w+)")

@@ -574,6 +574,21 @@ async fn cartesian_page_steps_overrides_stops_e_stops_saves_and_loads_teach_behi
     )
     .await;
 
+    // MDI keeps its modal state from line to line: G91 and F hold for the next line.
+    let x0 = page.js("pkmc.lastStatus.pose[0]").await.as_f64().unwrap();
+    page.type_into("#mdi", "G91 G1 X2 F900").await;
+    page.click("#mdi-send").await;
+    page.wait(&format!("Math.abs(pkmc.lastStatus.pose[0] - {}) < 0.0005 && pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.job", x0 + 2.0),
+        "the first MDI line moves 2 mm", Timeout::S(10)).await;
+    page.type_into("#mdi", "X2").await;
+    page.click("#mdi-send").await;
+    page.wait(&format!("Math.abs(pkmc.lastStatus.pose[0] - {}) < 0.0005 && pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.job", x0 + 4.0),
+        "the second, still G91 G1 at F900, 2 mm more", Timeout::S(10)).await;
+    page.type_into("#mdi", "G90").await;
+    page.click("#mdi-send").await;
+    tokio::time::sleep(Duration::from_millis(150)).await;
+    page.wait_idle(Timeout::S(5)).await;
+
     // The teach list saved as G-code by the browser, cleared, and loaded back.
     page.click("#teach-clear").await;
     for (axis, n) in [("X", 1), ("Y", 2)] {

@@ -194,10 +194,21 @@ pub fn run(
             // A fresh simulator is locked after its reset: unlock it where it stands.
             crate::job::prepare(link, false, true, &mut crate::link::NoHooks)?;
         }
+        let start = link.request_status()?.pose;
+        let options = crate::gcode::Options {
+            start,
+            axes: crate::job::machine_axes(machine),
+            tools: run.tools.clone(),
+            ..crate::gcode::Options::default()
+        };
         let mut m = machine::Machine {
             hub: &hub,
             machine,
             rx,
+            mdi: machine::Mdi {
+                session: crate::gcode::LineSession::new(&options, "MDI"),
+                lines: 0,
+            },
             tools: run.tools.clone(),
         };
         m.serve(link, stop)
