@@ -149,12 +149,7 @@ async fn h4_page_marks_errors_runs_holds_resumes_jogs_teaches_and_agrees_with_nc
         "nothing moves while held"
     );
     page.click("#resume").await;
-    page.wait(
-        "pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.feed > 0",
-        "the program resumes",
-        Timeout::S(5),
-    )
-    .await;
+    page.wait_moving("the program resumes").await;
     tokio::time::sleep(Duration::from_millis(600)).await;
     page.screenshot(&repo("docs/ui-h4.png")).await;
     page.wait_idle(Timeout::S(30)).await;
@@ -180,8 +175,7 @@ async fn h4_page_marks_errors_runs_holds_resumes_jogs_teaches_and_agrees_with_nc
     )
     .await;
     page.wait_idle(Timeout::S(5)).await;
-    page.type_into("#mdi", "G1 X0 Y0 Z-70 A10 C0 F1500").await;
-    page.click("#mdi-send").await;
+    page.mdi("G1 X0 Y0 Z-70 A10 C0 F1500").await;
     page.wait("Math.abs(pkmc.lastStatus.pose[0]) < 0.0005 && Math.abs(pkmc.lastStatus.pose[2] + 70) < 0.0005 \
         && Math.abs(pkmc.lastStatus.pose[3] - 10) < 0.0005", "the MDI line moves", Timeout::S(15)).await;
     page.wait_idle(Timeout::S(5)).await;
@@ -191,10 +185,11 @@ async fn h4_page_marks_errors_runs_holds_resumes_jogs_teaches_and_agrees_with_nc
     let mut taught = Vec::new();
     for (axis, dir) in [("Y", "1"), ("Z", "-1"), ("X", "-1")] {
         page.select("#jog-step", "10").await;
-        page.click(&format!("button.jog[data-axis='{axis}'][data-dir='{dir}']"))
-            .await;
-        tokio::time::sleep(Duration::from_millis(150)).await;
-        page.wait_idle(Timeout::S(10)).await;
+        page.click_and_wait_idle(
+            &format!("button.jog[data-axis='{axis}'][data-dir='{dir}']"),
+            Timeout::S(10),
+        )
+        .await;
         taught.push(page.js("pkmc.lastStatus.pose").await);
         page.click("#teach-set").await;
         let n = taught.len();
@@ -212,9 +207,8 @@ async fn h4_page_marks_errors_runs_holds_resumes_jogs_teaches_and_agrees_with_nc
         Timeout::S(5),
     )
     .await;
-    page.click("button.jog[data-axis='X'][data-dir='1']").await;
-    tokio::time::sleep(Duration::from_millis(150)).await;
-    page.wait_idle(Timeout::S(10)).await;
+    page.click_and_wait_idle("button.jog[data-axis='X'][data-dir='1']", Timeout::S(10))
+        .await;
     for (i, want) in taught.iter().enumerate() {
         page.click("#teach-step").await;
         let cond = format!(
@@ -293,14 +287,7 @@ async fn hexapod_page_runs_moves_one_arm_shares_its_state_and_stops_a_jog_when_i
         .await;
 
     // Unlocked where it stands (the simulated hexapod's drives are where it believes).
-    first.click("#reset").await;
-    first
-        .wait(
-            "pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.alarm",
-            "the reset unlocks",
-            Timeout::S(5),
-        )
-        .await;
+    first.unlock().await;
 
     // A program on the hexapod; both pages see the same state.
     first
@@ -335,9 +322,9 @@ async fn hexapod_page_runs_moves_one_arm_shares_its_state_and_stops_a_jog_when_i
         .type_into("#joint-distance", "\u{e009}a\u{e000}2")
         .await;
     first.select("#joint-select", "0").await;
-    first.click("#joint-plus").await;
-    tokio::time::sleep(Duration::from_millis(150)).await;
-    first.wait_idle(Timeout::S(10)).await;
+    first
+        .click_and_wait_idle("#joint-plus", Timeout::S(10))
+        .await;
     let after = first.js("pkmc.lastStatus.joints").await;
     let leg = |v: &Value, j: usize| v[j].as_f64().unwrap();
     assert!(
@@ -358,13 +345,7 @@ async fn hexapod_page_runs_moves_one_arm_shares_its_state_and_stops_a_jog_when_i
     first
         .press("button.jog[data-axis='Y'][data-dir='-1']")
         .await;
-    second
-        .wait(
-            "pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.feed > 0",
-            "the held jog moves",
-            Timeout::S(5),
-        )
-        .await;
+    second.wait_moving("the held jog moves").await;
     first.js("(setTimeout(() => { const t = performance.now(); while (performance.now() - t < 4000) {} }, 0), 1)").await;
     let frozen = std::time::Instant::now();
     second
@@ -384,13 +365,7 @@ async fn hexapod_page_runs_moves_one_arm_shares_its_state_and_stops_a_jog_when_i
 
     // Hold to jog, then the page closes with the button still down: the jog stops.
     first.press("button.jog[data-axis='X'][data-dir='1']").await;
-    second
-        .wait(
-            "pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.feed > 0",
-            "the held jog moves",
-            Timeout::S(5),
-        )
-        .await;
+    second.wait_moving("the held jog moves").await;
     tokio::time::sleep(Duration::from_millis(300)).await;
     first.close().await;
     second
@@ -475,13 +450,7 @@ async fn cartesian_page_steps_overrides_stops_e_stops_saves_and_loads_teach_behi
         Timeout::S(10),
     )
     .await;
-    page.click("#reset").await;
-    page.wait(
-        "pkmc.lastStatus.state === 'Idle'",
-        "the reset unlocks",
-        Timeout::S(5),
-    )
-    .await;
+    page.unlock().await;
 
     // A program typed into the editor, run by step: one block per press.
     let text = "G21 G90\nG1 X10 F3000\nG1 Y10\nG1 X0\nG1 Y0\nM2\n";
@@ -530,12 +499,7 @@ async fn cartesian_page_steps_overrides_stops_e_stops_saves_and_loads_teach_behi
     )
     .await;
     page.click("#run").await;
-    page.wait(
-        "pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.feed > 0",
-        "it runs",
-        Timeout::S(5),
-    )
-    .await;
+    page.wait_moving("it runs").await;
     page.keys("#override", "\u{e014}\u{e014}\u{e014}\u{e014}")
         .await;
     page.wait(
@@ -556,46 +520,31 @@ async fn cartesian_page_steps_overrides_stops_e_stops_saves_and_loads_teach_behi
 
     // E-stop: the motion ends at once, the alarm names its cause; Reset clears it.
     page.click("#run").await;
-    page.wait(
-        "pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.feed > 0",
-        "it runs again",
-        Timeout::S(5),
-    )
-    .await;
+    page.wait_moving("it runs again").await;
     page.click("#estop").await;
     page.wait("pkmc.lastStatus.state === 'Alarm' && document.getElementById('alarm').textContent.includes('Aborted')",
         "the e-stop raises an alarm shown with its cause", Timeout::S(5)).await;
     page.wait_idle_or_alarm().await;
-    page.click("#reset").await;
-    page.wait(
-        "pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.alarm",
-        "Reset clears it",
-        Timeout::S(5),
-    )
-    .await;
+    page.unlock().await;
 
     // MDI keeps its modal state from line to line: G91 and F hold for the next line.
     let x0 = page.js("pkmc.lastStatus.pose[0]").await.as_f64().unwrap();
-    page.type_into("#mdi", "G91 G1 X2 F900").await;
-    page.click("#mdi-send").await;
+    page.mdi("G91 G1 X2 F900").await;
     page.wait(&format!("Math.abs(pkmc.lastStatus.pose[0] - {}) < 0.0005 && pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.job", x0 + 2.0),
         "the first MDI line moves 2 mm", Timeout::S(10)).await;
-    page.type_into("#mdi", "X2").await;
-    page.click("#mdi-send").await;
+    page.mdi("X2").await;
     page.wait(&format!("Math.abs(pkmc.lastStatus.pose[0] - {}) < 0.0005 && pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.job", x0 + 4.0),
         "the second, still G91 G1 at F900, 2 mm more", Timeout::S(10)).await;
-    page.type_into("#mdi", "G90").await;
-    page.click("#mdi-send").await;
-    tokio::time::sleep(Duration::from_millis(150)).await;
-    page.wait_idle(Timeout::S(5)).await;
+    page.mdi("G90").await;
 
     // The teach list saved as G-code by the browser, cleared, and loaded back.
     page.click("#teach-clear").await;
     for (axis, n) in [("X", 1), ("Y", 2)] {
-        page.click(&format!("button.jog[data-axis='{axis}'][data-dir='1']"))
-            .await;
-        tokio::time::sleep(Duration::from_millis(150)).await;
-        page.wait_idle(Timeout::S(10)).await;
+        page.click_and_wait_idle(
+            &format!("button.jog[data-axis='{axis}'][data-dir='1']"),
+            Timeout::S(10),
+        )
+        .await;
         page.click("#teach-set").await;
         page.wait(
             &format!("pkmc.teach && pkmc.teach.points.length === {n}"),
@@ -645,9 +594,7 @@ async fn cartesian_page_steps_overrides_stops_e_stops_saves_and_loads_teach_behi
     page.click("#teach-list li[data-index='1'] .up").await;
     page.wait(&format!("JSON.stringify(pkmc.teach.points.map(p => p.pose)) === JSON.stringify([{t}[1], {t}[0]])", t = taught),
         "P2 moves up", Timeout::S(5)).await;
-    page.click("#teach-run").await;
-    tokio::time::sleep(Duration::from_millis(150)).await;
-    page.wait_idle(Timeout::S(15)).await;
+    page.click_and_wait_idle("#teach-run", Timeout::S(15)).await;
     let end = page.js("pkmc.lastStatus.pose").await;
     for k in 0..6 {
         let (a, b) = (end[k].as_f64().unwrap(), taught[0][k].as_f64().unwrap());
@@ -668,12 +615,7 @@ async fn cartesian_page_steps_overrides_stops_e_stops_saves_and_loads_teach_behi
     // Hold to jog: moves while held, stops on release.
     page.click("#jog-continuous").await;
     page.press("button.jog[data-axis='Y'][data-dir='1']").await;
-    page.wait(
-        "pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.feed > 0",
-        "the held jog moves",
-        Timeout::S(5),
-    )
-    .await;
+    page.wait_moving("the held jog moves").await;
     tokio::time::sleep(Duration::from_millis(300)).await;
     page.release().await;
     page.wait_idle(Timeout::S(3)).await;
@@ -705,13 +647,7 @@ async fn report_page_responsiveness_during_3d_chips() {
         Timeout::S(10),
     )
     .await;
-    page.click("#reset").await;
-    page.wait(
-        "pkmc.lastStatus.state === 'Idle'",
-        "the reset unlocks",
-        Timeout::S(5),
-    )
-    .await;
+    page.unlock().await;
     page.upload("#file", &program).await;
     page.wait("pkmc.program && pkmc.program.name === '3D_Chips.ngc' && pkmc.program.check && !document.getElementById('run').disabled",
         "3D_Chips is checked", Timeout::S(300)).await;

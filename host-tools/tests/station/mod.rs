@@ -295,6 +295,41 @@ impl Page {
         .await;
     }
 
+    /// Waits until the machine moves.
+    pub async fn wait_moving(&self, what: &str) {
+        self.wait(
+            "pkmc.lastStatus.state === 'Running' && pkmc.lastStatus.feed > 0",
+            what,
+            Timeout::S(5),
+        )
+        .await;
+    }
+
+    /// Clicks a button that starts a motion and waits until it is over.
+    pub async fn click_and_wait_idle(&self, css: &str, timeout: Timeout) {
+        self.click(css).await;
+        // The command reaches the machine thread before the status shows its job.
+        tokio::time::sleep(Duration::from_millis(150)).await;
+        self.wait_idle(timeout).await;
+    }
+
+    /// Reset: a controller locked after its reset is unlocked where it stands.
+    pub async fn unlock(&self) {
+        self.click("#reset").await;
+        self.wait(
+            "pkmc.lastStatus.state === 'Idle' && !pkmc.lastStatus.alarm",
+            "the reset unlocks",
+            Timeout::S(5),
+        )
+        .await;
+    }
+
+    /// Types an MDI line and sends it.
+    pub async fn mdi(&self, line: &str) {
+        self.type_into("#mdi", line).await;
+        self.click("#mdi-send").await;
+    }
+
     /// Waits until the machine has stopped, idle or in an alarm.
     pub async fn wait_idle_or_alarm(&self) {
         self.wait(
