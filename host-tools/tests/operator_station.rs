@@ -99,6 +99,44 @@ async fn h4_page_marks_errors_runs_holds_resumes_jogs_teaches_and_agrees_with_nc
         Timeout::S(2),
     )
     .await;
+    // In the editor, a line under the word at line 4, column 8 ("Q3"): where the
+    // browser's own text layout puts those characters (measured in a copy of the line
+    // in the editor's font).
+    let placed = page
+        .wait(
+            "(() => { const m = document.querySelector('#marks .mark[data-line=\"4\"][data-col=\"8\"]'); \
+             if (!m) return null; const ed = document.getElementById('editor'); \
+             const cs = getComputedStyle(ed); const pre = document.createElement('pre'); \
+             pre.style.cssText = `position:absolute;margin:0;padding:0;font:${cs.font};white-space:pre`; \
+             pre.textContent = ed.value.split('\\n')[3]; document.body.appendChild(pre); \
+             const r = document.createRange(); r.setStart(pre.firstChild, 7); r.setEnd(pre.firstChild, 9); \
+             const q = r.getBoundingClientRect(), p0 = pre.getBoundingClientRect(); pre.remove(); \
+             const e = ed.getBoundingClientRect(), b = m.getBoundingClientRect(); \
+             const x = b.left - e.left - parseFloat(cs.paddingLeft) - ed.clientLeft; \
+             const y = b.top - e.top - parseFloat(cs.paddingTop) - ed.clientTop; \
+             return [x, q.left - p0.left, b.width, q.width, y, parseFloat(cs.lineHeight)]; })()",
+            "the error is marked at its column in the editor",
+            Timeout::S(2),
+        )
+        .await;
+    let v = |i: usize| placed[i].as_f64().unwrap();
+    assert!(
+        (v(0) - v(1)).abs() < 1.0,
+        "mark starts at x {} where column 8 is at {}",
+        v(0),
+        v(1)
+    );
+    assert!(
+        (v(2) - v(3)).abs() < 1.0,
+        "mark {} px wide, the word {} px",
+        v(2),
+        v(3)
+    );
+    assert!(
+        v(4) > 3.0 * v(5) && v(4) < 4.0 * v(5) + 1.0,
+        "mark at y {} is not under line 4",
+        v(4)
+    );
 
     // A controller after its reset is locked until homed: Home.
     page.click("#home").await;

@@ -334,7 +334,61 @@ function countLines(text) {
 /** The gutter: line count, marks (line -> class and message) and the executing line.
  * Only the numbers in view are in the page (a CAM program has tens of thousands of
  * lines, and a div per line made every restyle of the page slow). */
-const gut = { lines: 1, marks: new Map(), cur: 0 };
+const gut = { lines: 1, marks: new Map(), cur: 0, charW: 0, cols: new Map() };
+
+/** The editor's character width (monospace), measured once. */
+function charWidth() {
+  if (!gut.charW) {
+    const probe = el('span', '', 'M'.repeat(100));
+    const cs = getComputedStyle($('editor'));
+    probe.style.cssText = `position:absolute;visibility:hidden;white-space:pre;font:${cs.font}`;
+    document.body.appendChild(probe);
+    gut.charW = probe.getBoundingClientRect().width / 100 || 7.2;
+    probe.remove();
+  }
+  return gut.charW;
+}
+
+/** Lines under the words at the errors' columns, for the lines in view. */
+function renderMarks(first, last) {
+  const ed = $('editor');
+  const lh = lineHeight();
+  const cw = charWidth();
+  const cs = getComputedStyle(ed);
+  const padTop = parseFloat(cs.paddingTop) || 0;
+  const padLeft = parseFloat(cs.paddingLeft) || 0;
+  const text = ed.value;
+  const frag = document.createDocumentFragment();
+  for (const [line, m] of gut.marks) {
+    if (line < first || line > last) continue;
+    const col = gut.cols.get(line) || 1;
+    const lineText = lineOf(text, line);
+    // The word at the column: up to the next blank (at least one character).
+    const rest = lineText.slice(col - 1);
+    const len = Math.max(1, (rest.match(/^\S+/) || [''])[0].length);
+    const d = el('div', `mark ${m.cls}`);
+    d.dataset.line = String(line);
+    d.dataset.col = String(col);
+    d.title = m.message;
+    d.style.left = `${padLeft + (col - 1) * cw - ed.scrollLeft}px`;
+    d.style.top = `${padTop + line * lh - 2 - ed.scrollTop}px`;
+    d.style.width = `${len * cw}px`;
+    frag.appendChild(d);
+  }
+  $('marks').replaceChildren(frag);
+}
+
+/** Line `n` (1-based) of `text`. */
+function lineOf(text, n) {
+  let start = 0;
+  for (let i = 1; i < n; i++) {
+    const k = text.indexOf('\n', start);
+    if (k < 0) return '';
+    start = k + 1;
+  }
+  const end = text.indexOf('\n', start);
+  return text.slice(start, end < 0 ? text.length : end);
+}
 
 function syncGutter() {
   gut.lines = countLines($('editor').value);
@@ -366,6 +420,7 @@ function renderGutter() {
   }
   gutter.replaceChildren(frag);
   gutter.scrollTop = ed.scrollTop;
+  renderMarks(first, last);
 }
 
 function updateDirty() {
@@ -395,6 +450,7 @@ function onProgram(p) {
 function renderErrors(p) {
   const ul = $('errors');
   gut.marks.clear();
+  gut.cols.clear();
   const items = [];
   for (const e of p.errors || []) {
     const li = el('li', 'error', `${e.line}:${e.col}: ${e.message}`);
@@ -402,6 +458,7 @@ function renderErrors(p) {
     li.dataset.col = String(e.col);
     items.push(li);
     markGutter(e.line, 'err', e.message);
+    if (!gut.cols.has(e.line)) gut.cols.set(e.line, e.col);
   }
   for (const f of (p.check && p.check.findings) || []) {
     const li = el('li', 'finding', `${f.line}: ${f.message}`);
