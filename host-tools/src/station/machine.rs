@@ -220,25 +220,13 @@ impl Machine<'_> {
         };
         let end = match req.cmd {
             Cmd::Run => {
-                let blocks = {
-                    let p = lock(&self.hub.program);
-                    if !p.runnable() {
-                        return Err(not_runnable(&p));
-                    }
-                    p.blocks().to_vec()
-                };
+                let blocks = self.program_blocks(false)?;
                 started("program");
                 let mut info = JobInfo::new("program", page, blocks.len());
                 self.run(link, &blocks, &mut info)?
             }
             Cmd::Step => {
-                let blocks = {
-                    let p = lock(&self.hub.program);
-                    if !p.runnable() {
-                        return Err(not_runnable(&p));
-                    }
-                    p.programmed().to_vec()
-                };
+                let blocks = self.program_blocks(true)?;
                 if blocks.is_empty() {
                     return Ok(Some("nothing to run".into()));
                 }
@@ -318,6 +306,21 @@ impl Machine<'_> {
         self.publish(&s, None);
         self.report_end(&end);
         Ok(None)
+    }
+
+    /// The loaded program's blocks to stream, or as programmed (Run by Step); refused
+    /// with the first error when it cannot run.
+    fn program_blocks(&self, programmed: bool) -> Result<Vec<Block>, Failure> {
+        let p = lock(&self.hub.program);
+        if !p.runnable() {
+            return Err(not_runnable(&p));
+        }
+        Ok(if programmed {
+            p.programmed()
+        } else {
+            p.blocks()
+        }
+        .to_vec())
     }
 
     fn control<T: Transport>(

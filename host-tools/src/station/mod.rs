@@ -43,7 +43,7 @@ impl Default for StationOptions {
 }
 
 /// A page's command, as the page sends it (`{"id": N, "cmd": "...", ...}`).
-#[derive(Clone, Debug, serde::Deserialize)]
+#[derive(Clone, Debug, serde::Deserialize, serde::Serialize)]
 #[serde(tag = "cmd", rename_all = "snake_case", deny_unknown_fields)]
 pub(crate) enum Cmd {
     Heartbeat,
@@ -106,18 +106,12 @@ pub(crate) enum Cmd {
 }
 
 impl Cmd {
-    /// The command's name as the page writes it.
+    /// The command's name as the page writes it (its `cmd` field).
     pub fn name(&self) -> String {
-        let debug = format!("{self:?}");
-        let head = debug.split([' ', '{']).next().unwrap_or("");
-        let mut out = String::new();
-        for (i, ch) in head.chars().enumerate() {
-            if ch.is_ascii_uppercase() && i > 0 {
-                out.push('_');
-            }
-            out.push(ch.to_ascii_lowercase());
-        }
-        out
+        serde_json::to_value(self)
+            .ok()
+            .and_then(|v| v["cmd"].as_str().map(String::from))
+            .unwrap_or_default()
     }
 }
 

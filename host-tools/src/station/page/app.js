@@ -323,7 +323,7 @@ function updateJob(job) {
 
 // ================================================================= program panel
 
-const prog = { curLine: 0, overrideTouched: 0, overrideHeld: false, lineAt: 0, lh: 0 };
+const prog = { overrideTouched: 0, overrideHeld: false, lineAt: 0, lh: 0 };
 
 function countLines(text) {
   let n = 1;
@@ -438,7 +438,7 @@ function onProgram(p) {
     ed.scrollTop = 0;
   }
   syncGutter();
-  prog.curLine = 0;
+  gut.cur = 0;
   renderErrors(p);
   renderCheck(p.check);
   const bad = (p.errors || []).length > 0;
@@ -532,13 +532,12 @@ function scrollEditorTo(line) {
 /** Marks the executing line in the gutter; follows it while running. */
 function highlightLine(st) {
   const line = st.line || 0;
-  if (line === prog.curLine) return;
+  if (line === gut.cur) return;
   // A CAM program changes line 50 times a second: the gutter and the editor follow
   // at most 8 times a second.
   const now = performance.now();
   if (now - prog.lineAt < 125 && st.state === 'Running') return;
   prog.lineAt = now;
-  prog.curLine = line;
   gut.cur = line;
   const ed = $('editor');
   const following = st.job && (st.job.kind === 'program' || st.job.kind === 'step');
