@@ -235,7 +235,11 @@ pub fn teach_gcode(points: &[[f64; 6]], axes: &[bool; 6], speed: f64) -> String 
     for (i, p) in points.iter().enumerate() {
         let words: Vec<String> = (0..6)
             .filter(|&k| axes[k])
-            .map(|k| format!("{}{:.4}", pkmc::config::AXIS_NAMES[k], p[k]))
+            // Every digit the machine has: 1 nm (6 decimals of mm), 1 n° (9 of a degree).
+            .map(|k| {
+                let digits = if k >= 3 { 9 } else { 6 };
+                format!("{}{:.*}", pkmc::config::AXIS_NAMES[k], digits, p[k])
+            })
             .collect();
         out += &format!("G1 {} F{speed:.1} (P{})\n", words.join(" "), i + 1);
     }
