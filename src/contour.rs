@@ -361,7 +361,9 @@ mod tests {
     use super::*;
 
     fn v3(x: f32, y: f32, z: f32) -> ChannelVec {
-        [x, y, z, 0.0]
+        let mut v = [0.0; MAX_SERVOS];
+        v[..3].copy_from_slice(&[x, y, z]);
+        v
     }
 
     #[test]

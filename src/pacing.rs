@@ -298,6 +298,11 @@ fn servo_joints_faulted(machine: &MachineConfig, fault: &[bool; MAX_SERVOS]) -> 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Four channels' values, the others' default.
+    fn pad<T: Copy + Default>(a: [T; 4]) -> [T; MAX_SERVOS] {
+        core::array::from_fn(|i| a.get(i).copied().unwrap_or_default())
+    }
     use crate::protocol::{encode_frame, Control, HostMsg, MAX_FRAME};
 
     /// The H-4 table machine: four servo joints (channels 0–3) and steppers.
@@ -333,7 +338,7 @@ mod tests {
     fn a_posted_target_is_loaded_at_the_next_edge_and_ramped_over_one_tick() {
         // The pacer against a bank fed by hand on the board's schedule: the command
         // posted after edge N is loaded at edge N + 1, never earlier.
-        let counts = [100, -50, 0, 7];
+        let counts = pad([100, -50, 0, 7]);
         let m = machine();
         let mut p = pacer(&counts);
         let mut reference = ServoBank::new(&m, &counts);
@@ -420,30 +425,30 @@ mod tests {
     fn the_snapshot_holds_the_edge_counts_and_any_fault_since_the_last_edge() {
         let mut p = pacer(&[0; MAX_SERVOS]);
         let no = [false; MAX_SERVOS];
-        let s = p.period(&[1, 2, 3, 4], &no);
+        let s = p.period(&pad([1, 2, 3, 4]), &no);
         assert!(s.tick);
         let snap = p.snapshot();
-        assert_eq!(snap.counts, [1, 2, 3, 4]);
+        assert_eq!(snap.counts, pad([1, 2, 3, 4]));
         assert_eq!(snap.fault, no);
         assert_eq!(snap.periods, 1);
         // A one-period pulse on channel 2 between edges is reported at the next edge,
         // once; the counts stay those of the edge until the next one.
         for k in 1..SERVO_PER_TICK {
-            let fault = [false, false, k == 4, false];
-            p.period(&[9, 9, 9, 9], &fault);
-            assert_eq!(p.snapshot().counts, [1, 2, 3, 4]);
+            let fault = pad([false, false, k == 4, false]);
+            p.period(&pad([9, 9, 9, 9]), &fault);
+            assert_eq!(p.snapshot().counts, pad([1, 2, 3, 4]));
         }
         p.post(Command::standing(&[0; MAX_SERVOS]));
-        assert!(p.period(&[5, 6, 7, 8], &no).tick);
+        assert!(p.period(&pad([5, 6, 7, 8]), &no).tick);
         let snap = p.snapshot();
-        assert_eq!(snap.counts, [5, 6, 7, 8]);
-        assert_eq!(snap.fault, [false, false, true, false]);
+        assert_eq!(snap.counts, pad([5, 6, 7, 8]));
+        assert_eq!(snap.fault, pad([false, false, true, false]));
         assert!(p.stats().fault);
         for _ in 1..SERVO_PER_TICK {
-            p.period(&[5, 6, 7, 8], &no);
+            p.period(&pad([5, 6, 7, 8]), &no);
         }
         p.post(Command::standing(&[0; MAX_SERVOS]));
-        p.period(&[5, 6, 7, 8], &no);
+        p.period(&pad([5, 6, 7, 8]), &no);
         assert_eq!(p.snapshot().fault, no);
         assert!(!p.stats().fault);
     }
@@ -458,7 +463,7 @@ mod tests {
             targets: [0; MAX_SERVOS],
             enable: true,
         });
-        let fault = [true, false, false, false];
+        let fault = pad([true, false, false, false]);
         let s = p.period(&counts, &fault);
         assert_eq!(s.out.trip[0], Some(Trip::AmplifierFault));
         assert_eq!(p.snapshot().trips[0], Some(Trip::AmplifierFault));
@@ -477,11 +482,11 @@ mod tests {
             enable: true,
         });
         // Trip channel 0, then reset the bank standing at new counts.
-        p.period(&counts, &[true, false, false, false]);
+        p.period(&counts, &pad([true, false, false, false]));
         for _ in 1..SERVO_PER_TICK {
             p.period(&counts, &[false; MAX_SERVOS]);
         }
-        let at = [300, 0, 0, 0];
+        let at = pad([300, 0, 0, 0]);
         let out = Outputs {
             servo_target: at.map(|c| c << SETPOINT_FRAC_BITS),
             servo_enable: true,

@@ -313,7 +313,7 @@ impl Words for GeometryField {
                 "joints",
                 Wrong::Text(
                     "the h4-table needs q1..q4 linear and q5 rotary (5 joints), the hexapod \
-                     six linear legs",
+                     six linear legs, the hexapod-xy six linear legs and a linear table X, Y",
                 ),
             ),
             GeometryField::Rails => ("h4_table.rails", Wrong::Coordinate),
@@ -332,6 +332,11 @@ impl Words for GeometryField {
                 "hexapod.platform",
                 Wrong::Text("a joint farther than 268 mm from the platform origin, or all at it"),
             ),
+            GeometryField::PlatformHome => (
+                "hexapod_xy.platform_home",
+                Wrong::Text("out of range (±537 mm)"),
+            ),
+            GeometryField::ToolZ => ("hexapod_xy.tool_z", Wrong::Coordinate),
         };
         o.str(name)?;
         o.str(": ")?;

@@ -222,6 +222,68 @@ impl MachineConfig {
             motion: MotionConfig::TRAPEZOID,
         }
     }
+    /// Report B's machine (`examples/machines/hexapod-xy.toml` without its plants and
+    /// tuned loops): the thesis hexapod's legs (as [`MachineConfig::hexapod`]) as
+    /// servo cylinders on channels 0..5, 280..420 mm, with the platform's home at
+    /// (0, 0, 260 mm); the table's X and Y on servo channels 6 and 7, ±50 mm; the tool
+    /// tip 275 mm above the base. All 1000 counts/mm, the simulator's default servo
+    /// plant's gains. Home: the workpiece point (0, 0, 275 mm) under the tool, level.
+    pub fn hexapod_xy() -> Self {
+        let mm = crate::units::NM_PER_MM;
+        let deg = crate::units::NDEG_PER_DEG;
+        let KinematicsConfig::Hexapod(legs) = Self::hexapod().kinematics else {
+            unreachable!("the built-in hexapod")
+        };
+        let joint = |channel: u8, min: i64, max: i64| JointConfig {
+            drive: Drive::Servo { channel },
+            scale: Scale::new(1000, mm as u64),
+            rotary: false,
+            min,
+            max,
+            limits: Limits {
+                max_velocity: 50 * mm,
+                max_accel: 500 * mm,
+            },
+            homing: Homing::NONE,
+        };
+        let mut joints = heapless::Vec::new();
+        for c in 0..6u8 {
+            let _ = joints.push(joint(c, 280 * mm, 420 * mm));
+        }
+        for c in 6..8u8 {
+            let _ = joints.push(joint(c, -50 * mm, 50 * mm));
+        }
+        let linear = Limits {
+            max_velocity: 30 * mm,
+            max_accel: 300 * mm,
+        };
+        let rotary = Limits {
+            max_velocity: 10 * deg,
+            max_accel: 100 * deg,
+        };
+        let none = Limits {
+            max_velocity: 0,
+            max_accel: 0,
+        };
+        let mut name = heapless::String::new();
+        let _ = name.push_str("hexapod-xy");
+        MachineConfig {
+            name,
+            kinematics: KinematicsConfig::HexapodXy(HexapodXyGeometry {
+                hexapod: legs,
+                platform_home: [0, 0, 260 * mm],
+                tool_z: 275 * mm,
+            }),
+            joints,
+            axes: [linear, linear, linear, rotary, rotary, none],
+            home: [0, 0, 275 * mm, 0, 0, 0],
+            servo: ServoConfig {
+                gains: [ServoGains::DEFAULT_PLANT; MAX_SERVOS],
+                contour: ContourConfig::UNCOUPLED,
+            },
+            motion: MotionConfig::TRAPEZOID,
+        }
+    }
 }
 
 #[cfg(test)]
@@ -237,12 +299,17 @@ mod tests {
     fn the_h4_and_hexapod_machines_are_valid() {
         assert_eq!(MachineConfig::h4_table().validate(), Ok(()));
         assert_eq!(MachineConfig::hexapod().validate(), Ok(()));
+        assert_eq!(MachineConfig::hexapod_xy().validate(), Ok(()));
     }
 
     #[test]
     fn the_h4_and_hexapod_machines_fit_the_configuration_store() {
         let mut buf = [0u8; crate::store::MAX_CONFIG_BYTES];
-        for m in [MachineConfig::h4_table(), MachineConfig::hexapod()] {
+        for m in [
+            MachineConfig::h4_table(),
+            MachineConfig::hexapod(),
+            MachineConfig::hexapod_xy(),
+        ] {
             let n = crate::store::encode(&m, &mut buf).expect("fits");
             let back: MachineConfig = postcard::from_bytes(&buf[..n]).unwrap();
             assert_eq!(back, m);

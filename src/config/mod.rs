@@ -19,12 +19,13 @@ pub use validate::{ConfigError, GeometryField};
 
 /// Number of pose axes: X Y Z (linear) and A B C (rotary).
 pub const AXES: usize = 6;
-/// Most joints a machine may have (4 servo + 7 stepper channels on the board).
+/// Most joints a machine may have (the board's 7 stepper channels and 4 of its servo
+/// channels; the eight-servo board has 8).
 pub const MAX_JOINTS: usize = 11;
 /// Stepper channels the board drives.
 pub const MAX_STEPPERS: usize = 7;
 /// Servo channels the board drives.
-pub const MAX_SERVOS: usize = 4;
+pub const MAX_SERVOS: usize = 8;
 /// Most steps a stepper channel on an advanced timer (TIM1, TIM8, TIM20) emits in one
 /// tick: one step per timer period, counted by its 16-bit repetition counter.
 pub const STEPS_PER_TICK_ADVANCED: u32 = 1 << 16;
@@ -487,6 +488,11 @@ pub enum KinematicsConfig {
     /// Gough–Stewart platform with six legs; joint i is the length of leg i.
     /// Pose: platform origin X Y Z and orientation R = Rz(C)·Ry(B)·Rx(A).
     Hexapod(HexapodGeometry),
+    /// Hexapod carrying the workpiece under a tool on an X-Y table (report B's
+    /// machine): joints q1..q6 the legs, q7 q8 the table's X and Y. Pose: X Y Z A B in
+    /// workpiece coordinates, the tool axis along `Rx(A)·Ry(B)·ẑ` there; C unused.
+    /// See [`crate::kinematics::hexapod_xy`].
+    HexapodXy(HexapodXyGeometry),
 }
 
 /// Largest magnitude of any geometry coordinate or length, nm (2^30 nm ≈ 1.07 m):
@@ -532,6 +538,18 @@ pub struct HexapodGeometry {
     pub base: [[i64; 3]; 6],
     /// Platform joints b_i, platform frame, nm.
     pub platform: [[i64; 3]; 6],
+}
+
+/// Hexapod under an X-Y table's tool ([`KinematicsConfig::HexapodXy`]), nm.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct HexapodXyGeometry {
+    /// The platform's legs, as [`HexapodGeometry`].
+    pub hexapod: HexapodGeometry,
+    /// Platform origin at home (level), machine frame: workpiece coordinates are
+    /// machine coordinates there.
+    pub platform_home: [i64; 3],
+    /// Height of the tool tip, machine frame (the table moves it in X and Y only).
+    pub tool_z: i64,
 }
 
 /// The whole machine.

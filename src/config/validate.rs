@@ -105,6 +105,10 @@ pub enum GeometryField {
     Base,
     /// Hexapod `platform`.
     Platform,
+    /// Hexapod-XY `platform_home`.
+    PlatformHome,
+    /// Hexapod-XY `tool_z`.
+    ToolZ,
 }
 
 fn within(v: &[i64]) -> bool {
@@ -187,6 +191,30 @@ impl HexapodGeometry {
         Ok(())
     }
 }
+impl HexapodXyGeometry {
+    /// Checks the legs as [`HexapodGeometry::check`] does, that `joints` are six linear
+    /// legs and a linear X-Y table, and the ranges of the fixed-point split (platform
+    /// home within 2^29 nm, the tool's height within 2^30 nm).
+    pub fn check(&self, joints: &[JointConfig]) -> Result<(), ConfigError> {
+        let bad = |field| Err(ConfigError::Geometry { field });
+        if !joint_kinds(joints, 8, 8) {
+            return bad(GeometryField::Joints);
+        }
+        self.hexapod.check(&joints[..6])?;
+        if !self
+            .platform_home
+            .iter()
+            .all(|c| c.unsigned_abs() < 1 << 29)
+        {
+            return bad(GeometryField::PlatformHome);
+        }
+        if !within(&[self.tool_z]) {
+            return bad(GeometryField::ToolZ);
+        }
+        Ok(())
+    }
+}
+
 impl MachineConfig {
     /// Checks every field; the first problem found is returned.
     pub fn validate(&self) -> Result<(), ConfigError> {
@@ -217,6 +245,7 @@ impl MachineConfig {
             }
             KinematicsConfig::H4Table(g) => g.check(&self.joints)?,
             KinematicsConfig::Hexapod(g) => g.check(&self.joints)?,
+            KinematicsConfig::HexapodXy(g) => g.check(&self.joints)?,
         }
         let contour = &self.servo.contour;
         let cartesian = matches!(self.kinematics, KinematicsConfig::Cartesian { .. });

@@ -491,6 +491,10 @@ fn a_servo_trip_names_the_joint_of_its_channel() {
                 limit: 2000,
             }),
             None,
+            None,
+            None,
+            None,
+            None,
         ],
         ..Inputs::default()
     };

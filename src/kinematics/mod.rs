@@ -7,8 +7,9 @@
 //! the analytic [`Kinematics::jacobian`] against central differences); adding a kind
 //! adds one entry to its table. Units are those of [`crate::units`].
 //!
-//! Machines: [`Cartesian`], the H-4 with rolling table ([`h4::H4Table`]) and the
-//! hexapod ([`hexapod::Hexapod`]); their geometry comes from
+//! Machines: [`Cartesian`], the H-4 with rolling table ([`h4::H4Table`]), the
+//! hexapod ([`hexapod::Hexapod`]) and the hexapod under an X-Y table's tool
+//! ([`hexapod_xy::HexapodXy`]); their geometry comes from
 //! [`crate::config::KinematicsConfig`], nothing is hard-coded here. The parallel
 //! machines' inverse kinematics is fixed point ([`fixed`]: Q31 sin/cos, positions in
 //! half nanometres, exact 64-bit sums of squares, integer square roots to ±0.51) with
@@ -26,6 +27,7 @@
 pub mod fixed;
 pub mod h4;
 pub mod hexapod;
+pub mod hexapod_xy;
 pub mod solve;
 
 #[cfg(test)]
@@ -131,6 +133,8 @@ pub enum MachineKinematics {
     H4Table(h4::H4Table),
     /// See [`hexapod::Hexapod`].
     Hexapod(hexapod::Hexapod),
+    /// See [`hexapod_xy::HexapodXy`].
+    HexapodXy(hexapod_xy::HexapodXy),
 }
 
 impl MachineKinematics {
@@ -143,6 +147,9 @@ impl MachineKinematics {
             }),
             KinematicsConfig::H4Table(g) => Self::H4Table(h4::H4Table::new(&g)),
             KinematicsConfig::Hexapod(g) => Self::Hexapod(hexapod::Hexapod::new(&g)),
+            KinematicsConfig::HexapodXy(g) => {
+                Self::HexapodXy(hexapod_xy::HexapodXy::new(&g, &config.joints))
+            }
         }
     }
 
@@ -157,6 +164,7 @@ impl MachineKinematics {
             Self::Cartesian(k) => k.forward(joints, guess, pose).map(|_| 0),
             Self::H4Table(k) => k.forward(joints, guess, pose),
             Self::Hexapod(k) => k.forward(joints, guess, pose),
+            Self::HexapodXy(k) => k.forward(joints, guess, pose),
         }
     }
 
@@ -183,6 +191,7 @@ impl Kinematics for MachineKinematics {
             Self::Cartesian(k) => k.inverse(pose, joints),
             Self::H4Table(k) => k.inverse(pose, joints),
             Self::Hexapod(k) => k.inverse(pose, joints),
+            Self::HexapodXy(k) => k.inverse(pose, joints),
         }
     }
     fn forward(&self, joints: &Joints, guess: &Pose, pose: &mut Pose) -> Result<(), Unreachable> {
@@ -193,6 +202,7 @@ impl Kinematics for MachineKinematics {
             Self::Cartesian(k) => k.jacobian(pose, jac),
             Self::H4Table(k) => k.jacobian(pose, jac),
             Self::Hexapod(k) => k.jacobian(pose, jac),
+            Self::HexapodXy(k) => k.jacobian(pose, jac),
         }
     }
 }

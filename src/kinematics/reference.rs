@@ -5,7 +5,8 @@
 
 use super::Pose;
 use crate::config::{
-    H4TableGeometry, HexapodGeometry, KinematicsConfig, MachineConfig, MAX_JOINTS,
+    H4TableGeometry, HexapodGeometry, HexapodXyGeometry, KinematicsConfig, MachineConfig,
+    MAX_JOINTS,
 };
 
 const NDEG: f64 = 1e9;
@@ -76,52 +77,101 @@ pub fn hexapod_inverse(g: &HexapodGeometry, pose: &[f64; 6]) -> [f64; 6] {
     q
 }
 
-/// Solves `f(x) = target` for the unknown axes `free` of `x` by Newton's method with a
-/// central-difference Jacobian, all in `f64` (to ~1e-6 nm); `f` gives at least as many
-/// values as there are unknowns, the first of which are matched to `target`.
+/// Hexapod under an X-Y table's tool in real numbers: legs and table X Y, nm, with
+/// the table's travel `table` ([min, max] of X and Y). Written from the geometry: the
+/// platform turns the workpiece by Ry(−B)·Rx(−A) about its origin; the table goes
+/// over the turned point (within its travel) and the platform moves the rest, so the
+/// point meets the tool tip.
+pub fn hexapod_xy_inverse(
+    g: &HexapodXyGeometry,
+    table: [[f64; 2]; 2],
+    pose: &[f64; 6],
+) -> [f64; 8] {
+    let h = g.platform_home.map(|c| c as f64);
+    let (a, b) = (
+        -(pose[3] / NDEG).to_radians(),
+        -(pose[4] / NDEG).to_radians(),
+    );
+    let v = rot_x(a, [pose[0] - h[0], pose[1] - h[1], pose[2] - h[2]]);
+    let (sb, cb) = b.sin_cos();
+    let v = [cb * v[0] + sb * v[2], v[1], -sb * v[0] + cb * v[2]];
+    let t = [
+        (h[0] + v[0]).clamp(table[0][0], table[0][1]),
+        (h[1] + v[1]).clamp(table[1][0], table[1][1]),
+    ];
+    let platform = [
+        t[0] - v[0],
+        t[1] - v[1],
+        g.tool_z as f64 - v[2],
+        -pose[3],
+        -pose[4],
+        0.0,
+    ];
+    let legs = hexapod_inverse(&g.hexapod, &platform);
+    let mut q = [0.0; 8];
+    q[..6].copy_from_slice(&legs);
+    q[6..].copy_from_slice(&t);
+    q
+}
+
+/// Solves `f(x) = target` for the unknown axes `free` of `x` by Gauss–Newton with a
+/// central-difference Jacobian, all in `f64` (to ~1e-6 nm): every value of `target`
+/// is matched (least squares when there are more joints than unknowns, as the
+/// hexapod-xy's eight joints for five axes; exact when the joints fit a pose).
 pub fn newton(f: impl Fn(&[f64; 6]) -> Vec<f64>, target: &[f64], x: &mut [f64; 6], free: &[usize]) {
-    let n = free.len();
+    let (n, m) = (free.len(), target.len());
     for _ in 0..50 {
         let y = f(x);
-        let r: Vec<f64> = (0..n).map(|i| target[i] - y[i]).collect();
+        let r: Vec<f64> = (0..m).map(|i| target[i] - y[i]).collect();
         if r.iter().all(|v| v.abs() < 1e-6) {
             return;
         }
-        let mut jac = vec![vec![0.0; n + 1]; n];
+        let mut jac = vec![vec![0.0; n]; m];
         for (k, &ax) in free.iter().enumerate() {
             let h = if ax >= 3 { 1e3 } else { 1.0 };
             let (mut xp, mut xm) = (*x, *x);
             xp[ax] += h;
             xm[ax] -= h;
             let (yp, ym) = (f(&xp), f(&xm));
-            for i in 0..n {
+            for i in 0..m {
                 jac[i][k] = (yp[i] - ym[i]) / (2.0 * h);
             }
         }
-        for i in 0..n {
-            jac[i][n] = r[i];
+        // Normal equations JᵀJ·dx = Jᵀr, by Gaussian elimination with partial pivoting.
+        let mut a = vec![vec![0.0; n + 1]; n];
+        for k in 0..n {
+            for l in 0..n {
+                a[k][l] = (0..m).map(|i| jac[i][k] * jac[i][l]).sum();
+            }
+            a[k][n] = (0..m).map(|i| jac[i][k] * r[i]).sum();
         }
         for k in 0..n {
             let p = (k..n)
-                .max_by(|&a, &b| jac[a][k].abs().total_cmp(&jac[b][k].abs()))
+                .max_by(|&u, &v| a[u][k].abs().total_cmp(&a[v][k].abs()))
                 .unwrap();
-            jac.swap(k, p);
+            a.swap(k, p);
             for i in k + 1..n {
-                let m = jac[i][k] / jac[k][k];
+                let q = a[i][k] / a[k][k];
                 for j in k..=n {
-                    jac[i][j] -= m * jac[k][j];
+                    a[i][j] -= q * a[k][j];
                 }
             }
         }
         let mut dx = vec![0.0; n];
         for k in (0..n).rev() {
-            let s: f64 = (k + 1..n).map(|j| jac[k][j] * dx[j]).sum();
-            dx[k] = (jac[k][n] - s) / jac[k][k];
+            let s: f64 = (k + 1..n).map(|j| a[k][j] * dx[j]).sum();
+            dx[k] = (a[k][n] - s) / a[k][k];
         }
         for (k, &ax) in free.iter().enumerate() {
             x[ax] += dx[k];
         }
-        if dx.iter().all(|v| v.abs() < 1e-6) {
+        // Converged: steps below 1e-6 nm, and 1e-3 n° (a femtoradian) on the angles,
+        // where the normal equations' rounding leaves ~1e-5 n° of noise.
+        if free
+            .iter()
+            .zip(&dx)
+            .all(|(&ax, v)| v.abs() < if ax >= 3 { 1e-3 } else { 1e-6 })
+        {
             return;
         }
     }
@@ -141,6 +191,10 @@ pub fn inverse(m: &MachineConfig, pose: &[f64; 6]) -> Option<[f64; MAX_JOINTS]> 
         }
         KinematicsConfig::H4Table(g) => q[..5].copy_from_slice(&h4_inverse(g, pose)?),
         KinematicsConfig::Hexapod(g) => q[..6].copy_from_slice(&hexapod_inverse(g, pose)),
+        KinematicsConfig::HexapodXy(g) => {
+            let travel = |j: usize| [m.joints[j].min as f64, m.joints[j].max as f64];
+            q[..8].copy_from_slice(&hexapod_xy_inverse(g, [travel(6), travel(7)], pose));
+        }
     }
     Some(q)
 }

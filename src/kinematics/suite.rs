@@ -61,11 +61,12 @@ fn kind(k: &KinematicsConfig) -> usize {
         KinematicsConfig::Cartesian { .. } => 0,
         KinematicsConfig::H4Table(_) => 1,
         KinematicsConfig::Hexapod(_) => 2,
+        KinematicsConfig::HexapodXy(_) => 3,
     }
 }
 
 /// Number of kinematics kinds.
-const KINDS: usize = 3;
+const KINDS: usize = 4;
 
 /// The H-4 geometry of `m`.
 pub fn h4_geometry(m: &MachineConfig) -> H4TableGeometry {
@@ -179,6 +180,61 @@ pub fn hexapod() -> Machine {
                 // Legs of about 320 mm, short of 350 mm.
                 (
                     [0, 0, 250_000_000, 0, 0, 0],
+                    Unreachable::JointLimit { joint: 0 },
+                ),
+            ]
+        },
+    }
+}
+
+/// The hexapod under an X-Y table's tool: the workpiece point within ±20 mm in X and
+/// Y of the platform's axis, Z 245..305 mm, A and B ±10° (the table follows within its
+/// travel).
+pub fn hexapod_xy() -> Machine {
+    Machine {
+        config: MachineConfig::hexapod_xy(),
+        sample: |_, u| {
+            let mut u =
+                |lo: f64, hi: f64, scale: f64| ((lo + (hi - lo) * u()) * scale).round() as i64;
+            [
+                u(-20.0, 20.0, 1e6),
+                u(-20.0, 20.0, 1e6),
+                u(245.0, 305.0, 1e6),
+                u(-10.0, 10.0, 1e9),
+                u(-10.0, 10.0, 1e9),
+                0,
+            ]
+        },
+        // |(0, 0, 260) + b_1 − a_1| = 327.549… mm for every leg; the table at 0.
+        home: &[
+            327_549_000,
+            327_549_000,
+            327_549_000,
+            327_549_000,
+            327_549_000,
+            327_549_000,
+            0,
+            0,
+        ],
+        home_tolerance: 999,
+        seeds: [4, 10],
+        ik_budget: 5.0,
+        solved: &[0, 1, 2, 3, 4],
+        // Up to 90 °/s on A and B.
+        turn: |p, u| {
+            for a in &mut p[3..5] {
+                *a -= ((u() * 2.0 - 1.0) * 90_000_000.0).round() as i64;
+            }
+        },
+        fk_budget: (2, 382),
+        round_trip: 5,
+        unreachable: |_| {
+            vec![
+                ([0, 0, i64::MIN, 0, 0, 0], Unreachable::OutOfReach),
+                // The workpiece point 100 mm above the tool's height: the platform
+                // would go down to 175 mm, legs of about 265 mm, short of 280 mm.
+                (
+                    [0, 0, 360_000_000, 0, 0, 0],
                     Unreachable::JointLimit { joint: 0 },
                 ),
             ]
@@ -476,4 +532,5 @@ every_machine! {
     cartesian: cartesian();
     h4_table: h4_table();
     hexapod: hexapod();
+    hexapod_xy: hexapod_xy();
 }

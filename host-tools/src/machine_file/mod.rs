@@ -15,8 +15,8 @@ mod locate;
 pub mod sections;
 
 pub use sections::{
-    ContourFile, ContourMode, DriveKind, H4TableFile, HexapodFile, HomingFile, JointFile,
-    KinematicsKind, LimitsFile, MotionFile, Profile, ServoFile, TimingFile, ToolFile,
+    ContourFile, ContourMode, DriveKind, H4TableFile, HexapodFile, HexapodXyFile, HomingFile,
+    JointFile, KinematicsKind, LimitsFile, MotionFile, Profile, ServoFile, TimingFile, ToolFile,
 };
 
 use convert::{axis_index, to_units};
@@ -78,15 +78,17 @@ pub(crate) use refused;
 pub struct MachineFile {
     /// Machine name.
     pub name: String,
-    /// `"cartesian"`, `"h4-table"` or `"hexapod"`.
+    /// `"cartesian"`, `"h4-table"`, `"hexapod"` or `"hexapod-xy"`.
     pub kinematics: KinematicsKind,
     /// Home pose X Y Z (mm) A B C (degrees).
     #[serde(default, deserialize_with = "exact::de")]
     pub home: [f64; AXES],
     /// Geometry for `kinematics = "h4-table"`.
     pub h4_table: Option<H4TableFile>,
-    /// Geometry for `kinematics = "hexapod"`.
+    /// Geometry for `kinematics = "hexapod"` and the legs of `"hexapod-xy"`.
     pub hexapod: Option<HexapodFile>,
+    /// The workpiece and tool of `kinematics = "hexapod-xy"`.
+    pub hexapod_xy: Option<HexapodXyFile>,
     /// Limits per used axis, keyed by axis letter.
     pub axes: BTreeMap<String, LimitsFile>,
     /// Joints q1..qN.
@@ -188,9 +190,33 @@ impl MachineFile {
         if self.h4_table.is_some() && self.kinematics != KinematicsKind::H4Table {
             return Err(refused!("h4_table: only for kinematics = \"h4-table\""));
         }
-        if self.hexapod.is_some() && self.kinematics != KinematicsKind::Hexapod {
-            return Err(refused!("hexapod: only for kinematics = \"hexapod\""));
+        let legs = matches!(
+            self.kinematics,
+            KinematicsKind::Hexapod | KinematicsKind::HexapodXy
+        );
+        if self.hexapod.is_some() && !legs {
+            return Err(refused!(
+                "hexapod: only for kinematics = \"hexapod\" or \"hexapod-xy\""
+            ));
         }
+        if self.hexapod_xy.is_some() && self.kinematics != KinematicsKind::HexapodXy {
+            return Err(refused!("hexapod_xy: only for kinematics = \"hexapod-xy\""));
+        }
+        let hexapod = || {
+            self.hexapod
+                .as_ref()
+                .ok_or_else(|| {
+                    refused!(
+                        "hexapod: kinematics = \"{}\" needs a [hexapod] section",
+                        if self.kinematics == KinematicsKind::Hexapod {
+                            "hexapod"
+                        } else {
+                            "hexapod-xy"
+                        }
+                    )
+                })?
+                .to_geometry()
+        };
         Ok(match self.kinematics {
             KinematicsKind::Cartesian => KinematicsConfig::Cartesian { axis_of_joint },
             KinematicsKind::H4Table => KinematicsConfig::H4Table(
@@ -201,13 +227,16 @@ impl MachineFile {
                     })?
                     .to_geometry()?,
             ),
-            KinematicsKind::Hexapod => KinematicsConfig::Hexapod(
-                self.hexapod
+            KinematicsKind::Hexapod => KinematicsConfig::Hexapod(hexapod()?),
+            KinematicsKind::HexapodXy => KinematicsConfig::HexapodXy(
+                self.hexapod_xy
                     .as_ref()
                     .ok_or_else(|| {
-                        refused!("hexapod: kinematics = \"hexapod\" needs a [hexapod] section")
+                        refused!(
+                            "hexapod_xy: kinematics = \"hexapod-xy\" needs a [hexapod_xy] section"
+                        )
                     })?
-                    .to_geometry()?,
+                    .to_geometry(hexapod()?)?,
             ),
         })
     }

@@ -6,8 +6,8 @@
 use super::convert::{mm_points, positive, positive_units, to_units};
 use super::{exact, refused, FieldError};
 use pkmc::config::{
-    ContourConfig, Drive, H4TableGeometry, HexapodGeometry, Homing, JointConfig, Limits,
-    MotionConfig, Scale, ServoGains, StepTiming,
+    ContourConfig, Drive, H4TableGeometry, HexapodGeometry, HexapodXyGeometry, Homing, JointConfig,
+    Limits, MotionConfig, Scale, ServoGains, StepTiming,
 };
 use pkmc::units::units_per_user;
 use serde::Deserialize;
@@ -32,6 +32,9 @@ pub enum KinematicsKind {
     H4Table,
     /// The hexapod (`[hexapod]`).
     Hexapod,
+    /// The hexapod carrying the workpiece under a tool on an X-Y table (`[hexapod]`
+    /// and `[hexapod_xy]`).
+    HexapodXy,
 }
 
 impl KinematicsKind {
@@ -41,6 +44,7 @@ impl KinematicsKind {
             KinematicsKind::Cartesian => "kinematics",
             KinematicsKind::H4Table => "h4_table",
             KinematicsKind::Hexapod => "hexapod",
+            KinematicsKind::HexapodXy => "hexapod_xy",
         }
     }
 }
@@ -499,6 +503,33 @@ impl HexapodFile {
                 &self.platform_angles,
                 "platform",
             )?,
+        })
+    }
+}
+
+/// `[hexapod_xy]`: where the workpiece and the tool are, mm (the legs are in
+/// `[hexapod]`; the table's X and Y are joints q7 and q8).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HexapodXyFile {
+    /// The platform origin at home (level), machine frame: workpiece coordinates are
+    /// machine coordinates there.
+    #[serde(deserialize_with = "exact::de")]
+    pub platform_home: [f64; 3],
+    /// Height of the tool tip, machine frame.
+    pub tool_z: f64,
+}
+
+impl HexapodXyFile {
+    /// The core's geometry, with the legs of `hexapod`.
+    pub(super) fn to_geometry(
+        &self,
+        hexapod: HexapodGeometry,
+    ) -> Result<HexapodXyGeometry, FieldError> {
+        Ok(HexapodXyGeometry {
+            hexapod,
+            platform_home: mm_points(&[self.platform_home], "hexapod_xy.platform_home")?[0],
+            tool_z: to_units(self.tool_z, false, "hexapod_xy.tool_z")?,
         })
     }
 }

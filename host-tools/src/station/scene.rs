@@ -83,6 +83,7 @@ pub fn describe(machine: &MachineConfig, joint_names: &[String]) -> Value {
         KinematicsConfig::Cartesian { .. } => "cartesian",
         KinematicsConfig::H4Table(_) => "h4",
         KinematicsConfig::Hexapod(_) => "hexapod",
+        KinematicsConfig::HexapodXy(_) => "hexapod-xy",
     };
     let axes: Vec<String> = (0..AXES)
         .filter(|&i| machine.axes[i].max_velocity > 0)
@@ -127,6 +128,13 @@ pub fn default_joint_names(machine: &MachineConfig) -> Vec<String> {
             })
             .collect(),
         KinematicsConfig::Hexapod(_) => (0..n).map(|j| format!("Arm{}", j + 1)).collect(),
+        KinematicsConfig::HexapodXy(_) => (0..n)
+            .map(|j| match j {
+                6 => "TableX".to_string(),
+                7 => "TableY".to_string(),
+                j => format!("Leg{}", j + 1),
+            })
+            .collect(),
     }
 }
 
@@ -154,13 +162,19 @@ fn bounds(machine: &MachineConfig) -> (P3, P3) {
                 [r + 50.0, r + 50.0, top + 50.0],
             )
         }
-        KinematicsConfig::Hexapod(g) => {
+        KinematicsConfig::Hexapod(g)
+        | KinematicsConfig::HexapodXy(pkmc::config::HexapodXyGeometry { hexapod: g, .. }) => {
             let r = g
                 .base
                 .iter()
                 .map(|p| mm(p[0]).hypot(mm(p[1])))
                 .fold(0.0, f64::max);
             let top = mm(machine.home[2]) + 150.0;
+            let r = r.max(
+                (6..machine.joints.len())
+                    .map(|j| travel(machine, j).1.abs())
+                    .fold(0.0, f64::max),
+            );
             ([-r - 50.0, -r - 50.0, 0.0], [r + 50.0, r + 50.0, top])
         }
         KinematicsConfig::Cartesian { .. } => {
@@ -198,6 +212,7 @@ pub fn scene(machine: &MachineConfig, pose: &[f64; AXES], joints: &[f64]) -> Val
     match machine.kinematics {
         KinematicsConfig::H4Table(g) => h4(&mut d, machine, &g, pose, joints),
         KinematicsConfig::Hexapod(g) => hexapod(&mut d, &g, pose),
+        KinematicsConfig::HexapodXy(g) => hexapod_xy(&mut d, machine, &g, pose, joints),
         KinematicsConfig::Cartesian { .. } => cartesian(&mut d, machine, pose),
     }
     let (m, t) = d.work;
@@ -304,6 +319,55 @@ fn hexapod(d: &mut Drawing, g: &pkmc::config::HexapodGeometry, pose: &[f64; AXES
     d.seg(origin, add(origin, mul(&r, [len, 0.0, 0.0])), "axis");
     d.seg(origin, add(origin, mul(&r, [0.0, len, 0.0])), "axis");
     d.seg(origin, add(origin, mul(&r, [0.0, 0.0, len])), "tool");
+}
+
+/// The hexapod at the platform pose the split gives, the workpiece on it, and the
+/// tool on the X-Y table above.
+fn hexapod_xy(
+    d: &mut Drawing,
+    machine: &MachineConfig,
+    g: &pkmc::config::HexapodXyGeometry,
+    pose: &[f64; AXES],
+    joints: &[f64],
+) {
+    let units = pose.map(|v| (v * 1e6).round() as i64);
+    let kin = pkmc::kinematics::MachineKinematics::new(machine);
+    let pkmc::kinematics::MachineKinematics::HexapodXy(k) = kin else {
+        return;
+    };
+    let Ok((platform, _)) = k.split(&units) else {
+        return;
+    };
+    let platform = platform.map(|v| v as f64 / 1e6);
+    hexapod(d, &g.hexapod, &platform);
+    // Workpiece point w sits at p + R·(w − home).
+    let r = mat_mul(&rot_y(platform[4]), &rot_x(platform[3]));
+    let home = g.platform_home.map(mm);
+    d.work = (
+        r,
+        sub([platform[0], platform[1], platform[2]], mul(&r, home)),
+    );
+    let tz = mm(g.tool_z);
+    let t = [
+        joints.get(6).copied().unwrap_or(0.0),
+        joints.get(7).copied().unwrap_or(0.0),
+    ];
+    let tip = [t[0], t[1], tz];
+    d.seg(tip, add(tip, [0.0, 0.0, 60.0]), "tool");
+    // The table's travel (a frame over the platform) and its carriage.
+    let (x, y) = (travel(machine, 6), travel(machine, 7));
+    let top = tz + 60.0;
+    d.poly(
+        &[
+            [x.0, y.0, top],
+            [x.1, y.0, top],
+            [x.1, y.1, top],
+            [x.0, y.1, top],
+        ],
+        "table",
+    );
+    d.seg([x.0, t[1], top], [x.1, t[1], top], "rail");
+    d.seg([t[0], y.0, top], [t[0], y.1, top], "carriage");
 }
 
 fn cartesian(d: &mut Drawing, machine: &MachineConfig, pose: &[f64; AXES]) {
