@@ -149,12 +149,16 @@ impl Statics {
 
 /// Refuses machines statics does not cover.
 fn covered(machine: &MachineConfig, axes: &[usize]) -> Result<(), String> {
-    if let KinematicsConfig::H4Table(_) = machine.kinematics {
-        return Err(
-            "unsupported: statics for the H-4 with its rolling table (the table \
+    match machine.kinematics {
+        KinematicsConfig::H4Table(_) => {
+            return Err(
+                "unsupported: statics for the H-4 with its rolling table (the table \
                     carries the workpiece on a joint of its own)"
-                .into(),
-        );
+                    .into(),
+            )
+        }
+        KinematicsConfig::HexapodXy(_) => return Ok(()),
+        _ => {}
     }
     if axes.len() != machine.joints.len() {
         return Err(format!(
@@ -178,10 +182,54 @@ fn rotation_axes(pose: &[i64; AXES]) -> [[f64; 3]; 3] {
 
 /// Joint forces holding wrench `w` at `pose`: f = −J⁻ᵀ·Q over the axes the machine
 /// uses (`axes`); `None` where the kinematics fail or J is singular.
+///
+/// The hexapod under an X-Y table's tool: the tool carries `w` and the workpiece its
+/// reaction. The legs hold the platform against −F at the tool tip T and −M, i.e. the
+/// wrench (−F, −M − (T − p) × F) about the platform origin p, through the hexapod's
+/// own Jacobian at the platform pose of the split; the table's X and Y joints push
+/// back −F_x and −F_y.
 pub fn joint_forces(
     pose: &[i64; AXES],
     w: &Wrench,
     machine: &MachineConfig,
+    kin: &MachineKinematics,
+    axes: &[usize],
+) -> Option<[f64; MAX_JOINTS]> {
+    if let MachineKinematics::HexapodXy(k) = kin {
+        let KinematicsConfig::HexapodXy(g) = &machine.kinematics else {
+            return None;
+        };
+        let (platform, t) = k.split(pose).ok()?;
+        let tip = [t[0], t[1], g.tool_z];
+        let arm: [f64; 3] = std::array::from_fn(|c| (tip[c] - platform[c]) as f64 * 1e-9);
+        let on_platform = [
+            -w[0],
+            -w[1],
+            -w[2],
+            -w[3] - (arm[1] * w[2] - arm[2] * w[1]),
+            -w[4] - (arm[2] * w[0] - arm[0] * w[2]),
+            -w[5] - (arm[0] * w[1] - arm[1] * w[0]),
+        ];
+        let legs = MachineKinematics::Hexapod(pkmc::kinematics::hexapod::Hexapod::new(&g.hexapod));
+        let mut f = forces_through(
+            &platform,
+            &on_platform,
+            &machine.joints[..6],
+            &legs,
+            &[0, 1, 2, 3, 4, 5],
+        )?;
+        f[6] = -w[0];
+        f[7] = -w[1];
+        return Some(f);
+    }
+    forces_through(pose, w, &machine.joints, kin, axes)
+}
+
+/// f = −J⁻ᵀ·Q for the joints `joints` of `kin` at `pose` over `axes`.
+fn forces_through(
+    pose: &[i64; AXES],
+    w: &Wrench,
+    joints: &[pkmc::config::JointConfig],
     kin: &MachineKinematics,
     axes: &[usize],
 ) -> Option<[f64; MAX_JOINTS]> {
@@ -201,7 +249,7 @@ pub fn joint_forces(
     let mut a = vec![vec![0.0f64; n + 1]; n];
     for (r, &k) in axes.iter().enumerate() {
         for j in 0..n {
-            let sq = si(machine.joints[j].rotary);
+            let sq = si(joints[j].rotary);
             a[r][j] = dq[j][k] as f64 * sq / si(axis_is_rotary(k));
         }
         let q = if k < 3 {
@@ -341,10 +389,11 @@ mod tests {
     /// computation): Σ f_i n_i + F = 0 and Σ f_i (R b_i × n_i) + M = 0, with n_i the
     /// unit vector from base joint a_i to platform joint p + R b_i.
     #[allow(clippy::needless_range_loop)]
-    fn hexapod_by_geometry(m: &MachineConfig, pose: [f64; 6], w: Wrench) -> [f64; 6] {
-        let KinematicsConfig::Hexapod(g) = &m.kinematics else {
-            unreachable!()
-        };
+    fn hexapod_by_geometry(
+        g: &pkmc::config::HexapodGeometry,
+        pose: [f64; 6],
+        w: Wrench,
+    ) -> [f64; 6] {
         let (a, b, c) = (
             pose[3].to_radians(),
             pose[4].to_radians(),
@@ -424,7 +473,10 @@ mod tests {
             });
             for w in wrenches {
                 let ours = joint_forces(&pose, &w, &m, &kin, &axes).unwrap();
-                let reference = hexapod_by_geometry(&m, p, w);
+                let KinematicsConfig::Hexapod(g) = &m.kinematics else {
+                    unreachable!()
+                };
+                let reference = hexapod_by_geometry(g, p, w);
                 for i in 0..6 {
                     let tol = 1e-4 * reference.iter().fold(1.0f64, |a, v| a.max(v.abs()));
                     assert!(
@@ -437,6 +489,86 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Report B's helix (x = t cos t, y = t sin t, z = 3t + 260 mm, t = 0..10 s) on the
+    /// hexapod-xy, level and with the tool axis tilting ±10°, under a cutting force of
+    /// (120, −80, −400) N and 2 N·m about the tool: every joint's force against an
+    /// independent f64 computation — the platform pose from the geometry (the table
+    /// over the turned point, the platform making up Z), the reaction on the
+    /// workpiece moved to the platform origin, and the legs' equilibrium from their
+    /// directions ([`hexapod_by_geometry`]).
+    #[test]
+    fn hexapod_xy_joint_forces_along_the_reports_helix_agree_with_an_independent_computation() {
+        let m = MachineConfig::hexapod_xy();
+        let kin = MachineKinematics::new(&m);
+        let KinematicsConfig::HexapodXy(g) = &m.kinematics else {
+            unreachable!()
+        };
+        let w: Wrench = [120.0, -80.0, -400.0, 0.0, 0.0, 2.0];
+        let h = g.platform_home.map(|c| c as f64 * 1e-6);
+        let tool_z = g.tool_z as f64 * 1e-6;
+        let mut largest = [0.0f64; 8];
+        for tilt in [0.0, 10.0] {
+            for k in 0..=200 {
+                let t = k as f64 * 0.05;
+                let (a, b) = (
+                    tilt * (std::f64::consts::PI * t / 5.0).sin(),
+                    tilt * (std::f64::consts::PI * t / 2.5).sin(),
+                );
+                let wp = [t * t.cos(), t * t.sin(), 3.0 * t + 260.0];
+                // R = Ry(−B)·Rx(−A) applied to w − home.
+                let (sa, ca) = (-a).to_radians().sin_cos();
+                let (sb, cb) = (-b).to_radians().sin_cos();
+                let v = [wp[0] - h[0], wp[1] - h[1], wp[2] - h[2]];
+                let v = [v[0], ca * v[1] - sa * v[2], sa * v[1] + ca * v[2]];
+                let rv = [cb * v[0] + sb * v[2], v[1], -sb * v[0] + cb * v[2]];
+                let tip = [h[0] + rv[0], h[1] + rv[1], tool_z];
+                let p = [tip[0] - rv[0], tip[1] - rv[1], tip[2] - rv[2]];
+                let arm = [
+                    (tip[0] - p[0]) * 1e-3,
+                    (tip[1] - p[1]) * 1e-3,
+                    (tip[2] - p[2]) * 1e-3,
+                ];
+                let cross = [
+                    arm[1] * w[2] - arm[2] * w[1],
+                    arm[2] * w[0] - arm[0] * w[2],
+                    arm[0] * w[1] - arm[1] * w[0],
+                ];
+                let on_platform = [
+                    -w[0],
+                    -w[1],
+                    -w[2],
+                    -w[3] - cross[0],
+                    -w[4] - cross[1],
+                    -w[5] - cross[2],
+                ];
+                let legs =
+                    hexapod_by_geometry(&g.hexapod, [p[0], p[1], p[2], -a, -b, 0.0], on_platform);
+                let pose: [i64; AXES] = [
+                    (wp[0] * 1e6).round() as i64,
+                    (wp[1] * 1e6).round() as i64,
+                    (wp[2] * 1e6).round() as i64,
+                    (a * 1e9).round() as i64,
+                    (b * 1e9).round() as i64,
+                    0,
+                ];
+                let ours = joint_forces(&pose, &w, &m, &kin, &[0, 1, 2, 3, 4]).unwrap();
+                let tol = 1e-4 * legs.iter().fold(1.0f64, |s, v| s.max(v.abs()));
+                for i in 0..6 {
+                    assert!(
+                        (ours[i] - legs[i]).abs() <= tol,
+                        "t {t} tilt {tilt} leg {}: ours {} N, geometry {} N",
+                        i + 1,
+                        ours[i],
+                        legs[i]
+                    );
+                    largest[i] = largest[i].max(ours[i].abs());
+                }
+                assert_eq!((ours[6], ours[7]), (-w[0], -w[1]));
+            }
+        }
+        eprintln!("largest joint forces along the helix, N: {largest:.1?}");
     }
 
     #[test]
