@@ -62,6 +62,65 @@ pub const MIN_CONTOUR_SPEED: f32 = 0.01;
 /// A vector over the servo channels (uncoupled channels hold zero).
 pub type ChannelVec = [f32; MAX_SERVOS];
 
+/// Pose coordinates the contour controller works in: X Y Z (mm) and the tool
+/// direction's A B (degrees).
+pub const POSE_AXES: usize = 5;
+
+/// A vector over [`POSE_AXES`]: X Y Z in mm, A B in degrees.
+pub type PoseVec = [f32; POSE_AXES];
+
+/// How the servo channels map to the pose near the setpoint: the linearised forward
+/// kinematics `to_pose` = ∂pose/∂q (pose units per channel unit: mm or degrees per mm
+/// or degree of the joint) and the inverse's Jacobian `to_joint` = ∂q/∂pose. A
+/// Cartesian machine's map is constant (ones where a channel follows X, Y or Z); the
+/// hexapod-xy's is recomputed every tick at the commanded pose
+/// ([`crate::kinematics::hexapod_xy::HexapodXy::contour_map`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ContourMap {
+    /// ∂pose/∂q per channel.
+    pub to_pose: [[f32; MAX_SERVOS]; POSE_AXES],
+    /// ∂q/∂pose per channel.
+    pub to_joint: [[f32; POSE_AXES]; MAX_SERVOS],
+}
+
+impl Default for ContourMap {
+    fn default() -> Self {
+        Self::NONE
+    }
+}
+
+impl ContourMap {
+    /// No channel coupled.
+    pub const NONE: ContourMap = ContourMap {
+        to_pose: [[0.0; MAX_SERVOS]; POSE_AXES],
+        to_joint: [[0.0; POSE_AXES]; MAX_SERVOS],
+    };
+
+    /// `to_pose · x`.
+    fn pose_of(&self, x: &ChannelVec) -> PoseVec {
+        let mut p = [0.0; POSE_AXES];
+        for k in 0..POSE_AXES {
+            let row = &self.to_pose[k];
+            let mut s = 0.0;
+            for c in 0..MAX_SERVOS {
+                s += row[c] * x[c];
+            }
+            p[k] = s;
+        }
+        p
+    }
+
+    /// `to_joint[c] · p`.
+    fn joint_of(&self, c: usize, p: &PoseVec) -> f32 {
+        let row = &self.to_joint[c];
+        let mut s = 0.0;
+        for k in 0..POSE_AXES {
+            s += row[k] * p[k];
+        }
+        s
+    }
+}
+
 /// 1/√x for x > 0, relative error below 1e-7: bit-level first guess and three Newton
 /// steps (multiplies only).
 pub fn rsqrt(x: f32) -> f32 {
@@ -73,70 +132,81 @@ pub fn rsqrt(x: f32) -> f32 {
     y
 }
 
-fn dot(a: &ChannelVec, b: &ChannelVec) -> f32 {
-    let mut s = 0.0;
-    for i in 0..MAX_SERVOS {
-        s += a[i] * b[i];
-    }
-    s
+/// The dot product of the X Y Z parts.
+fn dot3(a: &PoseVec, b: &PoseVec) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// The path's local frame at the setpoint.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PathFrame {
-    /// Unit tangent (direction cosines).
-    pub tangent: ChannelVec,
-    /// Curvature vector κ·n, 1/mm.
-    pub curvature: ChannelVec,
+    /// Unit tangent of the X Y Z path (direction cosines; A B zero).
+    pub tangent: PoseVec,
+    /// Curvature vector κ·n of the X Y Z path, 1/mm (A B zero).
+    pub curvature: PoseVec,
+    /// The tool direction's rate per mm of path, degrees/mm (X Y Z zero).
+    pub turn: PoseVec,
     /// The path is moving (faster than [`MIN_CONTOUR_SPEED`]): the frame is defined.
     pub moving: bool,
 }
 
 impl PathFrame {
-    /// The frame of a path with velocity `v` (mm/s) and acceleration `a` (mm/s²).
-    pub fn new(v: &ChannelVec, a: &ChannelVec) -> Self {
-        let v2 = dot(v, v);
+    /// The frame of a path with velocity `v` (mm/s, degrees/s) and acceleration `a`
+    /// (mm/s², degrees/s²).
+    pub fn new(v: &PoseVec, a: &PoseVec) -> Self {
+        let v2 = dot3(v, v);
         if v2.partial_cmp(&(MIN_CONTOUR_SPEED * MIN_CONTOUR_SPEED))
             != Some(core::cmp::Ordering::Greater)
         {
             return Self::default();
         }
         let inv = rsqrt(v2);
-        let mut tangent = [0.0; MAX_SERVOS];
-        for i in 0..MAX_SERVOS {
+        let mut tangent = [0.0; POSE_AXES];
+        for i in 0..3 {
             tangent[i] = v[i] * inv;
         }
-        let at = dot(a, &tangent);
+        let at = dot3(a, &tangent);
         let inv2 = inv * inv;
-        let mut curvature = [0.0; MAX_SERVOS];
-        for i in 0..MAX_SERVOS {
+        let mut curvature = [0.0; POSE_AXES];
+        for i in 0..3 {
             curvature[i] = (a[i] - at * tangent[i]) * inv2;
+        }
+        let mut turn = [0.0; POSE_AXES];
+        for i in 3..POSE_AXES {
+            turn[i] = v[i] * inv;
         }
         Self {
             tangent,
             curvature,
+            turn,
             moving: true,
         }
     }
 
-    /// Removes the tangential part of `x` in place.
-    pub fn project(&self, x: &mut ChannelVec) {
-        let along = dot(x, &self.tangent);
-        for i in 0..MAX_SERVOS {
+    /// Removes the tangential part of `x`'s X Y Z in place.
+    pub fn project(&self, x: &mut PoseVec) {
+        let along = dot3(x, &self.tangent);
+        for i in 0..3 {
             x[i] -= along * self.tangent[i];
         }
     }
 
-    /// The contour error vector ε of the tracking error `e` (mm); zero when standing.
-    pub fn contour_error(&self, e: &ChannelVec) -> ChannelVec {
+    /// The contour error ε of the tracking error `e` (mm, degrees); zero when standing.
+    /// Path: the normal-plane part of e with the circular correction. Tool direction:
+    /// its error less what the tangential lag e·t explains (the reference direction
+    /// where the tool actually is on the path), `e_o − (e·t)·turn`.
+    pub fn contour_error(&self, e: &PoseVec) -> PoseVec {
         if !self.moving {
-            return [0.0; MAX_SERVOS];
+            return [0.0; POSE_AXES];
         }
-        let et = dot(e, &self.tangent);
+        let et = dot3(e, &self.tangent);
         let bend = 0.5 * et * et;
-        let mut eps = [0.0; MAX_SERVOS];
-        for i in 0..MAX_SERVOS {
+        let mut eps = [0.0; POSE_AXES];
+        for i in 0..3 {
             eps[i] = e[i] - et * self.tangent[i] + bend * self.curvature[i];
+        }
+        for i in 3..POSE_AXES {
+            eps[i] = e[i] - et * self.turn[i];
         }
         eps
     }
@@ -148,17 +218,18 @@ pub struct ContourLoop {
     config: ContourConfig,
     ki_t: f32,
     kr_t: f32,
-    integral: ChannelVec,
-    offset: ChannelVec,
+    integral: PoseVec,
+    offset: PoseVec,
 }
 
-/// What the contour controller asks of each channel this period.
+/// What the contour controller asks, in pose coordinates, this period.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ContourCorrection {
-    /// Reference offset, mm (CCPM).
-    pub reference: ChannelVec,
-    /// Command correction, c.u. (cross-coupled and CCPM).
-    pub command: ChannelVec,
+    /// Reference offset, mm and degrees (CCPM).
+    pub reference: PoseVec,
+    /// Command correction, c.u. per mm (or degree) of pose, distributed to the
+    /// channels by ∂q/∂pose (cross-coupled and CCPM).
+    pub command: PoseVec,
 }
 
 impl ContourLoop {
@@ -168,34 +239,34 @@ impl ContourLoop {
             config: *config,
             ki_t: config.ki * SERVO_PERIOD_S,
             kr_t: config.kr * SERVO_PERIOD_S,
-            integral: [0.0; MAX_SERVOS],
-            offset: [0.0; MAX_SERVOS],
+            integral: [0.0; POSE_AXES],
+            offset: [0.0; POSE_AXES],
         }
     }
 
     /// Clears the integrator and the reference offset.
     pub fn reset(&mut self) {
-        self.integral = [0.0; MAX_SERVOS];
-        self.offset = [0.0; MAX_SERVOS];
+        self.integral = [0.0; POSE_AXES];
+        self.offset = [0.0; POSE_AXES];
     }
 
     /// One period given the frame and the contour error `eps` (mm).
-    pub fn update(&mut self, frame: &PathFrame, eps: &ChannelVec) -> ContourCorrection {
+    pub fn update(&mut self, frame: &PathFrame, eps: &PoseVec) -> ContourCorrection {
         let mut out = ContourCorrection::default();
         let c = &self.config;
         if c.mode == ContourMode::Uncoupled || !frame.moving {
             out.reference = self.offset;
             return out;
         }
-        for i in 0..MAX_SERVOS {
+        for i in 0..POSE_AXES {
             self.integral[i] = clamp_sym(self.integral[i] + self.ki_t * eps[i], c.max_integral);
         }
         frame.project(&mut self.integral);
-        for i in 0..MAX_SERVOS {
+        for i in 0..POSE_AXES {
             out.command[i] = c.kp * eps[i] + self.integral[i];
         }
         if c.mode == ContourMode::Ccpm {
-            for i in 0..MAX_SERVOS {
+            for i in 0..POSE_AXES {
                 self.offset[i] = clamp_sym(self.offset[i] + self.kr_t * eps[i], c.max_offset);
             }
             frame.project(&mut self.offset);
@@ -225,8 +296,9 @@ pub struct PeriodOutputs {
     pub enable: [bool; MAX_SERVOS],
     /// Latched trip of each channel.
     pub trip: [Option<Trip>; MAX_SERVOS],
-    /// Estimated contour error vector, mm, per channel (zero for uncoupled channels).
-    pub contour_error: ChannelVec,
+    /// Estimated contour error, X Y Z in mm and the tool direction's A B in degrees
+    /// (zero when uncoupled or standing).
+    pub contour_error: PoseVec,
     /// Command of each channel after its clamp, c.u.
     pub command: ChannelVec,
 }
@@ -237,7 +309,7 @@ impl Default for PeriodOutputs {
             dac: [DAC_MID as u16; MAX_SERVOS],
             enable: [false; MAX_SERVOS],
             trip: [None; MAX_SERVOS],
-            contour_error: [0.0; MAX_SERVOS],
+            contour_error: [0.0; POSE_AXES],
             command: [0.0; MAX_SERVOS],
         }
     }
@@ -250,23 +322,29 @@ pub struct ServoBank {
     setpoints: [SetpointInterpolator; MAX_SERVOS],
     axes: [ServoAxis; MAX_SERVOS],
     contour: ContourLoop,
+    /// The contour controller runs (a coupling mode other than uncoupled).
+    coupled: bool,
+    map: ContourMap,
     used: [bool; MAX_SERVOS],
-    mm_per_count: ChannelVec,
-    counts_per_mm: ChannelVec,
+    /// Joint units (mm or degrees) per count, and counts per joint unit.
+    unit_per_count: ChannelVec,
+    counts_per_unit: ChannelVec,
 }
 
 impl ServoBank {
     /// The bank of `machine`, standing at `positions` (encoder counts, per channel).
     ///
-    /// A channel is coupled when the machine is Cartesian and its joint follows X, Y
-    /// or Z (linear); its counts convert to mm by the joint's scale.
+    /// On a Cartesian machine the channels whose joints follow X, Y or Z (linear) are
+    /// coupled, through a constant [`ContourMap`]; on the hexapod-xy every channel is,
+    /// through the map the controller sends each tick ([`ServoBank::load_map`]).
     pub fn new(machine: &MachineConfig, positions: &[i64; MAX_SERVOS]) -> Self {
         let mut used = [false; MAX_SERVOS];
-        let mut mm_per_count = [0.0f32; MAX_SERVOS];
-        let mut counts_per_mm = [0.0f32; MAX_SERVOS];
+        let mut unit_per_count = [0.0f32; MAX_SERVOS];
+        let mut counts_per_unit = [0.0f32; MAX_SERVOS];
+        let mut map = ContourMap::NONE;
         let mut axes = [ServoAxis::new(&ServoGains::NONE, 0.0); MAX_SERVOS];
         for (j, jc) in machine.joints.iter().enumerate() {
-            let Drive::Servo { channel, .. } = jc.drive else {
+            let Drive::Servo { channel } = jc.drive else {
                 continue;
             };
             let c = channel as usize;
@@ -278,23 +356,27 @@ impl ServoBank {
             let per_unit = jc.scale.steps as f64 / jc.scale.per_units as f64;
             let vmax = (jc.limits.max_velocity as f64 * per_unit) as f32;
             axes[c] = ServoAxis::new(&machine.servo.gains[c], vmax);
-            let linear_xyz = match machine.kinematics {
-                KinematicsConfig::Cartesian { axis_of_joint } => axis_of_joint[j] < 3,
-                _ => false,
-            };
-            if linear_xyz && !jc.rotary {
-                let nm_per_mm = crate::units::NM_PER_MM as f64;
-                counts_per_mm[c] = (per_unit * nm_per_mm) as f32;
-                mm_per_count[c] = (1.0 / (per_unit * nm_per_mm)) as f32;
+            // nm per mm and n° per degree are both 10^6 and 10^9; the joint's unit.
+            let per_user = crate::units::units_per_user(jc.rotary) as f64;
+            counts_per_unit[c] = (per_unit * per_user) as f32;
+            unit_per_count[c] = (1.0 / (per_unit * per_user)) as f32;
+            if let KinematicsConfig::Cartesian { axis_of_joint } = machine.kinematics {
+                let a = axis_of_joint[j] as usize;
+                if a < 3 && !jc.rotary {
+                    map.to_pose[a][c] = 1.0;
+                    map.to_joint[c][a] = 1.0;
+                }
             }
         }
         Self {
             setpoints: positions.map(|p| SetpointInterpolator::new(p << SETPOINT_FRAC_BITS)),
             axes,
             contour: ContourLoop::new(&machine.servo.contour),
+            coupled: machine.servo.contour.mode != ContourMode::Uncoupled,
+            map,
             used,
-            mm_per_count,
-            counts_per_mm,
+            unit_per_count,
+            counts_per_unit,
         }
     }
 
@@ -306,12 +388,32 @@ impl ServoBank {
         }
     }
 
+    /// At a tick: the channels' map to the pose at the tick's commanded pose (a
+    /// machine whose map changes along the path).
+    pub fn load_map(&mut self, map: &ContourMap) {
+        self.map = *map;
+    }
+
     /// Clears every latched trip and the contour state.
     pub fn reset(&mut self) {
         for a in &mut self.axes {
             a.reset();
         }
         self.contour.reset();
+    }
+
+    /// The contour controller's period: the channels' errors, velocities and
+    /// accelerations (joint units) to the pose by the map, the frame, the contour error
+    /// and the correction.
+    fn couple(
+        &mut self,
+        e: &ChannelVec,
+        v: &ChannelVec,
+        a: &ChannelVec,
+    ) -> (PoseVec, ContourCorrection) {
+        let frame = PathFrame::new(&self.map.pose_of(v), &self.map.pose_of(a));
+        let eps = frame.contour_error(&self.map.pose_of(e));
+        (eps, self.contour.update(&frame, &eps))
     }
 
     /// One servo period of every channel.
@@ -322,18 +424,16 @@ impl ServoBank {
         let mut e = [0.0f32; MAX_SERVOS];
         for c in 0..MAX_SERVOS {
             sp[c] = self.setpoints[c].advance();
-            let s = self.mm_per_count[c];
+            let s = self.unit_per_count[c];
             v[c] = sp[c].velocity * s;
             a[c] = sp[c].accel * s;
             e[c] = following_error(sp[c].position_q16, inputs.feedback[c]).1 * s;
         }
-        let frame = PathFrame::new(&v, &a);
-        let eps = frame.contour_error(&e);
-        let corr = self.contour.update(&frame, &eps);
-        let mut out = PeriodOutputs {
-            contour_error: eps,
-            ..PeriodOutputs::default()
-        };
+        let mut out = PeriodOutputs::default();
+        let mut corr = ContourCorrection::default();
+        if self.coupled {
+            (out.contour_error, corr) = self.couple(&e, &v, &a);
+        }
         for c in 0..MAX_SERVOS {
             if !self.used[c] {
                 continue;
@@ -342,9 +442,13 @@ impl ServoBank {
                 enable: inputs.enable,
                 fault: inputs.fault[c],
             };
-            let coupling = Coupling {
-                reference: corr.reference[c] * self.counts_per_mm[c],
-                command: corr.command[c],
+            let coupling = if self.coupled {
+                Coupling {
+                    reference: self.map.joint_of(c, &corr.reference) * self.counts_per_unit[c],
+                    command: self.map.joint_of(c, &corr.command),
+                }
+            } else {
+                Coupling::NONE
             };
             let o: ServoOutput = self.axes[c].update(&sp[c], inputs.feedback[c], amp, coupling);
             out.dac[c] = o.dac;
@@ -360,10 +464,8 @@ impl ServoBank {
 mod tests {
     use super::*;
 
-    fn v3(x: f32, y: f32, z: f32) -> ChannelVec {
-        let mut v = [0.0; MAX_SERVOS];
-        v[..3].copy_from_slice(&[x, y, z]);
-        v
+    fn v3(x: f32, y: f32, z: f32) -> PoseVec {
+        [x, y, z, 0.0, 0.0]
     }
 
     #[test]
@@ -380,7 +482,7 @@ mod tests {
 
     #[test]
     fn a_lag_along_a_straight_path_is_no_contour_error() {
-        let f = PathFrame::new(&v3(3.0, 4.0, 0.0), &[0.0; MAX_SERVOS]);
+        let f = PathFrame::new(&v3(3.0, 4.0, 0.0), &[0.0; POSE_AXES]);
         let eps = f.contour_error(&v3(0.3, 0.4, 0.0));
         assert!(eps.iter().all(|c| c.abs() < 1e-6), "{eps:?}");
         // A sideways error is all contour error, along the normal.
@@ -405,9 +507,9 @@ mod tests {
 
     #[test]
     fn standing_still_there_is_no_contour_error_and_no_coupling() {
-        let f = PathFrame::new(&[0.0; MAX_SERVOS], &[0.0; MAX_SERVOS]);
+        let f = PathFrame::new(&[0.0; POSE_AXES], &[0.0; POSE_AXES]);
         assert!(!f.moving);
-        assert_eq!(f.contour_error(&v3(1.0, 1.0, 1.0)), [0.0; MAX_SERVOS]);
+        assert_eq!(f.contour_error(&v3(1.0, 1.0, 1.0)), [0.0; POSE_AXES]);
     }
 
     fn config(mode: ContourMode) -> ContourConfig {
@@ -423,7 +525,7 @@ mod tests {
 
     #[test]
     fn cross_coupling_pushes_each_axis_by_its_direction_cosine() {
-        let f = PathFrame::new(&v3(10.0, 0.0, 0.0), &[0.0; MAX_SERVOS]);
+        let f = PathFrame::new(&v3(10.0, 0.0, 0.0), &[0.0; POSE_AXES]);
         let mut l = ContourLoop::new(&config(ContourMode::CrossCoupled));
         let c = l.update(&f, &v3(0.0, 0.01, 0.0));
         assert!(c.command[0].abs() < 1e-9 && c.command[2].abs() < 1e-9);
@@ -431,12 +533,12 @@ mod tests {
             (c.command[1] - (0.1 + 100.0 * 0.01 * 1e-4)).abs() < 1e-6,
             "{c:?}"
         );
-        assert_eq!(c.reference, [0.0; MAX_SERVOS]);
+        assert_eq!(c.reference, [0.0; POSE_AXES]);
     }
 
     #[test]
     fn ccpm_shifts_the_reference_along_the_normal_and_integrates_it() {
-        let f = PathFrame::new(&v3(10.0, 0.0, 0.0), &[0.0; MAX_SERVOS]);
+        let f = PathFrame::new(&v3(10.0, 0.0, 0.0), &[0.0; POSE_AXES]);
         let mut l = ContourLoop::new(&config(ContourMode::Ccpm));
         let mut c = ContourCorrection::default();
         for _ in 0..100 {
@@ -456,7 +558,7 @@ mod tests {
 
     #[test]
     fn uncoupled_asks_for_nothing() {
-        let f = PathFrame::new(&v3(10.0, 0.0, 0.0), &[0.0; MAX_SERVOS]);
+        let f = PathFrame::new(&v3(10.0, 0.0, 0.0), &[0.0; POSE_AXES]);
         let mut l = ContourLoop::new(&config(ContourMode::Uncoupled));
         assert_eq!(
             l.update(&f, &v3(0.0, 1.0, 0.0)),

@@ -35,7 +35,7 @@
 //! firmware under a short critical section: copies only).
 
 use crate::config::{Drive, MachineConfig, MAX_SERVOS};
-use crate::contour::{PeriodInputs, PeriodOutputs, ServoBank};
+use crate::contour::{ContourMap, PeriodInputs, PeriodOutputs, ServoBank};
 use crate::controller::{Controller, Inputs, Outputs};
 use crate::debounce::{SwitchFilter, Switches};
 use crate::servo::{Trip, SERVO_PER_TICK, SETPOINT_FRAC_BITS};
@@ -63,6 +63,8 @@ pub struct Command {
     pub targets: [i64; MAX_SERVOS],
     /// The controller wants the amplifiers enabled.
     pub enable: bool,
+    /// The channels' map to the pose for the next tick, when it changes along the path.
+    pub map: Option<ContourMap>,
 }
 
 impl Command {
@@ -72,6 +74,7 @@ impl Command {
             bank: None,
             targets: counts.map(|c| c << SETPOINT_FRAC_BITS),
             enable: false,
+            map: None,
         }
     }
 
@@ -83,6 +86,7 @@ impl Command {
             bank: out.servo_reset.then(|| ServoBank::new(machine, counts)),
             targets: out.servo_target,
             enable: out.servo_enable,
+            map: out.contour_map,
         }
     }
 }
@@ -160,6 +164,9 @@ impl ServoPacer {
                         self.bank = bank;
                     }
                     self.bank.load_tick(&command.targets);
+                    if let Some(map) = &command.map {
+                        self.bank.load_map(map);
+                    }
                     self.enable = command.enable;
                 }
                 None => self.stats.late_ticks = self.stats.late_ticks.wrapping_add(1),
@@ -222,7 +229,7 @@ pub struct RawInputs {
 
 /// The tick's side of the pacing: the switch filters and the outputs due at the start
 /// of the next tick. See the module documentation.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct TickPacer {
     switches: SwitchFilter,
     /// Outputs of the last tick, applied at the start of the next.
@@ -367,6 +374,7 @@ mod tests {
                         bank: None,
                         targets: counts.map(|c| (c + 40 * (tick + 1)) << SETPOINT_FRAC_BITS),
                         enable: true,
+                        map: None,
                     };
                     p.post(c);
                     posted = c;
@@ -385,6 +393,7 @@ mod tests {
             bank: None,
             targets: at.map(|c| c << SETPOINT_FRAC_BITS),
             enable: true,
+            map: None,
         };
         let mut p = pacer(&at);
         one_tick(&mut p, &feedback);
@@ -399,7 +408,7 @@ mod tests {
             let a = late.period(&feedback, &[false; MAX_SERVOS]);
             let b = held.period(&feedback, &[false; MAX_SERVOS]);
             assert_eq!(a.out, b.out);
-            assert_eq!(a.out.enable, [true; MAX_SERVOS]);
+            assert_eq!(a.out.enable, pad([true; 4]));
         }
         assert_eq!(late.stats().late_ticks, 1);
         assert_eq!(held.stats().late_ticks, 0);
@@ -462,6 +471,7 @@ mod tests {
             bank: None,
             targets: [0; MAX_SERVOS],
             enable: true,
+            map: None,
         });
         let fault = pad([true, false, false, false]);
         let s = p.period(&counts, &fault);
@@ -480,6 +490,7 @@ mod tests {
             bank: None,
             targets: [0; MAX_SERVOS],
             enable: true,
+            map: None,
         });
         // Trip channel 0, then reset the bank standing at new counts.
         p.period(&counts, &pad([true, false, false, false]));
@@ -496,7 +507,7 @@ mod tests {
         p.post(Command::of(&out, &m, &at));
         let s = p.period(&at, &[false; MAX_SERVOS]);
         assert_eq!(s.out.trip, [None; MAX_SERVOS]);
-        assert_eq!(s.out.enable, [true; MAX_SERVOS]);
+        assert_eq!(s.out.enable, pad([true; 4]));
     }
 
     fn control(ctrl: &mut Controller, id: u16, cmd: Control) {

@@ -248,8 +248,11 @@ impl MachineConfig {
             KinematicsConfig::HexapodXy(g) => g.check(&self.joints)?,
         }
         let contour = &self.servo.contour;
-        let cartesian = matches!(self.kinematics, KinematicsConfig::Cartesian { .. });
-        if !contour.is_valid() || (contour.mode != ContourMode::Uncoupled && !cartesian) {
+        let mapped = matches!(
+            self.kinematics,
+            KinematicsConfig::Cartesian { .. } | KinematicsConfig::HexapodXy(_)
+        );
+        if !contour.is_valid() || (contour.mode != ContourMode::Uncoupled && !mapped) {
             return Err(ConfigError::Contour);
         }
         Ok(())

@@ -3,7 +3,9 @@
 //! references (steps or encoder counts, with the joints' homing offsets).
 
 use super::Controller;
-use crate::config::{Drive, MAX_SERVOS, MAX_STEPPERS};
+use crate::config::{ContourMode, Drive, MAX_SERVOS, MAX_STEPPERS};
+use crate::contour::{ContourMap, POSE_AXES};
+use crate::kinematics::MachineKinematics;
 use crate::protocol::State;
 use crate::servo::{Trip, SETPOINT_FRAC_BITS};
 use crate::stepper::StepTrain;
@@ -29,7 +31,7 @@ pub struct Inputs {
 }
 
 /// What the hardware must do this tick.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Outputs {
     /// Step train of each stepper channel; `forward` already includes DIR inversion.
     pub steps: [StepTrain; MAX_STEPPERS],
@@ -43,6 +45,10 @@ pub struct Outputs {
     /// The servo loops must restart, clearing their trips, standing at their present
     /// feedback (which `servo_target` now equals): rebuild the bank from it.
     pub servo_reset: bool,
+    /// The channels' map to the pose at this tick's commanded pose, for a coupled
+    /// machine whose map changes along the path (the hexapod-xy): load into
+    /// [`crate::contour::ServoBank::load_map`].
+    pub contour_map: Option<ContourMap>,
 }
 
 impl Controller {
@@ -73,6 +79,32 @@ impl Controller {
                 self.out.servo_target[channel as usize] = self.actuator_q16(j, self.joints[j]);
             }
         }
+        self.update_contour_map();
+    }
+
+    /// The hexapod-xy with contour control: the channels' map at the commanded pose
+    /// (kept from the tick before where the pose is singular).
+    fn update_contour_map(&mut self) {
+        let MachineKinematics::HexapodXy(k) = &self.kin else {
+            return;
+        };
+        if self.machine.servo.contour.mode == ContourMode::Uncoupled {
+            return;
+        }
+        let Ok(jm) = k.contour_map(&self.exec.pose) else {
+            return;
+        };
+        let mut map = ContourMap::NONE;
+        for (j, jc) in self.machine.joints.iter().enumerate() {
+            if let Drive::Servo { channel } = jc.drive {
+                let c = channel as usize;
+                for a in 0..POSE_AXES {
+                    map.to_pose[a][c] = jm.to_pose[a][j];
+                }
+                map.to_joint[c] = jm.to_joint[j];
+            }
+        }
+        self.out.contour_map = Some(map);
     }
 
     /// This tick's outputs from the joints' positions: step trains (DIR inverted where

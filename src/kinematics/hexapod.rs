@@ -258,6 +258,30 @@ impl Hexapod {
         Ok(())
     }
 
+    /// The legs' rows for small motions, in `f32` for the contour controller: with the
+    /// platform origin at `p` (mm) and its rotation `r`, row i is (n_i, (R·b_i) × n_i),
+    /// n_i the leg's unit vector, so that δl_i = n_i·δp + ((R·b_i) × n_i)·ω for a
+    /// small translation δp (mm) and rotation ω (rad, machine frame).
+    pub fn rows_f32(&self, p: &[f32; 3], r: &[[f32; 3]; 3]) -> [[f32; 6]; 6] {
+        let mut rows = [[0.0f32; 6]; 6];
+        for (row, (a, b)) in rows.iter_mut().zip(self.base.iter().zip(&self.platform)) {
+            let b = b.map(|c| c as f32 * 0.25e-6);
+            let rb = r.map(|ri| ri[0] * b[0] + ri[1] * b[1] + ri[2] * b[2]);
+            let d = [0, 1, 2].map(|k| p[k] + rb[k] - a[k] as f32 * 0.5e-6);
+            let inv = 1.0 / crate::math::sqrt_f32(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+            let n = d.map(|c| c * inv);
+            *row = [
+                n[0],
+                n[1],
+                n[2],
+                rb[1] * n[2] - rb[2] * n[1],
+                rb[2] * n[0] - rb[0] * n[2],
+                rb[0] * n[1] - rb[1] * n[0],
+            ];
+        }
+        rows
+    }
+
     /// Pose of `joints` by Newton iteration from `guess`; returns the iterations used.
     pub fn forward(
         &self,
