@@ -32,6 +32,9 @@
 //! platform pose, then `w = home + Rᵀ·(T − p)` in the same arithmetic. The Jacobian is
 //! the hexapod's chained with the split's derivatives, in `f32`.
 
+// Matrix arithmetic over index-addressed rows and columns reads best with an index.
+#![allow(clippy::needless_range_loop)]
+
 use super::hexapod::Hexapod;
 use super::{Jacobian, Joints, Pose, Unreachable};
 use crate::config::{HexapodXyGeometry, JointConfig, AXES, MAX_JOINTS};
@@ -268,7 +271,7 @@ fn inverse6(mut m: [[f32; 6]; 6]) -> Option<[[f32; 6]; 6]> {
                 p = r;
             }
         }
-        if !(m[p][c].abs() > 1e-6 * scale) {
+        if m[p][c].abs().partial_cmp(&(1e-6 * scale)) != Some(core::cmp::Ordering::Greater) {
             return None;
         }
         m.swap(c, p);
