@@ -24,7 +24,7 @@ ALLOWED = {
     "sim": {"link"},
     "machine_file": {"input", "sim", "analysis", "gcode"},
     "analysis": {"sim"},
-    "contour_study": {"sim", "machine_file"},
+    "contour_study": {"sim", "machine_file", "analysis"},
     "job": {"gcode", "link", "sim", "analysis", "machine_file", "input"},
     "grbl": {"gcode", "link", "analysis", "job"},
     "station": {"gcode", "link", "job", "input", "analysis"},

@@ -96,6 +96,26 @@ impl ContourMap {
         to_joint: [[0.0; POSE_AXES]; MAX_SERVOS],
     };
 
+    /// The channel-indexed map of `machine`'s servo joints from a joint-indexed one.
+    pub fn of_joints(
+        machine: &MachineConfig,
+        jm: &crate::kinematics::hexapod_xy::JointMap,
+    ) -> Self {
+        let mut map = Self::NONE;
+        for (j, jc) in machine.joints.iter().enumerate() {
+            if let Drive::Servo { channel } = jc.drive {
+                let c = channel as usize;
+                if c < MAX_SERVOS {
+                    for a in 0..POSE_AXES {
+                        map.to_pose[a][c] = jm.to_pose[a][j];
+                    }
+                    map.to_joint[c] = jm.to_joint[j];
+                }
+            }
+        }
+        map
+    }
+
     /// `to_pose · x`.
     fn pose_of(&self, x: &ChannelVec) -> PoseVec {
         let mut p = [0.0; POSE_AXES];

@@ -4,7 +4,7 @@
 
 use super::Controller;
 use crate::config::{ContourMode, Drive, MAX_SERVOS, MAX_STEPPERS};
-use crate::contour::{ContourMap, POSE_AXES};
+use crate::contour::ContourMap;
 use crate::kinematics::MachineKinematics;
 use crate::protocol::State;
 use crate::servo::{Trip, SETPOINT_FRAC_BITS};
@@ -94,17 +94,7 @@ impl Controller {
         let Ok(jm) = k.contour_map(&self.exec.pose) else {
             return;
         };
-        let mut map = ContourMap::NONE;
-        for (j, jc) in self.machine.joints.iter().enumerate() {
-            if let Drive::Servo { channel } = jc.drive {
-                let c = channel as usize;
-                for a in 0..POSE_AXES {
-                    map.to_pose[a][c] = jm.to_pose[a][j];
-                }
-                map.to_joint[c] = jm.to_joint[j];
-            }
-        }
-        self.out.contour_map = Some(map);
+        self.out.contour_map = Some(ContourMap::of_joints(&self.machine, &jm));
     }
 
     /// This tick's outputs from the joints' positions: step trains (DIR inverted where

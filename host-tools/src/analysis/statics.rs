@@ -514,7 +514,7 @@ mod tests {
                 let t = k as f64 * 0.05;
                 let (a, b) = (
                     tilt * (std::f64::consts::PI * t / 5.0).sin(),
-                    tilt * (std::f64::consts::PI * t / 2.5).sin(),
+                    tilt * (std::f64::consts::PI * t / 10.0).sin(),
                 );
                 let wp = [t * t.cos(), t * t.sin(), 3.0 * t + 260.0];
                 // R = Ry(−B)·Rx(−A) applied to w − home.

@@ -38,10 +38,20 @@ struct Args {
     /// Writes every run's trace as CSV (t, contour error and X Y Z tracking errors, mm).
     #[arg(long)]
     csv: Option<PathBuf>,
+    /// Report B's machine itself (the bundled examples/machines/hexapod-xy.toml, or
+    /// --machine): the five-axis study, PID and LQG.
+    #[arg(long)]
+    five_axis: bool,
+    /// Five-axis study: the tool axis tilts by this many degrees along the path.
+    #[arg(long, default_value_t = 0.0)]
+    tilt: f64,
 }
 
 fn main() -> Result<()> {
     let args = Args::parse();
+    if args.five_axis {
+        return five_axis(&args);
+    }
     let text = match &args.machine {
         Some(p) => std::fs::read_to_string(p)?,
         None => SEED_B.to_string(),
@@ -202,5 +212,54 @@ fn plot(path: &std::path::Path, results: &[RunResult], c: &Conditions) -> Result
         }
     }
     root.present().map_err(|e| fail(e.to_string()))?;
+    Ok(())
+}
+
+/// The five-axis study on report B's machine: every scheme with every axis law.
+fn five_axis(args: &Args) -> Result<()> {
+    use pkmc_host::contour_study::five_axis::{self as fa, FiveAxisMachine, Law};
+    let text = match &args.machine {
+        Some(p) => std::fs::read_to_string(p)?,
+        None => fa::HEXAPOD_XY.to_string(),
+    };
+    let file: MachineFile = toml::from_str(&text)?;
+    let machine = FiveAxisMachine::new(&file)?;
+    let mut c = fa::Conditions::study();
+    c.tilt_deg = args.tilt;
+    if args.exact_plants {
+        c.mismatch = [Mismatch::NONE; 8];
+    }
+    if args.no_disturbance {
+        c.force.steady = [0.0; 3];
+    }
+    println!("conditions: {c:?}");
+    println!("| loops | scheme | path max (um) | path RMS (um) | direction max (mdeg) | direction RMS (mdeg) | max / uncoupled (path, direction) | max following (um) | saturated periods |");
+    println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    for law in [Law::Pid] {
+        let runs: Vec<_> = Scheme::ALL
+            .iter()
+            .map(|s| machine.run(*s, law, &c))
+            .collect();
+        let (bp, bd) = (runs[0].max_path_mm, runs[0].max_dir_deg);
+        for r in &runs {
+            println!(
+                "| {} | {} | {:.2} | {:.2} | {:.3} | {:.3} | {:.4}, {:.4} | {:.1} | {} |{}",
+                law.name(),
+                r.scheme.name(),
+                r.max_path_mm * 1e3,
+                r.rms_path_mm * 1e3,
+                r.max_dir_deg * 1e3,
+                r.rms_dir_deg * 1e3,
+                r.max_path_mm / bp,
+                r.max_dir_deg / bd,
+                r.max_following_mm * 1e3,
+                r.saturated_periods,
+                r.trip
+                    .as_ref()
+                    .map(|t| format!(" TRIP {t:?}"))
+                    .unwrap_or_default()
+            );
+        }
+    }
     Ok(())
 }

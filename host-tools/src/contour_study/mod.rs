@@ -20,6 +20,8 @@
 //! measured as the true distance from the simulated tool position to the helix (Newton
 //! iteration on the curve parameter), not the controller's estimate.
 
+pub mod five_axis;
+
 use crate::machine_file::MachineFile;
 use crate::sim::plant::{DiscretePlant, Mismatch, TransferFunction};
 use pkmc::config::{ContourMode, Drive, KinematicsConfig, MachineConfig, MAX_SERVOS};
@@ -190,6 +192,12 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 
 /// Distance from `y` (mm) to the helix over t ∈ [`start`, `end`], searched near `guess`.
 pub fn distance_to_helix(y: [f64; 3], guess: f64, start: f64, end: f64) -> f64 {
+    nearest_on_helix(y, guess, start, end).1
+}
+
+/// The nearest point of the helix to `y` (mm) over t ∈ [`start`, `end`], searched near
+/// `guess` by Newton's method on the curve parameter: (t, distance).
+pub fn nearest_on_helix(y: [f64; 3], guess: f64, start: f64, end: f64) -> (f64, f64) {
     let mut t = guess.clamp(start, end);
     for _ in 0..8 {
         let p = helix(t);
@@ -208,11 +216,8 @@ pub fn distance_to_helix(y: [f64; 3], guess: f64, start: f64, end: f64) -> f64 {
         t = next;
     }
     let p = helix(t);
-    dot(
-        [p[0] - y[0], p[1] - y[1], p[2] - y[2]],
-        [p[0] - y[0], p[1] - y[1], p[2] - y[2]],
-    )
-    .sqrt()
+    let d = [p[0] - y[0], p[1] - y[1], p[2] - y[2]];
+    (t, dot(d, d).sqrt())
 }
 
 /// One servo channel of the study machine.
@@ -463,7 +468,7 @@ impl StudyMachine {
 }
 
 /// The bundled study machine file.
-pub const SEED_B: &str = include_str!("../../examples/machines/seed-b.toml");
+pub const SEED_B: &str = include_str!("../../../examples/machines/seed-b.toml");
 
 /// Runs all four schemes on the bundled `seed-b` machine under [`Conditions::STUDY`].
 pub fn run_study() -> Result<Vec<RunResult>, StudyError> {
