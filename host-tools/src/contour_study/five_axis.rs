@@ -195,6 +195,23 @@ pub struct Run {
     pub trip: Option<(usize, String)>,
 }
 
+impl Run {
+    fn new(scheme: Scheme, law: Law, ticks: usize) -> Self {
+        Run {
+            scheme,
+            law,
+            max_path_mm: 0.0,
+            rms_path_mm: 0.0,
+            max_dir_deg: 0.0,
+            rms_dir_deg: 0.0,
+            max_following_mm: 0.0,
+            trace: Vec::with_capacity(ticks),
+            saturated_periods: 0,
+            trip: None,
+        }
+    }
+}
+
 /// One servo joint of the machine.
 #[derive(Clone, Debug)]
 struct Joint {
@@ -263,19 +280,10 @@ impl FiveAxisMachine {
         ]
     }
 
-    /// Runs `scheme` with `law` under `c`.
-    pub fn run(&self, scheme: Scheme, law: Law, c: &Conditions) -> Run {
-        let config = scheme.configure(&self.config);
-        let kin = MachineKinematics::HexapodXy(self.kin);
-        let coupled = config.servo.contour.mode != pkmc::config::ContourMode::Uncoupled;
-        let h = 1.0 / SERVO_HZ as f64;
-        let t0 = -c.lead_in_s;
-        let mut start_q = [0i64; MAX_JOINTS];
-        kin.inverse(&Self::units(&c.pose(t0)), &mut start_q)
-            .expect("the path's start is reachable");
-        // Plants: the command path and, on the legs, the load-force path.
-        let mut plants: Vec<(DiscretePlant, Option<DiscretePlant>)> = self
-            .joints
+    /// Each joint's plant, `c`'s mismatch applied, at period `h`: the command path and,
+    /// on the legs, the load-force path.
+    fn plants(&self, c: &Conditions, h: f64) -> Vec<(DiscretePlant, Option<DiscretePlant>)> {
+        self.joints
             .iter()
             .enumerate()
             .map(|(j, jt)| {
@@ -288,7 +296,20 @@ impl FiveAxisMachine {
                 });
                 (tf.discretize(h), load)
             })
-            .collect();
+            .collect()
+    }
+
+    /// Runs `scheme` with `law` under `c`.
+    pub fn run(&self, scheme: Scheme, law: Law, c: &Conditions) -> Run {
+        let config = scheme.configure(&self.config);
+        let kin = MachineKinematics::HexapodXy(self.kin);
+        let coupled = config.servo.contour.mode != pkmc::config::ContourMode::Uncoupled;
+        let h = 1.0 / SERVO_HZ as f64;
+        let t0 = -c.lead_in_s;
+        let mut start_q = [0i64; MAX_JOINTS];
+        kin.inverse(&Self::units(&c.pose(t0)), &mut start_q)
+            .expect("the path's start is reachable");
+        let mut plants = self.plants(c, h);
         let mut counts = [0i64; MAX_SERVOS];
         for (j, jt) in self.joints.iter().enumerate() {
             counts[jt.channel] = (start_q[j] as f64 * 1e-6 * jt.counts_per_mm).round() as i64;
@@ -299,18 +320,7 @@ impl FiveAxisMachine {
         let mut inputs = [0.0f64; 8];
         let mut load = [0.0f64; 8];
         let ticks = ((c.duration_s + c.lead_in_s) * TICK_HZ as f64).round() as u64;
-        let mut run = Run {
-            scheme,
-            law,
-            max_path_mm: 0.0,
-            rms_path_mm: 0.0,
-            max_dir_deg: 0.0,
-            rms_dir_deg: 0.0,
-            max_following_mm: 0.0,
-            trace: Vec::with_capacity(ticks as usize),
-            saturated_periods: 0,
-            trip: None,
-        };
+        let mut run = Run::new(scheme, law, ticks as usize);
         let (mut sum_path, mut sum_dir, mut samples) = (0.0, 0.0, 0u64);
         let mut q_nm = start_q;
         let mut measured_pose = Self::units(&c.pose(t0));
@@ -332,9 +342,7 @@ impl FiveAxisMachine {
             let w = c.force.at(t_tick);
             let f = joint_forces(&pose, &w, &config, &kin, &[0, 1, 2, 3, 4])
                 .unwrap_or([0.0; MAX_JOINTS]);
-            for j in 0..8 {
-                load[j] = f[j];
-            }
+            load.copy_from_slice(&f[..8]);
             let (mut path_err, mut dir_err) = (0.0, 0.0);
             for k in 0..SERVO_PER_TICK {
                 let period = (n - 1) * SERVO_PER_TICK as u64 + k as u64;
@@ -386,22 +394,9 @@ impl FiveAxisMachine {
                 if t < 0.0 {
                     continue;
                 }
-                let mut at = [0i64; AXES];
-                if kin.forward(&q_nm, &measured_pose, &mut at).is_err() {
+                let Some((d, dir)) = measure(&kin, &q_nm, &mut measured_pose, t, c) else {
                     continue;
-                }
-                measured_pose = at;
-                let y = [
-                    at[0] as f64 * 1e-6,
-                    at[1] as f64 * 1e-6,
-                    at[2] as f64 * 1e-6,
-                ];
-                let (ts, d) = nearest_on_helix(y, t - 1.0 / TICK_HZ as f64, t0, c.duration_s);
-                let want = c.pose(ts);
-                let dir = angle_deg(
-                    tool_axis(at[3] as f64 * 1e-9, at[4] as f64 * 1e-9),
-                    tool_axis(want[3], want[4]),
-                );
+                };
                 (path_err, dir_err) = (d, dir);
                 sum_path += d * d;
                 sum_dir += dir * dir;
@@ -417,6 +412,33 @@ impl FiveAxisMachine {
         run.rms_dir_deg = (sum_dir / samples.max(1) as f64).sqrt();
         run
     }
+}
+
+/// The errors at joints `q` (nm) at `t` s: the pose by forward kinematics from `guess`
+/// (updated), the distance to the helix and the tool-direction error at the nearest
+/// point, mm and degrees.
+fn measure(
+    kin: &MachineKinematics,
+    q: &[i64; MAX_JOINTS],
+    guess: &mut [i64; AXES],
+    t: f64,
+    c: &Conditions,
+) -> Option<(f64, f64)> {
+    let mut at = [0i64; AXES];
+    kin.forward(q, guess, &mut at).ok()?;
+    *guess = at;
+    let y = [
+        at[0] as f64 * 1e-6,
+        at[1] as f64 * 1e-6,
+        at[2] as f64 * 1e-6,
+    ];
+    let (ts, d) = nearest_on_helix(y, t - 1.0 / TICK_HZ as f64, -c.lead_in_s, c.duration_s);
+    let want = c.pose(ts);
+    let dir = angle_deg(
+        tool_axis(at[3] as f64 * 1e-9, at[4] as f64 * 1e-9),
+        tool_axis(want[3], want[4]),
+    );
+    Some((d, dir))
 }
 
 /// The bundled machine file.
