@@ -146,7 +146,13 @@ impl MachineConfig {
             axes: [linear, linear, linear, rotary, none, rotary],
             home: [0, 0, -80 * mm, 0, 0, 0],
             servo: ServoConfig {
-                gains: [ServoGains::DEFAULT_PLANT; MAX_SERVOS],
+                gains: core::array::from_fn(|c| {
+                    if c < 4 {
+                        ServoGains::DEFAULT_PLANT
+                    } else {
+                        ServoGains::NONE
+                    }
+                }),
                 contour: ContourConfig::UNCOUPLED,
             },
             motion: MotionConfig::TRAPEZOID,
@@ -222,12 +228,13 @@ impl MachineConfig {
             motion: MotionConfig::TRAPEZOID,
         }
     }
-    /// Report B's machine (`examples/machines/hexapod-xy.toml` without its plants and
-    /// tuned loops): the thesis hexapod's legs (as [`MachineConfig::hexapod`]) as
-    /// servo cylinders on channels 0..5, 280..420 mm, with the platform's home at
-    /// (0, 0, 260 mm); the table's X and Y on servo channels 6 and 7, ±50 mm; the tool
-    /// tip 275 mm above the base. All 1000 counts/mm, the simulator's default servo
-    /// plant's gains. Home: the workpiece point (0, 0, 275 mm) under the tool, level.
+    /// Report B's machine (`examples/machines/hexapod-xy.toml`; the plants, names and
+    /// cylinder areas are the host's): the thesis hexapod's legs (as
+    /// [`MachineConfig::hexapod`]) as servo cylinders on channels 0..5, 280..420 mm, with
+    /// the platform's home at (0, 0, 260 mm); the table's X and Y on servo channels 6
+    /// and 7, ±50 mm; the tool tip 275 mm above the base. All 1000 counts/mm, 20 mm/s,
+    /// 200 mm/s²; `seed-b`'s loops (legs as its Z leg, the table as its X and Y) and
+    /// CCPM. Home: the workpiece point (0, 0, 275 mm) under the tool, level.
     pub fn hexapod_xy() -> Self {
         let mm = crate::units::NM_PER_MM;
         let deg = crate::units::NDEG_PER_DEG;
@@ -241,8 +248,8 @@ impl MachineConfig {
             min,
             max,
             limits: Limits {
-                max_velocity: 50 * mm,
-                max_accel: 500 * mm,
+                max_velocity: 20 * mm,
+                max_accel: 200 * mm,
             },
             homing: Homing::NONE,
         };
@@ -253,17 +260,27 @@ impl MachineConfig {
         for c in 6..8u8 {
             let _ = joints.push(joint(c, -50 * mm, 50 * mm));
         }
-        let linear = Limits {
-            max_velocity: 30 * mm,
-            max_accel: 300 * mm,
+        let loop_of = |kp: f32, ki: f32, kd: f32, kvff: f32, kaff: f32| ServoGains {
+            kp,
+            ki,
+            kd,
+            kvff,
+            kaff,
+            max_output: 200.0,
+            max_integral: 200.0,
+            dac_per_unit: 10.0,
+            dac_offset: 0,
+            ferror: 2000,
+            min_ferror: 1000,
         };
-        let rotary = Limits {
-            max_velocity: 10 * deg,
-            max_accel: 100 * deg,
-        };
-        let none = Limits {
-            max_velocity: 0,
-            max_accel: 0,
+        let leg = loop_of(0.05, 0.6, 5.0e-4, 3.8116e-3, 2.1552e-5);
+        let mut gains = [ServoGains::NONE; MAX_SERVOS];
+        gains[..6].copy_from_slice(&[leg; 6]);
+        gains[6] = loop_of(0.1, 1.6, 0.0, 5.4632e-3, -8.6924e-5);
+        gains[7] = loop_of(0.075, 1.2, 3.0e-4, 5.8629e-3, -1.2190e-4);
+        let axis = |v: i64, a: i64| Limits {
+            max_velocity: v,
+            max_accel: a,
         };
         let mut name = heapless::String::new();
         let _ = name.push_str("hexapod-xy");
@@ -275,11 +292,25 @@ impl MachineConfig {
                 tool_z: 275 * mm,
             }),
             joints,
-            axes: [linear, linear, linear, rotary, rotary, none],
+            axes: [
+                axis(20 * mm, 200 * mm),
+                axis(20 * mm, 200 * mm),
+                axis(10 * mm, 100 * mm),
+                axis(20 * deg, 200 * deg),
+                axis(20 * deg, 200 * deg),
+                axis(0, 0),
+            ],
             home: [0, 0, 275 * mm, 0, 0, 0],
             servo: ServoConfig {
-                gains: [ServoGains::DEFAULT_PLANT; MAX_SERVOS],
-                contour: ContourConfig::UNCOUPLED,
+                gains,
+                contour: ContourConfig {
+                    mode: ContourMode::Ccpm,
+                    kp: 400.0,
+                    ki: 1000.0,
+                    max_integral: 50.0,
+                    kr: 20.0,
+                    max_offset: 0.5,
+                },
             },
             motion: MotionConfig::TRAPEZOID,
         }

@@ -443,6 +443,9 @@ pub const H4_TABLE_MACHINE: &str = include_str!("../../../examples/machines/h4-t
 /// The hexapod machine file.
 pub const HEXAPOD_MACHINE: &str = include_str!("../../../examples/machines/hexapod.toml");
 
+/// Report B's machine file (`examples/machines/hexapod-xy.toml`).
+pub const HEXAPOD_XY_MACHINE: &str = include_str!("../../../examples/machines/hexapod-xy.toml");
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -459,6 +462,8 @@ mod tests {
         assert_eq!(m, MachineConfig::h4_table());
         let m = parse(HEXAPOD_MACHINE, "hexapod.toml").unwrap();
         assert_eq!(m, MachineConfig::hexapod());
+        let m = parse(HEXAPOD_XY_MACHINE, "hexapod-xy.toml").unwrap();
+        assert_eq!(m, MachineConfig::hexapod_xy());
     }
 
     #[test]
