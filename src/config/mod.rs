@@ -24,7 +24,7 @@ pub const MAX_JOINTS: usize = 11;
 /// Stepper channels the board drives.
 pub const MAX_STEPPERS: usize = 7;
 /// Servo channels the board drives.
-pub const MAX_SERVOS: usize = 4;
+pub const MAX_SERVOS: usize = 8;
 /// Most steps a stepper channel on an advanced timer (TIM1, TIM8, TIM20) emits in one
 /// tick: one step per timer period, counted by its 16-bit repetition counter.
 pub const STEPS_PER_TICK_ADVANCED: u32 = 1 << 16;
