@@ -6,9 +6,9 @@
 //!
 //! **Servo side** ([`ServoPacer`], one call per servo period). Every
 //! [`SERVO_PER_TICK`]th period is a tick edge. There the pacer first takes the
-//! [`Command`] the previous tick posted ([`ServoPacer::post`]): a rebuilt bank if the
-//! controller asked for a servo reset, then the tick's targets
-//! ([`ServoBank::load_tick`]) and the enable; then it runs the period; then it leaves
+//! [`Command`] the previous tick posted ([`ServoPacer::post`]): the tick's targets
+//! ([`ServoBank::load_tick`]), the channel map if it changes along the path, and the
+//! enable; then it runs the period; then it leaves
 //! a [`Snapshot`] of that period (encoder counts, trips, whether each channel's fault
 //! input was active in any period since the last edge) and reports the edge
 //! ([`ServoPeriod::tick`]): the tick runs next, on that snapshot. A tick that has not
@@ -57,8 +57,9 @@ pub struct Snapshot {
 /// What a tick hands to the servo loops, taken at the next tick edge.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Command {
-    /// A new bank to run from now on (the controller asked for a servo reset).
-    pub bank: Option<ServoBank>,
+    /// The controller asked for a servo reset: the caller has installed a bank rebuilt
+    /// at the snapshot's counts ([`ServoPacer::restart`]) before posting this.
+    pub reset: bool,
     /// Each channel's target at the end of the next tick, counts × 2^16.
     pub targets: [i64; MAX_SERVOS],
     /// The controller wants the amplifiers enabled.
@@ -71,19 +72,17 @@ impl Command {
     /// The loops standing at `counts` (their own positions), disabled.
     pub fn standing(counts: &[i64; MAX_SERVOS]) -> Self {
         Self {
-            bank: None,
+            reset: false,
             targets: counts.map(|c| c << SETPOINT_FRAC_BITS),
             enable: false,
             map: None,
         }
     }
 
-    /// What the controller's outputs `out` ask of the loops: with a bank of `machine`
-    /// rebuilt at `counts` (the snapshot the tick ran on) when they ask for a servo
-    /// reset.
-    pub fn of(out: &Outputs, machine: &MachineConfig, counts: &[i64; MAX_SERVOS]) -> Self {
+    /// What the controller's outputs `out` ask of the loops.
+    pub fn of(out: &Outputs) -> Self {
         Self {
-            bank: out.servo_reset.then(|| ServoBank::new(machine, counts)),
+            reset: out.servo_reset,
             targets: out.servo_target,
             enable: out.servo_enable,
             map: out.contour_map,
@@ -160,9 +159,6 @@ impl ServoPacer {
         if edge {
             match self.command.take() {
                 Some(command) => {
-                    if let Some(bank) = command.bank {
-                        self.bank = bank;
-                    }
                     self.bank.load_tick(&command.targets);
                     if let Some(map) = &command.map {
                         self.bank.load_map(map);
@@ -193,6 +189,15 @@ impl ServoPacer {
             self.fault_seen = [false; MAX_SERVOS];
         }
         ServoPeriod { out, tick: edge }
+    }
+
+    /// Replaces the bank at once (the controller asked for a servo reset: a bank of
+    /// its machine standing at the snapshot's counts, built by the tick side). A reset
+    /// takes effect before the next edge, up to one tick early: the loops then hold
+    /// the snapshot's position, which is what the reset asks; the bank is not carried
+    /// in the [`Command`], which keeps the servo side's state to one bank.
+    pub fn restart(&mut self, bank: ServoBank) {
+        self.bank = bank;
     }
 
     /// Posts a tick's command, to be taken at the next tick edge (replacing one not
@@ -262,7 +267,8 @@ impl TickPacer {
 
     /// One tick of `ctrl` on the raw inputs `raw` and the snapshot of this tick's
     /// edge; its outputs become [`TickPacer::due`], and the returned command is to be
-    /// posted to the servo side for the next edge.
+    /// posted to the servo side for the next edge (after [`ServoPacer::restart`] with
+    /// `ServoBank::new(ctrl.machine(), &snapshot.counts)` when it asks for a reset).
     pub fn tick(&mut self, ctrl: &mut Controller, raw: &RawInputs, snapshot: &Snapshot) -> Command {
         let switches = self.switches.sample(&raw.switches);
         let amplifier_fault = if snapshot.fault.iter().any(|&f| f) {
@@ -284,7 +290,7 @@ impl TickPacer {
         };
         self.inputs = inputs;
         self.due = *ctrl.tick(&inputs);
-        Command::of(&self.due, ctrl.machine(), &snapshot.counts)
+        Command::of(&self.due)
     }
 }
 
@@ -371,7 +377,7 @@ mod tests {
                 if k == 0 {
                     // The tick runs here and posts its command for the next edge.
                     let c = Command {
-                        bank: None,
+                        reset: false,
                         targets: counts.map(|c| (c + 40 * (tick + 1)) << SETPOINT_FRAC_BITS),
                         enable: true,
                         map: None,
@@ -390,7 +396,7 @@ mod tests {
         let at = [200; MAX_SERVOS];
         let feedback = [195; MAX_SERVOS];
         let hold = Command {
-            bank: None,
+            reset: false,
             targets: at.map(|c| c << SETPOINT_FRAC_BITS),
             enable: true,
             map: None,
@@ -468,7 +474,7 @@ mod tests {
         let mut p = pacer(&counts);
         one_tick(&mut p, &counts);
         p.post(Command {
-            bank: None,
+            reset: false,
             targets: [0; MAX_SERVOS],
             enable: true,
             map: None,
@@ -481,13 +487,13 @@ mod tests {
     }
 
     #[test]
-    fn a_reset_command_replaces_the_bank_at_the_next_edge() {
+    fn a_restart_replaces_the_bank_at_once_and_the_reset_command_loads_at_the_edge() {
         let m = machine();
         let counts = [0; MAX_SERVOS];
         let mut p = pacer(&counts);
         one_tick(&mut p, &counts);
         p.post(Command {
-            bank: None,
+            reset: false,
             targets: [0; MAX_SERVOS],
             enable: true,
             map: None,
@@ -504,7 +510,11 @@ mod tests {
             servo_reset: true,
             ..Outputs::default()
         };
-        p.post(Command::of(&out, &m, &at));
+        let command = Command::of(&out);
+        assert!(command.reset);
+        p.restart(ServoBank::new(&m, &at));
+        assert_eq!(p.snapshot().trips[0], Some(Trip::AmplifierFault));
+        p.post(command);
         let s = p.period(&at, &[false; MAX_SERVOS]);
         assert_eq!(s.out.trip, [None; MAX_SERVOS]);
         assert_eq!(s.out.enable, pad([true; 4]));

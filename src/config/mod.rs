@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 mod builtin;
 mod validate;
 
-pub use validate::{ConfigError, GeometryField};
+pub use validate::{BoardChannels, ConfigError, GeometryField};
 
 /// Number of pose axes: X Y Z (linear) and A B C (rotary).
 pub const AXES: usize = 6;

@@ -1,6 +1,8 @@
 //! Validation of a machine configuration: [`MachineConfig::validate`] and the
 //! geometry checks of the kinematics, each refusal naming its field
-//! ([`ConfigError`]).
+//! ([`ConfigError`]). [`MachineConfig::validate_on`] checks the drive channels against
+//! the board that runs the machine ([`BoardChannels`]): a firmware build wires fewer
+//! channels than the core has room for.
 
 use super::*;
 
@@ -215,9 +217,36 @@ impl HexapodXyGeometry {
     }
 }
 
+/// The drive channels a board wires: stepper channels `0..steppers` and servo channels
+/// `0..servos`. A machine on another channel is refused with
+/// [`ConfigError::JointChannel`], naming the joint.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BoardChannels {
+    /// Stepper channels wired, at most [`MAX_STEPPERS`].
+    pub steppers: u8,
+    /// Servo channels wired, at most [`MAX_SERVOS`].
+    pub servos: u8,
+}
+
+impl BoardChannels {
+    /// Every channel the core has room for: the simulator's board, and what
+    /// [`MachineConfig::validate`] checks against.
+    pub const ALL: BoardChannels = BoardChannels {
+        steppers: MAX_STEPPERS as u8,
+        servos: MAX_SERVOS as u8,
+    };
+}
+
 impl MachineConfig {
-    /// Checks every field; the first problem found is returned.
+    /// Checks every field against the core's capacities ([`BoardChannels::ALL`]); the
+    /// first problem found is returned.
     pub fn validate(&self) -> Result<(), ConfigError> {
+        self.validate_on(BoardChannels::ALL)
+    }
+
+    /// Checks every field, and that each joint's drive channel is one `board` wires;
+    /// the first problem found is returned.
+    pub fn validate_on(&self, board: BoardChannels) -> Result<(), ConfigError> {
         if self.joints.is_empty() {
             return Err(ConfigError::NoJoints);
         }
@@ -232,7 +261,7 @@ impl MachineConfig {
         }
         let mut used = ChannelsUsed::default();
         for (j, jc) in self.joints.iter().enumerate() {
-            self.check_joint(j as u8, jc, &mut used)?;
+            self.check_joint(j as u8, jc, board, &mut used)?;
         }
         match self.kinematics {
             KinematicsConfig::Cartesian { axis_of_joint } => {
@@ -258,12 +287,13 @@ impl MachineConfig {
         Ok(())
     }
 
-    /// Checks `joints[joint]` (`jc`): limits, travel, scale, homing and its drive,
-    /// marking its channel in `used`.
+    /// Checks `joints[joint]` (`jc`): limits, travel, scale, homing and its drive (on
+    /// a channel of `board`), marking its channel in `used`.
     fn check_joint(
         &self,
         joint: u8,
         jc: &JointConfig,
+        board: BoardChannels,
         used: &mut ChannelsUsed,
     ) -> Result<(), ConfigError> {
         if jc.limits.max_velocity <= 0 || jc.limits.max_accel <= 0 {
@@ -291,7 +321,8 @@ impl MachineConfig {
                 channel, timing, ..
             } => {
                 let bit = 1u32 << channel.min(31);
-                if channel as usize >= MAX_STEPPERS || used.steppers & bit != 0 {
+                let wired = MAX_STEPPERS.min(board.steppers as usize);
+                if channel as usize >= wired || used.steppers & bit != 0 {
                     return Err(ConfigError::JointChannel { joint });
                 }
                 used.steppers |= bit;
@@ -313,7 +344,8 @@ impl MachineConfig {
             }
             Drive::Servo { channel, .. } => {
                 let bit = 1u32 << channel.min(31);
-                if channel as usize >= MAX_SERVOS || used.servos & bit != 0 {
+                let wired = MAX_SERVOS.min(board.servos as usize);
+                if channel as usize >= wired || used.servos & bit != 0 {
                     return Err(ConfigError::JointChannel { joint });
                 }
                 used.servos |= bit;
@@ -362,6 +394,43 @@ mod tests {
             *channel = 0;
         }
         assert_eq!(m.validate(), Err(ConfigError::JointChannel { joint: 2 }));
+    }
+
+    #[test]
+    fn a_joint_on_a_channel_the_board_does_not_wire_is_refused_with_its_joint() {
+        let mut m = MachineConfig::h4_table();
+        // Servo channels 0..3 and stepper channel 0: fine on a board wiring exactly
+        // those, refused with the joint when one channel fewer of either kind is wired.
+        let board = BoardChannels {
+            steppers: 1,
+            servos: 4,
+        };
+        assert_eq!(m.validate_on(board), Ok(()));
+        let fewer_servos = BoardChannels { servos: 3, ..board };
+        assert_eq!(
+            m.validate_on(fewer_servos),
+            Err(ConfigError::JointChannel { joint: 3 })
+        );
+        let no_steppers = BoardChannels {
+            steppers: 0,
+            ..board
+        };
+        assert_eq!(
+            m.validate_on(no_steppers),
+            Err(ConfigError::JointChannel { joint: 4 })
+        );
+        // A servo channel beyond the core's room is refused whatever the board says.
+        if let Drive::Servo { channel } = &mut m.joints[3].drive {
+            *channel = MAX_SERVOS as u8;
+        }
+        let generous = BoardChannels {
+            steppers: u8::MAX,
+            servos: u8::MAX,
+        };
+        assert_eq!(
+            m.validate_on(generous),
+            Err(ConfigError::JointChannel { joint: 3 })
+        );
     }
 
     #[test]

@@ -37,7 +37,7 @@ mod actuators;
 mod safety;
 mod session;
 
-use crate::config::{ConfigError, Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS};
+use crate::config::{BoardChannels, ConfigError, Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS};
 use crate::homing::Homer;
 use crate::interp::{Event, Executor};
 use crate::kinematics::{Joints, MachineKinematics, Unreachable};
@@ -76,6 +76,9 @@ pub struct LinkStats {
 /// The controller. See the module documentation.
 pub struct Controller {
     machine: MachineConfig,
+    /// The channels of the board it runs on: every machine it adopts is checked
+    /// against them.
+    board: BoardChannels,
     kin: MachineKinematics,
     reader: FrameDecoder,
     tx: crate::ring::ByteRing<TX_CAPACITY>,
@@ -144,6 +147,7 @@ pub struct Controller {
 /// What a controller for a machine needs besides the machine, computed and checked
 /// before anything is written (small: no queue).
 struct Prepared {
+    board: BoardChannels,
     kin: MachineKinematics,
     joints: Joints,
     steps: StepScheduler,
@@ -153,8 +157,8 @@ struct Prepared {
 }
 
 impl Prepared {
-    fn of(machine: &MachineConfig) -> Result<Self, ConfigError> {
-        machine.validate()?;
+    fn of(machine: &MachineConfig, board: BoardChannels) -> Result<Self, ConfigError> {
+        machine.validate_on(board)?;
         let kin = MachineKinematics::new(machine);
         let mut joints = [0; MAX_JOINTS];
         kin.inverse_checked(&machine.home, &machine.joints, &mut joints)
@@ -175,6 +179,7 @@ impl Prepared {
                 + GUARD_SLACK_UNITS;
         }
         Ok(Self {
+            board,
             kin,
             max_step,
             steps: StepScheduler::new(&machine.joints, &joints),
@@ -198,12 +203,23 @@ impl Controller {
     /// Builds a controller for `machine` in `slot`, field by field, so that no
     /// temporary of the whole controller (or of its queue) is made on the stack: the
     /// MCU's stack could not hold one. Fails, leaving `slot` untouched, when the
-    /// machine is invalid.
+    /// machine is invalid. The board is [`BoardChannels::ALL`].
     pub fn init(
         slot: &mut core::mem::MaybeUninit<Self>,
         machine: MachineConfig,
     ) -> Result<&mut Self, ConfigError> {
-        let prepared = Prepared::of(&machine)?;
+        Self::init_on(slot, machine, BoardChannels::ALL)
+    }
+
+    /// [`init`](Self::init) for a board that wires only `board`'s channels: this
+    /// machine, and every machine loaded later, must use no other
+    /// ([`MachineConfig::validate_on`]).
+    pub fn init_on(
+        slot: &mut core::mem::MaybeUninit<Self>,
+        machine: MachineConfig,
+        board: BoardChannels,
+    ) -> Result<&mut Self, ConfigError> {
+        let prepared = Prepared::of(&machine, board)?;
         // SAFETY: `write` writes every field; the slot is valid and aligned.
         unsafe {
             Self::write(slot.as_mut_ptr(), machine, &prepared);
@@ -223,6 +239,7 @@ impl Controller {
         // SAFETY: the caller's promise; each write is to a field of `*p`.
         unsafe {
             at!((*p).machine).write(machine);
+            at!((*p).board).write(prep.board);
             at!((*p).kin).write(prep.kin);
             at!((*p).reader).write(FrameDecoder::new());
             at!((*p).tx).write(crate::ring::ByteRing::default());

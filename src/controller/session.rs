@@ -280,7 +280,7 @@ impl Controller {
     /// Adopts `config`: the controller restarts at its home pose, keeping the session.
     /// Rebuilt in place (no second controller on the stack).
     pub(super) fn load_machine(&mut self, config: MachineConfig) {
-        let prepared = match Prepared::of(&config) {
+        let prepared = match Prepared::of(&config, self.board) {
             Ok(p) => p,
             Err(e) => {
                 self.send(&CtrlMsg::MachineRefused {

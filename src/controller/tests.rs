@@ -80,6 +80,48 @@ fn session() -> Controller {
 }
 
 #[test]
+fn a_machine_config_on_a_servo_channel_the_board_does_not_wire_is_refused_naming_its_joint() {
+    // A board with every stepper channel and servo channels 0..3 only.
+    let board = BoardChannels {
+        steppers: MAX_STEPPERS as u8,
+        servos: 3,
+    };
+    let mut slot = core::mem::MaybeUninit::uninit();
+    let c = Controller::init_on(&mut slot, MachineConfig::cartesian_xyz(), board).unwrap();
+    // The H-4's joint 3 is on servo channel 3: the core has room for it, this board
+    // does not wire it.
+    let other = MachineConfig::h4_table();
+    assert_eq!(other.validate(), Ok(()));
+    let mut payload = [0u8; crate::store::MAX_CONFIG_BYTES];
+    let n = crate::store::encode(&other, &mut payload).unwrap();
+    let id = crate::store::identity(&other);
+    for (chunk_id, off) in (100..).zip((0..n).step_by(crate::store::CHUNK_BYTES)) {
+        let end = (off + crate::store::CHUNK_BYTES).min(n);
+        c.receive(&frame(
+            0,
+            &HostMsg::Machine {
+                id: chunk_id,
+                offset: off as u16,
+                total: n as u16,
+                crc: id,
+                data: heapless::Vec::from_slice(&payload[off..end]).unwrap(),
+            },
+        ));
+    }
+    let refused = CtrlMsg::MachineRefused {
+        error: crate::store::StoreError::Invalid(ConfigError::JointChannel { joint: 3 }),
+    };
+    assert!(replies(c).contains(&refused));
+    assert_eq!(c.machine(), &MachineConfig::cartesian_xyz());
+    // Nor can it be the first machine.
+    let mut slot = core::mem::MaybeUninit::uninit();
+    assert_eq!(
+        Controller::init_on(&mut slot, other, board).err(),
+        Some(ConfigError::JointChannel { joint: 3 })
+    );
+}
+
+#[test]
 fn a_controller_that_disagrees_about_the_machine_refuses_to_move_until_sent_it() {
     let mut other = MachineConfig::cartesian_xyz();
     other.joints[0].limits.max_velocity /= 2;

@@ -484,6 +484,9 @@ impl Simulator {
         self.last_in = *self.pacer.inputs();
         self.last_out = *self.pacer.due();
         if let Some(pacer) = self.servo.as_mut() {
+            if command.reset {
+                pacer.restart(ServoBank::new(self.ctrl.machine(), &snapshot.counts));
+            }
             pacer.post(command);
         }
         for _ in 1..SERVO_PER_TICK {

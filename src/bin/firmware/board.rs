@@ -1,25 +1,31 @@
-//! The NUCLEO-G474RE board: the only file that names pins, timers, DMA or interrupts.
+//! The NUCLEO-G474RE board: with its two modules the only code that names pins, timers,
+//! converters or interrupts.
 //!
-//! Everything hardware-specific lives here: the clock tree, the complete pin map (as
-//! typed embassy pins, so a pin without the named alternate function does not compile),
-//! the timers, converters and watchdog the firmware programs directly through the PAC,
-//! and the interrupt handlers and priorities. The rest of the firmware receives
-//! ready-made handles from [`init`]. `docs/wiring.md` is the same map as a wiring
-//! table; keep them in step.
+//! One MCU board, two wirings, chosen when the firmware is built (`docs/wiring.md` has
+//! both maps as wiring tables; keep them in step):
+//!
+//! - the default, `board/mixed.rs`: seven stepper channels and four servo channels;
+//! - `--features board-servo8`, `board/servo8.rs`: the hexapod-xy machine, eight servo
+//!   channels (six hydraulic legs, two X-Y table axes) and no stepper channel.
+//!
+//! This file holds what both share: the clock tree, the USB device, the switch inputs,
+//! the servo-period timer (TIM7) and the tick it paces, the embassy time base (TIM6),
+//! the watchdog, the interrupt handlers and priorities, and the helpers that bring up
+//! DACs, op-amp followers, encoder timers and the amplifier lines. Each wiring's module
+//! has its pin map (as typed embassy pins where embassy has the pin traits, so a pin
+//! without the named alternate function does not compile), its [`ServoIo`], its
+//! [`Steppers`] and its [`CHANNELS`], which the controller checks every machine
+//! against: a machine on a channel the build does not wire is refused, naming the joint.
+//! Alternate functions were checked against stm32-metapac 21 (stm32-data) for the
+//! STM32G474RE, connector positions against the NUCLEO-G474RE user manual (UM2505).
 //!
 //! Invariants: the STM32G474RE in LQFP64 has 38 GPIOs left once SWD (PA13/PA14), the
 //! ST-LINK virtual COM port (PA2/PA3), the HSE and LSE crystals (PF0/PF1, PC14/PC15),
 //! BOOT0 (PB8), the user button (PC13), the LED (PA5) and USB (PA11/PA12) are set
-//! aside, and this map uses all 38. Timer use: TIM1, TIM8, TIM20, TIM15, TIM16, TIM17
-//! STEP trains (stepper channels 0-5); HRTIM1 timer A the STEP train of stepper channel
-//! 6; TIM2, TIM3, TIM4, TIM5 encoders; TIM7 the 10 kHz servo period, which also paces
-//! the 1 kHz interpolation tick (run on the otherwise unused `UCPD1` vector); TIM6 the
-//! embassy time base; the IWDG watches both interrupts. Alternate functions were checked
-//! against stm32-metapac 21 (stm32-data) for the STM32G474RE; connector positions
-//! follow the NUCLEO-G474RE user manual (UM2505). One pin is not typed by its
-//! function: PA9 (HRTIM1_CHA2, AF13), because embassy-stm32's HRTIM pin traits come
-//! with its `stm32-hrtim` feature, which this build does not enable; the pin is fixed
-//! by type and its AF number by [`HRTIM1_CHA2_AF`].
+//! aside; the default wiring uses all 38, the eight-servo wiring takes the LED's PA5 as
+//! a DAC output and leaves two spare. Both keep TIM7 for the 10 kHz servo period,
+//! which also paces the 1 kHz interpolation tick (run on the otherwise unused `UCPD1`
+//! vector), and TIM6 for the embassy time base; the IWDG watches both interrupts.
 //!
 //! Interrupt priorities (lower number = more urgent):
 //!
@@ -30,12 +36,12 @@
 //! | 2 | `USB_LP` | USB device |
 //! | 3 | `TIM6_DAC` | embassy time base |
 //!
-//! Why a software-pended tick rather than a second timer: no timer is free (see above),
-//! and pending the tick from the servo interrupt makes it run exactly every
-//! [`pkmc::servo::SERVO_PER_TICK`]th servo period, so the servo loops load each tick's
-//! targets at a fixed phase. The servo interrupt is the most urgent so that the tick
-//! (tens to hundreds of µs of planning and kinematics) never delays a servo period;
-//! the controller and the tick's data are shared with thread-mode tasks under a
+//! Why a software-pended tick rather than a second timer: no timer is free in the
+//! default wiring, and pending the tick from the servo interrupt makes it run exactly
+//! every [`pkmc::servo::SERVO_PER_TICK`]th servo period, so the servo loops load each
+//! tick's targets at a fixed phase. The servo interrupt is the most urgent so that the
+//! tick (tens to hundreds of µs of planning and kinematics) never delays a servo
+//! period; the controller and the tick's data are shared with thread-mode tasks under a
 //! priority-ceiling lock at [`TICK_PRIORITY`] ([`crate::shared`]), which masks the
 //! tick, USB and the time base but never the servo interrupt. Global critical
 //! sections (embassy's drivers, the time driver, defmt, the servo/tick exchange) do
@@ -48,7 +54,6 @@
 //! interrupt, whatever its priority, for its whole run.
 
 use crate::time_driver::{BASIC_TIMER_COUNT_HZ, TIME_BASE};
-use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::gpio::{AfType, AnyPin, Flex, Input, Level, Output, OutputType, Pull, Speed};
 use embassy_stm32::interrupt;
 use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -56,23 +61,25 @@ use embassy_stm32::pac;
 use embassy_stm32::pac::dac::vals::Mode as DacMode;
 use embassy_stm32::pac::iwdg::vals::{Key, Pr};
 use embassy_stm32::pac::opamp::vals::{VmSel, VpSel};
-use embassy_stm32::peripherals::{
-    self, DAC1, DAC2, DAC3, DAC4, HRTIM1, OPAMP3, OPAMP4, PA4, PA6, PA9, PB1, PB12, RCC,
-};
+use embassy_stm32::peripherals::{self, PA11, PA12, USB};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::Timer as LowLevelTimer;
 use embassy_stm32::timer::qei::{self, Qei};
-use embassy_stm32::timer::simple_pwm::PwmPin;
-use embassy_stm32::timer::{
-    AdvancedInstance4Channel, Ch1, Ch2, Ch3, Ch4, GeneralInstance4Channel, TimerChannel, TimerPin,
-};
+use embassy_stm32::timer::{Ch1, Ch2, GeneralInstance4Channel, TimerPin};
 use embassy_stm32::usb::{self, Driver};
-use embassy_stm32::{bind_interrupts, Config, Peri, Peripherals};
-use pkmc::config::{BOARD_STEPS_PER_TICK, MAX_SERVOS};
+use embassy_stm32::{bind_interrupts, Config, Peri};
+use pkmc::config::MAX_SERVOS;
 use pkmc::servo::{DAC_MID, SERVO_HZ};
 
-use crate::encoders::Encoders;
-use crate::steppers::{periods, HrStepTimer, StepChannel, StepOutput, StepTimer, Steppers};
+#[cfg(not(feature = "board-servo8"))]
+mod mixed;
+#[cfg(not(feature = "board-servo8"))]
+pub use mixed::{builtin_machine, init, ServoIo, StepStats, Steppers, CHANNELS, SERVO_CHANNELS};
+
+#[cfg(feature = "board-servo8")]
+mod servo8;
+#[cfg(feature = "board-servo8")]
+pub use servo8::{builtin_machine, init, ServoIo, StepStats, Steppers, CHANNELS, SERVO_CHANNELS};
 
 /// USB vendor ID: pid.codes, the open-source vendor ID.
 pub const USB_VID: u16 = 0x1209;
@@ -92,12 +99,10 @@ pub const ESTOP_ACTIVE: Level = Level::High;
 /// Level of a limit/home input while its switch is open (limit or home reached): NC
 /// switches to GND with pull-ups, all switches of a joint in series.
 pub const LIMIT_ACTIVE: Level = Level::High;
-/// Level of the shared servo-fault input while an amplifier reports a fault:
-/// open-collector fault outputs, wired together, pulled up on the board.
+/// Level of a servo-fault input while an amplifier reports a fault: open-collector
+/// fault outputs, wired together per line, pulled up on the board.
 pub const SERVO_FAULT_ACTIVE: Level = Level::Low;
-/// Level that enables the stepper drives on STEP_EN (buffered to every drive's ENABLE).
-pub const STEPPER_ENABLE_ACTIVE: Level = Level::High;
-/// Level that enables the servo amplifiers on SERVO_EN.
+/// Level that enables the servo amplifiers on a servo-enable line.
 pub const SERVO_ENABLE_ACTIVE: Level = Level::High;
 
 bind_interrupts!(
@@ -117,14 +122,15 @@ const SERVO_TIMER: pac::timer::TimBasic = pac::TIM7;
 const SERVO_PRIORITY: Priority = Priority::P0;
 /// Priority of the interpolation tick; also the ceiling of [`crate::shared::TickShared`].
 pub const TICK_PRIORITY: Priority = Priority::P1;
-/// The tick's interrupt: the NVIC line of the USB Type-C/PD controller UCPD1, which the
-/// board does not use (its CC pins PB4/PB6 are STEP4 and ENC2 A), pended by software.
+/// The tick's interrupt: the NVIC line of the USB Type-C/PD controller UCPD1, which
+/// neither wiring uses (its CC pins PB4/PB6 are timer pins in both), pended by software.
 const TICK_IRQ: interrupt::Interrupt = interrupt::UCPD1;
 const _: () = assert!((SERVO_PRIORITY as u8) < (TICK_PRIORITY as u8));
 
 /// Clock tree: HSE 24 MHz crystal (X3) → PLL (÷6 × 85 ÷ 2) → 170 MHz SYSCLK in range-1
 /// boost mode; AHB, APB1 and APB2 undivided (timer kernels at 170 MHz); USB from
-/// HSI48 trimmed by the CRS on USB start-of-frame.
+/// HSI48 trimmed by the CRS on USB start-of-frame; LPTIM1 (an encoder counter of the
+/// eight-servo wiring) on PCLK1, its reset value, made explicit.
 pub fn clock_config() -> Config {
     use embassy_stm32::rcc::{
         mux, Hse, HseMode, Hsi48Config, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk,
@@ -148,6 +154,7 @@ pub fn clock_config() -> Config {
         sync_from_usb: true,
     });
     config.rcc.mux.clk48sel = mux::Clk48sel::HSI48;
+    config.rcc.mux.lptim1sel = mux::Lptimsel::PCLK1;
     config
 }
 
@@ -160,6 +167,14 @@ pub struct Switches {
 }
 
 impl Switches {
+    /// The e-stop on `estop` and the limit/home inputs `limits`, with pull-ups.
+    fn new(estop: Peri<'static, AnyPin>, limits: [Peri<'static, AnyPin>; 8]) -> Self {
+        Self {
+            estop: Input::new(estop, Pull::Up),
+            limits: limits.map(|pin| Input::new(pin, Pull::Up)),
+        }
+    }
+
     /// The raw e-stop input: true = active.
     pub fn estop(&self) -> bool {
         self.estop.get_level() == ESTOP_ACTIVE
@@ -177,41 +192,85 @@ impl Switches {
     }
 }
 
-/// The servo channels' hardware, driven by the servo interrupt: encoders, analog
-/// command outputs, the shared amplifier enable and the shared fault input.
-pub struct ServoIo {
-    /// Quadrature encoder counters of the servo channels.
-    pub encoders: Encoders,
-    /// DAC of each servo channel and its channel index: DAC1 ch1 (PA4), DAC2 ch1
-    /// (PA6), DAC3 ch2 (→ OPAMP3 → PB1), DAC4 ch1 (→ OPAMP4 → PB12).
-    dacs: [(pac::dac::Dac, usize); MAX_SERVOS],
-    /// SERVO_EN (PB5): enables every amplifier.
-    enable: Output<'static>,
-    /// SERVO_FAULT (PB11): open-collector fault outputs of every amplifier, wired
-    /// together.
-    fault: Input<'static>,
+/// The servo amplifiers' enable outputs and fault inputs, `G` of each: every servo
+/// channel belongs to one group, whose enable line is active while any of its channels'
+/// loops is enabled and whose fault line (open-collector outputs wired together) is the
+/// fault input of all its channels.
+pub struct AmpLines<const G: usize> {
+    /// Enable output of each group, see [`SERVO_ENABLE_ACTIVE`].
+    enable: [Output<'static>; G],
+    /// Fault input of each group, see [`SERVO_FAULT_ACTIVE`].
+    fault: [Input<'static>; G],
+    /// Group of each servo channel (channels the wiring lacks have no loop, so neither
+    /// their enable nor their fault matters).
+    group_of: [u8; MAX_SERVOS],
 }
 
-impl ServoIo {
-    /// The raw shared fault input: true = some amplifier reports a fault.
-    pub fn fault(&self) -> bool {
-        self.fault.get_level() == SERVO_FAULT_ACTIVE
+impl<const G: usize> AmpLines<G> {
+    /// Enable lines `enable`, driven inactive at once (before any command output comes
+    /// up), fault lines `fault` with pull-ups, and each channel's group.
+    fn new(
+        enable: [Peri<'static, AnyPin>; G],
+        fault: [Peri<'static, AnyPin>; G],
+        group_of: [u8; MAX_SERVOS],
+    ) -> Self {
+        Self {
+            enable: enable.map(|pin| Output::new(pin, opposite(SERVO_ENABLE_ACTIVE), Speed::Low)),
+            fault: fault.map(|pin| Input::new(pin, Pull::Up)),
+            group_of,
+        }
     }
 
-    /// Writes the DAC codes (12-bit, right-aligned; the DACs convert at once, no
-    /// trigger) and the shared enable: the enable goes off before new codes and on
-    /// after them.
-    pub fn write(&mut self, codes: &[u16; MAX_SERVOS], enable: bool) {
-        if !enable {
-            self.enable.set_level(opposite(SERVO_ENABLE_ACTIVE));
-        }
-        for ((dac, channel), &code) in self.dacs.iter().zip(codes) {
-            dac.dhr12r(*channel).write(|w| w.set_dhr(code));
-        }
-        if enable {
-            self.enable.set_level(SERVO_ENABLE_ACTIVE);
+    /// The fault input of each servo channel: its group's line (true = fault).
+    pub fn faults(&self) -> [bool; MAX_SERVOS] {
+        let active: [bool; G] =
+            core::array::from_fn(|g| self.fault[g].get_level() == SERVO_FAULT_ACTIVE);
+        // A group beyond the lines reads as a fault (it cannot happen: see `new`'s
+        // callers' compile-time checks).
+        self.group_of
+            .map(|g| active.get(usize::from(g)).copied().unwrap_or(true))
+    }
+
+    /// Which groups `enable` (per channel) asks to be enabled.
+    pub fn groups(&self, enable: &[bool; MAX_SERVOS]) -> [bool; G] {
+        core::array::from_fn(|g| {
+            self.group_of
+                .iter()
+                .zip(enable)
+                .any(|(&group, &on)| usize::from(group) == g && on)
+        })
+    }
+
+    /// Drives the enable line of every group that `on` leaves off inactive.
+    pub fn switch_off(&mut self, on: &[bool; G]) {
+        for (line, &on) in self.enable.iter_mut().zip(on) {
+            if !on {
+                line.set_level(opposite(SERVO_ENABLE_ACTIVE));
+            }
         }
     }
+
+    /// Drives the enable line of every group that `on` turns on active.
+    pub fn switch_on(&mut self, on: &[bool; G]) {
+        for (line, &on) in self.enable.iter_mut().zip(on) {
+            if on {
+                line.set_level(SERVO_ENABLE_ACTIVE);
+            }
+        }
+    }
+}
+
+/// Is every entry of a channel-to-group table a group of `groups`? For the compile-time
+/// checks of the wirings' tables.
+const fn groups_in_range(group_of: &[u8; MAX_SERVOS], groups: usize) -> bool {
+    let mut c = 0;
+    while c < MAX_SERVOS {
+        if group_of[c] as usize >= groups {
+            return false;
+        }
+        c += 1;
+    }
+    true
 }
 
 /// The servo-period timer, configured and waiting for [`ServoTimer::start`].
@@ -245,18 +304,18 @@ pub fn pend_tick() {
 pub struct Board {
     /// USB full-speed device on PA11 (D−) / PA12 (D+).
     pub usb: UsbDriver,
-    /// Green user LED LD2 (PA5), active high.
+    /// The heartbeat LED, active high.
     pub led: Output<'static>,
-    /// STEP/DIR channels and the shared stepper ENABLE.
+    /// STEP/DIR channels and the shared stepper ENABLE (none on the eight-servo wiring).
     pub steppers: Steppers,
     /// E-stop and limit/home inputs.
     pub switches: Switches,
-    /// Encoders, analog outputs, enable and fault of the servo channels.
+    /// Encoders, analog outputs, enables and faults of the servo channels.
     pub servo: ServoIo,
     /// The servo period (and with it the tick), ready to start.
     pub timer: ServoTimer,
     /// The flash, for the machine-configuration page ([`CONFIG_PAGE_OFFSET`]).
-    pub flash: Flash<'static, Blocking>,
+    pub flash: embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
 }
 
 /// Offset (from the start of flash) of the page that keeps the machine configuration:
@@ -266,131 +325,20 @@ pub const CONFIG_PAGE_OFFSET: u32 = 508 * 1024;
 /// Size of that region (two 2 KB pages, erased together).
 pub const CONFIG_PAGE_BYTES: u32 = 4 * 1024;
 
-/// Steps per tick of stepper channel `$channel`, whose timer's repetition-counter
-/// register `$reg` returns: [`capacity`] evaluated at compile time (a constant item,
-/// which `cargo check` evaluates too).
-macro_rules! steps_per_tick {
-    ($channel:literal, $reg:expr) => {{
-        const STEPS: u32 = capacity($channel, periods(|| $reg));
-        STEPS
-    }};
-}
-
-/// Steps per tick of stepper channel `channel`, whose timer's repetition counter
-/// counts `periods` ([`periods`]): checked, at compile time, against the core's
-/// [`BOARD_STEPS_PER_TICK`], by which machines are validated.
-const fn capacity(channel: usize, periods: u32) -> u32 {
-    assert!(
-        periods == BOARD_STEPS_PER_TICK[channel],
-        "a stepper channel's timer disagrees with pkmc::config::BOARD_STEPS_PER_TICK"
-    );
-    periods
-}
-
-/// Stepper channel 6 is HRTIM1 timer A ([`hrtim_step`]).
-const _: u32 = capacity(6, periods(|| pac::HRTIM1.tim(0).rep()));
-
-/// Sets up every pin, timer and converter of the pin map, the embassy time base and
-/// the watchdog.
-///
-/// Call once, right after `embassy_stm32::init`, before anything uses embassy-time.
-/// The watchdog runs from here on: start the servo timer within [`WATCHDOG_MS`].
-pub fn init(p: Peripherals) -> Board {
+/// What both wirings set up first: the watchdog (running from here on: start the servo
+/// timer within [`WATCHDOG_MS`]), the embassy time base on TIM6, the servo timer TIM7
+/// (stopped) and the USB driver on PA12 (D+) / PA11 (D−).
+fn start_common(
+    tim6: Peri<'static, peripherals::TIM6>,
+    tim7: Peri<'static, peripherals::TIM7>,
+    usb: (Peri<'static, USB>, Peri<'static, PA12>, Peri<'static, PA11>),
+) -> (ServoTimer, UsbDriver) {
     start_watchdog();
-    start_time_base(p.TIM6);
-    let timer = configure_servo_timer(p.TIM7);
-
-    // Stepper channels: STEP on a timer channel, DIR a GPIO (low = reverse).
-    let dir = |pin: Peri<'static, AnyPin>| Output::new(pin, Level::Low, Speed::Low);
-    let channels = [
-        // 0: TIM1_CH1 on PA8 (AF6).
-        StepChannel::new(
-            step_timer::<_, Ch1>(p.TIM1, p.PA8, steps_per_tick!(0, pac::TIM1.rcr())),
-            dir(p.PC0.into()),
-        ),
-        // 1: TIM8_CH4 on PC9 (AF4).
-        StepChannel::new(
-            step_timer::<_, Ch4>(p.TIM8, p.PC9, steps_per_tick!(1, pac::TIM8.rcr())),
-            dir(p.PC1.into()),
-        ),
-        // 2: TIM20_CH3 on PC8 (AF6).
-        StepChannel::new(
-            step_timer::<_, Ch3>(p.TIM20, p.PC8, steps_per_tick!(2, pac::TIM20.rcr())),
-            dir(p.PC2.into()),
-        ),
-        // 3: TIM15_CH1 on PB14 (AF1).
-        StepChannel::new(
-            step_timer::<_, Ch1>(p.TIM15, p.PB14, steps_per_tick!(3, pac::TIM15.rcr())),
-            dir(p.PC3.into()),
-        ),
-        // 4: TIM16_CH1 on PB4 (AF1).
-        StepChannel::new(
-            step_timer::<_, Ch1>(p.TIM16, p.PB4, steps_per_tick!(4, pac::TIM16.rcr())),
-            dir(p.PC4.into()),
-        ),
-        // 5: TIM17_CH1 on PA7 (AF1).
-        StepChannel::new(
-            step_timer::<_, Ch1>(p.TIM17, p.PA7, steps_per_tick!(5, pac::TIM17.rcr())),
-            dir(p.PC5.into()),
-        ),
-        // 6: HRTIM1 timer A output 2 on PA9 (AF13).
-        StepChannel::new(hrtim_step(p.HRTIM1, p.PA9, &p.RCC), dir(p.PB13.into())),
-    ];
-    let enable = Output::new(p.PB15, opposite(STEPPER_ENABLE_ACTIVE), Speed::Low);
-    let steppers = Steppers::new(channels, enable, STEPPER_ENABLE_ACTIVE);
-
-    let encoders = Encoders::new([
-        encoder(p.TIM2, p.PA0, p.PA1),  // servo 0: TIM2 CH1/CH2, AF1
-        encoder(p.TIM3, p.PC6, p.PC7),  // servo 1: TIM3 CH1/CH2, AF2
-        encoder(p.TIM4, p.PB6, p.PB7),  // servo 2: TIM4 CH1/CH2, AF2
-        encoder(p.TIM5, p.PB2, p.PC12), // servo 3: TIM5 CH1 AF2 / CH2 AF1
-    ]);
-    // Amplifiers disabled before their command outputs come up (at zero command).
-    let servo_enable = Output::new(p.PB5, opposite(SERVO_ENABLE_ACTIVE), Speed::Low);
-    start_servo_outputs(
-        (p.DAC1, p.DAC2, p.DAC3, p.DAC4),
-        (p.OPAMP3, p.OPAMP4),
-        (p.PA4, p.PA6, p.PB1, p.PB12),
-    );
-    let servo = ServoIo {
-        encoders,
-        dacs: [
-            (pac::DAC1, 0),
-            (pac::DAC2, 0),
-            (pac::DAC3, 1),
-            (pac::DAC4, 0),
-        ],
-        enable: servo_enable,
-        fault: Input::new(p.PB11, Pull::Up),
-    };
-
-    let input = |pin: Peri<'static, AnyPin>| Input::new(pin, Pull::Up);
-    let switches = Switches {
-        estop: Input::new(p.PA10, Pull::Up),
-        limits: [
-            input(p.PC10.into()),
-            input(p.PC11.into()),
-            input(p.PD2.into()),
-            input(p.PA15.into()),
-            input(p.PB0.into()),
-            input(p.PB9.into()),
-            input(p.PB10.into()),
-            input(p.PB3.into()),
-        ],
-    };
-
-    let usb = Driver::new(p.USB, Irqs, p.PA12, p.PA11);
+    start_time_base(tim6);
+    let timer = configure_servo_timer(tim7);
+    let usb = Driver::new(usb.0, Irqs, usb.1, usb.2);
     interrupt::USB_LP.set_priority(Priority::P2);
-
-    Board {
-        flash: Flash::new_blocking(p.FLASH),
-        usb,
-        led: Output::new(p.PA5, Level::Low, Speed::Low),
-        steppers,
-        switches,
-        servo,
-        timer,
-    }
+    (timer, usb)
 }
 
 /// DAC_MCR.HFSEL for the 170 MHz AHB clock of [`clock_config`]: 0b10, "AHB clock
@@ -400,57 +348,34 @@ const DAC_HFSEL: u8 = 0b10;
 /// (a few µs; one poll is at least a few cycles at 170 MHz).
 const DAC_READY_POLLS: u32 = 10_000;
 
-/// Brings up the four analog command outputs at mid-scale (zero command):
-/// DAC1 ch1 → PA4 and DAC2 ch1 → PA6 through the DACs' own output buffers; DAC3 ch2
-/// and DAC4 ch1 (internal-only converters, unbuffered) into OPAMP3 and OPAMP4 as
-/// voltage followers (VINP = their DAC, VINM = their output) driving PB1 and PB12.
-/// Register level: the servo interrupt then writes one data register per channel.
-fn start_servo_outputs(
-    _dacs: (
-        Peri<'static, DAC1>,
-        Peri<'static, DAC2>,
-        Peri<'static, DAC3>,
-        Peri<'static, DAC4>,
-    ),
-    _opamps: (Peri<'static, OPAMP3>, Peri<'static, OPAMP4>),
-    pins: (
-        Peri<'static, PA4>,
-        Peri<'static, PA6>,
-        Peri<'static, PB1>,
-        Peri<'static, PB12>,
-    ),
-) {
-    // Analog mode (their reset state, made explicit); the pins stay ours for good.
-    fn analog(mut pin: Flex<'static>) {
-        pin.set_as_analog();
-        core::mem::forget(pin);
-    }
-    analog(Flex::new(pins.0));
-    analog(Flex::new(pins.1));
-    analog(Flex::new(pins.2));
-    analog(Flex::new(pins.3));
+/// Puts `pin` in analog mode (its reset state, made explicit) and keeps it so for good.
+fn analog(mut pin: Flex<'static>) {
+    pin.set_as_analog();
+    core::mem::forget(pin);
+}
 
+/// Turns on the clocks of DAC1–DAC4 and of the OPAMP and COMP registers (clocked with
+/// SYSCFG, RCC_APB2ENR.SYSCFGEN), reading them back so that they run before the first
+/// register access.
+fn clock_analog() {
     pac::RCC.ahb2enr().modify(|w| {
         w.set_dac1en(true);
         w.set_dac2en(true);
         w.set_dac3en(true);
         w.set_dac4en(true);
     });
-    // The OPAMP registers are clocked with SYSCFG (RCC_APB2ENR.SYSCFGEN).
     pac::RCC.apb2enr().modify(|w| w.set_syscfgen(true));
-    // Read back: the clocks are on before the first register access.
     let _ = pac::RCC.ahb2enr().read();
     let _ = pac::RCC.apb2enr().read();
+}
 
-    let channels = [
-        (pac::DAC1, 0, DacMode::NORMAL_EXT_BUFEN),
-        (pac::DAC2, 0, DacMode::NORMAL_EXT_BUFEN),
-        (pac::DAC3, 1, DacMode::NORMAL_INT_BUFDIS),
-        (pac::DAC4, 0, DacMode::NORMAL_INT_BUFDIS),
-    ];
-    for (dac, ch, mode) in channels {
+/// Brings up DAC `channels` (DAC, channel index, mode) at mid-scale (zero command),
+/// register level: the servo interrupt then writes one data register per channel.
+/// Their clocks must run ([`clock_analog`]). No trigger: DHR → DOR at once.
+fn start_dacs(channels: &[(pac::dac::Dac, usize, DacMode)]) {
+    for &(dac, ch, mode) in channels {
         // Mode and HFSEL are written with the channel disabled; data before enabling,
-        // so the output comes up at mid-scale. No trigger: DHR → DOR at once.
+        // so the output comes up at mid-scale.
         dac.mcr().modify(|w| {
             w.set_hfsel(DAC_HFSEL);
             w.set_mode(ch, mode);
@@ -458,7 +383,7 @@ fn start_servo_outputs(
         dac.dhr12r(ch).write(|w| w.set_dhr(DAC_MID as u16));
         dac.cr().modify(|w| w.set_en(ch, true));
     }
-    for (dac, ch, _) in channels {
+    for &(dac, ch, _) in channels {
         let mut polls = 0;
         while !dac.sr().read().dacrdy(ch) && polls < DAC_READY_POLLS {
             polls += 1;
@@ -467,10 +392,16 @@ fn start_servo_outputs(
         // did not reach its output register.
         dac.dhr12r(ch).write(|w| w.set_dhr(DAC_MID as u16));
     }
-    for opamp in [pac::OPAMP3, pac::OPAMP4] {
+}
+
+/// Enables `opamps` as voltage followers of their internal DAC channel, output to their
+/// VOUT pin: VINP = VINP3 (the one DAC channel each OPAMP can take: OPAMP1 and
+/// OPAMP6 DAC3_CH1, OPAMP3 DAC3_CH2, OPAMP4 DAC4_CH1, OPAMP5 DAC4_CH2; RM0440 OPAMP
+/// "signal routing"; the PAC names the value after OPAMP1's), VINM = the output. Their
+/// register clock must run ([`clock_analog`]) and their DAC channels be up.
+fn start_followers(opamps: &[pac::opamp::Opamp]) {
+    for opamp in opamps {
         opamp.csr().write(|w| {
-            // VINP3: OPAMP3's is DAC3_CH2, OPAMP4's DAC4_CH1 (the PAC names the value
-            // after OPAMP1's, DAC3_CH1).
             w.set_vp_sel(VpSel::DAC3_CH1);
             w.set_vm_sel(VmSel::OUTPUT);
             w.set_opaintoen(false); // output to the VOUT pin
@@ -551,45 +482,14 @@ fn claim_timer<T: GeneralInstance4Channel>(tim: Peri<'static, T>) -> Hertz {
     clock
 }
 
-/// A STEP output: timer `tim` channel `C` on `pin`, whose repetition counter holds
-/// `rep_capacity` periods. `AdvancedInstance4Channel` admits exactly the timers with a
-/// repetition counter and break/dead-time register (TIM1/8/20, TIM15/16/17).
-fn step_timer<T: AdvancedInstance4Channel, C: TimerChannel>(
-    tim: Peri<'static, T>,
-    pin: Peri<'static, impl TimerPin<T, C>>,
-    rep_capacity: u32,
-) -> Option<StepOutput> {
-    let clock = claim_timer(tim);
-    // SAFETY: TIM1/8/20 and TIM15/16/17 share the advanced-timer register layout for
-    // every register StepTimer touches (embassy's own drivers view timers through the
-    // widest block the same way), and the timer is ours alone.
-    let regs = unsafe { pac::timer::TimAdv::from_ptr(T::regs()) };
-    let timer = StepTimer::new(regs, C::CHANNEL.index(), rep_capacity, clock.0);
-    // Only now, with the channel idle low, hand the pin to the timer.
-    core::mem::forget(PwmPin::<T, C>::new(pin, OutputType::PushPull));
-    Some(StepOutput::Tim(timer))
-}
-
-/// Alternate function of HRTIM1_CHA2 on PA9 (stm32-metapac 21, STM32G474RE).
+/// Alternate function of HRTIM1_CHA2 on PA9 (stm32-metapac 21, STM32G474RE): STEP6 of
+/// the default wiring, the filtered-PWM command of servo channel 7 of the eight-servo
+/// one. embassy-stm32's HRTIM pin traits come with its `stm32-hrtim` feature, which this
+/// build does not enable, so the pin is fixed by type and its AF number by this constant.
 pub const HRTIM1_CHA2_AF: u8 = 13;
 
-/// The STEP output of stepper channel 6: HRTIM1 timer A output 2 on PA9. HRTIM1 is
-/// clocked by the APB2 timer clock (stm32-data: `PCLK2_TIM`, 170 MHz here). `None`,
-/// with PA9 held low, if the HRTIM's DLL does not calibrate.
-fn hrtim_step(
-    _hrtim: Peri<'static, HRTIM1>,
-    pin: Peri<'static, PA9>,
-    rcc: &Peri<'static, RCC>,
-) -> Option<StepOutput> {
-    embassy_stm32::rcc::enable_and_reset::<HRTIM1>();
-    let clock = defmt::unwrap!(embassy_stm32::rcc::clocks(rcc).pclk2_tim.to_hertz());
-    let Some(timer) = HrStepTimer::new(pac::HRTIM1, clock.0) else {
-        defmt::warn!("HRTIM1 DLL not ready: stepper channel 6 is not driven");
-        // Forgotten, the output keeps driving PA9 low for good.
-        core::mem::forget(Output::new(pin, Level::Low, Speed::Low));
-        return None;
-    };
-    // Only now, with the output in RUN state and inactive, hand the pin to the HRTIM.
+/// Hands PA9 to HRTIM1 timer A output 2 ([`HRTIM1_CHA2_AF`]) for good.
+fn hrtim_cha2_pin(pin: Peri<'static, peripherals::PA9>) {
     let mut pin = Flex::new(pin);
     pin.set_as_af_unchecked(
         HRTIM1_CHA2_AF,
@@ -597,21 +497,21 @@ fn hrtim_step(
     );
     // Dropping the pin would disconnect it.
     core::mem::forget(pin);
-    Some(StepOutput::Hrtim(timer))
 }
 
-/// A quadrature encoder on timer `tim` (CH1 = A, CH2 = B), counting all four edges.
+/// A quadrature encoder on timer `tim` (CH1 = A, CH2 = B), counting all four edges with
+/// a 16-bit wrap.
 fn encoder<T: GeneralInstance4Channel>(
     tim: Peri<'static, T>,
     a: Peri<'static, impl TimerPin<T, Ch1>>,
     b: Peri<'static, impl TimerPin<T, Ch2>>,
-) -> pac::timer::TimGp16 {
+) -> crate::encoders::Counter {
     let qei = Qei::new(tim, a, b, qei::Config::default());
     // Dropping the driver would stop the timer's clock and float the pins.
     core::mem::forget(qei);
     // SAFETY: every encoder timer has at least the general-purpose 16-bit layout; the
     // firmware only reads its counter.
-    unsafe { pac::timer::TimGp16::from_ptr(T::regs()) }
+    crate::encoders::Counter::Timer(unsafe { pac::timer::TimGp16::from_ptr(T::regs()) })
 }
 
 /// Programs a basic timer to count at [`BASIC_TIMER_COUNT_HZ`] and overflow at

@@ -18,7 +18,8 @@
 //! Invariants: the controller is built once and moved once into its static before the
 //! servo timer starts; afterwards it is touched only under the tick's priority-ceiling
 //! lock ([`shared`]), by the tick interrupt and by the tasks, never by the servo
-//! interrupt. Only `board.rs` names pins, timers and interrupts. Pin map:
+//! interrupt. Only `board.rs` and its modules name pins, timers and interrupts. Pin
+//! maps (the default wiring, and the eight-servo one of `--features board-servo8`):
 //! `docs/wiring.md`.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
@@ -53,7 +54,7 @@ mod encoders;
 mod servo_period;
 #[cfg(target_os = "none")]
 mod shared;
-#[cfg(target_os = "none")]
+#[cfg(all(target_os = "none", not(feature = "board-servo8")))]
 mod steppers;
 #[cfg(target_os = "none")]
 mod time_driver;
@@ -78,7 +79,6 @@ mod firmware {
     use embassy_usb::class::cdc_acm::{self, CdcAcmClass, Sender};
     use embassy_usb::driver::EndpointError;
     use embassy_usb::{Builder, UsbDevice};
-    use pkmc::config::MachineConfig;
     use pkmc::contour::ServoBank;
     use pkmc::controller::Controller;
     use pkmc::debounce::Switches as SwitchStates;
@@ -87,10 +87,9 @@ mod firmware {
     use static_cell::StaticCell;
     use {defmt_rtt as _, panic_probe as _};
 
-    use crate::board::{self, Switches, UsbDriver};
+    use crate::board::{self, StepStats, Steppers, Switches, UsbDriver};
     use crate::servo_period;
     use crate::shared::TickShared;
-    use crate::steppers::{StepStats, Steppers};
 
     /// USB full-speed bulk packet size, bytes.
     const USB_PACKET: usize = 64;
@@ -162,7 +161,11 @@ mod firmware {
             let ticked = CONTROLLER
                 .lock(|c| {
                     let c = c.as_deref_mut()?;
-                    servo_period::post(io.pacer.tick(c, &raw, &snapshot));
+                    let command = io.pacer.tick(c, &raw, &snapshot);
+                    if command.reset {
+                        servo_period::restart(ServoBank::new(c.machine(), &snapshot.counts));
+                    }
+                    servo_period::post(command);
                     Some(())
                 })
                 .flatten()
@@ -179,9 +182,11 @@ mod firmware {
     const RECORD_BYTES: usize =
         (pkmc::store::HEADER_BYTES + pkmc::store::MAX_CONFIG_BYTES).div_ceil(8) * 8;
 
-    /// Builds the controller for the machine kept in flash (the built-in Cartesian
-    /// machine when the page holds none) and moves it, once, into its static. After a
-    /// watchdog reset it starts with the `Watchdog` alarm.
+    /// Builds the controller for the machine kept in flash (the wiring's built-in
+    /// machine when the page holds none, or one on channels this wiring lacks) and moves
+    /// it, once, into its static; it checks every machine loaded later against the
+    /// wiring's channels ([`board::CHANNELS`]). After a watchdog reset it starts with
+    /// the `Watchdog` alarm.
     fn install_controller(flash: &mut Flash<'static, Blocking>, watchdog_reset: bool) {
         let mut record = [0xFFu8; RECORD_BYTES];
         let stored = flash
@@ -194,17 +199,20 @@ mod firmware {
                 m
             }
             None => {
-                info!("no machine in flash: built-in Cartesian machine");
-                MachineConfig::cartesian_xyz()
+                info!("no machine in flash: built-in machine");
+                board::builtin_machine()
             }
         };
         // Built in place in its static cell: the controller is larger than the stack
         // could hold as a temporary.
         let slot = CONTROLLER_CELL.uninit();
-        if Controller::init(slot, machine).is_err()
-            && Controller::init(slot, MachineConfig::cartesian_xyz()).is_err()
-        {
-            defmt::panic!("the built-in machine configuration is invalid");
+        // The refusal is not worded here (its text costs 3.3 KiB of flash): the host
+        // sees the machine differ from its file and, loading it, gets the reason.
+        if Controller::init_on(slot, machine, board::CHANNELS).is_err() {
+            warn!("the stored machine does not fit this wiring: built-in machine");
+            if Controller::init_on(slot, board::builtin_machine(), board::CHANNELS).is_err() {
+                defmt::panic!("the built-in machine configuration is invalid");
+            }
         }
         // SAFETY: one of the two `init`s succeeded and wrote every field.
         let controller = unsafe { slot.assume_init_mut() };

@@ -4,11 +4,12 @@
 //! is left, and late ticks are counted).
 //!
 //! Each servo period ([`on_servo_period`], TIM7 at [`pkmc::servo::SERVO_HZ`]) reads
-//! the four encoder counters (extended to 64 bits) and the shared amplifier fault
-//! input (one line on this board: every channel's fault), runs
-//! [`ServoPacer::period`], writes its DAC codes and the shared amplifier enable
-//! (active when any channel is enabled: one line on this board), and at a tick edge
-//! pends the tick, which runs as soon as this interrupt returns.
+//! the wiring's encoder counters (extended to 64 bits) and amplifier fault inputs (a
+//! line per group of channels: each channel gets its group's), runs
+//! [`ServoPacer::period`], writes its command codes and the amplifier enables (a line
+//! per group, active when any channel of the group is enabled), and at a tick edge
+//! pends the tick, which runs as soon as this interrupt returns. A fixed amount of
+//! work: one pass over the channels for each step, no allocation.
 //!
 //! Shared state: the pacer and the servo hardware are touched only by this interrupt
 //! (and once at start-up), except the tick's [`post`], [`snapshot`] and [`stats`],
@@ -18,7 +19,6 @@
 use core::cell::RefCell;
 
 use critical_section::Mutex;
-use pkmc::config::MAX_SERVOS;
 use pkmc::contour::ServoBank;
 use pkmc::pacing::{Command, ServoPacer, ServoStats, Snapshot};
 use static_cell::StaticCell;
@@ -71,6 +71,11 @@ pub fn post(command: Command) {
     with_pacer(|p| p.post(command));
 }
 
+/// Replaces the loops' bank at once (a servo reset; see [`ServoPacer::restart`]).
+pub fn restart(bank: ServoBank) {
+    with_pacer(|p| p.restart(bank));
+}
+
 /// Diagnostics since start-up.
 pub fn stats() -> ServoStats {
     with_pacer(|p| p.stats()).unwrap_or_default()
@@ -86,9 +91,9 @@ pub fn on_servo_period() {
             return;
         };
         let feedback = s.io.encoders.read();
-        let fault = s.io.fault();
-        let period = s.pacer.period(&feedback, &[fault; MAX_SERVOS]);
-        s.io.write(&period.out.dac, period.out.enable.iter().any(|&on| on));
+        let faults = s.io.faults();
+        let period = s.pacer.period(&feedback, &faults);
+        s.io.write(&period.out.dac, &period.out.enable);
         if period.tick {
             board::pend_tick();
         }
