@@ -25,6 +25,7 @@ pub mod geometry;
 pub mod homing;
 pub mod interp;
 pub mod kinematics;
+pub mod lqg;
 pub mod math;
 pub mod pacing;
 pub mod place;

@@ -31,6 +31,7 @@
 mod drives;
 pub mod faults;
 mod inject;
+pub mod lqg;
 pub mod plant;
 pub mod serve;
 mod trace;

@@ -303,7 +303,7 @@ fn matmul(a: &[Vec<f64>], b: &[Vec<f64>]) -> Vec<Vec<f64>> {
 }
 
 /// Matrix exponential by scaling and squaring a 20-term Taylor series.
-fn expm(m: &[Vec<f64>]) -> Vec<Vec<f64>> {
+pub(crate) fn expm(m: &[Vec<f64>]) -> Vec<Vec<f64>> {
     let n = m.len();
     let norm = m
         .iter()
