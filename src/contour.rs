@@ -337,7 +337,7 @@ impl Default for PeriodOutputs {
 
 /// Every servo channel's setpoint interpolator and loop, and their contour coupling:
 /// the whole 10 kHz servo work of the board, as plain state and two calls.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ServoBank {
     setpoints: [SetpointInterpolator; MAX_SERVOS],
     axes: [ServoAxis; MAX_SERVOS],
@@ -345,6 +345,9 @@ pub struct ServoBank {
     /// The contour controller runs (a coupling mode other than uncoupled).
     coupled: bool,
     map: ContourMap,
+    /// Each channel's feedback law and the LQG designs (as [`crate::config::ServoConfig`]).
+    law: [u8; MAX_SERVOS],
+    lqg: heapless::Vec<crate::lqg::LqgGains, { crate::config::MAX_LQG }>,
     used: [bool; MAX_SERVOS],
     /// Joint units (mm or degrees) per count, and counts per joint unit.
     unit_per_count: ChannelVec,
@@ -394,6 +397,8 @@ impl ServoBank {
             contour: ContourLoop::new(&machine.servo.contour),
             coupled: machine.servo.contour.mode != ContourMode::Uncoupled,
             map,
+            law: machine.servo.law,
+            lqg: machine.servo.lqg.clone(),
             used,
             unit_per_count,
             counts_per_unit,
@@ -470,7 +475,11 @@ impl ServoBank {
             } else {
                 Coupling::NONE
             };
-            let o: ServoOutput = self.axes[c].update(&sp[c], inputs.feedback[c], amp, coupling);
+            let lqg = (self.law[c] as usize)
+                .checked_sub(1)
+                .and_then(|k| self.lqg.get(k));
+            let o: ServoOutput =
+                self.axes[c].update(&sp[c], inputs.feedback[c], amp, coupling, lqg);
             out.dac[c] = o.dac;
             out.enable[c] = o.enable;
             out.trip[c] = o.trip;

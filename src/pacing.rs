@@ -112,7 +112,7 @@ pub struct ServoPeriod {
 
 /// The servo loops and their side of the exchange with the tick. See the module
 /// documentation.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ServoPacer {
     bank: ServoBank,
     /// `PeriodInputs::enable` in force (from the last command taken).
@@ -407,7 +407,7 @@ mod tests {
         one_tick(&mut p, &feedback);
         // No command for the next edge: one late tick, and the loops run exactly as
         // if the same target had been posted again.
-        let mut late = p;
+        let mut late = p.clone();
         let mut held = p;
         held.post(hold);
         for _ in 0..SERVO_PER_TICK {

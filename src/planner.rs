@@ -62,9 +62,10 @@ use crate::units::TICK_HZ;
 pub const QUEUE_CAPACITY: usize = 368;
 
 /// Arcs and curves the controller buffers (their curved parts, [`Bend`]s of 112 bytes
-/// on the MCU, are kept apart from the queue's slots, which are line-sized). 56 curves
-/// of a merged 0.05 mm program hold seconds of motion.
-pub const BEND_CAPACITY: usize = 56;
+/// on the MCU, are kept apart from the queue's slots, which are line-sized). 48 curves
+/// of a merged 0.05 mm program hold seconds of motion (56 until the eight servo
+/// channels and their LQG designs needed the RAM).
+pub const BEND_CAPACITY: usize = 48;
 
 /// Factor applied to every planned limit so that single-precision rounding cannot
 /// take a joint past its own limit.

@@ -249,6 +249,8 @@ struct Coefs {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ServoAxis {
     c: Coefs,
+    /// The LQG law's estimate and integral (unused under PID).
+    lqg: crate::lqg::LqgState,
     integral: f32,
     previous_error: f32,
     enabled: bool,
@@ -316,6 +318,7 @@ impl ServoAxis {
                 ferror_per_velocity: per_v,
                 ferror_on: gains.ferror > 0,
             },
+            lqg: crate::lqg::LqgState::new(),
             integral: 0.0,
             previous_error: 0.0,
             enabled: false,
@@ -353,6 +356,7 @@ impl ServoAxis {
 
     fn idle(&mut self, error: f32) -> ServoOutput {
         self.integral = 0.0;
+        self.lqg.reset();
         self.previous_error = error;
         self.enabled = false;
         ServoOutput {
@@ -365,13 +369,16 @@ impl ServoAxis {
     }
 
     /// One servo period: drives towards `target` given the encoder `feedback` (counts),
-    /// the amplifier lines and the contour `coupling`.
+    /// the amplifier lines and the contour `coupling`; by the PID, or by the LQG design
+    /// `lqg` in its place (the feed-forward, coupling, limits, trips and output stage
+    /// are the same).
     pub fn update(
         &mut self,
         target: &Setpoint,
         feedback: i64,
         amp: AmpIo,
         coupling: Coupling,
+        lqg: Option<&crate::lqg::LqgGains>,
     ) -> ServoOutput {
         let (raw, exact) = following_error(target.position_q16, feedback);
         let error = exact + coupling.reference;
@@ -397,6 +404,18 @@ impl ServoAxis {
             self.previous_error = error;
         }
         let c = &self.c;
+        if let Some(g) = lqg {
+            let ff = c.kvff * target.velocity + c.kaff * target.accel + coupling.command;
+            let command = self.lqg.update(g, -error, ff, c.max_output, c.max_integral);
+            let dac = (c.dac_zero + round_i32(command * c.dac_per_unit)).clamp(0, DAC_MAX);
+            return ServoOutput {
+                dac: dac as u16,
+                command,
+                enable: true,
+                saturated: command >= c.max_output || command <= -c.max_output,
+                trip: None,
+            };
+        }
         let derivative = c.kd_hz * (error - self.previous_error);
         self.previous_error = error;
         let base = c.kp * error
@@ -521,11 +540,11 @@ mod tests {
     #[test]
     fn the_output_pushes_toward_the_target_around_mid_scale() {
         let mut a = ServoAxis::new(&gains(), 10_000.0);
-        let out = a.update(&at(20), 0, ON, Coupling::NONE);
+        let out = a.update(&at(20), 0, ON, Coupling::NONE, None);
         assert!(out.enable);
         assert!(out.command > 10.0 && out.command < 11.0, "{out:?}");
         assert!(out.dac >= DAC_MID as u16 + 100);
-        let out = a.update(&at(-20), 0, ON, Coupling::NONE);
+        let out = a.update(&at(-20), 0, ON, Coupling::NONE, None);
         assert!(out.dac < DAC_MID as u16);
     }
 
@@ -535,10 +554,10 @@ mod tests {
         g.dac_offset = -7;
         let mut a = ServoAxis::new(&g, 10_000.0);
         for _ in 0..100 {
-            a.update(&at(50), 0, ON, Coupling::NONE);
+            a.update(&at(50), 0, ON, Coupling::NONE, None);
         }
         assert!(a.integral() > 0.0);
-        let out = a.update(&at(50), 0, AmpIo::default(), Coupling::NONE);
+        let out = a.update(&at(50), 0, AmpIo::default(), Coupling::NONE, None);
         assert_eq!(out.dac, (DAC_MID - 7) as u16);
         assert!(!out.enable);
         assert_eq!(a.integral(), 0.0);
@@ -550,13 +569,13 @@ mod tests {
         let mut a = ServoAxis::new(&gains(), 10_000.0);
         // 90 counts: P alone gives 45 c.u.; the integral would pass 55 and saturate.
         for _ in 0..100_000 {
-            let out = a.update(&at(90), 0, ON, Coupling::NONE);
+            let out = a.update(&at(90), 0, ON, Coupling::NONE, None);
             assert!(out.command <= 100.0);
         }
         let i = a.integral();
         assert!((50.0 - 1e-3..=55.0 + 1e-3).contains(&i), "integral {i}");
         // The moment the error reverses, the output leaves saturation at once.
-        let out = a.update(&at(-90), 0, ON, Coupling::NONE);
+        let out = a.update(&at(-90), 0, ON, Coupling::NONE, None);
         assert!(!out.saturated && out.command < 10.0, "{out:?}");
     }
 
@@ -567,10 +586,10 @@ mod tests {
         (g.ferror, g.min_ferror) = (0, 0); // no following-error check
         let mut a = ServoAxis::new(&g, 10_000.0);
         assert_eq!(
-            a.update(&at(900), 0, ON, Coupling::NONE).dac,
+            a.update(&at(900), 0, ON, Coupling::NONE, None).dac,
             DAC_MAX as u16
         );
-        assert_eq!(a.update(&at(-900), 0, ON, Coupling::NONE).dac, 0);
+        assert_eq!(a.update(&at(-900), 0, ON, Coupling::NONE, None).dac, 0);
     }
 
     #[test]
@@ -590,8 +609,8 @@ mod tests {
             velocity: 5_000.0,
             accel: 0.0,
         };
-        assert_eq!(a.update(&moving, 0, ON, Coupling::NONE).trip, None);
-        let out = a.update(&at(400), 0, ON, Coupling::NONE);
+        assert_eq!(a.update(&moving, 0, ON, Coupling::NONE, None).trip, None);
+        let out = a.update(&at(400), 0, ON, Coupling::NONE, None);
         assert_eq!(
             out.trip,
             Some(Trip::FollowingError {
@@ -602,9 +621,9 @@ mod tests {
         assert!(!out.enable);
         assert_eq!(out.dac, DAC_MID as u16);
         // Still tripped with the error gone, until reset.
-        assert!(!a.update(&at(0), 0, ON, Coupling::NONE).enable);
+        assert!(!a.update(&at(0), 0, ON, Coupling::NONE, None).enable);
         a.reset();
-        assert!(a.update(&at(0), 0, ON, Coupling::NONE).enable);
+        assert!(a.update(&at(0), 0, ON, Coupling::NONE, None).enable);
     }
 
     #[test]
@@ -614,12 +633,15 @@ mod tests {
             enable: false,
             fault: true,
         };
-        assert_eq!(a.update(&at(0), 0, fault_off, Coupling::NONE).trip, None);
+        assert_eq!(
+            a.update(&at(0), 0, fault_off, Coupling::NONE, None).trip,
+            None
+        );
         let fault_on = AmpIo {
             enable: true,
             fault: true,
         };
-        let out = a.update(&at(0), 0, fault_on, Coupling::NONE);
+        let out = a.update(&at(0), 0, fault_on, Coupling::NONE, None);
         assert_eq!(out.trip, Some(Trip::AmplifierFault));
         assert!(!out.enable);
     }
@@ -632,13 +654,13 @@ mod tests {
             velocity: 1_000.0,
             accel: 0.0,
         };
-        let out = a.update(&sp, 0, ON, Coupling::NONE);
+        let out = a.update(&sp, 0, ON, Coupling::NONE, None);
         assert!((out.command - 10.0).abs() < 1e-4, "{out:?}");
         let c = Coupling {
             reference: 4.0,
             command: 1.0,
         };
-        let out = a.update(&sp, 0, ON, c);
+        let out = a.update(&sp, 0, ON, c, None);
         // 10 (ff) + 1 (command) + 0.5·4 (P) + 10·4·1e-4 (I) + the earlier I (0).
         assert!((out.command - 13.004).abs() < 1e-3, "{out:?}");
     }

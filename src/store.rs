@@ -13,8 +13,9 @@ use crate::config::{ConfigError, MachineConfig};
 pub const MAX_CONFIG_BYTES: usize = 2048;
 /// Bytes of configuration carried by one message.
 pub const CHUNK_BYTES: usize = 160;
-/// Start of a stored record.
-pub const MAGIC: [u8; 4] = *b"PKM1";
+/// Start of a stored record ("PKM2" since the configuration holds eight servo channels
+/// and LQG designs: a record of the older layout is not read as this one).
+pub const MAGIC: [u8; 4] = *b"PKM2";
 /// Header length of a stored record.
 pub const HEADER_BYTES: usize = 10;
 

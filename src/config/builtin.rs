@@ -153,6 +153,8 @@ impl MachineConfig {
                         ServoGains::NONE
                     }
                 }),
+                law: [0; MAX_SERVOS],
+                lqg: heapless::Vec::new(),
                 contour: ContourConfig::UNCOUPLED,
             },
             motion: MotionConfig::TRAPEZOID,
@@ -233,8 +235,9 @@ impl MachineConfig {
     /// [`MachineConfig::hexapod`]) as servo cylinders on channels 0..5, 280..420 mm, with
     /// the platform's home at (0, 0, 260 mm); the table's X and Y on servo channels 6
     /// and 7, ±50 mm; the tool tip 275 mm above the base. All 1000 counts/mm, 20 mm/s,
-    /// 200 mm/s²; `seed-b`'s loops (legs as its Z leg, the table as its X and Y) and
-    /// CCPM. Home: the workpiece point (0, 0, 275 mm) under the tool, level.
+    /// 200 mm/s²; `seed-b`'s loops (legs as its Z leg, the table as its X and Y), the
+    /// legs running the file's LQG design, and CCPM. Home: the workpiece point
+    /// (0, 0, 275 mm) under the tool, level.
     pub fn hexapod_xy() -> Self {
         let mm = crate::units::NM_PER_MM;
         let deg = crate::units::NDEG_PER_DEG;
@@ -273,6 +276,23 @@ impl MachineConfig {
             ferror: 2000,
             min_ferror: 1000,
         };
+        // The legs' LQG design, as the machine file's `lqg_gains` (`contour-study
+        // --design-lqg`): the identified L(s) at 1000 counts/mm, weights position 0.01,
+        // integral 40, command 1, load noise 2 c.u., encoder noise 0.29 counts.
+        let leg_lqg = crate::lqg::LqgGains {
+            order: 3,
+            phi_minus_i: [
+                [-1.8829388e-3, 3.3761698e-3, 5.70642e-6, 0.0e0],
+                [-3.376266e-3, -5.7065286e-6, 3.3793426e-3, 0.0e0],
+                [-5.696912e-5, -9.6289504e-8, -1.08482334e-10, 0.0e0],
+                [0.0e0, 0.0e0, 0.0e0, 0.0e0],
+            ],
+            gamma: [1.479193e-2, 9.372941e-3, 2.6076635e-2, 0.0e0],
+            c: [1.0e0, 0.0e0, 0.0e0, 0.0e0],
+            m: [9.7235724e-2, 6.377594e-2, 1.7082046e-1, 0.0e0],
+            k: [1.1118436e-1, 1.6003574e-1, 1.0232325e-1, 0.0e0],
+            ki_t: 6.3061964e-4,
+        };
         let leg = loop_of(0.05, 0.6, 5.0e-4, 3.8116e-3, 2.1552e-5);
         let mut gains = [ServoGains::NONE; MAX_SERVOS];
         gains[..6].copy_from_slice(&[leg; 6]);
@@ -303,12 +323,15 @@ impl MachineConfig {
             home: [0, 0, 275 * mm, 0, 0, 0],
             servo: ServoConfig {
                 gains,
+                // The legs (channels 0..5) run the LQG design, the table its PID.
+                law: [1, 1, 1, 1, 1, 1, 0, 0],
+                lqg: heapless::Vec::from_slice(&[leg_lqg]).unwrap_or_default(),
                 contour: ContourConfig {
                     mode: ContourMode::Ccpm,
-                    kp: 400.0,
-                    ki: 1000.0,
+                    kp: 2000.0,
+                    ki: 5000.0,
                     max_integral: 50.0,
-                    kr: 20.0,
+                    kr: 40.0,
                     max_offset: 0.5,
                 },
             },

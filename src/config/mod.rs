@@ -405,12 +405,23 @@ impl PartialEq for ContourConfig {
 }
 impl Eq for ContourConfig {}
 
+/// Most distinct LQG designs a machine carries ([`ServoConfig::lqg`]): report B's
+/// machine needs three (the legs', the table X's and Y's); each is 136 bytes of RAM in
+/// the configuration and again in the servo bank.
+pub const MAX_LQG: usize = 3;
+
 /// Servo settings of the machine: the loop of each servo channel and their coupling.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct ServoConfig {
-    /// Loop of each servo channel, indexed by `Drive::Servo::channel`.
+    /// Loop of each servo channel, indexed by `Drive::Servo::channel`: its limits,
+    /// output stage and feed-forward, and the PID gains.
     pub gains: [ServoGains; MAX_SERVOS],
-    /// Coupling of the channels that drive the X, Y and Z axes.
+    /// Each channel's feedback law: 0 the PID of `gains`, k ≥ 1 the LQG design
+    /// `lqg[k − 1]` ([`crate::lqg`]; the feed-forward and limits of `gains` still apply).
+    pub law: [u8; MAX_SERVOS],
+    /// The LQG designs the channels use (channels with the same plant share one).
+    pub lqg: heapless::Vec<crate::lqg::LqgGains, MAX_LQG>,
+    /// Coupling of the channels in pose coordinates ([`crate::contour`]).
     pub contour: ContourConfig,
 }
 
@@ -418,8 +429,16 @@ impl ServoConfig {
     /// No servo channels in use.
     pub const NONE: ServoConfig = ServoConfig {
         gains: [ServoGains::NONE; MAX_SERVOS],
+        law: [0; MAX_SERVOS],
+        lqg: heapless::Vec::new(),
         contour: ContourConfig::UNCOUPLED,
     };
+
+    /// The LQG design channel `c` runs, if it runs one.
+    pub fn lqg_of(&self, c: usize) -> Option<&crate::lqg::LqgGains> {
+        let k = *self.law.get(c)? as usize;
+        k.checked_sub(1).and_then(|i| self.lqg.get(i))
+    }
 }
 
 /// One joint: its drive, scale, travel and limits.

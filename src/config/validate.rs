@@ -66,7 +66,8 @@ pub enum ConfigError {
         field: GeometryField,
     },
     /// `servo.gains[channel]` of a channel in use is not finite, has a negative limit,
-    /// a zero DAC scale or `min_ferror > ferror`.
+    /// a zero DAC scale or `min_ferror > ferror`, or its `servo.law` names an LQG
+    /// design that is missing or invalid.
     ServoGains {
         /// Servo channel, 0-based.
         channel: u8,
@@ -349,7 +350,10 @@ impl MachineConfig {
                     return Err(ConfigError::JointChannel { joint });
                 }
                 used.servos |= bit;
-                if !self.servo.gains[channel as usize].is_valid() {
+                let c = channel as usize;
+                let law = self.servo.law[c] as usize;
+                let lqg_ok = law == 0 || self.servo.lqg_of(c).is_some_and(|g| g.is_valid());
+                if !self.servo.gains[c].is_valid() || !lqg_ok {
                     return Err(ConfigError::ServoGains { channel });
                 }
             }

@@ -42,6 +42,11 @@ struct Args {
     /// --machine): the five-axis study, PID and LQG.
     #[arg(long)]
     five_axis: bool,
+    /// Designs the LQG law of every servo joint of the machine file (--machine) with a
+    /// `plant` and `lqg` weights, and prints each joint's `lqg_gains` with its loop
+    /// figures on the model and on the 10 %-off plant.
+    #[arg(long)]
+    design_lqg: bool,
     /// Five-axis study: the tool axis tilts by this many degrees along the path.
     #[arg(long, default_value_t = 0.0)]
     tilt: f64,
@@ -49,6 +54,9 @@ struct Args {
 
 fn main() -> Result<()> {
     let args = Args::parse();
+    if args.design_lqg {
+        return design_lqg(&args);
+    }
     if args.five_axis {
         return five_axis(&args);
     }
@@ -235,7 +243,7 @@ fn five_axis(args: &Args) -> Result<()> {
     println!("conditions: {c:?}");
     println!("| loops | scheme | path max (um) | path RMS (um) | direction max (mdeg) | direction RMS (mdeg) | max / uncoupled (path, direction) | max following (um) | saturated periods |");
     println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
-    for law in [Law::Pid] {
+    for law in Law::ALL {
         let runs: Vec<_> = Scheme::ALL
             .iter()
             .map(|s| machine.run(*s, law, &c))
@@ -260,6 +268,49 @@ fn five_axis(args: &Args) -> Result<()> {
                     .unwrap_or_default()
             );
         }
+    }
+    Ok(())
+}
+
+/// `--design-lqg`: every joint's LQG design from its plant and weights.
+fn design_lqg(args: &Args) -> Result<()> {
+    use pkmc_host::sim::lqg::{design, gains_toml};
+    use pkmc_host::sim::plant::TransferFunction;
+    let path = args
+        .machine
+        .as_ref()
+        .ok_or_else(|| anyhow::anyhow!("--design-lqg needs --machine FILE"))?;
+    let file: MachineFile = toml::from_str(&std::fs::read_to_string(path)?)?;
+    let off = Mismatch {
+        gain: 1.1,
+        resonance: 0.9,
+    };
+    for (j, jf) in file.joints.iter().enumerate() {
+        let (Some(w), Some(p)) = (&jf.lqg, &jf.plant) else {
+            continue;
+        };
+        let tf = TransferFunction::new(&p.num, &p.den)?;
+        let d = design(
+            &tf,
+            jf.steps_per_unit,
+            1.0 / pkmc::servo::SERVO_HZ as f64,
+            w,
+        )?;
+        let model = d.loop_figures(&tf, jf.steps_per_unit)?;
+        let plant = d.loop_figures(&tf.perturbed(off), jf.steps_per_unit)?;
+        println!(
+            "# joints[{j}] ({}): peak |S| {:.2} (model) {:.2} (10 % off); crossover {:.1} / {:.1} rad/s; \
+             1 Hz load {:.2} / {:.2} counts per c.u.; largest closed-loop pole {:.5}",
+            jf.name,
+            model.peak_sensitivity,
+            plant.peak_sensitivity,
+            model.crossover_rad_s,
+            plant.crossover_rad_s,
+            model.load_response_1hz,
+            plant.load_response_1hz,
+            model.max_pole
+        );
+        println!("lqg_gains = {}", gains_toml(&d.gains));
     }
     Ok(())
 }

@@ -157,15 +157,21 @@ fn angle_deg(u: [f64; 3], v: [f64; 3]) -> f64 {
 /// The axis loops.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Law {
-    /// The machine file's PID gains.
+    /// The machine file's PID gains on every joint.
     Pid,
+    /// The machine file's LQG designs (`lqg_gains`) on every joint.
+    Lqg,
 }
 
 impl Law {
+    /// Both.
+    pub const ALL: [Law; 2] = [Law::Pid, Law::Lqg];
+
     /// Short name.
     pub fn name(self) -> &'static str {
         match self {
             Law::Pid => "PID",
+            Law::Lqg => "LQG",
         }
     }
 }
@@ -224,8 +230,10 @@ struct Joint {
 /// The hexapod-xy with a plant on every joint.
 #[derive(Clone, Debug)]
 pub struct FiveAxisMachine {
-    /// Core configuration.
+    /// Core configuration, every joint on its PID.
     pub config: MachineConfig,
+    /// The same, every joint on its LQG design.
+    pub lqg: MachineConfig,
     kin: HexapodXy,
     joints: Vec<Joint>,
 }
@@ -261,8 +269,14 @@ impl FiveAxisMachine {
             });
         }
         debug_assert!(matches!(config.kinematics, KinematicsConfig::HexapodXy(_)));
+        let mut config = config;
+        config.servo.law = [0; MAX_SERVOS];
+        config.servo.lqg.clear();
+        let mut lqg = config.clone();
+        file.apply_lqg(&mut lqg, true)?;
         Ok(Self {
             config,
+            lqg,
             kin,
             joints,
         })
@@ -301,7 +315,10 @@ impl FiveAxisMachine {
 
     /// Runs `scheme` with `law` under `c`.
     pub fn run(&self, scheme: Scheme, law: Law, c: &Conditions) -> Run {
-        let config = scheme.configure(&self.config);
+        let config = scheme.configure(match law {
+            Law::Pid => &self.config,
+            Law::Lqg => &self.lqg,
+        });
         let kin = MachineKinematics::HexapodXy(self.kin);
         let coupled = config.servo.contour.mode != pkmc::config::ContourMode::Uncoupled;
         let h = 1.0 / SERVO_HZ as f64;

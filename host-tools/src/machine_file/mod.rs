@@ -12,6 +12,7 @@
 mod convert;
 mod exact;
 mod locate;
+pub mod lqg;
 pub mod sections;
 
 pub use sections::{
@@ -138,7 +139,7 @@ impl MachineFile {
             )?,
             None => pkmc::config::MotionConfig::TRAPEZOID,
         };
-        let config = MachineConfig {
+        let mut config = MachineConfig {
             name,
             kinematics,
             joints,
@@ -147,6 +148,7 @@ impl MachineFile {
             servo,
             motion,
         };
+        self.apply_lqg(&mut config, false)?;
         self.check(&config)?;
         Ok(config)
     }

@@ -137,6 +137,10 @@ pub struct JointFile {
     /// A hydraulic joint's cylinder area, mm²: its force limit is this times the
     /// machine's `supply_pressure`.
     pub cylinder_area: Option<f64>,
+    /// Servo: the weights of its LQG design ([`super::lqg`]).
+    pub lqg: Option<crate::sim::lqg::LqgWeights>,
+    /// Servo: the LQG design's gains, as `contour-study --design-lqg` prints them.
+    pub lqg_gains: Option<pkmc::lqg::LqgGains>,
 }
 
 /// A servo joint's `servo = { ... }` table: [`pkmc::config::ServoGains`] in file units
@@ -144,7 +148,11 @@ pub struct JointFile {
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ServoFile {
-    /// c.u. per count of following error.
+    /// The feedback law: `"pid"` (the default) or `"lqg"` (`lqg_gains`).
+    #[serde(default)]
+    pub law: super::lqg::LawKind,
+    /// c.u. per count of following error (PID).
+    #[serde(default)]
     pub kp: f32,
     /// c.u. per (count · s).
     #[serde(default)]
