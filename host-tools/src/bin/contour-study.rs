@@ -243,6 +243,7 @@ fn five_axis(args: &Args) -> Result<()> {
     println!("conditions: {c:?}");
     println!("| loops | scheme | path max (um) | path RMS (um) | direction max (mdeg) | direction RMS (mdeg) | max / uncoupled (path, direction) | max following (um) | saturated periods |");
     println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
+    let mut all = Vec::new();
     for law in Law::ALL {
         let runs: Vec<_> = Scheme::ALL
             .iter()
@@ -268,7 +269,105 @@ fn five_axis(args: &Args) -> Result<()> {
                     .unwrap_or_default()
             );
         }
+        all.extend(runs);
     }
+    if let Some(path) = &args.plot {
+        plot_five_axis(path, &all, &c)?;
+    }
+    Ok(())
+}
+
+/// The five-axis study's plot: path and tool-direction error over time (logarithmic),
+/// the four schemes, a row per axis law.
+fn plot_five_axis(
+    path: &std::path::Path,
+    runs: &[pkmc_host::contour_study::five_axis::Run],
+    c: &pkmc_host::contour_study::five_axis::Conditions,
+) -> Result<()> {
+    use pkmc_host::contour_study::five_axis::Law;
+    use plotters::prelude::*;
+    let _ = plotters::style::register_font(
+        "sans-serif",
+        plotters::style::FontStyle::Normal,
+        dejavu::sans::regular(),
+    );
+    let fail = |e: String| anyhow::anyhow!("{}: cannot draw: {e}", path.display());
+    let root = BitMapBackend::new(path, (1600, 1000)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| fail(e.to_string()))?;
+    let root = root
+        .titled(
+            &format!(
+                "Report B's helix on the hexapod-xy, tool axis {}: plants 10 % off, cutting force",
+                if c.tilt_deg > 0.0 {
+                    "tilting +-10 deg"
+                } else {
+                    "held"
+                }
+            ),
+            ("sans-serif", 24),
+        )
+        .map_err(|e| fail(e.to_string()))?;
+    let colours = [RED, BLUE, RGBColor(0, 150, 0), BLACK];
+    let panels = root.split_evenly((2, 2));
+    for (i, panel) in panels.iter().enumerate() {
+        let law = Law::ALL[i / 2];
+        let direction = i % 2 == 1;
+        let (unit, scale) = if direction {
+            ("mdeg", 1e3)
+        } else {
+            ("um", 1e3)
+        };
+        let value = |x: &(f64, f64, f64)| if direction { x.2 } else { x.1 } * scale;
+        let chosen: Vec<_> = runs.iter().filter(|r| r.law == law).collect();
+        let top = chosen
+            .iter()
+            .flat_map(|r| r.trace.iter().map(value))
+            .fold(1e-2, f64::max);
+        let floor = top * 1e-4;
+        let mut chart = ChartBuilder::on(panel)
+            .caption(
+                format!(
+                    "{}: {} error ({unit})",
+                    law.name(),
+                    if direction { "tool-direction" } else { "path" }
+                ),
+                ("sans-serif", 20),
+            )
+            .margin(10)
+            .x_label_area_size(36)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..c.duration_s, (floor..top * 2.0).log_scale())
+            .map_err(|e| fail(e.to_string()))?;
+        chart
+            .configure_mesh()
+            .x_desc("t (s)")
+            .draw()
+            .map_err(|e| fail(e.to_string()))?;
+        for (r, col) in chosen.iter().zip(colours) {
+            let (max, rms) = if direction {
+                (r.max_dir_deg * scale, r.rms_dir_deg * scale)
+            } else {
+                (r.max_path_mm * scale, r.rms_path_mm * scale)
+            };
+            chart
+                .draw_series(LineSeries::new(
+                    r.trace.iter().map(|x| (x.0, value(x).max(floor))),
+                    col.stroke_width(1),
+                ))
+                .map_err(|e| fail(e.to_string()))?
+                .label(format!("{}: max {max:.2}, RMS {rms:.2}", r.scheme.name()))
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], col.stroke_width(3)));
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 16))
+            .draw()
+            .map_err(|e| fail(e.to_string()))?;
+    }
+    root.present().map_err(|e| fail(e.to_string()))?;
     Ok(())
 }
 
