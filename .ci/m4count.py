@@ -31,11 +31,18 @@ frames it completes (per frame: from the call's start, or the end of the previou
 frame's work, to the first read of the byte after the frame's delimiter, found by a
 memory-read hook on the packet). The worst 1 ms period is one tick plus every
 receive and transmit call between it and the previous tick plus ten servo periods
-(the `servo_ccpm_4axes` maximum); the lock-held figure is the longest single call (the
-firmware makes each under the controller's lock). Executed symbols of every counted
-call are checked for soft-float `f64` helpers, 64/128-bit division (the helpers, and
-LLVM's inline expansion of 128-bit division, recognised as a block that loops on
-itself with six or more subtract-with-carry instructions) and software square roots.
+of the program's machine (SERVO_OF_MACHINE: the `servo_ccpm_4axes` maximum for the
+H-4 and the hexapod, `servo_hexapod_xy_8ch` for the hexapod-xy); the lock-held
+figure is the longest single call (the firmware makes each under the controller's
+lock). Executed symbols of every counted call are checked for soft-float `f64`
+helpers, 64/128-bit division (the helpers, and LLVM's inline expansion of 128-bit
+division, recognised as a block that loops on itself with six or more
+subtract-with-carry instructions) and software square roots.
+
+The harness assumes no number of machines or servo channels: machines and servo
+benches are indices (MACHINES, SERVO_BENCHES, as the Rust side), and the word counts
+of the logged tick inputs and outputs come from the host run's first line (`wire`),
+checked against the image's `bench_wire_words`.
 
 Needs: Python 3, `pip install unicorn capstone` (tested with unicorn 2.1.4, capstone
 5.0.9), the Rust toolchain with the thumbv7em-none-eabihf target.
@@ -66,7 +73,16 @@ HOST_BIN = os.path.join(TARGET_DIR, "host", "pkmc-m4count")
 CALLS_DIR = os.path.join(TARGET_DIR, "calls")  # recorded programs (perf/m4count/src/record.rs)
 
 # Instruction budgets per call (docs/performance.md).
-BUDGETS = {"h4_ik": 600, "hexapod_ik": 1000, "servo_ccpm_4axes": 2000, "h4_period": 1500}
+BUDGETS = {"h4_ik": 600, "hexapod_ik": 1000, "servo_ccpm_4axes": 2000, "h4_period": 1500,
+           # hexapod-xy (issue 13): the first measurement (1 751 and 5 437) + ~15 %.
+           "hexapod_xy_ik": 2000, "servo_hexapod_xy_8ch": 6250}
+# Machines and servo benches by index, as perf/m4count/src/main.rs (`machine`) and
+# servo.rs (`bank`).
+MACHINES = {0: "h4", 1: "hexapod", 2: "hexapod_xy"}
+SERVO_BENCHES = {0: "servo_ccpm_4axes", 1: "servo_hexapod_xy_8ch"}
+# The servo bench whose worst period stands for a machine's ten servo periods in its
+# 1 ms figure (the hexapod has no servo channel: the 4-axis bank stands for it).
+SERVO_OF_MACHINE = {0: "servo_ccpm_4axes", 1: "servo_ccpm_4axes", 2: "servo_hexapod_xy_8ch"}
 # Real-time budgets of whole controller calls (issue 9), instructions; enforced with
 # --enforce-realtime only.
 RT_BUDGETS = [
@@ -82,15 +98,19 @@ RAM, RAM_SIZE = 0x2000_0000, 0x10_0000  # 1 MiB: more than the MCU, room for the
 RET = FLASH + FLASH_SIZE - 0x100  # return address: a `b .` placed at the end of flash
 KIN = RAM + 0x1000  # MachineKinematics (1024 bytes reserved)
 ARG = RAM + 0x2000  # argument buffers
-BANK = RAM + 0x3000  # ServoBank (2048 bytes reserved)
+BANK = RAM + 0x3000  # ServoBank (4096 bytes reserved)
 PERIOD = RAM + 0x4000  # Period (96 KiB reserved: up to RAM + 0x1C000)
 PERIOD_WARMUP, PERIOD_CHUNK = 1600, 200  # as perf/m4count/src/main.rs
-CALL = RAM + 0x1_8000  # whole-call buffers (below)
-PACKET, IN_WORDS_A, OUT_WORDS_A, INPUTS, TXBUF = CALL, CALL + 0x100, CALL + 0x300, CALL + 0x600, CALL + 0xA00
+CALL = RAM + 0x1_C000  # whole-call buffers: a packet, input words (up to 128), output
+# words (up to 256), one `Inputs` (INPUTS_BYTES, as perf/m4count/src/main.rs), a
+# transmit buffer
+PACKET, IN_WORDS_A, OUT_WORDS_A, INPUTS, TXBUF = CALL, CALL + 0x100, CALL + 0x500, CALL + 0xD00, CALL + 0x1500
 CTRL = RAM + 0x2_0000  # Controller (CTRL_BYTES reserved)
 CTRL_BYTES = 192 * 1024  # as perf/m4count/src/main.rs
 STACK_TOP = RAM + RAM_SIZE  # the stack grows down from the end of RAM (to CTRL + CTRL_BYTES)
-INPUT_WORDS, OUTPUT_WORDS = 4 + 8 + 4 + 12, 5 * 7 + 4 + 3  # as perf/m4count/src/main.rs, mod wire
+# Words of a tick's inputs and outputs, channels (MAX_SERVOS) and pose axes of the
+# contour error: from the host run's `wire` line (perf/m4count/src/wire.rs).
+WIRE = {}
 USB_PACKET = 64
 MAX_STEPS = 20_000_000  # instructions: a runaway call stops here
 
@@ -114,7 +134,13 @@ def build():
 
 def host_cases():
     out = subprocess.run([HOST_BIN], cwd=CRATE, check=True, capture_output=True, text=True).stdout
-    return [line.split() for line in out.splitlines() if line.strip()]
+    cases = [line.split() for line in out.splitlines() if line.strip()]
+    if not cases or cases[0][0] != "wire":
+        sys.exit("m4count: the host run did not start with its `wire` line")
+    WIRE.update(zip(("inputs", "outputs", "servos", "pose_axes"), map(int, cases[0][1:5])))
+    if WIRE["inputs"] > 128 or WIRE["outputs"] > 256:
+        sys.exit(f"m4count: {WIRE} words do not fit the buffers at CALL")
+    return cases[1:]
 
 
 def record_programs():
@@ -387,7 +413,7 @@ def kinematics_cases(m4, cases):
         if got != want:
             sys.exit(f"m4count: {what} differs from the host: emulated {got}, host {want} ({' '.join(case)})")
 
-    machines = {0: "h4", 1: "hexapod"}
+    machines = MACHINES
     initialised = None
     pose_a, joints_a, guess_a, out_a = ARG, ARG + 0x100, ARG + 0x200, ARG + 0x300
     for c in cases:
@@ -426,14 +452,20 @@ def kinematics_cases(m4, cases):
             check("isqrt", struct.unpack("<Q", m4.uc.mem_read(out_a, 8))[0], vals[1], c)
             record("isqrt", n)
         elif kind == "servo":
-            if vals[0] == 0:
-                _, n = m4.call("bench_servo_init", BANK)
-                record("servo_init", n)
-            m4.write_i64(pose_a, vals[1:5])
-            _, n = m4.call("bench_servo_ccpm_4axes", BANK, pose_a, out_a)
-            dac = list(struct.unpack("<4H", m4.uc.mem_read(out_a, 8)))
-            check("DAC codes", dac, vals[5:9], c)
-            record("servo_ccpm_4axes", n)
+            # servo B k f[S] d[S] e[P]: bench B's period k, feedback, DAC codes and the
+            # contour error's f32 bits (perf/m4count/src/servo.rs, `PeriodResult`).
+            s, p = WIRE["servos"], WIRE["pose_axes"]
+            bench, k, f, dac, err = vals[0], vals[1], vals[2:2 + s], vals[2 + s:2 + 2 * s], vals[2 + 2 * s:]
+            name = SERVO_BENCHES[bench]
+            if k == 0:
+                _, n = m4.call("bench_servo_init", bench, BANK)
+                record(f"{name}_init", n)
+            m4.write_i64(pose_a, f)
+            _, n = m4.call("bench_servo_period", BANK, pose_a, out_a)
+            got = m4.uc.mem_read(out_a, 2 * s + 4 * p)
+            check("DAC codes", list(struct.unpack(f"<{s}H", got[:2 * s])), dac, c)
+            check("contour error", list(struct.unpack(f"<{p}I", got[2 * s:])), err, c)
+            record(name, n)
         elif kind == "period":
             if vals[0] == 0:
                 _, n = m4.call("bench_period_init", PERIOD)
@@ -453,7 +485,7 @@ def kinematics_cases(m4, cases):
 def read_log(path):
     """The recorded calls: ("R", bytes) | ("T", input words, output words) | ("X", bytes)."""
     data = open(path, "rb").read()
-    magic = b"PKMC-M4-CALLS-1"
+    magic = b"PKMC-M4-CALLS-2"
     if not data.startswith(magic):
         sys.exit(f"m4count: {path} is not a call log")
     calls, i = [], len(magic)
@@ -465,9 +497,10 @@ def read_log(path):
             calls.append((kind.decode(), data[i + 2:i + 2 + n]))
             i += 2 + n
         elif kind == b"T":
-            words = struct.unpack_from(f"<{INPUT_WORDS + OUTPUT_WORDS}q", data, i)
-            calls.append(("T", words[:INPUT_WORDS], list(words[INPUT_WORDS:])))
-            i += 8 * (INPUT_WORDS + OUTPUT_WORDS)
+            n_in, n_out = WIRE["inputs"], WIRE["outputs"]
+            words = struct.unpack_from(f"<{n_in + n_out}q", data, i)
+            calls.append(("T", words[:n_in], list(words[n_in:])))
+            i += 8 * (n_in + n_out)
         else:
             sys.exit(f"m4count: {path}: bad record {kind!r} at byte {i - 1}")
     return calls
@@ -534,7 +567,7 @@ def replay(m4, name, machine, path, blocks, servo_period):
             trace, mem_calls = m4.trace, m4.mem_calls
             m4.call("bench_ctrl_outputs", out_ptr, OUT_WORDS_A)
             m4.trace, m4.mem_calls = trace, mem_calls
-            got = m4.read_i64(OUT_WORDS_A, OUTPUT_WORDS)
+            got = m4.read_i64(OUT_WORDS_A, WIRE["outputs"])
             if got != call[2]:
                 sys.exit(f"m4count: {name}: tick outputs (call {index}) differ from the host's:\n"
                          f"  emulated {got}\n  host     {call[2]}")
@@ -587,23 +620,25 @@ def short(name, width=60):
     return name if len(name) <= width else name[:width - 1] + "…"
 
 
-def report_whole_calls(m4, replays, servo_period):
+def report_whole_calls(m4, replays, servo_periods):
     print()
     print("whole controller calls, instructions per call (tick, receive and transmit include their C-ABI")
     print("wrapper; receive = one USB packet; frame = the part of a receive that completes one frame;")
     print(f"period = a tick + the receive and transmit calls since the previous tick + "
-          f"{SERVO_PER_TICK} x servo_ccpm_4axes max {servo_period}; lock = the longest single call)")
-    print(f"{'program':18} {'blocks':>6} {'call':8} {'calls':>6} {'min':>7} {'median':>7} {'p99':>7} {'max':>7}")
+          f"{SERVO_PER_TICK} x the machine's servo period ("
+          + ", ".join(f"{MACHINES[m]}: {SERVO_OF_MACHINE[m]} max {servo_periods[m]}" for m in sorted(servo_periods))
+          + "); lock = the longest single call)")
+    print(f"{'program':24} {'blocks':>6} {'call':8} {'calls':>6} {'min':>7} {'median':>7} {'p99':>7} {'max':>7}")
     for r in replays:
         first = True
         for kind in ("tick", "receive", "frame", "transmit", "period"):
             v = sorted(r.counts[kind])
-            label = f"{r.name:18} {r.blocks:6d}" if first else " " * 25
+            label = f"{r.name:24} {r.blocks:6d}" if first else " " * 31
             first = False
             print(f"{label} {kind:8} {len(v):6d} {v[0]:7d} {percentile(v, 50):7d} "
                   f"{percentile(v, 99):7d} {v[-1]:7d}")
         p, c = r.period
-        print(f"{'':25} worst period: tick {c['tick']} + {c['packets']} receives {c['receive']} "
+        print(f"{'':31} worst period: tick {c['tick']} + {c['packets']} receives {c['receive']} "
               f"({c['frames']} frames) + transmits {c['transmit']} + servo {c['servo']}; "
               f"lock held {r.lock[0]} ({r.lock[1]}); replayed in {r.seconds:.1f} s")
     print()
@@ -662,14 +697,17 @@ def main():
     size, _ = m4.call_raw("bench_ctrl_size")
     if size > CTRL_BYTES:
         sys.exit(f"m4count: Controller is {size} bytes, more than the {CTRL_BYTES} reserved")
-    servo_period = max(stats["servo_ccpm_4axes"])
+    words = m4.call_raw("bench_wire_words")[0]
+    if (words & 0xFFFF, words >> 16) != (WIRE["inputs"], WIRE["outputs"]):
+        sys.exit(f"m4count: the image's wire words {words & 0xFFFF}, {words >> 16} are not the host's {WIRE}")
+    servo_periods = {m: max(stats[SERVO_OF_MACHINE[m]]) for m in sorted({p[1] for p in programs})}
     replays = []
     t2 = time.time()
     for name, machine, path, blocks in programs:
-        replays.append(replay(m4, name, machine, path, blocks, servo_period))
+        replays.append(replay(m4, name, machine, path, blocks, servo_periods[machine]))
     replayed = sum(sum(r.counts[k]) for r in replays for k in ("tick", "receive", "transmit"))
     t3 = time.time()
-    seen = report_whole_calls(m4, replays, servo_period)
+    seen = report_whole_calls(m4, replays, servo_periods)
 
     print()
     print(f"{'real-time budget (issue 9)':34} {'worst':>8} {'budget':>8}  where")

@@ -1,10 +1,11 @@
 //! Whole programs recorded on the host, call by call, for the emulator to replay
 //! (`python3 .ci/m4count.py`, the whole-call section of `docs/performance.md`).
 //!
-//! Each program is G-code generated here ([`programs`]), compiled by the host's G-code
-//! front end as `nc-send` compiles a file ([`pkmc_host::job::compile_text`]: parser,
-//! canonical commands, blocks, pre-flight against the machine's reach), and streamed
-//! by `nc-send`'s own link client as `nc-send --check` streams it:
+//! Each program ([`crate::programs`]: generated G-code and report B's example helices)
+//! is compiled by the host's G-code front end as `nc-send` compiles a file
+//! ([`pkmc_host::job::compile_text`]: parser, canonical commands, blocks, pre-flight
+//! against the machine's reach), and streamed by `nc-send`'s own link client as
+//! `nc-send --check` streams it:
 //! [`Link::connect`], [`pkmc_host::job::prepare`] (which unlocks the controller),
 //! [`Link::run_job`] and a last status request, with the default [`LinkOptions`]. The
 //! client talks to a [`Simulator`] in this process through [`Recorder`], a transport
@@ -31,7 +32,8 @@
 //! would put all of them into one period, which no link can do in 1 ms (USB full speed
 //! carries about 30 block frames of 36–46 bytes per millisecond).
 //!
-//! Log (little-endian), one file per program: the magic `PKMC-M4-CALLS-1`, then records
+//! Log (little-endian), one file per program: the magic `PKMC-M4-CALLS-2` (2: the
+//! tick's outputs carry the contour map), then records
 //! until the end of the file:
 //!
 //! * `R` `len: u16` `bytes[len]`: `receive(bytes)`;
@@ -39,6 +41,7 @@
 //!   inputs and outputs flattened by [`crate::wire`];
 //! * `X` `n: u16` `bytes[n]`: `transmit` into a [`USB_PACKET`]-byte buffer returned `n`.
 
+use crate::programs::{programs, Program};
 use crate::wire;
 use pkmc::config::MachineConfig;
 use pkmc::controller::Controller;
@@ -62,7 +65,7 @@ pub const USB_PACKETS_PER_TICK: usize = 19;
 /// blocks/s that the period budget assumes (issue 9).
 pub const FRAMES_PER_TICK: usize = 10;
 /// Magic at the start of a log.
-pub const MAGIC: &[u8] = b"PKMC-M4-CALLS-1";
+pub const MAGIC: &[u8] = b"PKMC-M4-CALLS-2";
 /// Most ticks one read runs before returning empty-handed (as `InProcess`).
 const TICKS_PER_READ: u32 = 10_000;
 
@@ -232,224 +235,6 @@ impl Transport for Recorder {
     }
 }
 
-/// One recorded program.
-pub struct Program {
-    /// Short name (`h4_seg0.05mm`, …).
-    pub name: String,
-    /// Machine: 0 the H-4 with rolling table, 1 the hexapod ([`crate::machine`]).
-    pub machine: u32,
-    /// The G-code.
-    pub text: String,
-    /// Operator events during the run (hold, resume, feed override changes), and an
-    /// e-stop: the calls where the controller re-profiles and raises its alarm.
-    pub events: bool,
-}
-
-/// Formats mm or degrees for G-code (0.1 µm, 0.1 µ°).
-fn f(v: f64) -> String {
-    let s = format!("{v:.4}");
-    if s == "-0.0000" {
-        "0.0000".into()
-    } else {
-        s
-    }
-}
-
-/// A sine along X, `amp` mm high, `wave` mm long, from `x0` over `len` mm of X at
-/// height `z`, in G1 segments of `seg` mm of path each (the last one shorter), at F6000.
-fn sine(seg: f64, len: f64, x0: f64, z: f64, amp: f64, wave: f64) -> String {
-    sine_at(6000, seg, len, x0, z, amp, wave)
-}
-
-/// [`sine`] at feed `feed` mm/min.
-fn sine_at(feed: u32, seg: f64, len: f64, x0: f64, z: f64, amp: f64, wave: f64) -> String {
-    sine_blend(feed, "G64", seg, len, x0, z, amp, wave)
-}
-
-/// [`sine_at`] in path mode `mode` (`G64 P0.01` lets `nc-send` merge the segments into
-/// curves).
-#[allow(clippy::too_many_arguments)]
-fn sine_blend(
-    feed: u32,
-    mode: &str,
-    seg: f64,
-    len: f64,
-    x0: f64,
-    z: f64,
-    amp: f64,
-    wave: f64,
-) -> String {
-    let k = std::f64::consts::TAU / wave;
-    let y = |x: f64| amp * (k * (x - x0)).sin();
-    let mut g = format!("G21 G90 {mode}\nG0 X{} Y0 Z{}\nF{feed}\n", f(x0), f(z));
-    let mut x = x0;
-    while x < x0 + len {
-        // The step in X whose chord is `seg` long, to first order.
-        let slope = amp * k * (k * (x - x0)).cos();
-        x = (x + seg / (1.0 + slope * slope).sqrt()).min(x0 + len);
-        g += &format!("G1 X{} Y{}\n", f(x), f(y(x)));
-    }
-    g + "M2\n"
-}
-
-/// The same sine as [`sine`] (0.05 mm segments are not needed: these are the
-/// curves themselves) as a chain of `G5` cubics, one per `step` mm of X, each
-/// leaving along the sine's tangent, alternating with `G5.1` parabolas (one per
-/// `step` mm: the control point where the two end tangents meet) over the second half.
-fn g5_sine(step: f64, len: f64, x0: f64, z: f64, amp: f64, wave: f64) -> String {
-    let k = std::f64::consts::TAU / wave;
-    let y = |x: f64| amp * (k * (x - x0)).sin();
-    let dy = |x: f64| amp * k * (k * (x - x0)).cos();
-    let mut g = format!("G21 G90 G64 G17\nG0 X{} Y0 Z{}\nF6000\n", f(x0), f(z));
-    let n = (len / step).round() as usize;
-    for i in 0..n {
-        let (a, b) = (x0 + i as f64 * step, x0 + (i + 1) as f64 * step);
-        let h = step / 3.0;
-        if i < n / 2 {
-            // Control points a third of the step along each end's tangent.
-            g += &format!(
-                "G5 X{} Y{} I{} J{} P{} Q{}\n",
-                f(b),
-                f(y(b)),
-                f(h),
-                f(h * dy(a)),
-                f(-h),
-                f(-h * dy(b))
-            );
-        } else {
-            // Where the tangents at a and b meet (their slopes differ; parallel ones
-            // give the midpoint).
-            let (sa, sb) = (dy(a), dy(b));
-            let xm = if (sa - sb).abs() > 1e-9 {
-                (y(b) - y(a) + sa * a - sb * b) / (sa - sb)
-            } else {
-                (a + b) / 2.0
-            };
-            let xm = xm.clamp(a, b);
-            g += &format!(
-                "G5.1 X{} Y{} I{} J{}\n",
-                f(b),
-                f(y(b)),
-                f(xm - a),
-                f(sa * (xm - a))
-            );
-        }
-    }
-    g + "M2\n"
-}
-
-/// A chain of `n` tangent arcs of radius `r` mm, each turning `sweep` degrees,
-/// alternately counter-clockwise (G3) and clockwise (G2), starting at (`x0`, 0, `z`)
-/// heading along +X, at F6000.
-fn arcs(n: usize, r: f64, sweep: f64, x0: f64, z: f64) -> String {
-    let mut g = format!("G21 G90 G64 G17\nG0 X{} Y0 Z{}\nF6000\n", f(x0), f(z));
-    let (mut p, mut heading) = ([x0, 0.0], 0.0f64);
-    let phi = sweep.to_radians();
-    for i in 0..n {
-        let ccw = i % 2 == 0;
-        let side = if ccw { 1.0 } else { -1.0 };
-        // The centre lies on the side the arc turns to; the end is the start turned
-        // about it.
-        let c = [
-            p[0] - side * r * heading.sin(),
-            p[1] + side * r * heading.cos(),
-        ];
-        let turn = side * phi;
-        let (s, co) = turn.sin_cos();
-        let (dx, dy) = (p[0] - c[0], p[1] - c[1]);
-        let end = [c[0] + co * dx - s * dy, c[1] + s * dx + co * dy];
-        g += &format!(
-            "{} X{} Y{} I{} J{}\n",
-            if ccw { "G3" } else { "G2" },
-            f(end[0]),
-            f(end[1]),
-            f(c[0] - p[0]),
-            f(c[1] - p[1])
-        );
-        p = end;
-        heading += turn;
-    }
-    g + "M2\n"
-}
-
-/// A circle of radius `r` mm about (0, 0) at height `z` in `n` G1 segments at F3000,
-/// the rotary axes following `angles(t)` (t from 0 to 1 over the circle: words such as
-/// `A12.5 C-3`).
-fn five_axis(n: usize, r: f64, z: f64, angles: impl Fn(f64) -> String) -> String {
-    let mut g = format!(
-        "G21 G90 G64\nG0 X{} Y0 Z{} {}\nF3000\n",
-        f(r),
-        f(z),
-        angles(0.0)
-    );
-    for i in 1..=n {
-        let t = i as f64 / n as f64;
-        let a = std::f64::consts::TAU * t;
-        g += &format!("G1 X{} Y{} {}\n", f(r * a.cos()), f(r * a.sin()), angles(t));
-    }
-    g + "M2\n"
-}
-
-/// The measured programs, whole, on both machines: 0.05 mm, 1 mm and 2 mm G1
-/// segments along a sine (and 0.01 mm at F3000 over 20 mm of X) (5 mm high, 40 mm long waves: 8 mm radius at the crests, which
-/// both machines take at or near F6000) at F6000, a chain of tangent
-/// G2/G3 arcs at F6000, and a five-axis circle with the table turning (H-4: A tilts the
-/// table 0–30° and back while C swings ±15°; hexapod: A and B tilt the platform ±8°,
-/// C swings ±5°). X spans ±`SINE_MM`/2 about the machine's home (H-4: the tool tip at
-/// Z −80 mm, the workpiece frame; hexapod: the platform at Z 450 mm).
-pub fn programs() -> Vec<Program> {
-    let mut out = Vec::new();
-    for (m, tag, z) in [(0u32, "h4", -80.0), (1, "hexapod", 450.0)] {
-        let x0 = -SINE_MM / 2.0;
-        let mut add = |what: &str, text: String| {
-            out.push(Program {
-                name: format!("{tag}_{what}"),
-                machine: m,
-                text,
-                events: what.ends_with("events"),
-            })
-        };
-        add("seg0.05mm", sine(0.05, SINE_MM, x0, z, 5.0, 40.0));
-        // Five blocks a tick: the densest case of the end-to-end test, over a fifth of
-        // the length (2 300 blocks, as many as the 0.05 mm program).
-        add("seg0.01mm_F3000", sine_at(3000, 0.01, SINE_MM / 5.0, x0, z, 5.0, 40.0));
-        add("events", sine(0.05, SINE_MM, x0, z, 5.0, 40.0));
-        add("seg1mm", sine(1.0, SINE_MM, x0, z, 5.0, 40.0));
-        add("seg2mm", sine(2.0, SINE_MM, x0, z, 5.0, 40.0));
-        // The same sine in G64 P0.01: `nc-send` streams it as curves; and a chain of
-        // G5 cubics and G5.1 parabolas.
-        add(
-            "curves0.05mm",
-            sine_blend(6000, "G64 P0.01", 0.05, SINE_MM, x0, z, 5.0, 40.0),
-        );
-        add("g5", g5_sine(2.0, SINE_MM, x0, z, 5.0, 40.0));
-        add(
-            "curves_events",
-            sine_blend(6000, "G64 P0.01", 0.05, SINE_MM, x0, z, 5.0, 40.0),
-        );
-        add("arcs", arcs(ARCS, 5.0, 20.0, x0, z));
-        let angles: Box<dyn Fn(f64) -> String> = if m == 0 {
-            Box::new(|t: f64| {
-                let a = 30.0 * (std::f64::consts::PI * t).sin();
-                let c = 15.0 * (std::f64::consts::TAU * t).sin();
-                format!("A{} C{}", f(a), f(c))
-            })
-        } else {
-            Box::new(|t: f64| {
-                let w = std::f64::consts::TAU * t;
-                format!(
-                    "A{} B{} C{}",
-                    f(8.0 * w.sin()),
-                    f(8.0 * w.cos() - 8.0),
-                    f(5.0 * (2.0 * w).sin())
-                )
-            })
-        };
-        add("5axis", five_axis(FIVE_AXIS_SEGMENTS, 20.0, z, angles));
-    }
-    out
-}
-
 /// The operator of the `events` programs: at these motion times (ticks, as the
 /// controller's status reports them) a hold, a resume once the hold has stopped the
 /// machine (`None`: when the status shows it held at rest), feed overrides of 50 %,
@@ -462,18 +247,21 @@ const OPERATOR_EVENTS: [(Option<u64>, Control); 5] = [
     (Some(1000), Control::FeedOverride(100)),
 ];
 
-/// When the `events` programs' e-stop trips, s of simulated time.
+/// When the `events` programs' e-stop trips, s of simulated time (plus the program's
+/// lead, [`Program::lead_ticks`]).
 const EVENTS_ESTOP_S: f64 = 1.4;
 
-/// Sends [`OPERATOR_EVENTS`] as their times come (nothing when `on` is false).
+/// Sends [`OPERATOR_EVENTS`] as their times come, `lead` ticks later (nothing when
+/// `on` is false).
 struct Operator {
     on: bool,
+    lead: u64,
     next: usize,
 }
 
 impl Operator {
-    fn new(on: bool) -> Self {
-        Self { on, next: 0 }
+    fn new(on: bool, lead: u64) -> Self {
+        Self { on, lead, next: 0 }
     }
 }
 
@@ -482,7 +270,7 @@ impl JobHooks for Operator {
         let (at, cmd) = *OPERATOR_EVENTS.get(self.next).filter(|_| self.on)?;
         let status = link.status.as_ref()?;
         let due = match at {
-            Some(t) => status.motion_ticks >= t,
+            Some(t) => status.motion_ticks >= t + self.lead,
             None => status.state == State::Hold && status.speed == 0,
         };
         if link.control_pending || !due {
@@ -493,16 +281,13 @@ impl JobHooks for Operator {
     }
 }
 
-/// X span of the sines, mm (about 113 mm of path).
-pub const SINE_MM: f64 = 100.0;
-/// Arcs in the tangent chain (5 mm radius, 20° each: 1.75 mm of path per arc).
-pub const ARCS: usize = 60;
-/// Segments of the five-axis circle (20 mm radius: 1.05 mm each).
-pub const FIVE_AXIS_SEGMENTS: usize = 120;
-
 /// The machine files `nc-send` would be given for machine `m`.
 fn machine_file(m: u32) -> std::path::PathBuf {
-    let name = if m == 0 { "h4-table" } else { "hexapod" };
+    let name = match m {
+        0 => "h4-table",
+        1 => "hexapod",
+        _ => "hexapod-xy",
+    };
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../examples/machines")
         .join(format!("{name}.toml"))
@@ -533,19 +318,24 @@ pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
     )
     .map_err(|e| e.message)?
     .blocks;
-    let mut sim = Simulator::new(machine.clone()).map_err(|e| format!("{e:#}"))?;
+    // As `nc-send --machine FILE` simulates it: the servo joints' plants are the file's
+    // (the hexapod-xy's: the report's identified plants; the H-4 and the hexapod give
+    // none, the simulator's default).
+    let plants = pkmc_host::machine_file::load_plants(&file).map_err(|e| format!("{e:#}"))?;
+    let mut sim = Simulator::with_plants(machine.clone(), plants, [0; pkmc::config::MAX_JOINTS])
+        .map_err(|e| format!("{e:#}"))?;
     if p.events {
         sim.inject(&[Injection {
             kind: FaultKind::EStop,
             joint: None,
-            at_s: EVENTS_ESTOP_S,
+            at_s: EVENTS_ESTOP_S + p.lead_ticks as f64 / 1000.0,
         }])
         .map_err(|e| format!("{e:#}"))?;
     }
     let io = Recorder::new(sim);
     let mut link =
         Link::connect(io, &machine, LinkOptions::default()).map_err(|e| e.to_string())?;
-    let mut hooks = Operator::new(p.events);
+    let mut hooks = Operator::new(p.events, p.lead_ticks);
     let end = match prepare(&mut link, false, true, &mut NoHooks).map_err(|e| e.message)? {
         Some(end) => end,
         None => link
