@@ -53,7 +53,7 @@ use crate::config::{ContourConfig, ContourMode, Drive, KinematicsConfig, Machine
 use crate::config::{ServoGains, MAX_SERVOS};
 use crate::servo::{
     clamp_sym, following_error, AmpIo, Coupling, ServoAxis, ServoOutput, Setpoint,
-    SetpointInterpolator, Trip, DAC_MID, SERVO_PERIOD_S, SETPOINT_FRAC_BITS,
+    SetpointInterpolator, Trip, DAC_MID, SERVO_PERIOD_S, SERVO_PER_TICK, SETPOINT_FRAC_BITS,
 };
 
 /// Slowest path speed at which the contour error is estimated, mm/s.
@@ -114,20 +114,6 @@ impl ContourMap {
             }
         }
         map
-    }
-
-    /// `to_pose · x`.
-    fn pose_of(&self, x: &ChannelVec) -> PoseVec {
-        let mut p = [0.0; POSE_AXES];
-        for k in 0..POSE_AXES {
-            let row = &self.to_pose[k];
-            let mut s = 0.0;
-            for c in 0..MAX_SERVOS {
-                s += row[c] * x[c];
-            }
-            p[k] = s;
-        }
-        p
     }
 
     /// `to_joint[c] · p`.
@@ -349,6 +335,14 @@ pub struct ServoBank {
     law: [u8; MAX_SERVOS],
     lqg: heapless::Vec<crate::lqg::LqgGains, { crate::config::MAX_LQG }>,
     used: [bool; MAX_SERVOS],
+    /// The channels in use, `active[..n_active]`: the period loops over these only.
+    active: [u8; MAX_SERVOS],
+    n_active: usize,
+    /// The path frame of the current tick (velocity and acceleration are constant
+    /// over a tick: computed in its first period, and again when the setpoints run out).
+    frame: PathFrame,
+    /// Periods since the last `load_tick`.
+    since_load: usize,
     /// Joint units (mm or degrees) per count, and counts per joint unit.
     unit_per_count: ChannelVec,
     counts_per_unit: ChannelVec,
@@ -391,6 +385,14 @@ impl ServoBank {
                 }
             }
         }
+        let mut active = [0u8; MAX_SERVOS];
+        let mut n_active = 0;
+        for (c, &u) in used.iter().enumerate() {
+            if u {
+                active[n_active] = c as u8;
+                n_active += 1;
+            }
+        }
         Self {
             setpoints: positions.map(|p| SetpointInterpolator::new(p << SETPOINT_FRAC_BITS)),
             axes,
@@ -400,6 +402,10 @@ impl ServoBank {
             law: machine.servo.law,
             lqg: machine.servo.lqg.clone(),
             used,
+            active,
+            n_active,
+            frame: PathFrame::default(),
+            since_load: SERVO_PER_TICK,
             unit_per_count,
             counts_per_unit,
         }
@@ -411,6 +417,7 @@ impl ServoBank {
         for (s, t) in self.setpoints.iter_mut().zip(targets) {
             s.load(*t);
         }
+        self.since_load = 0;
     }
 
     /// At a tick: the channels' map to the pose at the tick's commanded pose (a
@@ -427,42 +434,50 @@ impl ServoBank {
         self.contour.reset();
     }
 
-    /// The contour controller's period: the channels' errors, velocities and
-    /// accelerations (joint units) to the pose by the map, the frame, the contour error
-    /// and the correction.
-    fn couple(
-        &mut self,
-        e: &ChannelVec,
-        v: &ChannelVec,
-        a: &ChannelVec,
-    ) -> (PoseVec, ContourCorrection) {
-        let frame = PathFrame::new(&self.map.pose_of(v), &self.map.pose_of(a));
-        let eps = frame.contour_error(&self.map.pose_of(e));
-        (eps, self.contour.update(&frame, &eps))
+    /// `to_pose · x` over the channels in use.
+    fn pose_of(&self, x: &ChannelVec) -> PoseVec {
+        let mut p = [0.0; POSE_AXES];
+        for i in 0..self.n_active {
+            let c = self.active[i] as usize;
+            let xc = x[c];
+            for k in 0..POSE_AXES {
+                p[k] += self.map.to_pose[k][c] * xc;
+            }
+        }
+        p
     }
 
-    /// One servo period of every channel.
+    /// One servo period of every channel in use.
     pub fn period(&mut self, inputs: &PeriodInputs) -> PeriodOutputs {
+        let n = self.n_active;
         let mut sp = [Setpoint::default(); MAX_SERVOS];
-        let mut v = [0.0f32; MAX_SERVOS];
-        let mut a = [0.0f32; MAX_SERVOS];
         let mut e = [0.0f32; MAX_SERVOS];
-        for c in 0..MAX_SERVOS {
+        for i in 0..n {
+            let c = self.active[i] as usize;
             sp[c] = self.setpoints[c].advance();
-            let s = self.unit_per_count[c];
-            v[c] = sp[c].velocity * s;
-            a[c] = sp[c].accel * s;
-            e[c] = following_error(sp[c].position_q16, inputs.feedback[c]).1 * s;
+            e[c] = following_error(sp[c].position_q16, inputs.feedback[c]).1 * self.unit_per_count[c];
         }
         let mut out = PeriodOutputs::default();
         let mut corr = ContourCorrection::default();
         if self.coupled {
-            (out.contour_error, corr) = self.couple(&e, &v, &a);
-        }
-        for c in 0..MAX_SERVOS {
-            if !self.used[c] {
-                continue;
+            if self.since_load == 0 || self.since_load == SERVO_PER_TICK {
+                // A new tick, or the setpoints just ran out (a late tick): the
+                // channels' velocity and acceleration, hence the frame, changed.
+                let (mut v, mut a) = ([0.0f32; MAX_SERVOS], [0.0f32; MAX_SERVOS]);
+                for i in 0..n {
+                    let c = self.active[i] as usize;
+                    v[c] = sp[c].velocity * self.unit_per_count[c];
+                    a[c] = sp[c].accel * self.unit_per_count[c];
+                }
+                self.frame = PathFrame::new(&self.pose_of(&v), &self.pose_of(&a));
             }
+            let eps = self.frame.contour_error(&self.pose_of(&e));
+            corr = self.contour.update(&self.frame, &eps);
+            out.contour_error = eps;
+        }
+        self.since_load = self.since_load.saturating_add(1);
+        for i in 0..n {
+            let c = self.active[i] as usize;
             let amp = AmpIo {
                 enable: inputs.enable,
                 fault: inputs.fault[c],
