@@ -115,16 +115,6 @@ impl ContourMap {
         }
         map
     }
-
-    /// `to_joint[c] · p`.
-    fn joint_of(&self, c: usize, p: &PoseVec) -> f32 {
-        let row = &self.to_joint[c];
-        let mut s = 0.0;
-        for k in 0..POSE_AXES {
-            s += row[k] * p[k];
-        }
-        s
-    }
 }
 
 /// 1/√x for x > 0, relative error below 1e-7: bit-level first guess and three Newton
@@ -330,7 +320,10 @@ pub struct ServoBank {
     contour: ContourLoop,
     /// The contour controller runs (a coupling mode other than uncoupled).
     coupled: bool,
-    map: ContourMap,
+    /// ∂pose/∂q of each channel (the map's `to_pose`, by channel: one 5-vector each).
+    to_pose: [PoseVec; MAX_SERVOS],
+    /// ∂q/∂pose of each channel (the map's `to_joint`).
+    to_joint: [PoseVec; MAX_SERVOS],
     /// Each channel's feedback law and the LQG designs (as [`crate::config::ServoConfig`]).
     law: [u8; MAX_SERVOS],
     lqg: heapless::Vec<crate::lqg::LqgGains, { crate::config::MAX_LQG }>,
@@ -398,7 +391,8 @@ impl ServoBank {
             axes,
             contour: ContourLoop::new(&machine.servo.contour),
             coupled: machine.servo.contour.mode != ContourMode::Uncoupled,
-            map,
+            to_pose: core::array::from_fn(|c| core::array::from_fn(|k| map.to_pose[k][c])),
+            to_joint: map.to_joint,
             law: machine.servo.law,
             lqg: machine.servo.lqg.clone(),
             used,
@@ -423,7 +417,12 @@ impl ServoBank {
     /// At a tick: the channels' map to the pose at the tick's commanded pose (a
     /// machine whose map changes along the path).
     pub fn load_map(&mut self, map: &ContourMap) {
-        self.map = *map;
+        for c in 0..MAX_SERVOS {
+            for k in 0..POSE_AXES {
+                self.to_pose[c][k] = map.to_pose[k][c];
+            }
+        }
+        self.to_joint = map.to_joint;
     }
 
     /// Clears every latched trip and the contour state.
@@ -437,14 +436,22 @@ impl ServoBank {
     /// `to_pose · x` over the channels in use.
     fn pose_of(&self, x: &ChannelVec) -> PoseVec {
         let mut p = [0.0; POSE_AXES];
-        for i in 0..self.n_active {
-            let c = self.active[i] as usize;
-            let xc = x[c];
-            for k in 0..POSE_AXES {
-                p[k] += self.map.to_pose[k][c] * xc;
-            }
+        for &c in &self.active[..self.n_active.min(MAX_SERVOS)] {
+            let c = c as usize % MAX_SERVOS;
+            let (col, xc) = (&self.to_pose[c], x[c]);
+            p[0] += col[0] * xc;
+            p[1] += col[1] * xc;
+            p[2] += col[2] * xc;
+            p[3] += col[3] * xc;
+            p[4] += col[4] * xc;
         }
         p
+    }
+
+    /// `to_joint[c] · p`.
+    fn joint_of(&self, c: usize, p: &PoseVec) -> f32 {
+        let row = &self.to_joint[c % MAX_SERVOS];
+        row[0] * p[0] + row[1] * p[1] + row[2] * p[2] + row[3] * p[3] + row[4] * p[4]
     }
 
     /// One servo period of every channel in use.
@@ -484,8 +491,8 @@ impl ServoBank {
             };
             let coupling = if self.coupled {
                 Coupling {
-                    reference: self.map.joint_of(c, &corr.reference) * self.counts_per_unit[c],
-                    command: self.map.joint_of(c, &corr.command),
+                    reference: self.joint_of(c, &corr.reference) * self.counts_per_unit[c],
+                    command: self.joint_of(c, &corr.command),
                 }
             } else {
                 Coupling::NONE
