@@ -462,7 +462,8 @@ impl ServoBank {
         for i in 0..n {
             let c = self.active[i] as usize;
             sp[c] = self.setpoints[c].advance();
-            e[c] = following_error(sp[c].position_q16, inputs.feedback[c]).1 * self.unit_per_count[c];
+            e[c] =
+                following_error(sp[c].position_q16, inputs.feedback[c]).1 * self.unit_per_count[c];
         }
         let mut out = PeriodOutputs::default();
         let mut corr = ContourCorrection::default();
