@@ -131,6 +131,27 @@ impl Hexapod {
             ],
             [-sb, mulhr(cb, sa) << 1, mulhr(cb, ca) << 1],
         ];
+        self.legs(x, y, z, &r, joints);
+        Ok(())
+    }
+
+    /// Joints of the platform at `p` (nm) turned by the Q31 rotation `r` (computed by
+    /// the caller, as the hexapod-xy's split does), with the range check of
+    /// [`Hexapod::inverse`].
+    pub fn inverse_rotated(
+        &self,
+        p: [i64; 3],
+        r: &[[i32; 3]; 3],
+        joints: &mut Joints,
+    ) -> Result<(), Unreachable> {
+        self.in_range(&[p[0], p[1], p[2], 0, 0, 0])?;
+        self.legs(p[0], p[1], p[2], r, joints);
+        Ok(())
+    }
+
+    /// The six leg lengths (see the module documentation) for an in-range position.
+    #[inline(always)]
+    fn legs(&self, x: i64, y: i64, z: i64, r: &[[i32; 3]; 3], joints: &mut Joints) {
         let (px, py, pz) = ((x << SUB) as i32, (y << SUB) as i32, (z << SUB) as i32);
         for (q, (ai, bi)) in joints.iter_mut().zip(self.base.iter().zip(&self.platform)) {
             // Written out (no arrays or iterators) so that it compiles to straight
@@ -144,7 +165,6 @@ impl Hexapod {
             let len = isqrt(sq);
             *q = ((len + 1) >> SUB) as i64;
         }
-        Ok(())
     }
 
     /// The leg lengths in 1/16 nm for the forward kinematics' residuals: R in Q31 with

@@ -81,6 +81,19 @@ fn rotation(a: i64, b: i64, c: i64) -> [[i32; 3]; 3] {
     ]
 }
 
+/// Q31 rotation `Ry(b)·Rx(a)` from n° (`rotation(a, b, 0)` without the third angle).
+fn rotation_ab(a: i64, b: i64) -> [[i32; 3]; 3] {
+    let (sa, ca) = sincos(a);
+    let (sb, cb) = sincos(b);
+    let m = |u: i32, v: i32| u as i64 * v as i64;
+    let q = |v: i64| ((v + (1 << 30)) >> 31).clamp(-(i32::MAX as i64), i32::MAX as i64) as i32;
+    [
+        [cb, q(m(sb, sa)), q(m(sb, ca))],
+        [0, ca, -sa],
+        [-sb, q(m(cb, sa)), q(m(cb, ca))],
+    ]
+}
+
 /// `Σ_j r_j·v_j` for a Q31 row and |v_j| < 2^31 nm, rounded to the nm.
 #[inline(always)]
 fn dot(r: [i32; 3], v: &[i64; 3]) -> i64 {
@@ -115,13 +128,18 @@ impl HexapodXy {
     /// The platform's pose (X Y Z A B C of [`super::hexapod`]) and the table's X Y for
     /// the program pose `pose`, by the split rule.
     pub fn split(&self, pose: &Pose) -> Result<(Pose, [i64; 2]), Unreachable> {
+        self.split_rotated(pose).map(|(p, t, _)| (p, t))
+    }
+
+    /// [`HexapodXy::split`] and the platform's rotation R = Ry(−B)·Rx(−A), Q31.
+    fn split_rotated(&self, pose: &Pose) -> Result<(Pose, [i64; 2], [[i32; 3]; 3]), Unreachable> {
         let [x, y, z, a, b, _] = *pose;
         if [x, y, z].iter().any(|c| c.unsigned_abs() > self.p_max)
             || [a, b].iter().any(|c| c.unsigned_abs() > 1 << 40)
         {
             return Err(Unreachable::OutOfReach);
         }
-        let r = rotation(-a, -b, 0);
+        let r = rotation_ab(-a, -b);
         let v = [x - self.home[0], y - self.home[1], z - self.home[2]];
         let rv = rotate(&r, &v);
         let t = [0, 1].map(|k| {
@@ -129,7 +147,7 @@ impl HexapodXy {
             (self.home[k] + rv[k]).clamp(lo, hi)
         });
         let platform = [t[0] - rv[0], t[1] - rv[1], self.tool_z - rv[2], -a, -b, 0];
-        Ok((platform, t))
+        Ok((platform, t, r))
     }
 
     /// Is the table at an end of its travel (X, Y)? There the platform
@@ -140,8 +158,9 @@ impl HexapodXy {
 
     /// Joints of `pose`.
     pub fn inverse(&self, pose: &Pose, joints: &mut Joints) -> Result<(), Unreachable> {
-        let (platform, t) = self.split(pose)?;
-        self.hexapod.inverse(&platform, joints)?;
+        let (platform, t, r) = self.split_rotated(pose)?;
+        let p = [platform[0], platform[1], platform[2]];
+        self.hexapod.inverse_rotated(p, &r, joints)?;
         joints[6] = t[0];
         joints[7] = t[1];
         Ok(())
