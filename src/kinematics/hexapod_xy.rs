@@ -81,6 +81,10 @@ fn rotation(a: i64, b: i64, c: i64) -> [[i32; 3]; 3] {
     ]
 }
 
+/// The split of a pose: the platform's pose, the table's X Y and the platform's Q31
+/// rotation.
+type Split = (Pose, [i64; 2], [[i32; 3]; 3]);
+
 /// Q31 rotation `Ry(b)·Rx(a)` from n° (`rotation(a, b, 0)` without the third angle).
 fn rotation_ab(a: i64, b: i64) -> [[i32; 3]; 3] {
     let (sa, ca) = sincos(a);
@@ -132,7 +136,7 @@ impl HexapodXy {
     }
 
     /// [`HexapodXy::split`] and the platform's rotation R = Ry(−B)·Rx(−A), Q31.
-    fn split_rotated(&self, pose: &Pose) -> Result<(Pose, [i64; 2], [[i32; 3]; 3]), Unreachable> {
+    fn split_rotated(&self, pose: &Pose) -> Result<Split, Unreachable> {
         let [x, y, z, a, b, _] = *pose;
         if [x, y, z].iter().any(|c| c.unsigned_abs() > self.p_max)
             || [a, b].iter().any(|c| c.unsigned_abs() > 1 << 40)
