@@ -83,15 +83,18 @@ impl Controller {
     }
 
     /// The hexapod-xy with contour control: the channels' map at the commanded pose
-    /// (kept from the tick before where the pose is singular).
+    /// while the path moves (standing, the contour controller is idle and the map is
+    /// not sent); kept from the tick before where the pose is singular.
     fn update_contour_map(&mut self) {
         let MachineKinematics::HexapodXy(k) = &self.kin else {
             return;
         };
-        if self.machine.servo.contour.mode == ContourMode::Uncoupled {
+        self.out.contour_map = None;
+        if self.machine.servo.contour.mode == ContourMode::Uncoupled || !self.path_moving() {
             return;
         }
         let Ok(jm) = k.contour_map(&self.exec.pose) else {
+            // Singular here: the bank keeps the map it has.
             return;
         };
         self.out.contour_map = Some(ContourMap::of_joints(&self.machine, &jm));

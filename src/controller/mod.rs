@@ -371,7 +371,7 @@ impl Controller {
     }
 
     /// A block executing or queued, or smoothing still catching up.
-    fn path_moving(&self) -> bool {
+    pub(super) fn path_moving(&self) -> bool {
         self.exec.busy() || !self.planner.is_empty() || !self.exec.settled()
     }
 
