@@ -98,6 +98,44 @@ fn rotation_ab(a: i64, b: i64) -> [[i32; 3]; 3] {
     ]
 }
 
+/// d(R·v)/d(X Y Z A B) for R = Ry(b)·Rx(a) with a = −A, b = −B (sines and cosines
+/// given): R's columns, then −dR/da·v and −dR/db·v, the angle columns per
+/// `per_angle` radians (a pose unit of angle).
+fn turned_derivatives(
+    sa: f32,
+    ca: f32,
+    sb: f32,
+    cb: f32,
+    v: [f32; 3],
+    per_angle: f32,
+) -> [[f32; 5]; 3] {
+    let r = [
+        [cb, sb * sa, sb * ca],
+        [0.0, ca, -sa],
+        [-sb, cb * sa, cb * ca],
+    ];
+    let dr_da = [
+        [0.0, sb * ca, -sb * sa],
+        [0.0, -sa, -ca],
+        [0.0, cb * ca, -cb * sa],
+    ];
+    let dr_db = [
+        [-sb, cb * sa, cb * ca],
+        [0.0, 0.0, 0.0],
+        [-cb, -sb * sa, -sb * ca],
+    ];
+    let mv = |m: &[[f32; 3]; 3], k: usize| m[k][0] * v[0] + m[k][1] * v[1] + m[k][2] * v[2];
+    [0, 1, 2].map(|k| {
+        [
+            r[k][0],
+            r[k][1],
+            r[k][2],
+            -mv(&dr_da, k) * per_angle,
+            -mv(&dr_db, k) * per_angle,
+        ]
+    })
+}
+
 /// `Σ_j r_j·v_j` for a Q31 row and |v_j| < 2^31 nm, rounded to the nm.
 #[inline(always)]
 fn dot(r: [i32; 3], v: &[i64; 3]) -> i64 {
@@ -214,34 +252,9 @@ impl HexapodXy {
         let unit = |(s, c): (i32, i32)| (s as f32 / ONE_Q31, c as f32 / ONE_Q31);
         let (sa, ca) = unit(sincos(-pose[3]));
         let (sb, cb) = unit(sincos(-pose[4]));
-        let r = [
-            [cb, sb * sa, sb * ca],
-            [0.0, ca, -sa],
-            [-sb, cb * sa, cb * ca],
-        ];
-        let dr_da = [
-            [0.0, sb * ca, -sb * sa],
-            [0.0, -sa, -ca],
-            [0.0, cb * ca, -cb * sa],
-        ];
-        let dr_db = [
-            [-sb, cb * sa, cb * ca],
-            [0.0, 0.0, 0.0],
-            [-cb, -sb * sa, -sb * ca],
-        ];
         let v = [0, 1, 2].map(|k| i64_to_f32(pose[k] - self.home[k]));
-        let mv = |m: &[[f32; 3]; 3], k: usize| m[k][0] * v[0] + m[k][1] * v[1] + m[k][2] * v[2];
-        // d(R·v)/d(X Y Z A B): R's columns; −dR/da·v and −dR/db·v per n° (a = −A).
-        let mut d = [[0.0f32; 5]; 3];
-        for k in 0..3 {
-            d[k] = [
-                r[k][0],
-                r[k][1],
-                r[k][2],
-                -mv(&dr_da, k) * RAD_PER_NDEG,
-                -mv(&dr_db, k) * RAD_PER_NDEG,
-            ];
-        }
+        // d(R·v)/d(X Y Z A B), the angle columns per n°.
+        let d = turned_derivatives(sa, ca, sb, cb, v, RAD_PER_NDEG);
         // The platform pose's derivatives: p_xy = t − (R·v)_xy (0 while the table
         // follows), p_z = tool_z − (R·v)_z; a = −A, b = −B.
         let mut dp = [[0.0f32; 5]; 6];
@@ -374,27 +387,7 @@ impl HexapodXy {
         }
         // to_joint: the split's derivatives per mm and degree, through the rows.
         let v = [0, 1, 2].map(|k| mm(pose[k] - self.home[k]));
-        let dr_da = [
-            [0.0, sb * ca, -sb * sa],
-            [0.0, -sa, -ca],
-            [0.0, cb * ca, -cb * sa],
-        ];
-        let dr_db = [
-            [-sb, cb * sa, cb * ca],
-            [0.0, 0.0, 0.0],
-            [-cb, -sb * sa, -sb * ca],
-        ];
-        let mv = |m: &[[f32; 3]; 3], k: usize| m[k][0] * v[0] + m[k][1] * v[1] + m[k][2] * v[2];
-        let mut drv = [[0.0f32; 5]; 3];
-        for k in 0..3 {
-            drv[k] = [
-                r[k][0],
-                r[k][1],
-                r[k][2],
-                -mv(&dr_da, k) * rad,
-                -mv(&dr_db, k) * rad,
-            ];
-        }
+        let drv = turned_derivatives(sa, ca, sb, cb, v, rad);
         let clamped = self.clamped(&t);
         // (δp, ω) per unit of each pose axis: ω = −(cos b, 0, −sin b)·δA − ŷ·δB, radians.
         let mut motion = [[0.0f32; 5]; 6];
