@@ -57,30 +57,6 @@ pub struct HexapodXy {
     p_max: u64,
 }
 
-/// Q31 rotation `Rz(c)·Ry(b)·Rx(a)` (the hexapod's convention) from n°, each entry
-/// rounded once from 64-bit products.
-fn rotation(a: i64, b: i64, c: i64) -> [[i32; 3]; 3] {
-    let (sa, ca) = sincos(a);
-    let (sb, cb) = sincos(b);
-    let (sc, cc) = sincos(c);
-    let m = |u: i32, v: i32| u as i64 * v as i64;
-    let q = |v: i64| ((v + (1 << 30)) >> 31).clamp(-(i32::MAX as i64), i32::MAX as i64) as i32;
-    let (sbsa, sbca) = (q(m(sb, sa)), q(m(sb, ca)));
-    [
-        [
-            q(m(cc, cb)),
-            q(m(cc, sbsa) - m(sc, ca)),
-            q(m(cc, sbca) + m(sc, sa)),
-        ],
-        [
-            q(m(sc, cb)),
-            q(m(sc, sbsa) + m(cc, ca)),
-            q(m(sc, sbca) - m(cc, sa)),
-        ],
-        [-sb, q(m(cb, sa)), q(m(cb, ca))],
-    ]
-}
-
 /// The split of a pose: the platform's pose, the table's X Y and the platform's Q31
 /// rotation.
 type Split = (Pose, [i64; 2], [[i32; 3]; 3]);
@@ -223,7 +199,7 @@ impl HexapodXy {
             .hexapod
             .forward(joints, &platform_guess, &mut platform)?;
         let [px, py, pz, a, b, c] = platform;
-        let r = rotation(a, b, c);
+        let r = super::hexapod::rotation_fine(a, b, c);
         let d = [joints[6] - px, joints[7] - py, self.tool_z - pz];
         if d.iter().any(|v| v.unsigned_abs() >= 1 << 31) {
             return Err(Unreachable::OutOfReach);
