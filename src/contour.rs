@@ -327,7 +327,6 @@ pub struct ServoBank {
     /// Each channel's feedback law and the LQG designs (as [`crate::config::ServoConfig`]).
     law: [u8; MAX_SERVOS],
     lqg: heapless::Vec<crate::lqg::LqgGains, { crate::config::MAX_LQG }>,
-    used: [bool; MAX_SERVOS],
     /// The channels in use, `active[..n_active]`: the period loops over these only.
     active: [u8; MAX_SERVOS],
     n_active: usize,
@@ -395,7 +394,6 @@ impl ServoBank {
             to_joint: map.to_joint,
             law: machine.servo.law,
             lqg: machine.servo.lqg.clone(),
-            used,
             active,
             n_active,
             frame: PathFrame::default(),

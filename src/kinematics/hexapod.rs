@@ -59,15 +59,16 @@ pub struct Hexapod {
 }
 
 /// Q31 rotation `Rz(c)·Ry(b)·Rx(a)` from n°, each entry rounded once from 64-bit
-/// products (the forward kinematics' residuals and the hexapod-xy's split use it).
-pub(super) fn rotation_fine(a: i64, b: i64, c: i64) -> [[i32; 3]; 3] {
+/// products (the forward kinematics' residuals and the hexapod-xy's split use it), and
+/// (sin C, cos C), Q31.
+pub(super) fn rotation_fine(a: i64, b: i64, c: i64) -> ([[i32; 3]; 3], [i32; 2]) {
     let (sa, ca) = sincos(a);
     let (sb, cb) = sincos(b);
     let (sc, cc) = sincos(c);
     let m = |u: i32, v: i32| u as i64 * v as i64;
     let q31 = |v: i64| ((v + (1 << 30)) >> 31).clamp(-(i32::MAX as i64), i32::MAX as i64) as i32;
     let (sbsa, sbca) = (q31(m(sb, sa)), q31(m(sb, ca)));
-    [
+    let r = [
         [
             q31(m(cc, cb)),
             q31(m(cc, sbsa) - m(sc, ca)),
@@ -79,7 +80,8 @@ pub(super) fn rotation_fine(a: i64, b: i64, c: i64) -> [[i32; 3]; 3] {
             q31(m(sc, sbca) - m(cc, sa)),
         ],
         [-sb, q31(m(cb, sa)), q31(m(cb, ca))],
-    ]
+    ];
+    (r, [sc, cc])
 }
 
 /// A Q30 value (|v| ≤ 1 + rounding) to Q31, saturated.
@@ -204,9 +206,8 @@ impl Hexapod {
     ) -> Result<([[i32; 3]; 3], [i32; 2]), Unreachable> {
         self.in_range(pose)?;
         let [x, y, z, a, b, c] = *pose;
-        let r = rotation_fine(a, b, c);
+        let (r, [sc, cc]) = rotation_fine(a, b, c);
         let m = |u: i32, v: i32| u as i64 * v as i64;
-        let (sc, cc) = sincos(c);
         const SH: u32 = 31 - FINE;
         let p = [x, y, z];
         for (i, (ai, bi)) in self.base.iter().zip(&self.platform).enumerate() {

@@ -199,7 +199,7 @@ impl HexapodXy {
             .hexapod
             .forward(joints, &platform_guess, &mut platform)?;
         let [px, py, pz, a, b, c] = platform;
-        let r = super::hexapod::rotation_fine(a, b, c);
+        let (r, _) = super::hexapod::rotation_fine(a, b, c);
         let d = [joints[6] - px, joints[7] - py, self.tool_z - pz];
         if d.iter().any(|v| v.unsigned_abs() >= 1 << 31) {
             return Err(Unreachable::OutOfReach);
