@@ -578,7 +578,7 @@ def replay(m4, name, machine, path, blocks, servo_period):
             m4.call("bench_ctrl_inputs", IN_WORDS_A, INPUTS)
             out_ptr, n = m4.call_raw("bench_ctrl_tick", CTRL, INPUTS)
             trace, mem_calls = m4.trace, m4.mem_calls
-            m4.call("bench_ctrl_outputs", out_ptr, OUT_WORDS_A)
+            m4.call("bench_ctrl_outputs", out_ptr, CTRL, OUT_WORDS_A)
             m4.trace, m4.mem_calls = trace, mem_calls
             got = m4.read_i64(OUT_WORDS_A, WIRE["outputs"])
             if got != call[2]:

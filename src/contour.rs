@@ -96,13 +96,12 @@ impl ContourMap {
         to_joint: [[0.0; POSE_AXES]; MAX_SERVOS],
     };
 
-    /// The channel-indexed map of `machine`'s servo joints from a joint-indexed one.
-    pub fn of_joints(
-        machine: &MachineConfig,
-        jm: &crate::kinematics::hexapod_xy::JointMap,
-    ) -> Self {
+    /// The channel-indexed map of `machine`'s servo joints from a joint-indexed one
+    /// (joint j in channel j, as
+    /// [`crate::kinematics::hexapod_xy::HexapodXy::contour_map`] returns it).
+    pub fn of_joints(machine: &MachineConfig, jm: &ContourMap) -> Self {
         let mut map = Self::NONE;
-        for (j, jc) in machine.joints.iter().enumerate() {
+        for (j, jc) in machine.joints.iter().enumerate().take(MAX_SERVOS) {
             if let Drive::Servo { channel } = jc.drive {
                 let c = channel as usize;
                 if c < MAX_SERVOS {
@@ -431,67 +430,55 @@ impl ServoBank {
         self.contour.reset();
     }
 
-    /// `to_pose · x` over the channels in use.
-    fn pose_of(&self, x: &ChannelVec) -> PoseVec {
-        let mut p = [0.0; POSE_AXES];
-        for &c in &self.active[..self.n_active.min(MAX_SERVOS)] {
-            let c = c as usize % MAX_SERVOS;
-            let (col, xc) = (&self.to_pose[c], x[c]);
-            p[0] += col[0] * xc;
-            p[1] += col[1] * xc;
-            p[2] += col[2] * xc;
-            p[3] += col[3] * xc;
-            p[4] += col[4] * xc;
-        }
-        p
-    }
-
-    /// `to_joint[c] · p`.
-    fn joint_of(&self, c: usize, p: &PoseVec) -> f32 {
-        let row = &self.to_joint[c % MAX_SERVOS];
-        row[0] * p[0] + row[1] * p[1] + row[2] * p[2] + row[3] * p[3] + row[4] * p[4]
-    }
-
     /// One servo period of every channel in use.
     pub fn period(&mut self, inputs: &PeriodInputs) -> PeriodOutputs {
-        let n = self.n_active;
+        let active = self.active;
+        let active = &active[..self.n_active.min(MAX_SERVOS)];
         let mut sp = [Setpoint::default(); MAX_SERVOS];
-        let mut e = [0.0f32; MAX_SERVOS];
-        for i in 0..n {
-            let c = self.active[i] as usize;
-            sp[c] = self.setpoints[c].advance();
-            e[c] =
-                following_error(sp[c].position_q16, inputs.feedback[c]).1 * self.unit_per_count[c];
+        let mut fe = [(0i32, 0.0f32); MAX_SERVOS];
+        // The tracking error in pose coordinates, to_pose · e, and at a new tick (or
+        // when the setpoints just ran out, a late tick) the velocity and acceleration
+        // too: the frame changed.
+        let new_frame = self.since_load == 0 || self.since_load == SERVO_PER_TICK;
+        let (mut pe, mut pv, mut pa) = ([0.0f32; POSE_AXES], [0.0; POSE_AXES], [0.0; POSE_AXES]);
+        for &c in active {
+            // (`% MAX_SERVOS`: a channel is below it; this spares the bounds checks.)
+            let c = c as usize % MAX_SERVOS;
+            let s = self.setpoints[c].advance();
+            let f = following_error(s.position_q16, inputs.feedback[c]);
+            if self.coupled {
+                let (col, u) = (&self.to_pose[c], self.unit_per_count[c]);
+                axpy5(&mut pe, col, f.1 * u);
+                if new_frame {
+                    axpy5(&mut pv, col, s.velocity * u);
+                    axpy5(&mut pa, col, s.accel * u);
+                }
+            }
+            sp[c] = s;
+            fe[c] = f;
         }
         let mut out = PeriodOutputs::default();
         let mut corr = ContourCorrection::default();
         if self.coupled {
-            if self.since_load == 0 || self.since_load == SERVO_PER_TICK {
-                // A new tick, or the setpoints just ran out (a late tick): the
-                // channels' velocity and acceleration, hence the frame, changed.
-                let (mut v, mut a) = ([0.0f32; MAX_SERVOS], [0.0f32; MAX_SERVOS]);
-                for i in 0..n {
-                    let c = self.active[i] as usize;
-                    v[c] = sp[c].velocity * self.unit_per_count[c];
-                    a[c] = sp[c].accel * self.unit_per_count[c];
-                }
-                self.frame = PathFrame::new(&self.pose_of(&v), &self.pose_of(&a));
+            if new_frame {
+                self.frame = PathFrame::new(&pv, &pa);
             }
-            let eps = self.frame.contour_error(&self.pose_of(&e));
+            let eps = self.frame.contour_error(&pe);
             corr = self.contour.update(&self.frame, &eps);
             out.contour_error = eps;
         }
         self.since_load = self.since_load.saturating_add(1);
-        for i in 0..n {
-            let c = self.active[i] as usize;
+        for &c in active {
+            let c = c as usize % MAX_SERVOS;
             let amp = AmpIo {
                 enable: inputs.enable,
                 fault: inputs.fault[c],
             };
             let coupling = if self.coupled {
+                let row = &self.to_joint[c];
                 Coupling {
-                    reference: self.joint_of(c, &corr.reference) * self.counts_per_unit[c],
-                    command: self.joint_of(c, &corr.command),
+                    reference: dot5(row, &corr.reference) * self.counts_per_unit[c],
+                    command: dot5(row, &corr.command),
                 }
             } else {
                 Coupling::NONE
@@ -499,8 +486,7 @@ impl ServoBank {
             let lqg = (self.law[c] as usize)
                 .checked_sub(1)
                 .and_then(|k| self.lqg.get(k));
-            let o: ServoOutput =
-                self.axes[c].update(&sp[c], inputs.feedback[c], amp, coupling, lqg);
+            let o: ServoOutput = self.axes[c].update_on(&sp[c], fe[c], amp, coupling, lqg);
             out.dac[c] = o.dac;
             out.enable[c] = o.enable;
             out.trip[c] = o.trip;
@@ -508,6 +494,22 @@ impl ServoBank {
         }
         out
     }
+}
+
+/// `acc += col · x` over the five pose axes.
+#[inline(always)]
+fn axpy5(acc: &mut PoseVec, col: &PoseVec, x: f32) {
+    acc[0] += col[0] * x;
+    acc[1] += col[1] * x;
+    acc[2] += col[2] * x;
+    acc[3] += col[3] * x;
+    acc[4] += col[4] * x;
+}
+
+/// `a · b` over the five pose axes.
+#[inline(always)]
+fn dot5(a: &PoseVec, b: &PoseVec) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4]
 }
 
 #[cfg(test)]

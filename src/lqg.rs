@@ -150,31 +150,26 @@ impl LqgState {
         max_output: f32,
         max_integral: f32,
     ) -> f32 {
-        let mut innovation = dy;
-        for (c, x) in g.c.iter().zip(&self.x) {
-            innovation -= c * x;
-        }
-        let mut x = self.x;
-        for (x, m) in x.iter_mut().zip(&g.m) {
-            *x += m * innovation;
-        }
-        let mut du = -self.integral;
-        for (k, x) in g.k.iter().zip(&x) {
-            du -= k * x;
-        }
-        let u = u_ff + du;
+        // Written out over the four states: the servo period's largest cost
+        // (docs/performance.md), and the M4F keeps the estimate in registers.
+        let x0 = self.x;
+        let innovation = dy - dot4(&g.c, &x0);
+        let x = [
+            x0[0] + g.m[0] * innovation,
+            x0[1] + g.m[1] * innovation,
+            x0[2] + g.m[2] * innovation,
+            x0[3] + g.m[3] * innovation,
+        ];
+        let u = u_ff - self.integral - dot4(&g.k, &x);
         let out = clamp_sym(u, max_output);
         let applied = out - u_ff;
-        for ((next, row), gamma) in self.x.iter_mut().zip(&g.phi_minus_i).zip(&g.gamma) {
-            let mut dx = gamma * applied;
-            for (p, x) in row.iter().zip(&x) {
-                dx += p * x;
-            }
-            *next = dx;
-        }
-        for (next, x) in self.x.iter_mut().zip(&x) {
-            *next += x;
-        }
+        let p = &g.phi_minus_i;
+        self.x = [
+            x[0] + (g.gamma[0] * applied + dot4(&p[0], &x)),
+            x[1] + (g.gamma[1] * applied + dot4(&p[1], &x)),
+            x[2] + (g.gamma[2] * applied + dot4(&p[2], &x)),
+            x[3] + (g.gamma[3] * applied + dot4(&p[3], &x)),
+        ];
         let winding = (u > max_output && dy < 0.0) || (u < -max_output && dy > 0.0);
         if !winding {
             self.integral = clamp_sym(self.integral + g.ki_t * dy, max_integral);
@@ -182,6 +177,15 @@ impl LqgState {
         out
     }
 }
+
+/// `a · b` over the four states.
+#[inline(always)]
+fn dot4(a: &[f32; LQG_STATES], b: &[f32; LQG_STATES]) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
+}
+
+// `LqgState::update` is written out for four states.
+const _: () = assert!(LQG_STATES == 4);
 
 #[cfg(test)]
 mod tests {

@@ -79,13 +79,14 @@ impl Command {
         }
     }
 
-    /// What the controller's outputs `out` ask of the loops.
-    pub fn of(out: &Outputs) -> Self {
+    /// What the controller's outputs `out` ask of the loops, with the channel map
+    /// `map` if the tick completed one ([`Controller::contour_map`]).
+    pub fn of(out: &Outputs, map: Option<&ContourMap>) -> Self {
         Self {
             reset: out.servo_reset,
             targets: out.servo_target,
             enable: out.servo_enable,
-            map: out.contour_map,
+            map: map.copied(),
         }
     }
 }
@@ -290,7 +291,7 @@ impl TickPacer {
         };
         self.inputs = inputs;
         self.due = *ctrl.tick(&inputs);
-        Command::of(&self.due)
+        Command::of(&self.due, ctrl.contour_map())
     }
 }
 
@@ -510,7 +511,7 @@ mod tests {
             servo_reset: true,
             ..Outputs::default()
         };
-        let command = Command::of(&out);
+        let command = Command::of(&out, None);
         assert!(command.reset);
         p.restart(ServoBank::new(&m, &at));
         assert_eq!(p.snapshot().trips[0], Some(Trip::AmplifierFault));

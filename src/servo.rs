@@ -259,7 +259,14 @@ pub struct ServoAxis {
 
 /// Saturating `i64` → `i32`.
 fn to_i32(v: i64) -> i32 {
-    v.clamp(i32::MIN as i64, i32::MAX as i64) as i32
+    let low = v as i32;
+    if low as i64 == v {
+        low
+    } else if v < 0 {
+        i32::MIN
+    } else {
+        i32::MAX
+    }
 }
 
 /// `target − feedback` in counts: the whole part saturated to `i32`, and the exact
@@ -380,7 +387,20 @@ impl ServoAxis {
         coupling: Coupling,
         lqg: Option<&crate::lqg::LqgGains>,
     ) -> ServoOutput {
-        let (raw, exact) = following_error(target.position_q16, feedback);
+        let fe = following_error(target.position_q16, feedback);
+        self.update_on(target, fe, amp, coupling, lqg)
+    }
+
+    /// [`ServoAxis::update`] given the period's following error
+    /// `following_error(target.position_q16, feedback)` (the bank has it already).
+    pub fn update_on(
+        &mut self,
+        target: &Setpoint,
+        (raw, exact): (i32, f32),
+        amp: AmpIo,
+        coupling: Coupling,
+        lqg: Option<&crate::lqg::LqgGains>,
+    ) -> ServoOutput {
         let error = exact + coupling.reference;
         if self.trip.is_none() && amp.enable && amp.fault {
             self.trip = Some(Trip::AmplifierFault);

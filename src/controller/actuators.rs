@@ -4,7 +4,6 @@
 
 use super::Controller;
 use crate::config::{ContourMode, Drive, MAX_SERVOS, MAX_STEPPERS};
-use crate::contour::ContourMap;
 use crate::kinematics::MachineKinematics;
 use crate::protocol::State;
 use crate::servo::{Trip, SETPOINT_FRAC_BITS};
@@ -45,10 +44,6 @@ pub struct Outputs {
     /// The servo loops must restart, clearing their trips, standing at their present
     /// feedback (which `servo_target` now equals): rebuild the bank from it.
     pub servo_reset: bool,
-    /// The channels' map to the pose at this tick's commanded pose, for a coupled
-    /// machine whose map changes along the path (the hexapod-xy): load into
-    /// [`crate::contour::ServoBank::load_map`].
-    pub contour_map: Option<ContourMap>,
 }
 
 impl Controller {
@@ -82,22 +77,20 @@ impl Controller {
         self.update_contour_map();
     }
 
-    /// The hexapod-xy with contour control: the channels' map at the commanded pose
-    /// while the path moves (standing, the contour controller is idle and the map is
-    /// not sent); kept from the tick before where the pose is singular.
+    /// The hexapod-xy with contour control: one phase of the channels' map at the
+    /// commanded pose each tick, moving or standing (a map is ready every
+    /// [`crate::kinematics::hexapod_xy_map::MAP_PHASES`] ticks, at the pose of its
+    /// first phase: [`Controller::contour_map`]); where the pose is singular the bank
+    /// keeps the map it has.
     fn update_contour_map(&mut self) {
+        self.map_fresh = false;
         let MachineKinematics::HexapodXy(k) = &self.kin else {
             return;
         };
-        self.out.contour_map = None;
-        if self.machine.servo.contour.mode == ContourMode::Uncoupled || !self.path_moving() {
+        if self.machine.servo.contour.mode == ContourMode::Uncoupled {
             return;
         }
-        let Ok(jm) = k.contour_map(&self.exec.pose) else {
-            // Singular here: the bank keeps the map it has.
-            return;
-        };
-        self.out.contour_map = Some(ContourMap::of_joints(&self.machine, &jm));
+        self.map_fresh = self.map.step(k, &self.exec.pose).is_some();
     }
 
     /// This tick's outputs from the joints' positions: step trains (DIR inverted where

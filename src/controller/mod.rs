@@ -38,8 +38,10 @@ mod safety;
 mod session;
 
 use crate::config::{BoardChannels, ConfigError, Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS};
+use crate::contour::ContourMap;
 use crate::homing::Homer;
 use crate::interp::{Event, Executor};
+use crate::kinematics::hexapod_xy_map::MapBuilder;
 use crate::kinematics::{Joints, MachineKinematics, Unreachable};
 use crate::planner::Planner;
 use crate::protocol::{Alarm, Aux, FrameDecoder, HeldJob, State, MAX_BODY, MAX_FRAME, NO_JOINT};
@@ -141,6 +143,10 @@ pub struct Controller {
     link_watch: bool,
     last: Inputs,
     out: Outputs,
+    /// The hexapod-xy's contour map, built a phase a tick (`update_contour_map`).
+    map: MapBuilder,
+    /// This tick completed a map.
+    map_fresh: bool,
     stats: LinkStats,
 }
 
@@ -238,6 +244,8 @@ impl Controller {
         let window = crate::interp::window_of(machine.motion.smoothing_ticks as u32);
         // SAFETY: the caller's promise; each write is to a field of `*p`.
         unsafe {
+            at!((*p).map).write(MapBuilder::new(&machine));
+            at!((*p).map_fresh).write(false);
             at!((*p).machine).write(machine);
             at!((*p).board).write(prep.board);
             at!((*p).kin).write(prep.kin);
@@ -428,6 +436,14 @@ impl Controller {
         if self.state == State::Running && !self.path_moving() {
             self.state = State::Idle;
         }
+    }
+
+    /// The channels' map to the pose that this tick completed (the hexapod-xy with
+    /// contour control, every [`crate::kinematics::hexapod_xy_map::MAP_PHASES`]
+    /// ticks): for [`crate::contour::ServoBank::load_map`], with this tick's outputs.
+    /// Valid until the next tick.
+    pub fn contour_map(&self) -> Option<&ContourMap> {
+        self.map_fresh.then(|| self.map.map())
     }
 
     /// Advances one interpolation period.

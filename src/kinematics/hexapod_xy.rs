@@ -46,11 +46,11 @@ const RAD_PER_NDEG: f32 = core::f32::consts::PI / 180e9;
 /// The machine, precomputed from [`HexapodXyGeometry`] and the table's travel.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct HexapodXy {
-    hexapod: Hexapod,
+    pub(super) hexapod: Hexapod,
     /// Platform origin at home, nm.
-    home: [i64; 3],
+    pub(super) home: [i64; 3],
     /// Tool tip height, nm.
-    tool_z: i64,
+    pub(super) tool_z: i64,
     /// Travel of the table's X and Y joints: `[min, max]`, nm.
     table: [[i64; 2]; 2],
     /// Largest |X|, |Y|, |Z| taken, nm: keeps `w − home` inside 31 bits.
@@ -77,7 +77,7 @@ fn rotation_ab(a: i64, b: i64) -> [[i32; 3]; 3] {
 /// d(R·v)/d(X Y Z A B) for R = Ry(b)·Rx(a) with a = −A, b = −B (sines and cosines
 /// given): R's columns, then −dR/da·v and −dR/db·v, the angle columns per
 /// `per_angle` radians (a pose unit of angle).
-fn turned_derivatives(
+pub(super) fn turned_derivatives(
     sa: f32,
     ca: f32,
     sb: f32,
@@ -150,7 +150,7 @@ impl HexapodXy {
     }
 
     /// [`HexapodXy::split`] and the platform's rotation R = Ry(−B)·Rx(−A), Q31.
-    fn split_rotated(&self, pose: &Pose) -> Result<Split, Unreachable> {
+    pub(super) fn split_rotated(&self, pose: &Pose) -> Result<Split, Unreachable> {
         let [x, y, z, a, b, _] = *pose;
         if [x, y, z].iter().any(|c| c.unsigned_abs() > self.p_max)
             || [a, b].iter().any(|c| c.unsigned_abs() > 1 << 40)
@@ -170,7 +170,7 @@ impl HexapodXy {
 
     /// Is the table at an end of its travel (X, Y)? There the platform
     /// takes the remainder.
-    fn clamped(&self, t: &[i64; 2]) -> [bool; 2] {
+    pub(super) fn clamped(&self, t: &[i64; 2]) -> [bool; 2] {
         [0, 1].map(|k| t[k] == self.table[k][0] || t[k] == self.table[k][1])
     }
 
@@ -254,139 +254,6 @@ impl HexapodXy {
             }
         }
         Ok(())
-    }
-}
-
-/// The joints' linear map to the pose near a commanded pose, for the contour
-/// controller (`crate::contour::ContourMap`, joint-indexed): `to_pose` = ∂(X Y Z A B)/∂q
-/// (mm or degrees per mm of joint) and `to_joint` = ∂q/∂(X Y Z A B).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct JointMap {
-    /// ∂pose/∂q: row per pose axis X Y Z A B, column per joint.
-    pub to_pose: [[f32; MAX_JOINTS]; 5],
-    /// ∂q/∂pose: row per joint.
-    pub to_joint: [[f32; 5]; MAX_JOINTS],
-}
-
-/// The inverse of `m` by Gauss–Jordan elimination with partial pivoting, in `f32`;
-/// `None` when a pivot is below 1e-6 of the largest entry.
-fn inverse6(mut m: [[f32; 6]; 6]) -> Option<[[f32; 6]; 6]> {
-    let mut inv = [[0.0f32; 6]; 6];
-    for (i, row) in inv.iter_mut().enumerate() {
-        row[i] = 1.0;
-    }
-    let scale = m.iter().flatten().fold(0.0f32, |s, v| s.max(v.abs()));
-    for c in 0..6 {
-        let mut p = c;
-        for r in c + 1..6 {
-            if m[r][c].abs() > m[p][c].abs() {
-                p = r;
-            }
-        }
-        if m[p][c].abs().partial_cmp(&(1e-6 * scale)) != Some(core::cmp::Ordering::Greater) {
-            return None;
-        }
-        m.swap(c, p);
-        inv.swap(c, p);
-        let k = 1.0 / m[c][c];
-        for j in 0..6 {
-            m[c][j] *= k;
-            inv[c][j] *= k;
-        }
-        for r in 0..6 {
-            if r != c {
-                let f = m[r][c];
-                for j in 0..6 {
-                    m[r][j] -= f * m[c][j];
-                    inv[r][j] -= f * inv[c][j];
-                }
-            }
-        }
-    }
-    Some(inv)
-}
-
-impl HexapodXy {
-    /// The joints' map to the pose at `pose` ([`JointMap`]), in `f32` from the legs'
-    /// directions ([`Hexapod::rows_f32`]): the forward kinematics linearised at the
-    /// commanded pose — one Newton step of the platform's forward kinematics plus the
-    /// table, as exact as the measured errors are small (their square, relative to the
-    /// lever, ~1e-6 for 10 µm over 100 mm). Legs to the platform's motion (δp, ω) by the
-    /// inverse of the rows; then δw = Rᵀ·(δT − δp − ω × (T − p)), δA = −ω_x / cos b,
-    /// δB = −ω_y (R = Ry(b)·Rx(a), b = −B; the platform's spin about the vertical tool
-    /// does not turn the tool direction).
-    pub fn contour_map(&self, pose: &Pose) -> Result<JointMap, Unreachable> {
-        let (platform, t) = self.split(pose)?;
-        let unit = |(s, c): (i32, i32)| (s as f32 / ONE_Q31, c as f32 / ONE_Q31);
-        let (sa, ca) = unit(sincos(platform[3]));
-        let (sb, cb) = unit(sincos(platform[4]));
-        let r = [
-            [cb, sb * sa, sb * ca],
-            [0.0, ca, -sa],
-            [-sb, cb * sa, cb * ca],
-        ];
-        let mm = |v: i64| i64_to_f32(v) * 1e-6;
-        let p = [mm(platform[0]), mm(platform[1]), mm(platform[2])];
-        let rows = self.hexapod.rows_f32(&p, &r);
-        let inv = inverse6(rows).ok_or(Unreachable::Singular)?;
-        let d = [mm(t[0]) - p[0], mm(t[1]) - p[1], mm(self.tool_z) - p[2]];
-        let deg = 180.0 / core::f32::consts::PI;
-        let rad = core::f32::consts::PI / 180.0;
-        let mut map = JointMap {
-            to_pose: [[0.0; MAX_JOINTS]; 5],
-            to_joint: [[0.0; 5]; MAX_JOINTS],
-        };
-        // to_pose, column by column: a leg's unit change, then each table axis'.
-        for j in 0..8 {
-            let (dp, w, dt) = if j < 6 {
-                (
-                    [inv[0][j], inv[1][j], inv[2][j]],
-                    [inv[3][j], inv[4][j], inv[5][j]],
-                    [0.0; 3],
-                )
-            } else {
-                let mut dt = [0.0; 3];
-                dt[j - 6] = 1.0;
-                ([0.0; 3], [0.0; 3], dt)
-            };
-            let wxd = [
-                w[1] * d[2] - w[2] * d[1],
-                w[2] * d[0] - w[0] * d[2],
-                w[0] * d[1] - w[1] * d[0],
-            ];
-            let m = [0, 1, 2].map(|k| dt[k] - dp[k] - wxd[k]);
-            for k in 0..3 {
-                map.to_pose[k][j] = r[0][k] * m[0] + r[1][k] * m[1] + r[2][k] * m[2];
-            }
-            map.to_pose[3][j] = -w[0] / cb * deg;
-            map.to_pose[4][j] = -w[1] * deg;
-        }
-        // to_joint: the split's derivatives per mm and degree, through the rows.
-        let v = [0, 1, 2].map(|k| mm(pose[k] - self.home[k]));
-        let drv = turned_derivatives(sa, ca, sb, cb, v, rad);
-        let clamped = self.clamped(&t);
-        // (δp, ω) per unit of each pose axis: ω = −(cos b, 0, −sin b)·δA − ŷ·δB, radians.
-        let mut motion = [[0.0f32; 5]; 6];
-        for k in 0..2 {
-            if clamped[k] {
-                motion[k] = drv[k].map(|x| -x);
-            }
-        }
-        motion[2] = drv[2].map(|x| -x);
-        motion[3][3] = -cb * rad;
-        motion[5][3] = sb * rad;
-        motion[4][4] = -rad;
-        for (row, leg) in map.to_joint.iter_mut().zip(&rows) {
-            for k in 0..5 {
-                row[k] = (0..6).map(|m| leg[m] * motion[m][k]).sum();
-            }
-        }
-        for k in 0..2 {
-            if !clamped[k] {
-                map.to_joint[6 + k] = drv[k];
-            }
-        }
-        Ok(map)
     }
 }
 

@@ -28,6 +28,7 @@ pub mod fixed;
 pub mod h4;
 pub mod hexapod;
 pub mod hexapod_xy;
+pub mod hexapod_xy_map;
 pub mod solve;
 
 #[cfg(test)]

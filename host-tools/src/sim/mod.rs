@@ -125,6 +125,8 @@ pub struct Simulator {
     index: [Option<i64>; MAX_SERVOS],
     /// The controller's last outputs.
     last_out: pkmc::controller::Outputs,
+    /// The channel map the last tick posted, if it completed one.
+    last_map: Option<pkmc::contour::ContourMap>,
     /// The inputs the last tick passed to the controller.
     last_in: Inputs,
     /// First tick at which the controller was in `Alarm` or `EStop` (not the lock
@@ -176,6 +178,7 @@ impl Simulator {
             forced: Inputs::default(),
             index: [None; MAX_SERVOS],
             last_out: pkmc::controller::Outputs::default(),
+            last_map: None,
             last_in: Inputs::default(),
             alarm_tick: None,
             ticks: 0,
@@ -197,6 +200,12 @@ impl Simulator {
     /// The outputs the controller returned on the last [`Simulator::tick`].
     pub fn last_outputs(&self) -> &pkmc::controller::Outputs {
         &self.last_out
+    }
+
+    /// The channel map the last tick completed and posted to the servo loops, if any
+    /// ([`pkmc::controller::Controller::contour_map`]).
+    pub fn last_map(&self) -> Option<&pkmc::contour::ContourMap> {
+        self.last_map.as_ref()
     }
 
     /// Simulated time, s.
@@ -484,6 +493,7 @@ impl Simulator {
         self.tick_lines = self.ctrl.take_line_log();
         self.last_in = *self.pacer.inputs();
         self.last_out = *self.pacer.due();
+        self.last_map = command.map;
         if let Some(pacer) = self.servo.as_mut() {
             if command.reset {
                 pacer.restart(ServoBank::new(self.ctrl.machine(), &snapshot.counts));

@@ -333,17 +333,20 @@ pub unsafe extern "C" fn bench_ctrl_inputs(
     unsafe { out.write(wire::inputs_from(&*words)) }
 }
 
-/// Flattens a tick's [`Outputs`] into words, as the host logged its own (not timed).
+/// Flattens a tick's [`Outputs`] and the contour map it completed (if any) into
+/// words, as the host logged its own (not timed).
 ///
 /// # Safety
-/// Valid, aligned pointers.
+/// Valid, aligned pointers: `outputs` as [`bench_ctrl_tick`] returned it, `c` its
+/// controller.
 #[no_mangle]
 pub unsafe extern "C" fn bench_ctrl_outputs(
     outputs: *const Outputs,
+    c: *const Controller,
     words: *mut [i64; wire::OUTPUT_WORDS],
 ) {
     // SAFETY: the caller passes valid pointers.
-    unsafe { *words = wire::outputs_words(&*outputs) }
+    unsafe { *words = wire::outputs_words(&*outputs, (*c).contour_map()) }
 }
 
 #[cfg(target_os = "none")]

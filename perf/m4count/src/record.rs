@@ -155,7 +155,10 @@ impl Recorder {
         self.log.push(b'T');
         for w in words
             .iter()
-            .chain(&wire::outputs_words(self.sim.last_outputs()))
+            .chain(&wire::outputs_words(
+                self.sim.last_outputs(),
+                self.sim.last_map(),
+            ))
         {
             self.log.extend_from_slice(&w.to_le_bytes());
         }

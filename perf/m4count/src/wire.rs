@@ -99,14 +99,13 @@ fn map_words(map: &ContourMap, w: &mut [i64]) {
 }
 
 /// `outputs` as words.
-pub fn outputs_words(outputs: &Outputs) -> [i64; OUTPUT_WORDS] {
+pub fn outputs_words(outputs: &Outputs, contour_map: Option<&ContourMap>) -> [i64; OUTPUT_WORDS] {
     let Outputs {
         steps,
         servo_target,
         enable,
         servo_enable,
         servo_reset,
-        contour_map,
     } = *outputs;
     let mut w = [0; OUTPUT_WORDS];
     for (c, t) in steps.iter().enumerate() {
@@ -133,7 +132,7 @@ pub fn outputs_words(outputs: &Outputs) -> [i64; OUTPUT_WORDS] {
     w[f + 2] = servo_reset as i64;
     if let Some(map) = contour_map {
         w[f + 3] = 1;
-        map_words(&map, &mut w[f + 4..]);
+        map_words(map, &mut w[f + 4..]);
     }
     w
 }

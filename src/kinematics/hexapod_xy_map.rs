@@ -1,0 +1,298 @@
+//! The hexapod-xy's channel map for the contour controller (`crate::contour::ContourMap`):
+//! the forward kinematics of platform plus table, linearised at a commanded pose, and
+//! the inverse's Jacobian, in `f32` from the legs' directions
+//! ([`super::hexapod::Hexapod::rows_f32`]).
+//!
+//! **What it is.** One Newton step of the platform's forward kinematics plus the
+//! table, as exact as the measured errors are small (their square relative to the
+//! lever, ~1e-6 for 10 µm over 100 mm). Legs to the platform's motion (δp, ω) by the
+//! inverse of the rows; then δw = Rᵀ·(δT − δp − ω × (T − p)), δA = −ω_x / cos b,
+//! δB = −ω_y (R = Ry(b)·Rx(a), b = −B; the platform's spin about the vertical tool
+//! does not turn the tool direction). `to_joint` is the split's derivatives through
+//! the rows.
+//!
+//! **In phases.** [`MapBuilder::step`] does a fifth of the work per call, so that the
+//! controller's tick carries a bounded share of it (docs/performance.md): the split and
+//! the rows; `to_joint`; the rows' LU factorisation (partial pivoting); `to_pose` of
+//! legs 1–3; `to_pose` of legs 4–6 and of the table. A map is therefore complete
+//! every [`MAP_PHASES`] ticks, at the pose of its first phase: up to ten ticks old
+//! when the bank stops using it, 0.2 mm at the hexapod-xy's 20 mm/s, which changes the
+//! map by about that over the lever (~1e-3 relative) and the contour errors it
+//! estimates by as much.
+
+// Matrix arithmetic over index-addressed rows and columns reads best with an index.
+#![allow(clippy::needless_range_loop)]
+
+use super::hexapod_xy::{turned_derivatives, HexapodXy};
+use super::{Pose, Unreachable};
+use crate::config::{Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS};
+use crate::contour::{ContourMap, POSE_AXES};
+use crate::math::{i64_to_f32, ONE_Q31};
+
+/// Calls of [`MapBuilder::step`] per map.
+pub const MAP_PHASES: u8 = 5;
+
+/// No servo channel (in [`MapBuilder`]'s joint-to-channel table).
+const NO_CHANNEL: u8 = u8::MAX;
+
+// A joint-indexed map of the hexapod-xy's eight joints is a channel-indexed one with
+// the identity table.
+const _: () = assert!(MAX_SERVOS >= 8);
+
+/// The map under construction, and what its phases hand each other.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapBuilder {
+    /// The phase the next [`MapBuilder::step`] runs, 0..[`MAP_PHASES`].
+    phase: u8,
+    /// Servo channel of each joint ([`NO_CHANNEL`] for none).
+    channel: [u8; MAX_JOINTS],
+    /// The legs' rows (unit direction, moment) at the pose; then their LU factors
+    /// (L below the diagonal, U above it, 1/u_kk on it).
+    rows: [[f32; 6]; 6],
+    /// Row order of the factorisation.
+    perm: [u8; 6],
+    /// The platform's rotation R.
+    r: [[f32; 3]; 3],
+    /// Tool tip less the platform origin, T − p, mm.
+    d: [f32; 3],
+    /// The pose less the platform's home, mm.
+    v: [f32; 3],
+    /// The table is at an end of its X, Y travel.
+    clamped: [bool; 2],
+    map: ContourMap,
+}
+
+impl MapBuilder {
+    /// A builder for `machine`'s servo channels, at its first phase.
+    pub fn new(machine: &MachineConfig) -> Self {
+        let mut channel = [NO_CHANNEL; MAX_JOINTS];
+        for (j, jc) in machine.joints.iter().enumerate().take(MAX_JOINTS) {
+            if let Drive::Servo { channel: c } = jc.drive {
+                if (c as usize) < MAX_SERVOS {
+                    channel[j] = c;
+                }
+            }
+        }
+        Self::with_channels(channel)
+    }
+
+    fn with_channels(channel: [u8; MAX_JOINTS]) -> Self {
+        Self {
+            phase: 0,
+            channel,
+            rows: [[0.0; 6]; 6],
+            perm: [0; 6],
+            r: [[0.0; 3]; 3],
+            d: [0.0; 3],
+            v: [0.0; 3],
+            clamped: [false; 2],
+            map: ContourMap::NONE,
+        }
+    }
+
+    /// The map as far as it is built: whole right after [`MapBuilder::step`] returned
+    /// it.
+    pub fn map(&self) -> &ContourMap {
+        &self.map
+    }
+
+    /// Starts the next map afresh at the next step.
+    pub fn restart(&mut self) {
+        self.phase = 0;
+    }
+
+    /// One phase of the map at `pose` (the pose counts at the first phase only); the
+    /// map when this phase completes it. A pose the split refuses, or a singular one,
+    /// starts over (the bank keeps the map it has).
+    pub fn step(&mut self, k: &HexapodXy, pose: &Pose) -> Option<&ContourMap> {
+        let phase = self.phase;
+        self.phase += 1;
+        match phase {
+            0 => {
+                if self.start(k, pose).is_err() {
+                    self.phase = 0;
+                }
+            }
+            1 => self.to_joint(),
+            2 => {
+                if !self.factor() {
+                    self.phase = 0;
+                }
+            }
+            3 => self.to_pose(0..3),
+            _ => {
+                self.to_pose(3..8);
+                self.phase = 0;
+                return Some(&self.map);
+            }
+        }
+        None
+    }
+
+    /// Phase 0: the split at `pose`, the rotation and the legs' rows.
+    fn start(&mut self, k: &HexapodXy, pose: &Pose) -> Result<(), Unreachable> {
+        let (platform, t, rq) = k.split_rotated(pose)?;
+        self.r = rq.map(|row| row.map(|x| x as f32 / ONE_Q31));
+        let mm = |v: i64| i64_to_f32(v) * 1e-6;
+        let p = [mm(platform[0]), mm(platform[1]), mm(platform[2])];
+        self.rows = k.hexapod.rows_f32(&p, &self.r);
+        self.d = [mm(t[0]) - p[0], mm(t[1]) - p[1], mm(k.tool_z) - p[2]];
+        self.v = [0, 1, 2].map(|i| mm(pose[i] - k.home[i]));
+        self.clamped = k.clamped(&t);
+        Ok(())
+    }
+
+    /// R's sines and cosines: R = Ry(b)·Rx(a) holds cos b, sin a, cos a, −sin b.
+    fn trig(&self) -> (f32, f32, f32, f32) {
+        let r = &self.r;
+        (-r[1][2], r[1][1], -r[2][0], r[0][0])
+    }
+
+    /// Phase 1: `to_joint`, the split's derivatives per mm and degree through the rows.
+    fn to_joint(&mut self) {
+        let (sa, ca, sb, cb) = self.trig();
+        let rad = core::f32::consts::PI / 180.0;
+        let drv = turned_derivatives(sa, ca, sb, cb, self.v, rad);
+        // (δp, ω) per unit of each pose axis: ω = −(cos b, 0, −sin b)·δA − ŷ·δB, radians.
+        let mut motion = [[0.0f32; POSE_AXES]; 6];
+        for i in 0..2 {
+            if self.clamped[i] {
+                motion[i] = drv[i].map(|x| -x);
+            }
+        }
+        motion[2] = drv[2].map(|x| -x);
+        motion[3][3] = -cb * rad;
+        motion[5][3] = sb * rad;
+        motion[4][4] = -rad;
+        for j in 0..6 {
+            let leg = self.rows[j];
+            let mut row = [0.0f32; POSE_AXES];
+            for a in 0..POSE_AXES {
+                row[a] = (0..6).map(|m| leg[m] * motion[m][a]).sum();
+            }
+            self.put_joint(j, row);
+        }
+        for i in 0..2 {
+            let row = if self.clamped[i] {
+                [0.0; POSE_AXES]
+            } else {
+                drv[i]
+            };
+            self.put_joint(6 + i, row);
+        }
+    }
+
+    fn put_joint(&mut self, j: usize, row: [f32; POSE_AXES]) {
+        let c = self.channel[j] as usize;
+        if c < MAX_SERVOS {
+            self.map.to_joint[c] = row;
+        }
+    }
+
+    /// Phase 2: the rows' LU factorisation with partial pivoting, in place; false when a
+    /// pivot is below 1e-6 of the largest entry (singular).
+    fn factor(&mut self) -> bool {
+        let a = &mut self.rows;
+        let scale = a.iter().flatten().fold(0.0f32, |s, v| s.max(v.abs()));
+        self.perm = [0, 1, 2, 3, 4, 5];
+        for c in 0..6 {
+            let mut p = c;
+            for r in c + 1..6 {
+                if a[r][c].abs() > a[p][c].abs() {
+                    p = r;
+                }
+            }
+            if a[p][c].abs().partial_cmp(&(1e-6 * scale)) != Some(core::cmp::Ordering::Greater) {
+                return false;
+            }
+            a.swap(c, p);
+            self.perm.swap(c, p);
+            let inv = 1.0 / a[c][c];
+            a[c][c] = inv;
+            for r in c + 1..6 {
+                let f = a[r][c] * inv;
+                a[r][c] = f;
+                for j in c + 1..6 {
+                    a[r][j] -= f * a[c][j];
+                }
+            }
+        }
+        true
+    }
+
+    /// Column `j` of the rows' inverse: the platform's motion (δp, ω) per unit change
+    /// of leg `j`, by forward and back substitution.
+    fn solve(&self, j: usize) -> [f32; 6] {
+        let a = &self.rows;
+        let mut x = [0.0f32; 6];
+        for i in 0..6 {
+            let mut s = if self.perm[i] as usize == j { 1.0 } else { 0.0 };
+            for m in 0..i {
+                s -= a[i][m] * x[m];
+            }
+            x[i] = s;
+        }
+        for i in (0..6).rev() {
+            let mut s = x[i];
+            for m in i + 1..6 {
+                s -= a[i][m] * x[m];
+            }
+            x[i] = s * a[i][i];
+        }
+        x
+    }
+
+    /// Phases 3 and 4: `to_pose` of joints `joints` (legs by their inverse column, the
+    /// table's axes directly).
+    fn to_pose(&mut self, joints: core::ops::Range<usize>) {
+        let (_, _, _, cb) = self.trig();
+        let deg = 180.0 / core::f32::consts::PI;
+        for j in joints {
+            let (dp, w, dt) = if j < 6 {
+                let x = self.solve(j);
+                ([x[0], x[1], x[2]], [x[3], x[4], x[5]], [0.0; 3])
+            } else {
+                let mut dt = [0.0; 3];
+                dt[j - 6] = 1.0;
+                ([0.0; 3], [0.0; 3], dt)
+            };
+            let d = &self.d;
+            let wxd = [
+                w[1] * d[2] - w[2] * d[1],
+                w[2] * d[0] - w[0] * d[2],
+                w[0] * d[1] - w[1] * d[0],
+            ];
+            let m = [0, 1, 2].map(|i| dt[i] - dp[i] - wxd[i]);
+            let c = self.channel[j] as usize;
+            if c >= MAX_SERVOS {
+                continue;
+            }
+            let r = &self.r;
+            for i in 0..3 {
+                self.map.to_pose[i][c] = r[0][i] * m[0] + r[1][i] * m[1] + r[2][i] * m[2];
+            }
+            self.map.to_pose[3][c] = -w[0] / cb * deg;
+            self.map.to_pose[4][c] = -w[1] * deg;
+        }
+    }
+}
+
+impl HexapodXy {
+    /// The joints' map to the pose at `pose`, joint-indexed (joint j in column or row
+    /// j, q1..q8 as channels 0..7), all phases at once: what [`MapBuilder`] builds over [`MAP_PHASES`] ticks.
+    pub fn contour_map(&self, pose: &Pose) -> Result<ContourMap, Unreachable> {
+        let identity = core::array::from_fn(|j| if j < 8 { j as u8 } else { NO_CHANNEL });
+        let mut b = MapBuilder::with_channels(identity);
+        b.start(self, pose)?;
+        b.phase = 1;
+        for _ in 1..MAP_PHASES {
+            if let Some(map) = b.step(self, pose) {
+                return Ok(*map);
+            }
+            if b.phase == 0 {
+                break;
+            }
+        }
+        Err(Unreachable::Singular)
+    }
+}
