@@ -52,8 +52,8 @@
 use crate::config::{ContourConfig, ContourMode, Drive, KinematicsConfig, MachineConfig};
 use crate::config::{ServoGains, MAX_SERVOS};
 use crate::servo::{
-    clamp_sym, following_error, AmpIo, Coupling, ServoAxis, ServoOutput, Setpoint,
-    SetpointInterpolator, Trip, DAC_MID, SERVO_PERIOD_S, SERVO_PER_TICK, SETPOINT_FRAC_BITS,
+    clamp_sym, following_error, AmpIo, Coupling, ServoAxis, ServoOutput, SetpointInterpolator,
+    Trip, DAC_MID, SERVO_PERIOD_S, SERVO_PER_TICK, SETPOINT_FRAC_BITS,
 };
 
 /// Slowest path speed at which the contour error is estimated, mm/s.
@@ -334,6 +334,9 @@ pub struct ServoBank {
     frame: PathFrame,
     /// Periods since the last `load_tick`.
     since_load: usize,
+    /// The contour controller's correction, from the last period's errors: this
+    /// period's loops apply it.
+    correction: ContourCorrection,
     /// Joint units (mm or degrees) per count, and counts per joint unit.
     unit_per_count: ChannelVec,
     counts_per_unit: ChannelVec,
@@ -397,6 +400,7 @@ impl ServoBank {
             n_active,
             frame: PathFrame::default(),
             since_load: SERVO_PER_TICK,
+            correction: ContourCorrection::default(),
             unit_per_count,
             counts_per_unit,
         }
@@ -428,53 +432,35 @@ impl ServoBank {
             a.reset();
         }
         self.contour.reset();
+        self.correction = ContourCorrection::default();
     }
 
-    /// One servo period of every channel in use.
+    /// One servo period of every channel in use, in one pass over the channels: each
+    /// channel's loop takes the contour correction formed from the previous period's
+    /// errors (a delay of one period, 100 µs, against the contour loop's bandwidth of
+    /// tens of hertz), and its tracking error joins this period's estimate.
     pub fn period(&mut self, inputs: &PeriodInputs) -> PeriodOutputs {
         let active = self.active;
         let active = &active[..self.n_active.min(MAX_SERVOS)];
-        let mut sp = [Setpoint::default(); MAX_SERVOS];
-        let mut fe = [(0i32, 0.0f32); MAX_SERVOS];
         // The tracking error in pose coordinates, to_pose · e, and at a new tick (or
         // when the setpoints just ran out, a late tick) the velocity and acceleration
         // too: the frame changed.
         let new_frame = self.since_load == 0 || self.since_load == SERVO_PER_TICK;
         let (mut pe, mut pv, mut pa) = ([0.0f32; POSE_AXES], [0.0; POSE_AXES], [0.0; POSE_AXES]);
+        let corr = self.correction;
+        let mut out = PeriodOutputs::default();
         for &c in active {
             // (`% MAX_SERVOS`: a channel is below it; this spares the bounds checks.)
             let c = c as usize % MAX_SERVOS;
             let s = self.setpoints[c].advance();
             let f = following_error(s.position_q16, inputs.feedback[c]);
-            if self.coupled {
+            let coupling = if self.coupled {
                 let (col, u) = (&self.to_pose[c], self.unit_per_count[c]);
                 axpy5(&mut pe, col, f.1 * u);
                 if new_frame {
                     axpy5(&mut pv, col, s.velocity * u);
                     axpy5(&mut pa, col, s.accel * u);
                 }
-            }
-            sp[c] = s;
-            fe[c] = f;
-        }
-        let mut out = PeriodOutputs::default();
-        let mut corr = ContourCorrection::default();
-        if self.coupled {
-            if new_frame {
-                self.frame = PathFrame::new(&pv, &pa);
-            }
-            let eps = self.frame.contour_error(&pe);
-            corr = self.contour.update(&self.frame, &eps);
-            out.contour_error = eps;
-        }
-        self.since_load = self.since_load.saturating_add(1);
-        for &c in active {
-            let c = c as usize % MAX_SERVOS;
-            let amp = AmpIo {
-                enable: inputs.enable,
-                fault: inputs.fault[c],
-            };
-            let coupling = if self.coupled {
                 let row = &self.to_joint[c];
                 Coupling {
                     reference: dot5(row, &corr.reference) * self.counts_per_unit[c],
@@ -483,15 +469,31 @@ impl ServoBank {
             } else {
                 Coupling::NONE
             };
-            let lqg = (self.law[c] as usize)
-                .checked_sub(1)
-                .and_then(|k| self.lqg.get(k));
-            let o: ServoOutput = self.axes[c].update_on(&sp[c], fe[c], amp, coupling, lqg);
+            let amp = AmpIo {
+                enable: inputs.enable,
+                fault: inputs.fault[c],
+            };
+            let law = self.law[c] as usize;
+            let lqg = if law == 0 {
+                None
+            } else {
+                self.lqg.get(law - 1)
+            };
+            let o: ServoOutput = self.axes[c].update_on(&s, f, amp, coupling, lqg);
             out.dac[c] = o.dac;
             out.enable[c] = o.enable;
             out.trip[c] = o.trip;
             out.command[c] = o.command;
         }
+        if self.coupled {
+            if new_frame {
+                self.frame = PathFrame::new(&pv, &pa);
+            }
+            let eps = self.frame.contour_error(&pe);
+            self.correction = self.contour.update(&self.frame, &eps);
+            out.contour_error = eps;
+        }
+        self.since_load = self.since_load.saturating_add(1);
         out
     }
 }

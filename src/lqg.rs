@@ -150,26 +150,44 @@ impl LqgState {
         max_output: f32,
         max_integral: f32,
     ) -> f32 {
-        // Written out over the four states: the servo period's largest cost
-        // (docs/performance.md), and the M4F keeps the estimate in registers.
-        let x0 = self.x;
-        let innovation = dy - dot4(&g.c, &x0);
-        let x = [
-            x0[0] + g.m[0] * innovation,
-            x0[1] + g.m[1] * innovation,
-            x0[2] + g.m[2] * innovation,
-            x0[3] + g.m[3] * innovation,
-        ];
-        let u = u_ff - self.integral - dot4(&g.k, &x);
+        // Over the model's order only (the states beyond it stay zero): the servo
+        // period's largest cost (docs/performance.md).
+        if g.order <= 3 {
+            self.run::<3>(g, dy, u_ff, max_output, max_integral)
+        } else {
+            self.run::<LQG_STATES>(g, dy, u_ff, max_output, max_integral)
+        }
+    }
+
+    /// [`LqgState::update`] over the first `N` states.
+    #[inline(always)]
+    fn run<const N: usize>(
+        &mut self,
+        g: &LqgGains,
+        dy: f32,
+        u_ff: f32,
+        max_output: f32,
+        max_integral: f32,
+    ) -> f32 {
+        // Written out (no loop): `N > 3` folds at compile time.
+        let mut x = self.x;
+        let innovation = dy - dot::<N>(&g.c, &x);
+        x[0] += g.m[0] * innovation;
+        x[1] += g.m[1] * innovation;
+        x[2] += g.m[2] * innovation;
+        if N > 3 {
+            x[3] += g.m[3] * innovation;
+        }
+        let u = u_ff - self.integral - dot::<N>(&g.k, &x);
         let out = clamp_sym(u, max_output);
         let applied = out - u_ff;
-        let p = &g.phi_minus_i;
-        self.x = [
-            x[0] + (g.gamma[0] * applied + dot4(&p[0], &x)),
-            x[1] + (g.gamma[1] * applied + dot4(&p[1], &x)),
-            x[2] + (g.gamma[2] * applied + dot4(&p[2], &x)),
-            x[3] + (g.gamma[3] * applied + dot4(&p[3], &x)),
-        ];
+        let (p, gamma) = (&g.phi_minus_i, &g.gamma);
+        self.x[0] = x[0] + (gamma[0] * applied + dot::<N>(&p[0], &x));
+        self.x[1] = x[1] + (gamma[1] * applied + dot::<N>(&p[1], &x));
+        self.x[2] = x[2] + (gamma[2] * applied + dot::<N>(&p[2], &x));
+        if N > 3 {
+            self.x[3] = x[3] + (gamma[3] * applied + dot::<N>(&p[3], &x));
+        }
         let winding = (u > max_output && dy < 0.0) || (u < -max_output && dy > 0.0);
         if !winding {
             self.integral = clamp_sym(self.integral + g.ki_t * dy, max_integral);
@@ -178,13 +196,18 @@ impl LqgState {
     }
 }
 
-/// `a · b` over the four states.
+/// `a · b` over the first `N` states (`N` is 3 or 4).
 #[inline(always)]
-fn dot4(a: &[f32; LQG_STATES], b: &[f32; LQG_STATES]) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
+fn dot<const N: usize>(a: &[f32; LQG_STATES], b: &[f32; LQG_STATES]) -> f32 {
+    let s = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    if N > 3 {
+        s + a[3] * b[3]
+    } else {
+        s
+    }
 }
 
-// `LqgState::update` is written out for four states.
+// `LqgState::run` is written out for three or four states.
 const _: () = assert!(LQG_STATES == 4);
 
 #[cfg(test)]

@@ -11,14 +11,14 @@
 //! does not turn the tool direction). `to_joint` is the split's derivatives through
 //! the rows.
 //!
-//! **In phases.** [`MapBuilder::step`] does a fifth of the work per call, so that the
-//! controller's tick carries a bounded share of it (docs/performance.md): the split and
-//! the rows; `to_joint`; the rows' LU factorisation (partial pivoting); `to_pose` of
-//! legs 1–3; `to_pose` of legs 4–6 and of the table. A map is therefore complete
-//! every [`MAP_PHASES`] ticks, at the pose of its first phase: up to ten ticks old
-//! when the bank stops using it, 0.2 mm at the hexapod-xy's 20 mm/s, which changes the
-//! map by about that over the lever (~1e-3 relative) and the contour errors it
-//! estimates by as much.
+//! **In phases.** [`MapBuilder::step`] does a seventh of the work per call, so that
+//! the controller's tick carries a bounded share of it (docs/performance.md): the
+//! split; the legs' rows; `to_joint`; the rows' LU factorisation (partial pivoting);
+//! `to_pose` of legs 1–2, of legs 3–4, of legs 5–6 and the table. A map is therefore
+//! complete every [`MAP_PHASES`] ticks, at the pose of its first phase: up to 14
+//! ticks old when the bank stops using it, 0.28 mm at the hexapod-xy's 20 mm/s, which
+//! changes the map by about that over the lever (~1e-3 relative) and the contour
+//! errors it estimates by as much.
 
 // Matrix arithmetic over index-addressed rows and columns reads best with an index.
 #![allow(clippy::needless_range_loop)]
@@ -30,7 +30,7 @@ use crate::contour::{ContourMap, POSE_AXES};
 use crate::math::{i64_to_f32, ONE_Q31};
 
 /// Calls of [`MapBuilder::step`] per map.
-pub const MAP_PHASES: u8 = 5;
+pub const MAP_PHASES: u8 = 7;
 
 /// No servo channel (in [`MapBuilder`]'s joint-to-channel table).
 const NO_CHANNEL: u8 = u8::MAX;
@@ -53,6 +53,8 @@ pub struct MapBuilder {
     perm: [u8; 6],
     /// The platform's rotation R.
     r: [[f32; 3]; 3],
+    /// The platform's origin p, mm.
+    p: [f32; 3],
     /// Tool tip less the platform origin, T − p, mm.
     d: [f32; 3],
     /// The pose less the platform's home, mm.
@@ -83,6 +85,7 @@ impl MapBuilder {
             rows: [[0.0; 6]; 6],
             perm: [0; 6],
             r: [[0.0; 3]; 3],
+            p: [0.0; 3],
             d: [0.0; 3],
             v: [0.0; 3],
             clamped: [false; 2],
@@ -109,19 +112,21 @@ impl MapBuilder {
         self.phase += 1;
         match phase {
             0 => {
-                if self.start(k, pose).is_err() {
+                if self.split(k, pose).is_err() {
                     self.phase = 0;
                 }
             }
-            1 => self.to_joint(),
-            2 => {
+            1 => self.rows = k.hexapod.rows_f32(&self.p, &self.r),
+            2 => self.to_joint(),
+            3 => {
                 if !self.factor() {
                     self.phase = 0;
                 }
             }
-            3 => self.to_pose(0..3),
+            4 => self.to_pose(0..2),
+            5 => self.to_pose(2..4),
             _ => {
-                self.to_pose(3..8);
+                self.to_pose(4..8);
                 self.phase = 0;
                 return Some(&self.map);
             }
@@ -129,14 +134,17 @@ impl MapBuilder {
         None
     }
 
-    /// Phase 0: the split at `pose`, the rotation and the legs' rows.
-    fn start(&mut self, k: &HexapodXy, pose: &Pose) -> Result<(), Unreachable> {
+    /// Phase 0: the split at `pose`: the platform's origin and rotation, the tool
+    /// tip's offset from it, the table's clamp (phase 1 forms the legs' rows).
+    fn split(&mut self, k: &HexapodXy, pose: &Pose) -> Result<(), Unreachable> {
         let (platform, t, rq) = k.split_rotated(pose)?;
         self.r = rq.map(|row| row.map(|x| x as f32 / ONE_Q31));
         let mm = |v: i64| i64_to_f32(v) * 1e-6;
-        let p = [mm(platform[0]), mm(platform[1]), mm(platform[2])];
-        self.rows = k.hexapod.rows_f32(&p, &self.r);
-        self.d = [mm(t[0]) - p[0], mm(t[1]) - p[1], mm(k.tool_z) - p[2]];
+        self.p = [mm(platform[0]), mm(platform[1]), mm(platform[2])];
+        self.d = [mm(t[0]), mm(t[1]), mm(k.tool_z)];
+        for i in 0..3 {
+            self.d[i] -= self.p[i];
+        }
         self.v = [0, 1, 2].map(|i| mm(pose[i] - k.home[i]));
         self.clamped = k.clamped(&t);
         Ok(())
@@ -153,31 +161,30 @@ impl MapBuilder {
         let (sa, ca, sb, cb) = self.trig();
         let rad = core::f32::consts::PI / 180.0;
         let drv = turned_derivatives(sa, ca, sb, cb, self.v, rad);
-        // (δp, ω) per unit of each pose axis: ω = −(cos b, 0, −sin b)·δA − ŷ·δB, radians.
-        let mut motion = [[0.0f32; POSE_AXES]; 6];
-        for i in 0..2 {
+        // (δp, ω) per unit of each pose axis: δp_xy = −∂(R·v)_xy only where the table
+        // is clamped, δp_z = −∂(R·v)_z; ω = −(cos b, 0, −sin b)·δA − ŷ·δB, radians.
+        let zero = [0.0f32; POSE_AXES];
+        let dp = [0, 1].map(|i| {
             if self.clamped[i] {
-                motion[i] = drv[i].map(|x| -x);
+                drv[i].map(|x| -x)
+            } else {
+                zero
             }
-        }
-        motion[2] = drv[2].map(|x| -x);
-        motion[3][3] = -cb * rad;
-        motion[5][3] = sb * rad;
-        motion[4][4] = -rad;
+        });
+        let dz = drv[2].map(|x| -x);
+        let (wa_x, wa_z, wb_y) = (-cb * rad, sb * rad, -rad);
         for j in 0..6 {
             let leg = self.rows[j];
             let mut row = [0.0f32; POSE_AXES];
             for a in 0..POSE_AXES {
-                row[a] = (0..6).map(|m| leg[m] * motion[m][a]).sum();
+                row[a] = leg[0] * dp[0][a] + leg[1] * dp[1][a] + leg[2] * dz[a];
             }
+            row[3] += leg[3] * wa_x + leg[5] * wa_z;
+            row[4] += leg[4] * wb_y;
             self.put_joint(j, row);
         }
         for i in 0..2 {
-            let row = if self.clamped[i] {
-                [0.0; POSE_AXES]
-            } else {
-                drv[i]
-            };
+            let row = if self.clamped[i] { zero } else { drv[i] };
             self.put_joint(6 + i, row);
         }
     }
@@ -283,7 +290,7 @@ impl HexapodXy {
     pub fn contour_map(&self, pose: &Pose) -> Result<ContourMap, Unreachable> {
         let identity = core::array::from_fn(|j| if j < 8 { j as u8 } else { NO_CHANNEL });
         let mut b = MapBuilder::with_channels(identity);
-        b.start(self, pose)?;
+        b.split(self, pose)?;
         b.phase = 1;
         for _ in 1..MAP_PHASES {
             if let Some(map) = b.step(self, pose) {
