@@ -287,10 +287,9 @@ pub struct PeriodInputs {
 pub struct PeriodOutputs {
     /// DAC code of each channel.
     pub dac: [u16; MAX_SERVOS],
-    /// Amplifier enable of each channel.
+    /// Amplifier enable of each channel (a channel whose loop tripped is disabled:
+    /// [`ServoBank::trips`] says why).
     pub enable: [bool; MAX_SERVOS],
-    /// Latched trip of each channel.
-    pub trip: [Option<Trip>; MAX_SERVOS],
     /// Estimated contour error, X Y Z in mm and the tool direction's A B in degrees
     /// (zero when uncoupled or standing).
     pub contour_error: PoseVec,
@@ -303,7 +302,6 @@ impl Default for PeriodOutputs {
         Self {
             dac: [DAC_MID as u16; MAX_SERVOS],
             enable: [false; MAX_SERVOS],
-            trip: [None; MAX_SERVOS],
             contour_error: [0.0; POSE_AXES],
             command: [0.0; MAX_SERVOS],
         }
@@ -426,6 +424,11 @@ impl ServoBank {
         self.to_joint = map.to_joint;
     }
 
+    /// The trip latched by each channel's loop.
+    pub fn trips(&self) -> [Option<Trip>; MAX_SERVOS] {
+        self.axes.each_ref().map(ServoAxis::trip)
+    }
+
     /// Clears every latched trip and the contour state.
     pub fn reset(&mut self) {
         for a in &mut self.axes {
@@ -442,12 +445,9 @@ impl ServoBank {
     pub fn period(&mut self, inputs: &PeriodInputs) -> PeriodOutputs {
         let active = self.active;
         let active = &active[..self.n_active.min(MAX_SERVOS)];
-        // The tracking error in pose coordinates, to_pose · e, and at a new tick (or
-        // when the setpoints just ran out, a late tick) the velocity and acceleration
-        // too: the frame changed.
-        let new_frame = self.since_load == 0 || self.since_load == SERVO_PER_TICK;
-        let (mut pe, mut pv, mut pa) = ([0.0f32; POSE_AXES], [0.0; POSE_AXES], [0.0; POSE_AXES]);
-        let corr = self.correction;
+        // The tracking error in pose coordinates, to_pose · e.
+        let mut pe = [0.0f32; POSE_AXES];
+        let corr = &self.correction;
         let mut out = PeriodOutputs::default();
         for &c in active {
             // (`% MAX_SERVOS`: a channel is below it; this spares the bounds checks.)
@@ -457,10 +457,6 @@ impl ServoBank {
             let coupling = if self.coupled {
                 let (col, u) = (&self.to_pose[c], self.unit_per_count[c]);
                 axpy5(&mut pe, col, f.1 * u);
-                if new_frame {
-                    axpy5(&mut pv, col, s.velocity * u);
-                    axpy5(&mut pa, col, s.accel * u);
-                }
                 let row = &self.to_joint[c];
                 Coupling {
                     reference: dot5(row, &corr.reference) * self.counts_per_unit[c],
@@ -482,11 +478,20 @@ impl ServoBank {
             let o: ServoOutput = self.axes[c].update_on(&s, f, amp, coupling, lqg);
             out.dac[c] = o.dac;
             out.enable[c] = o.enable;
-            out.trip[c] = o.trip;
             out.command[c] = o.command;
         }
         if self.coupled {
-            if new_frame {
+            if self.since_load == 0 || self.since_load == SERVO_PER_TICK {
+                // A new tick, or the setpoints just ran out (a late tick): the
+                // channels' velocity and acceleration, hence the frame, changed.
+                let (mut pv, mut pa) = ([0.0f32; POSE_AXES], [0.0; POSE_AXES]);
+                for &c in active {
+                    let c = c as usize % MAX_SERVOS;
+                    let (col, u) = (&self.to_pose[c], self.unit_per_count[c]);
+                    let (v, a) = self.setpoints[c].rates();
+                    axpy5(&mut pv, col, v * u);
+                    axpy5(&mut pa, col, a * u);
+                }
                 self.frame = PathFrame::new(&pv, &pa);
             }
             let eps = self.frame.contour_error(&pe);

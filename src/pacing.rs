@@ -183,7 +183,7 @@ impl ServoPacer {
             self.stats.fault = self.fault_seen.iter().any(|&f| f);
             self.snapshot = Snapshot {
                 counts: *feedback,
-                trips: out.trip,
+                trips: self.bank.trips(),
                 fault: self.fault_seen,
                 periods: self.stats.periods,
             };
@@ -205,6 +205,11 @@ impl ServoPacer {
     /// yet taken).
     pub fn post(&mut self, command: Command) {
         self.command = Some(command);
+    }
+
+    /// The trip latched by each channel's loop, now.
+    pub fn trips(&self) -> [Option<Trip>; MAX_SERVOS] {
+        self.bank.trips()
     }
 
     /// The snapshot of the last tick edge.
@@ -482,7 +487,7 @@ mod tests {
         });
         let fault = pad([true, false, false, false]);
         let s = p.period(&counts, &fault);
-        assert_eq!(s.out.trip[0], Some(Trip::AmplifierFault));
+        assert_eq!(p.trips()[0], Some(Trip::AmplifierFault));
         assert_eq!(p.snapshot().trips[0], Some(Trip::AmplifierFault));
         assert_eq!(p.snapshot().trips[1], None);
     }
@@ -517,7 +522,7 @@ mod tests {
         assert_eq!(p.snapshot().trips[0], Some(Trip::AmplifierFault));
         p.post(command);
         let s = p.period(&at, &[false; MAX_SERVOS]);
-        assert_eq!(s.out.trip, [None; MAX_SERVOS]);
+        assert_eq!(p.trips(), [None; MAX_SERVOS]);
         assert_eq!(s.out.enable, pad([true; 4]));
     }
 
@@ -609,5 +614,29 @@ mod tests {
         assert_ne!(expected, 0);
         assert_eq!(bits, expected);
         assert_eq!(servo_joints_faulted(&m, &[false; MAX_SERVOS]), 0);
+    }
+
+    #[test]
+    fn the_hexapod_xys_command_carries_its_contour_map_every_map_phases_ticks() {
+        use crate::kinematics::{hexapod_xy_map::MAP_PHASES, MachineKinematics};
+        let m = MachineConfig::hexapod_xy();
+        let MachineKinematics::HexapodXy(k) = MachineKinematics::new(&m) else {
+            panic!("the hexapod-xy's kinematics");
+        };
+        let want = ContourMap::of_joints(&m, &k.contour_map(&m.home).unwrap());
+        let mut ctrl = Controller::new(m).unwrap();
+        let mut t = TickPacer::new();
+        let (raw, snap) = (RawInputs::default(), Snapshot::default());
+        let mut carried = 0;
+        for tick in 1..=4 * MAP_PHASES as usize {
+            let command = t.tick(&mut ctrl, &raw, &snap);
+            if tick % MAP_PHASES as usize == 0 {
+                assert_eq!(command.map, Some(want), "tick {tick}");
+                carried += 1;
+            } else {
+                assert_eq!(command.map, None, "tick {tick}");
+            }
+        }
+        assert_eq!(carried, 4);
     }
 }

@@ -165,6 +165,12 @@ impl SetpointInterpolator {
         }
     }
 
+    /// The velocity (counts/s) and acceleration (counts/s²) of the last setpoint
+    /// [`advance`](Self::advance) gave.
+    pub fn rates(&self) -> (f32, f32) {
+        (self.velocity, self.accel)
+    }
+
     /// The last loaded target, counts × 2^16.
     pub fn target(&self) -> i64 {
         self.start + self.delta

@@ -74,7 +74,6 @@ impl Controller {
                 self.out.servo_target[channel as usize] = self.actuator_q16(j, self.joints[j]);
             }
         }
-        self.update_contour_map();
     }
 
     /// The hexapod-xy with contour control: one phase of the channels' map at the
@@ -121,6 +120,7 @@ impl Controller {
             }
         }
         self.update_servo_targets();
+        self.update_contour_map();
         let powered = self.state != State::EStop || self.stopping;
         self.out.enable = powered;
         self.out.servo_enable = powered;

@@ -303,3 +303,62 @@ impl HexapodXy {
         Err(Unreachable::Singular)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kinematics::MachineKinematics;
+
+    const MM: i64 = 1_000_000;
+    const DEG: i64 = 1_000_000_000;
+
+    fn machine() -> (MachineConfig, HexapodXy) {
+        let m = MachineConfig::hexapod_xy();
+        let MachineKinematics::HexapodXy(k) = MachineKinematics::new(&m) else {
+            panic!("the hexapod-xy's kinematics");
+        };
+        (m, k)
+    }
+
+    #[test]
+    fn the_phases_build_the_whole_map_at_the_pose_of_the_first() {
+        let (m, k) = machine();
+        let mut b = MapBuilder::new(&m);
+        let first = [8 * MM, -6 * MM, 282 * MM, 9 * DEG, -7 * DEG, 0];
+        let later = [9 * MM, -5 * MM, 283 * MM, 8 * DEG, -6 * DEG, 0];
+        let want = ContourMap::of_joints(&m, &k.contour_map(&first).unwrap());
+        assert_ne!(
+            want,
+            ContourMap::of_joints(&m, &k.contour_map(&later).unwrap())
+        );
+        for round in 0..3 {
+            for phase in 0..MAP_PHASES {
+                let pose = if phase == 0 { first } else { later };
+                let got = b.step(&k, &pose).copied();
+                if phase + 1 < MAP_PHASES {
+                    assert_eq!(got, None, "round {round}, phase {phase}");
+                } else {
+                    assert_eq!(got, Some(want), "round {round}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_pose_the_split_refuses_starts_the_map_over() {
+        let (m, k) = machine();
+        let mut b = MapBuilder::new(&m);
+        let pose = [0, 0, 275 * MM, 0, 0, 0];
+        b.step(&k, &pose);
+        b.step(&k, &pose);
+        let far = [0, 0, 2_000 * MM, 0, 0, 0];
+        b.restart();
+        assert_eq!(b.step(&k, &far), None);
+        assert_eq!(b.phase, 0, "refused at the first phase: starts over");
+        let want = ContourMap::of_joints(&m, &k.contour_map(&pose).unwrap());
+        let got = (0..MAP_PHASES)
+            .filter_map(|_| b.step(&k, &pose).copied())
+            .last();
+        assert_eq!(got, Some(want));
+    }
+}

@@ -382,8 +382,8 @@ impl FiveAxisMachine {
                     fault: [false; MAX_SERVOS],
                     enable: true,
                 });
-                if let Some((ch, trip)) = out
-                    .trip
+                if let Some((ch, trip)) = bank
+                    .trips()
                     .iter()
                     .enumerate()
                     .find_map(|(i, t)| t.map(|t| (i, t)))

@@ -384,8 +384,8 @@ impl StudyMachine {
                     fault: [false; MAX_SERVOS],
                     enable: true,
                 });
-                if let Some((c, trip)) = out
-                    .trip
+                if let Some((c, trip)) = bank
+                    .trips()
                     .iter()
                     .enumerate()
                     .find_map(|(c, t)| t.map(|t| (c, t)))

@@ -362,7 +362,7 @@ impl Simulator {
             s.as_ref().is_some_and(|s| {
                 let target = self.last_out.servo_target[c] >> pkmc::servo::SETPOINT_FRAC_BITS;
                 (s.counts() - target).abs() > 1
-            }) && self.bank_out.trip[c].is_none()
+            }) && self.servo.as_ref().is_some_and(|p| p.trips()[c].is_none())
                 && self.last_out.servo_enable
         })
     }

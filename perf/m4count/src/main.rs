@@ -123,6 +123,17 @@ pub unsafe extern "C" fn bench_sincos(angle: *const i64, out: *mut [i32; 2]) {
     }
 }
 
+/// `*a / *b` in `u128` into `*out`: the canary of the script's detector of LLVM's
+/// inline 128-bit division loop (never counted; the script checks it is seen).
+///
+/// # Safety
+/// Valid, aligned pointers; `*b` not zero.
+#[no_mangle]
+pub unsafe extern "C" fn bench_wide_division(a: *const u128, b: *const u128, out: *mut u128) {
+    // SAFETY: the caller passes valid pointers.
+    unsafe { *out = core::hint::black_box(*a) / core::hint::black_box(*b) }
+}
+
 /// Correctly rounded square root of `*n` into `*out`.
 ///
 /// # Safety
