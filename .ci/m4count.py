@@ -275,6 +275,7 @@ INLINE_WIDE_DIV = "inline 128-bit division loop"
 # Longest basic block taken for LLVM's inline 128-bit division loop; the canary
 # (`bench_wide_division`) checks that a real one is still recognised.
 WIDE_DIV_MAX_BLOCK = 120
+WIDE_DIV_HEAD_BYTES = 32
 
 
 def forbidden_kind(name):
@@ -349,7 +350,10 @@ class M4:
             m = re.fullmatch(r"#(0x[0-9a-f]+)", op.strip())
             loops = mnemonic.split(".")[0] in ("b", "beq", "bne", "bhs", "blo", "bhi", "bls", "bge",
                                               "blt", "bgt", "ble", "bmi", "bpl", "bcs", "bcc")
-            if loops and m and address <= int(m.group(1), 16) < address + size:
+            # A loop: a branch back into this block or to a short head just before it
+            # (LLVM's division loop starts a few instructions before the block the
+            # emulator sees, where a shift's result joins it).
+            if loops and m and address - WIDE_DIV_HEAD_BYTES <= int(m.group(1), 16) < address + size:
                 # LLVM's shift-and-subtract loop is short (about 60 instructions on the
                 # M4: a 128-bit compare, subtract and counter, 9 of them with carry). A
                 # long loop with as many carries is other 64-bit arithmetic (a two-pass

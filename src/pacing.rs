@@ -487,6 +487,7 @@ mod tests {
         });
         let fault = pad([true, false, false, false]);
         let s = p.period(&counts, &fault);
+        assert!(!s.out.enable[0], "the tripped loop is disabled");
         assert_eq!(p.trips()[0], Some(Trip::AmplifierFault));
         assert_eq!(p.snapshot().trips[0], Some(Trip::AmplifierFault));
         assert_eq!(p.snapshot().trips[1], None);

@@ -117,16 +117,16 @@ impl MapBuilder {
                 }
             }
             1 => self.rows = k.hexapod.rows_f32(&self.p, &self.r),
-            2 => self.to_joint(),
+            2 => self.joint_rows(),
             3 => {
                 if !self.factor() {
                     self.phase = 0;
                 }
             }
-            4 => self.to_pose(0..2),
-            5 => self.to_pose(2..4),
+            4 => self.pose_columns(0..2),
+            5 => self.pose_columns(2..4),
             _ => {
-                self.to_pose(4..8);
+                self.pose_columns(4..8);
                 self.phase = 0;
                 return Some(&self.map);
             }
@@ -156,8 +156,8 @@ impl MapBuilder {
         (-r[1][2], r[1][1], -r[2][0], r[0][0])
     }
 
-    /// Phase 1: `to_joint`, the split's derivatives per mm and degree through the rows.
-    fn to_joint(&mut self) {
+    /// Phase 2: `to_joint`, the split's derivatives per mm and degree through the rows.
+    fn joint_rows(&mut self) {
         let (sa, ca, sb, cb) = self.trig();
         let rad = core::f32::consts::PI / 180.0;
         let drv = turned_derivatives(sa, ca, sb, cb, self.v, rad);
@@ -196,7 +196,7 @@ impl MapBuilder {
         }
     }
 
-    /// Phase 2: the rows' LU factorisation with partial pivoting, in place; false when a
+    /// Phase 3: the rows' LU factorisation with partial pivoting, in place; false when a
     /// pivot is below 1e-6 of the largest entry (singular).
     fn factor(&mut self) -> bool {
         let a = &mut self.rows;
@@ -249,9 +249,9 @@ impl MapBuilder {
         x
     }
 
-    /// Phases 3 and 4: `to_pose` of joints `joints` (legs by their inverse column, the
+    /// Phases 4 to 6: `to_pose` of joints `joints` (legs by their inverse column, the
     /// table's axes directly).
-    fn to_pose(&mut self, joints: core::ops::Range<usize>) {
+    fn pose_columns(&mut self, joints: core::ops::Range<usize>) {
         let (_, _, _, cb) = self.trig();
         let deg = 180.0 / core::f32::consts::PI;
         for j in joints {

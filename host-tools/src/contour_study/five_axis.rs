@@ -9,8 +9,10 @@
 //!
 //! Each run steps the core's [`ServoBank`] at 10 kHz as the firmware does: per 1 kHz
 //! tick the pose on the path, its joints by the fixed-point inverse kinematics, the
-//! targets in counts × 2^16 and, when coupled, the channel map at that pose
-//! ([`HexapodXy::contour_map`], as the controller sends it); 16-bit encoder counters
+//! targets in counts × 2^16 and, when coupled, the channel map as the controller
+//! sends it: one phase a tick ([`MapBuilder`]), a map every
+//! [`pkmc::kinematics::hexapod_xy_map::MAP_PHASES`] ticks at the pose of its first
+//! phase (the bank starts with the map at the start pose); 16-bit encoder counters
 //! extended by [`extend_counter`]; DAC codes to the plants. Errors are measured from
 //! the simulated joints: the pose by the forward kinematics, the path error as the
 //! distance from the tool point to the helix, the direction error as the angle between
@@ -28,6 +30,7 @@ use crate::machine_file::MachineFile;
 use crate::sim::plant::{DiscretePlant, Mismatch, TransferFunction};
 use pkmc::config::{Drive, KinematicsConfig, MachineConfig, AXES, MAX_JOINTS, MAX_SERVOS};
 use pkmc::contour::{ContourMap, PeriodInputs, ServoBank};
+use pkmc::kinematics::hexapod_xy_map::MapBuilder;
 use pkmc::kinematics::{hexapod_xy::HexapodXy, Kinematics, MachineKinematics};
 use pkmc::servo::{extend_counter, target_q16, DAC_MID, SERVO_HZ, SERVO_PER_TICK};
 use pkmc::units::{NM_PER_MM, TICK_HZ};
@@ -332,6 +335,14 @@ impl FiveAxisMachine {
             counts[jt.channel] = (start_q[j] as f64 * 1e-6 * jt.counts_per_mm).round() as i64;
         }
         let mut bank = ServoBank::new(&config, &counts);
+        let mut builder = MapBuilder::new(&config);
+        if coupled {
+            let start = self.kin.contour_map(&Self::units(&c.pose(t0)));
+            bank.load_map(&ContourMap::of_joints(
+                &config,
+                &start.expect("not singular"),
+            ));
+        }
         let mut feedback = counts;
         let mut targets = counts.map(|v| v << 16);
         let mut inputs = [0.0f64; 8];
@@ -351,8 +362,8 @@ impl FiveAxisMachine {
             }
             bank.load_tick(&targets);
             if coupled {
-                if let Ok(jm) = self.kin.contour_map(&pose) {
-                    bank.load_map(&ContourMap::of_joints(&config, &jm));
+                if let Some(map) = builder.step(&self.kin, &pose) {
+                    bank.load_map(map);
                 }
             }
             // The cutting force at this tick, carried to the joints.
