@@ -20,7 +20,9 @@
 //!
 //! (the normal-plane part of e, corrected for the path bending away over the tangential
 //! lag e·t: Koren and Lo's circular correction, in 3-D). Below [`MIN_CONTOUR_SPEED`]
-//! the tangent is undefined and ε is taken as zero (coupling holds its state).
+//! the tangent is undefined and ε is taken as zero (coupling holds its state). The
+//! curvature is bounded by [`MAX_CURVATURE`]: from one tick's velocity change it is
+//! not the path's where the path leaves rest or turns a corner between pieces.
 //!
 //! **Uncoupled.** Each axis runs its own PID with its velocity and acceleration
 //! feed-forward ([`crate::servo`]).
@@ -58,6 +60,14 @@ use crate::servo::{
 
 /// Slowest path speed at which the contour error is estimated, mm/s.
 pub const MIN_CONTOUR_SPEED: f32 = 0.01;
+
+/// Largest curvature the path frame takes, 1/mm (a radius of 0.5 mm: report B's
+/// helix's tightest). The frame's curvature is the tick's velocity change across the
+/// path over |v|²: where the path starts from rest, stops, or turns a corner between
+/// straight pieces within one tick, that estimate is not the path's and is unbounded
+/// (10⁵ /mm at the first tick after a stop), and the circular correction
+/// ½(e·t)²·κ would turn it into a contour error of millimetres.
+pub const MAX_CURVATURE: f32 = 2.0;
 
 /// A vector over the servo channels (uncoupled channels hold zero).
 pub type ChannelVec = [f32; MAX_SERVOS];
@@ -137,7 +147,8 @@ fn dot3(a: &PoseVec, b: &PoseVec) -> f32 {
 pub struct PathFrame {
     /// Unit tangent of the X Y Z path (direction cosines; A B zero).
     pub tangent: PoseVec,
-    /// Curvature vector κ·n of the X Y Z path, 1/mm (A B zero).
+    /// Curvature vector κ·n of the X Y Z path, 1/mm (A B zero), |κ| at most
+    /// [`MAX_CURVATURE`].
     pub curvature: PoseVec,
     /// The tool direction's rate per mm of path, degrees/mm (X Y Z zero).
     pub turn: PoseVec,
@@ -165,6 +176,13 @@ impl PathFrame {
         let mut curvature = [0.0; POSE_AXES];
         for i in 0..3 {
             curvature[i] = (a[i] - at * tangent[i]) * inv2;
+        }
+        let k2 = dot3(&curvature, &curvature);
+        if k2 > MAX_CURVATURE * MAX_CURVATURE {
+            let scale = MAX_CURVATURE * rsqrt(k2);
+            for k in &mut curvature[..3] {
+                *k *= scale;
+            }
         }
         let mut turn = [0.0; POSE_AXES];
         for i in 3..POSE_AXES {
@@ -562,6 +580,22 @@ mod tests {
         let plain = e[0]; // the normal part alone: 0.05 mm
         assert!(plain > 0.04);
         assert!(eps[0].abs() < 1e-3 * plain * 10.0, "{eps:?}");
+    }
+
+    #[test]
+    fn the_curvature_of_a_path_leaving_rest_is_bounded() {
+        // 0.02 mm/s after the first tick from rest, the velocity's turn from the
+        // previous move read as 20 mm/s² across it: 5·10⁴ /mm, taken as MAX_CURVATURE
+        // in the same direction; a 0.1 mm lag then bends by at most ½·0.1²·2 mm.
+        let f = PathFrame::new(&v3(0.02, 0.0, 0.0), &v3(0.0, 20.0, 0.0));
+        assert!(
+            (f.curvature[1] - MAX_CURVATURE).abs() < 1e-5,
+            "{:?}",
+            f.curvature
+        );
+        assert!(f.curvature[0].abs() < 1e-6 && f.curvature[2].abs() < 1e-6);
+        let eps = f.contour_error(&v3(0.1, 0.0, 0.0));
+        assert!((eps[1] - 0.01).abs() < 1e-6, "{eps:?}");
     }
 
     #[test]

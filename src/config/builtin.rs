@@ -328,10 +328,10 @@ impl MachineConfig {
                 lqg: heapless::Vec::from_slice(&[leg_lqg]).unwrap_or_default(),
                 contour: ContourConfig {
                     mode: ContourMode::Ccpm,
-                    kp: 400.0,
-                    ki: 1000.0,
+                    kp: 3000.0,
+                    ki: 5000.0,
                     max_integral: 50.0,
-                    kr: 20.0,
+                    kr: 60.0,
                     max_offset: 0.5,
                 },
             },
