@@ -316,6 +316,24 @@ impl FiveAxisMachine {
             .collect()
     }
 
+    /// The servo bank of `config` standing at `counts` with the channel map at `start`
+    /// (the controller builds it at rest before a job), and the builder of the maps the
+    /// controller sends along the path.
+    fn bank(
+        &self,
+        config: &MachineConfig,
+        counts: &[i64; MAX_SERVOS],
+        start: &pkmc::kinematics::Pose,
+    ) -> (ServoBank, MapBuilder) {
+        let mut bank = ServoBank::new(config, counts);
+        let map = self
+            .kin
+            .contour_map(start)
+            .expect("the start is not singular");
+        bank.load_map(&ContourMap::of_joints(config, &map));
+        (bank, MapBuilder::new(config))
+    }
+
     /// Runs `scheme` with `law` under `c`.
     pub fn run(&self, scheme: Scheme, law: Law, c: &Conditions) -> Run {
         let config = scheme.configure(match law {
@@ -334,15 +352,7 @@ impl FiveAxisMachine {
         for (j, jt) in self.joints.iter().enumerate() {
             counts[jt.channel] = (start_q[j] as f64 * 1e-6 * jt.counts_per_mm).round() as i64;
         }
-        let mut bank = ServoBank::new(&config, &counts);
-        let mut builder = MapBuilder::new(&config);
-        if coupled {
-            let start = self.kin.contour_map(&Self::units(&c.pose(t0)));
-            bank.load_map(&ContourMap::of_joints(
-                &config,
-                &start.expect("not singular"),
-            ));
-        }
+        let (mut bank, mut builder) = self.bank(&config, &counts, &Self::units(&c.pose(t0)));
         let mut feedback = counts;
         let mut targets = counts.map(|v| v << 16);
         let mut inputs = [0.0f64; 8];
