@@ -354,11 +354,14 @@ class M4:
             # emulator sees, where a shift's result joins it).
             if loops and m and address - WIDE_DIV_HEAD_BYTES <= int(m.group(1), 16) < address + size:
                 # LLVM's shift-and-subtract loop is short (about 60 instructions on the
-                # M4: a 128-bit compare, subtract and counter, 9 of them with carry). A
-                # long loop with as many carries is other 64-bit arithmetic (a two-pass
-                # sincos of 64-bit angles was once taken for one): not counted.
+                # M4): a 128-bit shift left by one (limbs joined with `lsr #31`), a
+                # 128-bit compare, subtract and counter (9 instructions with carry).
+                # Other 64-bit arithmetic has carries too and is not counted: a two-pass
+                # sincos of 64-bit angles, or i64 magnitudes (`asr #31` sign masks), were
+                # once taken for it.
                 carries = sum(1 for i in insns if i[2].split(".")[0] in ("sbc", "sbcs"))
-                if carries >= 6 and n <= WIDE_DIV_MAX_BLOCK:
+                joins = sum(1 for i in insns if i[3].replace(" ", "").endswith("lsr#31"))
+                if carries >= 6 and joins >= 3 and n <= WIDE_DIV_MAX_BLOCK:
                     self.wide_div_blocks.add(key)
         return n
 
