@@ -258,15 +258,16 @@ impl HexapodXy {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::config::MachineConfig;
     use crate::kinematics::{reference as re, MachineKinematics};
 
-    const MM: i64 = 1_000_000;
-    const DEG: i64 = 1_000_000_000;
+    pub(crate) const MM: i64 = 1_000_000;
+    pub(crate) const DEG: i64 = 1_000_000_000;
 
-    fn machine() -> (MachineConfig, HexapodXy) {
+    /// The built-in hexapod-xy and its kinematics.
+    pub(crate) fn machine() -> (MachineConfig, HexapodXy) {
         let m = MachineConfig::hexapod_xy();
         let MachineKinematics::HexapodXy(k) = MachineKinematics::new(&m) else {
             unreachable!()

@@ -306,19 +306,8 @@ impl HexapodXy {
 
 #[cfg(test)]
 mod tests {
+    use super::super::hexapod_xy::tests::{machine, DEG, MM};
     use super::*;
-    use crate::kinematics::MachineKinematics;
-
-    const MM: i64 = 1_000_000;
-    const DEG: i64 = 1_000_000_000;
-
-    fn machine() -> (MachineConfig, HexapodXy) {
-        let m = MachineConfig::hexapod_xy();
-        let MachineKinematics::HexapodXy(k) = MachineKinematics::new(&m) else {
-            panic!("the hexapod-xy's kinematics");
-        };
-        (m, k)
-    }
 
     #[test]
     fn the_phases_build_the_whole_map_at_the_pose_of_the_first() {
