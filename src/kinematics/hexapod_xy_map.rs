@@ -140,11 +140,9 @@ impl MapBuilder {
         let (platform, t, rq) = k.split_rotated(pose)?;
         self.r = rq.map(|row| row.map(|x| x as f32 / ONE_Q31));
         let mm = |v: i64| i64_to_f32(v) * 1e-6;
-        self.p = [mm(platform[0]), mm(platform[1]), mm(platform[2])];
-        self.d = [mm(t[0]), mm(t[1]), mm(k.tool_z)];
-        for i in 0..3 {
-            self.d[i] -= self.p[i];
-        }
+        let p = [mm(platform[0]), mm(platform[1]), mm(platform[2])];
+        self.d = [mm(t[0]) - p[0], mm(t[1]) - p[1], mm(k.tool_z) - p[2]];
+        self.p = p;
         self.v = [0, 1, 2].map(|i| mm(pose[i] - k.home[i]));
         self.clamped = k.clamped(&t);
         Ok(())

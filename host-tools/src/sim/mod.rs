@@ -358,11 +358,14 @@ impl Simulator {
         if self.idle_ticks >= SETTLE_TICKS {
             return false;
         }
+        let Some(trips) = self.servo.as_ref().map(ServoPacer::trips) else {
+            return false;
+        };
         self.servos.iter().enumerate().any(|(c, s)| {
             s.as_ref().is_some_and(|s| {
                 let target = self.last_out.servo_target[c] >> pkmc::servo::SETPOINT_FRAC_BITS;
                 (s.counts() - target).abs() > 1
-            }) && self.servo.as_ref().is_some_and(|p| p.trips()[c].is_none())
+            }) && trips[c].is_none()
                 && self.last_out.servo_enable
         })
     }
