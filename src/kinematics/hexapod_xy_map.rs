@@ -348,4 +348,21 @@ mod tests {
             .last();
         assert_eq!(got, Some(want));
     }
+
+    /// docs/contour.md §6 weighs the held-axis direction error against this: one
+    /// encoder count (1 µm) of one leg turns the tool axis by 0.04–0.18 mdeg at home.
+    #[test]
+    fn one_micrometre_of_a_leg_turns_the_tool_axis_by_0_04_to_0_18_millidegrees_at_home() {
+        let (m, k) = machine();
+        let map = k.contour_map(&m.home).unwrap();
+        for leg in 0..6 {
+            // degrees per mm of the leg are millidegrees per µm.
+            let mdeg = [3, 4].map(|a| map.to_pose[a][leg].abs());
+            assert!(
+                mdeg.iter().all(|t| (0.04..=0.18).contains(t)),
+                "leg {}: A, B {mdeg:?} mdeg per µm",
+                leg + 1
+            );
+        }
+    }
 }
