@@ -55,13 +55,11 @@ fn every_scheme_measures_the_whole_ten_seconds_of_the_report_s_helix() {
 }
 
 /// Report B's test on its own machine (the hexapod-xy): the helix with the tool axis
-/// held and tilting, every joint's plant 10 % off and a periodic cutting force on the
-/// tool, with every joint on its PID and on its LQG design. CCPM keeps the path error
-/// below a tenth of uncoupled control in all four runs, and the tool-direction error
-/// in the tilting run below a tenth with both laws (measured 0.023 with PID, 0.075
-/// with LQG); with the axis held that error stays below a tenth of one encoder count
-/// of a leg over its lever for every scheme (1 µm over 150 mm is 0.38 mdeg), where no
-/// controller can see it.
+/// held and tilting, every joint's plant 10 % off (legs 1–3 more gain, 4–6 less) and a
+/// periodic cutting force on the tool, with every joint on its PID and on its LQG
+/// design. CCPM keeps both the path and the tool-direction error below a tenth of
+/// uncoupled control in all four runs (docs/contour.md, section 6, has the figures and
+/// the runs under other patterns of the legs' gains, not all of which meet it).
 #[test]
 fn five_axis_ccpm_keeps_both_contour_errors_below_a_tenth_of_uncoupled() {
     use pkmc_host::contour_study::five_axis::{Conditions, FiveAxisMachine, Law, HEXAPOD_XY};
@@ -93,18 +91,13 @@ fn five_axis_ccpm_keeps_both_contour_errors_below_a_tenth_of_uncoupled() {
             ccpm.max_path_mm * 1e3,
             us.max_path_mm * 1e3
         );
-        if tilt > 0.0 {
-            assert!(
-                ccpm.max_dir_deg <= us.max_dir_deg / 10.0,
-                "{}: direction CCPM {:.2} mdeg, uncoupled {:.2} mdeg",
-                law.name(),
-                ccpm.max_dir_deg * 1e3,
-                us.max_dir_deg * 1e3
-            );
-        } else {
-            let worst = us.max_dir_deg.max(ccpm.max_dir_deg);
-            assert!(worst < 0.038, "held axis: {:.3} mdeg", worst * 1e3);
-        }
+        assert!(
+            ccpm.max_dir_deg <= us.max_dir_deg / 10.0,
+            "{} tilt {tilt}: direction CCPM {:.3} mdeg, uncoupled {:.3} mdeg",
+            law.name(),
+            ccpm.max_dir_deg * 1e3,
+            us.max_dir_deg * 1e3
+        );
     }
 }
 

@@ -244,9 +244,10 @@ impl MachineConfig {
         let KinematicsConfig::Hexapod(legs) = Self::hexapod().kinematics else {
             unreachable!("the built-in hexapod")
         };
-        let joint = |channel: u8, min: i64, max: i64| JointConfig {
+        // The legs' scales count 10 nm, the table's 1 µm (the machine file says why).
+        let joint = |channel: u8, min: i64, max: i64, per_mm: u32| JointConfig {
             drive: Drive::Servo { channel },
-            scale: Scale::new(1000, mm as u64),
+            scale: Scale::new(per_mm, mm as u64),
             rotary: false,
             min,
             max,
@@ -258,10 +259,10 @@ impl MachineConfig {
         };
         let mut joints = heapless::Vec::new();
         for c in 0..6u8 {
-            let _ = joints.push(joint(c, 280 * mm, 420 * mm));
+            let _ = joints.push(joint(c, 280 * mm, 420 * mm, 100_000));
         }
         for c in 6..8u8 {
-            let _ = joints.push(joint(c, -50 * mm, 50 * mm));
+            let _ = joints.push(joint(c, -50 * mm, 50 * mm, 1000));
         }
         let loop_of = |kp: f32, ki: f32, kd: f32, kvff: f32, kaff: f32| ServoGains {
             kp,
@@ -277,23 +278,27 @@ impl MachineConfig {
             min_ferror: 1000,
         };
         // The legs' LQG design, as the machine file's `lqg_gains` (`contour-study
-        // --design-lqg`): the identified L(s) at 1000 counts/mm, weights position 0.01,
-        // integral 40, command 1, load noise 2 c.u., encoder noise 0.29 counts.
+        // --design-lqg`): the identified L(s) at 100 000 counts/mm, weights position
+        // 1e-6, integral 0.004, command 1, load noise 2 c.u., encoder noise 29 counts.
         let leg_lqg = crate::lqg::LqgGains {
             order: 3,
             phi_minus_i: [
                 [-1.8829388e-3, 3.3761698e-3, 5.70642e-6, 0.0e0],
                 [-3.376266e-3, -5.7065286e-6, 3.3793426e-3, 0.0e0],
-                [-5.696912e-5, -9.6289504e-8, -1.08482334e-10, 0.0e0],
+                [-5.696912e-5, -9.6289504e-8, -1.0848189e-10, 0.0e0],
                 [0.0e0, 0.0e0, 0.0e0, 0.0e0],
             ],
-            gamma: [1.479193e-2, 9.372941e-3, 2.6076635e-2, 0.0e0],
+            gamma: [1.479193e0, 9.372941e-1, 2.6076636e0, 0.0e0],
             c: [1.0e0, 0.0e0, 0.0e0, 0.0e0],
             m: [9.7235724e-2, 6.377594e-2, 1.7082046e-1, 0.0e0],
-            k: [1.1118436e-1, 1.6003574e-1, 1.0232325e-1, 0.0e0],
-            ki_t: 6.3061964e-4,
+            k: [1.1118435e-3, 1.6003574e-3, 1.0232325e-3, 0.0e0],
+            ki_t: 6.3061966e-6,
         };
-        let leg = loop_of(0.05, 0.6, 5.0e-4, 3.8116e-3, 2.1552e-5);
+        let leg = ServoGains {
+            ferror: 200_000,
+            min_ferror: 100_000,
+            ..loop_of(5.0e-4, 6.0e-3, 5.0e-6, 3.8116e-5, 2.1552e-7)
+        };
         let mut gains = [ServoGains::NONE; MAX_SERVOS];
         gains[..6].copy_from_slice(&[leg; 6]);
         gains[6] = loop_of(0.1, 1.6, 0.0, 5.4632e-3, -8.6924e-5);
@@ -328,8 +333,8 @@ impl MachineConfig {
                 lqg: heapless::Vec::from_slice(&[leg_lqg]).unwrap_or_default(),
                 contour: ContourConfig {
                     mode: ContourMode::Ccpm,
-                    kp: 3000.0,
-                    ki: 5000.0,
+                    kp: 5000.0,
+                    ki: 10000.0,
                     max_integral: 50.0,
                     kr: 60.0,
                     max_offset: 0.5,

@@ -47,6 +47,14 @@ struct Args {
     /// figures on the model and on the 10 %-off plant.
     #[arg(long)]
     design_lqg: bool,
+    /// Five-axis study: the six legs' plant gain factors, comma-separated (default:
+    /// 1.1,1.1,1.1,0.9,0.9,0.9).
+    #[arg(long, value_delimiter = ',')]
+    leg_gains: Option<Vec<f64>>,
+    /// Five-axis study: runs uncoupled and CCPM, with PID and with LQG, under each of
+    /// the 64 patterns of the legs' gains 10 % high or low, and prints the ratios.
+    #[arg(long)]
+    sweep_legs: bool,
     /// Five-axis study: the tool axis tilts by this many degrees along the path.
     #[arg(long, default_value_t = 0.0)]
     tilt: f64,
@@ -240,6 +248,20 @@ fn five_axis(args: &Args) -> Result<()> {
     if args.no_disturbance {
         c.force.steady = [0.0; 3];
     }
+    if let Some(g) = &args.leg_gains {
+        if g.len() != 6 {
+            anyhow::bail!("--leg-gains: six factors, one a leg, not {}", g.len());
+        }
+        for (m, g) in c.mismatch.iter_mut().zip(g) {
+            if !(g.is_finite() && *g > 0.0) {
+                anyhow::bail!("--leg-gains: {g} is not a positive gain factor");
+            }
+            m.gain = *g;
+        }
+    }
+    if args.sweep_legs {
+        return sweep_legs(&machine, &c);
+    }
     println!("conditions: {c:?}");
     println!("| loops | scheme | path max (um) | path RMS (um) | direction max (mdeg) | direction RMS (mdeg) | max / uncoupled (path, direction) | max following (um) | saturated periods |");
     println!("|---|---|---:|---:|---:|---:|---:|---:|---:|");
@@ -411,5 +433,67 @@ fn design_lqg(args: &Args) -> Result<()> {
         );
         println!("lqg_gains = {}", gains_toml(&d.gains));
     }
+    Ok(())
+}
+
+/// Every pattern of the legs' gains 10 % high or low: CCPM's errors against
+/// uncoupled control's with both laws, and how many patterns meet 1/10.
+fn sweep_legs(
+    machine: &pkmc_host::contour_study::five_axis::FiveAxisMachine,
+    c: &pkmc_host::contour_study::five_axis::Conditions,
+) -> Result<()> {
+    use pkmc_host::contour_study::five_axis::Law;
+    println!(
+        "tool axis tilt {} deg; other conditions as the study's",
+        c.tilt_deg
+    );
+    println!("| leg gains | law | US direction (mdeg) | CCPM direction (mdeg) | ratio | US path (um) | CCPM path (um) | ratio |");
+    println!("|---|---|---:|---:|---:|---:|---:|---:|");
+    let (mut met, mut runs, mut trips) = (0, 0, 0);
+    let mut failed_us = Vec::new();
+    for bits in 0..64u32 {
+        let mut c = *c;
+        let mut name = String::new();
+        for (leg, m) in c.mismatch[..6].iter_mut().enumerate() {
+            m.gain = if bits >> leg & 1 == 0 { 1.1 } else { 0.9 };
+            name += if bits >> leg & 1 == 0 { "+" } else { "-" };
+        }
+        for law in Law::ALL {
+            let us = machine.run(Scheme::Uncoupled, law, &c);
+            let cc = machine.run(Scheme::Ccpm, law, &c);
+            trips += us.trip.is_some() as u32 + cc.trip.is_some() as u32;
+            let (rd, rp) = (
+                cc.max_dir_deg / us.max_dir_deg,
+                cc.max_path_mm / us.max_path_mm,
+            );
+            runs += 1;
+            if rd <= 0.1 && rp <= 0.1 && us.trip.is_none() && cc.trip.is_none() {
+                met += 1;
+            } else {
+                failed_us.push(us.max_dir_deg * 1e3);
+            }
+            let trip = |r: &pkmc_host::contour_study::five_axis::Run| {
+                r.trip
+                    .as_ref()
+                    .map(|t| format!(" {} TRIP {t:?}", r.scheme.name()))
+                    .unwrap_or_default()
+            };
+            println!(
+                "| {name} | {} | {:.3} | {:.3} | {rd:.3} | {:.2} | {:.2} | {rp:.3} |{}{}",
+                law.name(),
+                us.max_dir_deg * 1e3,
+                cc.max_dir_deg * 1e3,
+                us.max_path_mm * 1e3,
+                cc.max_path_mm * 1e3,
+                trip(&us),
+                trip(&cc),
+            );
+        }
+    }
+    let worst = failed_us.iter().copied().fold(0.0, f64::max);
+    println!(
+        "{met} of {runs} (pattern, law) runs have CCPM within 1/10 of uncoupled on both errors; \
+         {trips} trips; the largest uncoupled direction error among the others: {worst:.3} mdeg"
+    );
     Ok(())
 }

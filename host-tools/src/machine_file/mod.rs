@@ -512,6 +512,29 @@ mod tests {
     }
 
     #[test]
+    fn a_scale_is_reduced_before_it_must_fit_and_refused_when_it_cannot() {
+        // 100 000 counts/mm is 10^11 per 10^12 nm, 1 per 10 nm reduced: it loads.
+        let scale = |v: &str| {
+            let text = HEXAPOD_XY_MACHINE.replacen("steps_per_unit = 100000", v, 1);
+            parse(&text, "m.toml").map(|m| m.joints[0].scale)
+        };
+        let s = scale("steps_per_unit = 100000").unwrap();
+        assert_eq!((s.steps, s.per_units), (1, 10));
+        // 4294.967297 per mm has no common factor with 10^12: 4 294 967 297 steps, one
+        // more than the core's u32 holds; 2^32 per nm neither fits.
+        for v in [
+            "steps_per_unit = 4294.967297",
+            "steps_per_unit = 4294967296000000",
+        ] {
+            let e = scale(v).unwrap_err().to_string();
+            assert!(
+                e.contains("joints[0] (leg1).steps_per_unit") && e.contains("too large"),
+                "{e}"
+            );
+        }
+    }
+
+    #[test]
     fn a_semantic_error_names_the_line_of_its_field() {
         let text = DEFAULT_MACHINE.replacen("steps_per_unit = 400", "steps_per_unit = 0", 1);
         let line = 1 + text

@@ -360,14 +360,19 @@ impl JointFile {
         let f = |s: &str| format!("joints[{j}] ({}).{s}", self.name);
         let per_unit = positive(self.steps_per_unit, &f("steps_per_unit"))?;
         // Scale as a ratio: steps per 10^6 user units, to 1e-6 step per user unit.
+        // Reduced to lowest terms before it must fit the core's u32 of steps, so a
+        // whole number of counts per unit fits up to u32::MAX (0.1 µm scales: 10 000).
         let steps = (per_unit * 1e6).round();
-        if steps > u32::MAX as f64 {
+        let per = (1_000_000 * units_per_user(self.rotary)) as u64;
+        let g = if steps < 1.8e19 {
+            gcd(steps as u64, per)
+        } else {
+            1
+        };
+        if steps / g as f64 > u32::MAX as f64 {
             return Err(refused!("{}: {per_unit} is too large", f("steps_per_unit")));
         }
-        let scale = Scale::new(
-            steps as u32,
-            (1_000_000 * units_per_user(self.rotary)) as u64,
-        );
+        let scale = Scale::new((steps as u64 / g) as u32, per / g);
         let drive = self.drive(&f)?;
         if let (Drive::Servo { channel }, Some(sf)) = (drive, &self.servo) {
             if let Some(g) = gains.get_mut(channel as usize) {
@@ -572,4 +577,12 @@ pub struct ToolFile {
     pub diameter: f64,
     /// What the tool is (not used).
     pub comment: Option<String>,
+}
+
+/// Greatest common divisor.
+fn gcd(mut a: u64, mut b: u64) -> u64 {
+    while b != 0 {
+        (a, b) = (b, a % b);
+    }
+    a.max(1)
 }
