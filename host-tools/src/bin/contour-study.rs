@@ -377,7 +377,11 @@ fn plot_five_axis(
                     col.stroke_width(1),
                 ))
                 .map_err(|e| fail(e.to_string()))?
-                .label(format!("{}: max {max:.2}, RMS {rms:.2}", r.scheme.name()))
+                .label(if direction {
+                    format!("{}: max {max:.3}, RMS {rms:.3}", r.scheme.name())
+                } else {
+                    format!("{}: max {max:.2}, RMS {rms:.2}", r.scheme.name())
+                })
                 .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], col.stroke_width(3)));
         }
         chart
