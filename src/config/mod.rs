@@ -131,7 +131,8 @@ pub struct Scale {
     pub per_units: u64,
 }
 
-const fn gcd(mut a: u64, mut b: u64) -> u64 {
+/// Greatest common divisor (0 for 0 and 0).
+pub const fn gcd(mut a: u64, mut b: u64) -> u64 {
     while b != 0 {
         let t = a % b;
         a = b;

@@ -361,11 +361,11 @@ impl JointFile {
         let per_unit = positive(self.steps_per_unit, &f("steps_per_unit"))?;
         // Scale as a ratio: steps per 10^6 user units, to 1e-6 step per user unit.
         // Reduced to lowest terms before it must fit the core's u32 of steps, so a
-        // whole number of counts per unit fits up to u32::MAX (0.1 µm scales: 10 000).
+        // whole number of counts per unit fits up to u32::MAX (10 nm: 100 000/mm).
         let steps = (per_unit * 1e6).round();
         let per = (1_000_000 * units_per_user(self.rotary)) as u64;
         let g = if steps < 1.8e19 {
-            gcd(steps as u64, per)
+            pkmc::config::gcd(steps as u64, per).max(1)
         } else {
             1
         };
@@ -577,12 +577,4 @@ pub struct ToolFile {
     pub diameter: f64,
     /// What the tool is (not used).
     pub comment: Option<String>,
-}
-
-/// Greatest common divisor.
-fn gcd(mut a: u64, mut b: u64) -> u64 {
-    while b != 0 {
-        (a, b) = (b, a % b);
-    }
-    a.max(1)
 }
