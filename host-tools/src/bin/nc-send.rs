@@ -140,6 +140,10 @@ enum Command {
         /// Link the pseudo-terminal at this path too.
         #[arg(long, value_name = "PATH")]
         link: Option<PathBuf>,
+        /// M6: `grbl` refuses it with error:20 as Grbl 1.1 does; `pause` holds the
+        /// machine for a manual tool change until `~`.
+        #[arg(long, value_name = "MODE", default_value = "grbl", value_parser = ["grbl", "pause"])]
+        tool_change: String,
     },
     /// Serve the operator station, a web page with the machine in 3-D, the DRO, the
     /// program editor, jog, MDI and teach, until Ctrl-C (docs/ui.md).
@@ -378,11 +382,16 @@ fn serve(
 ) -> Result<i32, Failure> {
     let stop = || interrupts.count() > 0;
     match cmd {
-        Command::Grbl { tcp, link } => {
+        Command::Grbl {
+            tcp,
+            link,
+            tool_change,
+        } => {
             let bridge = pkmc_host::grbl::BridgeOptions {
                 link: link.clone(),
                 tcp: tcp.clone(),
                 tools: opts.tools.clone(),
+                tool_change: tool_change == "pause",
             };
             pkmc_host::grbl::run(machine, opts, &bridge, &stop)
         }

@@ -7,9 +7,9 @@ use super::input::{Input, Item, RealTime};
 use super::ports::{write_all_patiently, End, Event, Ports};
 use super::words::{self, Mode, BLOCK_BUFFER, RX_BUFFER};
 use crate::gcode::canon::Canon;
-use crate::gcode::{Diagnostic, LineSession};
+use crate::gcode::LineSession;
 use crate::link::{JobHooks, LinkView};
-use pkmc::config::MachineConfig;
+use pkmc::config::{MachineConfig, AXES};
 use pkmc::protocol::{Block, Control, State, Status};
 use std::collections::{HashMap, VecDeque};
 use std::net::TcpStream;
@@ -56,7 +56,33 @@ pub(super) struct Bridge<'o> {
     busy_told: Option<Instant>,
     /// Counters for the summary at exit.
     pub(super) counts: Counts,
+    /// When the pseudo-terminal last sent a byte.
+    pty_heard: Option<Instant>,
+    /// Which sender started the job that is open.
+    job_owner: Option<End>,
+    /// Where the jogs accepted so far end (the next queued jog starts there).
+    pub(super) jog_end: [i64; AXES],
+    /// A homing cycle is under way (a reset then is Grbl's ALARM:6).
+    pub(super) homing: bool,
+    /// M6 holds for a manual tool change instead of Grbl 1.1's `error:20`.
+    pub(super) tool_change: bool,
+    /// `$130`–`$132`: the travel of X, Y and Z through the start pose, mm.
+    pub(super) travel: [f64; 3],
+    /// Ctrl-C: asked when the bridge should stop.
+    stop: &'o dyn Fn() -> bool,
+    /// Ctrl-C was seen: the job is aborted and no more lines are taken.
+    pub(super) stopping: bool,
+    /// The alarm last reported (`ALARM:N`), so that it is said once.
+    pub(super) alarm_told: Option<pkmc::protocol::Alarm>,
 }
+
+/// A pseudo-terminal sender counts as present this long after its last byte (a
+/// pseudo-terminal does not tell when its other end closes).
+const PTY_PRESENT: Duration = Duration::from_secs(5);
+
+/// Why G-code is refused during a jog (Grbl's `error:9`).
+const JOG_LOCK: &str =
+    "G-code is locked out while jogging: wait for the jog to end or cancel it (0x85)";
 
 /// What the bridge did, printed when it stops.
 #[derive(Clone, Copy, Debug, Default, serde::Serialize)]
@@ -72,7 +98,13 @@ pub(super) struct Counts {
 }
 
 impl<'o> Bridge<'o> {
-    pub(super) fn new(machine: &'o MachineConfig, ports: Ports, session: LineSession<'o>) -> Self {
+    pub(super) fn new(
+        machine: &'o MachineConfig,
+        ports: Ports,
+        session: LineSession<'o>,
+        stop: &'o dyn Fn() -> bool,
+    ) -> Self {
+        let start = session.interp().pos;
         Self {
             machine,
             ports,
@@ -93,6 +125,15 @@ impl<'o> Bridge<'o> {
             startup: [String::new(), String::new()],
             busy_told: None,
             counts: Counts::default(),
+            pty_heard: None,
+            job_owner: None,
+            jog_end: start,
+            homing: false,
+            tool_change: false,
+            travel: words::max_travel(machine, &start),
+            stop,
+            stopping: false,
+            alarm_told: None,
         }
     }
 
@@ -129,11 +170,8 @@ impl<'o> Bridge<'o> {
             match ev {
                 Event::Connected(id, stream) => {
                     self.tcp.insert(id, stream);
-                    if self.active == End::Pty {
-                        self.active = End::Tcp(id);
-                        self.input.clear();
-                        self.lines.clear();
-                        self.say(&words::banner());
+                    if self.active == End::Pty && !self.pty_holds() {
+                        self.take_over(End::Tcp(id));
                     } else if let Some(s) = self.tcp.get_mut(&id) {
                         let msg = "[MSG:Busy: another sender holds this bridge]\r\n";
                         write_all_patiently(s, msg.as_bytes());
@@ -146,9 +184,53 @@ impl<'o> Bridge<'o> {
                         self.input.clear();
                     }
                 }
-                Event::Bytes(end, bytes) if end == self.active => self.bytes(&bytes),
+                Event::Bytes(end, bytes) if end == self.active => {
+                    if end == End::Pty {
+                        self.pty_heard = Some(Instant::now());
+                    }
+                    self.bytes(&bytes)
+                }
+                Event::Bytes(End::Tcp(id), bytes)
+                    if self.active == End::Pty && !self.pty_holds() =>
+                {
+                    // A TCP sender told Busy before, now that the pseudo-terminal's
+                    // sender has gone quiet: it takes the bridge.
+                    self.take_over(End::Tcp(id));
+                    self.bytes(&bytes);
+                }
                 Event::Bytes(end, _) => self.tell_busy(end),
             }
+        }
+    }
+
+    /// Does the pseudo-terminal's sender hold the bridge? While it has been heard
+    /// lately, or while a job it started is moving.
+    fn pty_holds(&self) -> bool {
+        let moving = self.job_owner == Some(End::Pty)
+            && self
+                .status
+                .as_ref()
+                .is_some_and(|s| s.state != State::Hold || s.speed != 0);
+        self.pty_heard.is_some_and(|t| t.elapsed() < PTY_PRESENT) || moving
+    }
+
+    /// `end` becomes the sender holding the bridge: the banner, and a word about a
+    /// job the previous sender left.
+    fn take_over(&mut self, end: End) {
+        self.active = end;
+        self.input.clear();
+        self.lines.clear();
+        self.say(&words::banner());
+        if let Some((total, done)) = self.job {
+            let line = self.status.as_ref().map_or(0, |s| s.line);
+            let state = match self.status.as_ref() {
+                Some(s) if s.state == State::Hold => "is held",
+                _ => "is running",
+            };
+            let ahead = total.saturating_sub(done);
+            self.say(&format!(
+                "[MSG:A job of the previous sender {state} at line {line} with {ahead} blocks ahead: '~' resumes it, Ctrl-X clears it]"
+            ));
         }
     }
 
@@ -193,6 +275,11 @@ impl<'o> Bridge<'o> {
             RealTime::Status => {
                 let text = self.status_report();
                 self.say(&text);
+            }
+            // A feed hold during a jog cancels it (Grbl's jogging interface), and
+            // leaves no hold behind.
+            RealTime::Hold | RealTime::Door if self.mode.jogging => {
+                self.controls.push_back(Control::Abort)
             }
             RealTime::Hold | RealTime::Door => self.controls.push_back(Control::Hold),
             RealTime::Resume => self.controls.push_back(Control::Resume),
@@ -280,14 +367,24 @@ impl<'o> Bridge<'o> {
         self.say(&format!("error:{code}"));
     }
 
-    fn refuse_diagnostic(&mut self, d: &Diagnostic) {
-        let code = words::error_code(&d.message);
-        self.refuse(code, &d.to_string());
-    }
-
     /// Compiles one G-code line into blocks (none in check mode); an error is
     /// answered here and gives `None`.
     pub(super) fn compile(&mut self, text: &str) -> Option<Vec<Block>> {
+        match self.compile_line(text) {
+            Ok(blocks) => {
+                self.ok();
+                Some(blocks)
+            }
+            Err((code, why)) => {
+                self.refuse(code, &why);
+                None
+            }
+        }
+    }
+
+    /// Compiles one G-code line: its blocks (none in check mode), its messages said;
+    /// or Grbl's error number and why, the interpreter left where the machine will be.
+    pub(super) fn compile_line(&mut self, text: &str) -> Result<Vec<Block>, (u8, String)> {
         self.line_no += 1;
         let n = self.line_no;
         let start = self.session.interp().pos;
@@ -296,10 +393,21 @@ impl<'o> Bridge<'o> {
             mode: self.session.interp().path,
         }];
         if let Err(d) = self.session.line(text, n, &mut canon) {
-            self.refuse_diagnostic(&d);
-            return None;
+            return Err((words::error_code(&d.message), d.to_string()));
         }
-        if self.session.ended() {
+        if !self.tool_change && canon.iter().any(|c| matches!(c, Canon::ToolChange { .. })) {
+            // Grbl 1.1 has no M6 (error:20); a sender that wants the hold asks for it.
+            self.session.set_position(start);
+            return Err((
+                20,
+                format!(
+                    "sender:{n}: M6 (tool change) is not supported, as on Grbl 1.1; \
+                     start the bridge with --tool-change pause to hold for one"
+                ),
+            ));
+        }
+        let ended = self.session.ended();
+        if ended {
             // M2/M30: what compensation holds ends here; the next line starts afresh.
             let _ = self.session.finish(n, &mut canon);
             let pos = self.session.interp().pos;
@@ -308,22 +416,22 @@ impl<'o> Bridge<'o> {
         let program = crate::gcode::blocks::from_canon(&canon, start);
         let report = crate::analysis::preflight::check(&program.blocks, self.machine, start);
         if let Some(f) = report.findings.first() {
-            let why = format!("{}:{}: {}", "sender", f.line, f.what);
-            self.refuse(33, &why);
             // The interpreter already moved to the refused target: back to where the
             // machine will be.
             self.session.set_position(start);
-            return None;
+            return Err((33, format!("sender:{}: {}", f.line, f.what)));
         }
         for text in program.messages.values() {
             self.say(&format!("[MSG:{text}]"));
         }
-        self.ok();
+        if ended {
+            self.say("[MSG:Pgm End]");
+        }
         if self.mode.check {
-            return Some(Vec::new());
+            return Ok(Vec::new());
         }
         self.counts.blocks += program.blocks.len() as u64;
-        Some(program.blocks)
+        Ok(program.blocks)
     }
 
     /// `ok`.
@@ -340,8 +448,10 @@ impl<'o> Bridge<'o> {
     }
 
     /// Takes queued lines while a job runs: G-code lines are compiled and their blocks
-    /// appended to `out`; lines for the bridge alone are answered; a line that needs
-    /// the controller between jobs waits (and the job's feed closes).
+    /// appended to `out` (during a jog, `$J=` lines are queued jogs and G-code is
+    /// refused); `$` lines are answered as Grbl answers them in this state. Only once
+    /// the job is at rest does a line that needs the controller between jobs close
+    /// the job's feed (returns `false`) to run after it.
     fn take_lines(&mut self, view: &LinkView, out: &mut Vec<Block>) -> bool {
         while let Some((item, _)) = self.lines.front() {
             let ahead = view.total + out.len() - view.executed.min(view.total);
@@ -349,7 +459,13 @@ impl<'o> Bridge<'o> {
                 return true;
             }
             if let Item::Line(text) = item {
-                if super::commands::needs(text) == Needs::Link {
+                let jog =
+                    self.mode.jogging && text.trim_start().to_ascii_uppercase().starts_with("$J=");
+                if super::commands::needs(text) == Needs::Link
+                    && !jog
+                    && self.at_rest(view)
+                    && out.is_empty()
+                {
                     return false;
                 }
             }
@@ -362,6 +478,7 @@ impl<'o> Bridge<'o> {
                     let n = self.line_no;
                     self.refuse(code, &format!("sender:{n}: {why}"));
                 }
+                Item::Line(text) if self.mode.jogging => self.line_in_jog(&text, out),
                 Item::Line(text) if text.trim_start().starts_with('$') => {
                     self.line_no += 1;
                     super::commands::answer_local(self, &text);
@@ -374,19 +491,44 @@ impl<'o> Bridge<'o> {
                     );
                 }
                 Item::RealTime(_) => {}
-                Item::Line(text) => match self.compile(&text) {
-                    Some(blocks) => out.extend(blocks),
-                    None => {
-                        if view.total > view.executed {
-                            // An error holds the stream: the machine stops on the path
-                            // until the operator resumes (~) or resets.
-                            self.controls.push_back(Control::Hold);
-                        }
-                    }
-                },
+                // An error does not hold the stream (Grbl streams on after one).
+                Item::Line(text) => out.extend(self.compile(&text).unwrap_or_default()),
             }
         }
         true
+    }
+
+    /// A line during a jog: `$J=` queues a jog after those accepted; other `$` lines
+    /// are answered; G-code is refused (`error:9`).
+    fn line_in_jog(&mut self, text: &str, out: &mut Vec<Block>) {
+        self.line_no += 1;
+        let t = text.trim();
+        if t.to_ascii_uppercase().starts_with("$J=") {
+            let from = self.jog_end;
+            match super::commands::jog_block(self, &t[3..], &from) {
+                Ok(block) => {
+                    self.jog_end = block.target;
+                    self.ok();
+                    out.push(block);
+                }
+                Err((code, why)) => self.refuse(code, &format!("{t}: {why}")),
+            }
+        } else if t.starts_with('$') {
+            super::commands::answer_local(self, t);
+        } else if t.is_empty() {
+            self.ok();
+        } else {
+            self.refuse(9, JOG_LOCK);
+        }
+    }
+
+    /// Has every block of the job executed, with the controller idle and still?
+    fn at_rest(&self, view: &LinkView) -> bool {
+        self.status
+            .as_ref()
+            .is_some_and(|s| s.state == State::Idle && s.speed == 0)
+            && view.acked == view.total
+            && view.executed >= view.total
     }
 
     /// The job ended with every block executed.
@@ -399,7 +541,18 @@ impl<'o> Bridge<'o> {
         if job.is_none() {
             self.counts.executed += self.job.map_or(0, |(_, done)| done as u64);
         }
+        self.job_owner = job.map(|_| self.active);
         self.job = job;
+    }
+
+    /// Ctrl-C seen for the first time: a job under way is aborted.
+    fn check_stop(&mut self) {
+        if !self.stopping && (self.stop)() {
+            self.stopping = true;
+            if self.busy() {
+                self.controls.push_back(Control::Abort);
+            }
+        }
     }
 }
 
@@ -408,14 +561,18 @@ impl JobHooks for Bridge<'_> {
         self.status = Some(status.clone());
     }
 
+    /// Asked on every turn of a job's loop, and while homing or waiting: the ports
+    /// are read here, so real-time bytes act in every state.
     fn control(&mut self, _link: &LinkView) -> Option<Control> {
+        self.poll(Duration::ZERO);
+        self.check_stop();
         self.controls.pop_front()
     }
 
     fn feed(&mut self, view: &LinkView, out: &mut Vec<Block>) -> bool {
         self.poll(Duration::ZERO);
         self.job = Some((view.total, view.executed));
-        if self.reset {
+        if self.reset || self.stopping {
             return false;
         }
         if !self.take_lines(view, out) {
@@ -427,12 +584,6 @@ impl JobHooks for Bridge<'_> {
         }
         // Closed once everything has executed, the controller is at rest and no line
         // has come for a while.
-        let at_rest = self
-            .status
-            .as_ref()
-            .is_some_and(|s| s.state == State::Idle && s.speed == 0)
-            && view.acked == view.total
-            && view.executed >= view.total;
-        !(at_rest && self.last_busy.elapsed() > CLOSE_AFTER)
+        !(self.at_rest(view) && self.last_busy.elapsed() > CLOSE_AFTER)
     }
 }

@@ -1,6 +1,9 @@
 //! Grbl's `$` commands: those answered from the bridge's own state (`$`, `$$`, `$#`,
 //! `$G`, `$I`, `$N`, `$Nx=`, settings), and those that act on the controller and run
-//! only between jobs (`$H`, `$X`, `$C`, `$J=`).
+//! only between jobs (`$H`, `$X`, `$C`, `$J=`). While a job moves or is held, these
+//! get Grbl's answers at once: `$X` has no effect (`ok`), `$H` and `$C` are
+//! `error:8` (not idle), and `$J=` is `error:8` unless a jog is under way, when it is
+//! queued after it.
 
 use super::bridge::{Bridge, Needs};
 use super::words;
@@ -30,7 +33,7 @@ pub(super) fn answer_local(b: &mut Bridge<'_>, line: &str) {
             b.ok();
         }
         "$$" => {
-            for (n, v) in words::settings(b.machine) {
+            for (n, v) in words::settings(b.machine, &b.travel) {
                 b.say(&format!("${n}={v}"));
             }
             b.ok();
@@ -75,7 +78,7 @@ pub(super) fn answer_local(b: &mut Bridge<'_>, line: &str) {
                     ),
                 );
             } else {
-                match words::settings(b.machine)
+                match words::settings(b.machine, &b.travel)
                     .iter()
                     .find(|(k, _)| k.to_string() == n)
                 {
@@ -87,8 +90,13 @@ pub(super) fn answer_local(b: &mut Bridge<'_>, line: &str) {
                 }
             }
         }
+        // Outside an alarm, Grbl's $X has no effect.
+        "$X" => b.ok(),
         _ if needs(t) == Needs::Link => {
-            b.refuse(8, &format!("{t} runs only when the machine is idle"));
+            b.refuse(
+                8,
+                &format!("{t} runs only when the machine is idle (now it is moving or held)"),
+            );
         }
         _ => b.refuse(3, &format!("unknown or unsupported command {t}")),
     }
@@ -98,7 +106,9 @@ fn is_number(s: &str) -> bool {
     !s.is_empty() && s.bytes().all(|c| c.is_ascii_digit())
 }
 
-/// Runs a `$` line that acts on the controller (the machine is not in a job).
+/// Runs a `$` line that acts on the controller (the machine is not in a job). Grbl's
+/// refusals: `$H`, `$J=` and turning `$C` on need an idle machine (`error:8`, also in
+/// a feed hold at rest); `$X` outside an alarm has no effect.
 pub(super) fn run_link<T: Transport>(
     b: &mut Bridge<'_>,
     link: &mut Link<T>,
@@ -106,25 +116,25 @@ pub(super) fn run_link<T: Transport>(
 ) -> Result<(), Failure> {
     let t = line.trim();
     let upper = t.to_ascii_uppercase();
+    let held = b
+        .status
+        .as_ref()
+        .is_some_and(|s| s.state == pkmc::protocol::State::Hold);
+    let not_idle = |b: &mut Bridge<'_>, why: &str| {
+        b.refuse(8, &format!("{t} needs the machine idle: {why}"));
+    };
     match upper.as_str() {
-        "$X" => {
-            link.control(Control::AlarmReset)?;
-            b.status = Some(link.request_status()?);
-            b.say("[MSG:Caution: Unlocked]");
-            b.ok();
+        "$X" => unlock(b, link)?,
+        _ if b.locked() && upper != "$H" && upper != "$C" => {
+            not_idle(b, "it is in alarm; '$X' unlocks, '$H' homes")
         }
-        "$H" => {
-            let cmd = home_command(link)?;
-            link.control(cmd)?;
-            let end = link.wait_idle(b)?;
-            after_move(b, link, end)?;
-            // One answer for the line, as for every line: homing ended in an alarm
-            // (reported above) is a refusal.
-            if b.locked() {
-                b.refuse(9, "$H: homing did not complete");
-            } else {
-                b.ok();
-            }
+        _ if held && !(upper == "$C" && b.mode.check) => {
+            not_idle(b, "it is in a feed hold; '~' resumes, Ctrl-X clears it")
+        }
+        "$H" if b.mode.check => not_idle(b, "check mode is on; '$C' turns it off"),
+        "$H" => home(b, link)?,
+        "$C" if b.locked() && !b.mode.check => {
+            not_idle(b, "it is in alarm; '$X' unlocks, '$H' homes")
         }
         "$C" => {
             b.mode.check = !b.mode.check;
@@ -139,7 +149,61 @@ pub(super) fn run_link<T: Transport>(
                 b.session.restart(pose);
             }
         }
+        _ if b.mode.check => not_idle(b, "check mode is on; '$C' turns it off"),
         _ => jog(b, link, &t[3..])?,
+    }
+    Ok(())
+}
+
+/// `$X`: in an alarm, unlocks, unless the cause is still there (the e-stop held in,
+/// a drive fault): then it says so, and `error:9` (G-code stays locked out).
+fn unlock<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(), Failure> {
+    if !b.locked() {
+        b.ok();
+        return Ok(());
+    }
+    link.control(Control::AlarmReset)?;
+    let s = link.request_status()?;
+    b.status = Some(s.clone());
+    if b.locked() {
+        let why = match s.state {
+            pkmc::protocol::State::EStop => {
+                "the e-stop is still latched: release it, then '$X'".to_string()
+            }
+            _ => format!("the controller is still {}", crate::job::state_text(&s)),
+        };
+        b.refuse(9, &format!("$X: not unlocked: {why}"));
+    } else {
+        b.say("[MSG:Caution: Unlocked]");
+        b.ok();
+    }
+    Ok(())
+}
+
+/// `$H`: homes, reading the senders meanwhile; a reset during it is Grbl's ALARM:6.
+fn home<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(), Failure> {
+    let cmd = home_command(link)?;
+    link.control(cmd)?;
+    b.homing = true;
+    let end = link.wait_idle(b);
+    b.homing = false;
+    let end = end?;
+    if b.reset {
+        // The line gets no answer: the reset drops it, as on Grbl.
+        let s = link.request_status()?;
+        b.session.set_position(s.pose);
+        b.status = Some(s);
+        b.say("ALARM:6");
+        b.say("[MSG:Homing was cancelled by a reset: '$H' homes again]");
+        return Ok(());
+    }
+    after_move(b, link, end)?;
+    // One answer for the line, as for every line: homing ended in an alarm
+    // (reported above) is a refusal.
+    if b.locked() {
+        b.refuse(9, "$H: homing did not complete");
+    } else {
+        b.ok();
     }
     Ok(())
 }
@@ -153,6 +217,7 @@ fn after_move<T: Transport>(
 ) -> Result<(), Failure> {
     let s = link.request_status()?;
     b.session.set_position(s.pose);
+    b.jog_end = s.pose;
     b.status = Some(s);
     if let JobEnd::Alarm(a) = end {
         super::report_alarm(b, &a);
@@ -160,19 +225,37 @@ fn after_move<T: Transport>(
     Ok(())
 }
 
-/// `$J=…`: G20/G21, G90/G91, G53, axis words and F (required). The target is
-/// checked against the machine's reach (error:15 beyond it); the move is planned
-/// here and sent as one jog; 0x85 cancels it.
+/// `$J=…`: G20/G21, G90/G91, G53, axis words and F (required). The jog runs as a job
+/// of its own, fed by the `$J=` lines that follow while it moves (queued, as Grbl
+/// queues jogs); 0x85 or `!` cancels it and every queued jog.
 fn jog<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>, body: &str) -> Result<(), Failure> {
     let s = link.request_status()?;
-    let target = match jog_target(b, body, &s.pose) {
-        Ok(t) => t,
+    let block = match jog_block(b, body, &s.pose) {
+        Ok(block) => block,
         Err((code, why)) => {
             b.refuse(code, &format!("$J={body}: {why}"));
             return Ok(());
         }
     };
-    let (target, feed) = target;
+    b.ok();
+    b.mode.jogging = true;
+    b.jog_end = block.target;
+    b.set_job(Some((1, 0)));
+    let end = link.run_job(&[block], b);
+    b.set_job(None);
+    b.mode.jogging = false;
+    after_move(b, link, end?)
+}
+
+/// One jog from `from` (where the jogs before it end): its block, or Grbl's error
+/// number and why. The target is checked against the machine's reach (`error:15`
+/// beyond it) and the move must be one the planner can plan (`error:16`).
+pub(super) fn jog_block(
+    b: &Bridge<'_>,
+    body: &str,
+    from: &[i64; pkmc::config::AXES],
+) -> Result<Block, (u8, String)> {
+    let (target, feed) = jog_target(b, body, from)?;
     let block = Block {
         line: b.line_no,
         motion: Motion::Linear,
@@ -180,25 +263,15 @@ fn jog<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>, body: &str) -> Resu
         feed,
         tolerance_nm: 0,
     };
-    let report = crate::analysis::preflight::check(&[block], b.machine, s.pose);
+    let report = crate::analysis::preflight::check(&[block], b.machine, *from);
     if let Some(f) = report.findings.first() {
-        b.refuse(15, &format!("$J={body}: {}", f.what));
-        return Ok(());
+        return Err((15, f.what.clone()));
     }
     let kin = MachineKinematics::new(b.machine);
-    let planned = match pkmc::planner::plan_move(&block, s.pose, b.machine, &kin) {
-        Ok(p) => p,
-        Err(e) => {
-            b.refuse(16, &format!("$J={body}: cannot be planned: {e}"));
-            return Ok(());
-        }
-    };
-    link.control(Control::Jog(planned))?;
-    b.ok();
-    b.mode.jogging = true;
-    let end = link.wait_idle(b);
-    b.mode.jogging = false;
-    after_move(b, link, end?)
+    if let Err(e) = pkmc::planner::plan_move(&block, *from, b.machine, &kin) {
+        return Err((16, format!("cannot be planned: {e}")));
+    }
+    Ok(block)
 }
 
 type Jog = ([i64; AXES], i64);
@@ -235,7 +308,7 @@ fn jog_target(b: &Bridge<'_>, body: &str, pose: &[i64; AXES]) -> Result<Jog, (u8
             'F' => feed = Some(num),
             _ => match AXIS_NAMES.iter().position(|a| *a == letter) {
                 Some(i) if b.machine.axes[i].max_velocity > 0 => axes[i] = Some(num),
-                Some(_) => return Err((37, format!("the machine has no {letter} axis"))),
+                Some(_) => return Err((20, format!("the machine has no {letter} axis"))),
                 None => return Err((16, format!("{letter} is not allowed in a jog"))),
             },
         }

@@ -36,10 +36,15 @@ pub struct BridgeOptions {
     pub tcp: Option<String>,
     /// Tool table for G43 and cutter compensation.
     pub tools: gcode::ToolTable,
+    /// M6 holds the machine for a manual tool change (until `~`) instead of being
+    /// refused with `error:20` as Grbl 1.1 refuses it.
+    pub tool_change: bool,
 }
 
 /// How often the bridge asks the controller for its status between jobs.
 const IDLE_STATUS: Duration = Duration::from_millis(50);
+/// How often it asks during a job (the link's keepalive).
+const STATUS_AGE: Duration = Duration::from_millis(20);
 
 /// `nc-send grbl`: connects to the controller as `run` says (`--sim`, `--port`, or
 /// the board on USB), prints where senders connect on stdout (`pty PATH`, and
@@ -50,6 +55,11 @@ pub fn run(
     opts: &BridgeOptions,
     stop: &dyn Fn() -> bool,
 ) -> Result<i32, Failure> {
+    let mut link_opts = run.clone();
+    // A `?` is answered from the last status: while a job streams, one is asked
+    // every 20 ms (besides the controller's own), so a report is at most that old.
+    link_opts.link.keepalive = STATUS_AGE;
+    let run = &link_opts;
     crate::job::with_link(machine, run, |link| {
         if matches!(run.target, Target::Sim) {
             // A fresh simulator is locked after its reset: unlock it where it stands.
@@ -89,7 +99,8 @@ pub fn serve<T: Transport>(
         ..gcode::Options::default()
     };
     let session = gcode::LineSession::new(&options, "sender");
-    let mut b = Bridge::new(machine, ports, session);
+    let mut b = Bridge::new(machine, ports, session, stop);
+    b.tool_change = opts.tool_change;
     b.status = Some(start);
     let mut asked = Instant::now();
     while !stop() {
@@ -105,7 +116,15 @@ pub fn serve<T: Transport>(
             soft_reset(&mut b, link)?;
         }
         if asked.elapsed() >= IDLE_STATUS {
-            b.status = Some(link.request_status()?);
+            let s = link.request_status()?;
+            // An alarm raised between jobs (the e-stop pressed at rest) is pushed to
+            // the sender as Grbl pushes it.
+            match s.alarm {
+                Some(a) if b.alarm_told != Some(a) => report_alarm(&mut b, &a),
+                None => b.alarm_told = None,
+                _ => {}
+            }
+            b.status = Some(s);
             asked = Instant::now();
         }
         next_line(&mut b, link)?;
@@ -184,6 +203,7 @@ fn next_line<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(),
 
 /// `ALARM:N` and our cause, joint and line.
 fn report_alarm(b: &mut Bridge<'_>, a: &Alarm) {
+    b.alarm_told = Some(*a);
     b.say(&format!("ALARM:{}", words::alarm_code(a.cause)));
     b.say(&format!("[MSG:{}]", crate::job::describe_alarm(a)));
 }
@@ -195,7 +215,12 @@ fn soft_reset<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<()
     b.reset = false;
     b.mode.jogging = false;
     b.lines.clear();
-    let s = link.request_status()?;
+    let mut s = link.request_status()?;
+    if s.state == pkmc::protocol::State::Hold && s.speed == 0 {
+        // A feed hold with nothing under it (`!` while idle): a reset ends it.
+        link.control(Control::Resume)?;
+        s = link.request_status()?;
+    }
     b.session.restart(s.pose);
     b.status = Some(s.clone());
     b.say(&words::banner());
@@ -211,15 +236,27 @@ fn soft_reset<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<()
         if line.trim().is_empty() {
             continue;
         }
-        b.say(&format!(">{line}:"));
-        if let Some(blocks) = b.compile(&line) {
-            if !blocks.is_empty() {
-                b.set_job(Some((blocks.len(), 0)));
-                let end = link.run_job(&blocks, &mut NoFeed(b));
-                b.set_job(None);
-                if let JobEnd::Alarm(a) = end? {
-                    report_alarm(b, &a);
-                }
+        // Grbl echoes a start-up line and its answer on one line (`>G55:ok`), so
+        // that the answer is not taken for one to a streamed line.
+        let blocks = match b.compile_line(&line) {
+            Ok(blocks) => {
+                b.counts.ok += 1;
+                b.say(&format!(">{line}:ok"));
+                blocks
+            }
+            Err((code, why)) => {
+                b.counts.errors += 1;
+                b.say(&format!("[MSG:{why}]"));
+                b.say(&format!(">{line}:error:{code}"));
+                continue;
+            }
+        };
+        if !blocks.is_empty() {
+            b.set_job(Some((blocks.len(), 0)));
+            let end = link.run_job(&blocks, &mut NoFeed(b));
+            b.set_job(None);
+            if let JobEnd::Alarm(a) = end? {
+                report_alarm(b, &a);
             }
         }
     }

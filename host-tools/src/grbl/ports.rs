@@ -202,9 +202,11 @@ fn spawn_tcp_reader(id: u32, mut s: TcpStream, tx: SyncSender<Event>, stop: Arc<
     std::thread::spawn(move || {
         let mut buf = [0u8; 4096];
         while !stop.load(Ordering::Relaxed) {
+            quick_ack(&s);
             match s.read(&mut buf) {
                 Ok(0) => break,
                 Ok(n) => {
+                    quick_ack(&s);
                     if !send(&tx, Event::Bytes(End::Tcp(id), buf[..n].to_vec()), &stop) {
                         return;
                     }
@@ -219,4 +221,27 @@ fn spawn_tcp_reader(id: u32, mut s: TcpStream, tx: SyncSender<Event>, stop: Arc<
         }
         send(&tx, Event::Closed(id), &stop);
     });
+}
+
+/// Acknowledges what arrives at once (Linux's `TCP_QUICKACK`, which the kernel clears
+/// again as it goes, hence asked before and after every read). A sender with Nagle's
+/// algorithm on (most) holds a lone `?` back until its previous byte, a `!` say, is
+/// acknowledged; a delayed acknowledgement (about 40 ms) would hold the `?` that long.
+fn quick_ack(s: &TcpStream) {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        let one: libc::c_int = 1;
+        // SAFETY: a valid socket and an int option of the right size; failure is
+        // harmless (acknowledgements are merely delayed as usual).
+        unsafe {
+            libc::setsockopt(
+                s.as_raw_fd(),
+                libc::IPPROTO_TCP,
+                libc::TCP_QUICKACK,
+                (&one as *const libc::c_int).cast(),
+                std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+            );
+        }
+    }
 }

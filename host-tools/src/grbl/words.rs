@@ -60,9 +60,14 @@ pub struct Mode {
 pub fn state_word(s: &Status, mode: Mode) -> &'static str {
     match s.state {
         _ if mode.check && matches!(s.state, State::Idle) => "Check",
+        // A jog, its queued successors and its cancel's deceleration are all `Jog`.
+        State::Idle | State::Running | State::Hold
+            if mode.jogging && (mode.pending || s.state != State::Idle) =>
+        {
+            "Jog"
+        }
         State::Idle if mode.pending => "Run",
         State::Idle => "Idle",
-        State::Running if mode.jogging => "Jog",
         State::Running => "Run",
         State::Hold if s.speed == 0 => "Hold:0",
         State::Hold => "Hold:1",
@@ -157,9 +162,10 @@ pub fn error_code(message: &str) -> u8 {
 
 /// `$$`: the machine's limits as settings. All are read-only here: they come from
 /// the machine file. `$110`+i max rate (mm or °/min), `$120`+i acceleration (mm or
-/// °/s²); and per joint, `$200`+10·j … `$203`+10·j: travel min, max (mm or °), max speed (/min) and
+/// °/s²), `$130`–`$132` the travel of X, Y and Z (mm, from [`max_travel`]); and per
+/// joint, `$200`+10·j … `$203`+10·j: travel min, max (mm or °), max speed (/min) and
 /// acceleration (/s²).
-pub fn settings(machine: &MachineConfig) -> Vec<(u32, String)> {
+pub fn settings(machine: &MachineConfig, travel: &[f64; 3]) -> Vec<(u32, String)> {
     let homing = machine.joints.iter().any(|j| j.homing.enabled());
     let mut out = vec![
         (10, "511".to_string()),
@@ -174,6 +180,9 @@ pub fn settings(machine: &MachineConfig) -> Vec<(u32, String)> {
         out.push((110 + i as u32, per_minute(i, l.max_velocity.max(0))));
         out.push((120 + i as u32, value(i, l.max_accel.max(0))));
     }
+    for (i, t) in travel.iter().enumerate() {
+        out.push((130 + i as u32, format!("{t:.3}")));
+    }
     for (j, joint) in machine.joints.iter().enumerate() {
         let axis = if joint.rotary { 3 } else { 0 };
         let base = 200 + 10 * j as u32;
@@ -183,6 +192,42 @@ pub fn settings(machine: &MachineConfig) -> Vec<(u32, String)> {
         out.push((base + 3, value(axis, joint.limits.max_accel)));
     }
     out
+}
+
+/// How far X, Y and Z reach along a line through `pose` (the others held), mm to
+/// 1 µm: the machine's travel per axis, for `$130`–`$132` (senders draw the
+/// machine's limits from them). On a parallel machine the reach depends on the
+/// pose; the bridge measures it through its start pose.
+pub fn max_travel(machine: &MachineConfig, pose: &[i64; AXES]) -> [f64; 3] {
+    let kin = pkmc::kinematics::MachineKinematics::new(machine);
+    let mut q = [0i64; pkmc::config::MAX_JOINTS];
+    let mut reach = |axis: usize, v: i64| {
+        let mut p = *pose;
+        p[axis] = v;
+        kin.inverse_checked(&p, &machine.joints, &mut q).is_ok()
+    };
+    std::array::from_fn(|axis| {
+        if machine.axes[axis].max_velocity <= 0 || !reach(axis, pose[axis]) {
+            return 0.0;
+        }
+        let ends = [-1i64, 1].map(|dir| {
+            // Out by 1 mm steps (up to 10 m), then halve the last step to 1 µm.
+            let (mut inside, mut step) = (pose[axis], 1_000_000i64);
+            let mut k = 0;
+            while k < 10_000 && reach(axis, inside + dir * step) {
+                inside += dir * step;
+                k += 1;
+            }
+            while step > 1_000 {
+                step /= 2;
+                if reach(axis, inside + dir * step) {
+                    inside += dir * step;
+                }
+            }
+            inside
+        });
+        (ends[1] - ends[0]) as f64 / 1e6
+    })
 }
 
 fn per_minute(axis: usize, v: i64) -> String {

@@ -16,9 +16,15 @@ pub struct Bridge {
 impl Bridge {
     /// `nc-send --sim ARGS… grbl --tcp 127.0.0.1:0`.
     pub fn start(sim_args: &[&str]) -> Self {
+        Self::start_with(sim_args, &[])
+    }
+
+    /// `nc-send --sim SIM_ARGS… grbl --tcp 127.0.0.1:0 GRBL_ARGS…`.
+    pub fn start_with(sim_args: &[&str], grbl_args: &[&str]) -> Self {
         let mut args: Vec<&str> = vec!["--sim"];
         args.extend_from_slice(sim_args);
         args.extend_from_slice(&["grbl", "--tcp", "127.0.0.1:0"]);
+        args.extend_from_slice(grbl_args);
         let mut child = Command::new(env!("CARGO_BIN_EXE_nc-send"))
             .args(&args)
             .current_dir(super::common::repo())
@@ -51,17 +57,23 @@ impl Bridge {
         }
     }
 
-    /// Stops the bridge with Ctrl-C and returns its summary (JSON).
+    /// Stops the bridge with Ctrl-C and returns its summary (JSON); it must exit
+    /// within 20 s.
     pub fn stop(mut self) -> serde_json::Value {
         let mut child = self.child.take().unwrap();
         unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
-        let mut text = String::new();
-        child
-            .stdout
-            .take()
-            .unwrap()
-            .read_to_string(&mut text)
-            .unwrap();
+        let mut out = child.stdout.take().unwrap();
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let mut text = String::new();
+            let _ = out.read_to_string(&mut text);
+            let _ = tx.send(text);
+        });
+        let Ok(text) = rx.recv_timeout(Duration::from_secs(20)) else {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("nc-send grbl did not end within 20 s of Ctrl-C");
+        };
         let status = child.wait().unwrap();
         assert!(
             status.success(),
@@ -84,20 +96,50 @@ impl Drop for Bridge {
     }
 }
 
+/// What a test sender talks through: a TCP stream or the pseudo-terminal, each
+/// read with a short timeout (no read waits unbounded).
+pub trait Wire: Read + Write + Send {}
+impl<T: Read + Write + Send> Wire for T {}
+
 /// A sender written for the tests: sends bytes, reads lines.
 pub struct Client {
-    s: TcpStream,
+    s: Box<dyn Wire>,
     buf: Vec<u8>,
+    /// How long each [`Client::status_within`] waited for its report.
+    pub waits: Vec<Duration>,
 }
 
 impl Client {
+    /// Connects over TCP and waits for the banner.
     pub fn connect(addr: &str) -> Self {
-        let s = TcpStream::connect(addr).expect("connects");
-        s.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
-        let mut c = Self { s, buf: Vec::new() };
+        let mut c = Self::tcp(addr);
         let banner = c.line_until(|l| l.starts_with("Grbl "), Duration::from_secs(5));
         assert!(banner.contains("1.1"), "{banner}");
         c
+    }
+
+    /// Connects over TCP without waiting for anything.
+    pub fn tcp(addr: &str) -> Self {
+        let s = TcpStream::connect(addr).expect("connects");
+        s.set_read_timeout(Some(Duration::from_millis(20))).unwrap();
+        Self {
+            s: Box::new(s),
+            buf: Vec::new(),
+            waits: Vec::new(),
+        }
+    }
+
+    /// Opens the bridge's pseudo-terminal as a serial port (raw, 115200 baud).
+    pub fn pty(path: &str) -> Self {
+        let port = serialport::new(path, 115_200)
+            .timeout(Duration::from_millis(20))
+            .open_native()
+            .unwrap_or_else(|e| panic!("opens {path}: {e}"));
+        Self {
+            s: Box::new(port),
+            buf: Vec::new(),
+            waits: Vec::new(),
+        }
     }
 
     pub fn send(&mut self, bytes: &[u8]) {
@@ -116,6 +158,7 @@ impl Client {
                 return None;
             }
             let mut chunk = [0u8; 4096];
+            // Every read returns within 20 ms (the stream's timeout).
             match self.s.read(&mut chunk) {
                 Ok(0) => return None,
                 Ok(n) => self.buf.extend_from_slice(&chunk[..n]),
@@ -163,6 +206,55 @@ impl Client {
     pub fn status(&mut self) -> String {
         self.send(b"?");
         self.line_until(|l| l.starts_with('<'), Duration::from_secs(5))
+    }
+
+    /// A status report that must come within `limit` of the `?`; lines before it are
+    /// kept for [`Client::line`].
+    pub fn status_within(&mut self, limit: Duration) -> String {
+        let start = Instant::now();
+        self.send(b"?");
+        let mut other = Vec::new();
+        loop {
+            let left = limit.saturating_sub(start.elapsed());
+            match self.line(left) {
+                Some(l) if l.starts_with('<') => {
+                    let took = start.elapsed();
+                    self.waits.push(took);
+                    assert!(
+                        took <= limit,
+                        "status report after {took:?} (limit {limit:?}): {l}"
+                    );
+                    self.unread(other);
+                    return l;
+                }
+                Some(l) => other.push(l),
+                None => panic!(
+                    "no status report within {limit:?} of '?' (waited {:?}); saw {other:?}",
+                    start.elapsed()
+                ),
+            }
+        }
+    }
+
+    /// The status waits so far: count, median and largest.
+    pub fn wait_figures(&self) -> String {
+        let mut w = self.waits.clone();
+        w.sort();
+        match w.len() {
+            0 => "no status reports".into(),
+            n => format!("{n} reports, median {:?}, largest {:?}", w[n / 2], w[n - 1]),
+        }
+    }
+
+    /// Puts `lines` back in front of what is still to be read.
+    fn unread(&mut self, lines: Vec<String>) {
+        let mut front: Vec<u8> = Vec::new();
+        for l in lines {
+            front.extend_from_slice(l.as_bytes());
+            front.push(b'\n');
+        }
+        front.extend_from_slice(&self.buf);
+        self.buf = front;
     }
 
     /// Waits until a status report shows `state` (polling as senders do).

@@ -1,0 +1,472 @@
+//! Grbl 1.1's real-time rules in every state of `nc-send grbl`, one test per rule,
+//! driven with raw bytes over TCP and the pseudo-terminal. Every read has a
+//! timeout; the times asked are printed with what was measured.
+
+mod common;
+mod grbl;
+
+use grbl::{field, Bridge, Client};
+use std::time::{Duration, Instant};
+
+/// How soon a `?` must be answered, in every state.
+const STATUS_LIMIT: Duration = Duration::from_millis(50);
+
+/// Sends `line` and returns what came back up to its answer (`ok` or `error:N`),
+/// which must come within `limit`; status reports are left out.
+fn command_within(c: &mut Client, line: &str, limit: Duration) -> Vec<String> {
+    let start = Instant::now();
+    c.send(format!("{line}\n").as_bytes());
+    let mut got = Vec::new();
+    loop {
+        let left = limit.saturating_sub(start.elapsed());
+        let Some(l) = c.line(left) else {
+            panic!("no answer to {line:?} within {limit:?}; got {got:?}");
+        };
+        if l.starts_with('<') {
+            continue;
+        }
+        let end = l == "ok" || l.starts_with("error:");
+        got.push(l);
+        if end {
+            assert!(start.elapsed() <= limit, "{line:?} answered late: {got:?}");
+            return got;
+        }
+    }
+}
+
+/// Polls `?` (each answered within [`STATUS_LIMIT`]) until the state is `state`;
+/// returns that report and every state word seen on the way.
+fn poll_until(c: &mut Client, state: &str, limit: Duration) -> (String, Vec<String>) {
+    let end = Instant::now() + limit;
+    let mut seen = Vec::new();
+    loop {
+        let s = c.status_within(STATUS_LIMIT);
+        let word = s[1..].split('|').next().unwrap_or("").to_string();
+        if seen.last() != Some(&word) {
+            seen.push(word.clone());
+        }
+        if word == state {
+            return (s, seen);
+        }
+        assert!(Instant::now() < end, "state {state} not reached: {seen:?}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// A setting from `$$`.
+fn setting(c: &mut Client, n: u32) -> f64 {
+    let all = c.command("$$");
+    let key = format!("${n}=");
+    all.iter()
+        .find_map(|l| l.strip_prefix(&key))
+        .unwrap_or_else(|| panic!("{key} in {all:?}"))
+        .parse()
+        .unwrap()
+}
+
+/// Point 1 of issue 32: `$X`, `$H`, `$C` and `$J=` in a paused job get Grbl's answers
+/// at once, and `?` is answered within 50 ms at every step.
+fn paused_job_keeps_answering(c: &mut Client) {
+    assert_eq!(
+        command_within(c, "G21 G90 G1 X50 F600", Duration::from_secs(1)),
+        vec!["ok"]
+    );
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(1) {
+        c.status_within(STATUS_LIMIT);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    c.send(b"!");
+    let (held, _) = poll_until(c, "Hold:0", Duration::from_secs(5));
+    let x = field(&held, "MPos")[0];
+    assert!(x > 5.0 && x < 50.0, "{held}");
+    for (line, answer) in [
+        ("$X", "ok"),
+        ("$H", "error:8"),
+        ("$C", "error:8"),
+        ("$J=G91 X1 F100", "error:8"),
+    ] {
+        let got = command_within(c, line, Duration::from_millis(500));
+        assert_eq!(got.last().unwrap(), answer, "{line}: {got:?}");
+        let s = c.status_within(STATUS_LIMIT);
+        assert!(s.starts_with("<Hold:0|"), "after {line}: {s}");
+        assert_eq!(field(&s, "MPos")[0], x, "nothing moved after {line}");
+    }
+    println!("status waits: {}; {:?}", c.wait_figures(), c.waits);
+}
+
+#[test]
+fn a_paused_job_answers_grbl_commands_and_status_over_tcp_then_resumes() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::connect(&bridge.tcp);
+    paused_job_keeps_answering(&mut c);
+    c.send(b"~");
+    let (s, _) = poll_until(&mut c, "Idle", Duration::from_secs(10));
+    assert_eq!(field(&s, "MPos")[0], 50.0, "{s}");
+    // A new TCP sender (the first has gone) is greeted at once.
+    drop(c);
+    let mut c = Client::connect(&bridge.tcp);
+    c.status_within(STATUS_LIMIT);
+    let summary = bridge.stop();
+    assert_eq!(summary["status"]["pose"]["x"], 50.0, "{summary}");
+}
+
+#[test]
+fn a_paused_job_answers_over_the_pseudo_terminal_and_ctrl_c_still_ends_the_bridge() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::pty(&bridge.pty);
+    paused_job_keeps_answering(&mut c);
+    // Ctrl-C while the job is held: the bridge ends, with its summary.
+    let summary = bridge.stop();
+    let x = summary["status"]["pose"]["x"].as_f64().unwrap();
+    assert!(x > 5.0 && x < 50.0, "{summary}");
+}
+
+/// Jog, cancel it with `cancel` half a second in; returns (the report just before
+/// the cancel, the report at rest, every state seen after the cancel).
+fn jog_and_cancel(c: &mut Client, cancel: u8) -> (String, String, Vec<String>) {
+    let x0 = field(&c.status_within(STATUS_LIMIT), "MPos")[0];
+    assert_eq!(
+        command_within(c, "$J=G91 X30 F1200", Duration::from_millis(300)),
+        vec!["ok"]
+    );
+    let start = Instant::now();
+    let mut states = Vec::new();
+    while start.elapsed() < Duration::from_millis(470) {
+        let s = c.status_within(STATUS_LIMIT);
+        states.push(s[1..4].to_string());
+        std::thread::sleep(Duration::from_millis(30));
+    }
+    assert!(
+        states.iter().any(|s| s == "Jog"),
+        "a jog reports Jog: {states:?}"
+    );
+    // The cancel goes out right after this report.
+    let before = c.status_within(STATUS_LIMIT);
+    c.send(&[cancel]);
+    let (rest, seen) = poll_until(c, "Idle", Duration::from_secs(3));
+    let x = field(&rest, "MPos")[0];
+    assert!(x - x0 < 30.0 - 1.0, "the jog was cut short: {x0} → {x}");
+    (before, rest, seen)
+}
+
+#[test]
+fn a_jog_reports_jog_and_0x85_or_a_feed_hold_cancels_it_within_its_deceleration() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::connect(&bridge.tcp);
+    let accel = setting(&mut c, 120);
+    for cancel in [0x85u8, b'!'] {
+        let (before, rest, seen) = jog_and_cancel(&mut c, cancel);
+        assert!(
+            !seen.iter().any(|s| s.starts_with("Hold")),
+            "a cancelled jog holds nothing: {seen:?}"
+        );
+        // From the report just before the cancel: its speed v stops within v²/2a,
+        // plus what it covers in the 50 ms the cancel may take to act.
+        let v = field(&before, "FS")[0] / 60.0;
+        let x_before = field(&before, "MPos")[0];
+        let x_rest = field(&rest, "MPos")[0];
+        let allowed = v * v / (2.0 * accel) + v * 0.05;
+        println!(
+            "cancel 0x{cancel:02X}: {v:.1} mm/s, stopped {:.3} mm after the last report (allowed {allowed:.3}); states {seen:?}",
+            x_rest - x_before
+        );
+        assert!(v > 15.0, "the jog was at speed: {before}");
+        assert!(x_rest - x_before <= allowed, "{before} → {rest}");
+        // Nothing latched: still Idle a moment later, and the next jog runs.
+        std::thread::sleep(Duration::from_millis(300));
+        let s = c.status_within(STATUS_LIMIT);
+        assert!(s.starts_with("<Idle|"), "{s}");
+        assert_eq!(field(&s, "MPos")[0], x_rest);
+    }
+    println!("status waits: {}", c.wait_figures());
+    let x0 = field(&c.status_within(STATUS_LIMIT), "MPos")[0];
+    assert_eq!(
+        command_within(&mut c, "$J=G91 X-2 F600", Duration::from_millis(300)),
+        vec!["ok"]
+    );
+    let (s, _) = poll_until(&mut c, "Idle", Duration::from_secs(5));
+    assert!((field(&s, "MPos")[0] - (x0 - 2.0)).abs() < 1e-3, "{s}");
+    bridge.stop();
+}
+
+#[test]
+fn jogs_queue_each_answered_at_once_and_g_code_is_locked_out_meanwhile() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::pty(&bridge.pty);
+    let y0 = field(&c.status_within(STATUS_LIMIT), "MPos")[1];
+    let start = Instant::now();
+    for _ in 0..3 {
+        assert_eq!(
+            command_within(&mut c, "$J=G91 Y4 F600", Duration::from_millis(300)),
+            vec!["ok"]
+        );
+    }
+    let answered = start.elapsed();
+    let s = c.status_within(STATUS_LIMIT);
+    assert!(
+        s.starts_with("<Jog|"),
+        "three jogs of 0.4 s each are not over after {answered:?}: {s}"
+    );
+    let g = command_within(&mut c, "G0 X5", Duration::from_millis(300));
+    assert_eq!(g.last().unwrap(), "error:9", "{g:?}");
+    let (s, _) = poll_until(&mut c, "Idle", Duration::from_secs(10));
+    assert!((field(&s, "MPos")[1] - (y0 + 12.0)).abs() < 1e-3, "{s}");
+    println!("three queued jogs answered in {answered:?}");
+    bridge.stop();
+}
+
+#[test]
+fn a_second_sender_is_told_busy_and_never_evicts_the_first() {
+    let bridge = Bridge::start(&[]);
+    let mut pty = Client::pty(&bridge.pty);
+    assert_eq!(
+        command_within(&mut pty, "G1 X30 F600", Duration::from_secs(1)),
+        vec!["ok"]
+    );
+    poll_until(&mut pty, "Run", Duration::from_secs(2));
+    let mut tcp = Client::tcp(&bridge.tcp);
+    let first = tcp
+        .line(Duration::from_secs(2))
+        .expect("the TCP sender is told something");
+    assert!(first.starts_with("[MSG:Busy"), "{first}");
+    tcp.send(b"!G0 X0\n");
+    let s = pty.status_within(STATUS_LIMIT);
+    assert!(
+        s.starts_with("<Run|"),
+        "the TCP sender's ! was not read: {s}"
+    );
+    // The first sender still commands the job.
+    pty.send(b"!");
+    poll_until(&mut pty, "Hold:0", Duration::from_secs(3));
+    pty.send(b"~");
+    let (s, _) = poll_until(&mut pty, "Idle", Duration::from_secs(10));
+    assert_eq!(field(&s, "MPos")[0], 30.0, "{s}");
+    assert!(
+        tcp.line(Duration::from_millis(200))
+            .is_none_or(|l| l.starts_with("[MSG:Busy")),
+        "the TCP sender gets no banner and no answers"
+    );
+    bridge.stop();
+}
+
+/// A 1,000-line program: a spiral of short G1 moves (about 0.3 mm each).
+fn spiral() -> Vec<(String, [f64; 2])> {
+    (0..1000)
+        .map(|i| {
+            let t = i as f64 * std::f64::consts::TAU / 250.0;
+            let r = 10.0 + i as f64 * 0.01;
+            let p = [
+                (r * t.cos() * 1000.0).round() / 1000.0,
+                (r * t.sin() * 1000.0).round() / 1000.0,
+            ];
+            (format!("G1 X{:.3} Y{:.3} F3000", p[0], p[1]), p)
+        })
+        .collect()
+}
+
+/// A character-counting sender, as Grbl's interface describes one: at most 127
+/// bytes in flight, and every `ok` or `error:` answers the oldest line.
+fn stream_counting(c: &mut Client, lines: &[String], limit: Duration) -> usize {
+    let start = Instant::now();
+    let mut in_flight: std::collections::VecDeque<usize> = Default::default();
+    let (mut next, mut answered, mut errors) = (0, 0, 0);
+    while answered < lines.len() {
+        assert!(
+            start.elapsed() < limit,
+            "{answered} of {} answered in {limit:?}",
+            lines.len()
+        );
+        let sum: usize = in_flight.iter().sum();
+        if next < lines.len() && sum + lines[next].len() < 127 {
+            // The line and its \n fit in Grbl's 128-byte receive buffer (127 used).
+            c.send(format!("{}\n", lines[next]).as_bytes());
+            in_flight.push_back(lines[next].len() + 1);
+            next += 1;
+            continue;
+        }
+        let Some(l) = c.line(Duration::from_millis(200)) else {
+            continue;
+        };
+        if l == "ok" || l.starts_with("error:") {
+            assert!(
+                in_flight.pop_front().is_some(),
+                "{l:?} answers no line sent"
+            );
+            answered += 1;
+            errors += l.starts_with("error:") as usize;
+        }
+    }
+    assert!(
+        c.line(Duration::from_millis(300)).is_none_or(|l| l != "ok"),
+        "a stray ok"
+    );
+    errors
+}
+
+#[test]
+fn the_startup_echo_is_one_line_and_a_counting_sender_runs_a_thousand_lines() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::connect(&bridge.tcp);
+    assert_eq!(c.command("G10 L2 P2 X1 Y2"), vec!["ok"]);
+    assert_eq!(c.command("$N0=G55"), vec!["ok"]);
+    c.send(&[0x18]);
+    c.line_until(|l| l.starts_with("Grbl 1.1h"), Duration::from_secs(5));
+    assert_eq!(c.line(Duration::from_secs(5)).unwrap(), ">G55:ok");
+    let program = spiral();
+    let text: Vec<String> = program.iter().map(|(l, _)| l.clone()).collect();
+    let start = Instant::now();
+    let errors = stream_counting(&mut c, &text, Duration::from_secs(120));
+    let streamed = start.elapsed();
+    assert_eq!(errors, 0);
+    let (s, _) = poll_until(&mut c, "Idle", Duration::from_secs(60));
+    let last = program.last().unwrap().1;
+    let mpos = field(&s, "MPos");
+    assert!(
+        (mpos[0] - (last[0] + 1.0)).abs() < 1e-3 && (mpos[1] - (last[1] + 2.0)).abs() < 1e-3,
+        "ends on the last line in G55: {s}"
+    );
+    println!(
+        "1000 lines answered in {streamed:?}, at rest after {:?}",
+        start.elapsed()
+    );
+    let summary = bridge.stop();
+    assert_eq!(summary["errors"], 0, "{summary}");
+}
+
+#[test]
+fn an_error_while_moving_neither_holds_nor_stops_the_answers() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::connect(&bridge.tcp);
+    assert_eq!(
+        command_within(&mut c, "G1 X20 F600", Duration::from_secs(1)),
+        vec!["ok"]
+    );
+    poll_until(&mut c, "Run", Duration::from_secs(2));
+    let bad = command_within(&mut c, "G1 X1 Q", Duration::from_millis(500));
+    assert!(bad.last().unwrap().starts_with("error:"), "{bad:?}");
+    assert_eq!(
+        command_within(&mut c, "G1 Y5", Duration::from_millis(500)),
+        vec!["ok"]
+    );
+    let s = c.status_within(STATUS_LIMIT);
+    assert!(s.starts_with("<Run|"), "{s}");
+    let (s, seen) = poll_until(&mut c, "Idle", Duration::from_secs(15));
+    assert!(!seen.iter().any(|w| w.starts_with("Hold")), "{seen:?}");
+    assert_eq!(field(&s, "MPos")[..2], [20.0, 5.0], "{s}");
+    bridge.stop();
+}
+
+#[test]
+fn m6_is_error_20_as_on_grbl_unless_a_tool_change_pause_is_asked_for() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::connect(&bridge.tcp);
+    let got = command_within(&mut c, "T2 M6", Duration::from_millis(500));
+    assert_eq!(got.last().unwrap(), "error:20", "{got:?}");
+    assert!(
+        got[0].contains("M6") && got[0].contains("--tool-change"),
+        "{got:?}"
+    );
+    assert!(c.status_within(STATUS_LIMIT).starts_with("<Idle|"));
+    bridge.stop();
+
+    let bridge = Bridge::start_with(&[], &["--tool-change", "pause"]);
+    let mut c = Client::connect(&bridge.tcp);
+    for line in ["G1 X5 F600", "T2 M6", "G1 X10"] {
+        assert_eq!(
+            command_within(&mut c, line, Duration::from_secs(1)),
+            vec!["ok"]
+        );
+    }
+    let (s, _) = poll_until(&mut c, "Hold:0", Duration::from_secs(5));
+    assert_eq!(
+        field(&s, "MPos")[0],
+        5.0,
+        "held for the tool at the M6: {s}"
+    );
+    c.send(b"~");
+    let (s, _) = poll_until(&mut c, "Idle", Duration::from_secs(5));
+    assert_eq!(field(&s, "MPos")[0], 10.0, "{s}");
+    bridge.stop();
+}
+
+#[test]
+fn a_new_sender_is_told_of_a_held_job_and_its_reset_clears_it() {
+    let bridge = Bridge::start(&[]);
+    let mut a = Client::connect(&bridge.tcp);
+    assert_eq!(
+        command_within(&mut a, "G1 X50 F600", Duration::from_secs(1)),
+        vec!["ok"]
+    );
+    poll_until(&mut a, "Run", Duration::from_secs(2));
+    a.send(b"!");
+    let (held, _) = poll_until(&mut a, "Hold:0", Duration::from_secs(5));
+    drop(a);
+    std::thread::sleep(Duration::from_millis(200));
+    let mut b = Client::connect(&bridge.tcp);
+    let msg = b
+        .line(Duration::from_secs(1))
+        .expect("a word about the held job");
+    assert!(
+        msg.starts_with("[MSG:A job of the previous sender is held") && msg.contains("Ctrl-X"),
+        "{msg}"
+    );
+    b.send(&[0x18]);
+    b.line_until(|l| l.starts_with("Grbl 1.1h"), Duration::from_secs(5));
+    let (s, _) = poll_until(&mut b, "Idle", Duration::from_secs(3));
+    b.send(b"~");
+    std::thread::sleep(Duration::from_millis(500));
+    let after = b.status_within(STATUS_LIMIT);
+    assert!(after.starts_with("<Idle|"), "{after}");
+    assert_eq!(
+        field(&after, "MPos"),
+        field(&s, "MPos"),
+        "the old job is gone: {held} {after}"
+    );
+    bridge.stop();
+}
+
+#[test]
+fn settings_show_max_travel_m2_says_pgm_end_and_check_mode_refuses_jogs() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::connect(&bridge.tcp);
+    // On the Cartesian machine X is joint 1: $130 is its travel, $201 − $200.
+    let travel = setting(&mut c, 130);
+    let (min, max) = (setting(&mut c, 200), setting(&mut c, 201));
+    assert!(
+        (travel - (max - min)).abs() < 1e-3,
+        "$130={travel} for [{min}, {max}]"
+    );
+    assert!(setting(&mut c, 131) > 0.0 && setting(&mut c, 132) > 0.0);
+    assert_eq!(c.command("G0 X1"), vec!["ok"]);
+    assert_eq!(c.command("M2"), vec!["[MSG:Pgm End]", "ok"]);
+    // While the move runs, $C is refused as Grbl refuses it outside Idle.
+    assert_eq!(c.command("$C").last().unwrap(), "error:8");
+    poll_until(&mut c, "Idle", Duration::from_secs(5));
+    assert_eq!(c.command("$C"), vec!["[MSG:Enabled]", "ok"]);
+    assert!(c.status_within(STATUS_LIMIT).starts_with("<Check|"));
+    assert_eq!(c.command("$J=G91 X1 F100").last().unwrap(), "error:8");
+    assert_eq!(c.command("$H").last().unwrap(), "error:8");
+    assert_eq!(c.command("$C"), vec!["[MSG:Disabled]", "ok"]);
+    bridge.stop();
+}
+
+#[test]
+fn unlock_is_refused_while_the_e_stop_is_latched() {
+    // The simulator's clock runs while the machine moves: the e-stop comes 1 s in.
+    let bridge = Bridge::start(&["--inject", "estop@1.0"]);
+    let mut c = Client::connect(&bridge.tcp);
+    assert_eq!(c.command("G1 X50 F600"), vec!["ok"]);
+    let alarm = c.line_until(|l| l.starts_with("ALARM:"), Duration::from_secs(5));
+    assert_eq!(alarm, "ALARM:10");
+    poll_until(&mut c, "Alarm", Duration::from_secs(3));
+    let got = command_within(&mut c, "$X", Duration::from_secs(1));
+    assert_eq!(got.last().unwrap(), "error:9", "{got:?}");
+    assert!(
+        got.iter().any(|l| l.contains("e-stop is still latched")),
+        "{got:?}"
+    );
+    assert_eq!(c.command("$J=G91 X1 F100").last().unwrap(), "error:8");
+    assert_eq!(c.command("G0 X1").last().unwrap(), "error:9");
+    bridge.stop();
+}
