@@ -1,0 +1,574 @@
+//! The Cortex-M4F core: unicorn executes the instructions; this module supplies what
+//! unicorn lacks (it has no NVIC): exception entry and return with the basic and the
+//! FPU's extended frame, preemption and tail-chaining by priority, BASEPRI and
+//! PRIMASK, WFE/WFI with the event register, virtual time from executed instructions,
+//! and reset.
+//!
+//! Source: ARMv7-M Architecture Reference Manual (ARM DDI 0403E), B1.5.6 "Exception
+//! entry behavior", B1.5.7 "Stack alignment on exception entry", B1.5.8 "Exception
+//! return behavior", B1.5.4 "Execution priority", B1.5.18–B1.5.19 (WFE, WFI, the
+//! event register). Lazy FP state preservation (FPCCR.LSPEN) is modelled eagerly: the
+//! extended frame's S0–S15 and FPSCR are written at entry; the handler sees the same
+//! registers and memory either way, only the count of stores differs.
+//!
+//! Cycle model: every executed instruction takes one cycle of SYSCLK (counted per
+//! translated block, each block's instructions counted once by decoding its Thumb
+//! encodings; an IT-skipped instruction counts, as it takes an issue slot). Flash
+//! wait states, bus stalls, multi-cycle instructions (divisions, loads/stores of
+//! several registers) and the 12-cycle exception entry are not counted: figures of
+//! busy time are instruction counts at 170 MHz, a lower bound of the real time.
+
+use crate::board::{Board, Fault};
+use crate::elf::Image;
+use crate::nvic::{exc, IRQ0};
+use crate::periph::clocks::ResetCause;
+use crate::periph::flash;
+use anyhow::{anyhow, bail, Result};
+use std::collections::HashMap;
+use std::rc::Rc;
+use unicorn_engine::unicorn_const::{Arch, HookType, MemType, Mode, Prot};
+use unicorn_engine::{RegisterARM, Unicorn};
+
+/// RAM base and size (SRAM1 + SRAM2 + CCM SRAM, contiguous).
+pub const RAM: u32 = 0x2000_0000;
+/// RAM size.
+pub const RAM_SIZE: u32 = 128 * 1024;
+/// The CCM SRAM alias at 0x1000_0000 is not used by the firmware: not mapped.
+/// Pattern painted over the RAM at power-on (stack depth).
+pub const PAINT: u8 = 0xA5;
+
+/// Why [`Core::run`] returned.
+pub enum Exit {
+    /// The time limit was reached.
+    Time,
+    /// The board asked to stop (a fault).
+    Fault(Fault),
+}
+
+/// Per-block instruction counts, by block start address.
+#[derive(Default)]
+struct Blocks {
+    counts: HashMap<u64, u32>,
+}
+
+/// Thumb instruction count of `code`.
+fn count_instructions(code: &[u8]) -> u32 {
+    let mut n = 0;
+    let mut i = 0;
+    while i + 1 < code.len() {
+        let hw = u16::from_le_bytes([code[i], code[i + 1]]);
+        i += if matches!(hw >> 11, 0x1D..=0x1F) { 4 } else { 2 };
+        n += 1;
+    }
+    n
+}
+
+/// The core, its memory and the board.
+pub struct Core<'a> {
+    /// The emulator, owning the board.
+    pub uc: Unicorn<'a, Board>,
+    /// The firmware image.
+    pub image: Rc<Image>,
+    flash_image: Vec<u8>,
+    sleeping_at: Option<u32>,
+}
+
+fn reg(uc: &Unicorn<Board>, r: RegisterARM) -> u32 {
+    uc.reg_read(r).unwrap_or(0) as u32
+}
+
+fn set(uc: &mut Unicorn<Board>, r: RegisterARM, v: u32) {
+    let _ = uc.reg_write(r, u64::from(v));
+}
+
+fn read32(uc: &Unicorn<Board>, a: u32) -> u32 {
+    let mut b = [0u8; 4];
+    let _ = uc.mem_read(u64::from(a), &mut b);
+    u32::from_le_bytes(b)
+}
+
+fn write32(uc: &mut Unicorn<Board>, a: u32, v: u32) {
+    let _ = uc.mem_write(u64::from(a), &v.to_le_bytes());
+}
+
+const FRAME_REGS: [RegisterARM; 6] = [
+    RegisterARM::R0,
+    RegisterARM::R1,
+    RegisterARM::R2,
+    RegisterARM::R3,
+    RegisterARM::R12,
+    RegisterARM::LR,
+];
+
+/// Exception entry into `e` (B1.5.6): stacks the context on the main stack, sets LR
+/// to EXC_RETURN, IPSR, and jumps to the vector. `return_pc` is the address to come
+/// back to.
+fn enter(uc: &mut Unicorn<Board>, e: u32, return_pc: u32) {
+    if std::env::var_os("VBOARD_TRACE").is_some() {
+        eprintln!(
+            "enter {e} from {return_pc:#x} sp {:#x} xpsr {:#x} control {:#x}",
+            reg(uc, RegisterARM::SP),
+            reg(uc, RegisterARM::XPSR),
+            reg(uc, RegisterARM::CONTROL)
+        );
+    }
+    let control = reg(uc, RegisterARM::CONTROL);
+    let fp = control & 4 != 0;
+    let handler = !uc.get_data().scs.active.is_empty();
+    let sp = reg(uc, RegisterARM::SP);
+    let size = if fp { 0x68 } else { 0x20 };
+    let mut frame = sp.wrapping_sub(size);
+    let realign = frame & 4 != 0;
+    frame &= !7;
+    // The T bit is always set on this Thumb-only core (QEMU may not report it while
+    // stopped).
+    let mut xpsr = reg(uc, RegisterARM::XPSR) | 1 << 24;
+    if realign {
+        xpsr |= 1 << 9;
+    } else {
+        xpsr &= !(1 << 9);
+    }
+    for (k, r) in FRAME_REGS.iter().enumerate() {
+        let v = reg(uc, *r);
+        write32(uc, frame + 4 * k as u32, v);
+    }
+    write32(uc, frame + 24, return_pc);
+    write32(uc, frame + 28, xpsr);
+    if fp {
+        for k in 0..16u32 {
+            let s = reg(uc, s_reg(k));
+            write32(uc, frame + 32 + 4 * k, s);
+        }
+        let fpscr = reg(uc, RegisterARM::FPSCR);
+        write32(uc, frame + 96, fpscr);
+    }
+    set(uc, RegisterARM::SP, frame);
+    let exc_return = match (handler, fp) {
+        (true, false) => 0xFFFF_FFF1,
+        (false, false) => 0xFFFF_FFF9,
+        (true, true) => 0xFFFF_FFE1,
+        (false, true) => 0xFFFF_FFE9,
+    };
+    set(uc, RegisterARM::LR, exc_return);
+    jump_to_handler(uc, e);
+    if fp {
+        set(uc, RegisterARM::CONTROL, control & !4);
+    }
+}
+
+fn s_reg(k: u32) -> RegisterARM {
+    const S: [RegisterARM; 16] = [
+        RegisterARM::S0,
+        RegisterARM::S1,
+        RegisterARM::S2,
+        RegisterARM::S3,
+        RegisterARM::S4,
+        RegisterARM::S5,
+        RegisterARM::S6,
+        RegisterARM::S7,
+        RegisterARM::S8,
+        RegisterARM::S9,
+        RegisterARM::S10,
+        RegisterARM::S11,
+        RegisterARM::S12,
+        RegisterARM::S13,
+        RegisterARM::S14,
+        RegisterARM::S15,
+    ];
+    S[k as usize]
+}
+
+/// IPSR = `e`, EPSR cleared but T, PC = the vector; bookkeeping of the taken
+/// exception.
+fn jump_to_handler(uc: &mut Unicorn<Board>, e: u32) {
+    let vtor = uc.get_data().scs.vtor;
+    let vector = read32(uc, vtor + 4 * e);
+    // EPSR: T set, IT cleared; IPSR = e; APSR unknown on entry (kept).
+    let apsr = reg(uc, RegisterARM::XPSR) & 0xF80F_0000;
+    set(uc, RegisterARM::XPSR_NZCVQG, apsr | 1 << 24 | e);
+    set(uc, RegisterARM::PC, vector & !1);
+    let b = uc.get_data_mut();
+    b.scs.pending[e as usize] = false;
+    b.scs.active.push(e);
+    b.scs.event = true;
+    *b.stats.taken.entry(e).or_default() += 1;
+    if e == IRQ0 + 55 {
+        let since = b.scs.pending_since[e as usize];
+        b.stats.servo_latency.push(b.now.saturating_sub(since));
+    }
+}
+
+/// The exception that would preempt what runs now, if any.
+fn preempting(uc: &Unicorn<Board>) -> Option<u32> {
+    let basepri = reg(uc, RegisterARM::BASEPRI);
+    let primask = reg(uc, RegisterARM::PRIMASK);
+    let s = &uc.get_data().scs;
+    s.next_exception(s.execution_priority(basepri, primask))
+}
+
+/// Exception return (B1.5.8) to `exc_return`, or a tail-chain into a pending
+/// exception that may run at the priority returned to.
+fn exception_return(uc: &mut Unicorn<Board>, exc_return: u32) -> Result<(), String> {
+    let ipsr = reg(uc, RegisterARM::IPSR);
+    let popped = uc.get_data_mut().scs.active.pop();
+    if popped != Some(ipsr) {
+        return Err(format!(
+            "exception return from {ipsr} while {popped:?} was active"
+        ));
+    }
+    uc.get_data_mut().scs.event = true;
+    // A level-sensitive line still asserted pends again.
+    uc.get_data_mut().usb_line();
+    // Tail-chain: a pending exception more urgent than the context returned to.
+    if let Some(e) = preempting_after_return(uc, exc_return) {
+        set(uc, RegisterARM::LR, exc_return);
+        jump_to_handler(uc, e);
+        return Ok(());
+    }
+    if exc_return & 0x4 != 0 {
+        return Err("return to the process stack: not used by this firmware".into());
+    }
+    let fp = exc_return & 0x10 == 0;
+    let frame = reg(uc, RegisterARM::SP);
+    if std::env::var_os("VBOARD_TRACE").is_some() {
+        eprintln!(
+            "return {exc_return:#x} to {:#x} xpsr {:#x} sp {frame:#x}",
+            read32(uc, frame + 24),
+            read32(uc, frame + 28)
+        );
+    }
+    for (k, r) in FRAME_REGS.iter().enumerate() {
+        let v = read32(uc, frame + 4 * k as u32);
+        set(uc, *r, v);
+    }
+    let pc = read32(uc, frame + 24);
+    let xpsr = read32(uc, frame + 28);
+    if fp {
+        for k in 0..16u32 {
+            let v = read32(uc, frame + 32 + 4 * k);
+            set(uc, s_reg(k), v);
+        }
+        let fpscr = read32(uc, frame + 96);
+        set(uc, RegisterARM::FPSCR, fpscr);
+    }
+    let mut sp = frame + if fp { 0x68 } else { 0x20 };
+    if xpsr & (1 << 9) != 0 {
+        sp += 4;
+    }
+    set(uc, RegisterARM::SP, sp);
+    set(uc, RegisterARM::XPSR_NZCVQG, xpsr & !(1 << 9));
+    let control = reg(uc, RegisterARM::CONTROL);
+    set(
+        uc,
+        RegisterARM::CONTROL,
+        if fp { control | 4 } else { control & !4 },
+    );
+    set(uc, RegisterARM::PC, pc & !1);
+    Ok(())
+}
+
+fn preempting_after_return(uc: &Unicorn<Board>, _exc_return: u32) -> Option<u32> {
+    preempting(uc)
+}
+
+impl<'a> Core<'a> {
+    /// The core with `image` loaded into flash and `board` on its bus.
+    pub fn new(image: Rc<Image>, board: Board) -> Result<Self> {
+        let mut uc = Unicorn::new_with_data(Arch::ARM, Mode::THUMB | Mode::MCLASS, board)
+            .map_err(|e| anyhow!("unicorn: {e:?}"))?;
+        uc.ctl_set_cpu_model(unicorn_engine::ArmCpuModel::CORTEX_M4 as i32)
+            .map_err(|e| anyhow!("unicorn cpu model: {e:?}"))?;
+        let mut flash_image = vec![0xFFu8; flash::SIZE as usize];
+        for s in &image.segments {
+            let o = s.addr.wrapping_sub(flash::BASE) as usize;
+            if s.addr >= flash::BASE && o + s.data.len() <= flash::CONFIG as usize - flash::BASE as usize {
+                flash_image[o..o + s.data.len()].copy_from_slice(&s.data);
+            } else if s.addr < RAM || s.addr >= RAM + RAM_SIZE {
+                bail!("ELF segment at {:#010x} is outside flash and RAM", s.addr);
+            }
+        }
+        let program = (flash::CONFIG - flash::BASE) as u64;
+        let map = |uc: &mut Unicorn<Board>, a: u64, n: u64, p: Prot| {
+            uc.mem_map(a, n, p).map_err(|e| anyhow!("map {a:#x}: {e:?}"))
+        };
+        map(&mut uc, u64::from(flash::BASE), program, Prot::READ | Prot::EXEC)?;
+        uc.mem_write(u64::from(flash::BASE), &flash_image[..program as usize])
+            .map_err(|e| anyhow!("{e:?}"))?;
+        map(&mut uc, u64::from(RAM), u64::from(RAM_SIZE), Prot::ALL)?;
+        uc.mem_write(u64::from(RAM), &vec![PAINT; RAM_SIZE as usize])
+            .map_err(|e| anyhow!("{e:?}"))?;
+        // Everything else a program may address goes through the board: the
+        // configuration pages, the peripherals, the system control space.
+        for (base, size) in [
+            (flash::CONFIG, flash::CONFIG_SIZE),
+            (0x4000_0000, 0xB000),
+            (0x4001_0000, 0x8000),
+            (0x4002_0000, 0x4000),
+            (0x4800_0000, 0x2000),
+            (0x5000_0000, 0x2000),
+            (0xE000_0000, 0x10_0000),
+        ] {
+            let rb = u64::from(base);
+            uc.mmio_map(
+                rb,
+                u64::from(size),
+                Some(move |uc: &mut Unicorn<Board>, o: u64, size: usize| {
+                    u64::from(uc.get_data_mut().read((rb + o) as u32, size))
+                }),
+                Some(move |uc: &mut Unicorn<Board>, o: u64, size: usize, v: u64| {
+                    uc.get_data_mut().write((rb + o) as u32, size, v as u32);
+                    // CPACR reaches the core at once (the FPU enable, B3.2.20).
+                    if rb + o == 0xE000_ED88 {
+                        let cpacr = uc.get_data().scs.cpacr;
+                        let _ = uc.reg_write(RegisterARM::C1_C0_2, u64::from(cpacr));
+                    }
+                }),
+            )
+            .map_err(|e| anyhow!("mmio {base:#x}: {e:?}"))?;
+        }
+        let mut core = Self {
+            uc,
+            image,
+            flash_image,
+            sleeping_at: None,
+        };
+        core.install_hooks()?;
+        core.reset()?;
+        Ok(core)
+    }
+
+    fn install_hooks(&mut self) -> Result<()> {
+        let code = self.flash_image.clone();
+        let mut blocks = Blocks::default();
+        self.uc
+            .add_block_hook(1, 0, move |uc, addr, size| {
+                let n = *blocks.counts.entry(addr).or_insert_with(|| {
+                    let o = addr.wrapping_sub(u64::from(flash::BASE)) as usize;
+                    code.get(o..o + size as usize).map_or(1, count_instructions)
+                });
+                let b = uc.get_data_mut();
+                b.block_pc = addr as u32;
+                b.instructions += u64::from(n);
+                b.now += u64::from(n) * b.cycle_units;
+                if b.now >= b.deadline || b.stop {
+                    let _ = uc.emu_stop();
+                }
+            })
+            .map_err(|e| anyhow!("block hook: {e:?}"))?;
+        // Exception return: unicorn raises exception 8 (EXCP_EXCEPTION_EXIT) when a
+        // handler branches to an EXC_RETURN value.
+        self.uc
+            .add_intr_hook(|uc, intno| {
+                let pc = reg(uc, RegisterARM::PC);
+                if intno == 8 && pc >= 0xFFFF_FFE0 {
+                    if let Err(what) = exception_return(uc, pc) {
+                        let b = uc.get_data_mut();
+                        b.fault = Some(Fault { what, pc: Some(pc) });
+                    }
+                    // The run loop restarts the core at the new PC, with the state
+                    // QEMU derives from the registers recomputed.
+                    uc.get_data_mut().stop = true;
+                    let _ = uc.emu_stop();
+                    return;
+                }
+                let what = match intno {
+                    1 => "an undefined instruction (UDF: a panic or a hard fault)".to_string(),
+                    2 => "an SVC instruction (not used by this firmware)".to_string(),
+                    7 => "a BKPT instruction (a panic)".to_string(),
+                    n => format!("CPU exception {n} (a fault)"),
+                };
+                let b = uc.get_data_mut();
+                b.fault = Some(Fault { what, pc: Some(pc) });
+                let _ = uc.emu_stop();
+            })
+            .map_err(|e| anyhow!("intr hook: {e:?}"))?;
+        self.uc
+            .add_mem_hook(HookType::MEM_UNMAPPED, 1, 0, |uc, kind, addr, size, _v| {
+                let pc = reg(uc, RegisterARM::PC);
+                let what = format!(
+                    "{} of {size} bytes at {addr:#010x}, which nothing is mapped at",
+                    if kind == MemType::WRITE_UNMAPPED { "write" } else if kind == MemType::FETCH_UNMAPPED { "fetch" } else { "read" }
+                );
+                uc.get_data_mut().fault = Some(Fault { what, pc: Some(pc) });
+                false
+            })
+            .map_err(|e| anyhow!("unmapped hook: {e:?}"))?;
+        self.uc
+            .add_mem_hook(HookType::MEM_WRITE_PROT, 1, 0, |uc, _kind, addr, size, v| {
+                let pc = reg(uc, RegisterARM::PC);
+                let what = format!(
+                    "write of {size} bytes of {v:#x} at {addr:#010x} in program flash"
+                );
+                uc.get_data_mut().fault = Some(Fault { what, pc: Some(pc) });
+                false
+            })
+            .map_err(|e| anyhow!("write-protect hook: {e:?}"))?;
+        // QEMU ends a WFE or WFI by an exception unicorn reports as an invalid
+        // instruction; the sleep itself is handled by the hooks below.
+        let code = self.flash_image.clone();
+        self.uc
+            .add_insn_invalid_hook(move |uc| {
+                let pc = reg(uc, RegisterARM::PC);
+                let o = pc.wrapping_sub(flash::BASE + 2) as usize;
+                let hw = code.get(o..o + 2).map(|b| u16::from_le_bytes([b[0], b[1]]));
+                matches!(hw, Some(0xBF20 | 0xBF30))
+            })
+            .map_err(|e| anyhow!("invalid-instruction hook: {e:?}"))?;
+        // WFE, WFI and SEV: hooks on every half-word that encodes them in the program
+        // (a hook on a half-word that is not an instruction start never fires).
+        let mut sleeps = Vec::new();
+        for o in (0..self.flash_image.len() - 1).step_by(2) {
+            let hw = u16::from_le_bytes([self.flash_image[o], self.flash_image[o + 1]]);
+            if matches!(hw, 0xBF20 | 0xBF30 | 0xBF40) {
+                sleeps.push((flash::BASE + o as u32, hw));
+            }
+        }
+        for (a, hw) in sleeps {
+            let a64 = u64::from(a);
+            self.uc
+                .add_code_hook(a64, a64, move |uc, _addr, _size| {
+                    let b = uc.get_data_mut();
+                    if hw == 0xBF40 {
+                        b.scs.event = true;
+                        return;
+                    }
+                    if hw == 0xBF20 && b.scs.event {
+                        b.scs.event = false;
+                        return;
+                    }
+                    b.stop = true;
+                    b.deadline = 0;
+                    b.sleep_request = Some(a);
+                    let _ = uc.emu_stop();
+                })
+                .map_err(|e| anyhow!("sleep hook: {e:?}"))?;
+        }
+        Ok(())
+    }
+
+    /// Reset: SP and PC from the vector table, registers cleared, Thread mode.
+    pub fn reset(&mut self) -> Result<()> {
+        let sp = read32(&self.uc, flash::BASE);
+        let pc = read32(&self.uc, flash::BASE + 4);
+        let uc = &mut self.uc;
+        for r in [
+            RegisterARM::R0,
+            RegisterARM::R1,
+            RegisterARM::R2,
+            RegisterARM::R3,
+            RegisterARM::R4,
+            RegisterARM::R5,
+            RegisterARM::R6,
+            RegisterARM::R7,
+            RegisterARM::R8,
+            RegisterARM::R9,
+            RegisterARM::R10,
+            RegisterARM::R11,
+            RegisterARM::R12,
+        ] {
+            set(uc, r, 0);
+        }
+        set(uc, RegisterARM::IPSR, 0);
+        set(uc, RegisterARM::CONTROL, 0);
+        set(uc, RegisterARM::PRIMASK, 0);
+        set(uc, RegisterARM::BASEPRI, 0);
+        set(uc, RegisterARM::MSP, sp);
+        set(uc, RegisterARM::SP, sp);
+        set(uc, RegisterARM::LR, 0xFFFF_FFFF);
+        set(uc, RegisterARM::XPSR_NZCVQG, 1 << 24);
+        // CPACR: the FPU is off after reset; the firmware's start-up code enables it
+        // (SCB CPACR), which the board passes on before the next instruction.
+        let _ = uc.reg_write(RegisterARM::C1_C0_2, 0);
+        uc.get_data_mut().scs.vtor = flash::BASE; // boot from main flash (BOOT0 low)
+        set(uc, RegisterARM::PC, pc & !1);
+        self.sleeping_at = None;
+        Ok(())
+    }
+
+    /// Runs until virtual time `until` (units) or a fault.
+    pub fn run(&mut self, until: u64) -> Result<Exit> {
+        loop {
+            // Events due, then a reset if one is due.
+            self.uc.get_data_mut().process();
+            if let Some(cause) = self.uc.get_data_mut().reset_due.take() {
+                let b = self.uc.get_data_mut();
+                match cause {
+                    ResetCause::Watchdog => b.stats.watchdog_resets += 1,
+                    _ => b.stats.software_resets += 1,
+                }
+                b.reset_peripherals(cause);
+                self.reset()?;
+                continue;
+            }
+            if let Some(f) = self.uc.get_data_mut().fault.take() {
+                return Ok(Exit::Fault(f));
+            }
+            self.sync_fpu();
+            // Take the exception that preempts what runs now.
+            let pc = reg(&self.uc, RegisterARM::PC);
+            if let Some(e) = preempting(&self.uc) {
+                let resume = match self.sleeping_at.take() {
+                    Some(a) => a + 2,
+                    None => pc,
+                };
+                enter(&mut self.uc, e, resume);
+                continue;
+            }
+            let b = self.uc.get_data_mut();
+            b.scs.changed = false;
+            let next = b.next_event().min(until);
+            if b.now >= until {
+                return Ok(Exit::Time);
+            }
+            if self.sleeping_at.is_some() {
+                // Asleep with nothing to take: time jumps to the next event.
+                let b = self.uc.get_data_mut();
+                if b.scs.event && self.sleeping_at.is_some() {
+                    // An event arrived while asleep (WFE): wake past the WFE.
+                    b.scs.event = false;
+                    let a = self.sleeping_at.take().unwrap_or(0);
+                    set(&mut self.uc, RegisterARM::PC, a + 2);
+                    continue;
+                }
+                let b = self.uc.get_data_mut();
+                b.now = b.now.max(next);
+                continue;
+            }
+            let b = self.uc.get_data_mut();
+            b.deadline = next;
+            b.stop = false;
+            let start = reg(&self.uc, RegisterARM::PC);
+            let r = self.uc.emu_start(u64::from(start | 1), 0, 0, 0);
+            let b = self.uc.get_data_mut();
+            if let Some(a) = b.sleep_request.take() {
+                self.sleeping_at = Some(a);
+                set(&mut self.uc, RegisterARM::PC, a);
+            }
+            if let Err(e) = r {
+                let b = self.uc.get_data_mut();
+                let f = b.fault.take().unwrap_or(Fault {
+                    what: format!("the emulator stopped: {e:?}"),
+                    pc: None,
+                });
+                let pc = f.pc.unwrap_or_else(|| reg(&self.uc, RegisterARM::PC));
+                return Ok(Exit::Fault(Fault { pc: Some(pc), ..f }));
+            }
+        }
+    }
+
+    /// Passes the firmware's CPACR (the FPU enable) on to the core.
+    fn sync_fpu(&mut self) {
+        let cpacr = self.uc.get_data().scs.cpacr;
+        if reg(&self.uc, RegisterARM::C1_C0_2) != cpacr {
+            let _ = self.uc.reg_write(RegisterARM::C1_C0_2, u64::from(cpacr));
+        }
+    }
+
+    /// Names the function at `pc`.
+    pub fn function_at(&self, pc: u32) -> String {
+        self.image.function_at(pc)
+    }
+}
+
+/// The pending system exceptions the board does not raise (for completeness).
+pub const UNUSED: [u32; 3] = [exc::SVCALL, exc::PENDSV, exc::SYSTICK];

@@ -1,0 +1,244 @@
+//! `pkmc-vboard`: the firmware's release ELF on a virtual NUCLEO-G474RE, its USB link
+//! on a pseudo-terminal for `nc-send --port`, its machine the simulator's drives and
+//! plants (docs/vboard.md).
+
+mod board;
+mod cpu;
+mod elf;
+mod nvic;
+mod periph;
+mod rtt;
+mod time;
+mod usbhost;
+mod wiring;
+
+use anyhow::{bail, Context, Result};
+use board::{Board, MachineSide};
+use cpu::{Core, Exit};
+use std::io::{Read, Write};
+use std::path::PathBuf;
+use std::rc::Rc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// How often the USB host is serviced, virtual µs.
+const SERVICE_US: u64 = 50;
+
+struct Args {
+    elf: PathBuf,
+    machine: Option<PathBuf>,
+    seconds: Option<f64>,
+    link: Option<PathBuf>,
+    flash: Option<PathBuf>,
+    free_run: bool,
+    quiet_log: bool,
+}
+
+fn usage() -> ! {
+    eprintln!(
+        "usage: pkmc-vboard [--elf FIRMWARE.elf] [--machine FILE.toml] [--link PATH]\n\
+         \x20                  [--flash FILE] [--seconds S] [--free-run] [--quiet-log]\n\
+         Runs the firmware ELF on a virtual STM32G474RE board and prints the\n\
+         pseudo-terminal of its USB link (docs/vboard.md)."
+    );
+    std::process::exit(2)
+}
+
+fn parse_args() -> Args {
+    let mut a = Args {
+        elf: PathBuf::from("target/thumbv7em-none-eabihf/release/firmware"),
+        machine: None,
+        seconds: None,
+        link: None,
+        flash: None,
+        free_run: false,
+        quiet_log: false,
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(arg) = it.next() {
+        let mut value = || it.next().unwrap_or_else(|| usage());
+        match arg.as_str() {
+            "--elf" => a.elf = value().into(),
+            "--machine" => a.machine = Some(value().into()),
+            "--seconds" => {
+                a.seconds = Some(value().parse().unwrap_or_else(|_| usage()));
+            }
+            "--link" => a.link = Some(value().into()),
+            "--flash" => a.flash = Some(value().into()),
+            "--free-run" => a.free_run = true,
+            "--quiet-log" => a.quiet_log = true,
+            _ => usage(),
+        }
+    }
+    a
+}
+
+fn main() {
+    if let Err(e) = run(parse_args()) {
+        eprintln!("pkmc-vboard: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run(args: Args) -> Result<()> {
+    let raw = std::fs::read(&args.elf)
+        .with_context(|| format!("reading the firmware {}", args.elf.display()))?;
+    let image = Rc::new(elf::Image::parse(raw.clone()).context("the firmware ELF")?);
+    let (machine, plants) = match &args.machine {
+        Some(p) => {
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading {}", p.display()))?;
+            let file = pkmc_host::machine_file::read_file(&text, &p.display().to_string())
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let m = file
+                .to_config()
+                .map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?;
+            let plants: Vec<_> = file.joints.iter().map(|j| j.plant.clone()).collect();
+            (m, plants)
+        }
+        None => (pkmc::config::MachineConfig::cartesian_xyz(), Vec::new()),
+    };
+    // The drives stand where a fresh controller believes its joints are.
+    let start = pkmc::controller::Controller::new(machine.clone())
+        .map_err(|e| anyhow::anyhow!("the machine: {e:?}"))?
+        .joints()
+        .to_vec();
+    let wiring = wiring::mixed();
+    let groups = wiring.amp_lines.len();
+    let side = MachineSide::new(machine, &start, &plants, groups)?;
+    let config = match &args.flash {
+        Some(f) if f.exists() => std::fs::read(f)?,
+        _ => vec![0xFF; periph::flash::CONFIG_SIZE as usize],
+    };
+    if config.len() != periph::flash::CONFIG_SIZE as usize {
+        bail!("the flash file must hold {} bytes", periph::flash::CONFIG_SIZE);
+    }
+    let board = Board::new(wiring, side, config);
+    let mut core = Core::new(image.clone(), board)?;
+    let mut log = rtt::Log::new(&image, &raw)?;
+    let mut host = usbhost::Host::default();
+
+    let (mut master, slave) = serialport::TTYPort::pair().context("a pseudo-terminal")?;
+    let port = slave.name().context("the pseudo-terminal's name")?;
+    if let Some(link) = &args.link {
+        let _ = std::fs::remove_file(link);
+        std::os::unix::fs::symlink(&port, link)
+            .with_context(|| format!("linking {}", link.display()))?;
+    }
+    println!("{}", args.link.as_ref().map_or(port.clone(), |l| l.display().to_string()));
+    std::io::stdout().flush()?;
+    use serialport::SerialPort;
+    master.set_timeout(Duration::from_millis(0))?;
+
+    let stop = Arc::new(AtomicBool::new(false));
+    let s = stop.clone();
+    ctrlc::set_handler(move || s.store(true, Ordering::SeqCst)).context("signal handler")?;
+
+    let started = Instant::now();
+    let service = time::from_us(SERVICE_US);
+    let limit = args.seconds.map(|s| (s * time::UNITS_PER_S as f64) as u64);
+    let mut next_ms = 0u64;
+    let mut buf = [0u8; 4096];
+    let outcome = loop {
+        let now = core.uc.get_data().now;
+        if stop.load(Ordering::SeqCst) || limit.is_some_and(|l| now >= l) {
+            break Ok(());
+        }
+        match core.run(now + service)? {
+            Exit::Time => {}
+            Exit::Fault(f) => {
+                let pc = f.pc.unwrap_or(0);
+                break Err(anyhow::anyhow!(
+                    "{} (pc {pc:#010x}, in {}) at {:.6} s",
+                    f.what,
+                    core.function_at(pc),
+                    time::to_s(now)
+                ));
+            }
+        }
+        let now = core.uc.get_data().now;
+        host.service(&mut core.uc.get_data_mut().usb, now);
+        for line in host.log.drain(..) {
+            eprintln!("vboard: usb: {line}");
+        }
+        if now >= next_ms {
+            next_ms = now + time::from_ms(1);
+            for line in log.poll(&mut core.uc)? {
+                if !args.quiet_log {
+                    eprintln!("{line}");
+                }
+            }
+            // The pseudo-terminal, both ways.
+            if let Ok(n) = master.read(&mut buf) {
+                host.to_device.extend(&buf[..n]);
+            }
+            if !host.from_device.is_empty() {
+                let out: Vec<u8> = host.from_device.iter().copied().collect();
+                if let Ok(n) = master.write(&out) {
+                    host.from_device.drain(..n);
+                }
+            }
+            // Never ahead of the wall clock.
+            if !args.free_run {
+                let ahead = Duration::from_secs_f64(time::to_s(now))
+                    .saturating_sub(started.elapsed());
+                if ahead > Duration::from_millis(2) {
+                    std::thread::sleep(ahead);
+                }
+            }
+        }
+    };
+    for line in log.poll(&mut core.uc).unwrap_or_default() {
+        eprintln!("{line}");
+    }
+    let b2 = core.uc.get_data();
+    report(b2, started.elapsed());
+    if let Some(f) = &args.flash {
+        std::fs::write(f, &b2.flash.config)?;
+    }
+    drop(slave);
+    outcome
+}
+
+/// Prints the run's figures as one JSON object on stdout.
+fn report(b: &Board, wall: Duration) {
+    let virt = time::to_s(b.now);
+    let mut lat: Vec<u64> = b.stats.servo_latency.clone();
+    lat.sort_unstable();
+    let pct = |v: &[u64], q: f64| -> f64 {
+        if v.is_empty() {
+            return 0.0;
+        }
+        let i = ((v.len() - 1) as f64 * q).round() as usize;
+        time::to_ns(v[i]) as f64 / 1000.0
+    };
+    let taken: Vec<String> = b
+        .stats
+        .taken
+        .iter()
+        .map(|(e, n)| format!("\"{e}\": {n}"))
+        .collect();
+    println!(
+        "{{\"virtual_s\": {virt:.6}, \"wall_s\": {:.3}, \"instructions\": {}, \
+         \"final_joint_steps\": {:?}, \"drive_violations\": {}, \"steps_while_disabled\": {}, \
+         \"pulses_not_routed\": {}, \"exceptions\": {{{}}}, \
+         \"servo_latency_us\": {{\"min\": {:.3}, \"median\": {:.3}, \"p99\": {:.3}, \"max\": {:.3}}}, \
+         \"watchdog_resets\": {}, \"software_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}}}",
+        wall.as_secs_f64(),
+        b.instructions,
+        b.machine.joint_steps(),
+        b.machine.violations(),
+        b.machine.steps_disabled,
+        b.machine.pulses_lost,
+        taken.join(", "),
+        pct(&lat, 0.0),
+        pct(&lat, 0.5),
+        pct(&lat, 0.99),
+        pct(&lat, 1.0),
+        b.stats.watchdog_resets,
+        b.stats.software_resets,
+        b.flash.erases,
+        b.flash.programs,
+    );
+}
