@@ -71,6 +71,18 @@ pub struct MachineSide {
 /// Counters of the run.
 #[derive(Default, Clone, Debug)]
 pub struct Stats {
+    /// Busy fraction of each whole 1 ms period, per mille, and whether the host was
+    /// streaming blocks in it.
+    pub busy: Vec<(u16, bool)>,
+    /// Idle time in the current period so far, units.
+    pub idle_in_period: u64,
+    /// The busiest periods: (per mille, period index = ms since reset, code running at
+    /// its end).
+    pub worst_busy: Vec<(u16, u64, u32)>,
+    /// The worst servo-interrupt latencies: (latency, code running when it became due).
+    pub worst_servo: Vec<(u64, u32)>,
+    /// Lowest SP seen at a block start, and the block and stack-scan call chain then.
+    pub min_sp: Option<(u32, u32, Vec<u32>)>,
     /// Exceptions taken, by exception number.
     pub taken: std::collections::BTreeMap<u32, u64>,
     /// Start latency of each servo interrupt (time units from the update event).
@@ -134,6 +146,14 @@ pub struct Board {
     pub sleep_request: Option<u32>,
     /// Start address of the block being executed.
     pub block_pc: u32,
+    /// The code running when each exception became pending.
+    pub pended_in: Vec<u32>,
+    /// The host streamed blocks recently (set by the run loop, for the busy figures).
+    pub streaming: bool,
+    /// The lowest stack pointer seen at a block's start.
+    pub lowest_sp: u32,
+    /// An enabled exception is pending but masked: blocks check the masks.
+    pub masked_pending: bool,
 }
 
 impl MachineSide {
@@ -248,6 +268,10 @@ impl Board {
             reset_due: None,
             sleep_request: None,
             block_pc: 0,
+            pended_in: vec![0; 16 + crate::nvic::IRQ_LINES],
+            streaming: false,
+            lowest_sp: u32::MAX,
+            masked_pending: false,
         };
         b.reset_peripherals(ResetCause::PowerOn);
         b
@@ -612,6 +636,7 @@ impl Board {
                     Some(line) => {
                         let at = self.tims[i].irq_at;
                         self.scs.pend_irq(line, at);
+                        self.pended_in[16 + line] = self.block_pc;
                     }
                     None => self.unmodelled(format!("{} interrupt without a line", TIMERS[i].0)),
                 }
@@ -634,6 +659,45 @@ impl Board {
             self.reset_due = Some(ResetCause::Software);
         }
         self.usb_line();
+    }
+
+    /// Time passes from `from` to `to` with the core asleep.
+    pub fn idle(&mut self, from: u64, to: u64) {
+        let period = crate::time::from_ms(1);
+        let mut t = from;
+        while t < to {
+            let end = (t / period + 1) * period;
+            let upto = end.min(to);
+            self.stats.idle_in_period += upto - t;
+            t = upto;
+            if t == end {
+                self.close_period();
+            }
+        }
+    }
+
+    /// Closes every 1 ms period that `now` has passed.
+    pub fn close_periods(&mut self, last: &mut u64) {
+        let period = crate::time::from_ms(1);
+        while (*last + 1) * period <= self.now {
+            *last += 1;
+            self.close_period();
+        }
+    }
+
+    fn close_period(&mut self) {
+        let period = crate::time::from_ms(1);
+        let idle = self.stats.idle_in_period.min(period);
+        let busy = ((period - idle) * 1000 / period) as u16;
+        self.stats.busy.push((busy, self.streaming));
+        let k = self.stats.busy.len() as u64 - 1;
+        let w = &mut self.stats.worst_busy;
+        if w.len() < 5 || busy > w[w.len() - 1].0 {
+            w.push((busy, k, self.block_pc));
+            w.sort_by(|a, b| b.0.cmp(&a.0));
+            w.truncate(5);
+        }
+        self.stats.idle_in_period = 0;
     }
 
     /// Pends USB_LP while its line is asserted and the handler is not running.

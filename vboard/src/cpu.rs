@@ -63,6 +63,30 @@ fn count_instructions(code: &[u8]) -> u32 {
     n
 }
 
+/// The return addresses on the stack from `sp` to `top`: odd words pointing into
+/// the program just after a BL or BLX (a scan, not an unwind: a stale word of an
+/// earlier call can appear too).
+fn call_chain(uc: &Unicorn<Board>, code: &[u8], sp: u32, top: u32) -> Vec<u32> {
+    let hw = |k: usize| u16::from_le_bytes([code[k], code[k + 1]]);
+    let mut chain = Vec::new();
+    let mut a = sp;
+    while a < top && chain.len() < 48 {
+        let w = read32(uc, a);
+        a += 4;
+        let o = (w & !1).wrapping_sub(flash::BASE) as usize;
+        if w & 1 == 0 || o < 4 || o >= code.len() {
+            continue;
+        }
+        // BL: 0xF000–0xF7FF then 0xD000-type second half; BLX Rm: 0x4780.
+        let bl = (hw(o - 4) & 0xF800) == 0xF000 && (hw(o - 2) & 0xD000) == 0xD000;
+        let blx = (hw(o - 2) & 0xFF87) == 0x4780;
+        if bl || blx {
+            chain.push(w & !1);
+        }
+    }
+    chain
+}
+
 /// The core, its memory and the board.
 pub struct Core<'a> {
     /// The emulator, owning the board.
@@ -71,6 +95,9 @@ pub struct Core<'a> {
     pub image: Rc<Image>,
     flash_image: Vec<u8>,
     sleeping_at: Option<u32>,
+    periods_closed: u64,
+    /// The initial main stack pointer (the top of the stack).
+    pub stack_top: u32,
 }
 
 fn reg(uc: &Unicorn<Board>, r: RegisterARM) -> u32 {
@@ -194,7 +221,14 @@ fn jump_to_handler(uc: &mut Unicorn<Board>, e: u32) {
     *b.stats.taken.entry(e).or_default() += 1;
     if e == IRQ0 + 55 {
         let since = b.scs.pending_since[e as usize];
-        b.stats.servo_latency.push(b.now.saturating_sub(since));
+        let latency = b.now.saturating_sub(since);
+        b.stats.servo_latency.push(latency);
+        let w = &mut b.stats.worst_servo;
+        if w.len() < 5 || latency > w[w.len() - 1].0 {
+            w.push((latency, b.pended_in[e as usize]));
+            w.sort_by(|a, b| b.0.cmp(&a.0));
+            w.truncate(5);
+        }
     }
 }
 
@@ -331,7 +365,10 @@ impl<'a> Core<'a> {
             image,
             flash_image,
             sleeping_at: None,
+            periods_closed: 0,
+            stack_top: 0,
         };
+        core.stack_top = read32(&core.uc, flash::BASE);
         core.install_hooks()?;
         core.reset()?;
         Ok(core)
@@ -339,6 +376,7 @@ impl<'a> Core<'a> {
 
     fn install_hooks(&mut self) -> Result<()> {
         let code = self.flash_image.clone();
+        let top = self.stack_top;
         let mut blocks = Blocks::default();
         self.uc
             .add_block_hook(1, 0, move |uc, addr, size| {
@@ -346,11 +384,21 @@ impl<'a> Core<'a> {
                     let o = addr.wrapping_sub(u64::from(flash::BASE)) as usize;
                     code.get(o..o + size as usize).map_or(1, count_instructions)
                 });
+                let sp = reg(uc, RegisterARM::SP);
+                if sp < uc.get_data().lowest_sp && sp >= RAM {
+                    let chain = call_chain(uc, &code, sp, top);
+                    let b = uc.get_data_mut();
+                    b.lowest_sp = sp;
+                    b.stats.min_sp = Some((sp, addr as u32, chain));
+                }
+                // An exception waits behind a mask: look whether the code just run
+                // lifted it (CPSIE, MSR BASEPRI/PRIMASK).
+                let unmasked = uc.get_data().masked_pending && preempting(uc).is_some();
                 let b = uc.get_data_mut();
                 b.block_pc = addr as u32;
                 b.instructions += u64::from(n);
                 b.now += u64::from(n) * b.cycle_units;
-                if b.now >= b.deadline || b.stop {
+                if b.now >= b.deadline || b.stop || unmasked {
                     let _ = uc.emu_stop();
                 }
             })
@@ -514,7 +562,14 @@ impl<'a> Core<'a> {
                 enter(&mut self.uc, e, resume);
                 continue;
             }
+            let waiting = {
+                let s = &self.uc.get_data().scs;
+                (0..s.pending.len()).any(|e| {
+                    s.pending[e] && (e < IRQ0 as usize || s.enabled[e - IRQ0 as usize])
+                })
+            };
             let b = self.uc.get_data_mut();
+            b.masked_pending = waiting;
             b.scs.changed = false;
             let next = b.next_event().min(until);
             if b.now >= until {
@@ -531,7 +586,11 @@ impl<'a> Core<'a> {
                     continue;
                 }
                 let b = self.uc.get_data_mut();
+                let from = b.now;
                 b.now = b.now.max(next);
+                let to = b.now;
+                b.idle(from, to);
+                self.periods_closed = to / crate::time::from_ms(1);
                 continue;
             }
             let b = self.uc.get_data_mut();
@@ -539,6 +598,9 @@ impl<'a> Core<'a> {
             b.stop = false;
             let start = reg(&self.uc, RegisterARM::PC);
             let r = self.uc.emu_start(u64::from(start | 1), 0, 0, 0);
+            let mut closed = self.periods_closed;
+            self.uc.get_data_mut().close_periods(&mut closed);
+            self.periods_closed = closed;
             let b = self.uc.get_data_mut();
             if let Some(a) = b.sleep_request.take() {
                 self.sleeping_at = Some(a);
@@ -554,6 +616,16 @@ impl<'a> Core<'a> {
                 return Ok(Exit::Fault(Fault { pc: Some(pc), ..f }));
             }
         }
+    }
+
+    /// The deepest the stack went: the lowest RAM byte below the initial stack
+    /// pointer that no longer holds the power-on paint (flip-link puts the stack at
+    /// the bottom of RAM, so everything below is untouched).
+    pub fn stack_depth(&self) -> (u32, u32) {
+        let mut ram = vec![0u8; (self.stack_top - RAM) as usize];
+        let _ = self.uc.mem_read(u64::from(RAM), &mut ram);
+        let untouched = ram.iter().position(|&b| b != PAINT).unwrap_or(ram.len()) as u32;
+        (self.stack_top - RAM - untouched, untouched)
     }
 
     /// Passes the firmware's CPACR (the FPU enable) on to the core.

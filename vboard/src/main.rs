@@ -139,6 +139,7 @@ fn run(args: Args) -> Result<()> {
     let service = time::from_us(SERVICE_US);
     let limit = args.seconds.map(|s| (s * time::UNITS_PER_S as f64) as u64);
     let mut next_ms = 0u64;
+    let mut last_out: Option<u64> = None;
     let mut buf = [0u8; 4096];
     let outcome = loop {
         let now = core.uc.get_data().now;
@@ -158,7 +159,12 @@ fn run(args: Args) -> Result<()> {
             }
         }
         let now = core.uc.get_data().now;
+        let sent = host.packets.1;
         host.service(&mut core.uc.get_data_mut().usb, now);
+        if host.packets.1 != sent {
+            last_out = Some(now);
+        }
+        core.uc.get_data_mut().streaming = last_out.is_some_and(|t| now < t + time::from_ms(100));
         for line in host.log.drain(..) {
             eprintln!("vboard: usb: {line}");
         }
@@ -192,26 +198,40 @@ fn run(args: Args) -> Result<()> {
     for line in log.poll(&mut core.uc).unwrap_or_default() {
         eprintln!("{line}");
     }
-    let b2 = core.uc.get_data();
-    report(b2, started.elapsed());
+    report(&core, started.elapsed());
     if let Some(f) = &args.flash {
-        std::fs::write(f, &b2.flash.config)?;
+        std::fs::write(f, &core.uc.get_data().flash.config)?;
     }
     drop(slave);
     outcome
 }
 
+/// min / median / p99 / max of `v` (sorted here).
+fn quartiles(v: &mut [u64]) -> [u64; 4] {
+    v.sort_unstable();
+    if v.is_empty() {
+        return [0; 4];
+    }
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    [at(0.0), at(0.5), at(0.99), at(1.0)]
+}
+
 /// Prints the run's figures as one JSON object on stdout.
-fn report(b: &Board, wall: Duration) {
+fn report(core: &Core, wall: Duration) {
+    let b = core.uc.get_data();
     let virt = time::to_s(b.now);
-    let mut lat: Vec<u64> = b.stats.servo_latency.clone();
-    lat.sort_unstable();
-    let pct = |v: &[u64], q: f64| -> f64 {
-        if v.is_empty() {
-            return 0.0;
-        }
-        let i = ((v.len() - 1) as f64 * q).round() as usize;
-        time::to_ns(v[i]) as f64 / 1000.0
+    let us = |u: u64| time::to_ns(u) as f64 / 1000.0;
+    let lat = quartiles(&mut b.stats.servo_latency.clone()).map(us);
+    let mut busy_all: Vec<u64> = b.stats.busy.iter().map(|p| u64::from(p.0)).collect();
+    let mut busy_streaming: Vec<u64> =
+        b.stats.busy.iter().filter(|p| p.1).map(|p| u64::from(p.0)).collect();
+    let busy = |v: &mut Vec<u64>| {
+        let n = v.len();
+        let q = quartiles(v).map(|m| m as f64 / 10.0);
+        format!(
+            "{{\"periods\": {n}, \"min\": {:.1}, \"median\": {:.1}, \"p99\": {:.1}, \"max\": {:.1}}}",
+            q[0], q[1], q[2], q[3]
+        )
     };
     let taken: Vec<String> = b
         .stats
@@ -219,23 +239,58 @@ fn report(b: &Board, wall: Duration) {
         .iter()
         .map(|(e, n)| format!("\"{e}\": {n}"))
         .collect();
+    let worst: Vec<String> = b
+        .stats
+        .worst_servo
+        .iter()
+        .map(|(l, pc)| format!("[{:.3}, {:?}]", us(*l), core.function_at(*pc)))
+        .collect();
+    let worst_busy: Vec<String> = b
+        .stats
+        .worst_busy
+        .iter()
+        .map(|(m, k, pc)| format!("[{:.1}, {k}, {:?}]", f64::from(*m) / 10.0, core.function_at(*pc)))
+        .collect();
+    let (depth, untouched) = core.stack_depth();
+    let chain: Vec<String> = b
+        .stats
+        .min_sp
+        .as_ref()
+        .map(|(_, pc, c)| {
+            std::iter::once(*pc)
+                .chain(c.iter().copied())
+                .map(|a| format!("{:?}", core.function_at(a)))
+                .collect()
+        })
+        .unwrap_or_default();
     println!(
-        "{{\"virtual_s\": {virt:.6}, \"wall_s\": {:.3}, \"instructions\": {}, \
+        "{{\"virtual_s\": {virt:.6}, \"wall_s\": {:.3}, \"speed\": {:.3}, \"instructions\": {}, \
          \"final_joint_steps\": {:?}, \"drive_violations\": {}, \"steps_while_disabled\": {}, \
          \"pulses_not_routed\": {}, \"exceptions\": {{{}}}, \
-         \"servo_latency_us\": {{\"min\": {:.3}, \"median\": {:.3}, \"p99\": {:.3}, \"max\": {:.3}}}, \
+         \"busy_percent\": {}, \"busy_percent_streaming\": {}, \"busiest_periods_ms\": [{}], \
+         \"servo_latency_us\": {{\"min\": {:.3}, \"median\": {:.3}, \"p99\": {:.3}, \"max\": {:.3}, \"jitter\": {:.3}}}, \
+         \"worst_servo_latency_us\": [{}], \
+         \"stack\": {{\"top\": {}, \"deepest\": {depth}, \"untouched\": {untouched}, \"lowest_sp_chain\": [{}]}}, \
          \"watchdog_resets\": {}, \"software_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}}}",
         wall.as_secs_f64(),
+        virt / wall.as_secs_f64().max(1e-9),
         b.instructions,
         b.machine.joint_steps(),
         b.machine.violations(),
         b.machine.steps_disabled,
         b.machine.pulses_lost,
         taken.join(", "),
-        pct(&lat, 0.0),
-        pct(&lat, 0.5),
-        pct(&lat, 0.99),
-        pct(&lat, 1.0),
+        busy(&mut busy_all),
+        busy(&mut busy_streaming),
+        worst_busy.join(", "),
+        lat[0],
+        lat[1],
+        lat[2],
+        lat[3],
+        lat[3] - lat[0],
+        worst.join(", "),
+        core.stack_top - cpu::RAM,
+        chain.join(", "),
         b.stats.watchdog_resets,
         b.stats.software_resets,
         b.flash.erases,
