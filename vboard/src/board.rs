@@ -91,6 +91,8 @@ pub struct Stats {
     pub watchdog_resets: u64,
     /// Software resets.
     pub software_resets: u64,
+    /// Resets through the NRST pin.
+    pub pin_resets: u64,
 }
 
 /// The chip and its machine.

@@ -96,6 +96,8 @@ pub struct Core<'a> {
     flash_image: Vec<u8>,
     sleeping_at: Option<u32>,
     periods_closed: u64,
+    /// The core executes nothing until then (its instruction fetch held).
+    pub held_until: u64,
     /// The initial main stack pointer (the top of the stack).
     pub stack_top: u32,
 }
@@ -366,6 +368,7 @@ impl<'a> Core<'a> {
             flash_image,
             sleeping_at: None,
             periods_closed: 0,
+            held_until: 0,
             stack_top: 0,
         };
         core.stack_top = read32(&core.uc, flash::BASE);
@@ -542,14 +545,32 @@ impl<'a> Core<'a> {
                 let b = self.uc.get_data_mut();
                 match cause {
                     ResetCause::Watchdog => b.stats.watchdog_resets += 1,
+                    ResetCause::Pin => b.stats.pin_resets += 1,
                     _ => b.stats.software_resets += 1,
                 }
                 b.reset_peripherals(cause);
                 self.reset()?;
+                self.held_until = 0;
                 continue;
             }
             if let Some(f) = self.uc.get_data_mut().fault.take() {
                 return Ok(Exit::Fault(f));
+            }
+            let b = self.uc.get_data_mut();
+            if b.now < self.held_until {
+                // Held: the peripherals run on, nothing executes or is taken.
+                let from = b.now;
+                b.now = b.next_event().min(until).min(self.held_until).max(from + 1);
+                let to = b.now;
+                b.stats.idle_in_period += 0;
+                let mut closed = self.periods_closed;
+                b.close_periods(&mut closed);
+                self.periods_closed = closed;
+                let _ = to;
+                if b.now >= until {
+                    return Ok(Exit::Time);
+                }
+                continue;
             }
             self.sync_fpu();
             // Take the exception that preempts what runs now.

@@ -3,6 +3,7 @@
 //! plants (docs/vboard.md).
 
 mod board;
+mod control;
 mod cpu;
 mod elf;
 mod nvic;
@@ -135,6 +136,18 @@ fn run(args: Args) -> Result<()> {
     let s = stop.clone();
     ctrlc::set_handler(move || s.store(true, Ordering::SeqCst)).context("signal handler")?;
 
+    // Commands on standard input, one per line, optionally "at SECONDS COMMAND"
+    // (virtual time): see `control::apply`.
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    std::thread::spawn(move || {
+        for line in std::io::stdin().lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let mut scheduled: Vec<(u64, String)> = Vec::new();
+
     let started = Instant::now();
     let service = time::from_us(SERVICE_US);
     let limit = args.seconds.map(|s| (s * time::UNITS_PER_S as f64) as u64);
@@ -170,6 +183,28 @@ fn run(args: Args) -> Result<()> {
         }
         if now >= next_ms {
             next_ms = now + time::from_ms(1);
+            while let Ok(line) = rx.try_recv() {
+                match control::parse(&line) {
+                    Ok(Some((at, cmd))) => scheduled.push((at.unwrap_or(now), cmd)),
+                    Ok(None) => {}
+                    Err(e) => eprintln!("vboard: {e}"),
+                }
+            }
+            let due: Vec<String> = {
+                let (due, later): (Vec<_>, Vec<_>) =
+                    scheduled.drain(..).partition(|(t, _)| *t <= now);
+                scheduled = later;
+                due.into_iter().map(|(_, c)| c).collect()
+            };
+            for cmd in due {
+                eprintln!("vboard: {cmd} at {:.4} s", time::to_s(now));
+                match control::apply(&cmd, &mut core, &mut host) {
+                    Ok(control::Outcome::Report) => report(&core, started.elapsed()),
+                    Ok(control::Outcome::Quit) => stop.store(true, Ordering::SeqCst),
+                    Ok(control::Outcome::Done) => {}
+                    Err(e) => eprintln!("vboard: {cmd}: {e}"),
+                }
+            }
             for line in log.poll(&mut core.uc)? {
                 if !args.quiet_log {
                     eprintln!("{line}");

@@ -170,6 +170,7 @@ impl Host {
                 self.phase = Phase::Reset(now + from_ms(10));
             }
             Phase::Reset(t) if now >= t => {
+                self.strings.clear();
                 self.phase = Phase::Enumerate(0, now + from_ms(10));
             }
             Phase::Enumerate(step, t) if now >= t => self.enumerate(dev, step, now),

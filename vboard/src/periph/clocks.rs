@@ -33,6 +33,8 @@ pub enum ResetCause {
     Watchdog,
     /// A software reset (AIRCR.SYSRESETREQ).
     Software,
+    /// The NRST pin (the NUCLEO's reset button).
+    Pin,
 }
 
 /// RCC register offsets that only keep their value, with reset values.
@@ -81,6 +83,7 @@ impl Rcc {
             ResetCause::PowerOn => 0x0C00_0000, // PINRSTF, BORRSTF
             ResetCause::Watchdog => previous_csr & 0xFE00_0000 | 1 << 26 | 1 << 29,
             ResetCause::Software => previous_csr & 0xFE00_0000 | 1 << 26 | 1 << 28,
+            ResetCause::Pin => previous_csr & 0xFE00_0000 | 1 << 26,
         };
         Self {
             cr: 0x0000_0500, // HSION, HSIRDY

@@ -1,0 +1,109 @@
+//! Commands on the board's standard input: the machine's inputs (e-stop, limit
+//! switches, amplifier faults, a jammed axis), the USB cable, the reset button, a held
+//! core, and the report. One per line; `at SECONDS COMMAND` runs it at that virtual
+//! time instead of at once.
+//!
+//! | command | effect |
+//! |---|---|
+//! | `estop on` / `estop off` | the e-stop input (PA10 high = e-stop) |
+//! | `limit K on` / `limit K off` | limit/home input K open (high) or closed |
+//! | `fault G on` / `fault G off` | amplifier fault line of group G pulled low |
+//! | `jam C` | servo channel C's axis stops where it is (its plant is frozen) |
+//! | `unplug` / `plug` | the USB cable |
+//! | `reset` | a pulse on NRST (the reset button) |
+//! | `hold MS` | the core executes nothing for MS ms (its instruction fetch stalled); the peripherals run on |
+//! | `report` | print the JSON report now |
+//! | `quit` | stop, as Ctrl-C does |
+
+use crate::cpu::Core;
+use crate::periph::clocks::ResetCause;
+use crate::time;
+use crate::usbhost::Host;
+
+/// What the caller does next.
+pub enum Outcome {
+    /// Nothing more.
+    Done,
+    /// Print the report.
+    Report,
+    /// Stop.
+    Quit,
+}
+
+/// Parses a line: `Some((time, command))`, `None` for a blank line or a comment.
+pub fn parse(line: &str) -> Result<Option<(Option<u64>, String)>, String> {
+    let line = line.trim();
+    if line.is_empty() || line.starts_with('#') {
+        return Ok(None);
+    }
+    let mut words = line.split_whitespace();
+    if line.starts_with("at ") {
+        words.next();
+        let t: f64 = words
+            .next()
+            .and_then(|w| w.parse().ok())
+            .ok_or_else(|| format!("\"{line}\": \"at\" wants a time in seconds"))?;
+        let rest: Vec<&str> = words.collect();
+        return Ok(Some((
+            Some((t * time::UNITS_PER_S as f64) as u64),
+            rest.join(" "),
+        )));
+    }
+    Ok(Some((None, line.to_string())))
+}
+
+fn on_off(w: Option<&str>, cmd: &str) -> Result<bool, String> {
+    match w {
+        Some("on") => Ok(true),
+        Some("off") => Ok(false),
+        _ => Err(format!("\"{cmd}\": expected on or off")),
+    }
+}
+
+fn index(w: Option<&str>, cmd: &str, below: usize) -> Result<usize, String> {
+    w.and_then(|w| w.parse().ok())
+        .filter(|&k: &usize| k < below)
+        .ok_or_else(|| format!("\"{cmd}\": expected a number below {below}"))
+}
+
+/// Runs `cmd` on the board.
+pub fn apply(cmd: &str, core: &mut Core, host: &mut Host) -> Result<Outcome, String> {
+    let mut w = cmd.split_whitespace();
+    let verb = w.next().unwrap_or("");
+    let now = core.uc.get_data().now;
+    let b = core.uc.get_data_mut();
+    match verb {
+        "estop" => b.machine.estop = on_off(w.next(), cmd)?,
+        "limit" => {
+            let k = index(w.next(), cmd, b.wiring.limits.len())?;
+            if on_off(w.next(), cmd)? {
+                b.machine.limits |= 1 << k;
+            } else {
+                b.machine.limits &= !(1 << k);
+            }
+        }
+        "fault" => {
+            let g = index(w.next(), cmd, b.machine.amp_fault.len())?;
+            b.machine.amp_fault[g] = on_off(w.next(), cmd)?;
+        }
+        "jam" => {
+            let c = index(w.next(), cmd, b.machine.servos.len())?;
+            b.machine.servos[c]
+                .as_mut()
+                .ok_or_else(|| format!("\"{cmd}\": servo channel {c} drives no joint"))?
+                .jam();
+        }
+        "unplug" => host.plug(false, now),
+        "plug" => host.plug(true, now),
+        "reset" => b.reset_due = Some(ResetCause::Pin),
+        "hold" => {
+            let ms = index(w.next(), cmd, 100_000)?;
+            core.held_until = now + time::from_ms(ms as u64);
+        }
+        "report" => return Ok(Outcome::Report),
+        "quit" => return Ok(Outcome::Quit),
+        _ => return Err(format!("unknown command \"{cmd}\" (see docs/vboard.md)")),
+    }
+    core.uc.get_data_mut().drive_inputs();
+    Ok(Outcome::Done)
+}
