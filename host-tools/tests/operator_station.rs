@@ -560,8 +560,8 @@ async fn cartesian_page_steps_overrides_stops_e_stops_saves_and_loads_teach_behi
     page.click("#run").await;
     page.wait_moving("it runs again").await;
     page.click("#estop").await;
-    page.wait("pkmc.lastStatus.state === 'Alarm' && document.getElementById('alarm').textContent.includes('Aborted')",
-        "the e-stop raises an alarm shown with its cause", Timeout::S(5)).await;
+    page.wait("pkmc.lastStatus.state === 'Alarm' && document.getElementById('alarm').textContent.startsWith('E-STOP')",
+        "the e-stop raises an alarm shown as an e-stop", Timeout::S(5)).await;
     page.wait_idle_or_alarm().await;
     page.unlock().await;
 

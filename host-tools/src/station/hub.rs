@@ -6,7 +6,7 @@ use super::program::Program;
 use pkmc::protocol::Status;
 use serde_json::{json, Value};
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use tokio::sync::{broadcast, mpsc};
@@ -49,6 +49,9 @@ pub struct Hub {
     last_program: Mutex<Option<Arc<str>>>,
     /// The `hello` message's `machine`.
     pub machine: Value,
+    /// A page's E-STOP raised the alarm in force (the controller calls it an
+    /// immediate stop, `Aborted`; the pages say e-stop). Cleared with the alarm.
+    pub estop: AtomicBool,
 }
 
 /// Locks a mutex, whatever a panicking holder left.
@@ -63,6 +66,7 @@ impl Hub {
             pages: Mutex::new(HashMap::new()),
             lock: Mutex::new(None),
             next_id: AtomicU64::new(1),
+            estop: AtomicBool::new(false),
             program: Mutex::new(Program::default()),
             teach: Mutex::new(Teach {
                 points: Vec::new(),

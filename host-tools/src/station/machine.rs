@@ -62,6 +62,8 @@ pub(super) struct Machine<'a> {
     pub(super) mdi: Mdi<'a>,
     /// The tool table (for the teach list's programs).
     pub(super) tools: crate::gcode::ToolTable,
+    /// The kind of the last job run (for its end's message).
+    pub(super) last_job: &'static str,
 }
 
 /// The MDI's line-by-line front end.
@@ -108,6 +110,33 @@ impl Mdi<'_> {
     }
 }
 
+/// An alarm as the pages word it: its title (the core's wording of the cause; an
+/// e-stop says e-stop) and what the operator does next.
+fn alarm_words(a: &pkmc::protocol::Alarm, estop: bool) -> (String, &'static str) {
+    use pkmc::protocol::AlarmCause as C;
+    if estop {
+        let next = if a.cause == C::EStop {
+            "Release the e-stop button, then Reset."
+        } else {
+            "Motion was cut at once. Reset clears the e-stop; then Home if the machine asks."
+        };
+        return ("E-STOP".into(), next);
+    }
+    let next = match a.cause {
+        C::Unhomed => "Home the machine, or Reset to unlock it where it stands.",
+        C::HomingFailed => "Check the home switches, then Home again (Reset unlocks).",
+        C::LimitSwitch => "Reset, then jog off the switch.",
+        C::DriveFault | C::FollowingError => "Check the drive and the load, then Reset.",
+        C::LinkLoss | C::Watchdog => "Check the connection, then Reset.",
+        C::Unreachable | C::JointLimit | C::Singularity | C::JointSpeed => {
+            "Reset, then fix the program or the move (the line is shown)."
+        }
+        C::MachineMismatch => "The controller runs another machine: load this one.",
+        _ => "Reset to clear the alarm.",
+    };
+    (format!("Alarm: {}", a.cause), next)
+}
+
 /// The status message: the controller's status in user units, the job, the lock and
 /// the mechanism.
 fn status_message(machine: &MachineConfig, hub: &Hub, s: &Status, job: Option<&JobInfo>) -> Value {
@@ -129,9 +158,18 @@ fn status_message(machine: &MachineConfig, hub: &Hub, s: &Status, job: Option<&J
                 .unwrap_or("?")
                 .to_string()
         });
+        let estop = s.state == pkmc::protocol::State::EStop
+            || a.cause == pkmc::protocol::AlarmCause::EStop
+            || (a.cause == pkmc::protocol::AlarmCause::Aborted
+                && hub.estop.load(std::sync::atomic::Ordering::Relaxed));
+        let (title, next) = alarm_words(&a, estop);
         json!({"cause": format!("{:?}", a.cause), "joint": joint, "line": a.line,
-               "text": job::describe_alarm(&a)})
+               "text": job::describe_alarm(&a), "words": a.to_string(), "estop": estop,
+               "title": title, "next": next})
     });
+    if s.alarm.is_none() {
+        hub.estop.store(false, std::sync::atomic::Ordering::Relaxed);
+    }
     let job = job.map(|j| {
         let eta = match j.kind {
             "program" => lock(&hub.program).eta_s(j.executed, s.feed_override),
@@ -239,7 +277,12 @@ impl Machine<'_> {
             Cmd::Hold => return self.control(link, Control::Hold),
             Cmd::Resume => return self.control(link, Control::Resume),
             Cmd::Stop => return self.control(link, Control::Abort),
-            Cmd::Estop => return self.control(link, Control::Stop),
+            Cmd::Estop => {
+                self.hub
+                    .estop
+                    .store(true, std::sync::atomic::Ordering::Relaxed);
+                return self.control(link, Control::Stop);
+            }
             Cmd::Reset => return self.control(link, Control::AlarmReset),
             Cmd::Override { percent } => {
                 return self.control(link, Control::FeedOverride(override_of(percent)?))
@@ -366,6 +409,7 @@ impl Machine<'_> {
         blocks: &[Block],
         info: &mut JobInfo,
     ) -> Result<JobEnd, Failure> {
+        self.last_job = info.kind;
         let mut hooks = Hooks { m: self, info };
         Ok(link.run_job(blocks, &mut hooks)?)
     }
@@ -376,13 +420,20 @@ impl Machine<'_> {
         cmd: Control,
         info: &mut JobInfo,
     ) -> Result<JobEnd, Failure> {
+        self.last_job = info.kind;
         let mut hooks = Hooks { m: self, info };
         job::move_and_wait(link, cmd, &mut hooks)
     }
 
+    /// What a job's end is worth saying: a program's end, an alarm, a stop. Jogs,
+    /// MDI lines and joint moves that end as asked say nothing (a quiet log).
     fn report_end(&self, end: &JobEnd) {
+        let kind = self.last_job;
         match end {
-            JobEnd::Done => self.hub.log("info", "done"),
+            JobEnd::Done if matches!(kind, "program" | "teach") => {
+                self.hub.log("info", &format!("{kind} done"))
+            }
+            JobEnd::Done => {}
             JobEnd::Alarm(a) => self
                 .hub
                 .log("error", &format!("alarm: {}", job::describe_alarm(a))),
@@ -512,7 +563,13 @@ impl Hooks<'_, '_> {
             Cmd::Hold => self.queue(Control::Hold),
             Cmd::Resume => self.queue(Control::Resume),
             Cmd::Stop => self.queue(Control::Abort),
-            Cmd::Estop => self.queue(Control::Stop),
+            Cmd::Estop => {
+                self.m
+                    .hub
+                    .estop
+                    .store(true, std::sync::atomic::Ordering::Relaxed);
+                self.queue(Control::Stop)
+            }
             Cmd::JogStop if self.info.kind == "jog_hold" => self.queue(Control::Abort),
             Cmd::JogStop => Ok("no continuous jog runs".into()),
             Cmd::Override { percent } => override_of(percent)

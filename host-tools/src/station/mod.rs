@@ -196,6 +196,7 @@ pub fn run(
             ..crate::gcode::Options::default()
         };
         let mut m = machine::Machine {
+            last_job: "",
             hub: &hub,
             machine,
             rx,

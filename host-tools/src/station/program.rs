@@ -157,6 +157,29 @@ impl Program {
         Some((total - at).max(0.0) * 100.0 / override_pct.max(1) as f64)
     }
 
+    /// The path through the blocks' end points (arcs as chords), from home:
+    /// x y z (workpiece mm), NC line, rapid.
+    fn block_path(&self) -> Vec<[f64; 5]> {
+        let mut out = Vec::new();
+        let mut step = 1;
+        let blocks = self.blocks();
+        if blocks.len() > PATH_POINTS {
+            step = blocks.len().div_ceil(PATH_POINTS);
+        }
+        for (i, b) in blocks.iter().enumerate() {
+            if matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
+                continue;
+            }
+            if i % step != 0 && i + 1 != blocks.len() {
+                continue;
+            }
+            let mm = |k: usize| round3(b.target[k] as f64 / 1e6);
+            let rapid = matches!(b.motion, Motion::Rapid) as u8 as f64;
+            out.push([mm(0), mm(1), mm(2), b.line as f64, rapid]);
+        }
+        out
+    }
+
     /// The `program` message.
     pub fn message(&self) -> Value {
         let errors: Vec<Value> = self
@@ -175,11 +198,16 @@ impl Program {
                     .collect::<Vec<_>>(),
             })
         });
-        let path: Vec<[f64; 5]> = self
+        let mut path: Vec<[f64; 5]> = self
             .check
             .as_ref()
             .map(|c| c.path.iter().map(|p| p.map(round3)).collect())
             .unwrap_or_default();
+        if path.is_empty() {
+            // No dry run (a pre-flight error stops it): the blocks' end points, so that
+            // the program is still drawn, its errors marked on it by the page.
+            path = self.block_path();
+        }
         json!({
             "type": "program",
             "name": self.name,
@@ -277,7 +305,10 @@ pub fn teach_points(
             continue;
         }
         if b.feed > 0 {
-            speed = Some(b.feed as f64 * 60.0 / 1e6);
+            // The feed is kept in nm/s: 2000 mm/min is 33 333 333 nm/s, which reads
+            // back as 1999.99998. To 0.001 mm/min, an F of up to three decimals
+            // comes back exactly (one nm/s is 0.00006 mm/min).
+            speed = Some((b.feed as f64 * 60.0 / 1e3).round() / 1e3);
         }
         points.push(std::array::from_fn(|k| {
             b.target[k] as f64 / pkmc::units::units_per_user(k >= 3) as f64

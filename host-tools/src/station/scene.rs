@@ -89,6 +89,12 @@ pub fn describe(machine: &MachineConfig, joint_names: &[String]) -> Value {
         .filter(|&i| machine.axes[i].max_velocity > 0)
         .map(|i| AXIS_NAMES[i].to_string())
         .collect();
+    // The joints at the machine's home pose: where the range bars say "home".
+    let kin = pkmc::kinematics::MachineKinematics::new(machine);
+    let mut q = [0i64; pkmc::config::MAX_JOINTS];
+    let at_home = kin
+        .inverse_checked(&machine.home, &machine.joints, &mut q)
+        .is_ok();
     let joints: Vec<Value> = machine
         .joints
         .iter()
@@ -100,6 +106,7 @@ pub fn describe(machine: &MachineConfig, joint_names: &[String]) -> Value {
                 "unit": unit,
                 "min": pkmc::units::to_user(jc.min, jc.rotary),
                 "max": pkmc::units::to_user(jc.max, jc.rotary),
+                "home": at_home.then(|| pkmc::units::to_user(q[j], jc.rotary)),
             })
         })
         .collect();

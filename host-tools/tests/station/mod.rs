@@ -1,3 +1,4 @@
+#![allow(dead_code)] // shared by several test binaries, each using a part
 //! Harness of the operator-station tests: the simulator and the station as child
 //! processes, chromedriver, and a page driven through WebDriver.
 
@@ -412,6 +413,44 @@ impl Page {
     /// Presses keys on the element (`\u{e014}` is the right arrow).
     pub async fn keys(&self, css: &str, keys: &str) {
         self.find(css).await.send_keys(keys).await.unwrap();
+    }
+
+    /// Sets the browser window so that the page's viewport is `w` × `h` CSS pixels
+    /// (checked against the page's own `innerWidth` and `innerHeight`).
+    pub async fn set_viewport(&self, w: u32, h: u32) {
+        self.client.set_window_size(w, h).await.unwrap();
+        let got = self.js("[window.innerWidth, window.innerHeight]").await;
+        let (iw, ih) = (got[0].as_i64().unwrap(), got[1].as_i64().unwrap());
+        if (iw, ih) != (w as i64, h as i64) {
+            let (dw, dh) = (w as i64 - iw, h as i64 - ih);
+            self.client
+                .set_window_size((w as i64 + dw) as u32, (h as i64 + dh) as u32)
+                .await
+                .unwrap();
+        }
+        let got = self.js("[window.innerWidth, window.innerHeight]").await;
+        assert_eq!(
+            (got[0].as_i64().unwrap(), got[1].as_i64().unwrap()),
+            (w as i64, h as i64),
+            "the viewport"
+        );
+    }
+
+    /// Presses `key` (a WebDriver key code, e.g. `\u{e014}` for the right arrow)
+    /// with the modifier keys `mods` held, on whatever has the focus.
+    pub async fn key_with(&self, mods: &[char], key: char) {
+        use fantoccini::actions::{KeyAction, KeyActions};
+        let mut a = KeyActions::new("keyboard".into());
+        for &m in mods {
+            a = a.then(KeyAction::Down { value: m });
+        }
+        a = a
+            .then(KeyAction::Down { value: key })
+            .then(KeyAction::Up { value: key });
+        for &m in mods.iter().rev() {
+            a = a.then(KeyAction::Up { value: m });
+        }
+        self.client.perform_actions(a).await.unwrap();
     }
 
     pub async fn screenshot(&self, to: &Path) {

@@ -50,7 +50,7 @@ const CLIENT_NAME = params.get('name') ||
 const pkmc = window.pkmc = {
   stats: { frames: [], status: [], draw: [], handle: [], longtasks: [], slow: [] },
   lastStatus: null, program: null, machine: null, teach: null,
-  you: null, lock: null, log: [],
+  you: null, lock: null, log: [], alarms: [], jogEnabled: true,
 };
 
 const conn = {
@@ -181,6 +181,7 @@ function onStatus(st) {
   updateMachineState(st);
   updateLock(st.lock);
   updateJob(st.job);
+  updateEnables();
   updateOverride(st.override);
   highlightLine(st);
   recordCut(st);
@@ -238,19 +239,28 @@ function buildJoints(joints) {
       meas: el('td', 'meas num', '0.000'), unit: el('td', 'unit', j.unit || ''),
       range: el('td', 'range'),
     };
+    if (j.home != null && j.max > j.min) {
+      const h = el('div', 'home');
+      h.style.left = (100 * (j.home - j.min) / (j.max - j.min)).toFixed(1) + '%';
+      bar.appendChild(h);
+    }
     cells.range.appendChild(bar);
     cells.range.title = `${j.min} … ${j.max} ${j.unit || ''}`;
     Object.values(cells).forEach((c) => tr.appendChild(c));
     body.appendChild(tr);
-    return { ...cells, bar, mark, min: j.min, max: j.max, pct: -1 };
+    return {
+      ...cells, bar, mark, min: j.min, max: j.max, home: j.home, pct: -1,
+      linear: j.unit === 'mm', unitName: j.unit || '',
+    };
   });
 }
 
 function updateDro(st) {
   const pose = st.pose || [];
-  dro.cells.forEach((c, i) => setText(c, fmt3(pose[i])));
+  dro.cells.forEach((c, i) => setText(c, i < 3 ? fmtLen(pose[i]) : fmt3(pose[i])));
   setText($('line'), String(st.line ?? 0));
-  setText($('feed'), typeof st.feed === 'number' ? st.feed.toFixed(0) : '—');
+  setText($('feed'), typeof st.feed === 'number'
+    ? (st.feed / lengthScale()).toFixed(units.inch ? 1 : 0) : '—');
   setText($('override-value'), `${st.override ?? 100}%`);
   setText($('buffered'), String(st.buffered_ms ?? 0));
   setText($('homed'), homedText(st.homed));
@@ -268,32 +278,83 @@ function updateJoints(st) {
   const cmd = st.joints || [];
   const meas = st.measured || [];
   dro.joints.forEach((j, i) => {
-    setText(j.cmd, fmt3(cmd[i]));
-    setText(j.meas, fmt3(meas[i]));
+    const f = j.linear ? fmtLen : fmt3;
+    setText(j.cmd, f(cmd[i]));
+    setText(j.meas, f(meas[i]));
     const span = j.max - j.min;
     if (!(span > 0) || typeof cmd[i] !== 'number') return;
     const pct = Math.min(100, Math.max(0, (100 * (cmd[i] - j.min)) / span));
     if (Math.abs(pct - j.pct) < 0.1) return;
     j.pct = pct;
     j.mark.style.left = pct.toFixed(1) + '%';
-    j.bar.classList.toggle('near', pct < 5 || pct > 95);
+    // Red near either end of the travel, except at the joint's home (a joint may home
+    // at an end of its travel: there it is where it should be, and says so).
+    const atHome = j.home != null && Math.abs(cmd[i] - j.home) <= 0.005 * span;
+    j.bar.classList.toggle('at-home', atHome);
+    j.bar.classList.toggle('near', !atHome && (pct < 5 || pct > 95));
+    j.range.title = `${j.min} … ${j.max} ${j.unitName}` +
+      (j.home != null ? `, home ${j.home}` : '') + (atHome ? ' (at home)' : '');
   });
 }
 
+/** The state as the badge words it: the core's words; an e-stop says E-STOP. */
+const STATE_WORDS = {
+  Idle: 'idle', Running: 'running', Hold: 'hold', Homing: 'homing', Alarm: 'alarm',
+  EStop: 'e-stop',
+};
+
 function updateMachineState(st) {
   const s = $('state');
-  setText(s, st.state || '—');
-  const cls = 'badge st-' + String(st.state || 'none').toLowerCase();
-  if (s.className !== cls) s.className = cls;
   const a = st.alarm;
+  const estop = st.state === 'EStop' || !!(a && a.estop);
+  setText(s, estop ? 'E-STOP' : (STATE_WORDS[st.state] || st.state || '—'));
+  const cls = 'badge st-' + (estop ? 'estop' : String(st.state || 'none').toLowerCase());
+  if (s.className !== cls) s.className = cls;
   let text = '';
   if (a) {
-    const parts = [a.cause];
-    if (a.joint != null) parts.push(a.joint);
-    parts.push(a.line != null ? `line ${a.line}: ${a.text}` : a.text);
-    text = parts.filter((p) => p != null && p !== '').join(' — ');
+    const where = [a.joint ? `joint ${a.joint}` : '', a.line ? `line ${a.line}` : '']
+      .filter(Boolean).join(', ');
+    text = `${a.title || a.cause}${where ? ' (' + where + ')' : ''}. ${a.next || ''}`;
   }
   setText($('alarm'), text);
+  const now = $('alarm-now');
+  now.classList.toggle('on', !!a);
+  if (!a) {
+    setText(now, 'No alarm.');
+    alarms.key = '';
+    return;
+  }
+  const key = `${a.title}|${a.joint}|${a.line}|${a.cause}`;
+  if (key === alarms.key) return;
+  alarms.key = key;
+  now.replaceChildren(el('span', '', text.split('. ')[0] + '.'), el('span', 'next', a.next || ''));
+  const li = el('li');
+  const t = el('time', '', new Date().toTimeString().slice(0, 8));
+  li.append(t, `${a.title || a.cause}${a.line ? ' at line ' + a.line : ''}${a.joint ? ', joint ' + a.joint : ''}`);
+  li.title = a.next || '';
+  $('alarm-history').prepend(li);
+  pkmc.alarms.push({ title: a.title, cause: a.cause, line: a.line, joint: a.joint, next: a.next });
+}
+
+const alarms = { key: '' };
+
+/** Run and Jog are offered only where the controller would take them: no alarm, no
+ *  e-stop, not homing; Run also needs a program without errors and no job. */
+function updateEnables() {
+  const st = pkmc.lastStatus || {};
+  const p = pkmc.program;
+  const locked = ['Alarm', 'EStop', 'Homing'].includes(st.state);
+  const bad = !p || (p.errors || []).length > 0;
+  const job = st.job;
+  const busy = !!job || ['Running', 'Hold'].includes(st.state);
+  const stepping = !!(job && job.step);
+  const set = (b, off) => { if (b.disabled !== off) b.disabled = off; };
+  set($('run'), bad || locked || busy);
+  set($('step'), bad || locked || (busy && !stepping));
+  const jogOff = locked || (!!job && !['jog', 'jog_hold', 'joint'].includes(job.kind));
+  document.querySelectorAll('#jog-buttons button, #joint-minus, #joint-plus, #mdi-send, #teach-run, #teach-step')
+    .forEach((b) => set(b, jogOff));
+  pkmc.jogEnabled = !jogOff;
 }
 
 function updateLock(lock) {
@@ -441,10 +502,8 @@ function onProgram(p) {
   gut.cur = 0;
   renderErrors(p);
   renderCheck(p.check);
-  const bad = (p.errors || []).length > 0;
-  $('run').disabled = bad;
-  $('step').disabled = bad;
-  view.setProgramPath(p.path || []);
+  updateEnables();
+  view.setProgramPath(p.path || [], (p.errors || []).map((e) => e.line));
 }
 
 function renderErrors(p) {
@@ -604,9 +663,18 @@ function initProgramPanel() {
 const jog = { active: false, button: null };
 const mdiHistory = { list: [], pos: 0 };
 
+/** The jog feed in mm/min (the field is in in/min while inches are shown). */
 function jogFeed() {
   const f = parseFloat($('jog-feed').value);
-  return f > 0 ? f : 600;
+  return (f > 0 ? f : 600) * lengthScale();
+}
+
+/** The jog step for `axis` in mm or degrees: the chosen step, in inches on X Y Z
+ *  while inches are shown, times `factor` (the keyboard's modifier). */
+function jogDistance(axis, factor = 1) {
+  const step = parseFloat($('jog-step').value) || 1;
+  const linear = ['X', 'Y', 'Z'].includes(axis);
+  return step * factor * (linear ? lengthScale() : 1);
 }
 
 function buildJogButtons(axes) {
@@ -628,8 +696,7 @@ function buildJogButtons(axes) {
 
 function jogStep(b) {
   if ($('jog-continuous').checked) return;
-  const step = parseFloat($('jog-step').value) || 1;
-  send('jog', { axis: b.dataset.axis, distance: Number(b.dataset.dir) * step, feed: jogFeed() });
+  send('jog', { axis: b.dataset.axis, distance: Number(b.dataset.dir) * jogDistance(b.dataset.axis), feed: jogFeed() });
 }
 
 function jogStart(b, e) {
@@ -859,15 +926,35 @@ function setBounds(b) {
 
 /** Centres the bounds box and scales it to fill the canvas. */
 function fitView() {
-  const { min, max } = view.bounds;
+  fitBox(view.bounds.min, view.bounds.max, null);
+}
+
+/** Centres the program's path (workpiece coordinates, placed by the scene's work
+ *  matrix) and scales it to fill the canvas. */
+function fitProgram() {
+  const b = view.progBox;
+  if (!b) { toast('no program path to fit'); return; }
+  // Room around a path that is a point or a line.
+  const pad = [0, 1, 2].map((k) => Math.max(1, 0.05 * (b.max[k] - b.min[k])));
+  fitBox(b.min.map((v, k) => v - pad[k]), b.max.map((v, k) => v + pad[k]),
+    view.scene && view.scene.work);
+  pkmc.fittedProgram = true;
+}
+
+/** Fits the box [min, max] (mapped by the row-major 3x4 matrix W, if any). */
+function fitBox(min, max, W) {
+  const map = (p) => (W && W.length >= 12 ? [0, 1, 2].map((r) =>
+    W[4 * r] * p[0] + W[4 * r + 1] * p[1] + W[4 * r + 2] * p[2] + W[4 * r + 3]) : p);
   let r0 = Infinity, r1 = -Infinity, u0 = Infinity, u1 = -Infinity;
+  const c0 = [Infinity, Infinity, Infinity], c1 = [-Infinity, -Infinity, -Infinity];
   for (let k = 0; k < 8; k++) {
-    const p = [k & 1 ? max[0] : min[0], k & 2 ? max[1] : min[1], k & 4 ? max[2] : min[2]];
+    const p = map([k & 1 ? max[0] : min[0], k & 2 ? max[1] : min[1], k & 4 ? max[2] : min[2]]);
     const pr = dot(p, view.r), pu = dot(p, view.u);
     r0 = Math.min(r0, pr); r1 = Math.max(r1, pr);
     u0 = Math.min(u0, pu); u1 = Math.max(u1, pu);
+    for (let i = 0; i < 3; i++) { c0[i] = Math.min(c0[i], p[i]); c1[i] = Math.max(c1[i], p[i]); }
   }
-  view.target = [0, 1, 2].map((i) => (min[i] + max[i]) / 2);
+  view.target = [0, 1, 2].map((i) => (c0[i] + c1[i]) / 2);
   const w = Math.max(view.w - 20, 50), h = Math.max(view.h - 80, 50); // room for the overlays
   view.scale = Math.min(w / Math.max(r1 - r0, 1e-3), h / Math.max(u1 - u0, 1e-3)) * 0.95;
   view.fitted = view.w > 0;
@@ -885,8 +972,18 @@ function setViewMode(mode) {
     : 'drag: pan · wheel: zoom');
 }
 
-/** Splits the program path into feed and rapid polylines (NaN = pen up), ≤20k points. */
-function setProgramPath(path) {
+/** Splits the program path into feed and rapid polylines (NaN = pen up), ≤20k points;
+ *  the points on lines with an error are kept apart, to be marked. */
+function setProgramPath(path, errLines = []) {
+  const bad = new Set(errLines);
+  const errs = [];
+  const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
+  for (const p of path) {
+    if (bad.has(p[3])) errs.push(p[0], p[1], p[2]);
+    for (let k = 0; k < 3; k++) { lo[k] = Math.min(lo[k], p[k]); hi[k] = Math.max(hi[k], p[k]); }
+  }
+  view.progErr = Float32Array.from(errs);
+  view.progBox = path.length ? { min: lo, max: hi } : null;
   const n = path.length;
   const stride = Math.max(1, Math.ceil(n / PATH_DRAW_MAX));
   const keep = (i) => i % stride === 0 || i === n - 1 ||
@@ -910,6 +1007,7 @@ function setProgramPath(path) {
   }
   view.progFeed = Float32Array.from(feed);
   view.progRapid = Float32Array.from(rapid);
+  pkmc.preview = { points: n, errors: errs.length / 3, box: view.progBox };
 }
 
 // ----- the cut path: the pose while a job runs, in workpiece coordinates
@@ -1065,6 +1163,19 @@ function drawPaths(ctx, M) {
     ctx.strokeStyle = 'rgba(45,212,191,0.85)';
     ctx.lineWidth = 1.2;
     ctx.stroke();
+  }
+  const e = view.progErr;
+  if (e && e.length) {
+    ctx.strokeStyle = '#ff4d4f';
+    ctx.lineWidth = 2;
+    for (let i = 0; i < e.length && i < 3 * 2000; i += 3) {
+      const sx = M[0] * e[i] + M[1] * e[i + 1] + M[2] * e[i + 2] + M[3];
+      const sy = M[4] * e[i] + M[5] * e[i + 1] + M[6] * e[i + 2] + M[7];
+      ctx.beginPath();
+      ctx.moveTo(sx - 5, sy - 5); ctx.lineTo(sx + 5, sy + 5);
+      ctx.moveTo(sx - 5, sy + 5); ctx.lineTo(sx + 5, sy - 5);
+      ctx.stroke();
+    }
   }
   if (cut.n > 1) {
     ctx.beginPath();
@@ -1248,10 +1359,76 @@ function initView() {
   c.addEventListener('dblclick', fitView);
   for (const m of Object.keys(VIEWS)) $('view-' + m).addEventListener('click', () => setViewMode(m));
   $('view-fit').addEventListener('click', fitView);
+  $('view-fit-prog').addEventListener('click', fitProgram);
   $('clear-path').addEventListener('click', clearCut);
   new ResizeObserver(resizeCanvas).observe($('view'));
   resizeCanvas();
   requestAnimationFrame(frame);
+}
+
+// ================================================= units and the keyboard jog
+
+const units = { inch: false };
+
+/** mm per shown length unit: 25.4 while inches are shown. */
+function lengthScale() {
+  return units.inch ? 25.4 : 1;
+}
+
+/** A length in mm, shown in the display's unit (3 decimals of mm, 4 of an inch). */
+function fmtLen(v) {
+  if (!units.inch) return fmt3(v);
+  if (typeof v !== 'number' || !Number.isFinite(v)) return '—';
+  const x = v / 25.4;
+  return Math.abs(x) < 0.00005 ? '0.0000' : x.toFixed(4);
+}
+
+/** Switches the lengths shown (DRO, joints in mm, feeds, jog step and feed) between
+ *  millimetres and inches. The controller is always spoken to in mm. */
+function setInch(inch) {
+  units.inch = inch;
+  const u = inch ? 'in' : 'mm';
+  document.querySelectorAll('#dro .dro-row').forEach((row) => {
+    if (['X', 'Y', 'Z'].includes(row.dataset.axis)) setText(row.querySelector('.unit'), u);
+  });
+  setText($('feed').nextElementSibling, `${u}/min`);
+  setText($('jog-feed').nextElementSibling, `${u}/min`);
+  dro.joints.forEach((j) => { if (j.linear) setText(j.unit, u); j.pct = -1; });
+  setText($('units'), inch ? 'mm' : 'in');
+  $('units').title = inch ? 'Show lengths in millimetres' : 'Show lengths in inches';
+  pkmc.units = u;
+  if (pkmc.lastStatus) { updateDro(pkmc.lastStatus); updateJoints(pkmc.lastStatus); }
+}
+
+/** The keyboard jog: arrows X and Y, Page Up and Page Down Z, by the chosen step;
+ *  Shift ten times it, Alt a tenth. Not while typing in a field. */
+const JOG_KEYS = {
+  ArrowLeft: ['X', -1], ArrowRight: ['X', 1], ArrowDown: ['Y', -1], ArrowUp: ['Y', 1],
+  PageDown: ['Z', -1], PageUp: ['Z', 1],
+};
+
+function onJogKey(e) {
+  const k = JOG_KEYS[e.key];
+  if (!k || e.ctrlKey || e.metaKey) return;
+  const t = e.target;
+  if (t && (t.isContentEditable || ['INPUT', 'TEXTAREA', 'SELECT'].includes(t.tagName))) return;
+  e.preventDefault();
+  if (e.repeat) return;
+  const axes = (pkmc.machine && pkmc.machine.axes) || AXES;
+  if (!axes.includes(k[0])) return;
+  if (!pkmc.jogEnabled) {
+    toast('jog: not now (the machine is in alarm, homing or running a job)');
+    return;
+  }
+  const factor = e.shiftKey ? 10 : e.altKey ? 0.1 : 1;
+  const distance = k[1] * jogDistance(k[0], factor);
+  pkmc.lastKeyJog = { axis: k[0], distance };
+  send('jog', { axis: k[0], distance, feed: jogFeed() });
+}
+
+function initAids() {
+  $('units').addEventListener('click', (e) => { e.stopPropagation(); setInch(!units.inch); });
+  document.addEventListener('keydown', onJogKey);
 }
 
 // ====================================================================== start-up
@@ -1272,6 +1449,7 @@ function init() {
   initProgramPanel();
   initJogPanel();
   initTeachPanel();
+  initAids();
   initView();
   connect();
 }
