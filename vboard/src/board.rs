@@ -34,6 +34,9 @@ const TIMERS: &[(&str, u32, Kind, Option<usize>)] = &[
     ("TIM20", 0x4001_5000, Kind::Advanced, Some(78)),
 ];
 
+/// The NVIC line of the flash interface's interrupt.
+const IRQ_FLASH: usize = 4;
+
 /// The servo-period timer whose update events step the plants.
 const PLANT_CLOCK: &str = "TIM7";
 
@@ -76,8 +79,8 @@ pub struct Stats {
     pub busy: Vec<(u16, bool)>,
     /// Idle time in the current period so far, units.
     pub idle_in_period: u64,
-    /// The busiest periods: (per mille, period index = ms since reset, code running at
-    /// its end).
+    /// The busiest periods while the host streamed: (per mille, period index = ms
+    /// since power-on, code running at its end).
     pub worst_busy: Vec<(u16, u64, u32)>,
     /// The worst servo-interrupt latencies: (latency, code running when it became due).
     pub worst_servo: Vec<(u64, u32)>,
@@ -156,6 +159,11 @@ pub struct Board {
     pub lowest_sp: u32,
     /// An enabled exception is pending but masked: blocks check the masks.
     pub masked_pending: bool,
+    /// Instructions per block start executed in the current 1 ms period
+    /// (VBOARD_PROFILE set), and those of the busiest period while streaming.
+    pub profile: Option<(u64, u64, std::collections::HashMap<u32, u64>)>,
+    /// See `profile`: (busy per mille, period, histogram).
+    pub worst_profile: Option<(u16, u64, std::collections::HashMap<u32, u64>)>,
 }
 
 impl MachineSide {
@@ -274,6 +282,9 @@ impl Board {
             streaming: false,
             lowest_sp: u32::MAX,
             masked_pending: false,
+            profile: std::env::var_os("VBOARD_PROFILE")
+                .map(|_| (0, u64::MAX, Default::default())),
+            worst_profile: None,
         };
         b.reset_peripherals(ResetCause::PowerOn);
         b
@@ -416,7 +427,7 @@ impl Board {
         if r.is_err() {
             self.unmodelled(format!("write of {size} bytes of {value:#x} at {addr:#010x}"));
         }
-        if self.scs.changed || self.usb.irq() || self.usb.armed {
+        if self.scs.changed || self.usb.irq() || self.usb.armed || self.flash.irq() {
             self.stop = true;
         }
     }
@@ -692,7 +703,16 @@ impl Board {
         let idle = self.stats.idle_in_period.min(period);
         let busy = ((period - idle) * 1000 / period) as u16;
         self.stats.busy.push((busy, self.streaming));
-        let k = self.stats.busy.len() as u64 - 1;
+        let k = (self.now / period).saturating_sub(1);
+        let hist = self.profile.as_mut().map(|p| std::mem::take(&mut p.2));
+        if !self.streaming {
+            return;
+        }
+        if let Some(h) = hist {
+            if self.worst_profile.as_ref().is_none_or(|w| busy > w.0) {
+                self.worst_profile = Some((busy, k, h));
+            }
+        }
         let w = &mut self.stats.worst_busy;
         if w.len() < 5 || busy > w[w.len() - 1].0 {
             w.push((busy, k, self.block_pc));
@@ -702,11 +722,14 @@ impl Board {
         self.stats.idle_in_period = 0;
     }
 
-    /// Pends USB_LP while its line is asserted and the handler is not running.
+    /// Pends the level-sensitive lines (USB_LP, FLASH) while they are asserted and
+    /// their handler is not running.
     pub fn usb_line(&mut self) {
-        let e = crate::nvic::IRQ0 + IRQ_USB_LP as u32;
-        if self.usb.irq() && !self.scs.active.contains(&e) {
-            self.scs.pend_irq(IRQ_USB_LP, self.now);
+        for (level, line) in [(self.usb.irq(), IRQ_USB_LP), (self.flash.irq(), IRQ_FLASH)] {
+            let e = crate::nvic::IRQ0 + line as u32;
+            if level && !self.scs.active.contains(&e) {
+                self.scs.pend_irq(line, self.now);
+            }
         }
     }
 }

@@ -12,6 +12,7 @@
 //! | `unplug` / `plug` | the USB cable |
 //! | `reset` | a pulse on NRST (the reset button) |
 //! | `hold MS` | the core executes nothing for MS ms (its instruction fetch stalled); the peripherals run on |
+//! | `mark` | start the figures afresh: busy periods, servo latencies, the worst of each |
 //! | `report` | print the JSON report now |
 //! | `quit` | stop, as Ctrl-C does |
 
@@ -99,6 +100,14 @@ pub fn apply(cmd: &str, core: &mut Core, host: &mut Host) -> Result<Outcome, Str
         "hold" => {
             let ms = index(w.next(), cmd, 100_000)?;
             core.held_until = now + time::from_ms(ms as u64);
+        }
+        "mark" => {
+            let st = &mut b.stats;
+            st.busy.clear();
+            st.worst_busy.clear();
+            st.servo_latency.clear();
+            st.worst_servo.clear();
+            b.worst_profile = None;
         }
         "report" => return Ok(Outcome::Report),
         "quit" => return Ok(Outcome::Quit),

@@ -398,6 +398,11 @@ impl<'a> Core<'a> {
                 // lifted it (CPSIE, MSR BASEPRI/PRIMASK).
                 let unmasked = uc.get_data().masked_pending && preempting(uc).is_some();
                 let b = uc.get_data_mut();
+                if let Some((from, to, hist)) = b.profile.as_mut() {
+                    if b.now >= *from && b.now < *to {
+                        *hist.entry(addr as u32).or_insert(0) += u64::from(n);
+                    }
+                }
                 b.block_pc = addr as u32;
                 b.instructions += u64::from(n);
                 b.now += u64::from(n) * b.cycle_units;

@@ -199,7 +199,7 @@ fn run(args: Args) -> Result<()> {
             for cmd in due {
                 eprintln!("vboard: {cmd} at {:.4} s", time::to_s(now));
                 match control::apply(&cmd, &mut core, &mut host) {
-                    Ok(control::Outcome::Report) => report(&core, started.elapsed()),
+                    Ok(control::Outcome::Report) => report(&core, started.elapsed(), host.packets),
                     Ok(control::Outcome::Quit) => stop.store(true, Ordering::SeqCst),
                     Ok(control::Outcome::Done) => {}
                     Err(e) => eprintln!("vboard: {cmd}: {e}"),
@@ -233,7 +233,21 @@ fn run(args: Args) -> Result<()> {
     for line in log.poll(&mut core.uc).unwrap_or_default() {
         eprintln!("{line}");
     }
-    report(&core, started.elapsed());
+    report(&core, started.elapsed(), host.packets);
+    if let Some((busy, k, hist)) = &core.uc.get_data().worst_profile {
+        eprintln!("profile: the busiest period while streaming, {k} ms: {:.1} %", f64::from(*busy) / 10.0);
+        let mut by_fn: std::collections::HashMap<String, u64> = Default::default();
+        for (pc, n) in hist {
+            let f = core.function_at(*pc);
+            let f = f.rsplit_once('+').map_or(f.clone(), |(a, _)| a.to_string());
+            *by_fn.entry(f).or_default() += n;
+        }
+        let mut v: Vec<_> = by_fn.into_iter().collect();
+        v.sort_by(|a, b| b.1.cmp(&a.1));
+        for (f, n) in v.iter().take(25) {
+            eprintln!("profile: {n:>8} {f}");
+        }
+    }
     if let Some(f) = &args.flash {
         std::fs::write(f, &core.uc.get_data().flash.config)?;
     }
@@ -252,7 +266,7 @@ fn quartiles(v: &mut [u64]) -> [u64; 4] {
 }
 
 /// Prints the run's figures as one JSON object on stdout.
-fn report(core: &Core, wall: Duration) {
+fn report(core: &Core, wall: Duration, packets: (u64, u64)) {
     let b = core.uc.get_data();
     let virt = time::to_s(b.now);
     let us = |u: u64| time::to_ns(u) as f64 / 1000.0;
@@ -287,6 +301,10 @@ fn report(core: &Core, wall: Duration) {
         .map(|(m, k, pc)| format!("[{:.1}, {k}, {:?}]", f64::from(*m) / 10.0, core.function_at(*pc)))
         .collect();
     let (depth, untouched) = core.stack_depth();
+    // What the configuration pages hold, decoded by the core's own record reader.
+    let flash_machine = pkmc::store::read_record(&b.flash.config)
+        .map(|m| format!("{:?}", m.name.as_str()))
+        .unwrap_or_else(|_| "null".into());
     let chain: Vec<String> = b
         .stats
         .min_sp
@@ -306,7 +324,7 @@ fn report(core: &Core, wall: Duration) {
          \"servo_latency_us\": {{\"min\": {:.3}, \"median\": {:.3}, \"p99\": {:.3}, \"max\": {:.3}, \"jitter\": {:.3}}}, \
          \"worst_servo_latency_us\": [{}], \
          \"stack\": {{\"top\": {}, \"deepest\": {depth}, \"untouched\": {untouched}, \"lowest_sp_chain\": [{}]}}, \
-         \"watchdog_resets\": {}, \"software_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}}}",
+         \"watchdog_resets\": {}, \"software_resets\": {}, \"pin_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}, \"flash_machine\": {flash_machine}, \"usb_packets_in_out\": [{}, {}]}}",
         wall.as_secs_f64(),
         virt / wall.as_secs_f64().max(1e-9),
         b.instructions,
@@ -328,7 +346,10 @@ fn report(core: &Core, wall: Duration) {
         chain.join(", "),
         b.stats.watchdog_resets,
         b.stats.software_resets,
+        b.stats.pin_resets,
         b.flash.erases,
         b.flash.programs,
+        packets.0,
+        packets.1,
     );
 }

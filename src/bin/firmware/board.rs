@@ -35,6 +35,7 @@
 //! | 1 | `UCPD1` (software) | interpolation tick, 1 kHz: step trains, switches, controller |
 //! | 2 | `USB_LP` | USB device |
 //! | 3 | `TIM6_DAC` | embassy time base |
+//! | 3 | `FLASH` | end of a flash erase or write: wakes the store task |
 //!
 //! Why a software-pended tick rather than a second timer: no timer is free in the
 //! default wiring, and pending the tick from the servo interrupt makes it run exactly
@@ -109,8 +110,21 @@ bind_interrupts!(
     /// Interrupts bound to embassy drivers.
     pub struct Irqs {
         USB_LP => usb::InterruptHandler<peripherals::USB>;
+        FLASH => embassy_stm32::flash::InterruptHandler;
     }
 );
+
+/// The flash driver: asynchronous, so that the store task sleeps through a page
+/// erase (about 22 ms each) instead of polling, and the link task runs meanwhile.
+pub type BoardFlash = embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Async>;
+
+/// Takes the flash with its end-of-operation interrupt, at the least urgent priority
+/// (it only wakes the store task).
+pub fn flash(p: Peri<'static, peripherals::FLASH>) -> BoardFlash {
+    let flash = embassy_stm32::flash::Flash::new(p, Irqs);
+    interrupt::FLASH.set_priority(Priority::P3);
+    flash
+}
 
 /// The USB driver type.
 pub type UsbDriver = Driver<'static, peripherals::USB>;
@@ -315,7 +329,7 @@ pub struct Board {
     /// The servo period (and with it the tick), ready to start.
     pub timer: ServoTimer,
     /// The flash, for the machine-configuration page ([`CONFIG_PAGE_OFFSET`]).
-    pub flash: embassy_stm32::flash::Flash<'static, embassy_stm32::flash::Blocking>,
+    pub flash: BoardFlash,
 }
 
 /// Offset (from the start of flash) of the page that keeps the machine configuration:

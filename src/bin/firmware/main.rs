@@ -71,11 +71,10 @@ mod firmware {
     use embassy_executor::Spawner;
     use embassy_futures::join::join;
     use embassy_futures::select::select;
-    use embassy_stm32::flash::{Blocking, Flash};
     use embassy_stm32::gpio::Output;
     use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
     use embassy_sync::signal::Signal;
-    use embassy_time::{Duration, Ticker, Timer};
+    use embassy_time::{Duration, Instant, Ticker, Timer};
     use embassy_usb::class::cdc_acm::{self, CdcAcmClass, Sender};
     use embassy_usb::driver::EndpointError;
     use embassy_usb::{Builder, UsbDevice};
@@ -187,7 +186,7 @@ mod firmware {
     /// it, once, into its static; it checks every machine loaded later against the
     /// wiring's channels ([`board::CHANNELS`]). After a watchdog reset it starts with
     /// the `Watchdog` alarm.
-    fn install_controller(flash: &mut Flash<'static, Blocking>, watchdog_reset: bool) {
+    fn install_controller(flash: &mut board::BoardFlash, watchdog_reset: bool) {
         let mut record = [0xFFu8; RECORD_BYTES];
         let stored = flash
             .blocking_read(board::CONFIG_PAGE_OFFSET, &mut record)
@@ -228,11 +227,14 @@ mod firmware {
     ///
     /// The pages are in flash bank 2 and the program runs from bank 1, so the erase
     /// (up to 40 ms) and the writes do not stall the servo loops or the tick
-    /// (read-while-write in dual-bank mode). The watchdog is refreshed right before the
-    /// erase all the same, so that even a stalling erase would have the whole watchdog
-    /// timeout ([`board::WATCHDOG_MS`]).
+    /// (read-while-write in dual-bank mode). The erase and the writes are awaited (the
+    /// flash's end-of-operation interrupt wakes the task), so the executor runs the
+    /// link task meanwhile: a blocking erase held every other task off for about 44 ms,
+    /// seen on the virtual board (docs/vboard.md). The watchdog is refreshed right
+    /// before the erase all the same, so that even a stalling erase would have the
+    /// whole watchdog timeout ([`board::WATCHDOG_MS`]).
     #[embassy_executor::task]
-    async fn store_task(mut flash: Flash<'static, Blocking>) {
+    async fn store_task(mut flash: board::BoardFlash) {
         let mut record = [0xFFu8; RECORD_BYTES];
         loop {
             Timer::after_millis(100).await;
@@ -251,9 +253,12 @@ mod firmware {
             let end = board::CONFIG_PAGE_OFFSET + board::CONFIG_PAGE_BYTES;
             let padded = n.div_ceil(8) * 8;
             board::feed_watchdog();
-            let written = flash
-                .blocking_erase(board::CONFIG_PAGE_OFFSET, end)
-                .and_then(|_| flash.blocking_write(board::CONFIG_PAGE_OFFSET, &record[..padded]));
+            let mut written = flash.erase(board::CONFIG_PAGE_OFFSET, end).await;
+            if written.is_ok() {
+                written = flash
+                    .write(board::CONFIG_PAGE_OFFSET, &record[..padded])
+                    .await;
+            }
             match written {
                 Ok(()) => info!("machine stored in flash ({} bytes)", n),
                 Err(_) => warn!("could not store the machine in flash"),
@@ -358,9 +363,11 @@ mod firmware {
             loop {
                 rx.wait_connection().await;
                 info!("link: USB configured");
+                let mut pacer = ReceivePacer::new();
                 while let Ok(n) = rx.read_packet(&mut buf).await {
                     with_controller(|c| c.receive(&buf[..n]));
                     received.signal(());
+                    pacer.taken().await;
                 }
                 info!("link: USB gone");
             }
@@ -375,6 +382,47 @@ mod firmware {
             }
         };
         join(receive, transmit).await;
+    }
+
+    /// Packets the link takes from the host in each millisecond before it waits for
+    /// the next one. A host filling the queue at connection sends as fast as USB
+    /// allows, and without a limit the firmware read, decoded and pre-planned blocks at
+    /// 97 % of the CPU for tens of milliseconds (the virtual board's busiest periods,
+    /// docs/vboard.md): the interrupts were never held up, but nothing was left for the
+    /// other tasks. Four packets (256 bytes, a dozen blocks or more) a millisecond
+    /// keep the busiest millisecond of a dense job at 44 % and its motion time
+    /// unchanged (two slowed it: the executor takes up to a block a tick).
+    const RECEIVE_PACKETS_PER_MS: u32 = 4;
+
+    /// Keeps the packets taken within [`RECEIVE_PACKETS_PER_MS`].
+    struct ReceivePacer {
+        window: Instant,
+        packets: u32,
+    }
+
+    impl ReceivePacer {
+        fn new() -> Self {
+            Self {
+                window: Instant::now(),
+                packets: 0,
+            }
+        }
+
+        /// Counts a packet; waits for the next millisecond once the allowance is
+        /// taken.
+        async fn taken(&mut self) {
+            let period = Duration::from_millis(1);
+            if Instant::now() >= self.window + period {
+                self.window = Instant::now();
+                self.packets = 0;
+            }
+            self.packets += 1;
+            if self.packets >= RECEIVE_PACKETS_PER_MS {
+                Timer::at(self.window + period).await;
+                self.window = Instant::now();
+                self.packets = 0;
+            }
+        }
     }
 
     /// Sends everything the controller has to say, in packets; a full last packet is

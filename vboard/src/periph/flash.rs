@@ -96,6 +96,13 @@ impl Flash {
         }
     }
 
+    /// Is the FLASH interrupt asserted: EOP with EOPIE, OPERR with ERRIE (RM0440,
+    /// "Flash interrupts")?
+    pub fn irq(&self) -> bool {
+        (self.sr & SR_EOP != 0 && self.cr & CR_EOPIE != 0)
+            || (self.sr & 2 != 0 && self.cr & (1 << 25) != 0)
+    }
+
     /// When the running operation ends.
     pub fn next_event(&self) -> Option<u64> {
         (self.sr & SR_BSY != 0).then_some(self.busy_until)

@@ -10,7 +10,6 @@
 //! ([`CHANNELS`]): a machine using one is refused. One pin is not typed by its
 //! function: PA9 (HRTIM1_CHA2, see [`super::HRTIM1_CHA2_AF`]).
 
-use embassy_stm32::flash::Flash;
 use embassy_stm32::gpio::{AnyPin, Flex, Level, Output, OutputType, Speed};
 use embassy_stm32::pac;
 use embassy_stm32::pac::dac::vals::Mode as DacMode;
@@ -195,7 +194,7 @@ pub fn init(p: Peripherals) -> Board {
     );
 
     Board {
-        flash: Flash::new_blocking(p.FLASH),
+        flash: super::flash(p.FLASH),
         usb,
         led: Output::new(p.PA5, Level::Low, Speed::Low),
         steppers,

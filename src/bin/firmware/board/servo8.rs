@@ -29,7 +29,6 @@
 //! constants below, checked against stm32-metapac 21.
 
 use embassy_stm32::comp::{self, Comp, Hysteresis, InvertingInput};
-use embassy_stm32::flash::Flash;
 use embassy_stm32::gpio::{AfType, Flex, Level, Output, Pull, Speed};
 use embassy_stm32::interrupt::{self, InterruptExt};
 use embassy_stm32::pac;
@@ -224,7 +223,7 @@ pub fn init(p: Peripherals) -> Board {
     let _ = p.PC5;
 
     Board {
-        flash: Flash::new_blocking(p.FLASH),
+        flash: super::flash(p.FLASH),
         usb,
         // LD2 (PA5) is a DAC output here: the heartbeat goes to an LED on PC4.
         led: Output::new(p.PC4, Level::Low, Speed::Low),

@@ -1,0 +1,309 @@
+#!/usr/bin/env python3
+"""Jobs on the virtual board (docs/vboard.md) against the simulator.
+
+    python3 .ci/vboard.py [--elf FIRMWARE] [--nc-send PATH] [--vboard PATH] [CASE ...]
+
+Each case starts `pkmc-vboard` (the firmware's release ELF on the virtual
+STM32G474RE) with a machine file, streams a program to it with `nc-send --port`,
+asks the board for its report (drive steps, encoder counts, timing figures), and runs
+the same program with `nc-send --sim`. It fails on:
+
+- a difference in blocks executed, alarms, final joints (the controller's own
+  figures), or a stepper's final drive steps;
+- a servo joint's final encoder count more than SERVO_SETTLE counts from the
+  simulator's (the simulator stops a servo axis's plant once it is within one count
+  of its target, the board's plants run on: docs/vboard.md, "Comparing with --sim");
+- any drive timing violation, any unmodelled access, hard fault or panic (the board
+  exits non-zero);
+- a broken budget: the worst 1 ms period over 60 % busy while streaming, less than
+  4 KiB of stack never touched, servo-interrupt start jitter over 2 µs.
+
+Cases: square (cartesian-xyz), dense (0.05 mm segments at F6000 on the H-4),
+estop (an e-stop through its pin during a job), unplug (the USB cable pulled during a
+job: link loss), persist (the machine survives a pin reset and a watchdog reset).
+"""
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SERVO_SETTLE = 2
+BUSY_BUDGET = 60.0
+STACK_BUDGET = 4096
+JITTER_BUDGET_US = 2.0
+
+
+def die(msg):
+    print(f"vboard: FAIL: {msg}", flush=True)
+    sys.exit(1)
+
+
+class Board:
+    """A running pkmc-vboard with its stdin as a command line."""
+
+    def __init__(self, vboard, elf, machine, tag):
+        self.err = open(os.path.join(tempfile.gettempdir(), f"vboard-{tag}.log"), "w+")
+        args = [vboard, "--elf", elf]
+        if machine:
+            args += ["--machine", machine]
+        self.p = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                  stderr=self.err, text=True, bufsize=1)
+        self.lines = []
+        self.cond = threading.Condition()
+        threading.Thread(target=self._read, daemon=True).start()
+        self.port = self._next_line(30)
+        if not self.port:
+            self.fail("no port printed")
+
+    def _read(self):
+        for line in self.p.stdout:
+            with self.cond:
+                self.lines.append(line.strip())
+                self.cond.notify_all()
+
+    def _next_line(self, timeout):
+        end = time.time() + timeout
+        with self.cond:
+            while not self.lines:
+                left = end - time.time()
+                if left <= 0 or self.p.poll() is not None and not self.lines:
+                    return None
+                self.cond.wait(min(left, 0.5))
+            return self.lines.pop(0)
+
+    def command(self, cmd):
+        self.p.stdin.write(cmd + "\n")
+        self.p.stdin.flush()
+
+    def report(self):
+        self.command("report")
+        line = self._next_line(60)
+        if line is None:
+            self.fail("no report")
+        return json.loads(line)
+
+    def log(self):
+        self.err.seek(0)
+        return self.err.read()
+
+    def fail(self, msg):
+        print(self.log()[-4000:])
+        self.close()
+        die(msg)
+
+    def close(self):
+        if self.p.poll() is None:
+            self.command("quit")
+            try:
+                self.p.wait(30)
+            except subprocess.TimeoutExpired:
+                self.p.kill()
+        return self.p.returncode
+
+
+def nc_send(nc, args, timeout=900):
+    r = subprocess.run([nc] + args, capture_output=True, text=True, timeout=timeout)
+    return r
+
+
+def job_json(r, what):
+    try:
+        return json.loads(r.stdout)
+    except json.JSONDecodeError:
+        die(f"{what}: no JSON report (exit {r.returncode}): {r.stderr[-2000:]}")
+
+
+def joint_kinds(machine):
+    """'stepper' or 'servo' per joint, from the machine file."""
+    kinds = []
+    text = open(machine).read()
+    for block in text.split("[[joints]]")[1:]:
+        kinds.append("servo" if 'drive = "servo"' in block else "stepper")
+    return kinds
+
+
+def compare(name, machine, program, sim, port_job, rep):
+    errors = []
+    for k in ("blocks_executed", "final_joints", "alarms", "result"):
+        if sim.get(k) != port_job.get(k):
+            errors.append(f"{k}: sim {sim.get(k)} board {port_job.get(k)}")
+    kinds = joint_kinds(machine) if machine else ["stepper"] * 3
+    steps_sim = sim.get("final_joint_steps") or []
+    steps_board = rep["final_joint_steps"]
+    for j, (a, b) in enumerate(zip(steps_sim, steps_board)):
+        tol = SERVO_SETTLE if kinds[j] == "servo" else 0
+        if abs(a - b) > tol:
+            errors.append(f"joint {j} ({kinds[j]}): sim {a} board {b}")
+    if (sim.get("drive_violations") or 0) != 0 or rep["drive_violations"] != 0:
+        errors.append(f"drive violations: sim {sim.get('drive_violations')} board {rep['drive_violations']}")
+    return errors
+
+
+def budgets(name, rep):
+    errors = []
+    busy = rep["busy_percent_streaming"]
+    if busy["periods"] and busy["max"] > BUSY_BUDGET:
+        errors.append(f"busiest 1 ms while streaming {busy['max']} % > {BUSY_BUDGET} %: {rep['busiest_periods_ms']}")
+    if rep["stack"]["untouched"] < STACK_BUDGET:
+        errors.append(f"stack never touched {rep['stack']['untouched']} B < {STACK_BUDGET} B")
+    if rep["servo_latency_us"]["jitter"] > JITTER_BUDGET_US:
+        errors.append(f"servo jitter {rep['servo_latency_us']['jitter']} µs > {JITTER_BUDGET_US} µs: "
+                      f"{rep['worst_servo_latency_us']}")
+    return errors
+
+
+def run_job(o, name, machine, program):
+    m = ["--machine", machine] if machine else []
+    sim = job_json(nc_send(o.nc, ["--sim", "--report", "json"] + m + [program]), f"{name} on --sim")
+    b = Board(o.vboard, o.elf, machine, name)
+    r = nc_send(o.nc, ["--port", b.port] + m + ["reset"])
+    if r.returncode != 0:
+        b.fail(f"{name}: reset: {r.stderr}")
+    b.command("mark")  # the figures are the job's: from here on
+    t0 = time.time()
+    job = job_json(nc_send(o.nc, ["--port", b.port, "--report", "json"] + m + [program]), f"{name} on the board")
+    wall = time.time() - t0
+    time.sleep(1.0)  # let the servo axes settle on the board as the simulator waits for them
+    rep = b.report()
+    if b.close() != 0:
+        print(b.log()[-4000:])
+        die(f"{name}: the board stopped with an error")
+    errors = compare(name, machine, program, sim, job, rep) + budgets(name, rep)
+    return sim, job, rep, wall, errors
+
+
+def dense_program(path):
+    """A 60 mm sine of 0.05 mm G1 segments at F6000 in the H-4's work space."""
+    lines = ["G21 G90 G94", "G0 X0 Y0 Z-80", "G1 F6000"]
+    n = 1200
+    for i in range(1, n + 1):
+        x = i * 0.05
+        y = 5.0 * math.sin(2 * math.pi * x / 20.0)
+        lines.append(f"X{x:.4f} Y{y:.4f}")
+    lines.append("M2")
+    open(path, "w").write("\n".join(lines) + "\n")
+
+
+def table_row(name, sim, job, rep, wall):
+    busy = rep["busy_percent_streaming"] if rep["busy_percent_streaming"]["periods"] else rep["busy_percent"]
+    lat = rep["servo_latency_us"]
+    rt = job.get("run_time_s") or 0
+    return (f"| {name} | {job.get('blocks_executed')} | {rt:.3f} | {busy['min']:.1f} / {busy['median']:.1f} / "
+            f"{busy['p99']:.1f} / {busy['max']:.1f} | {lat['min']:.2f} / {lat['median']:.2f} / {lat['p99']:.2f} / "
+            f"{lat['max']:.2f} | {rep['stack']['deepest']} / {rep['stack']['untouched']} | "
+            f"{(job.get('blocks_executed') or 0) / rt if rt else 0:.0f} | {rep['speed']:.2f} |")
+
+
+def case_estop(o):
+    """An e-stop pressed 1.5 s into the square job: the controller stops on the path
+    and reports EStop at the line it was on."""
+    b = Board(o.vboard, o.elf, None, "estop")
+    nc_send(o.nc, ["--port", b.port, "reset"])
+    def press():
+        time.sleep(2.5)
+        b.command("estop on")
+    threading.Thread(target=press, daemon=True).start()
+    r = nc_send(o.nc, ["--port", b.port, "--report", "json", os.path.join(ROOT, "examples/square.ngc")])
+    job = job_json(r, "estop job")
+    rep = b.report()
+    b.close()
+    causes = [a.get("cause") if isinstance(a, dict) else a for a in job.get("alarms") or []]
+    if r.returncode != 5 or "EStop" not in json.dumps(job.get("alarms")) and job.get("alarm_cause") != "EStop":
+        die(f"estop: exit {r.returncode}, alarms {job.get('alarms')}, cause {job.get('alarm_cause')}")
+    if rep["drive_violations"] != 0:
+        die(f"estop: {rep['drive_violations']} drive violations")
+    return f"e-stop through PA10: exit {r.returncode}, alarm {job.get('alarm_cause')} at line {job.get('alarm_line')}, {causes}"
+
+
+def case_unplug(o):
+    """The USB cable pulled 2 s into the square job: the controller raises link loss
+    and stops; plugged in again, `nc-send abort` clears the job."""
+    b = Board(o.vboard, o.elf, None, "unplug")
+    nc_send(o.nc, ["--port", b.port, "reset"])
+    def pull():
+        time.sleep(2.5)
+        b.command("unplug")
+        time.sleep(3.0)
+        b.command("plug")
+    threading.Thread(target=pull, daemon=True).start()
+    r = nc_send(o.nc, ["--port", b.port, "--report", "json", os.path.join(ROOT, "examples/square.ngc")])
+    time.sleep(4.0)
+    st = nc_send(o.nc, ["--port", b.port, "status"])
+    ab = nc_send(o.nc, ["--port", b.port, "abort"])
+    b.close()
+    if r.returncode == 0:
+        die(f"unplug: the job reported success: {r.stdout[-500:]}")
+    if "LinkLoss" not in st.stdout + st.stderr:
+        die(f"unplug: status after replug does not name the link loss: {st.stdout} {st.stderr}")
+    return f"unplug: job exit {r.returncode}; after replug: {st.stdout.strip().splitlines()[-1]}; abort exit {ab.returncode}"
+
+
+def case_persist(o):
+    """The machine loaded by nc-send survives a reset by NRST and one by the watchdog."""
+    machine = os.path.join(ROOT, "examples/machines/h4-table.toml")
+    b = Board(o.vboard, o.elf, machine, "persist")
+    nc_send(o.nc, ["--port", b.port, "--machine", machine, "reset"])
+    time.sleep(1.0)
+    b.command("reset")
+    time.sleep(2.0)
+    b.command("hold 100")
+    time.sleep(2.0)
+    rep = b.report()
+    log = b.log()
+    b.close()
+    if log.count("machine from flash: h4-table") < 2:
+        die(f"persist: the machine was not read back after both resets:\n{log[-3000:]}")
+    if rep["watchdog_resets"] != 1 or rep.get("flash_machine") != "h4-table":
+        die(f"persist: watchdog resets {rep['watchdog_resets']}, flash holds {rep.get('flash_machine')}")
+    return "persist: h4-table read back after an NRST reset and a watchdog reset; flash pages decode to h4-table"
+
+
+def main():
+    import argparse
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--elf", default=os.path.join(ROOT, "target/thumbv7em-none-eabihf/release/firmware"))
+    ap.add_argument("--nc-send", dest="nc", default=os.path.join(ROOT, "target/debug/nc-send"))
+    ap.add_argument("--vboard", default=os.path.join(ROOT, "vboard/target/release/pkmc-vboard"))
+    ap.add_argument("cases", nargs="*", default=["square", "dense", "estop", "unplug", "persist"])
+    o = ap.parse_args()
+    rows, notes, failed = [], [], []
+    tmp = tempfile.mkdtemp()
+    for case in o.cases:
+        t = time.time()
+        if case in ("square", "dense"):
+            if case == "square":
+                machine, program = None, os.path.join(ROOT, "examples/square.ngc")
+            else:
+                machine = os.path.join(ROOT, "examples/machines/h4-table.toml")
+                program = os.path.join(tmp, "dense-sine.ngc")
+                dense_program(program)
+            sim, job, rep, wall, errors = run_job(o, case, machine, program)
+            rows.append(table_row(case, sim, job, rep, wall))
+            print(f"vboard: {case}: {wall:.1f} s wall, board {json.dumps(rep['final_joint_steps'])}, "
+                  f"sim {json.dumps(sim.get('final_joint_steps'))}", flush=True)
+            if errors:
+                failed += [f"{case}: {e}" for e in errors]
+        else:
+            notes.append({"estop": case_estop, "unplug": case_unplug, "persist": case_persist}[case](o))
+        print(f"vboard: {case} done in {time.time() - t:.1f} s", flush=True)
+    print("\n| job | blocks | motion s | busy % per 1 ms (min / median / p99 / max) | servo start µs "
+          "(min / median / p99 / max) | stack deepest / untouched B | blocks/s | speed × real time |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(r)
+    for n in notes:
+        print(f"- {n}")
+    if failed:
+        for f in failed:
+            print(f"vboard: FAIL: {f}")
+        sys.exit(1)
+    print(f"{len(o.cases)} passed, 0 failed")
+
+
+if __name__ == "__main__":
+    main()
