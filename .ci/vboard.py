@@ -220,6 +220,44 @@ def case_estop(o):
     return f"e-stop through PA10: exit {r.returncode}, alarm {job.get('alarm_cause')} at line {job.get('alarm_line')}, {causes}"
 
 
+def pin_fault(o, name, machine, program, command, cause):
+    """`command` on the board's pins 2.5 s into a job: the controller names `cause`
+    and stops; the drives end where the controller believes its joints are."""
+    m = ["--machine", machine] if machine else []
+    b = Board(o.vboard, o.elf, machine, name)
+    nc_send(o.nc, ["--port", b.port] + m + ["reset"])
+    def act():
+        time.sleep(2.5)
+        b.command(command)
+    threading.Thread(target=act, daemon=True).start()
+    r = nc_send(o.nc, ["--port", b.port, "--report", "json"] + m + [program])
+    job = job_json(r, f"{name} job")
+    time.sleep(1.0)
+    st = nc_send(o.nc, ["--port", b.port, "--report", "json"] + m + ["status"])
+    rep = b.report()
+    b.close()
+    if r.returncode != 5 or job.get("alarm_cause") != cause:
+        die(f"{name}: exit {r.returncode}, alarm {job.get('alarm_cause')}, expected {cause}: {job.get('alarms')}")
+    if rep["drive_violations"] != 0:
+        die(f"{name}: {rep['drive_violations']} drive violations")
+    return (f"{name} (`{command}`): exit {r.returncode}, alarm {cause} at line {job.get('alarm_line')}, "
+            f"joint {job.get('alarm_joint')}; drives {rep['final_joint_steps']}")
+
+
+def case_limit(o):
+    return pin_fault(o, "limit", None, os.path.join(ROOT, "examples/square.ngc"), "limit 0 on", "LimitSwitch")
+
+
+def case_ampfault(o):
+    return pin_fault(o, "ampfault", os.path.join(ROOT, "examples/machines/h4-table.toml"),
+                     os.path.join(ROOT, "examples/h4-table-tilt.ngc"), "fault 0 on", "DriveFault")
+
+
+def case_jam(o):
+    return pin_fault(o, "jam", os.path.join(ROOT, "examples/machines/h4-table.toml"),
+                     os.path.join(ROOT, "examples/h4-table-tilt.ngc"), "jam 1", "FollowingError")
+
+
 def case_unplug(o):
     """The USB cable pulled 2 s into the square job: the controller raises link loss
     and stops; plugged in again, `nc-send abort` clears the job."""
@@ -269,7 +307,8 @@ def main():
     ap.add_argument("--elf", default=os.path.join(ROOT, "target/thumbv7em-none-eabihf/release/firmware"))
     ap.add_argument("--nc-send", dest="nc", default=os.path.join(ROOT, "target/debug/nc-send"))
     ap.add_argument("--vboard", default=os.path.join(ROOT, "vboard/target/release/pkmc-vboard"))
-    ap.add_argument("cases", nargs="*", default=["square", "dense", "estop", "unplug", "persist"])
+    ap.add_argument("cases", nargs="*", default=["square", "dense", "estop", "limit", "ampfault", "jam",
+                                                 "unplug", "persist"])
     o = ap.parse_args()
     rows, notes, failed = [], [], []
     tmp = tempfile.mkdtemp()
@@ -289,7 +328,8 @@ def main():
             if errors:
                 failed += [f"{case}: {e}" for e in errors]
         else:
-            notes.append({"estop": case_estop, "unplug": case_unplug, "persist": case_persist}[case](o))
+            notes.append({"estop": case_estop, "unplug": case_unplug, "persist": case_persist,
+                          "limit": case_limit, "ampfault": case_ampfault, "jam": case_jam}[case](o))
         print(f"vboard: {case} done in {time.time() - t:.1f} s", flush=True)
     print("\n| job | blocks | motion s | busy % per 1 ms (min / median / p99 / max) | servo start µs "
           "(min / median / p99 / max) | stack deepest / untouched B | blocks/s | speed × real time |")
