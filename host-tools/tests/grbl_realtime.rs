@@ -210,7 +210,27 @@ fn jogs_queue_each_answered_at_once_and_g_code_is_locked_out_meanwhile() {
     );
     let g = command_within(&mut c, "G0 X5", Duration::from_millis(300));
     assert_eq!(g.last().unwrap(), "error:9", "{g:?}");
-    let (s, _) = poll_until(&mut c, "Idle", Duration::from_secs(10));
+    // The three run as one: no slowing down where one jog meets the next.
+    let end = Instant::now() + Duration::from_secs(10);
+    let mut speeds = Vec::new();
+    let s = loop {
+        let s = c.status_within(STATUS_LIMIT);
+        let y = field(&s, "MPos")[1] - y0;
+        if y > 0.5 && y < 11.5 {
+            speeds.push(field(&s, "FS")[0]);
+        }
+        if s.starts_with("<Idle|") {
+            break s;
+        }
+        assert!(Instant::now() < end, "the jogs did not end: {s}");
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    let slowest = speeds.iter().cloned().fold(f64::INFINITY, f64::min);
+    println!(
+        "{} reports between 0.5 and 11.5 mm, slowest {slowest} mm/min",
+        speeds.len()
+    );
+    assert!(speeds.len() >= 20 && slowest >= 570.0, "{speeds:?}");
     assert!((field(&s, "MPos")[1] - (y0 + 12.0)).abs() < 1e-3, "{s}");
     println!("three queued jogs answered in {answered:?}");
     bridge.stop();
@@ -468,5 +488,33 @@ fn unlock_is_refused_while_the_e_stop_is_latched() {
     );
     assert_eq!(c.command("$J=G91 X1 F100").last().unwrap(), "error:8");
     assert_eq!(c.command("G0 X1").last().unwrap(), "error:9");
+    bridge.stop();
+}
+
+#[test]
+fn homing_answers_status_and_a_reset_cancels_it_with_alarm_6() {
+    let bridge = Bridge::start(&["--machine", "examples/machines/h4-table.toml"]);
+    let mut c = Client::pty(&bridge.pty);
+    c.send(b"$H\n");
+    let (s, _) = poll_until(&mut c, "Home", Duration::from_secs(2));
+    for _ in 0..5 {
+        let s = c.status_within(STATUS_LIMIT);
+        assert!(s.starts_with("<Home|"), "{s}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    c.send(&[0x18]);
+    let alarm = c.line_until(|l| l.starts_with("ALARM:"), Duration::from_secs(3));
+    assert_eq!(
+        alarm, "ALARM:6",
+        "a reset during homing, as Grbl numbers it; {s}"
+    );
+    c.line_until(|l| l.starts_with("Grbl 1.1h"), Duration::from_secs(3));
+    let (s, _) = poll_until(&mut c, "Alarm", Duration::from_secs(3));
+    assert!(
+        c.line(Duration::from_millis(300))
+            .is_none_or(|l| !l.starts_with("ALARM:")),
+        "the alarm is said once: {s}"
+    );
+    println!("status waits: {}", c.wait_figures());
     bridge.stop();
 }

@@ -192,6 +192,7 @@ fn home<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(), Fail
         // The line gets no answer: the reset drops it, as on Grbl.
         let s = link.request_status()?;
         b.session.set_position(s.pose);
+        b.alarm_told = s.alarm;
         b.status = Some(s);
         b.say("ALARM:6");
         b.say("[MSG:Homing was cancelled by a reset: '$H' homes again]");
@@ -261,7 +262,7 @@ pub(super) fn jog_block(
         motion: Motion::Linear,
         target,
         feed,
-        tolerance_nm: 0,
+        tolerance_nm: JOG_BLEND_NM,
     };
     let report = crate::analysis::preflight::check(&[block], b.machine, *from);
     if let Some(f) = report.findings.first() {
@@ -273,6 +274,11 @@ pub(super) fn jog_block(
     }
     Ok(block)
 }
+
+/// A queued jog blends into the next within 10 µm of its end (Grbl's default
+/// junction deviation, `$11=0.010`, is of the same size), so that a sender's run of
+/// short jogs one way does not stop between them.
+const JOG_BLEND_NM: u32 = 10_000;
 
 type Jog = ([i64; AXES], i64);
 
