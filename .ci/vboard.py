@@ -46,9 +46,9 @@ def die(msg):
 class Board:
     """A running pkmc-vboard with its stdin as a command line."""
 
-    def __init__(self, vboard, elf, machine, tag):
+    def __init__(self, vboard, elf, machine, tag, extra=()):
         self.err = open(os.path.join(tempfile.gettempdir(), f"vboard-{tag}.log"), "w+")
-        args = [vboard, "--elf", elf]
+        args = [vboard, "--elf", elf] + list(extra)
         if machine:
             args += ["--machine", machine]
         self.p = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
@@ -127,6 +127,61 @@ def joint_kinds(machine):
     return kinds
 
 
+def read_trace(path):
+    rows = []
+    with open(path) as f:
+        next(f)
+        for line in f:
+            v = line.strip().split(",")
+            rows.append([float(x) for x in v])
+    return rows
+
+
+def aligned_servo_check(kinds, sim, sim_trace, board_trace):
+    """The servo joints' encoder counts on the board at the instant the simulator
+    stopped, the two runs aligned at their first encoder count change: the simulator
+    stops once every servo axis is within a count of its target, the board's plants
+    run on (docs/vboard.md). Returns (errors, note)."""
+    servos = [j for j, k in enumerate(kinds) if k == "servo"]
+    steps = sim.get("final_joint_steps") or []
+    srows = read_trace(sim_trace)
+    n = len(kinds)
+    fb0 = len(srows[0]) - n  # fb1..fbN are the last N columns
+    scale = []
+    for j in range(n):
+        last = srows[-1][fb0 + j]
+        scale.append(steps[j] / last if last else 1.0)
+    sim_counts = [[round(r[fb0 + j] * scale[j]) for j in range(n)] for r in srows]
+    brows = read_trace(board_trace)
+    board_counts = [[int(x) for x in r[1:]] for r in brows]
+
+    def first_move(rows):
+        for i, r in enumerate(rows):
+            if any(r[j] != rows[0][j] for j in servos):
+                return i
+        return None
+    si, bi = first_move(sim_counts), first_move(board_counts)
+    if si is None or bi is None:
+        return [f"no servo motion found (sim {si}, board {bi})"], ""
+    k = bi + (len(sim_counts) - 1 - si)
+    if k >= len(board_counts):
+        return [f"the board's trace ends before the simulator's end ({k} ≥ {len(board_counts)})"], ""
+    errors = []
+    # The runs agree from the first motion to the simulator's end, row by row.
+    worst = 0
+    for off in range(len(sim_counts) - si):
+        a, b = sim_counts[si + off], board_counts[bi + off]
+        for j in servos:
+            worst = max(worst, abs(a[j] - b[j]))
+    for j in servos:
+        if sim_counts[-1][j] != board_counts[k][j]:
+            errors.append(f"joint {j} at the simulator's end: sim {sim_counts[-1][j]} board {board_counts[k][j]}")
+    note = (f"servo joints aligned at the first count change: largest difference over "
+            f"{len(sim_counts) - si} ms {worst} counts; at the simulator's end board "
+            f"{[board_counts[k][j] for j in servos]} = sim {[sim_counts[-1][j] for j in servos]}")
+    return errors, note
+
+
 def compare(name, machine, program, sim, port_job, rep):
     errors = []
     for k in ("blocks_executed", "final_joints", "alarms", "result"):
@@ -136,8 +191,7 @@ def compare(name, machine, program, sim, port_job, rep):
     steps_sim = sim.get("final_joint_steps") or []
     steps_board = rep["final_joint_steps"]
     for j, (a, b) in enumerate(zip(steps_sim, steps_board)):
-        tol = SERVO_SETTLE if kinds[j] == "servo" else 0
-        if abs(a - b) > tol:
+        if kinds[j] != "servo" and a != b:
             errors.append(f"joint {j} ({kinds[j]}): sim {a} board {b}")
     if (sim.get("drive_violations") or 0) != 0 or rep["drive_violations"] != 0:
         errors.append(f"drive violations: sim {sim.get('drive_violations')} board {rep['drive_violations']}")
@@ -159,8 +213,12 @@ def budgets(name, rep):
 
 def run_job(o, name, machine, program):
     m = ["--machine", machine] if machine else []
-    sim = job_json(nc_send(o.nc, ["--sim", "--report", "json"] + m + [program]), f"{name} on --sim")
-    b = Board(o.vboard, o.elf, machine, name)
+    tmp = tempfile.gettempdir()
+    sim_trace = os.path.join(tmp, f"vboard-{name}-sim.csv")
+    board_trace = os.path.join(tmp, f"vboard-{name}-board.csv")
+    sim = job_json(nc_send(o.nc, ["--sim", "--report", "json", "--trace", sim_trace] + m + [program]),
+                   f"{name} on --sim")
+    b = Board(o.vboard, o.elf, machine, name, ["--trace", board_trace])
     r = nc_send(o.nc, ["--port", b.port] + m + ["reset"])
     if r.returncode != 0:
         b.fail(f"{name}: reset: {r.stderr}")
@@ -174,7 +232,31 @@ def run_job(o, name, machine, program):
         print(b.log()[-4000:])
         die(f"{name}: the board stopped with an error")
     errors = compare(name, machine, program, sim, job, rep) + budgets(name, rep)
-    return sim, job, rep, wall, errors
+    kinds = joint_kinds(machine) if machine else ["stepper"] * 3
+    note = ""
+    if "servo" in kinds:
+        e, note = aligned_servo_check(kinds, sim, sim_trace, board_trace)
+        if sim.get("run_time_s") == job.get("run_time_s"):
+            errors += e
+        else:
+            # The controller's motion itself differed (blocks arrived at other ticks:
+            # a queue the link could not keep full): only the settle tolerance holds.
+            note += (f"; motion time sim {sim.get('run_time_s')} s, board {job.get('run_time_s')} s: "
+                     f"compared within the settle tolerance of {SERVO_SETTLE} counts")
+            for j, k in enumerate(kinds):
+                a, b = (sim.get("final_joint_steps") or [])[j], rep["final_joint_steps"][j]
+                if k == "servo" and abs(a - b) > SERVO_SETTLE:
+                    errors.append(f"joint {j} (servo): sim {a} board {b}")
+    return sim, job, rep, wall, errors, note
+
+
+# Jobs: machine file (None: the built-in cartesian-xyz) and program.
+JOBS = {
+    "square": (None, "examples/square.ngc"),
+    "h4": ("examples/machines/h4-table.toml", "examples/h4-table-tilt.ngc"),
+    "hexapod": ("examples/machines/hexapod.toml", "examples/hexapod-orbit.ngc"),
+    "chips": ("examples/machines/h4-table.toml", "../shared/corpus/linuxcnc/3D_Chips.ngc"),
+}
 
 
 def dense_program(path):
@@ -314,15 +396,19 @@ def main():
     tmp = tempfile.mkdtemp()
     for case in o.cases:
         t = time.time()
-        if case in ("square", "dense"):
-            if case == "square":
-                machine, program = None, os.path.join(ROOT, "examples/square.ngc")
+        if case in JOBS or case == "dense":
+            if case in JOBS:
+                machine, program = JOBS[case]
+                machine = machine and os.path.join(ROOT, machine)
+                program = os.path.join(ROOT, program)
             else:
                 machine = os.path.join(ROOT, "examples/machines/h4-table.toml")
                 program = os.path.join(tmp, "dense-sine.ngc")
                 dense_program(program)
-            sim, job, rep, wall, errors = run_job(o, case, machine, program)
+            sim, job, rep, wall, errors, note = run_job(o, case, machine, program)
             rows.append(table_row(case, sim, job, rep, wall))
+            if note:
+                notes.append(f"{case}: {note}")
             print(f"vboard: {case}: {wall:.1f} s wall, board {json.dumps(rep['final_joint_steps'])}, "
                   f"sim {json.dumps(sim.get('final_joint_steps'))}", flush=True)
             if errors:

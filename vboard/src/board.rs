@@ -162,6 +162,10 @@ pub struct Board {
     /// Instructions per block start executed in the current 1 ms period
     /// (VBOARD_PROFILE set), and those of the busiest period while streaming.
     pub profile: Option<(u64, u64, std::collections::HashMap<u32, u64>)>,
+    /// When tracing: the drive positions the servo interrupt of each tick edge reads
+    /// (the simulator's trace rows hold what its edge period reads), with the time that
+    /// interrupt pends the tick.
+    pub trace_rows: Option<Vec<(u64, Vec<i64>)>>,
     /// See `profile`: (busy per mille, period, histogram).
     pub worst_profile: Option<(u16, u64, std::collections::HashMap<u32, u64>)>,
 }
@@ -285,6 +289,7 @@ impl Board {
             profile: std::env::var_os("VBOARD_PROFILE")
                 .map(|_| (0, u64::MAX, Default::default())),
             worst_profile: None,
+            trace_rows: None,
         };
         b.reset_peripherals(ResetCause::PowerOn);
         b
@@ -426,6 +431,15 @@ impl Board {
         };
         if r.is_err() {
             self.unmodelled(format!("write of {size} bytes of {value:#x} at {addr:#010x}"));
+        }
+        // The tick (UCPD1's line, pended by the servo interrupt) marks a trace row.
+        let tick = crate::nvic::IRQ0 as usize + 63;
+        if addr & !3 == 0xE000_E200 + 4 && value & (1 << (63 - 32)) != 0 {
+            let row = self.machine.joint_steps();
+            if let Some(rows) = self.trace_rows.as_mut() {
+                rows.push((now, row));
+            }
+            let _ = tick;
         }
         if self.scs.changed || self.usb.irq() || self.usb.armed || self.flash.irq() {
             self.stop = true;

@@ -34,12 +34,14 @@ struct Args {
     flash: Option<PathBuf>,
     free_run: bool,
     quiet_log: bool,
+    trace: Option<PathBuf>,
 }
 
 fn usage() -> ! {
     eprintln!(
         "usage: pkmc-vboard [--elf FIRMWARE.elf] [--machine FILE.toml] [--link PATH]\n\
          \x20                  [--flash FILE] [--seconds S] [--free-run] [--quiet-log]\n\
+         \x20                  [--trace FILE.csv]\n\
          Runs the firmware ELF on a virtual STM32G474RE board and prints the\n\
          pseudo-terminal of its USB link (docs/vboard.md)."
     );
@@ -55,6 +57,7 @@ fn parse_args() -> Args {
         flash: None,
         free_run: false,
         quiet_log: false,
+        trace: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -69,6 +72,7 @@ fn parse_args() -> Args {
             "--flash" => a.flash = Some(value().into()),
             "--free-run" => a.free_run = true,
             "--quiet-log" => a.quiet_log = true,
+            "--trace" => a.trace = Some(value().into()),
             _ => usage(),
         }
     }
@@ -154,6 +158,23 @@ fn run(args: Args) -> Result<()> {
     let mut next_ms = 0u64;
     let mut last_out: Option<u64> = None;
     let mut buf = [0u8; 4096];
+    // One row per ten servo periods (a millisecond; the rows are the plants' steps at
+    // the servo timer's update events): virtual time and each joint's drive position
+    // (steps or encoder counts, from the joint's zero), as the machine's drives
+    // report them.
+    let mut trace = match &args.trace {
+        Some(p) => {
+            let mut f = std::io::BufWriter::new(
+                std::fs::File::create(p).with_context(|| format!("creating {}", p.display()))?,
+            );
+            let n = core.uc.get_data().machine.machine.joints.len();
+            let cols: Vec<String> = (1..=n).map(|j| format!("d{j}")).collect();
+            writeln!(f, "t_s,{}", cols.join(","))?;
+            core.uc.get_data_mut().trace_rows = Some(Vec::new());
+            Some(f)
+        }
+        None => None,
+    };
     let outcome = loop {
         let now = core.uc.get_data().now;
         if stop.load(Ordering::SeqCst) || limit.is_some_and(|l| now >= l) {
@@ -183,6 +204,13 @@ fn run(args: Args) -> Result<()> {
         }
         if now >= next_ms {
             next_ms = now + time::from_ms(1);
+            if let Some(f) = trace.as_mut() {
+                let rows = core.uc.get_data_mut().trace_rows.replace(Vec::new());
+                for (t, d) in rows.unwrap_or_default() {
+                    let d: Vec<String> = d.iter().map(i64::to_string).collect();
+                    writeln!(f, "{:.6},{}", time::to_s(t), d.join(","))?;
+                }
+            }
             while let Ok(line) = rx.try_recv() {
                 match control::parse(&line) {
                     Ok(Some((at, cmd))) => scheduled.push((at.unwrap_or(now), cmd)),
