@@ -145,12 +145,55 @@ async fn the_station_fits_a_tablet_and_a_small_monitor_and_helps_the_operator() 
     .await;
     for (w, h) in [(800u32, 1280u32), (1024, 768), (1920, 1080)] {
         check_layout(&page, w, h).await;
+        page.click("#view-fit").await;
+        let machine = page.js("pkmc.programExtent()").await;
         page.click("#view-fit-prog").await;
         tokio::time::sleep(Duration::from_millis(300)).await;
+        // Fitted, the program spans at least 40 % of the view's width or height (its
+        // box, padded 5 %, is what is fitted), many times what it spans with the
+        // machine fitted, and lies inside the view.
+        let e = page.js("pkmc.programExtent()").await;
+        let f = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap();
+        let fill = ((f(&e, "right") - f(&e, "left")) / f(&e, "w"))
+            .max((f(&e, "bottom") - f(&e, "top")) / f(&e, "h"));
+        let before = ((f(&machine, "right") - f(&machine, "left")) / f(&machine, "w"))
+            .max((f(&machine, "bottom") - f(&machine, "top")) / f(&machine, "h"));
+        println!("{w}x{h}: the program spans {fill:.2} of the view fitted, {before:.2} with the machine fitted");
+        assert!(
+            fill > 0.4 && fill > 5.0 * before,
+            "{w}x{h}: fitted {e}, machine {machine}"
+        );
+        assert!(
+            f(&e, "left") >= 0.0
+                && f(&e, "top") >= 0.0
+                && f(&e, "right") <= f(&e, "w")
+                && f(&e, "bottom") <= f(&e, "h"),
+            "{w}x{h}: the fitted program lies inside the view: {e}"
+        );
         page.screenshot(&repo(&format!("docs/ui-{w}x{h}.png")))
             .await;
     }
     page.set_viewport(1024, 768).await;
+    // The preview and the tool meet: run the program; where it ends is the path's
+    // last point, in the same workpiece coordinates the tool marker is drawn in.
+    page.click("#run").await;
+    page.wait(
+        "pkmc.lastStatus.job != null",
+        "the example runs",
+        Timeout::S(5),
+    )
+    .await;
+    page.wait_idle(Timeout::S(60)).await;
+    let gap = page
+        .js(
+            "(() => { const p = pkmc.program.path, e = p[p.length - 1], q = pkmc.lastStatus.pose; \
+             return Math.hypot(e[0] - q[0], e[1] - q[1], e[2] - q[2]); })()",
+        )
+        .await;
+    assert!(
+        gap.as_f64().unwrap() < 0.01,
+        "the path's end and the tool are {gap} mm apart"
+    );
 
     // Keyboard jog: → X + step, Shift+↑ Y + 10 steps, Alt+PgDn Z − a tenth.
     page.select("#jog-step", "1").await;

@@ -938,8 +938,25 @@ function fitProgram() {
   const pad = [0, 1, 2].map((k) => Math.max(1, 0.05 * (b.max[k] - b.min[k])));
   fitBox(b.min.map((v, k) => v - pad[k]), b.max.map((v, k) => v + pad[k]),
     view.scene && view.scene.work);
-  pkmc.fittedProgram = true;
 }
+
+/** Where the program's path lies on the canvas now: its box in CSS px and the
+ *  canvas' size (for the tests: how much of the view the program fills). */
+function programExtent() {
+  const A = withWork(screenAffine(), view.scene && view.scene.work);
+  const pts = [view.progFeed, view.progRapid];
+  let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+  for (const a of pts) {
+    for (let i = 0; a && i < a.length; i += 3) {
+      if (Number.isNaN(a[i])) continue;
+      const x = A[0] * a[i] + A[1] * a[i + 1] + A[2] * a[i + 2] + A[3];
+      const y = A[4] * a[i] + A[5] * a[i + 1] + A[6] * a[i + 2] + A[7];
+      x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, y); y1 = Math.max(y1, y);
+    }
+  }
+  return { left: x0, right: x1, top: y0, bottom: y1, w: view.w, h: view.h };
+}
+pkmc.programExtent = programExtent;
 
 /** Fits the box [min, max] (mapped by the row-major 3x4 matrix W, if any). */
 function fitBox(min, max, W) {
