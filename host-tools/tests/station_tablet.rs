@@ -109,6 +109,27 @@ async fn the_station_fits_a_tablet_and_a_small_monitor_and_helps_the_operator() 
         Timeout::S(10),
     )
     .await;
+    // Unhomed at start: the alarm says what to do, and jogs are not offered.
+    let unhomed = page
+        .wait(
+            "pkmc.lastStatus.alarm && document.getElementById('alarm').textContent",
+            "the not-homed alarm is shown",
+            Timeout::S(5),
+        )
+        .await;
+    assert!(
+        unhomed
+            .as_str()
+            .unwrap()
+            .contains("Home the machine, or Reset"),
+        "{unhomed}"
+    );
+    page.wait(
+        "[...document.querySelectorAll('#jog-buttons button')].every(b => b.disabled)",
+        "no jog while not homed",
+        Timeout::S(3),
+    )
+    .await;
     page.click("#home").await;
     page.wait_idle(Timeout::S(30)).await;
 
