@@ -72,7 +72,7 @@ pub struct MachineSide {
 }
 
 /// Counters of the run.
-#[derive(Default, Clone, Debug)]
+#[derive(Clone, Debug)]
 pub struct Stats {
     /// Busy fraction of each whole 1 ms period, per mille, and whether the host was
     /// streaming blocks in it.
@@ -96,6 +96,26 @@ pub struct Stats {
     pub software_resets: u64,
     /// Resets through the NRST pin.
     pub pin_resets: u64,
+    /// The lowest and highest PWM command code seen (HRTIM command channels).
+    pub pwm_range: (u16, u16),
+}
+
+impl Default for Stats {
+    fn default() -> Self {
+        Self {
+            busy: Vec::new(),
+            idle_in_period: 0,
+            worst_busy: Vec::new(),
+            worst_servo: Vec::new(),
+            min_sp: None,
+            taken: Default::default(),
+            servo_latency: Vec::new(),
+            watchdog_resets: 0,
+            software_resets: 0,
+            pin_resets: 0,
+            pwm_range: (u16::MAX, 0),
+        }
+    }
 }
 
 /// The chip and its machine.
@@ -141,6 +161,8 @@ pub struct Board {
     pub wiring: Wiring,
     /// The machine.
     pub machine: MachineSide,
+    /// Each comparator's output.
+    comp_out: [bool; 7],
     /// Counters.
     pub stats: Stats,
     /// The last reset's cause.
@@ -277,6 +299,7 @@ impl Board {
             usb: UsbDevice::default(),
             wiring,
             machine,
+            comp_out: [false; 7],
             stats: Stats::default(),
             reset_cause: ResetCause::PowerOn,
             reset_due: None,
@@ -324,6 +347,11 @@ impl Board {
             .map(|&(name, _, kind, _)| Timer::new(name, kind, 16))
             .collect();
         self.hrtim = Hrtim::new(16);
+        self.hrtim.edges = self
+            .wiring
+            .steppers
+            .iter()
+            .any(|s| matches!(s.0, StepSource::Hrtim(..)));
         self.lptim = Lptim::default();
         self.dacs = ["DAC1", "DAC2", "DAC3", "DAC4"].into_iter().map(Dac::new).collect();
         let pma = self.usb.pma;
@@ -390,7 +418,12 @@ impl Board {
             0x4000_7000..=0x4000_73FF => self.pwr.read(addr - 0x4000_7000),
             0x4000_7C00..=0x4000_7FFF => self.lptim.read(addr - 0x4000_7C00),
             0x4001_0000..=0x4001_002F => self.syscfg.read(addr - 0x4001_0000),
-            0x4001_0200..=0x4001_02FF => self.comp.read(addr - 0x4001_0200),
+            0x4001_0200..=0x4001_02FF => {
+                // VALUE (bit 30): the comparator's output.
+                let o = addr - 0x4001_0200;
+                let out = self.comp_out.get((o / 4) as usize).copied().unwrap_or(false);
+                self.comp.read(o).map(|v| v & !(1 << 30) | u32::from(out) << 30)
+            }
             0x4001_0300..=0x4001_03FF => self.opamp.read(addr - 0x4001_0300),
             0x4001_0400..=0x4001_07FF => self.exti.read(addr - 0x4001_0400),
             0x4001_6800..=0x4001_77FF => self.hrtim.read(addr - 0x4001_6800, now),
@@ -600,25 +633,13 @@ impl Board {
             let group = self.wiring.servo_group[c];
             let en_pin = self.wiring.amp_lines[group].0;
             let enabled = self.gpio[en_pin.port].output(en_pin.pin) == Some(true);
-            let code = match source {
-                CommandSource::Dac(d, ch, _) => self.dacs[d].enabled(ch).then(|| self.dacs[d].output(ch)),
-                CommandSource::Follower(d, ch, op, _) => {
-                    let csr = self.opamp.read(4 * op as u32).unwrap_or(0);
-                    // OPAMPEN, VM_SEL = follower (0b11), VP_SEL = DAC (0b11).
-                    let follower = csr & 1 != 0 && (csr >> 5) & 3 == 3 && (csr >> 2) & 3 == 3;
-                    (follower && self.dacs[d].enabled(ch)).then(|| self.dacs[d].output(ch))
-                }
-            };
+            let code = self.command(source);
             let Some(servo) = self.machine.servos[c].as_mut() else {
                 continue;
             };
             let before = servo.counts();
             servo.period(code.unwrap_or(0), enabled && code.is_some());
             let after = servo.counts();
-            let EncoderSink::Timer(name, _, _) = sink;
-            let Some(i) = self.timer_index(name) else {
-                continue;
-            };
             let step = if after >= before { 1 } else { -1 };
             let mut phase = self.machine.phase[c];
             for _ in 0..(after - before).abs() {
@@ -626,9 +647,90 @@ impl Board {
                 // Gray sequence A leading B: 00, 10, 11, 01.
                 let (a, b) = [(false, false), (true, false), (true, true), (false, true)]
                     [phase as usize];
-                self.tims[i].encoder_input(a, b);
+                self.encoder_edge(sink, a, b);
             }
             self.machine.phase[c] = phase;
+        }
+    }
+
+    fn analog(&self, pin: Pin) -> bool {
+        self.gpio[pin.port].mode(pin.pin) == 3
+    }
+
+    fn routed(&self, (pin, af): (Pin, u32)) -> bool {
+        let g = &self.gpio[pin.port];
+        g.mode(pin.pin) == 2 && g.af(pin.pin) == af
+    }
+
+    /// The command code a servo amplifier sees from `source`, if the output reaches
+    /// its pin: a DAC channel enabled with its pin in analog mode; a DAC channel
+    /// through an OPAMP enabled as follower of the DAC (CSR: OPAMPEN, VP_SEL = 0b11
+    /// the DAC, VM_SEL = 0b11 the output; RM0440 OPAMP register map) with its output
+    /// pin in analog mode; or HRTIM PWM routed to its pin.
+    fn command(&mut self, source: CommandSource) -> Option<u16> {
+        match source {
+            CommandSource::Dac(d, ch, pin) => {
+                (self.dacs[d].enabled(ch) && self.analog(pin)).then(|| self.dacs[d].output(ch))
+            }
+            CommandSource::Follower(d, ch, op, pin) => {
+                let csr = self.opamp.read(4 * op as u32).unwrap_or(0);
+                let follower = csr & 1 != 0 && (csr >> 5) & 3 == 3 && (csr >> 2) & 3 == 3;
+                (follower && self.dacs[d].enabled(ch) && self.analog(pin))
+                    .then(|| self.dacs[d].output(ch))
+            }
+            CommandSource::HrtimPwm(pin, af) => {
+                let now = self.now;
+                self.hrtim.advance(now);
+                if !self.routed((pin, af)) {
+                    return None;
+                }
+                let code = self.hrtim.duty_code();
+                if let Some(c) = code {
+                    let r = &mut self.stats.pwm_range;
+                    *r = (r.0.min(c), r.1.max(c));
+                }
+                code
+            }
+        }
+    }
+
+    /// One quadrature edge of an encoder into its counter, through what the board
+    /// routes: the pins' alternate functions, COMP4 and TIM4_TISEL, LPTIM1's inputs.
+    fn encoder_edge(&mut self, sink: EncoderSink, a: bool, b: bool) {
+        match sink {
+            EncoderSink::Timer(name, pa, pb) => {
+                let Some(i) = self.timer_index(name) else {
+                    return;
+                };
+                let (ha, hb) = self.tims[i].encoder_inputs();
+                let a = if self.routed(pa) { a } else { ha };
+                let b = if self.routed(pb) { b } else { hb };
+                self.tims[i].encoder_input(a, b);
+            }
+            EncoderSink::TimerComp(name, pa, comp, pb) => {
+                let Some(i) = self.timer_index(name) else {
+                    return;
+                };
+                let (ha, hb) = self.tims[i].encoder_inputs();
+                let a = if self.routed(pa) { a } else { ha };
+                // COMPx_CSR (RM0440 COMP register map): EN bit 0, INMSEL bits 6:4
+                // (0b011: VREFINT), POL bit 15; the input pin in analog mode. B's
+                // 3.3 V / 0 V against VREFINT's 1.2 V.
+                let csr = self.comp.read(4 * comp as u32).unwrap_or(0);
+                let on = csr & 1 != 0 && (csr >> 4) & 7 == 3 && self.analog(pb);
+                let out = on && (b != (csr & (1 << 15) != 0));
+                self.comp_out[comp] = out;
+                // TIMx_TISEL.TI2SEL (bits 11:8) = 4: TI2 from COMP4's output.
+                let tisel = self.tims[i].read(0x5C, self.now).unwrap_or(0);
+                let b = if on && (tisel >> 8) & 0xF == 4 { out } else { hb };
+                self.tims[i].encoder_input(a, b);
+            }
+            EncoderSink::Lptim(pa, pb) => {
+                let (ha, hb) = self.lptim.inputs();
+                let a = if self.routed(pa) { a } else { ha };
+                let b = if self.routed(pb) { b } else { hb };
+                self.lptim.encoder_input(a, b);
+            }
         }
     }
 

@@ -35,13 +35,14 @@ struct Args {
     free_run: bool,
     quiet_log: bool,
     trace: Option<PathBuf>,
+    servo8: bool,
 }
 
 fn usage() -> ! {
     eprintln!(
         "usage: pkmc-vboard [--elf FIRMWARE.elf] [--machine FILE.toml] [--link PATH]\n\
          \x20                  [--flash FILE] [--seconds S] [--free-run] [--quiet-log]\n\
-         \x20                  [--trace FILE.csv]\n\
+         \x20                  [--trace FILE.csv] [--wiring default|servo8]\n\
          Runs the firmware ELF on a virtual STM32G474RE board and prints the\n\
          pseudo-terminal of its USB link (docs/vboard.md)."
     );
@@ -58,6 +59,7 @@ fn parse_args() -> Args {
         free_run: false,
         quiet_log: false,
         trace: None,
+        servo8: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -73,6 +75,11 @@ fn parse_args() -> Args {
             "--free-run" => a.free_run = true,
             "--quiet-log" => a.quiet_log = true,
             "--trace" => a.trace = Some(value().into()),
+            "--wiring" => match value().as_str() {
+                "default" => a.servo8 = false,
+                "servo8" => a.servo8 = true,
+                _ => usage(),
+            },
             _ => usage(),
         }
     }
@@ -109,7 +116,13 @@ fn run(args: Args) -> Result<()> {
         .map_err(|e| anyhow::anyhow!("the machine: {e:?}"))?
         .joints()
         .to_vec();
-    let wiring = wiring::mixed();
+    // The firmware's wiring (its `board-servo8` feature) is the board's build: the
+    // ELF does not say which it is, the board is told.
+    let wiring = if args.servo8 {
+        wiring::servo8()
+    } else {
+        wiring::mixed()
+    };
     let groups = wiring.amp_lines.len();
     let side = MachineSide::new(machine, &start, &plants, groups)?;
     let config = match &args.flash {
@@ -352,7 +365,7 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64)) {
          \"servo_latency_us\": {{\"min\": {:.3}, \"median\": {:.3}, \"p99\": {:.3}, \"max\": {:.3}, \"jitter\": {:.3}}}, \
          \"worst_servo_latency_us\": [{}], \
          \"stack\": {{\"top\": {}, \"deepest\": {depth}, \"untouched\": {untouched}, \"lowest_sp_chain\": [{}]}}, \
-         \"watchdog_resets\": {}, \"software_resets\": {}, \"pin_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}, \"flash_machine\": {flash_machine}, \"usb_packets_in_out\": [{}, {}]}}",
+         \"watchdog_resets\": {}, \"software_resets\": {}, \"pin_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}, \"flash_machine\": {flash_machine}, \"usb_packets_in_out\": [{}, {}], \"pwm_code_range\": [{}, {}]}}",
         wall.as_secs_f64(),
         virt / wall.as_secs_f64().max(1e-9),
         b.instructions,
@@ -379,5 +392,7 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64)) {
         b.flash.programs,
         packets.0,
         packets.1,
+        b.stats.pwm_range.0,
+        b.stats.pwm_range.1,
     );
 }

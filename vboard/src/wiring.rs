@@ -38,6 +38,11 @@ pub enum StepSource {
 pub enum EncoderSink {
     /// A timer's CH1/CH2 inputs on pins A and B with their alternate functions.
     Timer(&'static str, (Pin, u32), (Pin, u32)),
+    /// A timer's CH1 on pin A; B into comparator `comp` (0-based) on its analog pin,
+    /// whose output the timer selects as TI2 (TIMx_TISEL).
+    TimerComp(&'static str, (Pin, u32), usize, Pin),
+    /// LPTIM1's IN1 and IN2 on pins A and B with their alternate functions.
+    Lptim((Pin, u32), (Pin, u32)),
 }
 
 /// Where a servo command comes from.
@@ -47,6 +52,10 @@ pub enum CommandSource {
     Dac(usize, usize, Pin),
     /// DAC `dac` channel `ch` through OPAMP `opamp` (0-based) as follower to `pin`.
     Follower(usize, usize, usize, Pin),
+    /// HRTIM1 timer A output 2 on `pin` (alternate function `af`), PWM filtered by
+    /// the board's RC low-pass: the command is the duty (CMP1 / PER, set at the period
+    /// and reset at CMP1), scaled to the DACs' 4096 codes.
+    HrtimPwm(Pin, u32),
 }
 
 /// A wiring.
@@ -118,5 +127,63 @@ pub fn mixed() -> Wiring {
             p('B', 3),
         ],
         led: Some(p('A', 5)),
+    }
+}
+
+/// The eight-servo wiring of the hexapod-xy machine (`docs/wiring.md`, "Eight-servo
+/// wiring"): six legs and two table axes, no stepper channel.
+pub fn servo8() -> Wiring {
+    Wiring {
+        name: "eight servos",
+        steppers: Vec::new(),
+        step_enable: None,
+        servos: vec![
+            (
+                EncoderSink::Timer("TIM1", (p('C', 0), 2), (p('C', 1), 2)),
+                CommandSource::Dac(0, 0, p('A', 4)),
+            ),
+            (
+                EncoderSink::Timer("TIM2", (p('A', 15), 1), (p('B', 3), 1)),
+                CommandSource::Dac(0, 1, p('A', 5)),
+            ),
+            (
+                EncoderSink::Timer("TIM3", (p('B', 4), 2), (p('A', 7), 2)),
+                CommandSource::Dac(1, 0, p('A', 6)),
+            ),
+            (
+                EncoderSink::Timer("TIM5", (p('A', 0), 2), (p('A', 1), 2)),
+                CommandSource::Follower(2, 1, 2, p('B', 1)),
+            ),
+            (
+                EncoderSink::Timer("TIM8", (p('C', 6), 4), (p('C', 7), 4)),
+                CommandSource::Follower(3, 0, 3, p('B', 12)),
+            ),
+            (
+                EncoderSink::Timer("TIM20", (p('B', 2), 3), (p('C', 2), 6)),
+                CommandSource::Follower(3, 1, 4, p('A', 8)),
+            ),
+            (
+                EncoderSink::TimerComp("TIM4", (p('B', 6), 2), 3, p('B', 0)),
+                CommandSource::Follower(2, 0, 5, p('B', 11)),
+            ),
+            (
+                EncoderSink::Lptim((p('B', 5), 11), (p('B', 7), 11)),
+                CommandSource::HrtimPwm(p('A', 9), 13),
+            ),
+        ],
+        servo_group: vec![0, 0, 0, 0, 0, 0, 1, 1],
+        amp_lines: vec![(p('B', 15), p('B', 14)), (p('B', 13), p('C', 3))],
+        estop: p('A', 10),
+        limits: vec![
+            p('C', 10),
+            p('C', 11),
+            p('D', 2),
+            p('C', 12),
+            p('C', 8),
+            p('B', 9),
+            p('B', 10),
+            p('C', 9),
+        ],
+        led: Some(p('C', 4)),
     }
 }

@@ -58,6 +58,8 @@ pub struct Hrtim {
     out2_since: u64,
     /// Pulses of output 2 completed (channel index 1).
     pub pulses: Vec<Pulse>,
+    /// Output 2's edges are wanted (a STEP output); else whole periods are skipped.
+    pub edges: bool,
 }
 
 impl Hrtim {
@@ -80,6 +82,7 @@ impl Hrtim {
             out2: false,
             out2_since: 0,
             pulses: Vec::new(),
+            edges: true,
         }
     }
 
@@ -95,12 +98,27 @@ impl Hrtim {
         self.mcr & (1 << 17) != 0
     }
 
+    /// Time units per count: f_HRCK = f_HRTIM × 32 / 2^CKPSC ("Clocks"); CKPSC 0
+    /// (0.18 ns) is finer than the board's time unit and not modelled.
     fn units_per_count(&self) -> Result<u64, Unmodelled> {
         let ckpsc = self.cr & 7;
-        if ckpsc < 5 {
+        let scaled = self.clock_units << ckpsc;
+        if scaled % 32 != 0 {
             return Err(Unmodelled);
         }
-        Ok(self.clock_units << (ckpsc - 5))
+        Ok(scaled / 32)
+    }
+
+    /// The duty of output 2 as a 12-bit command code, for a PWM set by the period
+    /// event and reset by CMP1 (high from the period start to CMP1): CMP1 × 4096 / PER
+    /// of the active registers; None unless the timer runs with output 2 enabled in
+    /// that configuration.
+    pub fn duty_code(&self) -> Option<u16> {
+        let oen = self.common[(0x394 - 0x380) / 4] & 2 != 0;
+        let pwm = self.act(0x44) == 1 << 2 && self.act(0x48) == 1 << 3;
+        let per = self.act(0x14);
+        (self.running() && oen && pwm && per > 0)
+            .then(|| (u64::from(self.act(0x1C)) * 4096 / u64::from(per)).min(4095) as u16)
     }
 
     fn set_out2(&mut self, high: bool, t: u64) {
@@ -133,6 +151,10 @@ impl Hrtim {
         let Ok(upc) = self.units_per_count() else {
             return;
         };
+        if !self.edges {
+            self.skip_to(now, upc);
+            return;
+        }
         loop {
             let per = self.act(0x14).max(1);
             let cmp1 = self.act(0x1C);
@@ -179,6 +201,39 @@ impl Hrtim {
         let elapsed = (now - self.since) / upc;
         self.cnt_at += elapsed as u32;
         self.since += elapsed * upc;
+    }
+
+    /// Advances whole periods at once when nobody takes output 2's edges (a PWM
+    /// command): the roll-overs' repetition events and their preload transfers only.
+    fn skip_to(&mut self, now: u64, upc: u64) {
+        let per = u64::from(self.act(0x14).max(1));
+        let cnt = u64::from(self.cnt_at.min(self.act(0x14)));
+        let to_first = (per - cnt) * upc;
+        if self.since + to_first > now {
+            let elapsed = (now - self.since) / upc;
+            self.cnt_at += elapsed as u32;
+            self.since += elapsed * upc;
+            return;
+        }
+        let rollovers = 1 + (now - self.since - to_first) / (per * upc);
+        let last = self.since + to_first + (rollovers - 1) * per * upc;
+        if rollovers > u64::from(self.rep_left) {
+            // At least one repetition event: the last one's transfer stands.
+            self.isr |= 1 << 4;
+            if self.cr & (1 << 17) != 0 {
+                self.update();
+            }
+            let rep = u64::from(self.act(0x18) & 0xFF) + 1;
+            let after = (rollovers - u64::from(self.rep_left) - 1) % rep;
+            self.rep_left = (rep - 1 - after) as u32;
+        } else {
+            self.rep_left -= rollovers as u32;
+        }
+        self.cnt_at = 0;
+        self.since = last;
+        let elapsed = (now - last) / upc;
+        self.cnt_at = elapsed as u32;
+        self.since = last + elapsed * upc;
     }
 
     /// Reads `offset` (from HRTIM1's base) at `now`.

@@ -66,6 +66,11 @@ impl Lptim {
         Ok(())
     }
 
+    /// The inputs as last driven.
+    pub fn inputs(&self) -> (bool, bool) {
+        self.inputs
+    }
+
     /// Drives Input1 = `a`, Input2 = `b`; counts in encoder mode while enabled and
     /// started (same direction rule as the timers' encoder mode 3).
     pub fn encoder_input(&mut self, a: bool, b: bool) {
