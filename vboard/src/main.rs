@@ -27,7 +27,7 @@ use std::time::{Duration, Instant};
 const SERVICE_US: u64 = 50;
 
 struct Args {
-    elf: PathBuf,
+    elf: Option<PathBuf>,
     machine: Option<PathBuf>,
     seconds: Option<f64>,
     link: Option<PathBuf>,
@@ -44,14 +44,15 @@ fn usage() -> ! {
          \x20                  [--flash FILE] [--seconds S] [--free-run] [--quiet-log]\n\
          \x20                  [--trace FILE.csv] [--wiring default|servo8]\n\
          Runs the firmware ELF on a virtual STM32G474RE board and prints the\n\
-         pseudo-terminal of its USB link (docs/vboard.md)."
+         pseudo-terminal of its USB link (docs/vboard.md). Without --elf it builds\n\
+         the release firmware for the wiring first (as cargo fw-build does)."
     );
     std::process::exit(2)
 }
 
 fn parse_args() -> Args {
     let mut a = Args {
-        elf: PathBuf::from("target/thumbv7em-none-eabihf/release/firmware"),
+        elf: None,
         machine: None,
         seconds: None,
         link: None,
@@ -65,7 +66,7 @@ fn parse_args() -> Args {
     while let Some(arg) = it.next() {
         let mut value = || it.next().unwrap_or_else(|| usage());
         match arg.as_str() {
-            "--elf" => a.elf = value().into(),
+            "--elf" => a.elf = Some(value().into()),
             "--machine" => a.machine = Some(value().into()),
             "--seconds" => {
                 a.seconds = Some(value().parse().unwrap_or_else(|_| usage()));
@@ -93,9 +94,35 @@ fn main() {
     }
 }
 
+/// Builds the release firmware for the wiring, as `cargo fw-build` does (with
+/// `--features board-servo8` for the eight-servo wiring), and returns its ELF.
+fn build_firmware(servo8: bool) -> Result<PathBuf> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut cmd = std::process::Command::new("cargo");
+    cmd.current_dir(&root)
+        .args(["build", "-p", "pkmc", "--release", "--bin", "firmware"])
+        .args(["--target", "thumbv7em-none-eabihf"]);
+    if servo8 {
+        cmd.args(["--features", "board-servo8"]);
+    }
+    // The firmware's own target directory and flags, not this program's.
+    for var in ["CARGO_TARGET_DIR", "RUSTFLAGS", "CARGO_BUILD_TARGET", "CARGO_MANIFEST_DIR"] {
+        cmd.env_remove(var);
+    }
+    let status = cmd.status().context("running cargo to build the firmware")?;
+    if !status.success() {
+        bail!("building the firmware failed ({status})");
+    }
+    Ok(root.join("target/thumbv7em-none-eabihf/release/firmware"))
+}
+
 fn run(args: Args) -> Result<()> {
-    let raw = std::fs::read(&args.elf)
-        .with_context(|| format!("reading the firmware {}", args.elf.display()))?;
+    let elf = match &args.elf {
+        Some(p) => p.clone(),
+        None => build_firmware(args.servo8)?,
+    };
+    let raw =
+        std::fs::read(&elf).with_context(|| format!("reading the firmware {}", elf.display()))?;
     let image = Rc::new(elf::Image::parse(raw.clone()).context("the firmware ELF")?);
     let (machine, plants) = match &args.machine {
         Some(p) => {
