@@ -276,7 +276,7 @@ JOBS = {
     "dense": ("examples/machines/h4-table.toml", "dense-h4", "default"),
     "h4": ("examples/machines/h4-table.toml", "examples/h4-table-tilt.ngc", "default"),
     "hexapod": ("examples/machines/hexapod.toml", "examples/hexapod-orbit.ngc", "default"),
-    "chips": ("examples/machines/h4-table.toml", "../shared/corpus/linuxcnc/3D_Chips.ngc", "default"),
+    "chips": ("examples/machines/h4-table.toml", "chips-no-m6", "default"),
     "square8": ("examples/machines/hexapod-xy.toml", "square-xy", "servo8"),
     "dense8": ("examples/machines/hexapod-xy.toml", "dense-xy", "servo8"),
     "helix8": ("examples/machines/hexapod-xy.toml", "examples/helix-b.ngc", "servo8"),
@@ -302,7 +302,23 @@ def square_program(path, z):
     open(path, "w").write("\n".join(lines) + "\n")
 
 
+def chips_without_tool_change(path):
+    """LinuxCNC's 3D_Chips.ngc (read in place from ../shared/corpus) without its one
+    tool change (line 18, `T#<toolno> M6`): a board stops there for an operator
+    (docs/nc-send.md, exit 7), the simulator resumes by itself; the change moves
+    nothing."""
+    src = os.path.join(ROOT, "../shared/corpus/linuxcnc/3D_Chips.ngc")
+    if not os.path.exists(src):
+        die(f"chips: {src} is absent (the shared corpus is not beside the repository)")
+    lines = open(src).read().splitlines()
+    out = [line for line in lines if "M6" not in line.upper().replace(" ", "")]
+    if len(lines) - len(out) != 1:
+        die(f"chips: expected one tool change in 3D_Chips.ngc, found {len(lines) - len(out)}")
+    open(path, "w").write("\n".join(out) + "\n")
+
+
 GENERATED = {
+    "chips-no-m6": chips_without_tool_change,
     "dense-h4": lambda p: dense_program(p),
     "dense-xy": lambda p: dense_program(p, x0=-30.0, z=260.0),
     "square-xy": lambda p: square_program(p, 260.0),

@@ -2,7 +2,7 @@
 //! events, and the machine wired to the pins (the simulator's drive and plant models).
 
 use crate::nvic::Scs;
-use crate::periph::clocks::{pwr, ResetCause, Rcc};
+use crate::periph::clocks::{pwr, Rcc, ResetCause};
 use crate::periph::dac::Dac;
 use crate::periph::flash::{self, Flash};
 use crate::periph::gpio::Gpio;
@@ -28,9 +28,24 @@ const TIMERS: &[(&str, u32, Kind, Option<usize>)] = &[
     ("TIM7", 0x4000_1400, Kind::Basic, Some(55)),
     ("TIM1", 0x4001_2C00, Kind::Advanced, Some(25)),
     ("TIM8", 0x4001_3400, Kind::Advanced, Some(44)),
-    ("TIM15", 0x4001_4000, Kind::Compact { channels: 2 }, Some(24)),
-    ("TIM16", 0x4001_4400, Kind::Compact { channels: 1 }, Some(25)),
-    ("TIM17", 0x4001_4800, Kind::Compact { channels: 1 }, Some(26)),
+    (
+        "TIM15",
+        0x4001_4000,
+        Kind::Compact { channels: 2 },
+        Some(24),
+    ),
+    (
+        "TIM16",
+        0x4001_4400,
+        Kind::Compact { channels: 1 },
+        Some(25),
+    ),
+    (
+        "TIM17",
+        0x4001_4800,
+        Kind::Compact { channels: 1 },
+        Some(26),
+    ),
     ("TIM20", 0x4001_5000, Kind::Advanced, Some(78)),
 ];
 
@@ -98,6 +113,8 @@ pub struct Stats {
     pub pin_resets: u64,
     /// The lowest and highest PWM command code seen (HRTIM command channels).
     pub pwm_range: (u16, u16),
+    /// Changes of the heartbeat LED's output.
+    pub led_toggles: u64,
 }
 
 impl Default for Stats {
@@ -114,6 +131,7 @@ impl Default for Stats {
             software_resets: 0,
             pin_resets: 0,
             pwm_range: (u16::MAX, 0),
+            led_toggles: 0,
         }
     }
 }
@@ -256,16 +274,20 @@ impl MachineSide {
                         d.position
                     }
                 }),
-                Drive::Servo { channel } => {
-                    self.servos[channel as usize].as_ref().map_or(0, SimServo::position)
-                }
+                Drive::Servo { channel } => self.servos[channel as usize]
+                    .as_ref()
+                    .map_or(0, SimServo::position),
             })
             .collect()
     }
 
     /// Timing breaches of every stepper drive.
     pub fn violations(&self) -> u64 {
-        self.steppers.iter().flatten().map(|d| d.violation_count).sum()
+        self.steppers
+            .iter()
+            .flatten()
+            .map(|d| d.violation_count)
+            .sum()
     }
 }
 
@@ -295,7 +317,10 @@ impl Board {
             tims: Vec::new(),
             hrtim: Hrtim::new(16),
             lptim: Lptim::default(),
-            dacs: ["DAC1", "DAC2", "DAC3", "DAC4"].into_iter().map(Dac::new).collect(),
+            dacs: ["DAC1", "DAC2", "DAC3", "DAC4"]
+                .into_iter()
+                .map(Dac::new)
+                .collect(),
             usb: UsbDevice::default(),
             wiring,
             machine,
@@ -309,8 +334,7 @@ impl Board {
             streaming: false,
             lowest_sp: u32::MAX,
             masked_pending: false,
-            profile: std::env::var_os("VBOARD_PROFILE")
-                .map(|_| (0, u64::MAX, Default::default())),
+            profile: std::env::var_os("VBOARD_PROFILE").map(|_| (0, u64::MAX, Default::default())),
             worst_profile: None,
             trace_rows: None,
         };
@@ -336,7 +360,12 @@ impl Board {
         let _ = drives;
         let gpio: Vec<Gpio> = ('A'..='G').map(Gpio::new).collect();
         self.gpio = gpio;
-        for p in [&mut self.exti, &mut self.syscfg, &mut self.dbgmcu, &mut self.crs] {
+        for p in [
+            &mut self.exti,
+            &mut self.syscfg,
+            &mut self.dbgmcu,
+            &mut self.crs,
+        ] {
             p.reset();
         }
         self.opamp.reset();
@@ -353,7 +382,10 @@ impl Board {
             .iter()
             .any(|s| matches!(s.0, StepSource::Hrtim(..)));
         self.lptim = Lptim::default();
-        self.dacs = ["DAC1", "DAC2", "DAC3", "DAC4"].into_iter().map(Dac::new).collect();
+        self.dacs = ["DAC1", "DAC2", "DAC3", "DAC4"]
+            .into_iter()
+            .map(Dac::new)
+            .collect();
         let pma = self.usb.pma;
         self.usb = UsbDevice::default();
         self.usb.pma = pma;
@@ -363,6 +395,42 @@ impl Board {
 
     fn timer_index(&self, name: &str) -> Option<usize> {
         TIMERS.iter().position(|t| t.0 == name)
+    }
+
+    /// The peripheral at `addr`, for messages.
+    fn name_of(&self, addr: u32) -> String {
+        if let Some(i) = TIMERS
+            .iter()
+            .position(|t| (t.1..t.1 + 0x400).contains(&addr))
+        {
+            return self.tims[i].name.to_string();
+        }
+        match addr {
+            0x4000_2000..=0x4000_23FF => self.crs.name.into(),
+            0x4000_3000..=0x4000_33FF => "IWDG".into(),
+            0x4000_5C00..=0x4000_63FF => "USB".into(),
+            0x4000_7000..=0x4000_73FF => self.pwr.name.into(),
+            0x4000_7C00..=0x4000_7FFF => "LPTIM1".into(),
+            0x4001_0000..=0x4001_002F => self.syscfg.name.into(),
+            0x4001_0200..=0x4001_02FF => self.comp.name.into(),
+            0x4001_0300..=0x4001_03FF => self.opamp.name.into(),
+            0x4001_0400..=0x4001_07FF => self.exti.name.into(),
+            0x4001_6800..=0x4001_77FF => "HRTIM1".into(),
+            0x4002_1000..=0x4002_13FF => "RCC".into(),
+            0x4002_2000..=0x4002_23FF => "FLASH".into(),
+            0x4800_0000..=0x4800_1BFF => {
+                format!(
+                    "GPIO{}",
+                    self.gpio[((addr - 0x4800_0000) / 0x400) as usize].port
+                )
+            }
+            0x5000_0800..=0x5000_17FF => self.dacs[((addr - 0x5000_0800) / 0x400) as usize]
+                .name
+                .into(),
+            0xE004_2000..=0xE004_23FF => self.dbgmcu.name.into(),
+            0xE000_0000..=0xE00F_FFFF => "the Cortex-M4 system space".into(),
+            _ => "no peripheral of this model".into(),
+        }
     }
 
     fn unmodelled(&mut self, what: String) {
@@ -380,8 +448,12 @@ impl Board {
         let aligned = addr & !3;
         let shift = 8 * (addr & 3);
         let r = if (0x4000_6000..0x4000_6400).contains(&addr) {
-            self.usb.pma_read((addr - 0x4000_6000) as usize, size).ok_or(Unmodelled)
-        } else if (0xE000_0000..0xE010_0000).contains(&addr) && !(0xE004_2000..0xE004_2400).contains(&addr) {
+            self.usb
+                .pma_read((addr - 0x4000_6000) as usize, size)
+                .ok_or(Unmodelled)
+        } else if (0xE000_0000..0xE010_0000).contains(&addr)
+            && !(0xE004_2000..0xE004_2400).contains(&addr)
+        {
             self.scs
                 .read(aligned - 0xE000_0000, self.instructions)
                 .map_err(|_| Unmodelled)
@@ -400,7 +472,10 @@ impl Board {
                 }
             }
             Err(Unmodelled) => {
-                self.unmodelled(format!("read of {size} bytes at {addr:#010x}"));
+                let name = self.name_of(addr);
+                self.unmodelled(format!(
+                    "read of {size} bytes at {addr:#010x} ({name}): not modelled"
+                ));
                 0
             }
         }
@@ -408,7 +483,10 @@ impl Board {
 
     fn read_word(&mut self, addr: u32) -> Result<u32, Unmodelled> {
         let now = self.now;
-        if let Some(i) = TIMERS.iter().position(|t| (t.1..t.1 + 0x400).contains(&addr)) {
+        if let Some(i) = TIMERS
+            .iter()
+            .position(|t| (t.1..t.1 + 0x400).contains(&addr))
+        {
             return self.tims[i].read(addr - TIMERS[i].1, now);
         }
         match addr {
@@ -421,8 +499,14 @@ impl Board {
             0x4001_0200..=0x4001_02FF => {
                 // VALUE (bit 30): the comparator's output.
                 let o = addr - 0x4001_0200;
-                let out = self.comp_out.get((o / 4) as usize).copied().unwrap_or(false);
-                self.comp.read(o).map(|v| v & !(1 << 30) | u32::from(out) << 30)
+                let out = self
+                    .comp_out
+                    .get((o / 4) as usize)
+                    .copied()
+                    .unwrap_or(false);
+                self.comp
+                    .read(o)
+                    .map(|v| v & !(1 << 30) | u32::from(out) << 30)
             }
             0x4001_0300..=0x4001_03FF => self.opamp.read(addr - 0x4001_0300),
             0x4001_0400..=0x4001_07FF => self.exti.read(addr - 0x4001_0400),
@@ -446,8 +530,12 @@ impl Board {
     pub fn write(&mut self, addr: u32, size: usize, value: u32) {
         let now = self.now;
         let r = if (0x4000_6000..0x4000_6400).contains(&addr) {
-            self.usb.pma_write((addr - 0x4000_6000) as usize, size, value).ok_or(Unmodelled)
-        } else if (0xE000_0000..0xE010_0000).contains(&addr) && !(0xE004_2000..0xE004_2400).contains(&addr) {
+            self.usb
+                .pma_write((addr - 0x4000_6000) as usize, size, value)
+                .ok_or(Unmodelled)
+        } else if (0xE000_0000..0xE010_0000).contains(&addr)
+            && !(0xE004_2000..0xE004_2400).contains(&addr)
+        {
             self.scs.changed = true;
             self.scs
                 .write(addr - 0xE000_0000, size as u32, value, now)
@@ -463,7 +551,10 @@ impl Board {
             self.write_word(addr, value)
         };
         if r.is_err() {
-            self.unmodelled(format!("write of {size} bytes of {value:#x} at {addr:#010x}"));
+            let name = self.name_of(addr);
+            self.unmodelled(format!(
+                "write of {size} bytes of {value:#x} at {addr:#010x} ({name}): not modelled"
+            ));
         }
         // The tick (UCPD1's line, pended by the servo interrupt) marks a trace row.
         let tick = crate::nvic::IRQ0 as usize + 63;
@@ -481,7 +572,10 @@ impl Board {
 
     fn write_word(&mut self, addr: u32, value: u32) -> Result<(), Unmodelled> {
         let now = self.now;
-        if let Some(i) = TIMERS.iter().position(|t| (t.1..t.1 + 0x400).contains(&addr)) {
+        if let Some(i) = TIMERS
+            .iter()
+            .position(|t| (t.1..t.1 + 0x400).contains(&addr))
+        {
             self.tims[i].write(addr - TIMERS[i].1, value, now)?;
             self.collect_pulses();
             self.stop = true; // a timer may now have an earlier event
@@ -596,6 +690,11 @@ impl Board {
 
     fn outputs_changed(&mut self, port: usize, changed: u32) {
         let t = to_ns(self.now);
+        if let Some(led) = self.wiring.led {
+            if led.port == port && changed & (1 << led.pin) != 0 {
+                self.stats.led_toggles += 1;
+            }
+        }
         for s in 0..self.wiring.steppers.len() {
             let dir = self.wiring.steppers[s].1;
             if dir.port == port && changed & (1 << dir.pin) != 0 {
@@ -645,8 +744,8 @@ impl Board {
             for _ in 0..(after - before).abs() {
                 phase = (phase + step).rem_euclid(4);
                 // Gray sequence A leading B: 00, 10, 11, 01.
-                let (a, b) = [(false, false), (true, false), (true, true), (false, true)]
-                    [phase as usize];
+                let (a, b) =
+                    [(false, false), (true, false), (true, true), (false, true)][phase as usize];
                 self.encoder_edge(sink, a, b);
             }
             self.machine.phase[c] = phase;
@@ -722,7 +821,11 @@ impl Board {
                 self.comp_out[comp] = out;
                 // TIMx_TISEL.TI2SEL (bits 11:8) = 4: TI2 from COMP4's output.
                 let tisel = self.tims[i].read(0x5C, self.now).unwrap_or(0);
-                let b = if on && (tisel >> 8) & 0xF == 4 { out } else { hb };
+                let b = if on && (tisel >> 8) & 0xF == 4 {
+                    out
+                } else {
+                    hb
+                };
                 self.tims[i].encoder_input(a, b);
             }
             EncoderSink::Lptim(pa, pb) => {

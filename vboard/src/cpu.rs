@@ -20,7 +20,7 @@
 
 use crate::board::{Board, Fault};
 use crate::elf::Image;
-use crate::nvic::{exc, IRQ0};
+use crate::nvic::IRQ0;
 use crate::periph::clocks::ResetCause;
 use crate::periph::flash;
 use anyhow::{anyhow, bail, Result};
@@ -57,7 +57,11 @@ fn count_instructions(code: &[u8]) -> u32 {
     let mut i = 0;
     while i + 1 < code.len() {
         let hw = u16::from_le_bytes([code[i], code[i + 1]]);
-        i += if matches!(hw >> 11, 0x1D..=0x1F) { 4 } else { 2 };
+        i += if matches!(hw >> 11, 0x1D..=0x1F) {
+            4
+        } else {
+            2
+        };
         n += 1;
     }
     n
@@ -317,7 +321,9 @@ impl<'a> Core<'a> {
         let mut flash_image = vec![0xFFu8; flash::SIZE as usize];
         for s in &image.segments {
             let o = s.addr.wrapping_sub(flash::BASE) as usize;
-            if s.addr >= flash::BASE && o + s.data.len() <= flash::CONFIG as usize - flash::BASE as usize {
+            if s.addr >= flash::BASE
+                && o + s.data.len() <= flash::CONFIG as usize - flash::BASE as usize
+            {
                 flash_image[o..o + s.data.len()].copy_from_slice(&s.data);
             } else if s.addr < RAM || s.addr >= RAM + RAM_SIZE {
                 bail!("ELF segment at {:#010x} is outside flash and RAM", s.addr);
@@ -325,9 +331,15 @@ impl<'a> Core<'a> {
         }
         let program = (flash::CONFIG - flash::BASE) as u64;
         let map = |uc: &mut Unicorn<Board>, a: u64, n: u64, p: Prot| {
-            uc.mem_map(a, n, p).map_err(|e| anyhow!("map {a:#x}: {e:?}"))
+            uc.mem_map(a, n, p)
+                .map_err(|e| anyhow!("map {a:#x}: {e:?}"))
         };
-        map(&mut uc, u64::from(flash::BASE), program, Prot::READ | Prot::EXEC)?;
+        map(
+            &mut uc,
+            u64::from(flash::BASE),
+            program,
+            Prot::READ | Prot::EXEC,
+        )?;
         uc.mem_write(u64::from(flash::BASE), &flash_image[..program as usize])
             .map_err(|e| anyhow!("{e:?}"))?;
         map(&mut uc, u64::from(RAM), u64::from(RAM_SIZE), Prot::ALL)?;
@@ -351,14 +363,16 @@ impl<'a> Core<'a> {
                 Some(move |uc: &mut Unicorn<Board>, o: u64, size: usize| {
                     u64::from(uc.get_data_mut().read((rb + o) as u32, size))
                 }),
-                Some(move |uc: &mut Unicorn<Board>, o: u64, size: usize, v: u64| {
-                    uc.get_data_mut().write((rb + o) as u32, size, v as u32);
-                    // CPACR reaches the core at once (the FPU enable, B3.2.20).
-                    if rb + o == 0xE000_ED88 {
-                        let cpacr = uc.get_data().scs.cpacr;
-                        let _ = uc.reg_write(RegisterARM::C1_C0_2, u64::from(cpacr));
-                    }
-                }),
+                Some(
+                    move |uc: &mut Unicorn<Board>, o: u64, size: usize, v: u64| {
+                        uc.get_data_mut().write((rb + o) as u32, size, v as u32);
+                        // CPACR reaches the core at once (the FPU enable, B3.2.20).
+                        if rb + o == 0xE000_ED88 {
+                            let cpacr = uc.get_data().scs.cpacr;
+                            let _ = uc.reg_write(RegisterARM::C1_C0_2, u64::from(cpacr));
+                        }
+                    },
+                ),
             )
             .map_err(|e| anyhow!("mmio {base:#x}: {e:?}"))?;
         }
@@ -443,21 +457,31 @@ impl<'a> Core<'a> {
                 let pc = reg(uc, RegisterARM::PC);
                 let what = format!(
                     "{} of {size} bytes at {addr:#010x}, which nothing is mapped at",
-                    if kind == MemType::WRITE_UNMAPPED { "write" } else if kind == MemType::FETCH_UNMAPPED { "fetch" } else { "read" }
+                    if kind == MemType::WRITE_UNMAPPED {
+                        "write"
+                    } else if kind == MemType::FETCH_UNMAPPED {
+                        "fetch"
+                    } else {
+                        "read"
+                    }
                 );
                 uc.get_data_mut().fault = Some(Fault { what, pc: Some(pc) });
                 false
             })
             .map_err(|e| anyhow!("unmapped hook: {e:?}"))?;
         self.uc
-            .add_mem_hook(HookType::MEM_WRITE_PROT, 1, 0, |uc, _kind, addr, size, v| {
-                let pc = reg(uc, RegisterARM::PC);
-                let what = format!(
-                    "write of {size} bytes of {v:#x} at {addr:#010x} in program flash"
-                );
-                uc.get_data_mut().fault = Some(Fault { what, pc: Some(pc) });
-                false
-            })
+            .add_mem_hook(
+                HookType::MEM_WRITE_PROT,
+                1,
+                0,
+                |uc, _kind, addr, size, v| {
+                    let pc = reg(uc, RegisterARM::PC);
+                    let what =
+                        format!("write of {size} bytes of {v:#x} at {addr:#010x} in program flash");
+                    uc.get_data_mut().fault = Some(Fault { what, pc: Some(pc) });
+                    false
+                },
+            )
             .map_err(|e| anyhow!("write-protect hook: {e:?}"))?;
         // QEMU ends a WFE or WFI by an exception unicorn reports as an invalid
         // instruction; the sleep itself is handled by the hooks below.
@@ -590,9 +614,8 @@ impl<'a> Core<'a> {
             }
             let waiting = {
                 let s = &self.uc.get_data().scs;
-                (0..s.pending.len()).any(|e| {
-                    s.pending[e] && (e < IRQ0 as usize || s.enabled[e - IRQ0 as usize])
-                })
+                (0..s.pending.len())
+                    .any(|e| s.pending[e] && (e < IRQ0 as usize || s.enabled[e - IRQ0 as usize]))
             };
             let b = self.uc.get_data_mut();
             b.masked_pending = waiting;
@@ -667,6 +690,3 @@ impl<'a> Core<'a> {
         self.image.function_at(pc)
     }
 }
-
-/// The pending system exceptions the board does not raise (for completeness).
-pub const UNUSED: [u32; 3] = [exc::SVCALL, exc::PENDSV, exc::SYSTICK];

@@ -49,9 +49,7 @@ fn u32_at(b: &[u8], o: usize) -> Result<u32> {
 
 /// A section header's fields the board uses.
 struct Section {
-    name: u32,
     kind: u32,
-    addr: u32,
     offset: u32,
     size: u32,
     link: u32,
@@ -105,9 +103,7 @@ impl Image {
             .map(|i| {
                 let s = shoff + i * shentsize;
                 Ok(Section {
-                    name: u32_at(b, s)?,
                     kind: u32_at(b, s + 4)?,
-                    addr: u32_at(b, s + 12)?,
                     offset: u32_at(b, s + 16)?,
                     size: u32_at(b, s + 20)?,
                     link: u32_at(b, s + 24)?,
@@ -116,40 +112,13 @@ impl Image {
             .collect()
     }
 
-    fn section_name(&self, secs: &[Section], s: &Section) -> Result<String> {
-        let shstrndx = u16_at(&self.raw, 50)? as usize;
-        let strtab = secs.get(shstrndx).context("no section-name table")?;
-        Ok(cstr(&self.raw, (strtab.offset + s.name) as usize))
-    }
-
-    /// Address and size of the section called `name`.
-    pub fn section(&self, name: &str) -> Result<Option<(u32, u32)>> {
-        let secs = self.sections()?;
-        for s in &secs {
-            if self.section_name(&secs, s)? == name {
-                return Ok(Some((s.addr, s.size)));
-            }
-        }
-        Ok(None)
-    }
-
-    /// The bytes of the section called `name` in the file.
-    pub fn section_bytes(&self, name: &str) -> Result<Option<&[u8]>> {
-        let secs = self.sections()?;
-        for s in &secs {
-            if self.section_name(&secs, s)? == name {
-                let o = s.offset as usize;
-                return Ok(self.raw.get(o..o + s.size as usize));
-            }
-        }
-        Ok(None)
-    }
-
     fn read_symbols(&mut self) -> Result<()> {
         let secs = self.sections()?;
         let mut symbols = Vec::new();
         for s in secs.iter().filter(|s| s.kind == 2) {
-            let strtab = secs.get(s.link as usize).context("symbol table without strings")?;
+            let strtab = secs
+                .get(s.link as usize)
+                .context("symbol table without strings")?;
             for k in 0..(s.size / 16) as usize {
                 let e = s.offset as usize + k * 16;
                 let name = u32_at(&self.raw, e)?;

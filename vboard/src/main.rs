@@ -106,10 +106,17 @@ fn build_firmware(servo8: bool) -> Result<PathBuf> {
         cmd.args(["--features", "board-servo8"]);
     }
     // The firmware's own target directory and flags, not this program's.
-    for var in ["CARGO_TARGET_DIR", "RUSTFLAGS", "CARGO_BUILD_TARGET", "CARGO_MANIFEST_DIR"] {
+    for var in [
+        "CARGO_TARGET_DIR",
+        "RUSTFLAGS",
+        "CARGO_BUILD_TARGET",
+        "CARGO_MANIFEST_DIR",
+    ] {
         cmd.env_remove(var);
     }
-    let status = cmd.status().context("running cargo to build the firmware")?;
+    let status = cmd
+        .status()
+        .context("running cargo to build the firmware")?;
     if !status.success() {
         bail!("building the firmware failed ({status})");
     }
@@ -126,8 +133,8 @@ fn run(args: Args) -> Result<()> {
     let image = Rc::new(elf::Image::parse(raw.clone()).context("the firmware ELF")?);
     let (machine, plants) = match &args.machine {
         Some(p) => {
-            let text = std::fs::read_to_string(p)
-                .with_context(|| format!("reading {}", p.display()))?;
+            let text =
+                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
             let file = pkmc_host::machine_file::read_file(&text, &p.display().to_string())
                 .map_err(|e| anyhow::anyhow!("{e}"))?;
             let m = file
@@ -157,8 +164,12 @@ fn run(args: Args) -> Result<()> {
         _ => vec![0xFF; periph::flash::CONFIG_SIZE as usize],
     };
     if config.len() != periph::flash::CONFIG_SIZE as usize {
-        bail!("the flash file must hold {} bytes", periph::flash::CONFIG_SIZE);
+        bail!(
+            "the flash file must hold {} bytes",
+            periph::flash::CONFIG_SIZE
+        );
     }
+    eprintln!("vboard: wiring {}, firmware {}", wiring.name, elf.display());
     let board = Board::new(wiring, side, config);
     let mut core = Core::new(image.clone(), board)?;
     let mut log = rtt::Log::new(&image, &raw)?;
@@ -171,7 +182,12 @@ fn run(args: Args) -> Result<()> {
         std::os::unix::fs::symlink(&port, link)
             .with_context(|| format!("linking {}", link.display()))?;
     }
-    println!("{}", args.link.as_ref().map_or(port.clone(), |l| l.display().to_string()));
+    println!(
+        "{}",
+        args.link
+            .as_ref()
+            .map_or(port.clone(), |l| l.display().to_string())
+    );
     std::io::stdout().flush()?;
     use serialport::SerialPort;
     master.set_timeout(Duration::from_millis(0))?;
@@ -290,8 +306,8 @@ fn run(args: Args) -> Result<()> {
             }
             // Never ahead of the wall clock.
             if !args.free_run {
-                let ahead = Duration::from_secs_f64(time::to_s(now))
-                    .saturating_sub(started.elapsed());
+                let ahead =
+                    Duration::from_secs_f64(time::to_s(now)).saturating_sub(started.elapsed());
                 if ahead > Duration::from_millis(2) {
                     std::thread::sleep(ahead);
                 }
@@ -303,7 +319,10 @@ fn run(args: Args) -> Result<()> {
     }
     report(&core, started.elapsed(), host.packets);
     if let Some((busy, k, hist)) = &core.uc.get_data().worst_profile {
-        eprintln!("profile: the busiest period while streaming, {k} ms: {:.1} %", f64::from(*busy) / 10.0);
+        eprintln!(
+            "profile: the busiest period while streaming, {k} ms: {:.1} %",
+            f64::from(*busy) / 10.0
+        );
         let mut by_fn: std::collections::HashMap<String, u64> = Default::default();
         for (pc, n) in hist {
             let f = core.function_at(*pc);
@@ -340,8 +359,13 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64)) {
     let us = |u: u64| time::to_ns(u) as f64 / 1000.0;
     let lat = quartiles(&mut b.stats.servo_latency.clone()).map(us);
     let mut busy_all: Vec<u64> = b.stats.busy.iter().map(|p| u64::from(p.0)).collect();
-    let mut busy_streaming: Vec<u64> =
-        b.stats.busy.iter().filter(|p| p.1).map(|p| u64::from(p.0)).collect();
+    let mut busy_streaming: Vec<u64> = b
+        .stats
+        .busy
+        .iter()
+        .filter(|p| p.1)
+        .map(|p| u64::from(p.0))
+        .collect();
     let busy = |v: &mut Vec<u64>| {
         let n = v.len();
         let q = quartiles(v).map(|m| m as f64 / 10.0);
@@ -366,7 +390,13 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64)) {
         .stats
         .worst_busy
         .iter()
-        .map(|(m, k, pc)| format!("[{:.1}, {k}, {:?}]", f64::from(*m) / 10.0, core.function_at(*pc)))
+        .map(|(m, k, pc)| {
+            format!(
+                "[{:.1}, {k}, {:?}]",
+                f64::from(*m) / 10.0,
+                core.function_at(*pc)
+            )
+        })
         .collect();
     let (depth, untouched) = core.stack_depth();
     // What the configuration pages hold, decoded by the core's own record reader.
@@ -392,7 +422,7 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64)) {
          \"servo_latency_us\": {{\"min\": {:.3}, \"median\": {:.3}, \"p99\": {:.3}, \"max\": {:.3}, \"jitter\": {:.3}}}, \
          \"worst_servo_latency_us\": [{}], \
          \"stack\": {{\"top\": {}, \"deepest\": {depth}, \"untouched\": {untouched}, \"lowest_sp_chain\": [{}]}}, \
-         \"watchdog_resets\": {}, \"software_resets\": {}, \"pin_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}, \"flash_machine\": {flash_machine}, \"usb_packets_in_out\": [{}, {}], \"pwm_code_range\": [{}, {}]}}",
+         \"watchdog_resets\": {}, \"software_resets\": {}, \"pin_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}, \"flash_machine\": {flash_machine}, \"usb_packets_in_out\": [{}, {}], \"pwm_code_range\": [{}, {}], \"led_toggles\": {}}}",
         wall.as_secs_f64(),
         virt / wall.as_secs_f64().max(1e-9),
         b.instructions,
@@ -421,5 +451,6 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64)) {
         packets.1,
         b.stats.pwm_range.0,
         b.stats.pwm_range.1,
+        b.stats.led_toggles,
     );
 }

@@ -23,8 +23,6 @@ pub const PRIO_MASK: u8 = 0xF0;
 pub mod exc {
     /// HardFault.
     pub const HARD_FAULT: u32 = 3;
-    /// SVCall.
-    pub const SVCALL: u32 = 11;
     /// PendSV.
     pub const PENDSV: u32 = 14;
     /// SysTick.
@@ -168,11 +166,6 @@ impl Scs {
         best.filter(|b| b.0 < exec_priority).map(|b| b.2)
     }
 
-    /// Is any exception pending (enabled or not)?
-    pub fn any_pending(&self) -> bool {
-        self.pending.iter().any(|&p| p)
-    }
-
     /// Sets exception `e` pending at time `now`.
     pub fn pend(&mut self, e: u32, now: u64) {
         let i = e as usize;
@@ -225,7 +218,7 @@ impl Scs {
         Ok(match offset {
             0x1000 => self.dwt_ctrl,
             0x1004 => cycles as u32, // DWT_CYCCNT
-            0xE004 => 0x3, // ICTR: 4 × 32 interrupt lines
+            0xE004 => 0x3,           // ICTR: 4 × 32 interrupt lines
             0xE010 => self.systick_csr,
             0xE014 => self.systick_rvr,
             0xE018 => 0,
@@ -379,7 +372,10 @@ mod tests {
         s.pend_irq(20, 1);
         s.pend_irq(63, 2);
         // Thread mode: the most urgent of the two.
-        assert_eq!(s.next_exception(s.execution_priority(0, 0)), Some(IRQ0 + 63));
+        assert_eq!(
+            s.next_exception(s.execution_priority(0, 0)),
+            Some(IRQ0 + 63)
+        );
         // BASEPRI at 0x10 masks 0x10 and below in urgency.
         assert_eq!(s.next_exception(s.execution_priority(0x10, 0)), None);
         // PRIMASK masks all configurable ones.
@@ -389,7 +385,10 @@ mod tests {
         s.pending[(IRQ0 + 63) as usize] = false;
         assert_eq!(s.next_exception(s.execution_priority(0, 0)), None);
         s.pend_irq(55, 3);
-        assert_eq!(s.next_exception(s.execution_priority(0, 0)), Some(IRQ0 + 55));
+        assert_eq!(
+            s.next_exception(s.execution_priority(0, 0)),
+            Some(IRQ0 + 55)
+        );
     }
 
     #[test]

@@ -28,11 +28,6 @@ pub fn to_s(units: u64) -> f64 {
     units as f64 / UNITS_PER_S as f64
 }
 
-/// `ns` nanoseconds in units.
-pub fn from_ns(ns: u64) -> u64 {
-    ns * NS_DEN / NS_NUM
-}
-
 /// `us` microseconds in units.
 pub fn from_us(us: u64) -> u64 {
     us * (UNITS_PER_S / 1_000_000)

@@ -119,7 +119,10 @@ fn setup(request_type: u8, request: u8, value: u16, index: u16, length: u16) -> 
 }
 
 fn le16(b: &[u8], o: usize) -> u16 {
-    u16::from_le_bytes([b.get(o).copied().unwrap_or(0), b.get(o + 1).copied().unwrap_or(0)])
+    u16::from_le_bytes([
+        b.get(o).copied().unwrap_or(0),
+        b.get(o + 1).copied().unwrap_or(0),
+    ])
 }
 
 impl Host {
@@ -134,7 +137,11 @@ impl Host {
         self.plugged = plugged;
         self.log.push(format!(
             "{} at {:.3} s",
-            if plugged { "cable plugged in" } else { "cable pulled" },
+            if plugged {
+                "cable plugged in"
+            } else {
+                "cable pulled"
+            },
             crate::time::to_s(now)
         ));
         if !plugged {
@@ -231,7 +238,11 @@ impl Host {
             Stage::StatusIn => match dev.input(addr, 0) {
                 Handshake::Ack(d) if d.is_empty() => c.stage = Stage::Done,
                 Handshake::Ack(d) => {
-                    return Err(format!("status IN of {:02x?} carried {} bytes", c.setup, d.len()))
+                    return Err(format!(
+                        "status IN of {:02x?} carried {} bytes",
+                        c.setup,
+                        d.len()
+                    ))
                 }
                 Handshake::Nak => {}
                 h => return Err(format!("status IN of {:02x?}: {h:?}", c.setup)),
@@ -369,7 +380,12 @@ impl Host {
 }
 
 fn utf16(d: &[u8]) -> String {
-    let units: Vec<u16> = d.get(2..).unwrap_or(&[]).chunks(2).map(|c| le16(c, 0)).collect();
+    let units: Vec<u16> = d
+        .get(2..)
+        .unwrap_or(&[])
+        .chunks(2)
+        .map(|c| le16(c, 0))
+        .collect();
     String::from_utf16_lossy(&units)
 }
 
@@ -379,7 +395,9 @@ fn check_device(d: &[u8]) -> Result<(), String> {
     }
     let (vid, pid) = (le16(d, 8), le16(d, 10));
     if (vid, pid) != (VID, PID) {
-        return Err(format!("device {vid:04x}:{pid:04x}, expected {VID:04x}:{PID:04x}"));
+        return Err(format!(
+            "device {vid:04x}:{pid:04x}, expected {VID:04x}:{PID:04x}"
+        ));
     }
     if d[7] != 64 {
         return Err(format!("EP0 max packet {}", d[7]));
@@ -398,7 +416,9 @@ fn parse_config(d: &[u8]) -> Result<(u16, u8, u8), String> {
     while i + 2 <= d.len() {
         let len = usize::from(d[i]);
         if len < 2 || i + len > d.len() {
-            return Err(format!("descriptor at byte {i} of the configuration is malformed"));
+            return Err(format!(
+                "descriptor at byte {i} of the configuration is malformed"
+            ));
         }
         match d[i + 1] {
             4 => {

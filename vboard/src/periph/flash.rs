@@ -248,6 +248,9 @@ mod tests {
         assert_eq!(f.read_memory(CONFIG + 4, 4), 0x9ABC_DEF0);
         f.write_memory(CONFIG, 4, 0, from_us(PROGRAM_US));
         f.write_memory(CONFIG + 4, 4, 0, from_us(PROGRAM_US));
-        assert_ne!(f.read(0x10, from_us(PROGRAM_US)).ok().unwrap_or(0) & SR_PROGERR, 0);
+        assert_ne!(
+            f.read(0x10, from_us(PROGRAM_US)).ok().unwrap_or(0) & SR_PROGERR,
+            0
+        );
     }
 }

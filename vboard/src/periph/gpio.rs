@@ -9,7 +9,8 @@
 //!
 //! The board drives each input it has wired ([`Gpio::drive`]); an input nothing drives
 //! reads its pull (up: 1, down or none: 0). A pin in alternate-function mode reads the
-//! level the board last gave it for its function ([`Gpio::set_af_level`]).
+//! level of its function's output, which the board does not feed back: 0 (no firmware
+//! reads an alternate-function pin through IDR).
 
 use super::Unmodelled;
 
@@ -64,11 +65,6 @@ impl Gpio {
         (self.afr[pin / 8] >> (4 * (pin % 8))) & 0xF
     }
 
-    /// The output data register.
-    pub fn odr(&self) -> u32 {
-        self.odr
-    }
-
     /// The level of `pin` as the outside sees it if the chip drives it: Some(level)
     /// for an output or alternate-function pin, None for an input or analog pin.
     pub fn output(&self, pin: usize) -> Option<bool> {
@@ -108,12 +104,6 @@ impl Gpio {
         }
     }
 
-    /// The alternate function of `pin` outputs `high`.
-    pub fn set_af_level(&mut self, pin: usize, high: bool) {
-        let bit = 1 << pin;
-        self.af_level = self.af_level & !bit | if high { bit } else { 0 };
-    }
-
     /// Reads `offset`.
     pub fn read(&self, offset: u32) -> Result<u32, Unmodelled> {
         Ok(match offset {
@@ -121,7 +111,9 @@ impl Gpio {
             0x04 => self.otyper,
             0x08 => self.ospeedr,
             0x0C => self.pupdr,
-            0x10 => (0..16).filter(|&p| self.level(p)).fold(0, |w, p| w | 1 << p),
+            0x10 => (0..16)
+                .filter(|&p| self.level(p))
+                .fold(0, |w, p| w | 1 << p),
             0x14 => self.odr,
             0x18 | 0x28 => 0, // write-only: read as 0
             0x1C => self.lckr,

@@ -393,6 +393,13 @@ mod tests {
         h.write(0x394, 2, 0).ok();
         h.write(0x80 + 0x44, 1, 5).ok();
         h.write(0x80 + 0x48, 1, 50).ok();
-        assert_eq!(h.pulses, vec![Pulse { channel: 1, rise: 5, fall: 50 }]);
+        assert_eq!(
+            h.pulses,
+            vec![Pulse {
+                channel: 1,
+                rise: 5,
+                fall: 50
+            }]
+        );
     }
 }

@@ -89,7 +89,11 @@ impl Iwdg {
     }
 
     fn busy(&mut self, bit: u32, now: u64) {
-        self.busy_bits = if now < self.busy_until { self.busy_bits | bit } else { bit };
+        self.busy_bits = if now < self.busy_until {
+            self.busy_bits | bit
+        } else {
+            bit
+        };
         self.busy_until = now + UPDATE_LSI_CYCLES * self.lsi_units();
     }
 

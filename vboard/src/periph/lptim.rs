@@ -88,6 +88,10 @@ impl Lptim {
             return;
         };
         let top = self.arr + 1;
-        self.cnt = if up { (self.cnt + 1) % top } else { (self.cnt + top - 1) % top };
+        self.cnt = if up {
+            (self.cnt + 1) % top
+        } else {
+            (self.cnt + top - 1) % top
+        };
     }
 }

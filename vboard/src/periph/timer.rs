@@ -288,7 +288,8 @@ impl Timer {
             let at_start = self.level_at(ch, from_cnt);
             // With PWM modes the level changes at most once inside a period: at CCR.
             let ccr = self.ccr_active[ch];
-            let switch = (ccr > from_cnt && ccr < to_cnt).then(|| t0 + u64::from(ccr - from_cnt) * upc);
+            let switch =
+                (ccr > from_cnt && ccr < to_cnt).then(|| t0 + u64::from(ccr - from_cnt) * upc);
             let mut level = at_start;
             self.set_level(ch, level, t0);
             if let Some(t) = switch {
@@ -485,7 +486,12 @@ impl Timer {
                 }
             }
             reg::RCR if self.has_rcr() => {
-                self.rcr = value & if self.kind == Kind::Advanced { 0xFFFF } else { 0xFF }
+                self.rcr = value
+                    & if self.kind == Kind::Advanced {
+                        0xFFFF
+                    } else {
+                        0xFF
+                    }
             }
             o @ reg::CCR1..=reg::CCR4 => {
                 let ch = ((o - reg::CCR1) / 4) as usize;
@@ -554,11 +560,6 @@ impl Timer {
     pub fn encoder_inputs(&self) -> (bool, bool) {
         self.enc
     }
-
-    /// Is the counter enabled (CEN)?
-    pub fn enabled(&self) -> bool {
-        self.cr1 & CR1_CEN != 0
-    }
 }
 
 #[cfg(test)]
@@ -582,10 +583,14 @@ mod tests {
         t.write(reg::CCR1, 90, 0).ok();
         t.write(reg::RCR, 3, 0).ok();
         t.write(reg::EGR, 1, 0).ok();
-        t.write(reg::CR1, CR1_OPM | CR1_URS | CR1_ARPE | CR1_CEN, 0).ok();
+        t.write(reg::CR1, CR1_OPM | CR1_URS | CR1_ARPE | CR1_CEN, 0)
+            .ok();
         t.advance(16 * 1000);
         assert_eq!(t.pulses.len(), 4, "{:?}", t.pulses);
-        assert_eq!(t.read(reg::CR1, 16 * 1000).ok().map(|v| v & CR1_CEN), Some(0));
+        assert_eq!(
+            t.read(reg::CR1, 16 * 1000).ok().map(|v| v & CR1_CEN),
+            Some(0)
+        );
         // URS: no UIF from UG, one from the last overflow's update event.
         assert_eq!(t.update_events, 1);
     }
@@ -602,7 +607,13 @@ mod tests {
         t.advance(16 * 10_000);
         let p: Vec<(u64, u64)> = t.pulses.iter().map(|p| (p.rise, p.fall)).collect();
         // Counts at 16 units each from 160: CCR 90 → rise, ARR 99 → wrap at 100.
-        assert_eq!(p, vec![(160 + 90 * 16, 160 + 100 * 16), (160 + 190 * 16, 160 + 200 * 16)]);
+        assert_eq!(
+            p,
+            vec![
+                (160 + 90 * 16, 160 + 100 * 16),
+                (160 + 190 * 16, 160 + 200 * 16)
+            ]
+        );
     }
 
     #[test]

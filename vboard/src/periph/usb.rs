@@ -163,9 +163,8 @@ impl UsbDevice {
 
     /// Reads a 16-bit word of packet memory at byte offset `o` (`size` ≤ 4 bytes).
     pub fn pma_read(&self, o: usize, size: usize) -> Option<u32> {
-        (o + size <= PMA_SIZE).then(|| {
-            (0..size).fold(0u32, |v, k| v | u32::from(self.pma[o + k]) << (8 * k))
-        })
+        (o + size <= PMA_SIZE)
+            .then(|| (0..size).fold(0u32, |v, k| v | u32::from(self.pma[o + k]) << (8 * k)))
     }
 
     /// Writes packet memory.
@@ -261,7 +260,9 @@ impl UsbDevice {
             STAT_VALID => {
                 let base = usize::from(self.bt(n, 0));
                 let count = usize::from(self.bt(n, 1) & 0x3FF);
-                let data = (0..count).map(|k| self.pma[(base + k) % PMA_SIZE]).collect();
+                let data = (0..count)
+                    .map(|k| self.pma[(base + k) % PMA_SIZE])
+                    .collect();
                 self.epr[n] |= 0x0080;
                 self.epr[n] ^= 1 << 6;
                 self.set_stat(n, false, STAT_NAK);
