@@ -70,8 +70,10 @@ pub(super) struct Bridge<'o> {
     pub(super) travel: [f64; 3],
     /// Ctrl-C: asked when the bridge should stop.
     stop: &'o dyn Fn() -> bool,
-    /// Ctrl-C was seen: the job is aborted and no more lines are taken.
+    /// Ctrl-C was seen: no more lines are taken.
     pub(super) stopping: bool,
+    /// The held job was abandoned for Ctrl-C.
+    stop_aborted: bool,
     /// The alarm last reported (`ALARM:N`), so that it is said once.
     pub(super) alarm_told: Option<pkmc::protocol::Alarm>,
 }
@@ -133,6 +135,7 @@ impl<'o> Bridge<'o> {
             travel: words::max_travel(machine, &start),
             stop,
             stopping: false,
+            stop_aborted: false,
             alarm_told: None,
         }
     }
@@ -545,13 +548,22 @@ impl<'o> Bridge<'o> {
         self.job = job;
     }
 
-    /// Ctrl-C seen for the first time: a job under way is aborted.
+    /// Ctrl-C: no more lines are taken; a job under way runs to its end, and a job
+    /// held at rest (which would never end) is abandoned, stopped where it stands.
     fn check_stop(&mut self) {
-        if !self.stopping && (self.stop)() {
-            self.stopping = true;
-            if self.busy() {
-                self.controls.push_back(Control::Abort);
+        if !self.stopping {
+            if !(self.stop)() {
+                return;
             }
+            self.stopping = true;
+        }
+        let held = self
+            .status
+            .as_ref()
+            .is_some_and(|s| s.state == State::Hold && s.speed == 0);
+        if held && !self.stop_aborted {
+            self.stop_aborted = true;
+            self.controls.push_back(Control::Abort);
         }
     }
 }
