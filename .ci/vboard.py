@@ -332,7 +332,8 @@ def table_row(name, sim, job, rep, wall):
     return (f"| {name} | {job.get('blocks_executed')} | {rt:.3f} | {busy['min']:.1f} / {busy['median']:.1f} / "
             f"{busy['p99']:.1f} / {busy['max']:.1f} | {lat['min']:.2f} / {lat['median']:.2f} / {lat['p99']:.2f} / "
             f"{lat['max']:.2f} | {rep['stack']['deepest']} / {rep['stack']['untouched']} | "
-            f"{(job.get('blocks_executed') or 0) / rt if rt else 0:.0f} | {rep['speed']:.2f} |")
+            f"{(job.get('blocks_executed') or 0) / rt if rt else 0:.0f} | {rep['frames_per_s_peak_100ms']} | "
+            f"{rep['speed']:.2f} |")
 
 
 def case_estop(o):
@@ -474,8 +475,9 @@ def main():
                           "limit": case_limit, "ampfault": case_ampfault, "jam": case_jam}[case](o))
         print(f"vboard: {case} done in {time.time() - t:.1f} s", flush=True)
     print("\n| job | blocks | motion s | busy % per 1 ms (min / median / p99 / max) | servo start µs "
-          "(min / median / p99 / max) | stack deepest / untouched B | blocks/s | speed × real time |")
-    print("|---|---|---|---|---|---|---|---|")
+          "(min / median / p99 / max) | stack deepest / untouched B | blocks/s executed | frames/s accepted "
+          "(most in 100 ms) | speed × real time |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(r)
     for n in notes:

@@ -29,6 +29,8 @@ pub enum Outcome {
     Report,
     /// Stop.
     Quit,
+    /// The figures start afresh.
+    Mark,
 }
 
 /// Parses a line: `Some((time, command))`, `None` for a blank line or a comment.
@@ -108,6 +110,7 @@ pub fn apply(cmd: &str, core: &mut Core, host: &mut Host) -> Result<Outcome, Str
             st.servo_latency.clear();
             st.worst_servo.clear();
             b.worst_profile = None;
+            return Ok(Outcome::Mark);
         }
         "report" => return Ok(Outcome::Report),
         "quit" => return Ok(Outcome::Quit),

@@ -213,6 +213,9 @@ fn run(args: Args) -> Result<()> {
     let limit = args.seconds.map(|s| (s * time::UNITS_PER_S as f64) as u64);
     let mut next_ms = 0u64;
     let mut last_out: Option<u64> = None;
+    // Frames the device accepted in each millisecond (for the link's rate).
+    let mut frames_per_ms: Vec<u32> = Vec::new();
+    let mut frames_seen = 0u64;
     let mut buf = [0u8; 4096];
     // One row per ten servo periods (a millisecond; the rows are the plants' steps at
     // the servo timer's update events): virtual time and each joint's drive position
@@ -260,6 +263,8 @@ fn run(args: Args) -> Result<()> {
         }
         if now >= next_ms {
             next_ms = now + time::from_ms(1);
+            frames_per_ms.push((host.frames_out - frames_seen) as u32);
+            frames_seen = host.frames_out;
             if let Some(f) = trace.as_mut() {
                 let rows = core.uc.get_data_mut().trace_rows.replace(Vec::new());
                 for (t, d) in rows.unwrap_or_default() {
@@ -283,9 +288,12 @@ fn run(args: Args) -> Result<()> {
             for cmd in due {
                 eprintln!("vboard: {cmd} at {:.4} s", time::to_s(now));
                 match control::apply(&cmd, &mut core, &mut host) {
-                    Ok(control::Outcome::Report) => report(&core, started.elapsed(), host.packets),
+                    Ok(control::Outcome::Report) => {
+                        report(&core, started.elapsed(), host.packets, &frames_per_ms)
+                    }
                     Ok(control::Outcome::Quit) => stop.store(true, Ordering::SeqCst),
                     Ok(control::Outcome::Done) => {}
+                    Ok(control::Outcome::Mark) => frames_per_ms.clear(),
                     Err(e) => eprintln!("vboard: {cmd}: {e}"),
                 }
             }
@@ -317,7 +325,7 @@ fn run(args: Args) -> Result<()> {
     for line in log.poll(&mut core.uc).unwrap_or_default() {
         eprintln!("{line}");
     }
-    report(&core, started.elapsed(), host.packets);
+    report(&core, started.elapsed(), host.packets, &frames_per_ms);
     if let Some((busy, k, hist)) = &core.uc.get_data().worst_profile {
         eprintln!(
             "profile: the busiest period while streaming, {k} ms: {:.1} %",
@@ -353,7 +361,16 @@ fn quartiles(v: &mut [u64]) -> [u64; 4] {
 }
 
 /// Prints the run's figures as one JSON object on stdout.
-fn report(core: &Core, wall: Duration, packets: (u64, u64)) {
+fn report(core: &Core, wall: Duration, packets: (u64, u64), frames_per_ms: &[u32]) {
+    // The link's accepted frames a second: the most in any 100 ms.
+    let window = 100.min(frames_per_ms.len().max(1));
+    let peak = frames_per_ms
+        .windows(window)
+        .map(|w| w.iter().map(|&n| u64::from(n)).sum::<u64>())
+        .max()
+        .unwrap_or(0)
+        * 1000
+        / window as u64;
     let b = core.uc.get_data();
     let virt = time::to_s(b.now);
     let us = |u: u64| time::to_ns(u) as f64 / 1000.0;
@@ -422,7 +439,7 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64)) {
          \"servo_latency_us\": {{\"min\": {:.3}, \"median\": {:.3}, \"p99\": {:.3}, \"max\": {:.3}, \"jitter\": {:.3}}}, \
          \"worst_servo_latency_us\": [{}], \
          \"stack\": {{\"top\": {}, \"deepest\": {depth}, \"untouched\": {untouched}, \"lowest_sp_chain\": [{}]}}, \
-         \"watchdog_resets\": {}, \"software_resets\": {}, \"pin_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}, \"flash_machine\": {flash_machine}, \"usb_packets_in_out\": [{}, {}], \"pwm_code_range\": [{}, {}], \"led_toggles\": {}}}",
+         \"watchdog_resets\": {}, \"software_resets\": {}, \"pin_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}, \"flash_machine\": {flash_machine}, \"usb_packets_in_out\": [{}, {}], \"pwm_code_range\": [{}, {}], \"led_toggles\": {}, \"frames_per_s_peak_100ms\": {peak}}}",
         wall.as_secs_f64(),
         virt / wall.as_secs_f64().max(1e-9),
         b.instructions,

@@ -83,6 +83,8 @@ pub struct Host {
     pub configured_at: Vec<u64>,
     /// Bulk packets moved each way.
     pub packets: (u64, u64),
+    /// Frames (COBS-delimited: a zero byte ends each) delivered to the device.
+    pub frames_out: u64,
     strings: Vec<String>,
 }
 
@@ -105,6 +107,7 @@ impl Default for Host {
             log: Vec::new(),
             configured_at: Vec::new(),
             packets: (0, 0),
+            frames_out: 0,
             strings: Vec::new(),
         }
     }
@@ -355,6 +358,7 @@ impl Host {
                 Handshake::Ack(_) => {
                     self.to_device.drain(..n);
                     self.packets.1 += 1;
+                    self.frames_out += chunk.iter().filter(|&&b| b == 0).count() as u64;
                 }
                 Handshake::Nak => {}
                 h => self.log.push(format!("bulk OUT: {h:?}")),
