@@ -395,6 +395,28 @@ def case_jam(o):
                      os.path.join(ROOT, "examples/h4-table-tilt.ngc"), "jam 1", "FollowingError")
 
 
+def case_determinism(o):
+    """Two runs of the same 1.5 s (boot, USB enumeration, an e-stop injected at
+    1.0 s through the simulator's fault syntax), free-running: the same instructions,
+    interrupts, drive positions and figures."""
+    reps = []
+    for k in range(2):
+        r = subprocess.run([o.vboard, "--elf", o.elf, "--seconds", "1.5", "--free-run", "--quiet-log",
+                            "--inject", "estop@1.0"], capture_output=True, text=True, timeout=300,
+                           stdin=subprocess.DEVNULL)
+        if r.returncode != 0:
+            die(f"determinism: run {k + 1} exit {r.returncode}: {r.stderr[-2000:]}")
+        rep = json.loads(r.stdout.strip().splitlines()[-1])
+        for key in ("wall_s", "speed"):
+            rep.pop(key)
+        reps.append(rep)
+    if reps[0] != reps[1]:
+        diff = {k: (reps[0][k], reps[1].get(k)) for k in reps[0] if reps[0][k] != reps[1].get(k)}
+        die(f"determinism: the two runs differ: {diff}")
+    return (f"determinism: two free runs of 1.5 s agree on all {len(reps[0])} figures "
+            f"({reps[0]['instructions']} instructions, exceptions {reps[0]['exceptions']})")
+
+
 def case_unplug(o):
     """The USB cable pulled 2 s into the square job: the controller raises link loss
     and stops; plugged in again, `nc-send abort` clears the job."""
@@ -447,7 +469,7 @@ def main():
     ap.add_argument("--nc-send", dest="nc", default=os.path.join(ROOT, "target/debug/nc-send"))
     ap.add_argument("--vboard", default=os.path.join(ROOT, "vboard/target/release/pkmc-vboard"))
     ap.add_argument("cases", nargs="*", default=["square", "dense", "square8", "dense8", "estop", "limit",
-                                                 "ampfault", "jam", "unplug", "persist"])
+                                                 "ampfault", "jam", "unplug", "persist", "determinism"])
     o = ap.parse_args()
     rows, notes, failed = [], [], []
     tmp = tempfile.mkdtemp()
@@ -472,7 +494,8 @@ def main():
                 failed += [f"{case}: {e}" for e in errors]
         else:
             notes.append({"estop": case_estop, "unplug": case_unplug, "persist": case_persist,
-                          "limit": case_limit, "ampfault": case_ampfault, "jam": case_jam}[case](o))
+                          "limit": case_limit, "ampfault": case_ampfault, "jam": case_jam,
+                          "determinism": case_determinism}[case](o))
         print(f"vboard: {case} done in {time.time() - t:.1f} s", flush=True)
     print("\n| job | blocks | motion s | busy % per 1 ms (min / median / p99 / max) | servo start µs "
           "(min / median / p99 / max) | stack deepest / untouched B | blocks/s executed | frames/s accepted "

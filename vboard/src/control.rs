@@ -33,6 +33,55 @@ pub enum Outcome {
     Mark,
 }
 
+/// The board commands that make the simulator's fault injection `i` (`--inject
+/// KIND[:JOINT]@SECONDS`, the same syntax as `nc-send --inject`) happen at its pins,
+/// at `SECONDS` of virtual time since power-on: the e-stop input; joint J's limit
+/// switch (input J); the fault line of joint J's amplifier group; joint J's servo axis
+/// jammed; the USB cable pulled for [`pkmc_host::sim::LINK_CUT`].
+pub fn injection(
+    i: &pkmc_host::sim::Injection,
+    core: &Core,
+) -> Result<Vec<(u64, String)>, anyhow::Error> {
+    use pkmc::config::Drive;
+    use pkmc_host::sim::FaultKind;
+    let at = (i.at_s * time::UNITS_PER_S as f64) as u64;
+    let b = core.uc.get_data();
+    let joint = |what: &str| -> Result<(usize, Drive), anyhow::Error> {
+        let j = i
+            .joint
+            .ok_or_else(|| anyhow::anyhow!("--inject {what} needs :JOINT"))?;
+        let jc =
+            b.machine.machine.joints.get(j).ok_or_else(|| {
+                anyhow::anyhow!("--inject {what}:{j}: the machine has no joint {j}")
+            })?;
+        Ok((j, jc.drive))
+    };
+    let servo_channel = |what: &str| -> Result<usize, anyhow::Error> {
+        match joint(what)? {
+            (_, Drive::Servo { channel }) => Ok(channel as usize),
+            (j, Drive::Stepper { .. }) => Err(anyhow::anyhow!(
+                "--inject {what}:{j}: joint {j} is a stepper, and the board has no stepper \
+                 fault line (docs/wiring.md)"
+            )),
+        }
+    };
+    Ok(match i.kind {
+        FaultKind::EStop => vec![(at, "estop on".into())],
+        FaultKind::Limit => vec![(at, format!("limit {} on", joint("limit")?.0))],
+        FaultKind::DriveFault => {
+            let c = servo_channel("drive-fault")?;
+            vec![(at, format!("fault {} on", b.wiring.servo_group[c]))]
+        }
+        FaultKind::FollowingError => {
+            vec![(at, format!("jam {}", servo_channel("following-error")?))]
+        }
+        FaultKind::LinkLoss => {
+            let cut = time::from_ms(pkmc_host::sim::LINK_CUT.as_millis() as u64);
+            vec![(at, "unplug".into()), (at + cut, "plug".into())]
+        }
+    })
+}
+
 /// Parses a line: `Some((time, command))`, `None` for a blank line or a comment.
 pub fn parse(line: &str) -> Result<Option<(Option<u64>, String)>, String> {
     let line = line.trim();

@@ -36,6 +36,7 @@ struct Args {
     quiet_log: bool,
     trace: Option<PathBuf>,
     servo8: bool,
+    inject: Vec<pkmc_host::sim::Injection>,
 }
 
 fn usage() -> ! {
@@ -43,6 +44,7 @@ fn usage() -> ! {
         "usage: pkmc-vboard [--elf FIRMWARE.elf] [--machine FILE.toml] [--link PATH]\n\
          \x20                  [--flash FILE] [--seconds S] [--free-run] [--quiet-log]\n\
          \x20                  [--trace FILE.csv] [--wiring default|servo8]\n\
+         \x20                  [--inject KIND[:JOINT]@SECONDS]...\n\
          Runs the firmware ELF on a virtual STM32G474RE board and prints the\n\
          pseudo-terminal of its USB link (docs/vboard.md). Without --elf it builds\n\
          the release firmware for the wiring first (as cargo fw-build does)."
@@ -61,6 +63,7 @@ fn parse_args() -> Args {
         quiet_log: false,
         trace: None,
         servo8: false,
+        inject: Vec::new(),
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -76,6 +79,13 @@ fn parse_args() -> Args {
             "--free-run" => a.free_run = true,
             "--quiet-log" => a.quiet_log = true,
             "--trace" => a.trace = Some(value().into()),
+            "--inject" => match value().parse() {
+                Ok(i) => a.inject.push(i),
+                Err(e) => {
+                    eprintln!("pkmc-vboard: {e}");
+                    std::process::exit(2);
+                }
+            },
             "--wiring" => match value().as_str() {
                 "default" => a.servo8 = false,
                 "servo8" => a.servo8 = true,
@@ -207,6 +217,11 @@ fn run(args: Args) -> Result<()> {
         }
     });
     let mut scheduled: Vec<(u64, String)> = Vec::new();
+    for i in &args.inject {
+        for (at, cmd) in control::injection(i, &core)? {
+            scheduled.push((at, cmd));
+        }
+    }
 
     let started = Instant::now();
     let service = time::from_us(SERVICE_US);

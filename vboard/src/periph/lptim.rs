@@ -95,3 +95,32 @@ impl Lptim {
         };
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn encoder_mode_counts_both_edges_of_both_inputs_both_ways_within_arr() {
+        let mut l = Lptim::default();
+        l.write(0x0C, 1 << 24).ok(); // ENC
+        l.write(0x10, 1).ok(); // ENABLE
+        l.write(0x18, 0xFFFF).ok();
+        assert_ne!(l.read(0x00).ok().unwrap_or(0) & (1 << 4), 0); // ARROK
+                                                                  // Not started (CNTSTRT): nothing counts.
+        l.encoder_input(true, false);
+        assert_eq!(l.read(0x1C).ok(), Some(0));
+        l.encoder_input(false, false);
+        l.write(0x10, 1 | 4).ok();
+        for (a, b) in [(true, false), (true, true), (false, true), (false, false)] {
+            l.encoder_input(a, b);
+        }
+        assert_eq!(l.read(0x1C).ok(), Some(4));
+        for _ in 0..2 {
+            for (a, b) in [(false, true), (true, true), (true, false), (false, false)] {
+                l.encoder_input(a, b);
+            }
+        }
+        assert_eq!(l.read(0x1C).ok(), Some(0xFFFC));
+    }
+}
