@@ -4,10 +4,10 @@
 //! PRIMASK, WFE/WFI with the event register, virtual time from executed instructions,
 //! and reset.
 //!
-//! Source: ARMv7-M Architecture Reference Manual (ARM DDI 0403E), B1.5.6 "Exception
-//! entry behavior", B1.5.7 "Stack alignment on exception entry", B1.5.8 "Exception
-//! return behavior", B1.5.4 "Execution priority", B1.5.18–B1.5.19 (WFE, WFI, the
-//! event register). Lazy FP state preservation (FPCCR.LSPEN) is modelled eagerly: the
+//! Source: ARMv7-M Architecture Reference Manual (ARM DDI 0403E), "Exception
+//! entry behavior", "Stack alignment on exception entry", "Exception return
+//! behavior", "Execution priority", and WFE, WFI and the event register ("Power
+//! management"). Lazy FP state preservation (FPCCR.LSPEN) is modelled eagerly: the
 //! extended frame's S0–S15 and FPSCR are written at entry; the handler sees the same
 //! registers and memory either way, only the count of stores differs.
 //!
@@ -133,7 +133,7 @@ const FRAME_REGS: [RegisterARM; 6] = [
     RegisterARM::LR,
 ];
 
-/// Exception entry into `e` (B1.5.6): stacks the context on the main stack, sets LR
+/// Exception entry into `e` ("Exception entry behavior"): stacks the context on the main stack, sets LR
 /// to EXC_RETURN, IPSR, and jumps to the vector. `return_pc` is the address to come
 /// back to.
 fn enter(uc: &mut Unicorn<Board>, e: u32, return_pc: u32) {
@@ -246,7 +246,7 @@ fn preempting(uc: &Unicorn<Board>) -> Option<u32> {
     s.next_exception(s.execution_priority(basepri, primask))
 }
 
-/// Exception return (B1.5.8) to `exc_return`, or a tail-chain into a pending
+/// Exception return ("Exception return behavior") to `exc_return`, or a tail-chain into a pending
 /// exception that may run at the priority returned to.
 fn exception_return(uc: &mut Unicorn<Board>, exc_return: u32) -> Result<(), String> {
     let ipsr = reg(uc, RegisterARM::IPSR);
@@ -366,7 +366,7 @@ impl<'a> Core<'a> {
                 Some(
                     move |uc: &mut Unicorn<Board>, o: u64, size: usize, v: u64| {
                         uc.get_data_mut().write((rb + o) as u32, size, v as u32);
-                        // CPACR reaches the core at once (the FPU enable, B3.2.20).
+                        // CPACR reaches the core at once (the FPU enable).
                         if rb + o == 0xE000_ED88 {
                             let cpacr = uc.get_data().scs.cpacr;
                             let _ = uc.reg_write(RegisterARM::C1_C0_2, u64::from(cpacr));

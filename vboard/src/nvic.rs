@@ -2,9 +2,9 @@
 //! (enable, pending, active, priority of 102 interrupt lines), the SCB registers the
 //! firmware touches, SysTick, the FPU's control registers and DWT's cycle counter.
 //!
-//! Source: the ARMv7-M Architecture Reference Manual (ARM DDI 0403E), B3.2 "System
-//! Control Space" and B3.4 "Nested Vectored Interrupt Controller", and the STM32G4
-//! programming manual PM0214 §4.2–4.4 (the same registers as STM32 implements them:
+//! Source: the ARMv7-M Architecture Reference Manual (ARM DDI 0403E), "System
+//! Control Space" and "Nested Vectored Interrupt Controller", and ST's Cortex-M4
+//! programming manual PM0214, "Core peripherals" (the registers as STM32 implements them:
 //! four priority bits, bits 7:4 of each priority byte).
 //!
 //! Priorities here are the raw priority bytes with the unimplemented low nibble
@@ -16,7 +16,7 @@
 pub const IRQ_LINES: usize = 102;
 /// Exception number of interrupt line 0.
 pub const IRQ0: u32 = 16;
-/// Implemented priority bits mask (four bits, PM0214 §4.2.7).
+/// Implemented priority bits mask (four bits: PM0214, the NVIC's priority registers).
 pub const PRIO_MASK: u8 = 0xF0;
 
 /// Exception numbers of the system exceptions used here.
@@ -89,9 +89,9 @@ impl Default for Scs {
             prigroup: 0,
             vtor: 0,
             scr: 0,
-            ccr: 0x0000_0200, // STKALIGN (PM0214 §4.4.7: reset value 0x0000 0200)
+            ccr: 0x0000_0200, // STKALIGN (PM0214, CCR: reset value 0x0000 0200)
             cpacr: 0,
-            fpccr: 0xC000_0000, // ASPEN, LSPEN (PM0214 §4.6.2)
+            fpccr: 0xC000_0000, // ASPEN, LSPEN (PM0214, FPCCR)
             fpdscr: 0,
             shcsr: 0,
             demcr: 0,
@@ -124,7 +124,7 @@ impl Scs {
     }
 
     /// The priority the core executes at: the most urgent active exception, BASEPRI
-    /// and PRIMASK (ARMv7-M B1.5.4 "Execution priority").
+    /// and PRIMASK (ARMv7-M ARM, "Execution priority").
     pub fn execution_priority(&self, basepri: u32, primask: u32) -> i16 {
         let mut p: i16 = 256;
         for &e in &self.active {
@@ -174,7 +174,7 @@ impl Scs {
             self.pending_since[i] = now;
         }
         self.changed = true;
-        // SEVONPEND: a pend wakes WFE even if it is not taken (PM0214 §4.4.6).
+        // SEVONPEND: a pend wakes WFE even if it is not taken (PM0214, SCR).
         if self.scr & 0x10 != 0 {
             self.event = true;
         }
@@ -222,7 +222,7 @@ impl Scs {
             0xE010 => self.systick_csr,
             0xE014 => self.systick_rvr,
             0xE018 => 0,
-            0xED00 => 0x410F_C241, // CPUID: Cortex-M4 r0p1 (PM0214 §4.4.1)
+            0xED00 => 0x410F_C241, // CPUID: Cortex-M4 r0p1 (PM0214, CPUID)
             0xED04 => self.icsr(),
             0xED08 => self.vtor,
             0xED0C => 0xFA05_0000 | u32::from(self.prigroup) << 8,

@@ -5,7 +5,8 @@
 //! coding and DTR/RTS — then moves bytes between the bulk endpoints and a byte queue
 //! each way (the pseudo-terminal's). It can be unplugged and plugged in again.
 //!
-//! Timing (USB 2.0 specification §7.1.7.3, §9.2.6): attach debounce 100 ms (TATTDB),
+//! Timing (USB 2.0 specification, "Connect and Disconnect Signaling", "Reset
+//! Signaling" and "Request Processing"): attach debounce 100 ms (TATTDB),
 //! reset 10 ms (TDRST), 10 ms recovery (TRSTRCY), 2 ms after SET_ADDRESS (TDSETADDR),
 //! a start of frame every 1 ms. Transactions are tried at every service of the host
 //! (the board's USB service interval); a NAK is tried again at the next.

@@ -6,9 +6,12 @@
 //!
 //! - "Clocks": CKPSC ≥ 5 counts at f_HRTIM / 2^(CKPSC − 5) (low resolution); finer
 //!   ratios (CKPSC < 5) are not modelled and stop the board.
-//! - "Counter operating modes": in continuous mode the counter is reset when it
-//!   reaches the period value PER (a period lasts PER counts) and goes on; this is
-//!   the roll-over, which generates the period event.
+//! - "Counter operating modes": in continuous mode the counter rolls over to 0 when
+//!   it reaches the period value PER and goes on; the roll-over generates the period
+//!   event. Read here as: a period lasts PER counts (the counter is 0 … PER − 1), the
+//!   reading `src/bin/firmware/steppers.rs` designs its trains for. Whether the last
+//!   count PER itself lasts a clock on silicon (PER + 1 counts a period) is not settled
+//!   by the manual's text; a board would tell: 5.9 ns a step at CKPSC 5.
 //! - "Repetition counter": loaded from REP when the timer is enabled and at each
 //!   repetition event; decremented at each roll-over; the repetition event comes at
 //!   the roll-over at which it is already 0 (so every REP + 1 periods), sets REP in

@@ -51,7 +51,7 @@ impl Plain {
     }
 }
 
-/// SYSCFG (RM0440 §9.2 register map): MEMRMP, CFGR1, EXTICR1–4, SCSR, CFGR2, SWPR,
+/// SYSCFG (RM0440, SYSCFG register map): MEMRMP, CFGR1, EXTICR1–4, SCSR, CFGR2, SWPR,
 /// SKR.
 pub fn syscfg() -> Plain {
     Plain::new(
@@ -71,8 +71,8 @@ pub fn syscfg() -> Plain {
     )
 }
 
-/// EXTI (RM0440 §15.5 register map): IMR1, EMR1, RTSR1, FTSR1, SWIER1, PR1 and the
-/// same for lines 32–43. Reset values of IMR1 and IMR2 per §15.5.1 and §15.5.7 (the
+/// EXTI (RM0440, EXTI register map): IMR1, EMR1, RTSR1, FTSR1, SWIER1, PR1 and the
+/// same for lines 32–43. Reset values of IMR1 and IMR2 per their register descriptions (the
 /// direct lines unmasked).
 pub fn exti() -> Plain {
     Plain::new(
@@ -94,7 +94,7 @@ pub fn exti() -> Plain {
     )
 }
 
-/// DBGMCU (RM0440 §47.16): IDCODE (DEV_ID 0x469, the STM32G47x/G48x category 3), CR,
+/// DBGMCU (RM0440, "DBGMCU registers"): IDCODE (DEV_ID 0x469, the STM32G47x/G48x category 3), CR,
 /// APB1FZR1, APB1FZR2, APB2FZR.
 pub fn dbgmcu() -> Plain {
     Plain::new(
@@ -109,7 +109,7 @@ pub fn dbgmcu() -> Plain {
     )
 }
 
-/// CRS (RM0440 §8.7): CR, CFGR (reset 0x2022_BB7F), ISR, ICR. The HSI48 trimming is
+/// CRS (RM0440, CRS register map): CR, CFGR (reset 0x2022_BB7F), ISR, ICR. The HSI48 trimming is
 /// not modelled: the USB host of this board does not depend on the clock's accuracy.
 pub fn crs() -> Plain {
     Plain::new(
@@ -123,7 +123,7 @@ pub fn crs() -> Plain {
     )
 }
 
-/// The OPAMP control registers (RM0440 §25.5: OPAMPx_CSR at 0x00–0x14, OPAMPx_TCMR at
+/// The OPAMP control registers (RM0440, OPAMP register map: OPAMPx_CSR at 0x00–0x14, OPAMPx_TCMR at
 /// 0x18–0x2C). An enabled follower's output is its input: the board reads the DAC
 /// channel behind it.
 pub fn opamp() -> Plain {
@@ -135,7 +135,7 @@ pub fn opamp() -> Plain {
     Plain::new("OPAMP", &regs)
 }
 
-/// COMP1–COMP7 control registers (RM0440 §24.6: COMPx_CSR at 0x00–0x18).
+/// COMP1–COMP7 control registers (RM0440, COMP register map: COMPx_CSR at 0x00–0x18).
 pub fn comp() -> Plain {
     let regs: Vec<(u32, u32, u32)> = (0..7).map(|k| (4 * k, 0, 0xFFFF_FFFF)).collect();
     Plain::new("COMP", &regs)

@@ -4,36 +4,36 @@
 //! and 2 (as STEP pulses), the update interrupt with UIFREMAP, and the encoder
 //! interface.
 //!
-//! Source: RM0440 rev 8, chapter 28 "Advanced-control timers (TIM1/TIM8/TIM20)",
-//! chapter 29 "General-purpose timers (TIM2/TIM3/TIM4/TIM5)", chapter 30 "General
-//! purpose timers (TIM15/TIM16/TIM17)" and chapter 31 "Basic timers (TIM6/TIM7)". The
-//! sections cited below are those of chapter 28; the other chapters have the same
-//! sections for the parts their timers have.
+//! Source: RM0440, the chapters "Advanced-control timers (TIM1/TIM8/TIM20)",
+//! "General-purpose timers (TIM2/TIM3/TIM4/TIM5)", "General purpose timers
+//! (TIM15/TIM16/TIM17)" and "Basic timers (TIM6/TIM7)". The sections named below are
+//! the advanced-control chapter's; the other chapters have the same sections for the
+//! parts their timers have.
 //!
-//! - §28.3.1 time-base unit: PSC, ARR (preloaded when ARPE = 1) and RCR are written
+//! - "Time-base unit": PSC, ARR (preloaded when ARPE = 1) and RCR are written
 //!   to preload registers and copied to their shadows at an update event (UEV); CNT
 //!   is read and written directly. The counter counts at f_CK_PSC / (PSC + 1).
-//! - §28.3.2 up-counting mode: the counter counts from 0 to the auto-reload value,
+//! - "Upcounting mode": the counter counts from 0 to the auto-reload value,
 //!   restarts from 0 and generates a counter overflow. UG in EGR also generates an
 //!   update event and reinitialises the counter (and the prescaler counter). With
 //!   URS = 1 only the overflow sets UIF and raises the interrupt, not UG.
-//! - §28.3.3 repetition counter: an update event is generated only when the
+//! - "Repetition counter": an update event is generated only when the
 //!   repetition down-counter reaches zero; it is reloaded from RCR at every UEV. So
 //!   with RCR = N, overflows N + 1, 2N + 2, … are update events.
-//! - §28.3.20 one-pulse mode: with OPM = 1 the counter stops (CEN cleared) at the
+//! - "One-pulse mode": with OPM = 1 the counter stops (CEN cleared) at the
 //!   next update event.
-//! - §28.3.10 PWM mode: mode 1 is active while CNT < CCRx, mode 2 is inactive while
+//! - "PWM mode": mode 1 is active while CNT < CCRx, mode 2 is inactive while
 //!   CNT < CCRx and active otherwise; CCRx is preloaded when OCxPE = 1 and copied at
 //!   each UEV. The output is OCxREF with polarity CCxP, driven only when CCxE = 1
-//!   and, on timers with break, MOE = 1 (§28.3.17 table "Output control bits").
-//! - §28.3.24 encoder interface mode: SMS = 001/010/011 counts on TI2, TI1, or both
+//!   and, on timers with break, MOE = 1 (the table of output control bits for complementary channels with break).
+//! - "Encoder interface mode": SMS = 001/010/011 counts on TI2, TI1, or both
 //!   edges, up or down by the other input's level (table "Counting direction versus
 //!   encoder signals"); the counter wraps between 0 and ARR.
-//! - §28.6.5 TIMx_CNT: bit 31 is a copy of UIF when UIFREMAP = 1.
+//! - TIMx_CNT's description: bit 31 is a copy of UIF when UIFREMAP = 1.
 
 use crate::periph::Unmodelled;
 
-/// Register offsets (RM0440 §28.6 register map).
+/// Register offsets (RM0440, the TIMx register map).
 mod reg {
     pub const CR1: u32 = 0x00;
     pub const CR2: u32 = 0x04;
@@ -209,7 +209,7 @@ impl Timer {
         self.cr1 & CR1_CEN != 0 && !self.encoder_mode()
     }
 
-    /// SMS selects an encoder mode (§28.6.3: 001, 010, 011).
+    /// SMS selects an encoder mode (TIMx_SMCR: 001, 010, 011).
     pub fn encoder_mode(&self) -> bool {
         matches!(self.smcr & 0x7, 1..=3) && self.smcr & (1 << 16) == 0
     }
@@ -317,7 +317,7 @@ impl Timer {
         }
     }
 
-    /// Update event (§28.3.1): shadows from preloads, repetition counter reloaded.
+    /// Update event ("Time-base unit"): shadows from preloads, repetition counter reloaded.
     fn update_event(&mut self) {
         self.psc_active = self.psc;
         self.arr_active = self.arr;
@@ -449,7 +449,7 @@ impl Timer {
             reg::SR => self.sr &= value, // rc_w0
             reg::EGR => {
                 if value & 1 != 0 {
-                    // UG: reinitialise the counter and the shadows (§28.3.2).
+                    // UG: reinitialise the counter and the shadows ("Upcounting mode").
                     self.update_event();
                     self.cnt_at = 0;
                     self.since = now;
@@ -530,7 +530,7 @@ impl Timer {
     }
 
     /// Drives the encoder inputs TI1 = `a`, TI2 = `b` (a change of one of them is one
-    /// edge), counting per §28.3.24 when in encoder mode with CEN set.
+    /// edge), counting as "Encoder interface mode" says when in encoder mode with CEN set.
     pub fn encoder_input(&mut self, a: bool, b: bool) {
         let (pa, pb) = self.enc;
         self.enc = (a, b);
