@@ -191,6 +191,8 @@ pub struct Board {
     pub sleep_request: Option<u32>,
     /// Start address of the block being executed.
     pub block_pc: u32,
+    /// The instruction of the last peripheral access.
+    pub access_pc: u32,
     /// The code running when each exception became pending.
     pub pended_in: Vec<u32>,
     /// The host streamed blocks recently (set by the run loop, for the busy figures).
@@ -330,6 +332,7 @@ impl Board {
             reset_due: None,
             sleep_request: None,
             block_pc: 0,
+            access_pc: 0,
             pended_in: vec![0; 16 + crate::nvic::IRQ_LINES],
             streaming: false,
             lowest_sp: u32::MAX,
@@ -437,7 +440,7 @@ impl Board {
         if self.fault.is_none() {
             self.fault = Some(Fault {
                 what,
-                pc: Some(self.block_pc),
+                pc: Some(self.access_pc),
             });
         }
         self.stop = true;

@@ -452,6 +452,23 @@ impl<'a> Core<'a> {
                 let _ = uc.emu_stop();
             })
             .map_err(|e| anyhow!("intr hook: {e:?}"))?;
+        // The exact instruction of every peripheral access (unicorn brings the program
+        // counter up to date before a memory hook, not before an MMIO callback), for
+        // the message of an unmodelled access.
+        for (base, size) in [(0x4000_0000u64, 0x2000_0000u64), (0xE000_0000, 0x10_0000)] {
+            self.uc
+                .add_mem_hook(
+                    HookType::MEM_READ | HookType::MEM_WRITE,
+                    base,
+                    base + size - 1,
+                    |uc, _kind, _addr, _size, _v| {
+                        let pc = reg(uc, RegisterARM::PC);
+                        uc.get_data_mut().access_pc = pc;
+                        true
+                    },
+                )
+                .map_err(|e| anyhow!("access hook: {e:?}"))?;
+        }
         self.uc
             .add_mem_hook(HookType::MEM_UNMAPPED, 1, 0, |uc, kind, addr, size, _v| {
                 let pc = reg(uc, RegisterARM::PC);
