@@ -471,6 +471,9 @@ def main():
     ap.add_argument("cases", nargs="*", default=["square", "dense", "square8", "dense8", "estop", "limit",
                                                  "ampfault", "jam", "unplug", "persist", "determinism"])
     o = ap.parse_args()
+    for what, path in (("nc-send", o.nc), ("pkmc-vboard", o.vboard), ("firmware ELF", o.elf)):
+        if not os.path.exists(path):
+            die(f"{what} not found at {path} (build it first: see .ci/run)")
     rows, notes, failed = [], [], []
     tmp = tempfile.mkdtemp()
     for case in o.cases:
