@@ -40,6 +40,9 @@ fn answers_as_grbl_one_one_does() {
         gc[0].contains("G1 G54 G17 G20 G91 G94 M5 M8") && gc[0].contains("F60"),
         "{gc:?}"
     );
+    // M8's block runs after its `ok` (the state is `Run` meanwhile); Grbl stores a
+    // start-up line only when idle, so wait for Idle as a sender would.
+    c.wait_state("Idle", Duration::from_secs(2));
     assert_eq!(c.command("$N0=G21 G90"), vec!["ok"]);
     assert_eq!(c.command("$N"), vec!["$N0=G21 G90", "$N1=", "ok"]);
     // A soft reset: banner, then the start-up line, run and answered.

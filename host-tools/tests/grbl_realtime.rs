@@ -471,6 +471,147 @@ fn settings_show_max_travel_m2_says_pgm_end_and_check_mode_refuses_jogs() {
     bridge.stop();
 }
 
+/// Sends each `$` line and checks its answer (`ok` or `error:N`, within 500 ms),
+/// then that a `?` within 50 ms still reports a state starting with `state`.
+fn dollar_answers(c: &mut Client, expected: &[(&str, &str)], state: &str) {
+    for (line, answer) in expected {
+        let got = command_within(c, line, Duration::from_millis(500));
+        assert_eq!(got.last().unwrap(), answer, "{line} in {state}: {got:?}");
+        if *answer == "error:8" {
+            assert_eq!(got.len(), 2, "{line}: a message, then the error: {got:?}");
+        }
+        let s = c.status_within(STATUS_LIMIT);
+        assert!(s.starts_with(&format!("<{state}")), "after {line}: {s}");
+    }
+}
+
+/// Grbl 1.1's `system_execute_line` answers `$` lines by state: `$`, `$G` and `$X`
+/// always; `$$` except in a cycle or a hold; `$#`, `$I`, `$N`, settings only idle or
+/// in an alarm; storing a start-up line only idle.
+#[test]
+fn dollar_commands_are_refused_in_a_cycle_a_hold_a_jog_and_check_mode_as_on_grbl() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::pty(&bridge.pty);
+    let idle = [
+        ("$$", "ok"),
+        ("$#", "ok"),
+        ("$I", "ok"),
+        ("$N", "ok"),
+        ("$130", "ok"),
+        ("$G", "ok"),
+        ("$", "ok"),
+    ];
+    dollar_answers(&mut c, &idle, "Idle");
+    assert_eq!(
+        command_within(&mut c, "G21 G90 G1 X40 F600", Duration::from_secs(1)),
+        vec!["ok"]
+    );
+    poll_until(&mut c, "Run", Duration::from_secs(2));
+    let cycle = [
+        ("$$", "error:8"),
+        ("$#", "error:8"),
+        ("$I", "error:8"),
+        ("$N", "error:8"),
+        ("$N0=G54", "error:8"),
+        ("$130", "error:8"),
+        ("$G", "ok"),
+        ("$", "ok"),
+        ("$X", "ok"),
+    ];
+    dollar_answers(&mut c, &cycle, "Run");
+    c.send(b"!");
+    let (held, _) = poll_until(&mut c, "Hold:0", Duration::from_secs(5));
+    dollar_answers(&mut c, &cycle, "Hold:0");
+    let s = c.status_within(STATUS_LIMIT);
+    assert_eq!(field(&s, "MPos"), field(&held, "MPos"), "nothing moved");
+    c.send(b"~");
+    let (s, _) = poll_until(&mut c, "Idle", Duration::from_secs(10));
+    assert_eq!(field(&s, "MPos")[0], 40.0, "{s}");
+    dollar_answers(&mut c, &idle, "Idle");
+    // The start-up line refused during the cycle was not stored.
+    let n = command_within(&mut c, "$N", Duration::from_millis(500));
+    assert_eq!(n, vec!["$N0=", "$N1=", "ok"]);
+
+    assert_eq!(
+        command_within(&mut c, "$J=G91 X-30 F600", Duration::from_millis(300)),
+        vec!["ok"]
+    );
+    poll_until(&mut c, "Jog", Duration::from_secs(1));
+    let jog = [
+        ("$$", "ok"),
+        ("$#", "error:8"),
+        ("$N", "error:8"),
+        ("$G", "ok"),
+        ("$X", "ok"),
+    ];
+    dollar_answers(&mut c, &jog, "Jog");
+    c.send(&[0x85]);
+    poll_until(&mut c, "Idle", Duration::from_secs(3));
+
+    assert_eq!(
+        command_within(&mut c, "$C", Duration::from_millis(500)),
+        vec!["[MSG:Enabled]", "ok"]
+    );
+    let check = [
+        ("$$", "ok"),
+        ("$#", "error:8"),
+        ("$I", "error:8"),
+        ("$G", "ok"),
+    ];
+    dollar_answers(&mut c, &check, "Check");
+    assert_eq!(
+        command_within(&mut c, "$C", Duration::from_millis(500)),
+        vec!["[MSG:Disabled]", "ok"]
+    );
+    println!("status waits: {}", c.wait_figures());
+    let summary = bridge.stop();
+    let x = summary["status"]["pose"]["x"].as_f64().unwrap();
+    assert!(
+        x > 10.5 && x < 40.0,
+        "the jog was cancelled on its way: {summary}"
+    );
+}
+
+/// G-code errors carry Grbl 1.1's numbers (its `doc/csv/error_codes_en_US.csv`) where
+/// Grbl has one for the fault, each after a `[MSG:]` with our words.
+#[test]
+fn g_code_errors_carry_grbls_numbers() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::connect(&bridge.tcp);
+    let cases = [
+        // No feed rate set yet since the start.
+        ("G1 X1", "error:22"),
+        ("G1 X1 X2 F100", "error:25"),
+        ("G1 X1 F-100", "error:4"),
+        ("G4 P-1", "error:4"),
+        ("G4", "error:28"),
+        ("G10 L2 X1", "error:28"),
+        ("G17 G18", "error:21"),
+        ("G1 X1 M3 M5 F100", "error:21"),
+        ("G2 X1 Y1 F100", "error:35"),
+        ("G53 G2 X1 Y1 I1 F100", "error:30"),
+        ("G1 X1 Y1 F100 G1.5", "error:20"),
+        ("G0 X99999", "error:33"),
+    ];
+    let mut wrong = Vec::new();
+    for (line, want) in cases {
+        let got = command_within(&mut c, line, Duration::from_millis(500));
+        let answer = got.last().unwrap();
+        assert!(
+            got.len() >= 2 && got[got.len() - 2].starts_with("[MSG:"),
+            "{got:?}"
+        );
+        if answer != want {
+            wrong.push(format!("{line}: {answer}, Grbl {want} ({got:?})"));
+        }
+    }
+    assert!(wrong.is_empty(), "{wrong:#?}");
+    // Nothing moved and nothing is held.
+    let s = c.status_within(STATUS_LIMIT);
+    assert!(s.starts_with("<Idle|"), "{s}");
+    bridge.stop();
+}
+
 #[test]
 fn unlock_is_refused_while_the_e_stop_is_latched() {
     // The simulator's clock runs while the machine moves: the e-stop comes 1 s in.
@@ -488,6 +629,13 @@ fn unlock_is_refused_while_the_e_stop_is_latched() {
     );
     assert_eq!(c.command("$J=G91 X1 F100").last().unwrap(), "error:8");
     assert_eq!(c.command("G0 X1").last().unwrap(), "error:9");
+    // In an alarm Grbl still shows its settings and offsets, but stores no start-up
+    // line.
+    dollar_answers(
+        &mut c,
+        &[("$$", "ok"), ("$#", "ok"), ("$N0=G54", "error:8")],
+        "Alarm",
+    );
     bridge.stop();
 }
 

@@ -29,6 +29,18 @@ pub(super) enum Needs {
     Link,
 }
 
+/// Grbl 1.1's state as its `$` commands see it (`sys.state` in Grbl's
+/// `system_execute_line`): what a `?` would report at that moment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Phase {
+    Idle,
+    Alarm,
+    Check,
+    Jog,
+    /// `Run`, `Hold`, `Home`: a cycle under way or held.
+    Cycle,
+}
+
 pub(super) struct Bridge<'o> {
     pub(super) machine: &'o MachineConfig,
     pub(super) ports: Ports,
@@ -363,6 +375,29 @@ impl<'o> Bridge<'o> {
         words::status_report(s, &report)
     }
 
+    /// The state Grbl would be in for a `$` line read now; `accepted`: blocks of
+    /// lines answered in this turn that the job has not taken yet (a `?` would
+    /// already say `Run` or `Jog`).
+    pub(super) fn phase(&self, accepted: bool) -> Phase {
+        let Some(s) = self.status.as_ref() else {
+            return Phase::Idle;
+        };
+        let ahead = self
+            .job
+            .map_or(0, |(total, done)| total.saturating_sub(done));
+        let mode = Mode {
+            pending: ahead > 0 || accepted,
+            ..self.mode
+        };
+        match words::state_word(s, mode) {
+            "Idle" => Phase::Idle,
+            "Alarm" => Phase::Alarm,
+            "Check" => Phase::Check,
+            "Jog" => Phase::Jog,
+            _ => Phase::Cycle,
+        }
+    }
+
     /// A refused line: `[MSG:where: why]` then `error:N`.
     pub(super) fn refuse(&mut self, code: u8, why: &str) {
         self.counts.errors += 1;
@@ -484,7 +519,8 @@ impl<'o> Bridge<'o> {
                 Item::Line(text) if self.mode.jogging => self.line_in_jog(&text, out),
                 Item::Line(text) if text.trim_start().starts_with('$') => {
                     self.line_no += 1;
-                    super::commands::answer_local(self, &text);
+                    let phase = self.phase(!out.is_empty());
+                    super::commands::answer_local(self, &text, phase);
                 }
                 Item::Line(_) if self.locked() => {
                     self.line_no += 1;
@@ -517,7 +553,8 @@ impl<'o> Bridge<'o> {
                 Err((code, why)) => self.refuse(code, &format!("{t}: {why}")),
             }
         } else if t.starts_with('$') {
-            super::commands::answer_local(self, t);
+            let phase = self.phase(!out.is_empty());
+            super::commands::answer_local(self, t, phase);
         } else if t.is_empty() {
             self.ok();
         } else {

@@ -3,9 +3,10 @@
 //! only between jobs (`$H`, `$X`, `$C`, `$J=`). While a job moves or is held, these
 //! get Grbl's answers at once: `$X` has no effect (`ok`), `$H` and `$C` are
 //! `error:8` (not idle), and `$J=` is `error:8` unless a jog is under way, when it is
-//! queued after it.
+//! queued after it. Those answered from the bridge's state are refused in the states
+//! where Grbl 1.1 refuses them ([`refused_in`]).
 
-use super::bridge::{Bridge, Needs};
+use super::bridge::{Bridge, Needs, Phase};
 use super::words;
 use crate::job::{home_command, Failure};
 use crate::link::{JobEnd, Link, Transport};
@@ -23,10 +24,41 @@ pub(super) fn needs(line: &str) -> Needs {
     }
 }
 
-/// Answers a `$` line that needs only the bridge's state.
-pub(super) fn answer_local(b: &mut Bridge<'_>, line: &str) {
+/// Grbl 1.1's refusal (`error:8`, not idle) of a `$` line in `phase`, as its
+/// `system_execute_line` decides by the character after the `$`: `$` alone, `$G` and
+/// `$X` run in every state; `$$` not in a cycle or a hold; `$C` and `$J=` have their
+/// own rules (see [`run_link`]); every other one (`$#`, `$I`, `$N`, `$H`, settings)
+/// only when idle or in an alarm, and storing a start-up line (`$Nx=`) only when idle.
+/// `None`: the line may run.
+fn refused_in(upper: &str, phase: Phase) -> Option<&'static str> {
+    let when = match phase {
+        Phase::Idle => return None,
+        Phase::Alarm => "in an alarm",
+        Phase::Check => "in check mode",
+        Phase::Jog => "while jogging",
+        Phase::Cycle => "while a cycle runs or is held",
+    };
+    match upper.as_bytes().get(1) {
+        None | Some(b'G' | b'X' | b'C' | b'J') => None,
+        Some(b'$') => (phase == Phase::Cycle).then_some(when),
+        _ if upper.starts_with("$N0=") || upper.starts_with("$N1=") => Some(when),
+        _ if phase == Phase::Alarm => None,
+        _ => Some(when),
+    }
+}
+
+/// Answers a `$` line that needs only the bridge's state, `phase` being Grbl's state
+/// at that moment.
+pub(super) fn answer_local(b: &mut Bridge<'_>, line: &str, phase: Phase) {
     let t = line.trim();
     let upper = t.to_ascii_uppercase();
+    if let Some(when) = refused_in(&upper, phase) {
+        b.refuse(
+            8,
+            &format!("{t} is refused {when}, as Grbl 1.1 refuses it (not idle)"),
+        );
+        return;
+    }
     match upper.as_str() {
         "$" => {
             b.say(words::help());
@@ -357,4 +389,29 @@ fn jog_target(b: &Bridge<'_>, body: &str, pose: &[i64; AXES]) -> Result<Jog, (u8
         (f * 1e6 / 60.0).round() as i64
     };
     Ok((target, feed))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{refused_in, Phase};
+
+    /// The table of Grbl 1.1's `system_execute_line`, state by state.
+    #[test]
+    fn dollar_lines_are_refused_where_grbl_refuses_them() {
+        use Phase::*;
+        let all = [Idle, Alarm, Check, Jog, Cycle];
+        let allowed = |line: &str| -> Vec<Phase> {
+            all.into_iter()
+                .filter(|&p| refused_in(line, p).is_none())
+                .collect()
+        };
+        for line in ["$", "$G", "$X"] {
+            assert_eq!(allowed(line), all, "{line}");
+        }
+        assert_eq!(allowed("$$"), [Idle, Alarm, Check, Jog]);
+        for line in ["$#", "$I", "$N", "$H", "$130", "$100=5", "$SLP"] {
+            assert_eq!(allowed(line), [Idle, Alarm], "{line}");
+        }
+        assert_eq!(allowed("$N0=G54"), [Idle]);
+    }
 }

@@ -164,7 +164,8 @@ fn next_line<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(),
         return if commands::needs(&text) == Needs::Link {
             commands::run_link(b, link, &text)
         } else {
-            commands::answer_local(b, &text);
+            let phase = b.phase(false);
+            commands::answer_local(b, &text, phase);
             Ok(())
         };
     }

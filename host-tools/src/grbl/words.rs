@@ -145,9 +145,29 @@ pub fn alarm_code(cause: AlarmCause) -> u8 {
 /// and our words.
 pub fn error_code(message: &str) -> u8 {
     let m = message.to_ascii_lowercase();
-    if m.contains("feed") && (m.contains("no feed") || m.contains("f word") || m.contains("zero")) {
+    if m.contains("given twice") {
+        // A word repeated in the block.
+        25
+    } else if m.contains("feed f-") || m.contains("speed s-") || m.contains("negative dwell") {
+        // Grbl's F, S and P cannot be negative.
+        4
+    } else if m.contains("feed")
+        && (m.contains("no feed")
+            || m.contains("without a feed")
+            || m.contains("needs f")
+            || m.contains("f word")
+            || m.contains("zero"))
+    {
         22
-    } else if m.contains("arc") && m.contains("radius") {
+    } else if m.contains("g53 needs g0 or g1") {
+        30
+    } else if m.contains("without a centre (i j k) or a radius (r)") {
+        // An arc with no offset word in its plane.
+        35
+    } else if m.contains(" needs p ") || m.contains(" needs p (") {
+        // A required value word missing (G4's or G10's P).
+        28
+    } else if m.contains("arc") && m.contains("radius") || m.contains("with radius r0") {
         34
     } else if m.contains("modal group") || m.contains("same modal") {
         21
