@@ -572,6 +572,74 @@ fn dollar_commands_are_refused_in_a_cycle_a_hold_a_jog_and_check_mode_as_on_grbl
     );
 }
 
+/// Polls `?` (each answered within [`STATUS_LIMIT`]) until the feed override reads
+/// `ov`; returns that report.
+fn poll_override(c: &mut Client, ov: f64, limit: Duration) -> String {
+    let end = Instant::now() + limit;
+    loop {
+        let s = c.status_within(STATUS_LIMIT);
+        if field(&s, "Ov")[0] == ov {
+            return s;
+        }
+        assert!(Instant::now() < end, "Ov {ov} not reached: {s}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// Feed override and soft reset act while held, jogging and in check mode: the
+/// override is reported within 300 ms, the reset's banner comes within 1 s and
+/// leaves the machine Idle where it stopped (check mode ends, as Grbl's reset
+/// returns to Idle).
+#[test]
+fn overrides_and_reset_act_while_held_jogging_and_in_check_mode() {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::pty(&bridge.pty);
+    let banner = |c: &mut Client| {
+        c.send(&[0x18]);
+        c.line_until(|l| l.starts_with("Grbl 1.1h"), Duration::from_secs(1));
+    };
+    assert_eq!(
+        command_within(&mut c, "G21 G90 G1 X40 F600", Duration::from_secs(1)),
+        vec!["ok"]
+    );
+    poll_until(&mut c, "Run", Duration::from_secs(2));
+    c.send(b"!");
+    let (held, _) = poll_until(&mut c, "Hold:0", Duration::from_secs(3));
+    c.send(&[0x91]);
+    let s = poll_override(&mut c, 110.0, Duration::from_millis(300));
+    assert!(s.starts_with("<Hold:0|"), "{s}");
+    banner(&mut c);
+    let (s, seen) = poll_until(&mut c, "Idle", Duration::from_secs(2));
+    assert_eq!(field(&s, "MPos"), field(&held, "MPos"), "{seen:?}");
+
+    assert_eq!(
+        command_within(&mut c, "$J=G91 Y20 F600", Duration::from_millis(300)),
+        vec!["ok"]
+    );
+    poll_until(&mut c, "Jog", Duration::from_secs(1));
+    c.send(&[0x90]);
+    let s = poll_override(&mut c, 100.0, Duration::from_millis(300));
+    assert!(s.starts_with("<Jog|"), "{s}");
+    banner(&mut c);
+    let (s, seen) = poll_until(&mut c, "Idle", Duration::from_secs(2));
+    assert!(!seen.iter().any(|w| w.starts_with("Hold")), "{seen:?}");
+    let y = field(&s, "MPos")[1];
+    assert!(y > 0.0 && y < 19.0, "the jog was stopped by the reset: {s}");
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(field(&c.status_within(STATUS_LIMIT), "MPos")[1], y);
+
+    assert_eq!(
+        command_within(&mut c, "$C", Duration::from_millis(500)),
+        vec!["[MSG:Enabled]", "ok"]
+    );
+    assert!(c.status_within(STATUS_LIMIT).starts_with("<Check|"));
+    banner(&mut c);
+    let s = c.status_within(STATUS_LIMIT);
+    assert!(s.starts_with("<Idle|"), "check mode ends with a reset: {s}");
+    println!("status waits: {}", c.wait_figures());
+    bridge.stop();
+}
+
 /// G-code errors carry Grbl 1.1's numbers (its `doc/csv/error_codes_en_US.csv`) where
 /// Grbl has one for the fault, each after a `[MSG:]` with our words.
 #[test]

@@ -215,6 +215,8 @@ fn report_alarm(b: &mut Bridge<'_>, a: &Alarm) {
 fn soft_reset<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(), Failure> {
     b.reset = false;
     b.mode.jogging = false;
+    // Grbl's reset returns to Idle (or Alarm): check mode ends with it.
+    b.mode.check = false;
     b.lines.clear();
     let mut s = link.request_status()?;
     if s.state == pkmc::protocol::State::Hold && s.speed == 0 {
