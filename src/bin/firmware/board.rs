@@ -75,12 +75,18 @@ use pkmc::servo::{DAC_MID, SERVO_HZ};
 #[cfg(not(feature = "board-servo8"))]
 mod mixed;
 #[cfg(not(feature = "board-servo8"))]
-pub use mixed::{builtin_machine, init, ServoIo, StepStats, Steppers, CHANNELS, SERVO_CHANNELS};
+pub use mixed::{
+    builtin_machine, init, ServoIo, StepStats, Steppers, CHANNELS, RECEIVE_PACKETS_PER_MS,
+    SERVO_CHANNELS,
+};
 
 #[cfg(feature = "board-servo8")]
 mod servo8;
 #[cfg(feature = "board-servo8")]
-pub use servo8::{builtin_machine, init, ServoIo, StepStats, Steppers, CHANNELS, SERVO_CHANNELS};
+pub use servo8::{
+    builtin_machine, init, ServoIo, StepStats, Steppers, CHANNELS, RECEIVE_PACKETS_PER_MS,
+    SERVO_CHANNELS,
+};
 
 /// USB vendor ID: pid.codes, the open-source vendor ID.
 pub const USB_VID: u16 = 0x1209;

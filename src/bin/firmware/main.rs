@@ -385,14 +385,12 @@ mod firmware {
     }
 
     /// Packets the link takes from the host in each millisecond before it waits for
-    /// the next one. A host filling the queue at connection sends as fast as USB
-    /// allows, and without a limit the firmware read, decoded and pre-planned blocks at
-    /// 97 % of the CPU for tens of milliseconds (the virtual board's busiest periods,
-    /// docs/vboard.md): the interrupts were never held up, but nothing was left for the
-    /// other tasks. Four packets (256 bytes, a dozen blocks or more) a millisecond
-    /// keep the busiest millisecond of a dense job at 44 % and its motion time
-    /// unchanged (two slowed it: the executor takes up to a block a tick).
-    const RECEIVE_PACKETS_PER_MS: u32 = 4;
+    /// the next one: the wiring's [`board::RECEIVE_PACKETS_PER_MS`]. A host filling the
+    /// queue at connection sends as fast as USB allows, and without a limit the
+    /// firmware read, decoded and pre-planned blocks at 97 % of the CPU for tens of
+    /// milliseconds (the virtual board's busiest periods, docs/vboard.md): the
+    /// interrupts were never held up, but nothing was left for the other tasks.
+    const RECEIVE_PACKETS_PER_MS: u32 = board::RECEIVE_PACKETS_PER_MS;
 
     /// Keeps the packets taken within [`RECEIVE_PACKETS_PER_MS`].
     struct ReceivePacer {

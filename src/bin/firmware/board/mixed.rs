@@ -42,6 +42,12 @@ pub const CHANNELS: BoardChannels = BoardChannels {
 const GROUP_OF: [u8; MAX_SERVOS] = [0; MAX_SERVOS];
 const _: () = assert!(groups_in_range(&GROUP_OF, 1));
 
+/// USB packets the link takes in a millisecond (`crate::firmware`'s receive pacing):
+/// four (256 bytes, a dozen blocks or more) keep the busiest millisecond of a dense
+/// H-4 job near 45 % with its motion time unchanged; two slowed it (the executor takes
+/// up to a block a tick, a thousand a second).
+pub const RECEIVE_PACKETS_PER_MS: u32 = 4;
+
 /// Level that enables the stepper drives on STEP_EN (buffered to every drive's ENABLE).
 pub const STEPPER_ENABLE_ACTIVE: Level = Level::High;
 

@@ -65,6 +65,13 @@ pub const CHANNELS: BoardChannels = BoardChannels {
 const GROUP_OF: [u8; MAX_SERVOS] = [0, 0, 0, 0, 0, 0, 1, 1];
 const _: () = assert!(groups_in_range(&GROUP_OF, 2));
 
+/// USB packets the link takes in a millisecond (`crate::firmware`'s receive pacing):
+/// two. The eight servo loops with the five-axis contour control take about 31 % of
+/// every millisecond here, and with four packets a connection's queue fill pushed the
+/// busiest millisecond to 65 % (the virtual board); the executor runs at most some
+/// 130 dense blocks a second on this machine, far below what two packets carry.
+pub const RECEIVE_PACKETS_PER_MS: u32 = 2;
+
 /// Alternate function of LPTIM1_IN1 on PB5 and of LPTIM1_IN2 on PB7 (stm32-metapac 21,
 /// STM32G474RE); embassy-stm32 has no pin traits for LPTIM inputs.
 const LPTIM1_IN_AF: u8 = 11;
