@@ -317,8 +317,11 @@ mod firmware {
         UsbDevice<'static, UsbDriver>,
         CdcAcmClass<'static, UsbDriver>,
     ) {
-        static CONFIG_DESCRIPTOR: StaticCell<[u8; 256]> = StaticCell::new();
-        static BOS_DESCRIPTOR: StaticCell<[u8; 256]> = StaticCell::new();
+        // Sized for this device: its configuration descriptor (one CDC-ACM function)
+        // is 75 bytes and its BOS descriptor 5; embassy-usb refuses to build if a
+        // buffer is short, and the virtual board's host reads both back.
+        static CONFIG_DESCRIPTOR: StaticCell<[u8; 128]> = StaticCell::new();
+        static BOS_DESCRIPTOR: StaticCell<[u8; 32]> = StaticCell::new();
         static CONTROL_BUF: StaticCell<[u8; 64]> = StaticCell::new();
         static CDC_STATE: StaticCell<cdc_acm::State> = StaticCell::new();
 
@@ -332,8 +335,8 @@ mod firmware {
         let mut builder = Builder::new(
             driver,
             config,
-            CONFIG_DESCRIPTOR.init([0; 256]),
-            BOS_DESCRIPTOR.init([0; 256]),
+            CONFIG_DESCRIPTOR.init([0; 128]),
+            BOS_DESCRIPTOR.init([0; 32]),
             &mut [],
             CONTROL_BUF.init([0; 64]),
         );

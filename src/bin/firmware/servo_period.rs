@@ -12,11 +12,14 @@
 //! work: one pass over the channels for each step, no allocation.
 //!
 //! Shared state: the pacer and the servo hardware are touched only by this interrupt
-//! (and once at start-up), except the tick's [`post`], [`snapshot`] and [`stats`],
-//! which run under short critical sections (copies only; this interrupt, being the
-//! most urgent, holds one for its whole run, a few µs).
+//! (and once at start-up), except the tick's [`snapshot`], [`restart`] and
+//! [`stats`], which run under short critical sections (copies only; this interrupt,
+//! being the most urgent, holds one for its whole run, a few µs), and [`post`], which
+//! hands the command over through a mailbox without one.
 
-use core::cell::RefCell;
+use core::cell::{RefCell, UnsafeCell};
+use core::mem::MaybeUninit;
+use core::sync::atomic::{AtomicBool, Ordering};
 
 use critical_section::Mutex;
 use pkmc::contour::ServoBank;
@@ -65,10 +68,54 @@ pub fn snapshot() -> Snapshot {
     with_pacer(|p| p.snapshot()).unwrap_or_default()
 }
 
+/// The tick's command on its way to the servo interrupt, handed over without a
+/// critical section: the tick writes the slot while it is not published and then
+/// publishes it; the servo interrupt, which the tick can never preempt, takes it at
+/// its next period. Copying the command (with the hexapod-xy's channel map, some 460
+/// bytes) inside a critical section held the servo interrupt off for up to 1.9 µs
+/// (the virtual board, docs/vboard.md); the copy now happens in the servo interrupt
+/// itself. Should a command still be published when the next one comes (the servo
+/// interrupt not run for a whole tick), the slot is rewritten inside a critical
+/// section.
+struct Mailbox {
+    slot: UnsafeCell<MaybeUninit<Command>>,
+    ready: AtomicBool,
+}
+
+// SAFETY: the slot is written by the tick only while it is not published, or inside
+// a critical section, and read by the servo interrupt only while it is published
+// (see `Mailbox`); the interrupt runs to completion before the tick resumes.
+unsafe impl Sync for Mailbox {}
+
+static MAILBOX: Mailbox = Mailbox {
+    slot: UnsafeCell::new(MaybeUninit::uninit()),
+    ready: AtomicBool::new(false),
+};
+
 /// Posts a tick's command, to be taken at the next tick edge (replacing one not yet
-/// taken).
+/// taken). Called by the tick only.
 pub fn post(command: Command) {
-    with_pacer(|p| p.post(command));
+    if MAILBOX.ready.load(Ordering::Acquire) {
+        critical_section::with(|_| {
+            // SAFETY: the servo interrupt cannot run inside the critical section.
+            unsafe { (*MAILBOX.slot.get()).write(command) };
+        });
+        return;
+    }
+    // SAFETY: not published: the servo interrupt does not read the slot, and only the
+    // tick writes it.
+    unsafe { (*MAILBOX.slot.get()).write(command) };
+    MAILBOX.ready.store(true, Ordering::Release);
+}
+
+/// The command the tick published since the last period, if any. Servo interrupt only.
+fn take_posted() -> Option<Command> {
+    if !MAILBOX.ready.swap(false, Ordering::AcqRel) {
+        return None;
+    }
+    // SAFETY: published, so written in full; the tick does not write it outside a
+    // critical section while published and cannot run until this returns.
+    Some(unsafe { (*MAILBOX.slot.get()).assume_init_read() })
 }
 
 /// Replaces the loops' bank at once (a servo reset; see [`ServoPacer::restart`]).
@@ -90,6 +137,9 @@ pub fn on_servo_period() {
         let Some(s) = servo.as_deref_mut() else {
             return;
         };
+        if let Some(command) = take_posted() {
+            s.pacer.post(command);
+        }
         let feedback = s.io.encoders.read();
         let faults = s.io.faults();
         let period = s.pacer.period(&feedback, &faults);
