@@ -313,12 +313,13 @@ def chips_without_tool_change(path):
     nothing."""
     src = os.path.join(ROOT, "../shared/corpus/linuxcnc/3D_Chips.ngc")
     if not os.path.exists(src):
-        die(f"chips: {src} is absent (the shared corpus is not beside the repository)")
+        return False
     lines = open(src).read().splitlines()
     out = [line for line in lines if "M6" not in line.upper().replace(" ", "")]
     if len(lines) - len(out) != 1:
         die(f"chips: expected one tool change in 3D_Chips.ngc, found {len(lines) - len(out)}")
     open(path, "w").write("\n".join(out) + "\n")
+    return True
 
 
 GENERATED = {
@@ -479,6 +480,7 @@ def main():
         if not os.path.exists(path):
             die(f"{what} not found at {path} (build it first: see .ci/run)")
     rows, notes, failed = [], [], []
+    skipped = 0
     tmp = tempfile.mkdtemp()
     for case in o.cases:
         t = time.time()
@@ -487,7 +489,11 @@ def main():
             machine = machine and os.path.join(ROOT, machine)
             if program in GENERATED:
                 path = os.path.join(tmp, f"{program}.ngc")
-                GENERATED[program](path)
+                if GENERATED[program](path) is False:
+                    print(f"vboard: {case}: SKIPPED (its program comes from ../shared/corpus, "
+                          f"which is not beside the repository)", flush=True)
+                    skipped += 1
+                    continue
                 program = path
             else:
                 program = os.path.join(ROOT, program)
@@ -516,7 +522,7 @@ def main():
         for f in failed:
             print(f"vboard: FAIL: {f}")
         sys.exit(1)
-    print(f"{len(o.cases)} passed, 0 failed")
+    print(f"{len(o.cases) - skipped} passed, 0 failed" + (f", {skipped} skipped" if skipped else ""))
 
 
 if __name__ == "__main__":

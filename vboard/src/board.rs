@@ -16,7 +16,7 @@ use crate::periph::Unmodelled;
 use crate::time::to_ns;
 use crate::wiring::{CommandSource, EncoderSink, Pin, StepSource, Wiring};
 use pkmc::config::{Drive, MachineConfig, MAX_SERVOS, MAX_STEPPERS};
-use pkmc_host::sim::{SimServo, SimStepper};
+use pkmc_host::sim::{drive_steps, SimServo, SimStepper};
 
 /// The timers by name, base address, kind and NVIC line of their update interrupt.
 const TIMERS: &[(&str, u32, Kind, Option<usize>)] = &[
@@ -264,22 +264,7 @@ impl MachineSide {
         self.machine
             .joints
             .iter()
-            .map(|jc| match jc.drive {
-                Drive::Stepper {
-                    channel,
-                    invert_dir,
-                    ..
-                } => self.steppers[channel as usize].as_ref().map_or(0, |d| {
-                    if invert_dir {
-                        -d.position
-                    } else {
-                        d.position
-                    }
-                }),
-                Drive::Servo { channel } => self.servos[channel as usize]
-                    .as_ref()
-                    .map_or(0, SimServo::position),
-            })
+            .map(|jc| drive_steps(jc.drive, &self.steppers, &self.servos).unwrap_or(0))
             .collect()
     }
 
@@ -359,8 +344,6 @@ impl Board {
         self.flash.programs = programs;
         // Pins float back to inputs: the drives see DIR and STEP as the pulls leave
         // them; the board's inputs stay driven.
-        let drives: Vec<(u32, u32)> = self.gpio.iter().map(|_| (0, 0)).collect();
-        let _ = drives;
         let gpio: Vec<Gpio> = ('A'..='G').map(Gpio::new).collect();
         self.gpio = gpio;
         for p in [
@@ -560,13 +543,11 @@ impl Board {
             ));
         }
         // The tick (UCPD1's line, pended by the servo interrupt) marks a trace row.
-        let tick = crate::nvic::IRQ0 as usize + 63;
         if addr & !3 == 0xE000_E200 + 4 && value & (1 << (63 - 32)) != 0 {
             let row = self.machine.joint_steps();
             if let Some(rows) = self.trace_rows.as_mut() {
                 rows.push((now, row));
             }
-            let _ = tick;
         }
         if self.scs.changed || self.usb.irq() || self.usb.armed || self.flash.irq() {
             self.stop = true;

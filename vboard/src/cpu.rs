@@ -260,7 +260,7 @@ fn exception_return(uc: &mut Unicorn<Board>, exc_return: u32) -> Result<(), Stri
     // A level-sensitive line still asserted pends again.
     uc.get_data_mut().usb_line();
     // Tail-chain: a pending exception more urgent than the context returned to.
-    if let Some(e) = preempting_after_return(uc, exc_return) {
+    if let Some(e) = preempting(uc) {
         set(uc, RegisterARM::LR, exc_return);
         jump_to_handler(uc, e);
         return Ok(());
@@ -305,10 +305,6 @@ fn exception_return(uc: &mut Unicorn<Board>, exc_return: u32) -> Result<(), Stri
     );
     set(uc, RegisterARM::PC, pc & !1);
     Ok(())
-}
-
-fn preempting_after_return(uc: &Unicorn<Board>, _exc_return: u32) -> Option<u32> {
-    preempting(uc)
 }
 
 impl<'a> Core<'a> {
@@ -607,12 +603,9 @@ impl<'a> Core<'a> {
                 // Held: the peripherals run on, nothing executes or is taken.
                 let from = b.now;
                 b.now = b.next_event().min(until).min(self.held_until).max(from + 1);
-                let to = b.now;
-                b.stats.idle_in_period += 0;
                 let mut closed = self.periods_closed;
                 b.close_periods(&mut closed);
                 self.periods_closed = closed;
-                let _ = to;
                 if b.now >= until {
                     return Ok(Exit::Time);
                 }

@@ -253,6 +253,32 @@ impl SimServo {
     }
 }
 
+/// Where the drive of a joint driven by `drive` is, from the joint's zero: a
+/// stepper's steps (its DIR sense undone) or a servo's encoder counts; `None` if no
+/// drive is on that channel. Shared by the simulator and the virtual board.
+pub fn drive_steps(
+    drive: pkmc::config::Drive,
+    steppers: &[Option<SimStepper>],
+    servos: &[Option<SimServo>],
+) -> Option<i64> {
+    match drive {
+        pkmc::config::Drive::Stepper {
+            channel,
+            invert_dir,
+            ..
+        } => steppers[channel as usize].as_ref().map(|d| {
+            if invert_dir {
+                -d.position
+            } else {
+                d.position
+            }
+        }),
+        pkmc::config::Drive::Servo { channel } => {
+            servos[channel as usize].as_ref().map(SimServo::position)
+        }
+    }
+}
+
 /// Encoder reading of each servo channel (zero where none).
 pub(super) fn counts_of(servos: &[Option<SimServo>; MAX_SERVOS]) -> [i64; MAX_SERVOS] {
     servos

@@ -38,8 +38,8 @@ mod trace;
 
 use drives::counts_of;
 pub use drives::{
-    SimServo, SimStepper, Violation, DEFAULT_PLANT_GAIN, DEFAULT_PLANT_TAU_S, INDEX_PITCH,
-    LIMIT_BEYOND_TRAVEL, MAX_VIOLATIONS_KEPT, SWITCH_BEFORE_INDEX,
+    drive_steps, SimServo, SimStepper, Violation, DEFAULT_PLANT_GAIN, DEFAULT_PLANT_TAU_S,
+    INDEX_PITCH, LIMIT_BEYOND_TRAVEL, MAX_VIOLATIONS_KEPT, SWITCH_BEFORE_INDEX,
 };
 pub use inject::{FaultKind, Injection, LINK_CUT};
 use trace::write_row;
@@ -299,22 +299,7 @@ impl Simulator {
     /// zero).
     pub fn feedback_steps(&self, j: usize) -> Option<i64> {
         let jc = self.ctrl.machine().joints.get(j)?;
-        match jc.drive {
-            Drive::Stepper {
-                channel,
-                invert_dir,
-                ..
-            } => self.steppers[channel as usize].as_ref().map(|d| {
-                if invert_dir {
-                    -d.position
-                } else {
-                    d.position
-                }
-            }),
-            Drive::Servo { channel } => self.servos[channel as usize]
-                .as_ref()
-                .map(SimServo::position),
-        }
+        drives::drive_steps(jc.drive, &self.steppers, &self.servos)
     }
 
     /// Drive timing breaches of every stepper channel.

@@ -10,8 +10,9 @@
 //! a second operation while busy set PGSERR/PGAERR), and the register map (ACR,
 //! PDKEYR, KEYR, OPTKEYR, SR, CR, ECCR, OPTR). OPTR reads the factory value
 //! 0xFFEF F8AA (DBANK = 1: two banks of 256 KB, 2 KB pages). Erase and program times
-//! are the datasheet's typical figures (DS12288, flash memory characteristics:
-//! page erase about 22 ms, double-word programming about 82 µs).
+//! are modelling choices: a page erase takes 22 ms (the typical figure the firmware's
+//! `board.rs` designs its watchdog for, from the STM32G474 datasheet) and a double
+//! word 82 µs (of the order of the datasheet's programming time; not checked here).
 //!
 //! Only the configuration pages (bank 2, pages 126 and 127: the last 4 KB) may be
 //! erased or written; an erase or a write anywhere else would change the program

@@ -369,7 +369,6 @@ impl Timer {
                     return;
                 }
             }
-            let _ = upc;
         }
     }
 
