@@ -20,6 +20,7 @@ fn diagnostics_display_as_file_line_column_message() {
         file: "part.ngc".into(),
         line: 3,
         col: 7,
+        kind: pkmc_host::gcode::ErrorKind::BadNumber,
         message: "division by zero".into(),
     };
     assert_eq!(d.to_string(), "part.ngc:3:7: division by zero");

@@ -23,6 +23,8 @@
 //! G2 with positive R or a G3 with negative R, i.e. negative R selects the arc longer
 //! than a half circle).
 
+use super::ErrorKind;
+
 /// Centre of the arc from `start` to `end` with radius `radius` (negative: the larger
 /// arc).
 pub fn centre_from_radius(
@@ -31,21 +33,25 @@ pub fn centre_from_radius(
     radius: f64,
     clockwise: bool,
     tolerance: f64,
-) -> Result<[f64; 2], String> {
+) -> Result<[f64; 2], (ErrorKind, String)> {
     let (dx, dy) = (end[0] - start[0], end[1] - start[1]);
     let chord = (dx * dx + dy * dy).sqrt();
     if chord == 0.0 {
-        return Err(
+        return Err((
+            ErrorKind::InvalidTarget,
             "R-format arc ending where it starts: a full circle needs the centre (I J K)".into(),
-        );
+        ));
     }
     let r = radius.abs();
     let half = chord / 2.0;
     if half - r > tolerance {
-        return Err(format!(
-            "arc radius {} mm too small to reach the end point ({} mm away)",
-            mm(r),
-            mm(chord)
+        return Err((
+            ErrorKind::ArcRadius,
+            format!(
+                "arc radius {} mm too small to reach the end point ({} mm away)",
+                mm(r),
+                mm(chord)
+            ),
         ));
     }
     let offset = (r * r - half * half).max(0.0).sqrt();
@@ -80,36 +86,45 @@ pub fn check_end(
     end: [f64; 2],
     centre: [f64; 2],
     abs_tolerance: f64,
-) -> Result<(), String> {
+) -> Result<(), (ErrorKind, String)> {
     let r0 = dist(start, centre);
     let r1 = dist(end, centre);
     if r0 == 0.0 {
-        return Err("arc with zero radius (its centre is its start point)".into());
+        return Err((
+            ErrorKind::ArcRadius,
+            "arc with zero radius (its centre is its start point)".into(),
+        ));
     }
     let d = (r1 - r0).abs();
     let rel = d / r0.max(r1);
     if d > 100.0 * abs_tolerance || (rel > CENTRE_ARC_REL && d > abs_tolerance) {
-        return Err(format!(
-            "arc end is off its circle: start radius {} mm, end radius {} mm \
+        return Err((
+            ErrorKind::InvalidTarget,
+            format!(
+                "arc end is off its circle: start radius {} mm, end radius {} mm \
              (they differ by {} mm, {:.3} % of the radius; at most {} mm, or up to 100 \
              times that within 0.1 % of the radius, are accepted)",
-            mm(r0),
-            mm(r1),
-            mm(d),
-            rel * 100.0,
-            mm(abs_tolerance)
+                mm(r0),
+                mm(r1),
+                mm(d),
+                rel * 100.0,
+                mm(abs_tolerance)
+            ),
         ));
     }
     let slack = pkmc::geometry::ARC_RADIUS_SLACK_NM as f64;
     if d > slack {
-        return Err(super::unsupported(&format!(
-            "spiral arcs whose radius changes by more than {} mm (this one: {} mm, from \
+        return Err((
+            ErrorKind::Unsupported,
+            super::unsupported(&format!(
+                "spiral arcs whose radius changes by more than {} mm (this one: {} mm, from \
              {} mm to {} mm)",
-            mm(slack),
-            mm(d),
-            mm(r0),
-            mm(r1)
-        )));
+                mm(slack),
+                mm(d),
+                mm(r0),
+                mm(r1)
+            )),
+        ));
     }
     Ok(())
 }
@@ -199,13 +214,14 @@ mod tests {
             [0.0, 1001e6],
             [0.0, 0.0],
             CENTRE_ARC_ABS_NM_MM,
-        );
+        )
+        .map_err(|(_, message)| message);
         assert!(e.unwrap_err().starts_with("unsupported: spiral arcs"));
     }
 
     #[test]
     fn an_end_off_the_circle_is_reported_in_mm() {
-        let e = check_end([5e6, 0.0], [0.0, 5.1e6], [0.0, 0.0], 2000.0).unwrap_err();
+        let (_, e) = check_end([5e6, 0.0], [0.0, 5.1e6], [0.0, 0.0], 2000.0).unwrap_err();
         assert!(e.contains("start radius 5 mm, end radius 5.1 mm"), "{e}");
     }
 }

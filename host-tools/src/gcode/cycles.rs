@@ -28,6 +28,7 @@ use super::interp::{check_range, dwell_ms, fail, whole_in, Cycle, Interp, Motion
 use super::lexer::Words;
 use super::{arcs, MAX_CYCLE_REPEATS, MAX_PECKS};
 use crate::gcode::canon::{Canon, Feed, PathMode, Plane};
+use crate::gcode::ErrorKind;
 use pkmc::config::{AXES, AXIS_NAMES};
 
 /// How far above the last depth G83 rapids back down, and G73 backs off, nm
@@ -89,6 +90,7 @@ impl Interp<'_> {
         if self.rotated() {
             return fail(
                 col,
+                ErrorKind::Unsupported,
                 crate::gcode::unsupported(
                     "canned cycles in a rotated coordinate system (G10 L2 R)",
                 ),
@@ -161,16 +163,18 @@ impl Interp<'_> {
         if self.inverse_time {
             return fail(
                 col,
+                ErrorKind::ModeConflict,
                 format!("{name} cannot run in inverse-time feed mode (G93)"),
             );
         }
         let Some(rate) = self.feed else {
-            return fail(col, format!("{name} without a feed (F)"));
+            return fail(col, ErrorKind::NoFeed, format!("{name} without a feed (F)"));
         };
         for l in [b'A', b'B', b'C'] {
             if let Some(x) = w.get(l) {
                 return fail(
                     x.col,
+                    ErrorKind::UnusedAxisWords,
                     format!("{} cannot move in a canned cycle", l as char),
                 );
             }
@@ -179,12 +183,24 @@ impl Interp<'_> {
         let r = match w.get(b'R') {
             Some(r) => self.length(r)?,
             None if same => self.cycle.r,
-            None => return fail(col, format!("{name} needs R (retract plane)")),
+            None => {
+                return fail(
+                    col,
+                    ErrorKind::MissingValue,
+                    format!("{name} needs R (retract plane)"),
+                )
+            }
         };
         let z = match w.get(cc_letter as u8) {
             Some(z) => self.length(z)?,
             None if same => self.cycle.z,
-            None => return fail(col, format!("{name} needs {cc_letter} (hole bottom)")),
+            None => {
+                return fail(
+                    col,
+                    ErrorKind::MissingValue,
+                    format!("{name} needs {cc_letter} (hole bottom)"),
+                )
+            }
         };
         let repeats = match w.get(b'L') {
             Some(l) => whole_in(l, 1, MAX_CYCLE_REPEATS, "repeats L")?,
@@ -193,7 +209,11 @@ impl Interp<'_> {
         let p_ms = match (kind, w.get(b'P')) {
             (Cycle::G82 | Cycle::G89, Some(p)) => dwell_ms(p)?,
             (Cycle::G82 | Cycle::G89, None) if !same => {
-                return fail(col, format!("{name} needs P (dwell time, seconds)"))
+                return fail(
+                    col,
+                    ErrorKind::MissingValue,
+                    format!("{name} needs P (dwell time, seconds)"),
+                )
             }
             _ => self.cycle.p_ms,
         };
@@ -201,7 +221,11 @@ impl Interp<'_> {
             (Cycle::G73 | Cycle::G83, Some(q)) => {
                 let v = self.length(q)?;
                 if v <= 0 {
-                    return fail(q.col, format!("peck depth Q{} must be above zero", q.num));
+                    return fail(
+                        q.col,
+                        ErrorKind::Negative,
+                        format!("peck depth Q{} must be above zero", q.num),
+                    );
                 }
                 v
             }
@@ -209,7 +233,11 @@ impl Interp<'_> {
             // may have left the cycle in force without one): a zero peck would never
             // reach the bottom.
             (Cycle::G73 | Cycle::G83, None) if !same || self.cycle.q <= 0 => {
-                return fail(col, format!("{name} needs Q (peck depth)"))
+                return fail(
+                    col,
+                    ErrorKind::MissingValue,
+                    format!("{name} needs Q (peck depth)"),
+                )
             }
             _ => self.cycle.q,
         };
@@ -244,6 +272,7 @@ impl Interp<'_> {
         if r < bottom {
             return fail(
                 col,
+                ErrorKind::InvalidTarget,
                 format!(
                     "{name}: the retract plane R is below the hole bottom {} \
                      ({} mm under it)",
@@ -257,6 +286,7 @@ impl Interp<'_> {
         {
             return fail(
                 col,
+                ErrorKind::OutOfRange,
                 format!("{name} would peck more than {MAX_PECKS} times on one line"),
             );
         }
@@ -289,10 +319,18 @@ impl Interp<'_> {
             }
         } else if polar {
             if self.plane != Plane::Xy {
-                return fail(col, "polar coordinates (@ ^) need the XY plane (G17)");
+                return fail(
+                    col,
+                    ErrorKind::ModeConflict,
+                    "polar coordinates (@ ^) need the XY plane (G17)",
+                );
             }
             if let Some(xy) = w.get(b'X').or(w.get(b'Y')) {
-                return fail(xy.col, "polar coordinates (@ ^) and X or Y on one line");
+                return fail(
+                    xy.col,
+                    ErrorKind::ModeConflict,
+                    "polar coordinates (@ ^) and X or Y on one line",
+                );
             }
             let dr = match w.polar_radius {
                 Some(r) => self.length(r)? as f64,
@@ -320,6 +358,7 @@ impl Interp<'_> {
             if x == 0.0 && y == 0.0 {
                 return fail(
                     col,
+                    ErrorKind::InvalidTarget,
                     "incremental polar motion (G91 @ ^) is undefined at the origin",
                 );
             }
@@ -392,7 +431,11 @@ impl Interp<'_> {
     fn round_at(&self, v: f64, i: usize, col: u32) -> Res<i64> {
         match super::lexer::f64_to_i64(v) {
             Some(u) => check_range(u, i, col),
-            None => fail(col, format!("{} position out of range", AXIS_NAMES[i])),
+            None => fail(
+                col,
+                ErrorKind::InvalidTarget,
+                format!("{} position out of range", AXIS_NAMES[i]),
+            ),
         }
     }
 }

@@ -41,12 +41,14 @@ pub mod compress;
 pub mod cycles;
 pub mod flow;
 pub mod interp;
+pub mod kind;
 pub mod lexer;
 pub mod params;
 mod session;
 pub mod tools;
 
 pub use interp::state::Offsets;
+pub use kind::ErrorKind;
 pub use session::LineSession;
 pub use tools::{Tool, ToolTable};
 
@@ -120,6 +122,8 @@ pub struct Diagnostic {
     pub line: usize,
     /// Column, 1-based, in characters.
     pub col: usize,
+    /// What kind of fault it is, set where it was found.
+    pub kind: ErrorKind,
     /// What is wrong.
     pub message: String,
 }
@@ -158,12 +162,13 @@ pub fn compile_canon(
     let program = flow::Program::index(source, options.block_delete, &interp.params);
     let mut out = Vec::with_capacity(source.len() / 24);
     let mut errors = Vec::new();
-    for (line, col, message) in &program.errors {
+    for (line, col, kind, message) in &program.errors {
         let text = program.text_of(source, *line);
         errors.push(Diagnostic {
             file: file.to_string(),
             line: *line as usize,
             col: lexer::char_col(text, *col),
+            kind: *kind,
             message: message.clone(),
         });
     }
@@ -175,6 +180,7 @@ pub fn compile_canon(
                 file: file.to_string(),
                 line,
                 col: e.col as usize,
+                kind: e.kind,
                 message: e.message,
             });
         }
@@ -185,6 +191,7 @@ pub fn compile_canon(
                 file: file.to_string(),
                 line: open,
                 col: 1,
+                kind: ErrorKind::Flow,
                 message: "program opened with '%' is never closed by a '%' line".into(),
             });
         }

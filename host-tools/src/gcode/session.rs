@@ -6,7 +6,7 @@
 use super::canon::Canon;
 use super::interp::Interp;
 use super::lexer::{self, Words};
-use super::{flow, Diagnostic, Options};
+use super::{flow, Diagnostic, ErrorKind, Options};
 use pkmc::config::AXES;
 
 /// An interpreter fed line by line.
@@ -63,15 +63,16 @@ impl<'o> LineSession<'o> {
         number: u32,
         out: &mut Vec<Canon>,
     ) -> Result<(), Diagnostic> {
-        let fail = |col: usize, message: String| Diagnostic {
+        let fail = |col: usize, kind: ErrorKind, message: String| Diagnostic {
             file: self.file.clone(),
             line: number as usize,
             col,
+            kind,
             message,
         };
         let program = flow::Program::index(text, false, &self.interp.params);
-        if let Some((_, col, message)) = program.errors.first() {
-            return Err(fail(lexer::char_col(text, *col), message.clone()));
+        if let Some((_, col, kind, message)) = program.errors.first() {
+            return Err(fail(lexer::char_col(text, *col), *kind, message.clone()));
         }
         if !program.owords.is_empty() {
             let col = text
@@ -79,6 +80,7 @@ impl<'o> LineSession<'o> {
                 .map_or(1, |c| lexer::char_col(text, c as u32));
             return Err(fail(
                 col,
+                ErrorKind::Flow,
                 "O-word flow control (subroutines, loops, branches) works only in a whole \
                  program (nc-send FILE), not line by line"
                     .into(),
@@ -95,7 +97,7 @@ impl<'o> LineSession<'o> {
             number,
             out,
         )
-        .map_err(|(col, message)| fail(col, message))
+        .map_err(|(col, kind, message)| fail(col, kind, message))
     }
 
     /// Emits what cutter compensation still holds (the end of the stream).
@@ -104,6 +106,7 @@ impl<'o> LineSession<'o> {
             file: self.file.clone(),
             line: number as usize,
             col: e.col as usize,
+            kind: e.kind,
             message: e.message,
         })
     }

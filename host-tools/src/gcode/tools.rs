@@ -13,7 +13,7 @@
 
 use super::lexer::{char_col, scan_line, Num, Words};
 use super::params::Params;
-use super::{Diagnostic, MAX_AXIS_UNITS, MAX_LINE};
+use super::{Diagnostic, ErrorKind, MAX_AXIS_UNITS, MAX_LINE};
 use pkmc::config::AXES;
 use pkmc::units::{NDEG_PER_DEG, NM_PER_MM};
 use std::collections::BTreeMap;
@@ -73,10 +73,11 @@ impl ToolTable {
         for (n, raw) in text.split('\n').enumerate() {
             let line = n + 1;
             let text = raw.trim_end_matches('\r');
-            let err = |col: u32, message: String| Diagnostic {
+            let err = |col: u32, kind: ErrorKind, message: String| Diagnostic {
                 file: origin.to_string(),
                 line,
                 col: char_col(text, col),
+                kind,
                 message,
             };
             if text.chars().count() > MAX_LINE {
@@ -84,14 +85,16 @@ impl ToolTable {
                     file: origin.to_string(),
                     line,
                     col: MAX_LINE + 1,
+                    kind: ErrorKind::LineTooLong,
                     message: format!("line longer than {MAX_LINE} characters"),
                 });
             }
-            scan_line(text, 0, &params, &mut words).map_err(|e| err(e.col, e.message))?;
+            scan_line(text, 0, &params, &mut words).map_err(|e| err(e.col, e.kind, e.message))?;
             let stray = words.g.first().or(words.m.first()).map(|c| c.col);
             if let Some(col) = stray.or(words.assigns.first().map(|a| a.col)) {
                 return Err(err(
                     col,
+                    ErrorKind::UnusedWords,
                     "a tool line holds T P X Y Z A B C D I J Q words only".into(),
                 ));
             }
@@ -99,7 +102,11 @@ impl ToolTable {
                 continue;
             }
             let Some(t) = words.get(b'T') else {
-                return Err(err(1, "tool line without a tool number (T)".into()));
+                return Err(err(
+                    1,
+                    ErrorKind::MissingValue,
+                    "tool line without a tool number (T)".into(),
+                ));
             };
             let number = t
                 .num
@@ -108,16 +115,27 @@ impl ToolTable {
                 .ok_or_else(|| {
                     err(
                         t.col,
+                        ErrorKind::NotInteger,
                         format!("tool number T{} is not a whole number ≥ 0", t.num),
                     )
                 })?;
             if table.tools.contains_key(&number) {
-                return Err(err(t.col, format!("tool T{number} listed twice")));
+                return Err(err(
+                    t.col,
+                    ErrorKind::RepeatedWord,
+                    format!("tool T{number} listed twice"),
+                ));
             }
             let units = |num: Num, col: u32, what: &str, per: i64, unit: &str| {
                 num.scaled(per, 1)
                     .filter(|v| v.abs() <= MAX_AXIS_UNITS)
-                    .ok_or_else(|| err(col, format!("{what} {num} {unit} out of range")))
+                    .ok_or_else(|| {
+                        err(
+                            col,
+                            ErrorKind::OutOfRange,
+                            format!("{what} {num} {unit} out of range"),
+                        )
+                    })
             };
             let mm = |num: Num, col: u32, what: &str| units(num, col, what, NM_PER_MM, "mm");
             let mut tool = Tool::default();
@@ -137,12 +155,17 @@ impl ToolTable {
                     b'D' => {
                         tool.diameter_nm = mm(w.num, w.col, "diameter D")?;
                         if tool.diameter_nm < 0 {
-                            return Err(err(w.col, format!("negative diameter D{}", w.num)));
+                            return Err(err(
+                                w.col,
+                                ErrorKind::Negative,
+                                format!("negative diameter D{}", w.num),
+                            ));
                         }
                     }
                     _ => {
                         return Err(err(
                             w.col,
+                            ErrorKind::UnusedWords,
                             format!("unknown tool field '{}'", letter as char),
                         ))
                     }

@@ -29,7 +29,7 @@ pub(crate) use run::run;
 
 use super::lexer::{self, Keyword, Label};
 use super::params::Params;
-use super::MAX_LINE;
+use super::{ErrorKind, MAX_LINE};
 use lines::Lines;
 use std::collections::HashMap;
 
@@ -134,7 +134,7 @@ pub(crate) struct OWord {
 }
 
 /// A located error found while indexing: line number, byte column, message.
-pub(crate) type FlowError = (u32, u32, String);
+pub(crate) type FlowError = (u32, u32, ErrorKind, String);
 
 /// The program's lines and O-word structure.
 #[derive(Debug, Default)]
@@ -238,7 +238,7 @@ impl Program {
             }
             Err(e) => {
                 line.oword = BAD;
-                self.errors.push((line.number, e.col, e.message));
+                self.errors.push((line.number, e.col, e.kind, e.message));
             }
         }
     }
@@ -266,7 +266,7 @@ impl Program {
             (Some(l), None) => (l.number, 1),
             _ => (0, 1),
         };
-        self.errors.push((number, col, message));
+        self.errors.push((number, col, ErrorKind::Flow, message));
     }
 
     /// Links every block: one pass with a stack of open blocks, then calls to subs.

@@ -20,7 +20,7 @@ use crate::gcode::canon::Canon;
 use crate::gcode::interp::Interp;
 use crate::gcode::lexer::{self, Words, MAX_ARGS};
 use crate::gcode::params::Scope;
-use crate::gcode::{Diagnostic, MAX_LINE};
+use crate::gcode::{Diagnostic, ErrorKind, MAX_LINE};
 use std::collections::HashSet;
 
 /// What a subroutine call keeps to return.
@@ -113,12 +113,13 @@ impl Runner<'_, '_> {
 
     /// Records an error at line `number`, column `col` (characters), unless the line
     /// has one already.
-    fn error(&mut self, number: u32, col: usize, message: String) {
+    fn error(&mut self, number: u32, col: usize, kind: ErrorKind, message: String) {
         if self.failed.insert(number) {
             self.errors.push(Diagnostic {
                 file: self.file.to_string(),
                 line: number as usize,
                 col,
+                kind,
                 message,
             });
         }
@@ -130,7 +131,7 @@ impl Runner<'_, '_> {
             return;
         };
         let col = lexer::char_col(self.text(&line), col);
-        self.error(line.number, col, message);
+        self.error(line.number, col, ErrorKind::Flow, message);
     }
 
     /// An error on O-word line `i`, at its O.
@@ -143,7 +144,7 @@ impl Runner<'_, '_> {
     #[inline]
     fn plain(&mut self, line: &Line) {
         let text = self.source.get(line.start..line.end).unwrap_or("");
-        if let Err((col, message)) = execute_line(
+        if let Err((col, kind, message)) = execute_line(
             self.interp,
             &mut self.words,
             text,
@@ -151,7 +152,7 @@ impl Runner<'_, '_> {
             line.number,
             self.out,
         ) {
-            self.error(line.number, col, message);
+            self.error(line.number, col, kind, message);
         }
     }
 
@@ -309,7 +310,7 @@ impl Runner<'_, '_> {
             Err(e) => {
                 let col = lexer::char_col(text, e.col);
                 let message = format!("{} {}: {}", o.label, o.keyword.name(), e.message);
-                self.error(line.number, col, message);
+                self.error(line.number, col, e.kind, message);
                 Err(())
             }
         }
@@ -417,18 +418,19 @@ pub(crate) fn execute_line(
     from: usize,
     number: u32,
     out: &mut Vec<Canon>,
-) -> Result<(), (usize, String)> {
+) -> Result<(), (usize, ErrorKind, String)> {
     if text.len() > MAX_LINE && text.chars().count() > MAX_LINE {
         return Err((
             MAX_LINE + 1,
+            ErrorKind::LineTooLong,
             format!("line longer than {MAX_LINE} characters"),
         ));
     }
     lexer::scan_line(text, from, &interp.params, words)
-        .map_err(|e| (lexer::char_col(text, e.col), e.message))?;
+        .map_err(|e| (lexer::char_col(text, e.col), e.kind, e.message))?;
     let before = out.len();
     interp.execute(words, number, out).map_err(|e| {
         out.truncate(before);
-        (lexer::char_col(text, e.col), e.message)
+        (lexer::char_col(text, e.col), e.kind, e.message)
     })
 }

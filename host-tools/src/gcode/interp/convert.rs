@@ -22,6 +22,7 @@ use crate::gcode::canon::{Canon, Coolant, PathMode, Plane, Spindle};
 use crate::gcode::lexer::{bit, f64_to_i64, Code, Note, Word, Words};
 use crate::gcode::params;
 use crate::gcode::unsupported;
+use crate::gcode::ErrorKind;
 use pkmc::config::AXES;
 
 /// What the phases of one line share.
@@ -143,7 +144,11 @@ impl Interp<'_> {
         } else {
             b.used |= bit(b'Q');
             let Some(q) = w.get(b'Q') else {
-                return fail(c.col, "M61 needs Q (the tool now in the spindle)");
+                return fail(
+                    c.col,
+                    ErrorKind::MissingValue,
+                    "M61 needs Q (the tool now in the spindle)",
+                );
             };
             self.current_tool = whole_in(q, 0, i64::from(u32::MAX), "tool number Q")? as u32;
         }
@@ -203,7 +208,11 @@ impl Interp<'_> {
         };
         b.used |= bit(b'P');
         let Some(p) = w.get(b'P') else {
-            return fail(c.col, "G4 needs P (dwell time, seconds)");
+            return fail(
+                c.col,
+                ErrorKind::MissingValue,
+                "G4 needs P (dwell time, seconds)",
+            );
         };
         let ms = dwell_ms(p)?;
         out.push(Canon::Dwell { line: b.line, ms });
@@ -237,7 +246,11 @@ impl Interp<'_> {
                 None if n == 0 => [0; AXES],
                 None => {
                     let at = w.get(b'H').map_or(c.col, |h| h.col);
-                    return fail(at, format!("G43: tool {n} is not in the tool table"));
+                    return fail(
+                        at,
+                        ErrorKind::ToolNumber,
+                        format!("G43: tool {n} is not in the tool table"),
+                    );
                 }
             };
         } else if c.tenths == 431 {
@@ -285,13 +298,21 @@ impl Interp<'_> {
             // LinuxCNC's G64 R (the planner's peak-scale mode), unless the line's own
             // motion code (an R arc or cycle) takes the R.
             if let (Some(r), None) = (w.get(b'R'), b.codes.get(Group::Motion)) {
-                return fail(r.col, unsupported("G64 R (trajectory planner mode)"));
+                return fail(
+                    r.col,
+                    ErrorKind::Unsupported,
+                    unsupported("G64 R (trajectory planner mode)"),
+                );
             }
             b.used |= bit(b'P') | bit(b'Q');
             match w.get(b'P') {
                 Some(p) => {
                     if p.num.is_negative() {
-                        return fail(p.col, format!("negative blending tolerance P{}", p.num));
+                        return fail(
+                            p.col,
+                            ErrorKind::Negative,
+                            format!("negative blending tolerance P{}", p.num),
+                        );
                     }
                     PathMode::Blend(Some(self.length(p)?))
                 }
@@ -367,6 +388,7 @@ impl Interp<'_> {
         if let (Some(c), Some(n)) = (explicit.filter(|c| c.tenths != 800), nm_axes) {
             return fail(
                 c.col,
+                ErrorKind::TwoAxisCommands,
                 format!(
                     "{} and {} on one line: both would use the axis words",
                     code_name('G', c.tenths),
@@ -398,21 +420,34 @@ impl Interp<'_> {
             };
         if nm_axes.is_some() && has_polar {
             let at = w.polar_radius.or(w.polar_angle).map_or(1, |p| p.col);
-            return fail(at, "polar coordinates (@ ^) only go with motion");
+            return fail(
+                at,
+                ErrorKind::UnusedAxisWords,
+                "polar coordinates (@ ^) only go with motion",
+            );
         }
         if let Some(c) = g53 {
             let ok = run && matches!(self.motion, Motion::Rapid | Motion::Linear);
             if !ok {
                 return fail(
                     c.col,
+                    ErrorKind::G53Motion,
                     "G53 needs G0 or G1 (on its line or in force) and axis words",
                 );
             }
             if !self.absolute {
-                return fail(c.col, "G53 needs absolute distance mode (G90)");
+                return fail(
+                    c.col,
+                    ErrorKind::ModeConflict,
+                    "G53 needs absolute distance mode (G90)",
+                );
             }
             if has_polar {
-                return fail(c.col, "G53 cannot take polar coordinates (@ ^)");
+                return fail(
+                    c.col,
+                    ErrorKind::ModeConflict,
+                    "G53 cannot take polar coordinates (@ ^)",
+                );
             }
         }
         if run {
@@ -444,7 +479,7 @@ impl Interp<'_> {
                 } else {
                     "coordinates without a motion mode (G0, G1, G2, G3 or a canned cycle)"
                 };
-                return fail(first_motion_col, what);
+                return fail(first_motion_col, ErrorKind::UnusedAxisWords, what);
             }
             Motion::Rapid => {
                 let t = self.target(w, machine)?;
@@ -538,6 +573,7 @@ pub(super) fn check_unused(w: &Words, b: &Block) -> Res<()> {
         .unwrap_or(b'?');
     fail(
         at,
+        ErrorKind::UnusedWords,
         format!(
             "{} word with no G or M code on its line that uses it",
             letter as char
@@ -550,13 +586,18 @@ fn inverse_time_us(f: Word) -> Res<u64> {
     if f.num.is_negative() || f.num.is_zero() {
         return fail(
             f.col,
+            ErrorKind::Negative,
             format!("inverse-time feed F{} must be above zero", f.num),
         );
     }
     let us = 60e6 / f.num.to_f64();
     match f64_to_i64(us) {
         Some(v) if v >= 1 => Ok(v as u64),
-        _ => fail(f.col, format!("inverse-time feed F{} out of range", f.num)),
+        _ => fail(
+            f.col,
+            ErrorKind::OutOfRange,
+            format!("inverse-time feed F{} out of range", f.num),
+        ),
     }
 }
 
@@ -588,6 +629,11 @@ fn spindle_rpm(s: Word) -> Res<u32> {
     if !(0.0..=f64::from(u32::MAX)).contains(&v) {
         return fail(
             s.col,
+            if v < 0.0 {
+                ErrorKind::Negative
+            } else {
+                ErrorKind::OutOfRange
+            },
             format!("spindle speed S{} must be from 0 to 4294967295 rpm", s.num),
         );
     }

@@ -45,7 +45,7 @@ mod tooling;
 
 use super::lexer::{bit, f64_to_i64, Word, Words, DEGREE, INCH, MM};
 use super::params::Params;
-use super::{Options, MAX_AXIS_UNITS};
+use super::{ErrorKind, Options, MAX_AXIS_UNITS};
 use crate::gcode::canon::Canon;
 use crate::gcode::canon::{PathMode, Plane, Spindle};
 use convert::{check_unused, Block};
@@ -62,15 +62,18 @@ pub const NM_PER_INCH: i64 = 25_400_000;
 pub struct LineError {
     /// Column, 1-based.
     pub col: u32,
+    /// What kind of fault.
+    pub kind: ErrorKind,
     /// What is wrong.
     pub message: String,
 }
 
 pub(crate) type Res<T> = Result<T, LineError>;
 
-pub(crate) fn fail<T>(col: u32, message: impl Into<String>) -> Res<T> {
+pub(crate) fn fail<T>(col: u32, kind: ErrorKind, message: impl Into<String>) -> Res<T> {
     Err(LineError {
         col,
+        kind,
         message: message.into(),
     })
 }
@@ -321,6 +324,7 @@ impl<'o> Interp<'o> {
             .collect();
         fail(
             word.col,
+            ErrorKind::NoSuchAxis,
             format!(
                 "{}{}: the machine has no {} axis (its axes: {})",
                 AXIS_NAMES[i],
@@ -368,7 +372,11 @@ impl<'o> Interp<'o> {
 pub(crate) fn bounded_round(v: f64, col: u32) -> Res<i64> {
     match f64_to_i64(v) {
         Some(u) if u.abs() <= MAX_AXIS_UNITS => Ok(u),
-        _ => fail(col, "computed position out of range"),
+        _ => fail(
+            col,
+            ErrorKind::InvalidTarget,
+            "computed position out of range",
+        ),
     }
 }
 
@@ -377,7 +385,11 @@ pub(crate) fn bounded_round(v: f64, col: u32) -> Res<i64> {
 pub(crate) fn bounded(v: Option<i64>, w: Word) -> Res<i64> {
     match v {
         Some(u) if u.abs() <= MAX_AXIS_UNITS => Ok(u),
-        _ => fail(w.col, format!("value {} out of range", w.num)),
+        _ => fail(
+            w.col,
+            ErrorKind::OutOfRange,
+            format!("value {} out of range", w.num),
+        ),
     }
 }
 
@@ -387,34 +399,47 @@ pub(crate) fn check_range(v: i64, i: usize, col: u32) -> Res<i64> {
     if v.abs() <= MAX_AXIS_UNITS {
         Ok(v)
     } else {
-        fail(col, format!("{} position out of range", AXIS_NAMES[i]))
+        fail(
+            col,
+            ErrorKind::InvalidTarget,
+            format!("{} position out of range", AXIS_NAMES[i]),
+        )
     }
 }
 
 /// A whole number within `lo..=hi`.
 pub(crate) fn whole_in(w: Word, lo: i64, hi: i64, what: &str) -> Res<i64> {
-    match w.num.whole() {
-        Some(v) if (lo..=hi).contains(&v) => Ok(v),
-        _ => fail(
-            w.col,
-            format!(
-                "{what} must be a whole number from {lo} to {hi}, not {}",
-                w.num
-            ),
+    let kind = match w.num.whole() {
+        Some(v) if (lo..=hi).contains(&v) => return Ok(v),
+        None => ErrorKind::NotInteger,
+        Some(v) if v < 0 && lo >= 0 => ErrorKind::Negative,
+        Some(_) => ErrorKind::OutOfRange,
+    };
+    fail(
+        w.col,
+        kind,
+        format!(
+            "{what} must be a whole number from {lo} to {hi}, not {}",
+            w.num
         ),
-    }
+    )
 }
 
 /// A dwell time P, seconds → ms (G4, and the dwell of G82/G89).
 pub(crate) fn dwell_ms(p: Word) -> Res<u32> {
     if p.num.is_negative() {
-        return fail(p.col, format!("negative dwell time P{}", p.num));
+        return fail(
+            p.col,
+            ErrorKind::Negative,
+            format!("negative dwell time P{}", p.num),
+        );
     }
     p.num
         .scaled(1000, 1)
         .and_then(|v| u32::try_from(v).ok())
         .ok_or_else(|| LineError {
             col: p.col,
+            kind: ErrorKind::OutOfRange,
             message: format!("dwell time P{} s out of range", p.num),
         })
 }

@@ -14,6 +14,7 @@
 use super::{fail, LineError, Res};
 use crate::gcode::lexer::{Code, Words};
 use crate::gcode::unsupported;
+use crate::gcode::ErrorKind;
 
 /// A modal group of G codes (the first 14) or M codes (the last 4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -92,7 +93,7 @@ pub(crate) fn code_name(letter: char, tenths: i32) -> String {
 
 /// The modal group of code `letter` (`G` or `M`) `tenths` (ten times its number), or
 /// why it is refused.
-pub(crate) fn group_of(letter: char, tenths: i32) -> Result<Group, String> {
+pub(crate) fn group_of(letter: char, tenths: i32) -> Result<Group, (ErrorKind, String)> {
     use Group::*;
     Ok(match (letter, tenths) {
         ('G', 0 | 10 | 20 | 30 | 50 | 51 | 730 | 800 | 810 | 820 | 830 | 850 | 890) => Motion,
@@ -118,7 +119,7 @@ pub(crate) fn group_of(letter: char, tenths: i32) -> Result<Group, String> {
 }
 
 /// Why code `letter` `tenths`, which is in no group here, is refused.
-fn refusal(letter: char, tenths: i32) -> String {
+fn refusal(letter: char, tenths: i32) -> (ErrorKind, String) {
     let feature = match (letter, tenths) {
         ('G', 52) => "G5.2 NURBS blocks",
         ('G', 53) => "G5.3 NURBS blocks",
@@ -141,9 +142,14 @@ fn refusal(letter: char, tenths: i32) -> String {
         ('M', 1000..=1990) => "M100-M199 user-defined M codes",
         ('M', 980 | 990) => "M98/M99 subprogram calls (Fanuc style)",
         ('M', 270) => "M27 (a machine-specific code some posts write; not in LinuxCNC)",
-        _ => return format!("unknown code {}", code_name(letter, tenths)),
+        _ => {
+            return (
+                ErrorKind::UnknownCode,
+                format!("unknown code {}", code_name(letter, tenths)),
+            )
+        }
     };
-    unsupported(feature)
+    (ErrorKind::Unsupported, unsupported(feature))
 }
 
 /// Which of two codes of `group` on one line the group keeps, or `None` when they
@@ -195,8 +201,9 @@ impl Modal {
     }
 
     fn add(&mut self, letter: char, c: Code) -> Res<()> {
-        let group = group_of(letter, c.tenths).map_err(|message| LineError {
+        let group = group_of(letter, c.tenths).map_err(|(kind, message)| LineError {
             col: c.col,
+            kind,
             message,
         })?;
         let bit = 1 << group as usize;
@@ -209,6 +216,7 @@ impl Modal {
                     let first = *slot;
                     return fail(
                         c.col,
+                        ErrorKind::ModalGroup,
                         format!(
                             "{} conflicts with {} at column {} (both in the {} modal group)",
                             code_name(letter, c.tenths),

@@ -17,6 +17,7 @@ use super::{
 use crate::gcode::arcs;
 use crate::gcode::canon::{Canon, Feed, Plane};
 use crate::gcode::lexer::{Word, Words};
+use crate::gcode::ErrorKind;
 use crate::gcode::MAX_AXIS_UNITS;
 use pkmc::config::{AXES, AXIS_NAMES};
 use pkmc::units::NM_PER_MM;
@@ -97,10 +98,18 @@ impl Interp<'_> {
     pub(crate) fn polar(&self, w: &Words, x: i64, y: i64) -> Res<(i64, i64)> {
         let col = w.polar_radius.or(w.polar_angle).map_or(1, |p| p.col);
         if self.plane != Plane::Xy {
-            return fail(col, "polar coordinates (@ ^) need the XY plane (G17)");
+            return fail(
+                col,
+                ErrorKind::ModeConflict,
+                "polar coordinates (@ ^) need the XY plane (G17)",
+            );
         }
         if let Some(xy) = w.get(b'X').or(w.get(b'Y')) {
-            return fail(xy.col, "polar coordinates (@ ^) and X or Y on one line");
+            return fail(
+                xy.col,
+                ErrorKind::ModeConflict,
+                "polar coordinates (@ ^) and X or Y on one line",
+            );
         }
         let (xf, yf) = (x as f64, y as f64);
         let at_origin = x == 0 && y == 0;
@@ -114,7 +123,11 @@ impl Interp<'_> {
             let theta = match angle {
                 Some(a) => a.0,
                 None if at_origin => {
-                    return fail(col, "@ without ^ at the origin: the angle is undefined")
+                    return fail(
+                        col,
+                        ErrorKind::InvalidTarget,
+                        "@ without ^ at the origin: the angle is undefined",
+                    )
                 }
                 None => yf.atan2(xf),
             };
@@ -123,6 +136,7 @@ impl Interp<'_> {
             if at_origin {
                 return fail(
                     col,
+                    ErrorKind::InvalidTarget,
                     "incremental polar motion (G91 @ ^) is undefined at the origin",
                 );
             }
@@ -155,6 +169,7 @@ impl Interp<'_> {
                 Some(us) => Ok(Feed::InverseTime(us)),
                 None => fail(
                     col,
+                    ErrorKind::NoFeed,
                     format!("{code} in inverse-time mode (G93) needs F on its line"),
                 ),
             };
@@ -163,10 +178,11 @@ impl Interp<'_> {
             if self.feed_zero {
                 return fail(
                     col,
+                    ErrorKind::NoFeed,
                     format!("{code} at feed F0: a feed move needs F above zero"),
                 );
             }
-            return fail(col, format!("{code} without a feed (F)"));
+            return fail(col, ErrorKind::NoFeed, format!("{code} without a feed (F)"));
         };
         // An arc moves X Y Z even when it ends where it starts (a full circle).
         let linear = arc || (0..3).any(|i| end[i] != self.pos[i]);
@@ -181,13 +197,29 @@ impl Interp<'_> {
     /// F in units per minute → nm/s and µ°/s.
     pub(super) fn feed_rate(&self, f: Word) -> Res<FeedRate> {
         if f.num.is_negative() || f.num.is_zero() {
-            return fail(f.col, format!("feed F{} must be above zero", f.num));
+            return fail(
+                f.col,
+                if f.num.is_negative() {
+                    ErrorKind::Negative
+                } else {
+                    ErrorKind::NoFeed
+                },
+                format!("feed F{} must be above zero", f.num),
+            );
         }
         let per = if self.inch { NM_PER_INCH } else { NM_PER_MM };
         let range = |v: Option<i64>| match v {
             Some(v) if (1..=MAX_AXIS_UNITS).contains(&v) => Ok(v),
-            Some(v) if v < 1 => fail(f.col, format!("feed F{} too small", f.num)),
-            _ => fail(f.col, format!("feed F{} out of range", f.num)),
+            Some(v) if v < 1 => fail(
+                f.col,
+                ErrorKind::OutOfRange,
+                format!("feed F{} too small", f.num),
+            ),
+            _ => fail(
+                f.col,
+                ErrorKind::OutOfRange,
+                format!("feed F{} out of range", f.num),
+            ),
         };
         Ok(FeedRate {
             linear: range(f.num.scaled(per, 60))?,
@@ -237,6 +269,7 @@ impl Interp<'_> {
         if self.rotated() && self.plane != Plane::Xy {
             return fail(
                 col,
+                ErrorKind::Unsupported,
                 crate::gcode::unsupported(&format!(
                     "arcs in the {plane_name} of a rotated coordinate system (G10 L2 R)"
                 )),
@@ -245,6 +278,7 @@ impl Interp<'_> {
         if let Some(k) = w.get(offset_letter(h)) {
             return fail(
                 k.col,
+                ErrorKind::UnusedWords,
                 format!(
                     "{} word given for an arc in the {plane_name}",
                     offset_letter(h) as char
@@ -260,22 +294,38 @@ impl Interp<'_> {
             (Some(r), true) => {
                 return fail(
                     r.col,
+                    ErrorKind::UnusedWords,
                     format!("{name} with both a radius (R) and a centre (I J K)"),
                 )
             }
             (None, false) => {
                 return fail(
                     col,
+                    ErrorKind::ArcNoOffset,
                     format!("{name} without a centre (I J K) or a radius (R)"),
                 )
             }
             (Some(r), false) => {
                 let radius = self.length(r)?;
                 if radius == 0 {
-                    return fail(r.col, format!("{name} with radius R0"));
+                    return fail(
+                        r.col,
+                        ErrorKind::ArcRadius,
+                        format!("{name} with radius R0"),
+                    );
                 }
-                let c = arcs::centre_from_radius(s, e, radius as f64, clockwise, tol)
-                    .map_err(|m| LineError { col, message: m })?;
+                let c = arcs::centre_from_radius(s, e, radius as f64, clockwise, tol).map_err(
+                    |(kind, message)| {
+                        // Ending where it starts without an axis word in its plane:
+                        // the line has no in-plane end point at all.
+                        let in_plane = [a, b].iter().any(|&i| w.get(AXIS_NAMES[i] as u8).is_some());
+                        let kind = match kind {
+                            ErrorKind::InvalidTarget if !in_plane => ErrorKind::ArcNoPlaneAxis,
+                            kind => kind,
+                        };
+                        LineError { col, kind, message }
+                    },
+                )?;
                 [bounded_round(c[0], col)?, bounded_round(c[1], col)?]
             }
             (None, true) => self.centre_from_offsets([(a, wa), (b, wb)], s, e, col)?,
@@ -288,6 +338,7 @@ impl Interp<'_> {
             let at = w.get(b'R').map_or(col, |r| r.col);
             return fail(
                 at,
+                ErrorKind::ArcRadius,
                 format!(
                     "{name} with a radius of {:.3} mm: larger than the {} mm the controller \
                      interpolates exactly",
@@ -321,6 +372,7 @@ impl Interp<'_> {
                 None if self.arc_absolute => {
                     return fail(
                         col,
+                        ErrorKind::MissingValue,
                         format!(
                             "{} word missing for an absolute centre (G90.1)",
                             b"IJK"[axis] as char
@@ -356,7 +408,7 @@ impl Interp<'_> {
             arcs::CENTRE_ARC_ABS_NM_MM
         };
         arcs::check_end(s, e, [c[0] as f64, c[1] as f64], abs)
-            .map_err(|m| LineError { col, message: m })?;
+            .map_err(|(kind, message)| LineError { col, kind, message })?;
         Ok(c)
     }
 }

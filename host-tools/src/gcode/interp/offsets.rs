@@ -20,6 +20,7 @@ use super::{check_range, fail, whole_in, Interp, Res, AXIS_BITS};
 use crate::gcode::canon::Canon;
 use crate::gcode::lexer::{bit, f64_to_i64, Code, ParamRef, Words};
 use crate::gcode::params;
+use crate::gcode::ErrorKind;
 use crate::gcode::MAX_AXIS_UNITS;
 use pkmc::config::{AXES, AXIS_NAMES};
 
@@ -31,13 +32,18 @@ impl Interp<'_> {
             match a.target {
                 ParamRef::Numbered(n) => {
                     if n >= params::READ_ONLY_FROM {
-                        return fail(a.col, format!("parameter #{n} is read-only"));
+                        return fail(
+                            a.col,
+                            ErrorKind::Parameter,
+                            format!("parameter #{n} is read-only"),
+                        );
                     }
                     if n == params::CURRENT_SYSTEM
                         && !(a.value.fract() == 0.0 && (1.0..=9.0).contains(&a.value))
                     {
                         return fail(
                             a.col,
+                            ErrorKind::Parameter,
                             format!(
                                 "parameter #{n} (the coordinate system in force) takes 1 to 9 \
                                  (G54 to G59.3), not {}",
@@ -54,6 +60,7 @@ impl Interp<'_> {
                     if params::Params::read_only_name(&name) {
                         return fail(
                             a.col,
+                            ErrorKind::Parameter,
                             format!(
                                 "parameter #<{}> is read-only (LinuxCNC maintains it)",
                                 String::from_utf8_lossy(&name)
@@ -133,7 +140,7 @@ impl Interp<'_> {
     /// G92: offsets that make the current point have the given coordinates.
     pub(super) fn g92(&mut self, w: &Words, c: Code) -> Res<()> {
         if w.present() & AXIS_BITS == 0 {
-            return fail(c.col, "G92 needs axis words");
+            return fail(c.col, ErrorKind::NoAxisWords, "G92 needs axis words");
         }
         // Where the current point is, offsets but G92's taken away: in the rotated
         // frame for X and Y.
@@ -171,7 +178,7 @@ impl Interp<'_> {
     /// set, as by G92. `G52 X0 Y0` takes the X and Y offsets away.
     pub(super) fn g52(&mut self, w: &Words, c: Code) -> Res<()> {
         if w.present() & AXIS_BITS == 0 {
-            return fail(c.col, "G52 needs axis words");
+            return fail(c.col, ErrorKind::NoAxisWords, "G52 needs axis words");
         }
         for (i, &letter) in AXIS_NAMES.iter().enumerate() {
             let o = match w.get(letter as u8) {
@@ -189,7 +196,11 @@ impl Interp<'_> {
     pub(super) fn g10(&mut self, w: &Words, c: Code, used: &mut u32) -> Res<()> {
         *used |= bit(b'L') | bit(b'P') | bit(b'R');
         let Some(l) = w.get(b'L') else {
-            return fail(c.col, "G10 needs L1, L2, L10, L11 or L20");
+            return fail(
+                c.col,
+                ErrorKind::MissingValue,
+                "G10 needs L1, L2, L10, L11 or L20",
+            );
         };
         let l20 = match l.num.whole() {
             Some(2) => false,
@@ -198,6 +209,7 @@ impl Interp<'_> {
             _ => {
                 return fail(
                     l.col,
+                    ErrorKind::UnknownCode,
                     format!("G10 L{}: only L1, L2, L10, L11 and L20 exist", l.num),
                 )
             }
@@ -205,6 +217,7 @@ impl Interp<'_> {
         let Some(p) = w.get(b'P') else {
             return fail(
                 c.col,
+                ErrorKind::MissingValue,
                 "G10 L2/L20 needs P (coordinate system 1-9, 0 for the current)",
             );
         };
@@ -213,13 +226,21 @@ impl Interp<'_> {
             n = self.system();
         }
         if w.polar_radius.is_some() || w.polar_angle.is_some() {
-            return fail(c.col, "G10 cannot take polar coordinates (@ ^)");
+            return fail(
+                c.col,
+                ErrorKind::ModeConflict,
+                "G10 cannot take polar coordinates (@ ^)",
+            );
         }
         let base = params::SYSTEM_BASE + 20 * (n - 1);
         if let Some(r) = w.get(b'R') {
             let deg = r.num.to_f64();
             if !deg.is_finite() || deg.abs() > 1e9 {
-                return fail(r.col, format!("rotation R{} out of range", r.num));
+                return fail(
+                    r.col,
+                    ErrorKind::OutOfRange,
+                    format!("rotation R{} out of range", r.num),
+                );
             }
             self.params.set_numbered(base + params::ROTATION, deg);
         }
@@ -266,7 +287,11 @@ impl Interp<'_> {
         let v = self.params.numbered(n);
         match f64_to_i64(v * self.per_user(i) as f64) {
             Some(u) if u.abs() <= MAX_AXIS_UNITS => Ok(u),
-            _ => fail(col, format!("parameter #{n} = {v} out of range")),
+            _ => fail(
+                col,
+                ErrorKind::Parameter,
+                format!("parameter #{n} = {v} out of range"),
+            ),
         }
     }
 
@@ -287,6 +312,7 @@ impl Interp<'_> {
         if !r.is_finite() || r.abs() > 1e9 {
             return fail(
                 col,
+                ErrorKind::Parameter,
                 format!("parameter #{} = {r} out of range", base + params::ROTATION),
             );
         }

@@ -34,6 +34,7 @@ use super::convert::Block;
 use super::{bounded_round, fail, Interp, Res};
 use crate::gcode::canon::{Canon, Feed, Plane};
 use crate::gcode::lexer::{Word, Words};
+use crate::gcode::ErrorKind;
 use pkmc::config::AXES;
 use pkmc::geometry::{Path, MAX_SPLINE_SPAN};
 use pkmc::protocol::Motion;
@@ -88,6 +89,7 @@ impl Interp<'_> {
         if self.plane != Plane::Xy {
             return fail(
                 col,
+                ErrorKind::ModeConflict,
                 format!("{name}: splines must be in the XY plane (G17)"),
             );
         }
@@ -98,6 +100,7 @@ impl Interp<'_> {
         if let Some((letter, word)) = other {
             return fail(
                 word.col,
+                ErrorKind::UnusedAxisWords,
                 format!(
                     "{}{} with {name}: splines may not move Z, A, B or C (X and Y only)",
                     letter as char, word.num
@@ -106,7 +109,11 @@ impl Interp<'_> {
         }
         let polar = w.polar_radius.is_some() || w.polar_angle.is_some();
         if w.get(b'X').is_none() && w.get(b'Y').is_none() && !polar {
-            return fail(col, format!("{name} needs X or Y (its end point)"));
+            return fail(
+                col,
+                ErrorKind::NoAxisWords,
+                format!("{name} needs X or Y (its end point)"),
+            );
         }
         let first = self.spline_ij(w, quadratic, tangent, col)?;
         let second = second.transpose()?;
@@ -119,10 +126,12 @@ impl Interp<'_> {
             (Some(p), Some(q)) => Ok([self.length(p)?, self.length(q)?]),
             (Some(x), None) | (None, Some(x)) => fail(
                 x.col,
+                ErrorKind::MissingValue,
                 "G5 needs both P and Q (the offset from its end to its second control point)",
             ),
             (None, None) => fail(
                 col,
+                ErrorKind::MissingValue,
                 "G5 needs P and Q (the offset from its end to its second control point)",
             ),
         }
@@ -142,7 +151,7 @@ impl Interp<'_> {
             } else {
                 "G5 needs both I and J, or neither (after another G5)"
             };
-            fail(one.col, what)
+            fail(one.col, ErrorKind::MissingValue, what)
         };
         let offset = match (w.get(b'I'), w.get(b'J')) {
             (Some(i), Some(j)) => [self.length(i)?, self.length(j)?],
@@ -150,6 +159,7 @@ impl Interp<'_> {
             (None, None) if quadratic => {
                 return fail(
                     col,
+                    ErrorKind::MissingValue,
                     "G5.1 needs I and J (the offset from its start to its control point)",
                 )
             }
@@ -158,6 +168,7 @@ impl Interp<'_> {
                 None => {
                     return fail(
                         col,
+                        ErrorKind::MissingValue,
                         "G5 without I and J: only a G5 right after another G5 may omit them \
                          (the first of a series needs its first control point)",
                     )
@@ -168,6 +179,7 @@ impl Interp<'_> {
             let at = w.get(b'I').map_or(col, |i| i.col);
             return fail(
                 at,
+                ErrorKind::InvalidTarget,
                 "G5.1 with I and J both zero: its control point must differ from its start",
             );
         }
@@ -210,6 +222,7 @@ impl Interp<'_> {
         if !still && Path::new(&block, &self.pos).is_err() {
             return fail(
                 col,
+                ErrorKind::InvalidTarget,
                 format!(
                     "{name}: the curve is too large for the controller (its Bézier \
                      coefficients along an axis may add up to at most {} m)",

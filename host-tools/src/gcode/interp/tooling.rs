@@ -12,6 +12,7 @@
 
 use super::{bounded_round, check_range, fail, whole_in, Interp, Res, AXIS_BITS};
 use crate::gcode::lexer::{Code, Words};
+use crate::gcode::ErrorKind;
 use crate::gcode::{params, Tool};
 use pkmc::config::{AXES, AXIS_NAMES};
 
@@ -24,11 +25,19 @@ impl Interp<'_> {
     /// and orientation) are read and ignored.
     pub(super) fn g10_tool(&mut self, w: &Words, c: Code, l: u8) -> Res<()> {
         let Some(p) = w.get(b'P') else {
-            return fail(c.col, format!("G10 L{l} needs P (the tool number)"));
+            return fail(
+                c.col,
+                ErrorKind::MissingValue,
+                format!("G10 L{l} needs P (the tool number)"),
+            );
         };
         let n = whole_in(p, 0, i64::from(u32::MAX), "tool number P")? as u32;
         if w.polar_radius.is_some() || w.polar_angle.is_some() {
-            return fail(c.col, "G10 cannot take polar coordinates (@ ^)");
+            return fail(
+                c.col,
+                ErrorKind::ModeConflict,
+                "G10 cannot take polar coordinates (@ ^)",
+            );
         }
         let mut tool = self.tools.get(n).unwrap_or_default();
         if l != 1 {
@@ -50,7 +59,11 @@ impl Interp<'_> {
         if let Some(r) = w.get(b'R') {
             let radius = self.length(r)?;
             if radius < 0 {
-                return fail(r.col, "G10: the tool radius R cannot be negative");
+                return fail(
+                    r.col,
+                    ErrorKind::Negative,
+                    "G10: the tool radius R cannot be negative",
+                );
             }
             tool.diameter_nm = check_range(2 * radius, 0, r.col)?;
         }
@@ -113,7 +126,11 @@ impl Interp<'_> {
     /// not named has none.
     pub(super) fn dynamic_tool_offsets(&self, w: &Words, col: u32) -> Res<[i64; AXES]> {
         if w.present() & AXIS_BITS == 0 {
-            return fail(col, "G43.1 needs an offset (X Y Z A B C; Z is the length)");
+            return fail(
+                col,
+                ErrorKind::NoAxisWords,
+                "G43.1 needs an offset (X Y Z A B C; Z is the length)",
+            );
         }
         let mut offsets = [0; AXES];
         for (i, &letter) in AXIS_NAMES.iter().enumerate() {

@@ -13,7 +13,7 @@
 use super::number::Num;
 use super::{Cursor, LexError};
 use crate::gcode::params::NUM_PARAMS;
-use crate::gcode::MAX_NESTING;
+use crate::gcode::{ErrorKind, MAX_NESTING};
 
 /// Binary operators.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -59,6 +59,7 @@ impl Cursor<'_> {
         if depth >= MAX_NESTING {
             return Err(self.err(
                 self.i,
+                ErrorKind::OutOfRange,
                 format!("expression nested more than {MAX_NESTING} deep"),
             ));
         }
@@ -78,7 +79,7 @@ impl Cursor<'_> {
                 self.operand(depth + 1)
             }
             Some(c) if c.is_ascii_alphabetic() => self.function(depth + 1),
-            _ => Err(self.unexpected("expected a value")),
+            _ => Err(self.unexpected(ErrorKind::BadNumber, "expected a value")),
         }
     }
 
@@ -92,8 +93,12 @@ impl Cursor<'_> {
                 self.i += 1;
                 Ok(v)
             }
-            None => Err(self.err(open, "'[' opened here is never closed")),
-            Some(_) => Err(self.unexpected("expected an operator or ']'")),
+            None => Err(self.err(
+                open,
+                ErrorKind::BadNumber,
+                "'[' opened here is never closed",
+            )),
+            Some(_) => Err(self.unexpected(ErrorKind::BadNumber, "expected an operator or ']'")),
         }
     }
 
@@ -121,7 +126,13 @@ impl Cursor<'_> {
     /// `]`.
     fn peek_op(&mut self, open: usize) -> Result<Option<(Op, usize)>, LexError> {
         let c = match self.peek() {
-            None => return Err(self.err(open, "'[' opened here is never closed")),
+            None => {
+                return Err(self.err(
+                    open,
+                    ErrorKind::BadNumber,
+                    "'[' opened here is never closed",
+                ))
+            }
             Some(c) => c,
         };
         let start = self.i;
@@ -185,10 +196,12 @@ impl Cursor<'_> {
                 };
                 return match two {
                     Some(op) => Ok(Some((op, ends[1] - start))),
-                    None => Err(self.unexpected("expected an operator or ']'")),
+                    None => {
+                        Err(self.unexpected(ErrorKind::BadNumber, "expected an operator or ']'"))
+                    }
                 };
             }
-            _ => return Err(self.unexpected("expected an operator or ']'")),
+            _ => return Err(self.unexpected(ErrorKind::BadNumber, "expected an operator or ']'")),
         };
         Ok(Some((op, 1)))
     }
@@ -198,20 +211,24 @@ impl Cursor<'_> {
         let v = match op {
             Op::Pow => {
                 if a < 0.0 && b.fract() != 0.0 {
-                    return Err(self.err(at, "negative number raised to a fractional power"));
+                    return Err(self.err(
+                        at,
+                        ErrorKind::BadNumber,
+                        "negative number raised to a fractional power",
+                    ));
                 }
                 a.powf(b)
             }
             Op::Mul => a * b,
             Op::Div => {
                 if b == 0.0 {
-                    return Err(self.err(at, "division by zero"));
+                    return Err(self.err(at, ErrorKind::BadNumber, "division by zero"));
                 }
                 a / b
             }
             Op::Mod => {
                 if b == 0.0 {
-                    return Err(self.err(at, "division by zero (MOD 0)"));
+                    return Err(self.err(at, ErrorKind::BadNumber, "division by zero (MOD 0)"));
                 }
                 let r = a % b;
                 if r < 0.0 {
@@ -235,7 +252,7 @@ impl Cursor<'_> {
         if v.is_finite() {
             Ok(v)
         } else {
-            Err(self.err(at, "expression result out of range"))
+            Err(self.err(at, ErrorKind::OutOfRange, "expression result out of range"))
         }
     }
 
@@ -249,7 +266,7 @@ impl Cursor<'_> {
             match self.b.get(self.i) {
                 Some(&l) if l.is_ascii_alphabetic() => {
                     if n == name.len() {
-                        return Err(self.err(at, "unknown function"));
+                        return Err(self.err(at, ErrorKind::UnknownCode, "unknown function"));
                     }
                     name[n] = l.to_ascii_uppercase();
                     n += 1;
@@ -278,10 +295,16 @@ impl Cursor<'_> {
                 | b"EXISTS"
         );
         if !known {
-            return Err(self.err(at, format!("unknown function {shown}")));
+            return Err(self.err(
+                at,
+                ErrorKind::UnknownCode,
+                format!("unknown function {shown}"),
+            ));
         }
         if self.peek() != Some(b'[') {
-            return Err(self.unexpected(&format!("expected '[' after {shown}")));
+            return Err(
+                self.unexpected(ErrorKind::BadNumber, &format!("expected '[' after {shown}"))
+            );
         }
         if name == b"EXISTS" {
             return self.exists(depth);
@@ -291,7 +314,11 @@ impl Cursor<'_> {
         if v.is_finite() {
             Ok(v)
         } else {
-            Err(self.err(at, format!("{shown} result out of range")))
+            Err(self.err(
+                at,
+                ErrorKind::OutOfRange,
+                format!("{shown} result out of range"),
+            ))
         }
     }
 
@@ -302,7 +329,10 @@ impl Cursor<'_> {
         let open = self.i;
         self.i += 1;
         if self.peek() != Some(b'#') {
-            return Err(self.unexpected("expected #<name> or #number in EXISTS[…]"));
+            return Err(self.unexpected(
+                ErrorKind::BadNumber,
+                "expected #<name> or #number in EXISTS[…]",
+            ));
         }
         self.i += 1;
         let digit = self.peek().is_some_and(|c| c.is_ascii_digit());
@@ -330,12 +360,19 @@ impl Cursor<'_> {
                     self.i += 1;
                     Ok(f64::from((1..NUM_PARAMS as u64).contains(&n) as u8))
                 }
-                None => Err(self.err(open, "'[' opened here is never closed")),
-                Some(_) => Err(self.unexpected("expected ']'")),
+                None => Err(self.err(
+                    open,
+                    ErrorKind::BadNumber,
+                    "'[' opened here is never closed",
+                )),
+                Some(_) => Err(self.unexpected(ErrorKind::BadNumber, "expected ']'")),
             };
         }
         if self.peek() != Some(b'<') {
-            return Err(self.unexpected("expected #<name> or #number in EXISTS[…]"));
+            return Err(self.unexpected(
+                ErrorKind::BadNumber,
+                "expected #<name> or #number in EXISTS[…]",
+            ));
         }
         let mut buf = NameBuf::new();
         self.name(&mut buf)?;
@@ -348,8 +385,12 @@ impl Cursor<'_> {
                     0.0
                 })
             }
-            None => Err(self.err(open, "'[' opened here is never closed")),
-            Some(_) => Err(self.unexpected("expected ']'")),
+            None => Err(self.err(
+                open,
+                ErrorKind::BadNumber,
+                "'[' opened here is never closed",
+            )),
+            Some(_) => Err(self.unexpected(ErrorKind::BadNumber, "expected ']'")),
         }
     }
 
@@ -368,7 +409,11 @@ impl Cursor<'_> {
             b"ABS" => x.abs(),
             b"ACOS" | b"ASIN" => {
                 if !(-1.0..=1.0).contains(&x) {
-                    return Err(self.err(at, format!("{shown} of {x}: outside -1 to 1")));
+                    return Err(self.err(
+                        at,
+                        ErrorKind::BadNumber,
+                        format!("{shown} of {x}: outside -1 to 1"),
+                    ));
                 }
                 if name == b"ACOS" {
                     x.acos().to_degrees()
@@ -378,11 +423,15 @@ impl Cursor<'_> {
             }
             b"ATAN" => {
                 if self.peek() != Some(b'/') {
-                    return Err(self.unexpected("expected '/' in ATAN[y]/[x]"));
+                    return Err(
+                        self.unexpected(ErrorKind::BadNumber, "expected '/' in ATAN[y]/[x]")
+                    );
                 }
                 self.i += 1;
                 if self.peek() != Some(b'[') {
-                    return Err(self.unexpected("expected '[' in ATAN[y]/[x]"));
+                    return Err(
+                        self.unexpected(ErrorKind::BadNumber, "expected '[' in ATAN[y]/[x]")
+                    );
                 }
                 let d = self.bracket(depth)?;
                 x.atan2(d).to_degrees()
@@ -393,7 +442,11 @@ impl Cursor<'_> {
             b"FUP" => x.ceil(),
             b"LN" => {
                 if x <= 0.0 {
-                    return Err(self.err(at, format!("LN of {x}: not above zero")));
+                    return Err(self.err(
+                        at,
+                        ErrorKind::BadNumber,
+                        format!("LN of {x}: not above zero"),
+                    ));
                 }
                 x.ln()
             }
@@ -401,7 +454,11 @@ impl Cursor<'_> {
             b"SIN" => deg(x).sin(),
             b"SQRT" => {
                 if x < 0.0 {
-                    return Err(self.err(at, format!("SQRT of {x}: below zero")));
+                    return Err(self.err(
+                        at,
+                        ErrorKind::BadNumber,
+                        format!("SQRT of {x}: below zero"),
+                    ));
                 }
                 x.sqrt()
             }
@@ -419,6 +476,7 @@ impl Cursor<'_> {
             return self.params.named(buf.as_slice()).ok_or_else(|| {
                 self.err(
                     at,
+                    ErrorKind::Parameter,
                     format!(
                         "unknown parameter #<{}> (read before it was set)",
                         String::from_utf8_lossy(buf.as_slice())
@@ -441,12 +499,18 @@ impl Cursor<'_> {
             Some(c) if c == b'[' || c == b'#' || c.is_ascii_alphabetic() => {
                 Num::Real(self.operand(depth)?)
             }
-            _ => return Err(self.unexpected("expected a parameter number or <name> after '#'")),
+            _ => {
+                return Err(self.unexpected(
+                    ErrorKind::BadNumber,
+                    "expected a parameter number or <name> after '#'",
+                ))
+            }
         };
         match v.whole() {
             Some(n) if n >= 1 && (n as u64) < NUM_PARAMS as u64 => Ok(n as usize),
             _ => Err(self.err(
                 at,
+                ErrorKind::Parameter,
                 format!(
                     "parameter number {v} out of range (1 to {})",
                     NUM_PARAMS - 1
@@ -461,7 +525,13 @@ impl Cursor<'_> {
         self.i += 1;
         loop {
             match self.b.get(self.i) {
-                None => return Err(self.err(open, "'<' of a parameter name is never closed")),
+                None => {
+                    return Err(self.err(
+                        open,
+                        ErrorKind::BadNumber,
+                        "'<' of a parameter name is never closed",
+                    ))
+                }
                 Some(b'>') => {
                     self.i += 1;
                     break;
@@ -473,7 +543,7 @@ impl Cursor<'_> {
             self.i += 1;
         }
         if buf.len == 0 {
-            return Err(self.err(open, "empty parameter name"));
+            return Err(self.err(open, ErrorKind::BadNumber, "empty parameter name"));
         }
         Ok(())
     }

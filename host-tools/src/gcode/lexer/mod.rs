@@ -30,6 +30,7 @@ pub use oword::{oword_args, scan_oword, Keyword, Label, OHeader, MAX_ARGS};
 
 use super::params::Params;
 use super::unsupported;
+use super::ErrorKind;
 use expr::NameBuf;
 
 /// A letter word's value and where it starts.
@@ -174,6 +175,8 @@ pub fn char_col(text: &str, byte_col: u32) -> usize {
 pub struct LexError {
     /// Column, 1-based.
     pub col: u32,
+    /// What kind of fault.
+    pub kind: ErrorKind,
     /// What is wrong.
     pub message: String,
 }
@@ -213,9 +216,10 @@ impl Cursor<'_> {
         u32::try_from(i + 1).unwrap_or(u32::MAX)
     }
 
-    fn err(&self, i: usize, message: impl Into<String>) -> LexError {
+    fn err(&self, i: usize, kind: ErrorKind, message: impl Into<String>) -> LexError {
         LexError {
             col: self.col(i),
+            kind,
             message: message.into(),
         }
     }
@@ -234,10 +238,10 @@ impl Cursor<'_> {
     }
 
     /// Error for an unexpected byte at `self.i`.
-    fn unexpected(&self, what: &str) -> LexError {
+    fn unexpected(&self, kind: ErrorKind, what: &str) -> LexError {
         let i = self.i;
         match self.b.get(i) {
-            None => self.err(i, format!("{what}, found the end of the line")),
+            None => self.err(i, kind, format!("{what}, found the end of the line")),
             Some(&c) if c < 0x20 || c == 0x7f => self.control(i),
             Some(_) => {
                 let ch = self
@@ -245,7 +249,7 @@ impl Cursor<'_> {
                     .get(i..)
                     .and_then(|s| s.chars().next())
                     .unwrap_or('?');
-                self.err(i, format!("{what}, found '{ch}'"))
+                self.err(i, kind, format!("{what}, found '{ch}'"))
             }
         }
     }
@@ -254,6 +258,7 @@ impl Cursor<'_> {
         let c = self.b.get(i).copied().unwrap_or(0);
         self.err(
             i,
+            ErrorKind::ExpectedLetter,
             format!("control character U+{c:04X} (binary data, not G-code text)"),
         )
     }
@@ -293,6 +298,7 @@ impl Cursor<'_> {
                     if let Some(first) = slot {
                         return Err(LexError {
                             col,
+                            kind: ErrorKind::RepeatedWord,
                             message: format!(
                                 "{} given twice (first at column {})",
                                 c as char, first.col
@@ -306,7 +312,12 @@ impl Cursor<'_> {
                 }
                 c if c.is_ascii_alphabetic() => self.word(words)?,
                 c if c < 0x20 || c == 0x7f => return Err(self.control(self.i)),
-                _ => return Err(self.unexpected("expected a word (letter and value)")),
+                _ => {
+                    return Err(self.unexpected(
+                        ErrorKind::ExpectedLetter,
+                        "expected a word (letter and value)",
+                    ))
+                }
             }
         }
         Ok(())
@@ -321,11 +332,16 @@ impl Cursor<'_> {
             b'O' => {
                 return Err(self.err(
                     at,
+                    ErrorKind::Syntax,
                     "an O-word must begin its line (only an N number may come before it)",
                 ))
             }
             b'U' | b'V' | b'W' => {
-                return Err(self.err(at, unsupported(&format!("U V W axes ({})", letter as char))))
+                return Err(self.err(
+                    at,
+                    ErrorKind::Unsupported,
+                    unsupported(&format!("U V W axes ({})", letter as char)),
+                ))
             }
             _ => {}
         }
@@ -334,7 +350,11 @@ impl Cursor<'_> {
             b'A'..=b'F' | b'G' | b'H' | b'I'..=b'N' | b'P'..=b'T' | b'X'..=b'Z'
         );
         if !known {
-            return Err(self.err(at, format!("unknown word '{}'", letter as char)));
+            return Err(self.err(
+                at,
+                ErrorKind::UnknownCode,
+                format!("unknown word '{}'", letter as char),
+            ));
         }
         let num = self.value(letter as char, 0)?;
         match letter {
@@ -351,7 +371,11 @@ impl Cursor<'_> {
                         list.push(Code { tenths, col });
                     }
                     None => {
-                        return Err(self.err(at, format!("unknown code {}{num}", letter as char)))
+                        return Err(self.err(
+                            at,
+                            ErrorKind::UnknownCode,
+                            format!("unknown code {}{num}", letter as char),
+                        ))
                     }
                 }
             }
@@ -361,6 +385,7 @@ impl Cursor<'_> {
                 if words.present & b != 0 {
                     return Err(self.err(
                         at,
+                        ErrorKind::RepeatedWord,
                         format!(
                             "{} given twice (first at column {})",
                             letter as char, words.vals[slot].col
@@ -383,10 +408,20 @@ impl Cursor<'_> {
         let mut j = open + 1;
         loop {
             match self.b.get(j) {
-                None => return Err(self.err(open, "comment opened here is never closed")),
+                None => {
+                    return Err(self.err(
+                        open,
+                        ErrorKind::Syntax,
+                        "comment opened here is never closed",
+                    ))
+                }
                 Some(b')') => break,
                 Some(b'(') => {
-                    return Err(self.err(j, "'(' inside a comment (comments do not nest)"))
+                    return Err(self.err(
+                        j,
+                        ErrorKind::Syntax,
+                        "'(' inside a comment (comments do not nest)",
+                    ))
                 }
                 Some(&c) if (c < 0x20 && c != b'\t') || c == 0x7f => return Err(self.control(j)),
                 Some(_) => j += 1,
@@ -418,19 +453,25 @@ impl Cursor<'_> {
         self.i += 1;
         let given = match self.peek() {
             Some(b'0'..=b'9') => self.literal(star + 1)?,
-            _ => return Err(self.unexpected("expected the checksum number after '*'")),
+            _ => {
+                return Err(
+                    self.unexpected(ErrorKind::Syntax, "expected the checksum number after '*'")
+                )
+            }
         };
         match given.whole() {
             Some(n) if n == i64::from(sum) => {}
             Some(n) if (0..=255).contains(&n) => {
                 return Err(self.err(
                     star,
+                    ErrorKind::Syntax,
                     format!("checksum mismatch: the line says *{n} but its bytes give *{sum}"),
                 ))
             }
             _ => {
                 return Err(self.err(
                     star,
+                    ErrorKind::Syntax,
                     format!("checksum *{given} is not a whole number from 0 to 255"),
                 ))
             }
@@ -444,7 +485,10 @@ impl Cursor<'_> {
                 }
                 Some(b';') => return self.check_text(self.i + 1, self.b.len()),
                 Some(_) => {
-                    return Err(self.unexpected("expected the end of the line after the checksum"))
+                    return Err(self.unexpected(
+                        ErrorKind::Syntax,
+                        "expected the end of the line after the checksum",
+                    ))
                 }
             }
         }
@@ -463,7 +507,7 @@ impl Cursor<'_> {
             ParamRef::Numbered(self.param_index(1)?)
         };
         if self.peek() != Some(b'=') {
-            return Err(self.unexpected("expected '=' in a parameter setting"));
+            return Err(self.unexpected(ErrorKind::Syntax, "expected '=' in a parameter setting"));
         }
         self.i += 1;
         let value = self.value('=', 0)?.to_f64();
@@ -477,7 +521,10 @@ impl Cursor<'_> {
         self.skip_blanks();
         let start = self.i;
         let Some(&c) = self.b.get(start) else {
-            return Err(self.unexpected(&format!("expected a value after '{after}'")));
+            return Err(self.unexpected(
+                ErrorKind::BadNumber,
+                &format!("expected a value after '{after}'"),
+            ));
         };
         let literal = match c {
             b'0'..=b'9' | b'.' => true,
@@ -503,7 +550,10 @@ impl Cursor<'_> {
             c if c.is_ascii_alphabetic() && self.function_follows() => {
                 Ok(Num::Real(self.operand(depth)?))
             }
-            _ => Err(self.unexpected(&format!("expected a value after '{after}'"))),
+            _ => Err(self.unexpected(
+                ErrorKind::BadNumber,
+                &format!("expected a value after '{after}'"),
+            )),
         }
     }
 

@@ -18,7 +18,7 @@
 //!
 //! Source: LinuxCNC G-code overview (numbers; 0.0001 as the tolerance of whole numbers).
 
-use super::{Cursor, LexError};
+use super::{Cursor, ErrorKind, LexError};
 use std::fmt;
 
 /// Powers of ten that fit an `i64`.
@@ -389,7 +389,11 @@ impl Cursor<'_> {
         loop {
             while let Some(&c @ b'0'..=b'9') = self.b.get(self.i) {
                 if mant > MANT_LIMIT {
-                    return Err(self.err(start, "number with too many digits"));
+                    return Err(self.err(
+                        start,
+                        ErrorKind::OutOfRange,
+                        "number with too many digits",
+                    ));
                 }
                 mant = mant * 10 + i64::from(c - b'0');
                 digits += 1;
@@ -398,7 +402,11 @@ impl Cursor<'_> {
             match self.b.get(self.i) {
                 Some(b'.') if point_at.is_none() => point_at = Some(digits),
                 Some(b'.') => {
-                    return Err(self.err(col_at.min(start), "malformed number (two decimal points)"))
+                    return Err(self.err(
+                        col_at.min(start),
+                        ErrorKind::BadNumber,
+                        "malformed number (two decimal points)",
+                    ))
                 }
                 Some(b' ' | b'\t') => {}
                 _ => break,
@@ -409,11 +417,12 @@ impl Cursor<'_> {
         if scale > MAX_DECIMALS {
             return Err(self.err(
                 start,
+                ErrorKind::OutOfRange,
                 format!("number with more than {MAX_DECIMALS} decimals"),
             ));
         }
         if digits == 0 {
-            return Err(self.err(start, "malformed number (no digits)"));
+            return Err(self.err(start, ErrorKind::BadNumber, "malformed number (no digits)"));
         }
         Ok((mant, scale))
     }

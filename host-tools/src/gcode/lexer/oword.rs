@@ -15,6 +15,7 @@ use super::expr::NameBuf;
 use super::{Cursor, LexError};
 use crate::gcode::params::Params;
 use crate::gcode::unsupported;
+use crate::gcode::ErrorKind;
 use std::fmt;
 
 /// Most values after a keyword: the 30 arguments of a call (#1–#30).
@@ -167,6 +168,7 @@ pub fn scan_oword(text: &str, start: usize, params: &Params) -> Result<Option<OH
     if n == 0 {
         return Err(c.err(
             at,
+            ErrorKind::Unsupported,
             unsupported(&format!(
                 "Fanuc-style numbered programs ({label} without a keyword; M98/M99)"
             )),
@@ -180,6 +182,7 @@ pub fn scan_oword(text: &str, start: usize, params: &Params) -> Result<Option<OH
             let shown = text.get(kw_at..c.i).unwrap_or("?").replace([' ', '\t'], "");
             c.err(
                 kw_at,
+                ErrorKind::Flow,
                 format!(
                     "unknown O-word keyword '{shown}' (sub, endsub, call, return, if, elseif, \
                      else, endif, while, endwhile, do, repeat, endrepeat, break, continue)"
@@ -200,7 +203,7 @@ pub fn scan_oword(text: &str, start: usize, params: &Params) -> Result<Option<OH
                 } else {
                     format!("expected the end of the line after {}", keyword.name())
                 };
-                return Err(c.unexpected(&what));
+                return Err(c.unexpected(ErrorKind::Flow, &what));
             }
         }
     }
@@ -240,6 +243,7 @@ pub fn oword_args(
             Some(b'[') => {
                 return Err(c.err(
                     c.i,
+                    ErrorKind::Flow,
                     if most == 1 {
                         "a second value where one is expected".to_string()
                     } else {
@@ -247,7 +251,12 @@ pub fn oword_args(
                     },
                 ))
             }
-            Some(_) => return Err(c.unexpected("expected '[' and a value, or the end of the line")),
+            Some(_) => {
+                return Err(c.unexpected(
+                    ErrorKind::Flow,
+                    "expected '[' and a value, or the end of the line",
+                ))
+            }
         }
     }
 }
@@ -261,16 +270,24 @@ impl Cursor<'_> {
                 self.name(&mut buf)?;
                 Ok(Label::Name(buf.as_slice().into()))
             }
-            Some(b'[' | b'#') => Err(self.err(at, unsupported("computed O-word labels (o[…])"))),
+            Some(b'[' | b'#') => Err(self.err(
+                at,
+                ErrorKind::Unsupported,
+                unsupported("computed O-word labels (o[…])"),
+            )),
             Some(b'0'..=b'9') => {
                 let from = self.i;
                 let num = self.literal(from)?;
                 match num.whole() {
                     Some(v) if v >= 0 => Ok(Label::Num(v)),
-                    _ => Err(self.err(from, format!("O-word label {num} is not a whole number"))),
+                    _ => Err(self.err(
+                        from,
+                        ErrorKind::Flow,
+                        format!("O-word label {num} is not a whole number"),
+                    )),
                 }
             }
-            _ => Err(self.unexpected("expected a number or <name> after 'O'")),
+            _ => Err(self.unexpected(ErrorKind::Flow, "expected a number or <name> after 'O'")),
         }
     }
 

@@ -11,6 +11,7 @@ use super::{ArcMove, Side, Straight};
 use crate::gcode::arcs;
 use crate::gcode::canon::{Canon, Feed};
 use crate::gcode::interp::{fail, Interp, Res};
+use crate::gcode::ErrorKind;
 use pkmc::config::AXES;
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
@@ -74,6 +75,7 @@ pub(super) fn swept(start: [f64; 2], centre: [f64; 2], turn: i64, end: [f64; 2])
 fn gouge<T>(col: u32, what: &str) -> Res<T> {
     fail(
         col,
+        ErrorKind::InvalidTarget,
         format!(
             "cutter compensation: {what} makes a concave corner the tool cannot reach \
              without gouging the part"
@@ -109,6 +111,7 @@ impl Interp<'_> {
         if length <= r {
             return fail(
                 col,
+                ErrorKind::InvalidTarget,
                 format!(
                     "the cutter compensation entry move ({} mm in XY) must be longer than \
                      the tool radius ({} mm)",
@@ -267,6 +270,7 @@ impl Interp<'_> {
         let Some(held) = self.comp.queue.first_move().copied() else {
             return fail(
                 col,
+                ErrorKind::InvalidTarget,
                 "cutter compensation: a concave corner right after a stop (M0/M1) cannot \
                  be compensated, since the move before the stop has ended",
             );
@@ -280,6 +284,7 @@ impl Interp<'_> {
             if half == 0.0 {
                 return fail(
                     col,
+                    ErrorKind::InvalidTarget,
                     "cutter compensation: a zero-degree inside corner cannot be compensated",
                 );
             }
@@ -321,6 +326,7 @@ impl Interp<'_> {
         if length <= r {
             return fail(
                 col,
+                ErrorKind::InvalidTarget,
                 format!(
                     "the cutter compensation entry arc must end farther than the tool radius \
                      ({} mm) from where it starts ({} mm)",
@@ -357,6 +363,7 @@ impl Interp<'_> {
         if (dist(centre, end) - dist(centre, c)).abs() > slack {
             return fail(
                 col,
+                ErrorKind::InvalidTarget,
                 "cutter compensation: no entry arc fits this move (its start and end are not \
                  equally far from any centre on the programmed one's side)",
             );
@@ -380,6 +387,7 @@ impl Interp<'_> {
     fn too_small<T>(&self, radius: f64, col: u32) -> Res<T> {
         fail(
             col,
+            ErrorKind::InvalidTarget,
             format!(
                 "cutter compensation: the tool radius ({} mm) is not smaller than the radius \
                  of the arc it must stay inside ({} mm)",
@@ -476,6 +484,7 @@ impl Interp<'_> {
         let Some(held) = self.comp.queue.first_move().copied() else {
             return fail(
                 col,
+                ErrorKind::InvalidTarget,
                 "cutter compensation: a concave corner right after a stop (M0/M1) cannot \
                  be compensated, since the move before the stop has ended",
             );
@@ -511,6 +520,7 @@ impl Interp<'_> {
         if oldrad == 0.0 || between == 0.0 {
             return fail(
                 col,
+                ErrorKind::InvalidTarget,
                 "cutter compensation: two arcs with the same centre meet in a concave corner",
             );
         }

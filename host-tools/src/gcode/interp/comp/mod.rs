@@ -38,6 +38,7 @@ use super::{fail, whole_in, Interp, Res};
 use crate::gcode::canon::{Canon, Feed, Plane};
 use crate::gcode::lexer::{bit, Words};
 use crate::gcode::unsupported;
+use crate::gcode::ErrorKind;
 use pkmc::config::AXES;
 pub(crate) use queue::Queue;
 
@@ -194,6 +195,7 @@ impl Interp<'_> {
             if let Some(what) = forbidden(g, c.tenths).filter(|_| !same_plane) {
                 return fail(
                     c.col,
+                    ErrorKind::ModeConflict,
                     format!(
                         "{}: {what} is not allowed while cutter compensation is on (G40 first)",
                         code_name(if g == Group::ToolChange { 'M' } else { 'G' }, c.tenths)
@@ -211,6 +213,7 @@ impl Interp<'_> {
         if !before && modal_cycle && self.line_moves(w) {
             return fail(
                 w.first_motion_col.max(1),
+                ErrorKind::ModeConflict,
                 "a canned cycle is not allowed while cutter compensation is on (G40 first)",
             );
         }
@@ -225,6 +228,7 @@ impl Interp<'_> {
         if matches!(l, Some(2 | 20)) && (p == Some(0) || p == Some(current)) {
             return fail(
                 col,
+                ErrorKind::ModeConflict,
                 "G10: changing the coordinate system in force is not allowed while cutter \
                  compensation is on (G40 first)",
             );
@@ -257,12 +261,14 @@ impl Interp<'_> {
             Plane::Zx => {
                 return fail(
                     c.col,
+                    ErrorKind::Unsupported,
                     unsupported("cutter compensation in the XZ plane (G18: lathe tools)"),
                 )
             }
             Plane::Yz => {
                 return fail(
                     c.col,
+                    ErrorKind::ModeConflict,
                     format!("{name}: cutter compensation needs the XY plane (G17)"),
                 )
             }
@@ -270,6 +276,7 @@ impl Interp<'_> {
         if self.comp.on() {
             return fail(
                 c.col,
+                ErrorKind::ModeConflict,
                 format!("{name} while cutter compensation is already on (G40 first)"),
             );
         }
@@ -283,11 +290,16 @@ impl Interp<'_> {
             if let Some(l) = w.get(b'L') {
                 return fail(
                     l.col,
+                    ErrorKind::Unsupported,
                     unsupported("lathe tool orientation (L) with G41.1/G42.1"),
                 );
             }
             let Some(d) = w.get(b'D') else {
-                return fail(c.col, format!("{name} needs D (the tool diameter)"));
+                return fail(
+                    c.col,
+                    ErrorKind::MissingValue,
+                    format!("{name} needs D (the tool diameter)"),
+                );
             };
             self.length(d)? as f64 / 2.0
         } else {
@@ -313,7 +325,11 @@ impl Interp<'_> {
         let n = match w.get(b'D') {
             Some(d) => {
                 if d.num.is_negative() {
-                    return fail(d.col, format!("{name}: negative tool number D{}", d.num));
+                    return fail(
+                        d.col,
+                        ErrorKind::Negative,
+                        format!("{name}: negative tool number D{}", d.num),
+                    );
                 }
                 whole_in(d, 0, i64::from(u32::MAX), "tool number D")? as u32
             }
@@ -326,7 +342,11 @@ impl Interp<'_> {
             None if n == 0 => Ok(0.0),
             None => {
                 let at = w.get(b'D').map_or(col, |d| d.col);
-                fail(at, format!("{name}: tool {n} is not in the tool table"))
+                fail(
+                    at,
+                    ErrorKind::ToolNumber,
+                    format!("{name}: tool {n} is not in the tool table"),
+                )
             }
         }
     }
@@ -402,6 +422,7 @@ impl Interp<'_> {
         if self.comp.arc_not_allowed {
             return fail(
                 col,
+                ErrorKind::ModeConflict,
                 "the move after turning cutter compensation off (G40) must be straight, \
                  not an arc",
             );
@@ -417,6 +438,7 @@ impl Interp<'_> {
         if self.comp.on() {
             return fail(
                 col,
+                ErrorKind::ModeConflict,
                 format!(
                     "{name} while cutter radius compensation is on: splines cannot be \
                      compensated (G40 first)"

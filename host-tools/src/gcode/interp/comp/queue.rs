@@ -9,6 +9,7 @@ use super::corners::swept;
 use super::Straight;
 use crate::gcode::canon::{Canon, Feed, Plane};
 use crate::gcode::interp::{bounded_round, fail, Res};
+use crate::gcode::ErrorKind;
 use pkmc::config::AXES;
 use pkmc::units::NM_PER_MM;
 
@@ -118,6 +119,7 @@ impl Queue {
                     if (r1 - r2).abs() > 0.01 * unit {
                         return fail(
                             col,
+                            ErrorKind::InvalidTarget,
                             format!(
                                 "cutter compensation: the arc of line {} would leave its \
                                  circle (radius {:.4} mm, end at {:.4} mm from the centre)",
@@ -133,6 +135,7 @@ impl Queue {
                         if grown.abs() > programmed.abs() + slack {
                             return fail(
                                 col,
+                                ErrorKind::InvalidTarget,
                                 format!(
                                     "cutter compensation: the arc of line {} cannot reach \
                                      this concave corner without the tool gouging the part",
@@ -151,6 +154,7 @@ impl Queue {
                             };
                             return fail(
                                 col,
+                                ErrorKind::InvalidTarget,
                                 format!(
                                     "cutter compensation: the {what} of line {} is shorter \
                                      than the cut-back this concave corner needs: the tool \
