@@ -1,17 +1,23 @@
 //! `nc-send grbl` spoken to directly: Grbl 1.1's answers, jogging, holds and
-//! overrides, alarms, and hostile bytes (the real senders' tests are in
-//! `grbl_senders.rs`).
+//! overrides, alarms, and hostile bytes, each over the pseudo-terminal (`test::pty`)
+//! and over TCP (`test::tcp`) (the real senders' tests are in `grbl_senders.rs`).
 
 mod common;
 mod grbl;
 
-use grbl::{field, Bridge, Client};
+use grbl::{field, Bridge, Client, Via};
 use std::time::Duration;
 
-#[test]
-fn answers_as_grbl_one_one_does() {
+over_both! {
+    answers_as_grbl_one_one_does => answers;
+    moves_jogs_holds_resumes_and_overrides_the_feed => moves_jogs_holds;
+    hostile_bytes_get_errors_or_are_filtered_and_the_bridge_goes_on => hostile_bytes;
+    an_alarm_is_reported_with_its_cause_and_locks_g_code_until_unlocked => alarm;
+}
+
+fn answers(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::connect(&bridge.tcp);
+    let mut c = Client::open(&bridge, via);
     let s = c.status();
     assert!(
         s.starts_with("<Idle|MPos:0.000,0.000,0.000|FS:0,0|Bf:128,1024|"),
@@ -64,10 +70,9 @@ fn answers_as_grbl_one_one_does() {
     assert_eq!(summary["errors"], 1, "{summary}");
 }
 
-#[test]
-fn moves_jogs_holds_resumes_and_overrides_the_feed() {
+fn moves_jogs_holds(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::connect(&bridge.tcp);
+    let mut c = Client::open(&bridge, via);
     assert_eq!(c.command("$J=G91 X2 Y-1 F600"), vec!["ok"]);
     let s = c.wait_state("Idle", Duration::from_secs(10));
     assert_eq!(field(&s, "MPos"), vec![2.0, -1.0, 0.0], "{s}");
@@ -105,10 +110,9 @@ fn moves_jogs_holds_resumes_and_overrides_the_feed() {
     bridge.stop();
 }
 
-#[test]
-fn hostile_bytes_get_errors_or_are_filtered_and_the_bridge_goes_on() {
+fn hostile_bytes(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::connect(&bridge.tcp);
+    let mut c = Client::open(&bridge, via);
     // Binary (without the bytes that are real-time commands: those act, as on Grbl).
     let bin: Vec<u8> = (0u8..=255)
         .filter(|b| !b"\r\n?!~\x18".contains(b) && !(0x84..=0xa1).contains(b))
@@ -145,10 +149,9 @@ fn hostile_bytes_get_errors_or_are_filtered_and_the_bridge_goes_on() {
     assert_eq!(summary["status"]["pose"]["x"], 0.0, "{summary}");
 }
 
-#[test]
-fn an_alarm_is_reported_with_its_cause_and_locks_g_code_until_unlocked() {
+fn alarm(via: Via) {
     let bridge = Bridge::start(&["--inject", "limit:0@1.0"]);
-    let mut c = Client::connect(&bridge.tcp);
+    let mut c = Client::open(&bridge, via);
     assert_eq!(c.command("G1 X80 F600"), vec!["ok"]);
     let alarm = c.line_until(|l| l.starts_with("ALARM:"), Duration::from_secs(10));
     assert_eq!(alarm, "ALARM:1", "a limit switch");

@@ -1,11 +1,12 @@
 //! Grbl 1.1's real-time rules in every state of `nc-send grbl`, one test per rule,
-//! driven with raw bytes over TCP and the pseudo-terminal. Every read has a
-//! timeout; the times asked are printed with what was measured.
+//! each driven with raw bytes over the pseudo-terminal (`rule::pty`) and over TCP
+//! (`rule::tcp`). Every read has a timeout; the times asked are printed with what was
+//! measured.
 
 mod common;
 mod grbl;
 
-use grbl::{field, Bridge, Client};
+use grbl::{field, Bridge, Client, Via};
 use std::time::{Duration, Instant};
 
 /// How soon a `?` must be answered, in every state.
@@ -95,26 +96,46 @@ fn paused_job_keeps_answering(c: &mut Client) {
     println!("status waits: {}; {:?}", c.wait_figures(), c.waits);
 }
 
-#[test]
-fn a_paused_job_answers_grbl_commands_and_status_over_tcp_then_resumes() {
+over_both! {
+    a_paused_job_answers_grbl_commands_and_status_then_resumes => paused_job_resumes;
+    a_paused_job_answers_and_ctrl_c_still_ends_the_bridge => paused_job_ctrl_c;
+    a_jog_reports_jog_and_0x85_or_a_feed_hold_cancels_it_within_its_deceleration => jog_cancels;
+    jogs_queue_each_answered_at_once_and_g_code_is_locked_out_meanwhile => jogs_queue;
+    a_jog_runs_at_its_own_feed_whatever_the_feed_override => jog_ignores_override;
+    a_second_sender_is_told_busy_and_never_evicts_the_first => second_sender_busy;
+    the_startup_echo_is_one_line_and_a_counting_sender_runs_a_thousand_lines => startup_echo_and_counting;
+    an_error_while_moving_neither_holds_nor_stops_the_answers => error_while_moving;
+    m6_is_error_20_as_on_grbl_unless_a_tool_change_pause_is_asked_for => m6_error_20;
+    a_new_sender_is_told_of_a_held_job_and_its_reset_clears_it => held_job_handed_over;
+    settings_show_max_travel_m2_says_pgm_end_and_check_mode_refuses_jogs => settings_pgm_end_check;
+    dollar_commands_are_refused_in_a_cycle_a_hold_a_jog_and_check_mode_as_on_grbl => dollar_by_state;
+    overrides_and_reset_act_while_held_jogging_and_in_check_mode => overrides_and_reset;
+    g_code_errors_carry_grbls_numbers => g_code_errors;
+    every_grbl_error_number_is_given_for_a_line_that_has_its_fault => every_error_number;
+    unlock_is_refused_while_the_e_stop_is_latched => unlock_refused_in_e_stop;
+    homing_answers_status_and_a_reset_cancels_it_with_alarm_6 => homing_reset;
+}
+
+fn paused_job_resumes(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::connect(&bridge.tcp);
+    let mut c = Client::open(&bridge, via);
     paused_job_keeps_answering(&mut c);
     c.send(b"~");
     let (s, _) = poll_until(&mut c, "Idle", Duration::from_secs(10));
     assert_eq!(field(&s, "MPos")[0], 50.0, "{s}");
-    // A new TCP sender (the first has gone) is greeted at once.
-    drop(c);
-    let mut c = Client::connect(&bridge.tcp);
-    c.status_within(STATUS_LIMIT);
+    if via == Via::Tcp {
+        // A new TCP sender (the first has gone) is greeted at once.
+        drop(c);
+        let mut c = Client::connect(&bridge.tcp);
+        c.status_within(STATUS_LIMIT);
+    }
     let summary = bridge.stop();
     assert_eq!(summary["status"]["pose"]["x"], 50.0, "{summary}");
 }
 
-#[test]
-fn a_paused_job_answers_over_the_pseudo_terminal_and_ctrl_c_still_ends_the_bridge() {
+fn paused_job_ctrl_c(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::pty(&bridge.pty);
+    let mut c = Client::open(&bridge, via);
     paused_job_keeps_answering(&mut c);
     // Ctrl-C while the job is held: the bridge ends, with its summary.
     let summary = bridge.stop();
@@ -150,10 +171,9 @@ fn jog_and_cancel(c: &mut Client, cancel: u8) -> (String, String, Vec<String>) {
     (before, rest, seen)
 }
 
-#[test]
-fn a_jog_reports_jog_and_0x85_or_a_feed_hold_cancels_it_within_its_deceleration() {
+fn jog_cancels(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::connect(&bridge.tcp);
+    let mut c = Client::open(&bridge, via);
     let accel = setting(&mut c, 120);
     for cancel in [0x85u8, b'!'] {
         let (before, rest, seen) = jog_and_cancel(&mut c, cancel);
@@ -190,10 +210,9 @@ fn a_jog_reports_jog_and_0x85_or_a_feed_hold_cancels_it_within_its_deceleration(
     bridge.stop();
 }
 
-#[test]
-fn jogs_queue_each_answered_at_once_and_g_code_is_locked_out_meanwhile() {
+fn jogs_queue(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::pty(&bridge.pty);
+    let mut c = Client::open(&bridge, via);
     let y0 = field(&c.status_within(STATUS_LIMIT), "MPos")[1];
     let start = Instant::now();
     for _ in 0..3 {
@@ -236,37 +255,49 @@ fn jogs_queue_each_answered_at_once_and_g_code_is_locked_out_meanwhile() {
     bridge.stop();
 }
 
-#[test]
-fn a_second_sender_is_told_busy_and_never_evicts_the_first() {
+/// The first sender is on `via`; the others are a TCP sender and, when the first is
+/// on TCP, the pseudo-terminal too. They are told Busy and nothing they send is read.
+fn second_sender_busy(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut pty = Client::pty(&bridge.pty);
+    let mut first = Client::open(&bridge, via);
     assert_eq!(
-        command_within(&mut pty, "G1 X30 F600", Duration::from_secs(1)),
+        command_within(&mut first, "G1 X30 F600", Duration::from_secs(1)),
         vec!["ok"]
     );
-    poll_until(&mut pty, "Run", Duration::from_secs(2));
+    poll_until(&mut first, "Run", Duration::from_secs(2));
     let mut tcp = Client::tcp(&bridge.tcp);
-    let first = tcp
+    let told = tcp
         .line(Duration::from_secs(2))
         .expect("the TCP sender is told something");
-    assert!(first.starts_with("[MSG:Busy"), "{first}");
+    assert!(told.starts_with("[MSG:Busy"), "{told}");
     tcp.send(b"!G0 X0\n");
-    let s = pty.status_within(STATUS_LIMIT);
-    assert!(
-        s.starts_with("<Run|"),
-        "the TCP sender's ! was not read: {s}"
-    );
+    let mut others = vec![tcp];
+    if via == Via::Tcp {
+        // The pseudo-terminal says nothing when opened: its sender is told Busy when
+        // it sends.
+        let mut pty = Client::pty(&bridge.pty);
+        pty.send(b"!G0 X0\n");
+        let told = pty
+            .line(Duration::from_secs(2))
+            .expect("the sender on the pseudo-terminal is told something");
+        assert!(told.starts_with("[MSG:Busy"), "{told}");
+        others.push(pty);
+    }
+    let s = first.status_within(STATUS_LIMIT);
+    assert!(s.starts_with("<Run|"), "the others' ! was not read: {s}");
     // The first sender still commands the job.
-    pty.send(b"!");
-    poll_until(&mut pty, "Hold:0", Duration::from_secs(3));
-    pty.send(b"~");
-    let (s, _) = poll_until(&mut pty, "Idle", Duration::from_secs(10));
+    first.send(b"!");
+    poll_until(&mut first, "Hold:0", Duration::from_secs(3));
+    first.send(b"~");
+    let (s, _) = poll_until(&mut first, "Idle", Duration::from_secs(10));
     assert_eq!(field(&s, "MPos")[0], 30.0, "{s}");
-    assert!(
-        tcp.line(Duration::from_millis(200))
-            .is_none_or(|l| l.starts_with("[MSG:Busy")),
-        "the TCP sender gets no banner and no answers"
-    );
+    for o in &mut others {
+        assert!(
+            o.line(Duration::from_millis(200))
+                .is_none_or(|l| l.starts_with("[MSG:Busy")),
+            "the other senders get no banner and no answers"
+        );
+    }
     bridge.stop();
 }
 
@@ -324,10 +355,9 @@ fn stream_counting(c: &mut Client, lines: &[String], limit: Duration) -> usize {
     errors
 }
 
-#[test]
-fn the_startup_echo_is_one_line_and_a_counting_sender_runs_a_thousand_lines() {
+fn startup_echo_and_counting(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::connect(&bridge.tcp);
+    let mut c = Client::open(&bridge, via);
     assert_eq!(c.command("G10 L2 P2 X1 Y2"), vec!["ok"]);
     assert_eq!(c.command("$N0=G55"), vec!["ok"]);
     c.send(&[0x18]);
@@ -354,10 +384,9 @@ fn the_startup_echo_is_one_line_and_a_counting_sender_runs_a_thousand_lines() {
     assert_eq!(summary["errors"], 0, "{summary}");
 }
 
-#[test]
-fn an_error_while_moving_neither_holds_nor_stops_the_answers() {
+fn error_while_moving(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::connect(&bridge.tcp);
+    let mut c = Client::open(&bridge, via);
     assert_eq!(
         command_within(&mut c, "G1 X20 F600", Duration::from_secs(1)),
         vec!["ok"]
@@ -377,10 +406,9 @@ fn an_error_while_moving_neither_holds_nor_stops_the_answers() {
     bridge.stop();
 }
 
-#[test]
-fn m6_is_error_20_as_on_grbl_unless_a_tool_change_pause_is_asked_for() {
+fn m6_error_20(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::connect(&bridge.tcp);
+    let mut c = Client::open(&bridge, via);
     let got = command_within(&mut c, "T2 M6", Duration::from_millis(500));
     assert_eq!(got.last().unwrap(), "error:20", "{got:?}");
     assert!(
@@ -391,7 +419,7 @@ fn m6_is_error_20_as_on_grbl_unless_a_tool_change_pause_is_asked_for() {
     bridge.stop();
 
     let bridge = Bridge::start_with(&[], &["--tool-change", "pause"]);
-    let mut c = Client::connect(&bridge.tcp);
+    let mut c = Client::open(&bridge, via);
     for line in ["G1 X5 F600", "T2 M6", "G1 X10"] {
         assert_eq!(
             command_within(&mut c, line, Duration::from_secs(1)),
@@ -410,10 +438,12 @@ fn m6_is_error_20_as_on_grbl_unless_a_tool_change_pause_is_asked_for() {
     bridge.stop();
 }
 
-#[test]
-fn a_new_sender_is_told_of_a_held_job_and_its_reset_clears_it() {
+/// The previous sender is on `via`; the new one is on TCP (a pseudo-terminal does not
+/// tell the bridge that a new sender has opened it). The sender on the
+/// pseudo-terminal holds the bridge while it has sent a byte in the last 5 s.
+fn held_job_handed_over(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut a = Client::connect(&bridge.tcp);
+    let mut a = Client::open(&bridge, via);
     assert_eq!(
         command_within(&mut a, "G1 X50 F600", Duration::from_secs(1)),
         vec!["ok"]
@@ -422,7 +452,11 @@ fn a_new_sender_is_told_of_a_held_job_and_its_reset_clears_it() {
     a.send(b"!");
     let (held, _) = poll_until(&mut a, "Hold:0", Duration::from_secs(5));
     drop(a);
-    std::thread::sleep(Duration::from_millis(200));
+    let quiet = match via {
+        Via::Tcp => Duration::from_millis(200),
+        Via::Pty => Duration::from_millis(5_300),
+    };
+    std::thread::sleep(quiet);
     let mut b = Client::connect(&bridge.tcp);
     let msg = b
         .line(Duration::from_secs(1))
@@ -446,10 +480,9 @@ fn a_new_sender_is_told_of_a_held_job_and_its_reset_clears_it() {
     bridge.stop();
 }
 
-#[test]
-fn settings_show_max_travel_m2_says_pgm_end_and_check_mode_refuses_jogs() {
+fn settings_pgm_end_check(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::connect(&bridge.tcp);
+    let mut c = Client::open(&bridge, via);
     // On the Cartesian machine X is joint 1: $130 is its travel, $201 − $200.
     let travel = setting(&mut c, 130);
     let (min, max) = (setting(&mut c, 200), setting(&mut c, 201));
@@ -488,10 +521,9 @@ fn dollar_answers(c: &mut Client, expected: &[(&str, &str)], state: &str) {
 /// Grbl 1.1's `system_execute_line` answers `$` lines by state: `$`, `$G` and `$X`
 /// always; `$$` except in a cycle or a hold; `$#`, `$I`, `$N`, settings only idle or
 /// in an alarm; storing a start-up line only idle.
-#[test]
-fn dollar_commands_are_refused_in_a_cycle_a_hold_a_jog_and_check_mode_as_on_grbl() {
+fn dollar_by_state(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::pty(&bridge.pty);
+    let mut c = Client::open(&bridge, via);
     let idle = [
         ("$$", "ok"),
         ("$#", "ok"),
@@ -590,10 +622,9 @@ fn poll_override(c: &mut Client, ov: f64, limit: Duration) -> String {
 /// override is reported within 300 ms, the reset's banner comes within 1 s and
 /// leaves the machine Idle where it stopped (check mode ends, as Grbl's reset
 /// returns to Idle).
-#[test]
-fn overrides_and_reset_act_while_held_jogging_and_in_check_mode() {
+fn overrides_and_reset(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::pty(&bridge.pty);
+    let mut c = Client::open(&bridge, via);
     let banner = |c: &mut Client| {
         c.send(&[0x18]);
         c.line_until(|l| l.starts_with("Grbl 1.1h"), Duration::from_secs(1));
@@ -642,10 +673,9 @@ fn overrides_and_reset_act_while_held_jogging_and_in_check_mode() {
 
 /// G-code errors carry Grbl 1.1's numbers (its `doc/csv/error_codes_en_US.csv`) where
 /// Grbl has one for the fault, each after a `[MSG:]` with our words.
-#[test]
-fn g_code_errors_carry_grbls_numbers() {
+fn g_code_errors(via: Via) {
     let bridge = Bridge::start(&[]);
-    let mut c = Client::connect(&bridge.tcp);
+    let mut c = Client::open(&bridge, via);
     let cases = [
         // No feed rate set yet since the start.
         ("G1 X1", "error:22"),
@@ -680,11 +710,137 @@ fn g_code_errors_carry_grbls_numbers() {
     bridge.stop();
 }
 
-#[test]
-fn unlock_is_refused_while_the_e_stop_is_latched() {
+/// One line for each of Grbl 1.1's error numbers that a G-code or `$` line can get
+/// (`doc/csv/error_codes_en_US.csv` of github.com/gnea/grbl), answered with exactly
+/// that number after a `[MSG:]` with our words. The front end's errors carry their
+/// kind from where they are raised; the bridge maps the kind, not the words.
+fn every_error_number(via: Via) {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::open(&bridge, via);
+    let long = format!("G0 X1 ({})", "a".repeat(300));
+    let cases = [
+        // No feed rate set yet since the start.
+        ("G1 X1", "error:22"),
+        ("G0 X1 &", "error:1"),
+        ("G0 X1.2.3", "error:2"),
+        ("$Q", "error:3"),
+        ("G1 X1 F-100", "error:4"),
+        (long.as_str(), "error:11"),
+        ("$J=G90 X1000 F600", "error:15"),
+        ("G1.5 X1", "error:20"),
+        ("G17 G18", "error:21"),
+        ("T1.5", "error:23"),
+        ("G1 G92 X1 F100", "error:24"),
+        ("G1 X1 X2 F100", "error:25"),
+        ("G92", "error:26"),
+        ("G4", "error:28"),
+        ("G53 G2 X1 Y1 I1 F100", "error:30"),
+        ("G80 X1", "error:31"),
+        ("G17 G2 Z1 R5 F100", "error:32"),
+        ("G2 X10 I1 F100", "error:33"),
+        ("G0 X99999", "error:33"),
+        ("G2 X10 R1 F100", "error:34"),
+        ("G2 X1 Y1 F100", "error:35"),
+        ("G1 X1 F100 K1", "error:36"),
+        ("G43 H1", "error:38"),
+    ];
+    let mut wrong = Vec::new();
+    for (line, want) in cases {
+        let got = command_within(&mut c, line, Duration::from_millis(500));
+        let answer = got.last().unwrap();
+        assert!(
+            got.len() >= 2 && got[got.len() - 2].starts_with("[MSG:"),
+            "{line}: {got:?}"
+        );
+        if answer != want {
+            wrong.push(format!("{line}: {answer}, Grbl {want} ({got:?})"));
+        }
+    }
+    assert!(wrong.is_empty(), "{wrong:#?}");
+    let s = c.status_within(STATUS_LIMIT);
+    assert!(s.starts_with("<Idle|MPos:0.000,0.000,0.000|"), "{s}");
+    // Grbl's 27 (line number), 29 (G59.x) and 37 (G43.1 on another axis than the
+    // tool length's) are faults of Grbl's smaller dialect; ours takes these lines.
+    for line in ["N12345678 G4 P0", "G59.1", "G54", "G43.1 X1", "G49"] {
+        let got = command_within(&mut c, line, Duration::from_millis(500));
+        assert_eq!(got, vec!["ok"], "{line}");
+    }
+    let summary = bridge.stop();
+    assert_eq!(summary["errors"], cases.len(), "{summary}");
+}
+
+/// The time from a jog's `ok` until the machine is Idle again, and the fastest
+/// speed reported meanwhile (mm/min).
+fn timed_jog(c: &mut Client, jog: &str) -> (Duration, f64) {
+    assert_eq!(
+        command_within(c, jog, Duration::from_millis(300)),
+        vec!["ok"]
+    );
+    let start = Instant::now();
+    let mut fastest = 0.0f64;
+    loop {
+        let s = c.status_within(STATUS_LIMIT);
+        fastest = fastest.max(field(&s, "FS")[0]);
+        if s.starts_with("<Idle|") {
+            return (start.elapsed(), fastest);
+        }
+        assert!(start.elapsed() < Duration::from_secs(10), "{jog}: {s}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+/// Grbl's jogs are not slowed or sped up by the feed override (its jogging interface,
+/// `doc/markdown/jogging.md` of github.com/gnea/grbl); G-code moves still are.
+fn jog_ignores_override(via: Via) {
+    let bridge = Bridge::start(&[]);
+    let mut c = Client::open(&bridge, via);
+    // 20 mm at 1200 mm/min: a second at speed.
+    let (full, full_speed) = timed_jog(&mut c, "$J=G91 X20 F1200");
+    c.send(&[0x92; 5]);
+    poll_override(&mut c, 50.0, Duration::from_millis(300));
+    let (half, half_speed) = timed_jog(&mut c, "$J=G91 X-20 F1200");
+    println!("jog at 100 %: {full:?}, {full_speed} mm/min; at 50 %: {half:?}, {half_speed} mm/min");
+    assert!(
+        (half_speed - 1200.0).abs() < 15.0,
+        "the jog ran at its F whatever the override: {half_speed} mm/min"
+    );
+    assert!(
+        half.as_secs_f64() < full.as_secs_f64() * 1.15 + 0.05,
+        "a jog at 50 % takes {half:?}, at 100 % {full:?}"
+    );
+    let s = c.status_within(STATUS_LIMIT);
+    assert_eq!(field(&s, "Ov")[0], 50.0, "the override is kept: {s}");
+    assert_eq!(field(&s, "MPos")[0], 0.0, "{s}");
+    // A G-code move after the jog runs at the override.
+    assert_eq!(
+        command_within(&mut c, "G1 X20 F1200", Duration::from_secs(1)),
+        vec!["ok"]
+    );
+    let (_, seen) = poll_until(&mut c, "Run", Duration::from_secs(2));
+    assert!(!seen.is_empty());
+    let mut fastest = 0.0f64;
+    let end = Instant::now() + Duration::from_secs(10);
+    loop {
+        let s = c.status_within(STATUS_LIMIT);
+        fastest = fastest.max(field(&s, "FS")[0]);
+        if s.starts_with("<Idle|") {
+            break;
+        }
+        assert!(Instant::now() < end, "{s}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    println!("G1 F1200 at 50 %: fastest {fastest} mm/min");
+    assert!(
+        (fastest - 600.0).abs() < 15.0,
+        "G1 at 50 %: {fastest} mm/min"
+    );
+    bridge.stop();
+}
+
+fn unlock_refused_in_e_stop(via: Via) {
     // The simulator's clock runs while the machine moves: the e-stop comes 1 s in.
     let bridge = Bridge::start(&["--inject", "estop@1.0"]);
-    let mut c = Client::connect(&bridge.tcp);
+    let mut c = Client::open(&bridge, via);
     assert_eq!(c.command("G1 X50 F600"), vec!["ok"]);
     let alarm = c.line_until(|l| l.starts_with("ALARM:"), Duration::from_secs(5));
     assert_eq!(alarm, "ALARM:10");
@@ -707,10 +863,9 @@ fn unlock_is_refused_while_the_e_stop_is_latched() {
     bridge.stop();
 }
 
-#[test]
-fn homing_answers_status_and_a_reset_cancels_it_with_alarm_6() {
+fn homing_reset(via: Via) {
     let bridge = Bridge::start(&["--machine", "examples/machines/h4-table.toml"]);
-    let mut c = Client::pty(&bridge.pty);
+    let mut c = Client::open(&bridge, via);
     c.send(b"$H\n");
     let (s, _) = poll_until(&mut c, "Home", Duration::from_secs(2));
     for _ in 0..5 {

@@ -56,7 +56,9 @@ pub(super) struct Bridge<'o> {
     pub(super) line_no: u32,
     pub(super) status: Option<Status>,
     pub(super) controls: VecDeque<Control>,
-    feed_override: u16,
+    /// The feed override the sender set, %. The controller has it except during a
+    /// jog, which runs at 100 % (see [`Bridge::real_time`]).
+    pub(super) feed_override: u16,
     rapid_spindle: (u8, u8),
     pub(super) mode: Mode,
     /// A soft reset is to be carried out once the motion has stopped.
@@ -65,7 +67,8 @@ pub(super) struct Bridge<'o> {
     job: Option<(usize, usize)>,
     last_busy: Instant,
     pub(super) startup: [String; 2],
-    busy_told: Option<Instant>,
+    /// When each sender that does not hold the bridge was last told Busy.
+    busy_told: HashMap<End, Instant>,
     /// Counters for the summary at exit.
     pub(super) counts: Counts,
     /// When the pseudo-terminal last sent a byte.
@@ -137,7 +140,7 @@ impl<'o> Bridge<'o> {
             job: None,
             last_busy: Instant::now(),
             startup: [String::new(), String::new()],
-            busy_told: None,
+            busy_told: HashMap::new(),
             counts: Counts::default(),
             pty_heard: None,
             job_owner: None,
@@ -250,13 +253,15 @@ impl<'o> Bridge<'o> {
     }
 
     fn tell_busy(&mut self, end: End) {
+        // At most once a second to each sender.
         if self
             .busy_told
+            .get(&end)
             .is_some_and(|t| t.elapsed() < Duration::from_secs(1))
         {
             return;
         }
-        self.busy_told = Some(Instant::now());
+        self.busy_told.insert(end, Instant::now());
         let msg = b"[MSG:Busy: another sender holds this bridge; nothing was read]\r\n";
         match end {
             End::Pty => self.ports.write_pty(msg),
@@ -317,7 +322,12 @@ impl<'o> Bridge<'o> {
                     d => (self.feed_override as i32 + d as i32).clamp(10, 200) as u16,
                 };
                 self.feed_override = v;
-                self.controls.push_back(Control::FeedOverride(v));
+                // Grbl's jogs ignore the feed override (its jog motions are planned
+                // with PL_COND_FLAG_NO_FEED_OVERRIDE): during a jog the controller
+                // stays at 100 % and gets the new value when the jog ends.
+                if !self.mode.jogging {
+                    self.controls.push_back(Control::FeedOverride(v));
+                }
             }
             RealTime::Rapid(v) => {
                 self.rapid_spindle.0 = v;
@@ -370,6 +380,7 @@ impl<'o> Bridge<'o> {
                 RX_BUFFER.saturating_sub(queued_bytes),
             ),
             wco: self.session.interp().work_offset(),
+            feed_override: self.feed_override,
             rapid_spindle: self.rapid_spindle,
         };
         words::status_report(s, &report)
@@ -431,7 +442,10 @@ impl<'o> Bridge<'o> {
             mode: self.session.interp().path,
         }];
         if let Err(d) = self.session.line(text, n, &mut canon) {
-            return Err((words::error_code(&d.message), d.to_string()));
+            // The front end may have moved its position before it found the fault:
+            // back to where the machine will be, as after any refused line.
+            self.session.set_position(start);
+            return Err((words::error_code(d.kind), d.to_string()));
         }
         if !self.tool_change && canon.iter().any(|c| matches!(c, Canon::ToolChange { .. })) {
             // Grbl 1.1 has no M6 (error:20); a sender that wants the hold asks for it.

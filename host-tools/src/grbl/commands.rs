@@ -271,12 +271,21 @@ fn jog<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>, body: &str) -> Resu
         }
     };
     b.ok();
+    // A jog runs at its own feed whatever the feed override (Grbl 1.1's jogging
+    // interface): the controller is at 100 % for it and back to the sender's
+    // override after it, including overrides set while it moved.
+    if b.feed_override != 100 {
+        link.control(Control::FeedOverride(100))?;
+    }
     b.mode.jogging = true;
     b.jog_end = block.target;
     b.set_job(Some((1, 0)));
     let end = link.run_job(&[block], b);
     b.set_job(None);
     b.mode.jogging = false;
+    if b.feed_override != 100 {
+        link.control(Control::FeedOverride(b.feed_override))?;
+    }
     after_move(b, link, end?)
 }
 

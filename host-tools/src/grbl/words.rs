@@ -2,7 +2,7 @@
 //! settings (`$$`), offsets (`$#`), build information (`$I`) and help (`$`).
 //! Lengths are in millimetres and angles in degrees, three decimals.
 
-use crate::gcode::Offsets;
+use crate::gcode::{ErrorKind, Offsets};
 use pkmc::config::{axis_is_rotary, MachineConfig, AXES, AXIS_NAMES};
 use pkmc::protocol::{AlarmCause, State, Status};
 use pkmc::units::to_user;
@@ -86,6 +86,9 @@ pub struct Report<'a> {
     pub free: (usize, usize),
     /// Work offset in force, machine units.
     pub wco: [i64; AXES],
+    /// The feed override the sender set, % (during a jog the controller runs at
+    /// 100 %: Grbl's jogs ignore the feed override).
+    pub feed_override: u16,
     /// Rapid and spindle overrides as the sender set them (they do not act; see
     /// `docs/senders.md`).
     pub rapid_spindle: (u8, u8),
@@ -104,7 +107,7 @@ pub fn status_report(s: &Status, r: &Report<'_>) -> String {
         r.free.0,
         r.free.1,
         s.line,
-        s.feed_override,
+        r.feed_override,
         r.rapid_spindle.0,
         r.rapid_spindle.1,
         list(&r.wco, n),
@@ -140,43 +143,34 @@ pub fn alarm_code(cause: AlarmCause) -> u8 {
     }
 }
 
-/// Grbl's error number for a front-end message (20: unsupported or invalid command,
-/// unless a closer one exists); the `[MSG:…]` before it gives file, line, column
-/// and our words.
-pub fn error_code(message: &str) -> u8 {
-    let m = message.to_ascii_lowercase();
-    if m.contains("given twice") {
-        // A word repeated in the block.
-        25
-    } else if m.contains("feed f-") || m.contains("speed s-") || m.contains("negative dwell") {
-        // Grbl's F, S and P cannot be negative.
-        4
-    } else if m.contains("feed")
-        && (m.contains("no feed")
-            || m.contains("without a feed")
-            || m.contains("needs f")
-            || m.contains("f word")
-            || m.contains("zero"))
-    {
-        22
-    } else if m.contains("g53 needs g0 or g1") {
-        30
-    } else if m.contains("without a centre (i j k) or a radius (r)") {
-        // An arc with no offset word in its plane.
-        35
-    } else if m.contains(" needs p ") || m.contains(" needs p (") {
-        // A required value word missing (G4's or G10's P).
-        28
-    } else if m.contains("arc") && m.contains("radius") || m.contains("with radius r0") {
-        34
-    } else if m.contains("modal group") || m.contains("same modal") {
-        21
-    } else if m.contains("bad number") || m.contains("number") && m.contains("expected") {
-        2
-    } else if m.contains("expected a letter") || m.contains("not a word") {
-        1
-    } else {
-        20
+/// Grbl 1.1's error number for a front-end error, by its kind (the numbers of
+/// `doc/csv/error_codes_en_US.csv` of github.com/gnea/grbl); the `[MSG:…]` before it
+/// gives file, line, column and our words. Kinds Grbl has no number of its own for
+/// take the nearest: syntax around the words is 1 (not a word), a value that cannot
+/// be read, computed or held is 2 (bad number).
+pub fn error_code(kind: ErrorKind) -> u8 {
+    use ErrorKind::*;
+    match kind {
+        ExpectedLetter | Syntax => 1,
+        BadNumber | OutOfRange | Parameter => 2,
+        Negative => 4,
+        LineTooLong => 11,
+        Unsupported | UnknownCode | NoSuchAxis | ModeConflict | Flow => 20,
+        ModalGroup => 21,
+        NoFeed => 22,
+        NotInteger => 23,
+        TwoAxisCommands => 24,
+        RepeatedWord => 25,
+        NoAxisWords => 26,
+        MissingValue => 28,
+        G53Motion => 30,
+        UnusedAxisWords => 31,
+        ArcNoPlaneAxis => 32,
+        InvalidTarget => 33,
+        ArcRadius => 34,
+        ArcNoOffset => 35,
+        UnusedWords => 36,
+        ToolNumber => 38,
     }
 }
 
@@ -285,4 +279,41 @@ pub fn build_info(machine: &MachineConfig) -> Vec<String> {
 /// `$`: the commands understood.
 pub fn help() -> &'static str {
     "[HLP:$$ $# $G $I $N $x=val $Nx=line $J=line $C $X $H ~ ! ? ctrl-x]"
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{error_code, ErrorKind};
+
+    /// The front end's error kinds that Grbl 1.1 answers with `error:20` ("unsupported
+    /// or invalid g-code command"): what the dialect does not have (a feature not
+    /// implemented, an unknown code or letter, an axis the machine lacks, O-word flow
+    /// control line by line) or does not take in the mode in force. Every other kind has
+    /// a number of its own ([`error_code`]).
+    pub const UNSUPPORTED: &[ErrorKind] = &[
+        ErrorKind::Unsupported,
+        ErrorKind::UnknownCode,
+        ErrorKind::NoSuchAxis,
+        ErrorKind::ModeConflict,
+        ErrorKind::Flow,
+    ];
+
+    /// Only the kinds listed as unsupported are `error:20`; every other kind has a
+    /// number of its own among Grbl 1.1's G-code errors.
+    #[test]
+    fn no_error_kind_falls_back_to_20_unless_listed_as_unsupported() {
+        assert!(ErrorKind::ALL.len() >= 20, "{:?}", ErrorKind::ALL);
+        for &kind in ErrorKind::ALL {
+            let code = error_code(kind);
+            assert_eq!(
+                code == 20,
+                UNSUPPORTED.contains(&kind),
+                "{kind:?} is error:{code}"
+            );
+            assert!(
+                matches!(code, 1 | 2 | 4 | 11 | 20..=38),
+                "{kind:?}: error:{code} is not one of Grbl 1.1's G-code errors"
+            );
+        }
+    }
 }

@@ -96,6 +96,33 @@ impl Drop for Bridge {
     }
 }
 
+/// The two ways a sender reaches the bridge: every rule is tested over both.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Via {
+    /// The pseudo-terminal, opened as a serial port.
+    Pty,
+    /// The TCP port.
+    Tcp,
+}
+
+/// `over_both! { name => body; … }`: the tests `name::pty` and `name::tcp`, each
+/// calling `body` (a `fn(Via)` of the test file) with its transport.
+#[macro_export]
+macro_rules! over_both {
+    ($($name:ident => $body:ident;)*) => {$(
+        mod $name {
+            #[test]
+            fn pty() {
+                super::$body(super::grbl::Via::Pty)
+            }
+            #[test]
+            fn tcp() {
+                super::$body(super::grbl::Via::Tcp)
+            }
+        }
+    )*};
+}
+
 /// What a test sender talks through: a TCP stream or the pseudo-terminal, each
 /// read with a short timeout (no read waits unbounded).
 pub trait Wire: Read + Write + Send {}
@@ -116,6 +143,19 @@ impl Client {
         let banner = c.line_until(|l| l.starts_with("Grbl "), Duration::from_secs(5));
         assert!(banner.contains("1.1"), "{banner}");
         c
+    }
+
+    /// A sender on `via`: over TCP once the banner has come; on the pseudo-terminal
+    /// (which says nothing when it is opened) once a `?` has been answered.
+    pub fn open(bridge: &Bridge, via: Via) -> Self {
+        match via {
+            Via::Tcp => Self::connect(&bridge.tcp),
+            Via::Pty => {
+                let mut c = Self::pty(&bridge.pty);
+                c.status();
+                c
+            }
+        }
     }
 
     /// Connects over TCP without waiting for anything.
