@@ -23,7 +23,8 @@ the same program with `nc-send --sim`. It fails on:
 
 Cases: square (cartesian-xyz), dense (0.05 mm segments at F6000 on the H-4),
 estop (an e-stop through its pin during a job), unplug (the USB cable pulled during a
-job: link loss), persist (the machine survives a pin reset and a watchdog reset).
+job: link loss), persist (the machine survives a pin reset and a watchdog reset),
+determinism (two free runs agree), replay (a recorded job replays exactly).
 """
 import json
 import math
@@ -422,6 +423,53 @@ def case_determinism(o):
             f"({reps[0]['instructions']} instructions, exceptions {reps[0]['exceptions']})")
 
 
+def case_replay(o):
+    """The square job streamed by a real nc-send, recorded (--record); replayed twice
+    (--replay) without a host or the wall clock: the device writes the recorded bytes
+    at the recorded times (the board checks), and the three traces and reports are
+    identical."""
+    tmp = tempfile.gettempdir()
+    rec = os.path.join(tmp, "vboard-replay.rec")
+    live = os.path.join(tmp, "vboard-replay-live.csv")
+    b = Board(o.vboard, o.elf, None, "replay", ["--record", rec, "--trace", live, "--quiet-log"])
+    r = nc_send(o.nc, ["--port", b.port, "reset"])
+    job = nc_send(o.nc, ["--port", b.port, "--report", "json", os.path.join(ROOT, "examples/square.ngc")])
+    time.sleep(0.5)
+    if b.close() != 0 or r.returncode != 0 or job.returncode != 0:
+        print(b.log()[-3000:])
+        die(f"replay: the recorded run failed: reset exit {r.returncode}, job exit {job.returncode}: "
+            f"{job.stderr[-1000:]}")
+    with b.cond:
+        reports = [json.loads(line) for line in b.lines if line.startswith("{")]
+    if not reports:
+        die("replay: the recorded run printed no report")
+    reports = [reports[-1]]
+    traces = [open(live).read()]
+    for k in range(2):
+        path = os.path.join(tmp, f"vboard-replay-{k}.csv")
+        p = subprocess.run([o.vboard, "--elf", o.elf, "--replay", rec, "--trace", path, "--quiet-log"],
+                           capture_output=True, text=True, timeout=600, stdin=subprocess.DEVNULL)
+        if p.returncode != 0:
+            die(f"replay {k + 1}: exit {p.returncode}: {p.stderr[-2000:]}")
+        reports.append(json.loads(p.stdout.strip().splitlines()[-1]))
+        traces.append(open(path).read())
+    for rep_ in reports:
+        for key in ("wall_s", "speed"):
+            rep_.pop(key)
+    for k in (1, 2):
+        if reports[k] != reports[0]:
+            diff = {x: (reports[0][x], reports[k].get(x)) for x in reports[0] if reports[0][x] != reports[k].get(x)}
+            die(f"replay {k}: the report differs from the recorded run's: {diff}")
+        if traces[k] != traces[0]:
+            lines = [(i, a, c) for i, (a, c) in enumerate(zip(traces[0].splitlines(), traces[k].splitlines()))
+                     if a != c]
+            die(f"replay {k}: the trace differs from the recorded run's, first at row {lines[:1]}")
+    rows = traces[0].count("\n") - 1
+    return (f"replay: the square job (nc-send, {job_json(job, 'replay')['blocks_executed']} blocks) recorded, "
+            f"replayed twice: traces identical ({rows} rows), reports identical "
+            f"({reports[0]['instructions']} instructions, final steps {reports[0]['final_joint_steps']})")
+
+
 def case_unplug(o):
     """The USB cable pulled 2 s into the square job: the controller raises link loss
     and stops; plugged in again, `nc-send abort` clears the job."""
@@ -474,7 +522,7 @@ def main():
     ap.add_argument("--nc-send", dest="nc", default=os.path.join(ROOT, "target/debug/nc-send"))
     ap.add_argument("--vboard", default=os.path.join(ROOT, "vboard/target/release/pkmc-vboard"))
     ap.add_argument("cases", nargs="*", default=["square", "dense", "square8", "dense8", "estop", "limit",
-                                                 "ampfault", "jam", "unplug", "persist", "determinism"])
+                                                 "ampfault", "jam", "unplug", "persist", "determinism", "replay"])
     o = ap.parse_args()
     for what, path in (("nc-send", o.nc), ("pkmc-vboard", o.vboard), ("firmware ELF", o.elf)):
         if not os.path.exists(path):
@@ -508,7 +556,7 @@ def main():
         else:
             notes.append({"estop": case_estop, "unplug": case_unplug, "persist": case_persist,
                           "limit": case_limit, "ampfault": case_ampfault, "jam": case_jam,
-                          "determinism": case_determinism}[case](o))
+                          "determinism": case_determinism, "replay": case_replay}[case](o))
         print(f"vboard: {case} done in {time.time() - t:.1f} s", flush=True)
     print("\n| job | blocks | motion s | busy % per 1 ms (min / median / p99 / max) | servo start µs "
           "(min / median / p99 / max) | stack deepest / untouched B | blocks/s executed | frames/s accepted "

@@ -99,8 +99,9 @@ pub struct Stats {
     pub worst_busy: Vec<(u16, u64, u32)>,
     /// The worst servo-interrupt latencies: (latency, code running when it became due).
     pub worst_servo: Vec<(u64, u32)>,
-    /// Lowest SP seen at a block start, and the block and stack-scan call chain then.
-    pub min_sp: Option<(u32, u32, Vec<u32>)>,
+    /// Lowest SP seen at a block start, and the call chain then, unwound from the
+    /// ELF's call-frame information (the block first; empty without `.debug_frame`).
+    pub min_sp: Option<(u32, Vec<crate::unwind::Frame>)>,
     /// Exceptions taken, by exception number.
     pub taken: std::collections::BTreeMap<u32, u64>,
     /// Start latency of each servo interrupt (time units from the update event).
@@ -115,6 +116,10 @@ pub struct Stats {
     pub pwm_range: (u16, u16),
     /// Changes of the heartbeat LED's output.
     pub led_toggles: u64,
+    /// Deferred FP saves carried out (a floating-point instruction under LSPACT).
+    pub lazy_saves: u64,
+    /// Extended frames returned from with the save still deferred (never written).
+    pub lazy_skipped: u64,
 }
 
 impl Default for Stats {
@@ -132,6 +137,8 @@ impl Default for Stats {
             pin_resets: 0,
             pwm_range: (u16::MAX, 0),
             led_toggles: 0,
+            lazy_saves: 0,
+            lazy_skipped: 0,
         }
     }
 }
@@ -193,6 +200,10 @@ pub struct Board {
     pub block_pc: u32,
     /// The instruction of the last peripheral access.
     pub access_pc: u32,
+    /// A deferred FP save carried out at the start of the current block for a
+    /// floating-point instruction further in it: (block start, that instruction).
+    /// An FPCCR read between the two still sees LSPACT set, as on the core.
+    pub lazy_window: Option<(u32, u32)>,
     /// The code running when each exception became pending.
     pub pended_in: Vec<u32>,
     /// The host streamed blocks recently (set by the run loop, for the busy figures).
@@ -318,6 +329,7 @@ impl Board {
             sleep_request: None,
             block_pc: 0,
             access_pc: 0,
+            lazy_window: None,
             pended_in: vec![0; 16 + crate::nvic::IRQ_LINES],
             streaming: false,
             lowest_sp: u32::MAX,
@@ -440,9 +452,18 @@ impl Board {
         } else if (0xE000_0000..0xE010_0000).contains(&addr)
             && !(0xE004_2000..0xE004_2400).contains(&addr)
         {
+            let early = matches!(self.lazy_window,
+                Some((start, fp)) if start == self.block_pc && self.access_pc < fp);
             self.scs
                 .read(aligned - 0xE000_0000, self.instructions)
                 .map_err(|_| Unmodelled)
+                .map(|w| {
+                    if early && aligned == 0xE000_EF34 {
+                        w | 1
+                    } else {
+                        w
+                    }
+                })
                 .map(|w| w >> shift)
         } else if (flash::CONFIG..flash::CONFIG + flash::CONFIG_SIZE).contains(&addr) {
             Ok(self.flash.read_memory(addr, size))

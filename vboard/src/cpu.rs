@@ -7,9 +7,20 @@
 //! Source: ARMv7-M Architecture Reference Manual (ARM DDI 0403E), "Exception
 //! entry behavior", "Stack alignment on exception entry", "Exception return
 //! behavior", "Execution priority", and WFE, WFI and the event register ("Power
-//! management"). Lazy FP state preservation (FPCCR.LSPEN) is modelled eagerly: the
-//! extended frame's S0–S15 and FPSCR are written at entry; the handler sees the same
-//! registers and memory either way, only the count of stores differs.
+//! management"). Lazy FP state preservation ("Lazy context save of FP state"): with
+//! FPCCR.LSPEN set (its reset value), an entry from a context with CONTROL.FPCA set
+//! reserves the extended frame but writes only R0–R3, R12, LR, PC and xPSR; it sets
+//! FPCCR.LSPACT and points FPCAR at the frame's S0 slot. The first floating-point
+//! instruction executed while LSPACT is set (in the handler, or in one that preempts
+//! it) first writes S0–S15 and FPSCR there and clears LSPACT; an exception return
+//! with LSPACT still set clears it and leaves S0–S15 and FPSCR as they are (they were
+//! never saved nor changed). The save happens at the start of the translated block
+//! holding that instruction: the instructions before it in the block cannot change
+//! S0–S15 or FPSCR, so the stored values are those of the instruction's own moment,
+//! and an FPCCR read by one of them still sees LSPACT set. (A store by one of them
+//! into the reserved slot itself would be overwritten on the core and is not here;
+//! code has no business there.)
+//! With LSPEN clear, the FP state is stacked at entry.
 //!
 //! Cycle model: every executed instruction takes one cycle of SYSCLK (counted per
 //! translated block, each block's instructions counted once by decoding its Thumb
@@ -23,6 +34,7 @@ use crate::elf::Image;
 use crate::nvic::IRQ0;
 use crate::periph::clocks::ResetCause;
 use crate::periph::flash;
+use crate::unwind::Unwinder;
 use anyhow::{anyhow, bail, Result};
 use std::collections::HashMap;
 use std::rc::Rc;
@@ -45,50 +57,38 @@ pub enum Exit {
     Fault(Fault),
 }
 
-/// Per-block instruction counts, by block start address.
+/// Per-block instruction counts and whether the block holds a floating-point
+/// instruction, by block start address.
 #[derive(Default)]
 struct Blocks {
-    counts: HashMap<u64, u32>,
+    counts: HashMap<u64, (u32, Option<u32>)>,
 }
 
-/// Thumb instruction count of `code`.
-fn count_instructions(code: &[u8]) -> u32 {
+/// Thumb instruction count of `code`, and the offset of its first floating-point
+/// instruction if it has one: a 32-bit coprocessor encoding (first half-word 111x 11xx xxxx xxxx)
+/// for coprocessor 10 or 11 (bits 11:8 of the second half-word 101x), which covers
+/// every VFP data-processing, load/store, register-transfer and VMRS/VMSR encoding
+/// (ARMv7-M ARM, "Floating-point instruction encoding").
+fn scan_block(code: &[u8]) -> (u32, Option<u32>) {
     let mut n = 0;
+    let mut fp = None;
     let mut i = 0;
     while i + 1 < code.len() {
         let hw = u16::from_le_bytes([code[i], code[i + 1]]);
-        i += if matches!(hw >> 11, 0x1D..=0x1F) {
-            4
+        if matches!(hw >> 11, 0x1D..=0x1F) {
+            if let Some(b) = code.get(i + 2..i + 4) {
+                let hw2 = u16::from_le_bytes([b[0], b[1]]);
+                if fp.is_none() && hw & 0xEC00 == 0xEC00 && hw2 & 0x0E00 == 0x0A00 {
+                    fp = Some(i as u32);
+                }
+            }
+            i += 4;
         } else {
-            2
-        };
+            i += 2;
+        }
         n += 1;
     }
-    n
-}
-
-/// The return addresses on the stack from `sp` to `top`: odd words pointing into
-/// the program just after a BL or BLX (a scan, not an unwind: a stale word of an
-/// earlier call can appear too).
-fn call_chain(uc: &Unicorn<Board>, code: &[u8], sp: u32, top: u32) -> Vec<u32> {
-    let hw = |k: usize| u16::from_le_bytes([code[k], code[k + 1]]);
-    let mut chain = Vec::new();
-    let mut a = sp;
-    while a < top && chain.len() < 48 {
-        let w = read32(uc, a);
-        a += 4;
-        let o = (w & !1).wrapping_sub(flash::BASE) as usize;
-        if w & 1 == 0 || o < 4 || o >= code.len() {
-            continue;
-        }
-        // BL: 0xF000–0xF7FF then 0xD000-type second half; BLX Rm: 0x4780.
-        let bl = (hw(o - 4) & 0xF800) == 0xF000 && (hw(o - 2) & 0xD000) == 0xD000;
-        let blx = (hw(o - 2) & 0xFF87) == 0x4780;
-        if bl || blx {
-            chain.push(w & !1);
-        }
-    }
-    chain
+    (n, fp)
 }
 
 /// The core, its memory and the board.
@@ -123,6 +123,25 @@ fn read32(uc: &Unicorn<Board>, a: u32) -> u32 {
 fn write32(uc: &mut Unicorn<Board>, a: u32, v: u32) {
     let _ = uc.mem_write(u64::from(a), &v.to_le_bytes());
 }
+
+/// R0–R12, SP, LR (an unwind's starting registers, PC apart).
+const GPRS: [RegisterARM; 15] = [
+    RegisterARM::R0,
+    RegisterARM::R1,
+    RegisterARM::R2,
+    RegisterARM::R3,
+    RegisterARM::R4,
+    RegisterARM::R5,
+    RegisterARM::R6,
+    RegisterARM::R7,
+    RegisterARM::R8,
+    RegisterARM::R9,
+    RegisterARM::R10,
+    RegisterARM::R11,
+    RegisterARM::R12,
+    RegisterARM::SP,
+    RegisterARM::LR,
+];
 
 const FRAME_REGS: [RegisterARM; 6] = [
     RegisterARM::R0,
@@ -168,12 +187,18 @@ fn enter(uc: &mut Unicorn<Board>, e: u32, return_pc: u32) {
     write32(uc, frame + 24, return_pc);
     write32(uc, frame + 28, xpsr);
     if fp {
-        for k in 0..16u32 {
-            let s = reg(uc, s_reg(k));
-            write32(uc, frame + 32 + 4 * k, s);
+        let scs = &mut uc.get_data_mut().scs;
+        if scs.fpccr & FPCCR_LSPEN != 0 {
+            // Deferred: LSPACT, FPCAR, and who the frame belongs to (privileged
+            // always here; THREAD if taken from Thread mode; HardFault may pend).
+            scs.fpcar = frame + 32;
+            scs.fpccr = (scs.fpccr & !FPCCR_STATE)
+                | FPCCR_LSPACT
+                | FPCCR_HFRDY
+                | if handler { 0 } else { FPCCR_THREAD };
+        } else {
+            save_fp(uc, frame + 32);
         }
-        let fpscr = reg(uc, RegisterARM::FPSCR);
-        write32(uc, frame + 96, fpscr);
     }
     set(uc, RegisterARM::SP, frame);
     let exc_return = match (handler, fp) {
@@ -187,6 +212,38 @@ fn enter(uc: &mut Unicorn<Board>, e: u32, return_pc: u32) {
     if fp {
         set(uc, RegisterARM::CONTROL, control & !4);
     }
+}
+
+/// FPCCR.LSPEN: lazy stacking enabled.
+const FPCCR_LSPEN: u32 = 1 << 30;
+/// FPCCR.LSPACT: a deferred save is pending.
+const FPCCR_LSPACT: u32 = 1;
+/// FPCCR.THREAD: the deferred frame was stacked from Thread mode.
+const FPCCR_THREAD: u32 = 1 << 3;
+/// FPCCR.HFRDY: HardFault could be pended when the save was deferred.
+const FPCCR_HFRDY: u32 = 1 << 4;
+/// The state bits of FPCCR the core sets at a deferred entry: LSPACT, USER,
+/// THREAD, HFRDY, MMRDY, BFRDY, MONRDY.
+const FPCCR_STATE: u32 = 0x17B;
+
+/// Writes S0–S15 and FPSCR to the frame slot at `at`.
+fn save_fp(uc: &mut Unicorn<Board>, at: u32) {
+    for k in 0..16u32 {
+        let s = reg(uc, s_reg(k));
+        write32(uc, at + 4 * k, s);
+    }
+    let fpscr = reg(uc, RegisterARM::FPSCR);
+    write32(uc, at + 64, fpscr);
+}
+
+/// The deferred save, before a floating-point instruction runs while FPCCR.LSPACT
+/// is set: the registers go to FPCAR's slot, LSPACT clears.
+fn lazy_save(uc: &mut Unicorn<Board>) {
+    let at = uc.get_data().scs.fpcar;
+    save_fp(uc, at);
+    let b = uc.get_data_mut();
+    b.scs.fpccr &= !FPCCR_LSPACT;
+    b.stats.lazy_saves += 1;
 }
 
 fn s_reg(k: u32) -> RegisterARM {
@@ -284,12 +341,19 @@ fn exception_return(uc: &mut Unicorn<Board>, exc_return: u32) -> Result<(), Stri
     let pc = read32(uc, frame + 24);
     let xpsr = read32(uc, frame + 28);
     if fp {
-        for k in 0..16u32 {
-            let v = read32(uc, frame + 32 + 4 * k);
-            set(uc, s_reg(k), v);
+        let scs = &mut uc.get_data_mut().scs;
+        if scs.fpccr & FPCCR_LSPACT != 0 {
+            // Never saved: the registers still hold the context's own values.
+            scs.fpccr &= !FPCCR_LSPACT;
+            uc.get_data_mut().stats.lazy_skipped += 1;
+        } else {
+            for k in 0..16u32 {
+                let v = read32(uc, frame + 32 + 4 * k);
+                set(uc, s_reg(k), v);
+            }
+            let fpscr = read32(uc, frame + 96);
+            set(uc, RegisterARM::FPSCR, fpscr);
         }
-        let fpscr = read32(uc, frame + 96);
-        set(uc, RegisterARM::FPSCR, fpscr);
     }
     let mut sp = frame + if fp { 0x68 } else { 0x20 };
     if xpsr & (1 << 9) != 0 {
@@ -391,18 +455,36 @@ impl<'a> Core<'a> {
         let code = self.flash_image.clone();
         let top = self.stack_top;
         let mut blocks = Blocks::default();
+        let mut unwinder = self.image.section(".debug_frame").and_then(Unwinder::new);
         self.uc
             .add_block_hook(1, 0, move |uc, addr, size| {
-                let n = *blocks.counts.entry(addr).or_insert_with(|| {
+                let (n, fp) = *blocks.counts.entry(addr).or_insert_with(|| {
                     let o = addr.wrapping_sub(u64::from(flash::BASE)) as usize;
-                    code.get(o..o + size as usize).map_or(1, count_instructions)
+                    code.get(o..o + size as usize).map_or((1, None), scan_block)
                 });
+                uc.get_data_mut().lazy_window = None;
+                if let Some(at) = fp {
+                    if uc.get_data().scs.fpccr & FPCCR_LSPACT != 0 {
+                        lazy_save(uc);
+                        if at > 0 {
+                            let a = addr as u32;
+                            uc.get_data_mut().lazy_window = Some((a, a + at));
+                        }
+                    }
+                }
                 let sp = reg(uc, RegisterARM::SP);
                 if sp < uc.get_data().lowest_sp && sp >= RAM {
-                    let chain = call_chain(uc, &code, sp, top);
+                    let chain = unwinder.as_mut().map(|u| {
+                        let mut regs = [0u32; 16];
+                        for (k, r) in GPRS.iter().enumerate() {
+                            regs[k] = reg(uc, *r);
+                        }
+                        regs[15] = addr as u32;
+                        u.chain(regs, top, |a| read32(uc, a))
+                    });
                     let b = uc.get_data_mut();
                     b.lowest_sp = sp;
-                    b.stats.min_sp = Some((sp, addr as u32, chain));
+                    b.stats.min_sp = Some((sp, chain.unwrap_or_default()));
                 }
                 // An exception waits behind a mask: look whether the code just run
                 // lifted it (CPSIE, MSR BASEPRI/PRIMASK).
@@ -698,5 +780,141 @@ impl<'a> Core<'a> {
     /// Names the function at `pc`.
     pub fn function_at(&self, pc: u32) -> String {
         self.image.function_at(pc)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! Lazy FP state preservation on a hand-assembled program: Thread mode loads
+    //! S0 = 1.0 and pends PendSV; the handler reads FPCCR and FPCAR, optionally
+    //! overwrites S0 with 2.0, reads FPCCR again and returns; Thread mode then copies
+    //! S0 to R3. Encodings from the ARMv7-M ARM (MOVW/MOVT T3/T1, STR/LDR T1,
+    //! VMOV core register to/from single-precision T1, ISB, BX, B).
+    use super::*;
+    use crate::board::MachineSide;
+    use crate::elf::Segment;
+
+    /// MOVW (`top` false) or MOVT of `imm` into `rd`.
+    fn mov16(rd: u16, imm: u16, top: bool) -> [u16; 2] {
+        let i = (imm >> 11) & 1;
+        let imm4 = imm >> 12;
+        let imm3 = (imm >> 8) & 7;
+        let hw1 = if top { 0xF2C0 } else { 0xF240 } | i << 10 | imm4;
+        [hw1, imm3 << 12 | rd << 8 | (imm & 0xFF)]
+    }
+
+    /// `rd` = `v` (MOVW then MOVT).
+    fn load(rd: u16, v: u32) -> Vec<u16> {
+        let mut c = mov16(rd, v as u16, false).to_vec();
+        c.extend(mov16(rd, (v >> 16) as u16, true));
+        c
+    }
+
+    const ISB: [u16; 2] = [0xF3BF, 0x8F6F];
+
+    /// Runs the program; `lspen` leaves FPCCR.LSPEN set (else it is cleared first),
+    /// `touch` makes the handler execute a floating-point instruction. Returns the
+    /// core after 2 000 instructions' time.
+    fn run(lspen: bool, touch: bool) -> Core<'static> {
+        let base = flash::BASE;
+        let mut thread = Vec::new();
+        if !lspen {
+            thread.extend(load(0, 0xE000_EF34));
+            thread.extend(load(1, 0x8000_0000));
+            thread.push(0x6001); // str r1, [r0]
+        }
+        thread.extend(load(0, 0xE000_ED88)); // CPACR: CP10 and CP11 full access
+        thread.extend(load(1, 0x00F0_0000));
+        thread.push(0x6001);
+        thread.extend(ISB);
+        thread.extend(load(2, 0x3F80_0000)); // 1.0
+        thread.extend([0xEE00, 0x2A10]); // vmov s0, r2
+        thread.extend(load(0, 0xE000_ED04)); // ICSR.PENDSVSET
+        thread.extend(load(1, 0x1000_0000));
+        thread.push(0x6001);
+        thread.extend(ISB);
+        thread.extend([0xEE10, 0x3A10]); // vmov r3, s0
+        thread.push(0xE7FE); // b .
+        let mut handler = load(0, 0xE000_EF34);
+        handler.push(0x6804); // ldr r4, [r0]      FPCCR
+        handler.push(0x6845); // ldr r5, [r0, #4]  FPCAR
+        if touch {
+            handler.extend(load(6, 0x4000_0000)); // 2.0
+            handler.extend([0xEE00, 0x6A10]); // vmov s0, r6
+        }
+        handler.push(0x6807); // ldr r7, [r0]      FPCCR again
+        handler.push(0x4770); // bx lr
+        let mut image = vec![0u8; 0x400];
+        let mut word = |o: usize, v: u32| image[o..o + 4].copy_from_slice(&v.to_le_bytes());
+        word(0, RAM + 0x1000);
+        word(4, base + 0x101);
+        word(4 * 14, base + 0x201);
+        for (at, code) in [(0x100, &thread), (0x200, &handler)] {
+            for (k, hw) in code.iter().enumerate() {
+                image[at + 2 * k..at + 2 * k + 2].copy_from_slice(&hw.to_le_bytes());
+            }
+        }
+        let image = Image::from_segments(vec![Segment {
+            addr: base,
+            data: image,
+        }]);
+        let machine = pkmc::config::MachineConfig::cartesian_xyz();
+        let wiring = crate::wiring::mixed();
+        let side = MachineSide::new(machine, &[0, 0, 0], &[], wiring.amp_lines.len()).unwrap();
+        let board = Board::new(wiring, side, vec![0xFF; flash::CONFIG_SIZE as usize]);
+        let mut core = Core::new(Rc::new(image), board).unwrap();
+        match core.run(2000 * 170).unwrap() {
+            Exit::Time => {}
+            Exit::Fault(f) => panic!("fault: {} at {:?}", f.what, f.pc),
+        }
+        core
+    }
+
+    fn r(core: &Core, r: RegisterARM) -> u32 {
+        reg(&core.uc, r)
+    }
+
+    #[test]
+    fn deferred_save_written_by_the_handlers_first_fp_instruction() {
+        let core = run(true, true);
+        let fpcar = r(&core, RegisterARM::R5);
+        // At entry: LSPACT and THREAD set, FPCAR at the frame's S0 slot (the frame
+        // is 0x68 bytes below the 8-aligned stack top).
+        assert_eq!(r(&core, RegisterARM::R4) & 0x9, 0x9, "FPCCR at entry");
+        assert_eq!(fpcar, RAM + 0x1000 - 0x68 + 32);
+        // The first FP instruction saved the Thread's S0 (1.0) and cleared LSPACT.
+        assert_eq!(read32(&core.uc, fpcar), 0x3F80_0000);
+        assert_eq!(r(&core, RegisterARM::R7) & 1, 0, "FPCCR after the save");
+        // The return restored S0 from the frame, over the handler's 2.0.
+        assert_eq!(r(&core, RegisterARM::R3), 0x3F80_0000);
+        let b = core.uc.get_data();
+        assert_eq!((b.stats.lazy_saves, b.stats.lazy_skipped), (1, 0));
+        assert_eq!(b.scs.fpccr & 1, 0);
+    }
+
+    #[test]
+    fn deferred_save_never_written_when_the_handler_does_no_fp() {
+        let core = run(true, false);
+        let fpcar = r(&core, RegisterARM::R5);
+        assert_eq!(r(&core, RegisterARM::R4) & 1, 1);
+        assert_eq!(r(&core, RegisterARM::R7) & 1, 1, "still deferred");
+        // The slot still holds the power-on paint: nothing was stacked there.
+        assert_eq!(read32(&core.uc, fpcar), u32::from_le_bytes([PAINT; 4]));
+        // The return cleared LSPACT and left S0 as it was.
+        assert_eq!(r(&core, RegisterARM::R3), 0x3F80_0000);
+        let b = core.uc.get_data();
+        assert_eq!((b.stats.lazy_saves, b.stats.lazy_skipped), (0, 1));
+        assert_eq!(b.scs.fpccr & 1, 0);
+    }
+
+    #[test]
+    fn without_lspen_the_fp_state_is_stacked_at_entry() {
+        let core = run(false, false);
+        assert_eq!(r(&core, RegisterARM::R4) & 1, 0, "nothing deferred");
+        let slot = RAM + 0x1000 - 0x68 + 32;
+        assert_eq!(read32(&core.uc, slot), 0x3F80_0000);
+        assert_eq!(r(&core, RegisterARM::R3), 0x3F80_0000);
+        let b = core.uc.get_data();
+        assert_eq!((b.stats.lazy_saves, b.stats.lazy_skipped), (0, 0));
     }
 }

@@ -49,6 +49,7 @@ fn u32_at(b: &[u8], o: usize) -> Result<u32> {
 
 /// A section header's fields the board uses.
 struct Section {
+    name: u32,
     kind: u32,
     offset: u32,
     size: u32,
@@ -94,6 +95,16 @@ impl Image {
         Ok(image)
     }
 
+    /// An image of bare segments with no symbols (the core's own tests).
+    #[cfg(test)]
+    pub fn from_segments(segments: Vec<Segment>) -> Self {
+        Self {
+            segments,
+            symbols: Vec::new(),
+            raw: Vec::new(),
+        }
+    }
+
     fn sections(&self) -> Result<Vec<Section>> {
         let b = &self.raw;
         let shoff = u32_at(b, 32)? as usize;
@@ -103,6 +114,7 @@ impl Image {
             .map(|i| {
                 let s = shoff + i * shentsize;
                 Ok(Section {
+                    name: u32_at(b, s)?,
                     kind: u32_at(b, s + 4)?,
                     offset: u32_at(b, s + 16)?,
                     size: u32_at(b, s + 20)?,
@@ -141,6 +153,17 @@ impl Image {
         symbols.sort_by_key(|s| s.addr);
         self.symbols = symbols;
         Ok(())
+    }
+
+    /// The contents of the section called `name` (e.g. `.debug_frame`), if any.
+    pub fn section(&self, name: &str) -> Option<&[u8]> {
+        let secs = self.sections().ok()?;
+        let names = secs.get(usize::from(u16_at(&self.raw, 50).ok()?))?;
+        let s = secs
+            .iter()
+            .find(|s| cstr(&self.raw, (names.offset + s.name) as usize) == name)?;
+        self.raw
+            .get(s.offset as usize..s.offset as usize + s.size as usize)
     }
 
     /// The symbol called `name` (exact, demangled), if any.

@@ -8,8 +8,10 @@ mod cpu;
 mod elf;
 mod nvic;
 mod periph;
+mod replay;
 mod rtt;
 mod time;
+mod unwind;
 mod usbhost;
 mod wiring;
 
@@ -37,6 +39,8 @@ struct Args {
     trace: Option<PathBuf>,
     servo8: bool,
     inject: Vec<pkmc_host::sim::Injection>,
+    record: Option<PathBuf>,
+    replay: Option<PathBuf>,
 }
 
 fn usage() -> ! {
@@ -45,6 +49,7 @@ fn usage() -> ! {
          \x20                  [--flash FILE] [--seconds S] [--free-run] [--quiet-log]\n\
          \x20                  [--trace FILE.csv] [--wiring default|servo8]\n\
          \x20                  [--inject KIND[:JOINT]@SECONDS]...\n\
+         \x20                  [--record FILE | --replay FILE]\n\
          Runs the firmware ELF on a virtual STM32G474RE board and prints the\n\
          pseudo-terminal of its USB link (docs/vboard.md). Without --elf it builds\n\
          the release firmware for the wiring first (as cargo fw-build does)."
@@ -64,6 +69,8 @@ fn parse_args() -> Args {
         trace: None,
         servo8: false,
         inject: Vec::new(),
+        record: None,
+        replay: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -79,6 +86,8 @@ fn parse_args() -> Args {
             "--free-run" => a.free_run = true,
             "--quiet-log" => a.quiet_log = true,
             "--trace" => a.trace = Some(value().into()),
+            "--record" => a.record = Some(value().into()),
+            "--replay" => a.replay = Some(value().into()),
             "--inject" => match value().parse() {
                 Ok(i) => a.inject.push(i),
                 Err(e) => {
@@ -141,10 +150,12 @@ fn run(args: Args) -> Result<()> {
     let raw =
         std::fs::read(&elf).with_context(|| format!("reading the firmware {}", elf.display()))?;
     let image = Rc::new(elf::Image::parse(raw.clone()).context("the firmware ELF")?);
+    let mut machine_text = String::from("built-in cartesian-xyz");
     let (machine, plants) = match &args.machine {
         Some(p) => {
             let text =
                 std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            machine_text = text.clone();
             let file = pkmc_host::machine_file::read_file(&text, &p.display().to_string())
                 .map_err(|e| anyhow::anyhow!("{e}"))?;
             let m = file
@@ -169,9 +180,45 @@ fn run(args: Args) -> Result<()> {
     };
     let groups = wiring.amp_lines.len();
     let side = MachineSide::new(machine, &start, &plants, groups)?;
-    let config = match &args.flash {
-        Some(f) if f.exists() => std::fs::read(f)?,
+    // A recording of this run's outside world, or one to replay instead of it.
+    let setup = format!(
+        "elf={:016x} machine={:016x} wiring={}",
+        replay::fnv(&raw),
+        replay::fnv(machine_text.as_bytes()),
+        wiring.name
+    );
+    let mut replaying = match &args.replay {
+        Some(p) => {
+            if !args.inject.is_empty() || args.record.is_some() || args.flash.is_some() {
+                bail!("--replay takes the recording's flash, injections and commands: no --flash, --inject or --record with it");
+            }
+            let text =
+                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
+            let r = replay::Replay::new(replay::parse(&text, &p.display().to_string())?);
+            if r.setup.as_deref() != Some(setup.as_str()) {
+                bail!(
+                    "{} was recorded with {}, this run is {setup}: the same ELF, machine file and wiring are needed",
+                    p.display(),
+                    r.setup.as_deref().unwrap_or("nothing named")
+                );
+            }
+            Some(r)
+        }
+        None => None,
+    };
+    let config = match (&args.flash, replaying.as_mut().and_then(|r| r.flash.take())) {
+        (_, Some(recorded)) => recorded,
+        (Some(f), None) if f.exists() => std::fs::read(f)?,
         _ => vec![0xFF; periph::flash::CONFIG_SIZE as usize],
+    };
+    let mut recorder = match &args.record {
+        Some(p) => {
+            let mut r = replay::Recorder::create(p)?;
+            r.event(0, &replay::Kind::Setup(setup.clone()))?;
+            r.event(0, &replay::Kind::Flash(config.clone()))?;
+            Some(r)
+        }
+        None => None,
     };
     if config.len() != periph::flash::CONFIG_SIZE as usize {
         bail!(
@@ -217,6 +264,8 @@ fn run(args: Args) -> Result<()> {
         }
     });
     let mut scheduled: Vec<(u64, String)> = Vec::new();
+    // The device's bytes since the last look (recorded, or checked in a replay).
+    let mut new_out: Vec<u8> = Vec::new();
     for i in &args.inject {
         for (at, cmd) in control::injection(i, &core)? {
             scheduled.push((at, cmd));
@@ -251,7 +300,11 @@ fn run(args: Args) -> Result<()> {
     };
     let outcome = loop {
         let now = core.uc.get_data().now;
-        if stop.load(Ordering::SeqCst) || limit.is_some_and(|l| now >= l) {
+        let ended = replaying.as_ref().is_some_and(|r| now >= r.end);
+        if stop.load(Ordering::SeqCst) || limit.is_some_and(|l| now >= l) || ended {
+            if let Some(r) = recorder.as_mut() {
+                r.event(now, &replay::Kind::End)?;
+            }
             break Ok(());
         }
         match core.run(now + service)? {
@@ -268,7 +321,9 @@ fn run(args: Args) -> Result<()> {
         }
         let now = core.uc.get_data().now;
         let sent = host.packets.1;
+        let before = host.from_device.len();
         host.service(&mut core.uc.get_data_mut().usb, now);
+        new_out.extend(host.from_device.range(before..));
         if host.packets.1 != sent {
             last_out = Some(now);
         }
@@ -288,19 +343,35 @@ fn run(args: Args) -> Result<()> {
                 }
             }
             while let Ok(line) = rx.try_recv() {
+                if replaying.is_some() {
+                    continue; // the recording's commands only
+                }
                 match control::parse(&line) {
                     Ok(Some((at, cmd))) => scheduled.push((at.unwrap_or(now), cmd)),
                     Ok(None) => {}
                     Err(e) => eprintln!("vboard: {e}"),
                 }
             }
-            let due: Vec<String> = {
+            let mut due: Vec<String> = {
                 let (due, later): (Vec<_>, Vec<_>) =
                     scheduled.drain(..).partition(|(t, _)| *t <= now);
                 scheduled = later;
                 due.into_iter().map(|(_, c)| c).collect()
             };
+            let mut replayed_in: Vec<u8> = Vec::new();
+            if let Some(r) = replaying.as_mut() {
+                for k in r.due(now)? {
+                    match k {
+                        replay::Kind::Cmd(c) => due.push(c),
+                        replay::Kind::In(b) => replayed_in.extend(b),
+                        _ => {}
+                    }
+                }
+            }
             for cmd in due {
+                if let Some(r) = recorder.as_mut() {
+                    r.event(now, &replay::Kind::Cmd(cmd.clone()))?;
+                }
                 eprintln!("vboard: {cmd} at {:.4} s", time::to_s(now));
                 match control::apply(&cmd, &mut core, &mut host) {
                     Ok(control::Outcome::Report) => {
@@ -317,18 +388,33 @@ fn run(args: Args) -> Result<()> {
                     eprintln!("{line}");
                 }
             }
-            // The pseudo-terminal, both ways.
-            if let Ok(n) = master.read(&mut buf) {
+            // The pseudo-terminal, both ways (a replay's host bytes instead).
+            if replaying.is_some() {
+                host.to_device.extend(&replayed_in);
+            } else if let Ok(n) = master.read(&mut buf) {
+                if n > 0 {
+                    if let Some(r) = recorder.as_mut() {
+                        r.event(now, &replay::Kind::In(buf[..n].to_vec()))?;
+                    }
+                }
                 host.to_device.extend(&buf[..n]);
             }
+            if let Some(r) = replaying.as_mut() {
+                r.check_out(now, &new_out)?;
+            } else if let Some(r) = recorder.as_mut() {
+                if !new_out.is_empty() {
+                    r.event(now, &replay::Kind::Out(new_out.clone()))?;
+                }
+            }
+            new_out.clear();
             if !host.from_device.is_empty() {
                 let out: Vec<u8> = host.from_device.iter().copied().collect();
                 if let Ok(n) = master.write(&out) {
                     host.from_device.drain(..n);
                 }
             }
-            // Never ahead of the wall clock.
-            if !args.free_run {
+            // Never ahead of the wall clock (a replay has no host to wait for).
+            if !args.free_run && replaying.is_none() {
                 let ahead =
                     Duration::from_secs_f64(time::to_s(now)).saturating_sub(started.elapsed());
                 if ahead > Duration::from_millis(2) {
@@ -341,6 +427,18 @@ fn run(args: Args) -> Result<()> {
         eprintln!("{line}");
     }
     report(&core, started.elapsed(), host.packets, &frames_per_ms);
+    if let (Some(r), Ok(())) = (&replaying, &outcome) {
+        if r.unseen() > 0 {
+            bail!(
+                "the replay diverged: {} bytes the device wrote in the recording were never written",
+                r.unseen()
+            );
+        }
+        eprintln!(
+            "vboard: replay: {} host events given, {} device bytes as recorded",
+            r.given, r.checked
+        );
+    }
     if let Some((busy, k, hist)) = &core.uc.get_data().worst_profile {
         eprintln!(
             "profile: the busiest period while streaming, {k} ms: {:.1} %",
@@ -439,10 +537,16 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64), frames_per_ms: &[u32
         .stats
         .min_sp
         .as_ref()
-        .map(|(_, pc, c)| {
-            std::iter::once(*pc)
-                .chain(c.iter().copied())
-                .map(|a| format!("{:?}", core.function_at(a)))
+        .map(|(_, c)| {
+            c.iter()
+                .map(|f| {
+                    let name = core.function_at(f.pc);
+                    if f.interrupted {
+                        format!("{:?}", format!("{name} (interrupted)"))
+                    } else {
+                        format!("{name:?}")
+                    }
+                })
                 .collect()
         })
         .unwrap_or_default();
@@ -454,7 +558,7 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64), frames_per_ms: &[u32
          \"servo_latency_us\": {{\"min\": {:.3}, \"median\": {:.3}, \"p99\": {:.3}, \"max\": {:.3}, \"jitter\": {:.3}}}, \
          \"worst_servo_latency_us\": [{}], \
          \"stack\": {{\"top\": {}, \"deepest\": {depth}, \"untouched\": {untouched}, \"lowest_sp_chain\": [{}]}}, \
-         \"watchdog_resets\": {}, \"software_resets\": {}, \"pin_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}, \"flash_machine\": {flash_machine}, \"usb_packets_in_out\": [{}, {}], \"pwm_code_range\": [{}, {}], \"led_toggles\": {}, \"frames_per_s_peak_100ms\": {peak}}}",
+         \"watchdog_resets\": {}, \"software_resets\": {}, \"pin_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}, \"flash_machine\": {flash_machine}, \"usb_packets_in_out\": [{}, {}], \"pwm_code_range\": [{}, {}], \"led_toggles\": {}, \"fp_lazy_saves\": {}, \"fp_lazy_skipped\": {}, \"frames_per_s_peak_100ms\": {peak}}}",
         wall.as_secs_f64(),
         virt / wall.as_secs_f64().max(1e-9),
         b.instructions,
@@ -484,5 +588,7 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64), frames_per_ms: &[u32
         b.stats.pwm_range.0,
         b.stats.pwm_range.1,
         b.stats.led_toggles,
+        b.stats.lazy_saves,
+        b.stats.lazy_skipped,
     );
 }

@@ -54,8 +54,12 @@ pub struct Scs {
     pub ccr: u32,
     /// CPACR.
     pub cpacr: u32,
-    /// FPCCR.
+    /// FPCCR (PM0214 4.6.2): ASPEN bit 31, LSPEN bit 30, and the lazy-stacking state
+    /// LSPACT bit 0, USER bit 1, THREAD bit 3, HFRDY bit 4.
     pub fpccr: u32,
+    /// FPCAR (PM0214 4.6.3): the address of the deferred S0–S15 slot of the frame
+    /// whose FP state is still in the registers.
+    pub fpcar: u32,
     /// FPDSCR.
     pub fpdscr: u32,
     /// SHCSR.
@@ -92,6 +96,7 @@ impl Default for Scs {
             ccr: 0x0000_0200, // STKALIGN (PM0214, CCR: reset value 0x0000 0200)
             cpacr: 0,
             fpccr: 0xC000_0000, // ASPEN, LSPEN (PM0214, FPCCR)
+            fpcar: 0,
             fpdscr: 0,
             shcsr: 0,
             demcr: 0,
@@ -233,7 +238,7 @@ impl Scs {
             0xED88 => self.cpacr,
             0xEDFC => self.demcr,
             0xEF34 => self.fpccr,
-            0xEF38 => 0, // FPCAR
+            0xEF38 => self.fpcar,
             0xEF3C => self.fpdscr,
             _ => return Err(Unknown),
         })
@@ -334,7 +339,15 @@ impl Scs {
                 0xED88 => self.cpacr = value,
                 0xEDFC => self.demcr = value,
                 0xEF00 => self.pend_irq((value & 0x1FF) as usize % IRQ_LINES, now),
-                0xEF34 => self.fpccr = value,
+                // LSPEN is modelled both ways. Clearing ASPEN (QEMU keeps its own copy,
+                // which sets CONTROL.FPCA) or writing the state bits is not modelled.
+                0xEF34
+                    if value & 0x8000_0000 != 0
+                        && value & 0x3FFF_FFFF == self.fpccr & 0x3FFF_FFFF =>
+                {
+                    self.fpccr = value
+                }
+                0xEF38 => self.fpcar = value & !7,
                 0xEF3C => self.fpdscr = value,
                 _ => return Err(Unknown),
             }
