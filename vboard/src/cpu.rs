@@ -816,7 +816,6 @@ mod tests {
     /// `touch` makes the handler execute a floating-point instruction. Returns the
     /// core after 2 000 instructions' time.
     fn run(lspen: bool, touch: bool) -> Core<'static> {
-        let base = flash::BASE;
         let mut thread = Vec::new();
         if !lspen {
             thread.extend(load(0, 0xE000_EF34));
@@ -844,13 +843,26 @@ mod tests {
         }
         handler.push(0x6807); // ldr r7, [r0]      FPCCR again
         handler.push(0x4770); // bx lr
-        let mut image = vec![0u8; 0x400];
+        execute(&thread, &[(14, handler)])
+    }
+
+    /// Runs `thread` from reset with `handlers` (exception number, code) in the vector
+    /// table, for 2 000 instructions' time.
+    fn execute(thread: &[u16], handlers: &[(usize, Vec<u16>)]) -> Core<'static> {
+        let base = flash::BASE;
+        let mut image = vec![0u8; 0x800];
         let mut word = |o: usize, v: u32| image[o..o + 4].copy_from_slice(&v.to_le_bytes());
         word(0, RAM + 0x1000);
         word(4, base + 0x101);
-        word(4 * 14, base + 0x201);
-        for (at, code) in [(0x100, &thread), (0x200, &handler)] {
-            for (k, hw) in code.iter().enumerate() {
+        for (k, (e, _)) in handlers.iter().enumerate() {
+            word(4 * e, base + 0x201 + 0x100 * k as u32);
+        }
+        let mut code = vec![(0x100, thread)];
+        for (k, (_, h)) in handlers.iter().enumerate() {
+            code.push((0x200 + 0x100 * k, h.as_slice()));
+        }
+        for (at, c) in code {
+            for (k, hw) in c.iter().enumerate() {
                 image[at + 2 * k..at + 2 * k + 2].copy_from_slice(&hw.to_le_bytes());
             }
         }
@@ -905,6 +917,55 @@ mod tests {
         let b = core.uc.get_data();
         assert_eq!((b.stats.lazy_saves, b.stats.lazy_skipped), (0, 1));
         assert_eq!(b.scs.fpccr & 1, 0);
+    }
+
+    #[test]
+    fn a_preempting_handler_saves_the_deferred_state_of_the_frame_below() {
+        // Thread: S0 = 1.0, PendSV at the lowest priority, SysTick at the highest;
+        // pend PendSV. PendSV (no FP) reads FPCAR, pends SysTick, which preempts it
+        // with a basic frame (PendSV has not used the FPU) and writes S0 = 2.0: the
+        // save goes to the Thread's frame. PendSV returns and restores S0 = 1.0.
+        let mut thread = load(0, 0xE000_ED20); // SHPR3: SysTick 0x00, PendSV 0xF0
+        thread.extend(load(1, 0x00F0_0000));
+        thread.push(0x6001);
+        thread.extend(load(0, 0xE000_ED88));
+        thread.extend(load(1, 0x00F0_0000));
+        thread.push(0x6001);
+        thread.extend(ISB);
+        thread.extend(load(2, 0x3F80_0000));
+        thread.extend([0xEE00, 0x2A10]); // vmov s0, r2
+        thread.extend(load(0, 0xE000_ED04));
+        thread.extend(load(1, 0x1000_0000)); // PENDSVSET
+        thread.push(0x6001);
+        thread.extend(ISB);
+        thread.extend([0xEE10, 0x3A10]); // vmov r3, s0
+        thread.push(0xE7FE);
+        let mut pendsv = load(0, 0xE000_EF34);
+        pendsv.push(0x6845); // ldr r5, [r0, #4]  FPCAR
+        pendsv.extend(load(0, 0xE000_ED04));
+        pendsv.extend(load(1, 0x0400_0000)); // PENDSTSET
+        pendsv.push(0x6001);
+        pendsv.extend(ISB);
+        pendsv.push(0x4770);
+        let mut systick = load(6, 0x4000_0000);
+        systick.extend([0xEE00, 0x6A10]); // vmov s0, r6
+        systick.push(0x466C); // mov r4, sp (SysTick's frame: basic, below PendSV's)
+        systick.push(0x4770);
+        let core = execute(&thread, &[(14, pendsv), (15, systick)]);
+        let fpcar = r(&core, RegisterARM::R5);
+        assert_eq!(fpcar, RAM + 0x1000 - 0x68 + 32, "the Thread's frame");
+        assert_eq!(
+            read32(&core.uc, fpcar),
+            0x3F80_0000,
+            "saved by SysTick's VMOV"
+        );
+        // SysTick's own frame is 8 words right below the Thread's 26 (PendSV pushes
+        // nothing): SP in SysTick = the Thread's frame - 0x20.
+        assert_eq!(r(&core, RegisterARM::R4), RAM + 0x1000 - 0x68 - 0x20);
+        assert_eq!(r(&core, RegisterARM::R3), 0x3F80_0000);
+        let b = core.uc.get_data();
+        assert_eq!((b.stats.lazy_saves, b.stats.lazy_skipped), (1, 0));
+        assert_eq!(*b.stats.taken.get(&15).unwrap_or(&0), 1);
     }
 
     #[test]
