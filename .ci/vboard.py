@@ -549,6 +549,9 @@ def main():
             rows.append(table_row(case, sim, job, rep, wall))
             if note:
                 notes.append(f"{case}: {note}")
+            chain = [f.split("::{{closure}}")[0] for f in rep["stack"]["lowest_sp_chain"]]
+            notes.append(f"{case}: the deepest stack ({rep['stack']['deepest']} B), unwound: "
+                         + " ← ".join(chain))
             print(f"vboard: {case}: {wall:.1f} s wall, board {json.dumps(rep['final_joint_steps'])}, "
                   f"sim {json.dumps(sim.get('final_joint_steps'))}", flush=True)
             if errors:
