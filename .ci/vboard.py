@@ -494,7 +494,8 @@ def case_unplug(o):
 
 
 def case_persist(o):
-    """The machine loaded by nc-send survives a reset by NRST and one by the watchdog."""
+    """The machine loaded by nc-send survives a reset by NRST, one by the watchdog and
+    a reset request (AIRCR.SYSRESETREQ, as a debugger makes it)."""
     machine = os.path.join(ROOT, "examples/machines/h4-table.toml")
     b = Board(o.vboard, o.elf, machine, "persist")
     nc_send(o.nc, ["--port", b.port, "--machine", machine, "reset"])
@@ -503,14 +504,18 @@ def case_persist(o):
     time.sleep(2.0)
     b.command("hold 100")
     time.sleep(2.0)
+    b.command("sysreset")
+    time.sleep(2.0)
     rep = b.report()
     log = b.log()
     b.close()
-    if log.count("machine from flash: h4-table") < 2:
-        die(f"persist: the machine was not read back after both resets:\n{log[-3000:]}")
-    if rep["watchdog_resets"] != 1 or rep.get("flash_machine") != "h4-table":
-        die(f"persist: watchdog resets {rep['watchdog_resets']}, flash holds {rep.get('flash_machine')}")
-    return "persist: h4-table read back after an NRST reset and a watchdog reset; flash pages decode to h4-table"
+    if log.count("machine from flash: h4-table") < 3:
+        die(f"persist: the machine was not read back after the three resets:\n{log[-3000:]}")
+    resets = (rep["pin_resets"], rep["watchdog_resets"], rep["software_resets"])
+    if resets != (1, 1, 1) or rep.get("flash_machine") != "h4-table":
+        die(f"persist: resets (pin, watchdog, software) {resets}, flash holds {rep.get('flash_machine')}")
+    return ("persist: h4-table read back after an NRST reset, a watchdog reset and a reset request "
+            "(SYSRESETREQ); flash pages decode to h4-table")
 
 
 def main():

@@ -148,6 +148,9 @@ pub fn apply(cmd: &str, core: &mut Core, host: &mut Host) -> Result<Outcome, Str
         "unplug" => host.plug(false, now),
         "plug" => host.plug(true, now),
         "reset" => b.reset_due = Some(ResetCause::Pin),
+        // A debugger's reset request (as `probe-rs reset` makes it): AIRCR written
+        // with VECTKEY and SYSRESETREQ through the debug port, on the same bus.
+        "sysreset" => b.write(0xE000_ED0C, 4, 0x05FA_0004),
         "hold" => {
             let ms = index(w.next(), cmd, 100_000)?;
             core.held_until = now + time::from_ms(ms as u64);
