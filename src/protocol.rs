@@ -100,7 +100,7 @@ mod fixed_width {
 }
 
 /// Protocol version, exchanged in the handshake; both sides must agree.
-pub const PROTOCOL_VERSION: u16 = 9;
+pub const PROTOCOL_VERSION: u16 = 10;
 /// Largest unencoded frame body (sequence number, message and CRC), bytes: a planned
 /// helix with every field at its widest fits.
 pub const MAX_BODY: usize = 384;
@@ -287,6 +287,19 @@ pub enum Control {
     /// leaves an unfinished job, an alarm (`LinkLoss`) even when the queue has run dry
     /// at rest, so that an interrupted job is never taken for a finished one.
     EndJob,
+    /// The job now starting is a streamed program: when its host is silent, the
+    /// controller runs out what is queued and waits for more (`State::Starved`)
+    /// instead of raising `LinkLoss` after [`crate::controller::LINK_LOSS_TICKS`];
+    /// only after `host_timeout_ms` of silence does it hold the job for take-over
+    /// (a controlled stop if still moving, alarm `HostTimeout`, job kept). 0: the
+    /// short watch (MDI, and any job of a host that does not send this). Valid until
+    /// the job ends (protocol 10).
+    BeginJob {
+        /// Host silence after which the job is held, ms
+        /// ([`crate::controller::MIN_HOST_TIMEOUT_MS`] ..=
+        /// [`crate::controller::MAX_HOST_TIMEOUT_MS`], clamped into that range).
+        host_timeout_ms: u32,
+    },
 }
 
 /// Messages from the host to the controller.
@@ -358,6 +371,10 @@ pub enum State {
     Alarm,
     /// Emergency stop input active.
     EStop,
+    /// A streamed job whose queue ran dry before the host said it was complete
+    /// (`Control::EndJob`): stopped on the path at the end of what was queued, as
+    /// planned, waiting for blocks; it runs on as soon as they come (protocol 10).
+    Starved,
 }
 
 /// What raised an alarm.
@@ -397,6 +414,10 @@ pub enum AlarmCause {
     /// or its drive could not take the steps within its timing. The setpoint is not
     /// applied: the controller's position stays the drives'.
     JointSpeed,
+    /// The host of a streamed job was silent longer than the job's host timeout
+    /// (`Control::BeginJob`): the job is held (state `Hold`, queue kept) for its host
+    /// or a new one to resume or abort (protocol 10).
+    HostTimeout,
 }
 
 /// An alarm: its cause, the joint concerned (`NO_JOINT` if none) and the NC line.

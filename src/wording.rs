@@ -115,6 +115,7 @@ impl Words for State {
             State::Homing => "homing",
             State::Alarm => "alarm",
             State::EStop => "e-stop",
+            State::Starved => "starved",
         })
     }
 }
@@ -136,6 +137,7 @@ impl Words for AlarmCause {
             AlarmCause::Unhomed => "not homed",
             AlarmCause::HomingFailed => "homing failed",
             AlarmCause::JointSpeed => "joint speed guard",
+            AlarmCause::HostTimeout => "host silent too long, job held",
         })
     }
 }

@@ -20,7 +20,8 @@
 //! | limit switch | a joint's switch becomes active (not while that joint homes) | `LimitSwitch`, joint |
 //! | drive fault | a stepper drive's fault input, or a servo amplifier's, while the drives are powered | `DriveFault`, joint |
 //! | following error | a servo loop trips ([`crate::servo`]) | `FollowingError`, joint |
-//! | link loss | no valid frame for [`LINK_LOSS_TICKS`] while moving | `LinkLoss` |
+//! | link loss | no valid frame for [`LINK_LOSS_TICKS`] while moving (a jog, MDI, homing) | `LinkLoss` |
+//! | host timeout | a streamed job's host silent for its host timeout (`Control::BeginJob`; before that its queue runs out and the state is `Starved`) | `HostTimeout`; the job is held, not dropped |
 //! | joint travel | a block would take a joint outside its travel | `JointLimit`, joint |
 //! | per-period guard | a joint setpoint would move more in one period than its maximum velocity × T (+ [`GUARD_MARGIN_PERCENT`] + [`GUARD_SLACK_UNITS`]), or a stepper's steps would not fit its drive's timing | `JointSpeed`, joint; the setpoint is not applied, the machine stops at once |
 //!
@@ -59,6 +60,16 @@ pub const STATUS_EVERY_TICKS: u32 = 50;
 /// Ticks without a valid frame from the host, while moving, after which the link is
 /// lost (1 s at 1 kHz; the host asks for a status at least every 100 ms).
 pub const LINK_LOSS_TICKS: u32 = 1000;
+/// The host timeout of a streamed job by default (`Control::BeginJob`), ms: the
+/// machine file's `host_timeout_s`.
+pub const DEFAULT_HOST_TIMEOUT_MS: u32 = 30_000;
+/// Shortest host timeout a streamed job may ask for, ms: more than the link-loss
+/// watch, so that the short watch is never the longer one.
+pub const MIN_HOST_TIMEOUT_MS: u32 = 2_000;
+/// Longest host timeout a streamed job may ask for, ms (one hour).
+pub const MAX_HOST_TIMEOUT_MS: u32 = 3_600_000;
+/// The controller keeps a host timeout in units of this many ticks (100 ms).
+pub const PATIENCE_UNIT_TICKS: u32 = 100;
 
 /// The per-period guard's margin: a joint setpoint may move in one period at most its
 /// maximum velocity × T plus this share of it, plus [`GUARD_SLACK_UNITS`].
@@ -102,6 +113,11 @@ pub struct Controller {
     /// Blocks were accepted and the host has not said the job is complete
     /// (`Control::EndJob`).
     job_open: bool,
+    /// The running job is a streamed program (`Control::BeginJob`): host silence
+    /// starves it and, after this many [`PATIENCE_UNIT_TICKS`], holds it; 0: the
+    /// short link-loss watch. (16 bits: it fits the controller's padding, and the
+    /// firmware's static RAM has no room for more.)
+    patience: u16,
     assembler: crate::store::Assembler,
     store_pending: bool,
     planner: Planner,
@@ -132,7 +148,9 @@ pub struct Controller {
     abort_pending: bool,
     spindle: Aux,
     motion_ticks: u64,
-    since_status: u32,
+    /// Ticks since the last periodic status (16 bits: with `patience`, the controller
+    /// stays within the firmware's static RAM; it saturates without a session).
+    since_status: u16,
     /// An `Ack` of the last block accepted is owed (acks are cumulative: one covers
     /// every block accepted and every slot freed since the last); encoded by
     /// `transmit`, not in the `receive` or `tick` that made it due.
@@ -262,6 +280,7 @@ impl Controller {
             at!((*p).host).write(0);
             at!((*p).orphan).write(None);
             at!((*p).job_open).write(false);
+            at!((*p).patience).write(0);
             at!((*p).assembler).write(crate::store::Assembler::new());
             at!((*p).store_pending).write(false);
             Planner::init_at(at!((*p).planner), pose);
@@ -359,13 +378,37 @@ impl Controller {
             // is the link-loss watch over a held job.
             State::Hold => !self.exec.stopped() || self.abort_pending || self.watching_hold(),
             State::Idle => self.path_moving() || self.watching_hold(),
+            // The host-timeout watch of a starved job (or blocks just queued).
+            State::Starved => self.path_moving() || self.watching_starved(),
             _ => self.path_moving(),
         }
     }
 
     /// A job is queued, executing or held (a pause or hold at rest counts).
     pub(super) fn job_held(&self) -> bool {
-        !self.planner.is_empty() || self.exec.busy() || self.state == State::Hold
+        !self.planner.is_empty()
+            || self.exec.busy()
+            || matches!(self.state, State::Hold | State::Starved)
+    }
+
+    /// The host-timeout watch of a starved job is running.
+    fn watching_starved(&self) -> bool {
+        self.session && self.link_watch && self.silent_ticks < self.patience_ticks()
+    }
+
+    /// The host timeout of the streamed job, ticks (0: none).
+    pub(super) fn patience_ticks(&self) -> u32 {
+        self.patience as u32 * PATIENCE_UNIT_TICKS
+    }
+
+    /// Where a job with nothing left to execute rests: `Starved` while its host may
+    /// still send blocks of a streamed program, else `Idle`.
+    pub(super) fn rest_state(&self) -> State {
+        if self.job_open && self.patience > 0 {
+            State::Starved
+        } else {
+            State::Idle
+        }
     }
 
     /// The link-loss watch of a held or unfinished job is running (time must advance
@@ -393,7 +436,7 @@ impl Controller {
     fn motion_tick(&mut self) {
         if self.path_moving() {
             self.motion_ticks += 1;
-            if self.state == State::Idle {
+            if matches!(self.state, State::Idle | State::Starved) {
                 self.state = State::Running;
             }
         }
@@ -434,7 +477,11 @@ impl Controller {
             self.state = State::Idle;
         }
         if self.state == State::Running && !self.path_moving() {
-            self.state = State::Idle;
+            self.state = self.rest_state();
+            if self.state == State::Idle {
+                // The streamed job is over: the next one says again what it is.
+                self.patience = 0;
+            }
         }
     }
 
@@ -477,8 +524,8 @@ impl Controller {
             self.ack_due = true;
         }
         self.update_outputs();
-        self.since_status += 1;
-        if self.session && self.since_status >= STATUS_EVERY_TICKS {
+        self.since_status = self.since_status.saturating_add(1);
+        if self.session && self.since_status as u32 >= STATUS_EVERY_TICKS {
             self.since_status = 0;
             self.status_due = true;
         }
@@ -486,5 +533,7 @@ impl Controller {
     }
 }
 
+#[cfg(test)]
+mod starve_tests;
 #[cfg(test)]
 mod tests;

@@ -60,8 +60,8 @@ impl Controller {
     /// `AlarmReset`: refused while the cause is still there (e-stop or a drive fault
     /// active) or the motion is still stopping.
     pub(super) fn reset_alarm(&mut self) {
-        if self.state == State::Hold && self.alarm.map(|a| a.cause) == Some(AlarmCause::LinkLoss) {
-            // The link loss over a held job: the job stays held.
+        if self.state == State::Hold && self.held_for_silence() {
+            // The link loss or host timeout over a held job: the job stays held.
             self.alarm = None;
             return;
         }
@@ -158,8 +158,18 @@ impl Controller {
         }
     }
 
+    /// The alarm is the one a held job gets when its host goes silent (the job was
+    /// kept): `LinkLoss` or `HostTimeout` in `Hold`.
+    pub(super) fn held_for_silence(&self) -> bool {
+        matches!(
+            self.alarm.map(|a| a.cause),
+            Some(AlarmCause::LinkLoss | AlarmCause::HostTimeout)
+        )
+    }
+
     pub(super) fn raise(&mut self, alarm: Alarm) {
         self.job_open = false;
+        self.patience = 0;
         self.alarm = Some(alarm);
         self.state = State::Alarm;
         self.exec.stop();
@@ -178,9 +188,12 @@ impl Controller {
             _ => {}
         }
         let homing = self.state == State::Homing;
+        // In a hold, an alarm can only be the one that says its host went silent.
+        let informational = self.state == State::Hold;
         self.job_open = false;
+        self.patience = 0;
         self.state = if estop { State::EStop } else { State::Alarm };
-        if self.alarm.is_none() || estop {
+        if self.alarm.is_none() || estop || informational {
             self.alarm = Some(alarm);
         }
         self.abort_pending = false;
@@ -258,7 +271,23 @@ impl Controller {
             State::Hold => !self.exec.stopped(),
             _ => false,
         };
-        if self.link_watch && self.silent_ticks >= LINK_LOSS_TICKS {
+        // A streamed job (`Control::BeginJob`) starves rather than stops; its host
+        // timeout holds it. A hold's link loss below applies to it too.
+        let patient = self.patience > 0
+            && matches!(self.state, State::Running | State::Starved | State::Hold);
+        if self.link_watch && patient {
+            if self.silent_ticks >= self.patience_ticks()
+                && matches!(self.state, State::Running | State::Starved)
+            {
+                self.hold_for_take_over(at(AlarmCause::HostTimeout, None));
+            } else if self.silent_ticks >= LINK_LOSS_TICKS
+                && self.state == State::Hold
+                && self.alarm.is_none()
+                && self.job_held()
+            {
+                self.alarm = Some(at(AlarmCause::LinkLoss, None));
+            }
+        } else if self.link_watch && self.silent_ticks >= LINK_LOSS_TICKS {
             if moving {
                 self.fault(at(AlarmCause::LinkLoss, None), false);
             } else if self.job_open && self.state == State::Idle {
@@ -275,6 +304,17 @@ impl Controller {
             drive_fault,
             ..*inputs
         };
+    }
+
+    /// A streamed job whose host has been silent for its host timeout: a feed hold
+    /// (decelerating on the path if it still moves), the job kept, and the alarm that
+    /// says why; a host resumes or aborts it.
+    #[cold]
+    fn hold_for_take_over(&mut self, alarm: Alarm) {
+        self.planner.hold = true;
+        self.exec.replan(&mut self.planner);
+        self.state = State::Hold;
+        self.alarm = Some(alarm);
     }
 
     /// Re-bases joint `j`: the actuator reading `reference` (steps or counts) is the

@@ -9,7 +9,7 @@
 //! encodes them; `Nak`, `HelloAck`, `ControlAck` and the machine answers go at once.
 
 use super::safety::UNHOMED;
-use super::{Controller, LinkStats, Prepared, QUEUE_CAPACITY};
+use super::{Controller, LinkStats, Prepared, LINK_LOSS_TICKS, QUEUE_CAPACITY};
 use crate::config::MachineConfig;
 use crate::planner::PushError;
 use crate::protocol::{
@@ -23,6 +23,18 @@ impl Controller {
     /// Ticks since the last valid frame from the host.
     pub fn link_silence_ticks(&self) -> u32 {
         self.silent_ticks
+    }
+
+    /// The silence, ticks, at which the link watch acts next in the present state: the
+    /// host timeout of a streamed job running or starved, else [`LINK_LOSS_TICKS`]. (A
+    /// simulator running ahead of the wall clock must not pass it before its host has
+    /// really been silent that long.)
+    pub fn silence_limit(&self) -> u32 {
+        if self.patience > 0 && matches!(self.state, State::Running | State::Starved) {
+            self.patience_ticks()
+        } else {
+            LINK_LOSS_TICKS
+        }
     }
 
     /// Turns the link-loss watch off (or on): only for a controller fed in the same
@@ -170,6 +182,7 @@ impl Controller {
                     });
                 } else {
                     self.orphan = None;
+                    self.patience = 0;
                 }
                 self.host = host;
                 self.session = true;
@@ -335,18 +348,25 @@ impl Controller {
         }
         match cmd {
             Control::Hold => {
-                if matches!(self.state, State::Running | State::Idle) {
+                if matches!(self.state, State::Running | State::Idle | State::Starved) {
                     self.planner.hold = true;
                     self.exec.replan(&mut self.planner);
                     self.state = State::Hold;
                 }
             }
             Control::Resume => {
-                if matches!(self.state, State::Hold | State::Running) {
-                    // Resuming adopts a job left by an earlier session (held, or still
-                    // running out its queue), and clears the link loss that held it.
-                    self.orphan = None;
+                if matches!(self.state, State::Hold | State::Running | State::Starved) {
+                    // Resuming adopts a job left by an earlier session (held, starved,
+                    // or still running out its queue), and clears the link loss or
+                    // host timeout that held it. An adopted job is complete with what
+                    // is queued: its new host sends none of its blocks.
+                    if self.orphan.take().is_some() {
+                        self.job_open = false;
+                    }
                     self.clear_held_link_loss();
+                }
+                if self.state == State::Starved {
+                    self.state = self.rest_state();
                 }
                 if self.state == State::Hold && !self.abort_pending {
                     self.planner.hold = false;
@@ -358,15 +378,19 @@ impl Controller {
                     self.state = if self.path_moving() {
                         State::Running
                     } else {
-                        State::Idle
+                        self.rest_state()
                     };
                 }
             }
             Control::Abort => {
                 self.orphan = None;
                 self.job_open = false;
+                self.patience = 0;
                 self.clear_held_link_loss();
-                if matches!(self.state, State::Running | State::Hold | State::Idle) {
+                if matches!(
+                    self.state,
+                    State::Running | State::Hold | State::Idle | State::Starved
+                ) {
                     self.planner.hold = true;
                     self.abort_pending = true;
                     self.exec.replan(&mut self.planner);
@@ -402,14 +426,28 @@ impl Controller {
                 })
             }
             Control::Home => self.home(),
-            Control::EndJob => self.job_open = false,
+            Control::EndJob => {
+                self.job_open = false;
+                if self.state == State::Starved {
+                    self.state = State::Idle;
+                    self.patience = 0;
+                }
+            }
+            Control::BeginJob { host_timeout_ms } => {
+                use super::{MAX_HOST_TIMEOUT_MS, MIN_HOST_TIMEOUT_MS, PATIENCE_UNIT_TICKS};
+                let unit_ms = PATIENCE_UNIT_TICKS * 1000 / TICK_HZ;
+                self.patience = match host_timeout_ms {
+                    0 => 0,
+                    ms => (ms.clamp(MIN_HOST_TIMEOUT_MS, MAX_HOST_TIMEOUT_MS) / unit_ms) as u16,
+                };
+            }
         }
     }
 
-    /// A link loss raised over a held job (the job was kept) is over once a host acts
-    /// on the job.
+    /// A link loss or host timeout raised over a held job (the job was kept) is over
+    /// once a host acts on the job.
     fn clear_held_link_loss(&mut self) {
-        if self.state == State::Hold && self.alarm.map(|a| a.cause) == Some(AlarmCause::LinkLoss) {
+        if self.state == State::Hold && self.held_for_silence() {
             self.alarm = None;
         }
     }
