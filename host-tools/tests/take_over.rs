@@ -213,25 +213,26 @@ fn a_host_killed_during_a_run_leaves_an_explicit_link_loss_and_a_new_host_recove
     let host = spawn(&sim, &[p.to_str().unwrap()]);
     std::thread::sleep(Duration::from_millis(2500));
     kill(host);
-    // The controller stops on the path once the link has been silent for 1 s (a new
-    // host that connects keeps it alive: the job would then go on as the earlier
-    // host's, shown by `status` as its held job, until `abort`).
+    // Issue 33 (this test expected `LinkLoss` and the queue dropped before): a program
+    // whose host dies is never dropped. It runs out its queue (here still on line 2)
+    // and is held after the host timeout; a new host sees it as the earlier host's.
     std::thread::sleep(Duration::from_millis(1500));
-    let s = wait_for(&sim, &[], "in alarm", |s| s["state"] == "Alarm");
-    let alarm = s["alarm"].as_str().unwrap_or("");
+    let s = status(&sim);
+    assert!(s["state"] == "Running" || s["state"] == "Hold", "{s}");
     assert!(
-        alarm.contains("LinkLoss") && alarm.contains("line 2"),
+        !s["alarm"].as_str().unwrap_or("").contains("LinkLoss"),
         "{s}"
     );
-    // Nothing new moves before the alarm is reset (exit 5 naming it), then it does.
+    assert!(s["held_job"]["line"].as_u64() >= Some(2), "{s}");
+    // Nothing new moves behind it (exit 7 naming it); `abort` ends it, then it does.
     let out = send(&sim, &["mdi", "G0 X1"]);
     assert_eq!(
         out.status.code(),
-        Some(5),
+        Some(7),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    assert_eq!(send(&sim, &["reset"]).status.code(), Some(0));
+    assert_eq!(json(&send_ok(&sim, &["abort"]))["result"], "aborted");
     let out = send_ok(&sim, &["mdi", "G0 X1"]);
     assert_eq!(json(&out)["pose"]["x"], 1.0);
 }
@@ -318,11 +319,13 @@ fn a_host_killed_while_streaming_short_blocks_leaves_a_link_loss_not_a_finished_
     std::thread::sleep(Duration::from_millis(1500));
     kill(host);
     std::thread::sleep(Duration::from_millis(1500));
-    let s = wait_for(&sim, &[], "in alarm", |s| s["state"] == "Alarm");
-    assert!(
-        s["alarm"].as_str().unwrap_or("").contains("LinkLoss"),
-        "{s}"
-    );
+    // Issue 33 (this test expected the `LinkLoss` alarm before): the queue runs dry
+    // and the job starves on the path, waiting for blocks (then, after the host
+    // timeout, held), never idle: an interrupted job still does not look finished.
+    let s = status(&sim);
+    assert!(s["state"] == "Starved" || s["state"] == "Running", "{s}");
+    assert!(s["alarm"].is_null(), "{s}");
+    assert!(!s["held_job"].is_null(), "{s}");
 }
 
 #[test]
@@ -340,11 +343,15 @@ fn a_job_that_ends_normally_leaves_no_alarm_after_its_host_exits() {
 
 #[test]
 fn a_new_host_resumes_a_job_whose_host_was_killed_while_it_ran_to_its_final_pose() {
-    let sim = Sim::start(&[]);
+    // Real time (issue 33): the job no longer stops when its host dies, and a
+    // simulator running free while nobody streams would finish it before the new
+    // host comes.
+    let sim = Sim::start(&["--real-time"]);
     send_ok(&sim, &["reset"]);
     let p = tmp("run-then-resume.ngc");
-    // A minute of motion, all of it queued at once (the host may buffer a minute).
-    std::fs::write(&p, "G21 G90\nG1 X30 F60\nG1 X0 Y5\nM2\n").unwrap();
+    // Twenty seconds of motion, all of it queued at once (the host may buffer a
+    // minute; issue 33: ten seconds shorter than it was, as it now runs in real time).
+    std::fs::write(&p, "G21 G90\nG1 X10 F60\nG1 X0 Y5\nM2\n").unwrap();
     let host = spawn(&sim, &["--max-buffered-ms", "120000", p.to_str().unwrap()]);
     std::thread::sleep(Duration::from_millis(1500));
     kill(host);

@@ -356,6 +356,12 @@ fn run(args: &Args) -> Result<i32, Failure> {
         statics,
         compress: compress_settings(args)?,
     };
+    // Refused by name for every command, used by programs only (MDI, jogs and homing
+    // keep the short link-loss watch).
+    let host_timeout = match &args.machine {
+        Some(p) => pkmc_host::machine_file::load_host_timeout(p).map_err(|e| bad(e.to_string()))?,
+        None => pkmc_host::machine_file::DEFAULT_HOST_TIMEOUT,
+    };
     let interrupts = Interrupts::install().map_err(|e| Failure::new(exit::LINK, e))?;
     match &args.command {
         Some(cmd @ (Command::Grbl { .. } | Command::Serve { .. })) => {
@@ -367,6 +373,8 @@ fn run(args: &Args) -> Result<i32, Failure> {
                 .program
                 .as_deref()
                 .ok_or_else(|| bad("no program given (nc-send --help lists the commands)"))?;
+            let mut opts = opts.clone();
+            opts.link.host_timeout = Some(host_timeout);
             run_program(args, program, &machine, &opts, interrupts, quiet)
         }
     }

@@ -34,6 +34,10 @@ struct Args {
     /// the host streams: for a page or a sender that watches the machine move.
     #[arg(long)]
     real_time: bool,
+    /// Write a CSV row per tick (as `nc-send --trace`) to this file, a line at a time: it is
+    /// whole up to the last tick however the simulator is ended.
+    #[arg(long, value_name = "FILE.csv")]
+    trace: Option<PathBuf>,
 }
 
 fn main() {
@@ -62,6 +66,11 @@ fn serve(args: Args) -> anyhow::Result<()> {
         }
     };
     sim.inject(&args.inject)?;
+    if let Some(p) = &args.trace {
+        let f = std::fs::File::create(p)
+            .map_err(|e| anyhow::anyhow!("--trace {}: {e}", p.display()))?;
+        sim.trace_to(Box::new(std::io::LineWriter::new(f)))?;
+    }
     let (mut master, slave) = serialport::TTYPort::pair()?;
     println!("{}", slave.name().unwrap_or_default());
     let stop = AtomicBool::new(false);

@@ -383,7 +383,12 @@ impl JobHooks for Operator {
         if s.state != State::Hold || s.speed != 0 || self.resumed_line != Some(s.line) {
             self.resumed_line = None;
         }
+        // (A hold for this host's own silence is the link's to resume: `note`.)
+        let host_timeout = s
+            .alarm
+            .is_some_and(|a| a.cause == pkmc::protocol::AlarmCause::HostTimeout);
         if s.state == State::Hold
+            && !host_timeout
             && self.resumed_line.is_none()
             && s.speed == 0
             && self.stage == Stage::Running
@@ -404,6 +409,10 @@ impl JobHooks for Operator {
                 self.progress.say("held (pause, tool change or hold)");
             }
         }
+    }
+
+    fn note(&mut self, text: &str) {
+        self.progress.say(text);
     }
 
     fn ends_at_pause(&self) -> bool {

@@ -68,7 +68,10 @@ pub fn state_word(s: &Status, mode: Mode) -> &'static str {
         }
         State::Idle if mode.pending => "Run",
         State::Idle => "Idle",
-        State::Running => "Run",
+        // Starved (the host is late with blocks; it runs on when they come): `Run`, so
+        // that a sender neither takes the job for over (`Idle`) nor waits for a cycle
+        // start (`Hold`): it keeps streaming, which is what ends the starvation.
+        State::Running | State::Starved => "Run",
         State::Hold if s.speed == 0 => "Hold:0",
         State::Hold => "Hold:1",
         State::Homing => "Home",

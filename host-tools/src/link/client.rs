@@ -75,6 +75,14 @@ pub struct ClientStats {
     pub frames_received: u64,
     /// Received frames that failed to decode (damaged on the way).
     pub corrupt_received: u64,
+    /// Gaps in the client's own loop longer than [`super::OWN_GAP`] (the process was
+    /// stopped or starved of CPU): each restarted the silence timers.
+    pub own_gaps: u64,
+    /// The longest of them, s.
+    pub own_gap_max_s: f64,
+    /// Times the controller held this job because this host had been silent longer
+    /// than the job's host timeout, and this host, back, resumed it.
+    pub host_timeout_resumes: u64,
     /// Motion time of the last job as planned on the host with unlimited look-ahead,
     /// s: what an ideal controller under the same limits takes (jerk smoothing not
     /// counted).
@@ -142,6 +150,9 @@ pub trait JobHooks {
     fn feed(&mut self, _link: &LinkView, _out: &mut Vec<pkmc::protocol::Block>) -> bool {
         false
     }
+    /// Something the operator should know that is not an error (the job was held for
+    /// this host's silence and is resumed, ...).
+    fn note(&mut self, _text: &str) {}
 }
 
 /// Hooks that do nothing.
@@ -204,6 +215,8 @@ impl<T: Transport> Link<T> {
             capacity: 0,
             last_heard: now,
             last_bytes: now,
+            last_pump: now,
+            last_gap_end: now,
             last_request: now,
             next_control_id: 1,
             controls: VecDeque::new(),
@@ -347,7 +360,8 @@ impl<T: Transport> Link<T> {
         while !self.tx.is_empty() {
             self.flush_some()?;
             if !self.tx.is_empty() {
-                if start.elapsed() > self.opts.link_timeout {
+                // A gap of our own: the port had no chance to take the bytes.
+                if self.since(start).elapsed() > self.opts.link_timeout {
                     return Err(LinkError::Lost {
                         port: self.port(),
                         silent: start.elapsed(),
@@ -418,7 +432,7 @@ impl<T: Transport> Link<T> {
                 }
                 _ => {}
             }
-            if start.elapsed() > self.opts.link_timeout {
+            if self.since(start).elapsed() > self.opts.link_timeout {
                 return Err(self.lost("waiting for the controller to load the machine", start));
             }
             let msgs = self.pump(READ_WAIT)?;
@@ -456,8 +470,15 @@ impl<T: Transport> Link<T> {
         }
     }
 
-    /// Reads what has arrived (waiting up to `wait` for it) and decodes it.
+    /// Reads what has arrived (waiting up to `wait` for it) and decodes it. After a
+    /// gap of the client's own ([`super::OWN_GAP`]) the silence timers start again and
+    /// a status is asked for at once: the controller is probed again before any
+    /// silence counts against it.
     pub(super) fn pump(&mut self, wait: Duration) -> Result<Vec<CtrlMsg>, LinkError> {
+        // Stopped between two reads, or inside the read (a read never takes much
+        // longer than its wait).
+        self.own_gap(self.last_pump.elapsed())?;
+        let read_at = Instant::now();
         let n = self
             .io
             .read_some(&mut self.rx, wait)
@@ -480,6 +501,8 @@ impl<T: Transport> Link<T> {
                 }
             }
         }
+        self.own_gap(read_at.elapsed().saturating_sub(wait))?;
+        self.last_pump = Instant::now();
         if n > 0 {
             self.last_bytes = Instant::now();
         }
@@ -509,7 +532,15 @@ impl<T: Transport> Link<T> {
     /// on a damaged line: the answer may get through), up to ten times it.
     pub(super) fn given_up(&self, start: Instant) -> bool {
         let t = self.opts.link_timeout;
-        start.elapsed() > t && (self.last_bytes.elapsed() > t || start.elapsed() > t * 10)
+        let waited = self.since(start).elapsed();
+        waited > t && (self.last_bytes.elapsed() > t || waited > t * 10)
+    }
+
+    /// When a wait that began at `start` began, as far as the controller can be
+    /// blamed: not before the end of the client's last gap of its own
+    /// ([`super::OWN_GAP`]).
+    pub(super) fn since(&self, start: Instant) -> Instant {
+        start.max(self.last_gap_end)
     }
 
     /// Asks for and waits for a fresh status.

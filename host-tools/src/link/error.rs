@@ -94,6 +94,15 @@ pub enum LinkError {
         /// Simulated time without progress.
         still: Duration,
     },
+    /// Another program opened a session on the port (it said `Hello`) in the middle
+    /// of our job: our session is over; the controller keeps the job as ours, an
+    /// earlier host's unfinished job.
+    Superseded {
+        /// Port.
+        port: String,
+        /// How it showed.
+        seen: &'static str,
+    },
     /// A message did not fit in a frame (a bug).
     Frame {
         /// Port.
@@ -185,6 +194,14 @@ impl fmt::Display for LinkError {
                     still.as_secs_f64()
                 )
             }
+            LinkError::Superseded { port, seen } => write!(
+                f,
+                "{port}: another program opened a session on this port in the middle of the \
+                 job (it said Hello; seen by {seen}): this host's session is over and it \
+                 sends nothing more. The controller keeps the job as this host's unfinished \
+                 job: once the other program has let go of the port, `nc-send status` shows \
+                 it, `nc-send resume` continues what is queued, `nc-send abort` drops it"
+            ),
             LinkError::Frame { port, what } => write!(f, "{port}: cannot frame {what}"),
         }
     }

@@ -56,6 +56,7 @@
 
 mod client;
 mod error;
+mod liveness;
 mod plans;
 mod stall;
 mod stream;
@@ -82,6 +83,12 @@ pub const RESEND_AFTER: Duration = Duration::from_millis(200);
 pub const LINK_TIMEOUT: Duration = Duration::from_secs(3);
 /// Default silence after which the client asks for a status.
 pub const KEEPALIVE: Duration = Duration::from_millis(100);
+/// A gap this long between two reads of the client's own loop means the client
+/// itself was stopped (SIGSTOP, a starved CPU, a laptop's sleep): its silence timers
+/// start again and the controller is asked at once, rather than the link being
+/// declared dead because the client's own clock jumped. The loop reads every few
+/// milliseconds.
+pub const OWN_GAP: Duration = Duration::from_millis(500);
 /// Time after which an unacknowledged control command is sent again (same id).
 pub const CONTROL_RESEND_AFTER: Duration = Duration::from_millis(100);
 /// Time the handshake waits for `HelloAck` before sending `Hello` again.
@@ -107,6 +114,10 @@ pub struct LinkOptions {
     pub link_timeout: Duration,
     /// Ask for a status after this long without a valid frame.
     pub keepalive: Duration,
+    /// A job is a streamed program with this host timeout (`Control::BeginJob`): the
+    /// controller starves on host silence and holds the job after this long. `None`:
+    /// the short link-loss watch (MDI, the bridge's lines).
+    pub host_timeout: Option<Duration>,
 }
 
 impl Default for LinkOptions {
@@ -116,6 +127,7 @@ impl Default for LinkOptions {
             resend_after: RESEND_AFTER,
             link_timeout: LINK_TIMEOUT,
             keepalive: KEEPALIVE,
+            host_timeout: None,
         }
     }
 }
@@ -132,6 +144,11 @@ pub struct Link<T: Transport> {
     last_heard: Instant,
     /// When bytes last arrived, valid or not.
     last_bytes: Instant,
+    /// When the client's loop last read the port (see [`OWN_GAP`]).
+    last_pump: Instant,
+    /// When the client's last gap of its own ended (see [`OWN_GAP`]): waits count
+    /// from then at the earliest.
+    last_gap_end: Instant,
     last_request: Instant,
     next_control_id: u16,
     controls: VecDeque<Control>,

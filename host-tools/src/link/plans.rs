@@ -19,6 +19,9 @@ use pkmc::math::sqrtf;
 use pkmc::planner::{forward_pass, refine_splines, reverse_pass, Lookahead, PlanBlock};
 use pkmc::protocol::{Block, PlannedBlock};
 
+/// Blocks planned between two calls of the keep-alive (some milliseconds).
+const ALIVE_EVERY: usize = 4096;
+
 pub(super) struct Plans {
     la: Lookahead,
     /// Where the job starts.
@@ -49,8 +52,12 @@ impl Plans {
         frozen: usize,
         machine: &MachineConfig,
         kin: &MachineKinematics,
+        alive: &mut dyn FnMut(),
     ) -> Result<(), usize> {
-        for b in blocks {
+        for (k, b) in blocks.iter().enumerate() {
+            if k % ALIVE_EVERY == ALIVE_EVERY - 1 {
+                alive();
+            }
             let i = self.work.len();
             // The block before, unless it is sent (its acceleration is final).
             let prev = match i.checked_sub(1) {
@@ -80,10 +87,14 @@ impl Plans {
                 forward_pass(tail, entry);
             }
         };
+        alive();
         passes(&mut self.work[frozen..]);
+        alive();
         if refine_splines(&mut self.work, frozen, self.start, machine, kin) {
+            alive();
             passes(&mut self.work[frozen..]);
         }
+        alive();
         for (i, p) in self.work.iter().enumerate().skip(frozen) {
             self.planned[i].plan = p.plan();
         }

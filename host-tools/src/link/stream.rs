@@ -9,7 +9,9 @@ use super::window::{Ending, Guard, JobState};
 use super::{Link, LinkError, Transport, CONTROL_RESEND_AFTER, READ_WAIT};
 use pkmc::geometry::Path;
 use pkmc::kinematics::MachineKinematics;
-use pkmc::protocol::{Block, Control, CtrlMsg, HostMsg, Motion, NakReason, State, Status};
+use pkmc::protocol::{
+    AlarmCause, Block, Control, CtrlMsg, HostMsg, Motion, NakReason, State, Status,
+};
 use std::time::{Duration, Instant};
 
 /// While a job is fed, the last block known is sent without its successor once no
@@ -79,6 +81,14 @@ impl<T: Transport> Link<T> {
                 return Ok(JobEnd::Alarm(a));
             }
         }
+        if let Some(t) = self.opts.host_timeout {
+            // A streamed program: host silence starves it, and holds it only after
+            // `t` (the short watch stays for MDI and the bridge's lines).
+            let ms = t.as_millis().clamp(1, u32::MAX as u128) as u32;
+            self.control(Control::BeginJob {
+                host_timeout_ms: ms,
+            })?;
+        }
         let mut job = JobState::new(self.next_seq, self.capacity, &start_status);
         job.planned_ms.push(0.0);
         job.arcs_before.push(0);
@@ -117,8 +127,10 @@ impl<T: Transport> Link<T> {
             }
         }
         let first = fed.blocks.len();
+        let machine = self.machine.clone();
+        // A large program takes seconds to plan: the link is kept alive meanwhile.
         fed.plans
-            .extend(new, job.high, &self.machine, &fed.kin)
+            .extend(new, job.high, &machine, &fed.kin, &mut || self.keep_alive())
             .map_err(|i| LinkError::BadBlock {
                 port: self.port(),
                 line: new[i - first].line,
@@ -227,7 +239,8 @@ impl<T: Transport> Link<T> {
                     return Ok(end);
                 }
             }
-            // Retransmission timeout.
+            // Retransmission timeout (not counting a gap of our own).
+            job.last_progress = self.since(job.last_progress);
             if job.sent > job.acked && job.last_progress.elapsed() > self.opts.resend_after {
                 self.stats.timeouts += 1;
                 job.rewind_to(job.acked, &mut self.stats);
@@ -329,9 +342,9 @@ impl<T: Transport> Link<T> {
                 }
             }
             CtrlMsg::Status(s) => return self.on_status(&s, fed, hooks, job),
-            CtrlMsg::HelloAck { .. }
-            | CtrlMsg::MachineLoaded { .. }
-            | CtrlMsg::MachineRefused { .. } => {}
+            // We said no `Hello` since the job began: another program on the port did.
+            CtrlMsg::HelloAck { .. } => return Err(self.superseded("its HelloAck")),
+            CtrlMsg::MachineLoaded { .. } | CtrlMsg::MachineRefused { .. } => {}
         }
         Ok(None)
     }
@@ -369,6 +382,11 @@ impl<T: Transport> Link<T> {
             NakReason::NoSession => return Err(LinkError::SessionLost { port: self.port() }),
             NakReason::MachineMismatch => {
                 return Err(LinkError::MachineMismatch { port: self.port() })
+            }
+            // The job was ours when it began (`run_job` refuses a held one): now it is
+            // held as an earlier host's, so another program said `Hello`.
+            NakReason::JobHeld if job.high > 0 => {
+                return Err(self.superseded("Nak(JobHeld) of our blocks"))
             }
             NakReason::JobHeld => {
                 return Err(LinkError::JobHeld {
@@ -442,6 +460,28 @@ impl<T: Transport> Link<T> {
             job.buffered_samples.push(s.buffered_ms);
         }
         hooks.status(s);
+        if s.orphan {
+            return Err(self.superseded("a status naming the job another host's"));
+        }
+        if s.state == State::Hold
+            && s.alarm.is_some_and(|a| a.cause == AlarmCause::HostTimeout)
+            && job.ending.is_none()
+        {
+            // Held because this host was silent past the job's host timeout (stopped,
+            // starved of CPU): back, it resumes its own job and streams on.
+            let asked = self.control.is_some_and(|pc| pc.cmd == Control::Resume)
+                || self.controls.contains(&Control::Resume);
+            if !asked {
+                self.stats.host_timeout_resumes += 1;
+                hooks.note(&format!(
+                    "the controller held the job at line {} after this host had been \
+                     silent past its host timeout (stopped or starved of CPU); resuming it",
+                    s.line
+                ));
+                self.controls.push_back(Control::Resume);
+            }
+            return Ok(None);
+        }
         if s.state == State::Hold
             && s.speed == 0
             && job.ending.is_none()

@@ -128,6 +128,9 @@ impl JobState {
     }
 
     pub(super) fn rewind_to(&mut self, at: usize, stats: &mut ClientStats) {
+        // Never behind what the controller accepted (a `Nak` of another session's
+        // numbering, after a foreign `Hello`, may name an earlier block).
+        let at = at.max(self.acked);
         if at >= self.sent {
             return;
         }

@@ -11,10 +11,12 @@
 
 mod convert;
 mod exact;
+mod host;
 mod locate;
 pub mod lqg;
 pub mod sections;
 
+pub use host::{load_host_timeout, DEFAULT_HOST_TIMEOUT};
 pub use sections::{
     ContourFile, ContourMode, DriveKind, H4TableFile, HexapodFile, HexapodXyFile, HomingFile,
     JointFile, KinematicsKind, LimitsFile, MotionFile, Profile, ServoFile, TimingFile, ToolFile,
@@ -104,6 +106,9 @@ pub struct MachineFile {
     /// Hydraulic supply pressure, MPa (the force limit of a joint with a
     /// `cylinder_area`).
     pub supply_pressure: Option<f64>,
+    /// Host silence after which a streamed job is held for take-over, s (default 30;
+    /// see `host` and docs/safety.md).
+    pub host_timeout_s: Option<f64>,
 }
 
 impl MachineFile {

@@ -262,8 +262,10 @@ impl Board<'_> {
         if self.pending.is_empty() {
             return Ok(());
         }
+        // No wait: a host that does not read (stopped, or gone) must not slow the
+        // board's clock down; what the port does not take now waits in `pending`.
         self.port
-            .set_timeout(Duration::from_millis(1))
+            .set_timeout(Duration::ZERO)
             .map_err(|e| self.error("write", e.into()))?;
         match self.port.write(&self.pending) {
             Ok(n) => {
@@ -317,7 +319,6 @@ pub fn serve(
         cut_until: None,
         next_tick: None,
     };
-    let loss_wall = Duration::from_millis(pkmc::controller::LINK_LOSS_TICKS as u64);
     while !stop.load(Ordering::Relaxed) {
         let now = Instant::now();
         if sim.take_link_cut() {
@@ -327,8 +328,10 @@ pub fn serve(
         // Simulated time may run ahead of the host's wall clock; it may pass the
         // controller's link-loss limit only when the host has really been silent
         // that long (or the line is cut).
-        let starved = sim.ctrl.link_silence_ticks() + 1 >= pkmc::controller::LINK_LOSS_TICKS
-            && board.delivered.elapsed() < loss_wall;
+        let limit = sim.ctrl.silence_limit();
+        let limit_wall = Duration::from_nanos(limit as u64 * pkmc::units::TICK_NS as u64);
+        let starved =
+            sim.ctrl.link_silence_ticks() + 1 >= limit && board.delivered.elapsed() < limit_wall;
         let busy = sim.busy() && !starved;
         let status = sim.ctrl.status();
         if status.free_slots == 0 || status.free_bends == 0 {
