@@ -179,8 +179,8 @@ fn rate_of(rate: i128, x: i128, len: i64) -> bool {
 /// with sine and cosine in Q31 (within 7·10⁻¹⁰), so the interpolated path stays within
 /// r × 7·10⁻¹⁰ ≤ 7 nm of the exact circle, and the arc starts and ends within the
 /// controller's [`PLAN_SLACK_UNITS`] of its programmed points (at 41 m it no longer
-/// did: the plan was refused as malformed). The G-code front end refuses larger radii
-/// by name; the controller refuses a plan with one.
+/// did: the plan was refused as malformed). The controller refuses a plan with a
+/// larger one ([`Path::checked`]); the host sends such an arc as chords along it.
 pub const MAX_ARC_RADIUS_NM: i64 = 10_000_000_000;
 
 /// Largest start/end radius difference accepted for an arc, nm (the host checks its
@@ -353,6 +353,26 @@ impl Path {
         Ok(p)
     }
 
+    /// The one rule, host and controller, for a block the controller runs as it is: the
+    /// path the host plans for `block` from `start` ([`Path::new`]), which the host
+    /// sends, checked by the very check the controller makes on receipt
+    /// ([`Course::set_from_plan`], exact integers and `f32`, the same on both). For an
+    /// arc it holds when its start radius is 1 nm to [`MAX_ARC_RADIUS_NM`], its radius
+    /// changes by at most [`ARC_RADIUS_SLACK_NM`], and the controller's own
+    /// interpolation starts and ends within [`PLAN_SLACK_UNITS`] of its programmed
+    /// points, with rates and length that match its sweep. An arc refused here is sent
+    /// by the host as lines along it (`gcode::blocks` in the host tools); the
+    /// controller refuses the plan of any block refused here.
+    pub fn checked(block: &Block, start: &[i64; AXES]) -> Result<Path, GeometryError> {
+        let host = Path::new(block, start)?;
+        let controller = Path::from_plan(block, start, host.length, host.shape())?;
+        if controller == host {
+            Ok(host)
+        } else {
+            Err(GeometryError::PlanMismatch)
+        }
+    }
+
     /// The shape the host sends for this path.
     pub fn shape(&self) -> Shape {
         let b = &self.bend.circle();
@@ -478,11 +498,14 @@ impl Course {
                 {
                     return bad;
                 }
-                // Length: √((r̄·|sweep|)² + helix²), to 10⁻⁵ (single precision; the
-                // sweep's low 32 bits, below 2⁻³² turn, do not matter).
+                // Length: √((r̄·|sweep|)² + helix²), to 10⁻⁵ (single precision). The
+                // sweep is converted whole (its turns, then its fraction): cut to 2⁻³²
+                // turn, a sweep of 10⁻⁵ turn (0.2 mm on a 4 m radius) was off by 3·10⁻⁵
+                // and its plan refused.
                 let f = crate::math::i64_to_f32;
-                let sweep_turns = crate::math::u64_to_f32((sweep.unsigned_abs() >> 32) as u64)
-                    * (1.0 / 4_294_967_296.0);
+                let sw = sweep.unsigned_abs();
+                let sweep_turns = crate::math::u64_to_f32((sw >> 64) as u64)
+                    + crate::math::u64_to_f32(sw as u64) * (1.0 / 18_446_744_073_709_551_616.0);
                 let planar = (f(r0) + f(dr) / 2.0) * (sweep_turns * core::f32::consts::TAU);
                 let helix = f(delta[k]);
                 let want = planar * planar + helix * helix;
@@ -890,5 +913,125 @@ mod tests {
             Path::from_plan(&b, &start, host.length * 2, host.shape()),
             Err(GeometryError::PlanMismatch)
         );
+    }
+}
+
+#[cfg(test)]
+mod extreme_arcs {
+    use super::*;
+
+    /// xorshift64*: a seeded generator (the same cases every run).
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> f64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
+    /// Issue 34: line 5,557 of a CamBam program, `G3 X10.9764 Y15.2949 I3827.4875
+    /// J1391.3692` (radius 4,072 mm, chord 0.2 mm), with the start written to four
+    /// decimals at 2,000 places along its circle. The length check took the sweep to
+    /// 2⁻³² turn, 3·10⁻⁵ of this one, and refused 182 of these plans as malformed.
+    #[test]
+    fn the_cambam_arc_of_issue_34_runs_exactly_wherever_it_starts() {
+        let off = [3_827_487_500i64, 1_391_369_200];
+        let r = (off[0] as f64).hypot(off[1] as f64);
+        let e = [10_976_400i64, 15_294_900];
+        let u = [-off[0] as f64 / r, -off[1] as f64 / r];
+        let mut refused = 0;
+        for k in 0..2000 {
+            let d = 200_000.0 / r * (0.5 + k as f64 * 1e-3);
+            let ru = [
+                u[0] * d.cos() - u[1] * d.sin(),
+                u[0] * d.sin() + u[1] * d.cos(),
+            ];
+            let ct = [e[0] as f64 - r * ru[0], e[1] as f64 - r * ru[1]];
+            let at = |v: f64| (v / 100.0).round() as i64 * 100;
+            let s = [at(ct[0] + r * u[0]), at(ct[1] + r * u[1])];
+            let b = Block {
+                line: 5557,
+                motion: Motion::Arc {
+                    center: [s[0] + off[0], s[1] + off[1]],
+                    plane: Plane::Xy,
+                    clockwise: false,
+                    turns: 0,
+                },
+                target: [e[0], e[1], 0, 0, 0, 0],
+                feed: 1_000_000,
+                tolerance_nm: 0,
+            };
+            if Path::checked(&b, &[s[0], s[1], 0, 0, 0, 0]).is_err() {
+                refused += 1;
+            }
+        }
+        assert_eq!(refused, 0, "{refused} of 2000 refused");
+    }
+
+    /// The reach of the one rule ([`Path::checked`]): every arc of radius up to
+    /// [`MAX_ARC_RADIUS_NM`], chord 2 nm to 100 mm (radius up to 10⁹ chords), minor
+    /// or major (nearly full circles), every plane, helical or not, runs exactly.
+    /// (Chords of 1 nm may not: the host sends those as lines.)
+    #[test]
+    fn every_arc_within_the_exact_range_over_two_nanometres_runs_exactly() {
+        let mut rng = Rng(0x34);
+        let (mut refused, mut n) = (0, 0);
+        while n < 100_000 {
+            let chord = 10f64.powf(0.31 + rng.next() * 7.7);
+            let r = chord * 10f64.powf(rng.next() * 9.0).max(0.5);
+            if r > MAX_ARC_RADIUS_NM as f64 {
+                continue;
+            }
+            let half = (chord / 2.0 / r).min(1.0).asin();
+            let major = rng.next() < 0.3;
+            let sweep = if major {
+                core::f64::consts::TAU - 2.0 * half
+            } else {
+                2.0 * half
+            };
+            let cw = rng.next() < 0.5;
+            let plane = [Plane::Xy, Plane::Zx, Plane::Yz][(rng.next() * 3.0) as usize];
+            let (i, j, k) = plane.axes();
+            let a0 = rng.next() * core::f64::consts::TAU;
+            let a1 = if cw { a0 - sweep } else { a0 + sweep };
+            let c = [
+                (rng.next() * 2e8 - 1e8) as i64,
+                (rng.next() * 2e8 - 1e8) as i64,
+            ];
+            let mut start = [0i64; AXES];
+            start[i] = c[0] + (r * a0.cos()).round() as i64;
+            start[j] = c[1] + (r * a0.sin()).round() as i64;
+            start[k] = 5_000_000;
+            let mut target = start;
+            target[i] = c[0] + (r * a1.cos()).round() as i64;
+            target[j] = c[1] + (r * a1.sin()).round() as i64;
+            if rng.next() < 0.5 {
+                target[k] += (rng.next() * 2e7 - 1e7) as i64;
+            }
+            let ends = [target[i] - start[i], target[j] - start[j]];
+            if (ends[0] as f64).hypot(ends[1] as f64) < 2.0 {
+                continue;
+            }
+            let b = Block {
+                line: 1,
+                motion: Motion::Arc {
+                    center: c,
+                    plane,
+                    clockwise: cw,
+                    turns: 0,
+                },
+                target,
+                feed: 1,
+                tolerance_nm: 0,
+            };
+            n += 1;
+            if let Err(e) = Path::checked(&b, &start) {
+                refused += 1;
+                std::eprintln!("{e:?}: radius {r} nm, chord {chord} nm: {b:?} from {start:?}");
+            }
+        }
+        assert_eq!(refused, 0, "{refused} of {n} arcs refused");
     }
 }
