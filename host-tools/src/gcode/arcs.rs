@@ -129,6 +129,103 @@ pub fn check_end(
     Ok(())
 }
 
+/// How far a chord of [`chords`] may lie from its arc, nm, before its ends are rounded
+/// to whole nanometres (at most 0.87 nm more).
+pub const CHORD_SAGITTA_NM: f64 = 40.0;
+
+/// The blending tolerance of the joins between the chords of one arc, nm (the arc's
+/// own tolerance, when it is smaller and not exact stop). The compressor may merge the
+/// chords into curves within 0.95 of it: 40 + 38 + 0.87 nm stays within
+/// [`CHORDS_WITHIN_NM`] of the arc.
+pub const CHORD_JOIN_NM: u32 = 40;
+
+/// How far the path of an arc sent as [`chords`] may be from the true arc, nm: 0.1 µm.
+pub const CHORDS_WITHIN_NM: f64 = 100.0;
+
+/// An arc block the controller does not run exactly (`pkmc::geometry::Path::checked`
+/// refuses it: its radius is above [`pkmc::geometry::MAX_ARC_RADIUS_NM`], its radius
+/// changes by more than [`pkmc::geometry::ARC_RADIUS_SLACK_NM`], or its plan misses the
+/// controller's numeric checks), from `from`, as straight moves along it: its points
+/// at equal steps of angle (the radius moving linearly from the start's to the end's,
+/// the helix axis and A B C linearly), each chord within [`CHORD_SAGITTA_NM`] of the
+/// arc, ending exactly on its target. Every move has the arc's line and feed; the joins
+/// between them blend within [`CHORD_JOIN_NM`], and the last keeps the arc's
+/// tolerance. Not an arc: `vec![*arc]`.
+pub fn chords(arc: &pkmc::protocol::Block, from: &[i64; 6]) -> Vec<pkmc::protocol::Block> {
+    use pkmc::protocol::Motion;
+    let Motion::Arc {
+        center,
+        plane,
+        clockwise,
+        turns,
+    } = arc.motion
+    else {
+        return vec![*arc];
+    };
+    let (i, j, _) = plane.axes();
+    let c = [center[0] as f64, center[1] as f64];
+    let s = [from[i] as f64 - c[0], from[j] as f64 - c[1]];
+    let e = [arc.target[i] as f64 - c[0], arc.target[j] as f64 - c[1]];
+    let (r0, r1) = (s[0].hypot(s[1]), e[0].hypot(e[1]));
+    let (a0, a1) = (s[1].atan2(s[0]), e[1].atan2(e[0]));
+    let tau = std::f64::consts::TAU;
+    // The sweep as the controller's geometry takes it (`Path::new`): in (0, 2π] each
+    // way, a full circle when the ends meet, plus the extra turns.
+    let wrap = |x: f64| {
+        let w = x - (x / tau).floor() * tau;
+        if w < 1e-12 {
+            tau
+        } else {
+            w
+        }
+    };
+    let sweep = if clockwise {
+        -(wrap(a0 - a1) + tau * turns as f64)
+    } else {
+        wrap(a1 - a0) + tau * turns as f64
+    };
+    // A chord spanning δ at radius r lies r·(1 − cos(δ/2)) inside the arc.
+    let r = r0.max(r1);
+    let step = if r > 2.0 * CHORD_SAGITTA_NM {
+        2.0 * (1.0 - CHORD_SAGITTA_NM / r).acos()
+    } else {
+        std::f64::consts::FRAC_PI_4
+    };
+    let n = (sweep.abs() / step).ceil().max(1.0) as u64;
+    let join = match arc.tolerance_nm {
+        0 => CHORD_JOIN_NM,
+        t => t.min(CHORD_JOIN_NM),
+    };
+    let mut out = Vec::with_capacity(n as usize);
+    let mut last = *from;
+    for k in 1..=n {
+        let target = if k == n {
+            arc.target
+        } else {
+            let t = k as f64 / n as f64;
+            let (a, rad) = (a0 + sweep * t, r0 + (r1 - r0) * t);
+            let mut p = [0i64; 6];
+            for (x, (f, to)) in p.iter_mut().zip(from.iter().zip(&arc.target)) {
+                *x = f + ((to - f) as f64 * t).round() as i64;
+            }
+            p[i] = (c[0] + rad * a.cos()).round() as i64;
+            p[j] = (c[1] + rad * a.sin()).round() as i64;
+            p
+        };
+        if target == last && k < n {
+            continue;
+        }
+        out.push(pkmc::protocol::Block {
+            motion: Motion::Linear,
+            target,
+            tolerance_nm: if k == n { arc.tolerance_nm } else { join },
+            ..*arc
+        });
+        last = target;
+    }
+    out
+}
+
 /// Distance between two in-plane points (no overflow: coordinates are below 2⁶³).
 fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
     let (dx, dy) = (a[0] - b[0], a[1] - b[1]);
@@ -217,6 +314,42 @@ mod tests {
         )
         .map_err(|(_, message)| message);
         assert!(e.unwrap_err().starts_with("unsupported: spiral arcs"));
+    }
+
+    #[test]
+    fn an_arc_of_16_m_over_35_6_mm_is_16_chords_within_40_nm_ending_on_its_target() {
+        use pkmc::protocol::{Block, Motion, Plane};
+        // G2 X35.6 Y0 I17.8 J-16275.9903 from the origin (issue 34).
+        let arc = Block {
+            line: 3,
+            motion: Motion::Arc {
+                center: [17_800_000, -16_275_990_300],
+                plane: Plane::Xy,
+                clockwise: true,
+                turns: 0,
+            },
+            target: [35_600_000, 0, 0, 0, 0, 0],
+            feed: 50_000_000,
+            tolerance_nm: 0,
+        };
+        assert!(pkmc::geometry::Path::checked(&arc, &[0; 6]).is_err());
+        let c = chords(&arc, &[0; 6]);
+        assert_eq!(c.len(), 16);
+        assert_eq!(c.last().unwrap().target, arc.target);
+        let r = 17.8e6f64.hypot(16_275_990_300.0);
+        let mut from = [0.0f64, 0.0];
+        for b in &c {
+            assert_eq!((b.motion, b.line, b.feed), (Motion::Linear, 3, 50_000_000));
+            let to = [b.target[0] as f64, b.target[1] as f64];
+            // The chord's midpoint lies inside the circle by at most 40 nm (+ rounding).
+            let mid = [(from[0] + to[0]) / 2.0, (from[1] + to[1]) / 2.0];
+            let inside = r - (mid[0] - 17.8e6).hypot(mid[1] + 16_275_990_300.0);
+            assert!((-1.0..=41.0).contains(&inside), "{inside} nm");
+            from = to;
+        }
+        // The joins blend within 40 nm under G61; the last keeps the arc's exact stop.
+        assert_eq!(c[0].tolerance_nm, CHORD_JOIN_NM);
+        assert_eq!(c.last().unwrap().tolerance_nm, 0);
     }
 
     #[test]

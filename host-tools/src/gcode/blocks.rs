@@ -1,6 +1,9 @@
 //! Canonical commands to protocol blocks: what is streamed to the controller.
 //!
 //! Motion keeps its geometry (lines, native arcs, G5/G5.1 splines as Bézier blocks);
+//! an arc the controller would not run exactly (the one rule both share,
+//! `pkmc::geometry::Path::checked`) goes as chords within 0.1 µm of it
+//! ([`crate::gcode::arcs::chords`]), never refused;
 //! G93 inverse-time feeds become path speeds from the block's exact length (measured
 //! with the core's own geometry, so host and controller agree; for a spline that length
 //! is the one the controller runs the curve's parameter over, so the move takes the
@@ -88,6 +91,14 @@ pub fn from_canon(commands: &[Canon], start: [i64; AXES]) -> Program {
             }
             Canon::End { .. } => None,
         };
+        // An arc the controller would not run as it is goes as chords along it.
+        if let Some(b) = block.filter(|b| matches!(b.motion, Motion::Arc { .. })) {
+            if Path::checked(&b, &pose).is_err() {
+                program.blocks.extend(crate::gcode::arcs::chords(&b, &pose));
+                pose = b.target;
+                continue;
+            }
+        }
         if let Some(b) = block {
             if matches!(
                 b.motion,

@@ -330,23 +330,8 @@ impl Interp<'_> {
             }
             (None, true) => self.centre_from_offsets([(a, wa), (b, wb)], s, e, col)?,
         };
-        let (dx, dy) = (s[0] - centre[0] as f64, s[1] - centre[1] as f64);
-        let max = pkmc::geometry::MAX_ARC_RADIUS_NM as f64;
-        // Compared squared: no square root on the path of every arc.
-        if dx * dx + dy * dy > max * max {
-            let radius = dx.hypot(dy);
-            let at = w.get(b'R').map_or(col, |r| r.col);
-            return fail(
-                at,
-                ErrorKind::ArcRadius,
-                format!(
-                    "{name} with a radius of {:.3} mm: larger than the {} mm the controller \
-                     interpolates exactly",
-                    radius * 1e-6,
-                    pkmc::geometry::MAX_ARC_RADIUS_NM / 1_000_000
-                ),
-            );
-        }
+        // Any radius: an arc the controller does not run exactly
+        // (`pkmc::geometry::Path::checked`) is sent as chords (`blocks::from_canon`).
         let turns = match w.get(b'P') {
             Some(p) => (whole_in(p, 1, i64::from(u32::MAX), "turns P")? - 1) as u32,
             None => 0,
