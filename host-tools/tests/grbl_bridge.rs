@@ -5,10 +5,11 @@
 mod common;
 mod grbl;
 
-use grbl::{field, Bridge, Client, Via};
+use grbl::{field, stream_counting, Bridge, Client, Via};
 use std::time::Duration;
 
 over_both! {
+    a_senders_short_moves_run_as_the_curves_nc_send_makes => merged_as_nc_send;
     answers_as_grbl_one_one_does => answers;
     moves_jogs_holds_resumes_and_overrides_the_feed => moves_jogs_holds;
     hostile_bytes_get_errors_or_are_filtered_and_the_bridge_goes_on => hostile_bytes;
@@ -163,4 +164,74 @@ fn alarm(via: Via) {
     c.wait_state("Alarm", Duration::from_secs(5));
     assert_eq!(c.command("G0 X0").last().unwrap(), "error:9");
     bridge.stop();
+}
+
+/// The motion's span in a simulator trace: from the first period whose commanded
+/// X Y Z differs from the first row's to the last that moved, s.
+fn motion_span(trace: &std::path::Path) -> f64 {
+    let text = std::fs::read_to_string(trace).expect("the simulator's trace");
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            l.split(',')
+                .map(|v| v.parse().unwrap_or(f64::NAN))
+                .collect()
+        })
+        .collect();
+    let xyz = |r: &Vec<f64>| [r[2], r[3], r[4]];
+    let moved: Vec<f64> = rows
+        .windows(2)
+        .filter(|w| xyz(&w[0]) != xyz(&w[1]))
+        .map(|w| w[1][0])
+        .collect();
+    assert!(!moved.is_empty(), "nothing moved in {}", trace.display());
+    moved[moved.len() - 1] - moved[0]
+}
+
+/// A 60 mm sine of 0.1 mm chords at F3000 in G64 P0.01 (601 lines), streamed by a
+/// character-counting sender: the bridge merges the chords as nc-send does, and the
+/// motion takes nc-send's time (within 5 % and 20 ms) and ends where it ends.
+fn merged_as_nc_send(via: Via) {
+    let program = common::sine(60.0, 0.1, 3000, 0.0, "G64 P0.01");
+    let path = common::tmp(&format!("merge-{via:?}.ngc"));
+    std::fs::write(&path, &program).unwrap();
+    let direct_trace = common::tmp(&format!("merge-{via:?}-direct.csv"));
+    let direct = common::ok(&common::nc_send(&[
+        "--sim",
+        "--report",
+        "json",
+        "--trace",
+        direct_trace.to_str().unwrap(),
+        path.to_str().unwrap(),
+    ]));
+    let trace = common::tmp(&format!("merge-{via:?}-bridge.csv"));
+    let bridge = Bridge::start(&["--trace", trace.to_str().unwrap()]);
+    let mut c = Client::open(&bridge, via);
+    let lines: Vec<String> = program.lines().map(String::from).collect();
+    let errors = stream_counting(&mut c, &lines, Duration::from_secs(60));
+    assert_eq!(errors, 0);
+    let s = c.wait_state("Idle", Duration::from_secs(30));
+    let summary = bridge.stop();
+    let mpos = field(&s, "MPos");
+    let end = &direct["final_pose"];
+    for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+        let want = end[axis].as_f64().unwrap();
+        assert!(
+            (mpos[k] - want).abs() < 1e-3,
+            "ends at nc-send's end: {s} {end}"
+        );
+    }
+    let moves = summary["moves_merged"].as_u64().unwrap();
+    let curves = summary["curves_made"].as_u64().unwrap();
+    assert!(moves >= 590 && curves * 10 < moves, "merged: {summary}");
+    let (t_bridge, t_direct) = (motion_span(&trace), motion_span(&direct_trace));
+    println!(
+        "{via:?}: {moves} moves merged into {curves} curves; motion {t_bridge:.3} s through \
+         the bridge, {t_direct:.3} s from nc-send"
+    );
+    assert!(
+        t_bridge <= t_direct * 1.05 + 0.02,
+        "the bridge's motion {t_bridge:.3} s, nc-send's {t_direct:.3} s"
+    );
 }

@@ -400,6 +400,7 @@ fn serve(
                 tcp: tcp.clone(),
                 tools: opts.tools.clone(),
                 tool_change: tool_change == "pause",
+                compress: opts.compress,
             };
             pkmc_host::grbl::run(machine, opts, &bridge, &stop)
         }

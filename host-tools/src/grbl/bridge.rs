@@ -91,6 +91,8 @@ pub(super) struct Bridge<'o> {
     stop_aborted: bool,
     /// The alarm last reported (`ALARM:N`), so that it is said once.
     pub(super) alarm_told: Option<pkmc::protocol::Alarm>,
+    /// Short moves held back for merging.
+    pub(super) merge: super::merge::Merger,
 }
 
 /// A pseudo-terminal sender counts as present this long after its last byte (a
@@ -152,6 +154,7 @@ impl<'o> Bridge<'o> {
             stopping: false,
             stop_aborted: false,
             alarm_told: None,
+            merge: super::merge::Merger::new(None, start),
         }
     }
 
@@ -545,7 +548,10 @@ impl<'o> Bridge<'o> {
                 }
                 Item::RealTime(_) => {}
                 // An error does not hold the stream (Grbl streams on after one).
-                Item::Line(text) => out.extend(self.compile(&text).unwrap_or_default()),
+                Item::Line(text) => {
+                    let blocks = self.compile(&text).unwrap_or_default();
+                    self.merge.take(blocks, out);
+                }
             }
         }
         true
@@ -583,6 +589,7 @@ impl<'o> Bridge<'o> {
             .is_some_and(|s| s.state == State::Idle && s.speed == 0)
             && view.acked == view.total
             && view.executed >= view.total
+            && self.merge.is_empty()
     }
 
     /// The job ended with every block executed.
@@ -640,6 +647,10 @@ impl JobHooks for Bridge<'_> {
         }
         if !self.take_lines(view, out) {
             return false;
+        }
+        let queued = view.total.saturating_sub(view.executed) + out.len();
+        if self.merge.due(queued, !self.lines.is_empty()) {
+            self.merge.flush(out);
         }
         if !out.is_empty() || !self.lines.is_empty() {
             self.last_busy = Instant::now();

@@ -13,6 +13,7 @@
 mod bridge;
 mod commands;
 mod input;
+mod merge;
 mod ports;
 mod words;
 
@@ -39,6 +40,9 @@ pub struct BridgeOptions {
     /// M6 holds the machine for a manual tool change (until `~`) instead of being
     /// refused with `error:20` as Grbl 1.1 refuses it.
     pub tool_change: bool,
+    /// Merge a sender's runs of short moves as nc-send does ([`merge`]); `None`: each
+    /// line's blocks go as they are (nc-send passes its own settings).
+    pub compress: Option<gcode::compress::Settings>,
 }
 
 /// How often the bridge asks the controller for its status between jobs.
@@ -101,6 +105,14 @@ pub fn serve<T: Transport>(
     let session = gcode::LineSession::new(&options, "sender");
     let mut b = Bridge::new(machine, ports, session, stop);
     b.tool_change = opts.tool_change;
+    // Runs of short moves merged as nc-send merges them (its --no-compress and
+    // --corner-deg apply here too).
+    b.merge = merge::Merger::new(
+        opts.compress
+            .as_ref()
+            .map(|s| crate::job::compress_for_machine(s, machine)),
+        b.session.interp().pos,
+    );
     b.status = Some(start);
     let mut asked = Instant::now();
     while !stop() {
@@ -135,6 +147,8 @@ pub fn serve<T: Transport>(
         "ok": b.counts.ok,
         "errors": b.counts.errors,
         "blocks_fed": b.counts.blocks,
+        "moves_merged": b.merge.merged.0,
+        "curves_made": b.merge.merged.1,
         "blocks_executed": b.counts.executed,
         "link": link.stats,
         "status": crate::job::status_json(&s, machine, "served"),
@@ -184,7 +198,11 @@ fn next_line<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(),
         return Ok(());
     }
     b.set_job(Some((blocks.len(), 0)));
+    // The job's first line goes as it is; merging starts with the lines after it.
+    b.merge.restart_at(b.session.interp().pos);
     let end = link.run_job(&blocks, b);
+    // Whatever is still held goes with the job (an alarm or a reset ended it).
+    b.merge.restart_at(b.session.interp().pos);
     if matches!(end, Ok(JobEnd::Done)) {
         b.job_done();
     }
@@ -225,6 +243,7 @@ fn soft_reset<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<()
         s = link.request_status()?;
     }
     b.session.restart(s.pose);
+    b.merge.restart_at(s.pose);
     b.status = Some(s.clone());
     b.say(&words::banner());
     if b.locked() {

@@ -205,7 +205,7 @@ fn findings_text(name: &str, findings: &[crate::analysis::preflight::Finding]) -
 
 /// The compressor's settings with `machine`'s smallest X Y Z acceleration and speed
 /// (what a curve's time is weighed with).
-fn for_machine(
+pub fn for_machine(
     settings: &gcode::compress::Settings,
     machine: &MachineConfig,
 ) -> gcode::compress::Settings {

@@ -30,7 +30,7 @@ pub use commands::{
 };
 pub use compile::{
     compile_compressed, compile_job, compile_located, compile_program, compile_text,
-    compile_text_with, machine_axes, Compiled,
+    compile_text_with, for_machine as compress_for_machine, machine_axes, Compiled,
 };
 pub use report::{
     describe_alarm, pose_text, print_report, status_json, CompressionSummary, LinesExecuted,

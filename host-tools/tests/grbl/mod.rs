@@ -321,3 +321,42 @@ pub fn field(report: &str, name: &str) -> Vec<f64> {
         .map(|v| v.parse().unwrap())
         .collect()
 }
+
+/// A character-counting sender, as Grbl's interface describes one: at most 127
+/// bytes in flight, and every `ok` or `error:` answers the oldest line.
+pub fn stream_counting(c: &mut Client, lines: &[String], limit: Duration) -> usize {
+    let start = Instant::now();
+    let mut in_flight: std::collections::VecDeque<usize> = Default::default();
+    let (mut next, mut answered, mut errors) = (0, 0, 0);
+    while answered < lines.len() {
+        assert!(
+            start.elapsed() < limit,
+            "{answered} of {} answered in {limit:?}",
+            lines.len()
+        );
+        let sum: usize = in_flight.iter().sum();
+        if next < lines.len() && sum + lines[next].len() < 127 {
+            // The line and its \n fit in Grbl's 128-byte receive buffer (127 used).
+            c.send(format!("{}\n", lines[next]).as_bytes());
+            in_flight.push_back(lines[next].len() + 1);
+            next += 1;
+            continue;
+        }
+        let Some(l) = c.line(Duration::from_millis(200)) else {
+            continue;
+        };
+        if l == "ok" || l.starts_with("error:") {
+            assert!(
+                in_flight.pop_front().is_some(),
+                "{l:?} answers no line sent"
+            );
+            answered += 1;
+            errors += l.starts_with("error:") as usize;
+        }
+    }
+    assert!(
+        c.line(Duration::from_millis(300)).is_none_or(|l| l != "ok"),
+        "a stray ok"
+    );
+    errors
+}

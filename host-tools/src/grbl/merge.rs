@@ -1,0 +1,207 @@
+//! Merging in the bridge: a sender's runs of short `G1` moves in `G64 P` become the
+//! curves `nc-send` makes of the same program ([`crate::gcode::compress`], with the
+//! same settings), so that a sender gets nc-send's motion.
+//!
+//! A sender streams line by line, so the bridge cannot see a whole run at once: it
+//! answers each line `ok` at once (Grbl's `ok` says the line is in the planner
+//! buffer) and holds the line's mergeable moves back, until one of these comes:
+//! - a block that cannot join a run (a rapid, an arc, a dwell, an auxiliary function,
+//!   `G61`, `G64` without P): the held moves are merged and sent before it;
+//! - [`MOST_HELD`] moves held;
+//! - the controller is about to run out ([`LOW_QUEUE`] blocks or fewer left to run);
+//! - the oldest held move has waited [`LONGEST_HOLD`], or the sender has been quiet
+//!   for [`QUIET`] with nothing more waiting.
+//!
+//! A run cut by the last three ends at a vertex of the programmed polyline, as any run
+//! does at a corner: the curves on either side meet there. A reset (0x18) or an alarm
+//! drops what is held, as Grbl drops its planner buffer.
+
+use crate::gcode::compress::{self, Settings};
+use pkmc::config::AXES;
+use pkmc::protocol::{Block, Motion};
+use std::time::{Duration, Instant};
+
+/// Most moves held back for one merge.
+const MOST_HELD: usize = 256;
+/// The longest a move is held back.
+const LONGEST_HOLD: Duration = Duration::from_millis(150);
+/// Held moves go once the sender has been quiet this long.
+const QUIET: Duration = Duration::from_millis(40);
+/// Held moves go once the controller has this few blocks or fewer left to run.
+const LOW_QUEUE: usize = 3;
+
+/// The moves held back for merging.
+pub(super) struct Merger {
+    /// The compressor's settings for the machine; `None`: every block goes as it is.
+    settings: Option<Settings>,
+    held: Vec<Block>,
+    /// Where the held run starts: the end of what was sent before it.
+    start: [i64; AXES],
+    /// When the oldest held move came.
+    since: Option<Instant>,
+    /// When the last line's blocks came.
+    last_line: Instant,
+    /// Moves merged, and the blocks made of them (for the summary).
+    pub(super) merged: (u64, u64),
+}
+
+/// May `b` be part of a run? A feed move with a finite, non-zero blending tolerance
+/// (the compressor decides the rest: length, feed, corners).
+fn candidate(b: &Block) -> bool {
+    b.motion == Motion::Linear && b.tolerance_nm != 0 && b.tolerance_nm != u32::MAX
+}
+
+impl Merger {
+    /// A merger with `settings` (already set for the machine), starting at `start`.
+    pub(super) fn new(settings: Option<Settings>, start: [i64; AXES]) -> Self {
+        Self {
+            settings,
+            held: Vec::new(),
+            start,
+            since: None,
+            last_line: Instant::now(),
+            merged: (0, 0),
+        }
+    }
+
+    /// Drops anything held; the next block starts at `pose` (a job's first line
+    /// went straight to the controller, a reset, an alarm).
+    pub(super) fn restart_at(&mut self, pose: [i64; AXES]) {
+        self.held.clear();
+        self.since = None;
+        self.start = pose;
+    }
+
+    /// Nothing is held.
+    pub(super) fn is_empty(&self) -> bool {
+        self.held.is_empty()
+    }
+
+    /// Takes a line's blocks: mergeable moves are held, anything else sends what is
+    /// held (merged) and then itself.
+    pub(super) fn take(&mut self, blocks: Vec<Block>, out: &mut Vec<Block>) {
+        self.last_line = Instant::now();
+        for b in blocks {
+            if self.settings.is_some() && candidate(&b) {
+                self.since.get_or_insert_with(Instant::now);
+                self.held.push(b);
+                if self.held.len() >= MOST_HELD {
+                    self.flush(out);
+                }
+            } else {
+                self.flush(out);
+                if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
+                    self.start = b.target;
+                }
+                out.push(b);
+            }
+        }
+    }
+
+    /// Merges what is held and appends it to `out`.
+    pub(super) fn flush(&mut self, out: &mut Vec<Block>) {
+        let (Some(s), Some(last)) = (&self.settings, self.held.last()) else {
+            return;
+        };
+        let end = last.target;
+        let c = compress::compress(&self.held, self.start, s);
+        self.merged.0 += self.held.len() as u64;
+        self.merged.1 += c.blocks.len() as u64;
+        out.extend(c.blocks);
+        self.held.clear();
+        self.since = None;
+        self.start = end;
+    }
+
+    /// Should what is held go now? `queued`: blocks the controller has yet to run
+    /// (or is about to get); `lines_waiting`: the sender's lines not yet taken.
+    pub(super) fn due(&self, queued: usize, lines_waiting: bool) -> bool {
+        let Some(since) = self.since else {
+            return false;
+        };
+        queued <= LOW_QUEUE
+            || since.elapsed() >= LONGEST_HOLD
+            || (!lines_waiting && self.last_line.elapsed() >= QUIET)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn g1(x: i64, y: i64, line: u32) -> Block {
+        Block {
+            line,
+            motion: Motion::Linear,
+            target: [x, y, 0, 0, 0, 0],
+            feed: 50_000_000,
+            tolerance_nm: 10_000,
+        }
+    }
+
+    /// A sine's chords of 0.05 mm, as a sender would send them, a line each.
+    fn chords(n: usize) -> Vec<Block> {
+        (1..=n)
+            .map(|i| {
+                let x = i as f64 * 0.05;
+                let y = 5.0 * (x / 10.0).sin();
+                g1((x * 1e6) as i64, (y * 1e6) as i64, i as u32)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn held_moves_become_the_curves_nc_send_makes() {
+        let s = Settings::default();
+        let mut m = Merger::new(Some(s), [0; AXES]);
+        let mut out = Vec::new();
+        let blocks = chords(200);
+        for b in &blocks {
+            m.take(vec![*b], &mut out);
+        }
+        assert!(out.is_empty(), "all held: {}", out.len());
+        // A rapid sends the run first, merged as compress merges the whole program.
+        let rapid = Block {
+            motion: Motion::Rapid,
+            target: [0; AXES],
+            line: 201,
+            ..blocks[0]
+        };
+        m.take(vec![rapid], &mut out);
+        let whole = compress::compress(&blocks, [0; AXES], &s);
+        assert_eq!(out[..out.len() - 1], whole.blocks[..]);
+        assert_eq!(out.last(), Some(&rapid));
+        assert!(whole.blocks.len() < 20, "{} curves", whole.blocks.len());
+        assert_eq!(m.merged, (200, whole.blocks.len() as u64));
+        assert!(m.is_empty() && !m.due(0, false));
+    }
+
+    #[test]
+    fn without_settings_every_block_goes_at_once() {
+        let mut m = Merger::new(None, [0; AXES]);
+        let mut out = Vec::new();
+        m.take(chords(3), &mut out);
+        assert_eq!(out, chords(3));
+    }
+
+    #[test]
+    fn held_moves_go_when_the_controller_runs_low_or_the_most_are_held() {
+        let mut m = Merger::new(Some(Settings::default()), [0; AXES]);
+        let mut out = Vec::new();
+        m.take(chords(10), &mut out);
+        assert!(!m.due(10, true));
+        assert!(m.due(LOW_QUEUE, true));
+        m.flush(&mut out);
+        assert!(!out.is_empty() && m.is_empty());
+        // A long run is cut at MOST_HELD moves, ending on a programmed vertex.
+        let mut m = Merger::new(Some(Settings::default()), [0; AXES]);
+        let mut out = Vec::new();
+        let blocks = chords(MOST_HELD + 5);
+        m.take(blocks.clone(), &mut out);
+        assert_eq!(
+            out.last().map(|b| b.target),
+            Some(blocks[MOST_HELD - 1].target)
+        );
+        assert_eq!(m.held.len(), 5);
+    }
+}
