@@ -28,6 +28,7 @@ ALLOWED = {
     "job": {"gcode", "link", "sim", "analysis", "machine_file", "input"},
     "grbl": {"gcode", "link", "analysis", "job"},
     "station": {"gcode", "link", "job", "input", "analysis"},
+    "calibrate": {"machine_file", "analysis", "input"},
 }
 CRATE_PATH = re.compile(r"\bcrate::([a-z_]+)")
 FN = re.compile(r"^\s*(pub(\([a-z]+\))?\s+)?(const\s+)?(async\s+)?(unsafe\s+)?fn\s+(\w+)")

@@ -14,6 +14,8 @@
 //!   drives, plants and injected faults) and its board loop, served over a
 //!   pseudo-terminal or in process.
 //! - [`analysis`]: pre-flight checks and plots.
+//! - [`calibrate`]: kinematic calibration of the parallel machines' geometry from
+//!   measured tool poses, and the plan of the poses to measure (`nc-send calibrate`).
 //! - [`contour_study`]: the contour-error study of the seeds' controller schemes on a
 //!   machine file's servo axes and plants.
 //! - [`job`]: the application layer shared by the binaries and the tests — compile,
@@ -22,6 +24,7 @@
 //! - [`input`]: bounded reading of input files.
 
 pub mod analysis;
+pub mod calibrate;
 pub mod cli;
 pub mod contour_study;
 pub mod gcode;

@@ -1,0 +1,29 @@
+//! Kinematic calibration of the parallel machines (`nc-send calibrate`, issue 36,
+//! docs/calibration.md): the geometry of the machine file identified from measured
+//! tool poses.
+//!
+//! - [`model`]: the parameterised `f64` kinematics of the H-4 with its rolling table,
+//!   the hexapod and the hexapod-xy, written over [`dual::Scalar`] so the same
+//!   equations give their exact derivatives.
+//! - [`forward`]: forward kinematics (Newton) and the measurement's Jacobian with
+//!   respect to the parameters (implicit function theorem).
+//! - [`fit`]: identifiability (SVD of the scaled Jacobian, the parameters held),
+//!   Levenberg–Marquardt, the covariance; the residual is pluggable ([`fit::Residual`])
+//!   so a sphere-probing fit can be added beside the pose measurements.
+//! - [`data`]: the pose-list and measurement CSV files.
+//! - [`write`]: the corrected machine file.
+//! - [`plan`]: measurement poses chosen for conditioning (greedy D-optimal).
+//! - [`truth`]: a simulated "true" machine for tests and worked examples.
+//! - [`cli`]: the `nc-send calibrate` command.
+
+pub mod cli;
+pub mod data;
+pub mod dual;
+pub mod fit;
+pub mod forward;
+pub mod linalg;
+pub mod model;
+pub mod plan;
+pub mod study;
+pub mod truth;
+pub mod write;
