@@ -158,6 +158,9 @@ enum Command {
         #[arg(long, value_name = "FILE")]
         program: Option<PathBuf>,
     },
+    /// Calibrate the machine file's geometry from measured tool poses; `plan` the poses
+    /// to measure (docs/calibration.md). Runs on this computer, no controller.
+    Calibrate(pkmc_host::calibrate::cli::CalibrateArgs),
 }
 
 fn main() {
@@ -269,6 +272,11 @@ const MAX_LINK_TIMEOUT_S: f64 = 3600.0;
 
 fn run(args: &Args) -> Result<i32, Failure> {
     let machine = load_machine(args)?;
+    if let Some(Command::Calibrate(c)) = &args.command {
+        return pkmc_host::calibrate::cli::run(c, args.machine.as_deref())
+            .map(|()| exit::OK)
+            .map_err(bad);
+    }
     let quiet = args.report.is_some();
     if args.check && (args.sim || args.port.is_some()) {
         return Err(bad("--check runs in-process: leave out --sim and --port"));
@@ -527,7 +535,7 @@ fn command(
                 (link.wait_idle(&mut op)?, None)
             }
             Command::Resume => (resume(link, &mut op)?, None),
-            Command::Grbl { .. } | Command::Serve { .. } => {
+            Command::Grbl { .. } | Command::Serve { .. } | Command::Calibrate(_) => {
                 unreachable!("served by grbl::run and station::run")
             }
         };
