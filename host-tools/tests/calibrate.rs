@@ -193,3 +193,20 @@ fn corrected_machine_file_carries_the_fit() {
         );
     }
 }
+
+/// The error map over the workspace: drawn, and the calibrated machine's largest
+/// error on it is within the bound where the nominal one is far outside.
+#[test]
+fn error_map_before_and_after() {
+    let (_, config, model) = machine("h4-table");
+    let p = plan::plan(&config, &model, 60, 200, 1, study::NOISE).unwrap();
+    let o = study::run(&config, &model, &p.joints, 3, 1).unwrap();
+    let path = std::env::temp_dir().join(format!("pkmc-calibrate-map-{}.svg", std::process::id()));
+    let th = truth::perturb(&model, 3);
+    let [before, after] =
+        pkmc_host::calibrate::plot::draw(&path, &config, &model, &th, &o.fit.theta).unwrap();
+    let svg = std::fs::read_to_string(&path).unwrap();
+    std::fs::remove_file(&path).ok();
+    assert!(svg.contains("calibrated") && svg.matches("<rect").count() > 1000);
+    assert!(before > 300.0 && after < 60.0, "{before} {after}");
+}

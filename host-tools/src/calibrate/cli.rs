@@ -83,6 +83,13 @@ pub enum Action {
         /// Test poses per seed.
         #[arg(long, default_value_t = 200)]
         tests: usize,
+        /// Draw the position error over X and Y (at home Z and angles) before and
+        /// after, for the seed `--plot-seed` (.svg or .png).
+        #[arg(long, value_name = "FILE")]
+        plot: Option<PathBuf>,
+        /// The seed the plot shows.
+        #[arg(long, default_value_t = 0)]
+        plot_seed: u64,
     },
 }
 
@@ -162,7 +169,21 @@ pub fn run(args: &CalibrateArgs, machine: Option<&Path>) -> Result<(), String> {
             seeds,
             poses,
             tests,
-        }) => study_command(&origin, &config, &model, *seeds, *poses, *tests),
+            plot,
+            plot_seed,
+        }) => {
+            let p = study_command(&origin, &config, &model, *seeds, *poses, *tests)?;
+            if let Some(path) = plot {
+                let o = study::run(&config, &model, &p, *plot_seed, 1)?;
+                let truth = truth::perturb(&model, *plot_seed);
+                let [b, a] = super::plot::draw(path, &config, &model, &truth, &o.fit.theta)?;
+                println!(
+                    "{}: seed {plot_seed}, largest position error over the map {b:.1} µm before, {a:.1} µm after",
+                    path.display()
+                );
+            }
+            Ok(())
+        }
         None => fit_command(args, &text, &model, noise),
     }
 }
@@ -174,7 +195,7 @@ fn study_command(
     seeds: u64,
     poses: usize,
     tests: usize,
-) -> Result<(), String> {
+) -> Result<Vec<Vec<f64>>, String> {
     let p = plan::plan(config, model, poses, 400, 1, study::NOISE)?;
     println!(
         "{origin}: {} poses, condition {:.1}",
@@ -235,7 +256,7 @@ fn study_command(
         errors(&worst_a),
         (z2 / nz.max(1) as f64).sqrt()
     );
-    Ok(())
+    Ok(p.joints)
 }
 
 fn fit_command(

@@ -13,6 +13,7 @@
 //! - [`data`]: the pose-list and measurement CSV files.
 //! - [`write`]: the corrected machine file.
 //! - [`plan`]: measurement poses chosen for conditioning (greedy D-optimal).
+//! - [`plot`]: maps of the tool position error over the workspace, before and after.
 //! - [`truth`]: a simulated "true" machine for tests and worked examples.
 //! - [`cli`]: the `nc-send calibrate` command.
 
@@ -24,6 +25,7 @@ pub mod forward;
 pub mod linalg;
 pub mod model;
 pub mod plan;
+pub mod plot;
 pub mod study;
 pub mod truth;
 pub mod write;
