@@ -100,7 +100,7 @@ mod fixed_width {
 }
 
 /// Protocol version, exchanged in the handshake; both sides must agree.
-pub const PROTOCOL_VERSION: u16 = 10;
+pub const PROTOCOL_VERSION: u16 = 11;
 /// Largest unencoded frame body (sequence number, message and CRC), bytes: a planned
 /// helix with every field at its widest fits.
 pub const MAX_BODY: usize = 384;
@@ -294,12 +294,39 @@ pub enum Control {
     /// (a controlled stop if still moving, alarm `HostTimeout`, job kept). 0: the
     /// short watch (MDI, and any job of a host that does not send this). Valid until
     /// the job ends (protocol 10).
+    ///
+    /// `mark` names the program and where the job starts in it (protocol 11): the
+    /// controller counts the blocks it accepts from there and reports the mark with a
+    /// held job (`HelloAck::mark`), so that a new host can send the rest. A `BeginJob`
+    /// whose mark continues a held job (same program, `first_block` the next block
+    /// the controller never received) adopts that job for the new host, which then
+    /// streams the rest of it.
     BeginJob {
         /// Host silence after which the job is held, ms
         /// ([`crate::controller::MIN_HOST_TIMEOUT_MS`] ..=
         /// [`crate::controller::MAX_HOST_TIMEOUT_MS`], clamped into that range).
         host_timeout_ms: u32,
+        /// The program and the job's first block in it (`program` 0: none).
+        mark: JobMark,
     },
+}
+
+/// A streamed program's identity and how far the controller has received it
+/// (`Control::BeginJob`, `HelloAck::mark`; protocol 11). Kept by the controller with
+/// its job: 24 bytes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct JobMark {
+    /// A 64-bit hash of the program and of what shaped its blocks (0: none).
+    pub program: u64,
+    /// Index in the program of the next block the controller has not received (in
+    /// `BeginJob`: the job's first block).
+    pub next_block: u32,
+    /// The program's blocks.
+    pub total_blocks: u32,
+    /// NC line of the last block received (in `BeginJob`: 0).
+    pub last_line: u32,
+    /// The program's last NC line.
+    pub total_lines: u32,
 }
 
 /// Messages from the host to the controller.
@@ -526,6 +553,9 @@ pub enum CtrlMsg {
         queue_capacity: u16,
         /// An earlier session's unfinished job, if one is queued or held.
         held: Option<HeldJob>,
+        /// The held job's program and how far it was received (`Control::BeginJob`),
+        /// if it was streamed with one (protocol 11).
+        mark: Option<JobMark>,
         /// Identity of the controller's machine configuration.
         machine: u32,
     },

@@ -45,7 +45,9 @@ use crate::interp::{Event, Executor};
 use crate::kinematics::hexapod_xy_map::MapBuilder;
 use crate::kinematics::{Joints, MachineKinematics, Unreachable};
 use crate::planner::Planner;
-use crate::protocol::{Alarm, Aux, FrameDecoder, HeldJob, State, MAX_BODY, MAX_FRAME, NO_JOINT};
+use crate::protocol::{
+    Alarm, Aux, FrameDecoder, HeldJob, JobMark, State, MAX_BODY, MAX_FRAME, NO_JOINT,
+};
 use crate::stepper::{StepScheduler, StepTrain};
 pub use actuators::{Inputs, Outputs};
 use safety::{alarm_of, UNHOMED};
@@ -118,6 +120,9 @@ pub struct Controller {
     /// short link-loss watch. (16 bits: it fits the controller's padding, and the
     /// firmware's static RAM has no room for more.)
     patience: u16,
+    /// The streamed program's identity and how far it was received
+    /// (`Control::BeginJob`), kept with its job for a new host (`HelloAck::mark`).
+    mark: JobMark,
     assembler: crate::store::Assembler,
     store_pending: bool,
     planner: Planner,
@@ -281,6 +286,7 @@ impl Controller {
             at!((*p).orphan).write(None);
             at!((*p).job_open).write(false);
             at!((*p).patience).write(0);
+            at!((*p).mark).write(JobMark::default());
             at!((*p).assembler).write(crate::store::Assembler::new());
             at!((*p).store_pending).write(false);
             Planner::init_at(at!((*p).planner), pose);

@@ -14,8 +14,8 @@ use crate::config::MachineConfig;
 use crate::planner::PushError;
 use crate::protocol::{
     decode_block_into, encode_ack, encode_frame_with, encode_status, Alarm, AlarmCause, Control,
-    CtrlMsg, HeldJob, HostMsgOf, NakReason, NotBlock, PlannedBlock, State, Status, MAX_BODY,
-    MAX_FRAME, NO_JOINT, PROTOCOL_VERSION,
+    CtrlMsg, HeldJob, HostMsgOf, JobMark, NakReason, NotBlock, PlannedBlock, State, Status,
+    MAX_BODY, MAX_FRAME, NO_JOINT, PROTOCOL_VERSION,
 };
 use crate::units::TICK_HZ;
 
@@ -183,6 +183,7 @@ impl Controller {
                 } else {
                     self.orphan = None;
                     self.patience = 0;
+                    self.mark = JobMark::default();
                 }
                 self.host = host;
                 self.session = true;
@@ -202,6 +203,10 @@ impl Controller {
                     version: PROTOCOL_VERSION,
                     queue_capacity: QUEUE_CAPACITY as u16,
                     held: self.orphan,
+                    mark: self
+                        .orphan
+                        .filter(|_| self.mark.program != 0)
+                        .map(|_| self.mark),
                     machine: self.machine_id,
                 });
             }
@@ -284,6 +289,8 @@ impl Controller {
                 self.expected_seq = seq.wrapping_add(1);
                 self.ack_due = true;
                 self.job_open = true;
+                self.mark.next_block = self.mark.next_block.wrapping_add(1);
+                self.mark.last_line = planned.block.line;
             }
             Err(PushError::Full) => self.nak(NakReason::QueueFull),
             Err(PushError::Geometry(_)) => self.nak(NakReason::BadBlock),
@@ -384,6 +391,7 @@ impl Controller {
             }
             Control::Abort => {
                 self.orphan = None;
+                self.mark = JobMark::default();
                 self.job_open = false;
                 self.patience = 0;
                 self.clear_held_link_loss();
@@ -428,13 +436,32 @@ impl Controller {
             Control::Home => self.home(),
             Control::EndJob => {
                 self.job_open = false;
+                self.mark = JobMark::default();
                 if self.state == State::Starved {
                     self.state = State::Idle;
                     self.patience = 0;
                 }
             }
-            Control::BeginJob { host_timeout_ms } => {
+            Control::BeginJob {
+                host_timeout_ms,
+                mark,
+            } => {
                 use super::{MAX_HOST_TIMEOUT_MS, MIN_HOST_TIMEOUT_MS, PATIENCE_UNIT_TICKS};
+                if self.orphan.is_some() {
+                    // Only the rest of the held job's own program adopts it (it stays
+                    // held until `Resume`); anything else leaves it as it is.
+                    let own = &self.mark;
+                    if mark.program == 0
+                        || mark.program != own.program
+                        || mark.next_block != own.next_block
+                    {
+                        return;
+                    }
+                    self.orphan = None;
+                    self.job_open = true;
+                } else {
+                    self.mark = mark;
+                }
                 let unit_ms = PATIENCE_UNIT_TICKS * 1000 / TICK_HZ;
                 self.patience = match host_timeout_ms {
                     0 => 0,

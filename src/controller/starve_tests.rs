@@ -71,6 +71,7 @@ fn streaming(ms: u32) -> Controller {
         1,
         Control::BeginJob {
             host_timeout_ms: ms,
+            mark: JobMark::default(),
         },
     );
     c
@@ -200,6 +201,7 @@ fn a_host_timeout_is_clamped_into_its_range() {
         2,
         Control::BeginJob {
             host_timeout_ms: u32::MAX,
+            mark: JobMark::default(),
         },
     );
     assert_eq!(c.patience_ticks(), MAX_HOST_TIMEOUT_MS);
@@ -215,4 +217,72 @@ fn an_abort_of_a_starved_job_ends_it_where_it_stands() {
     silent(&mut c, 2);
     assert_eq!((c.state(), c.pose()[0]), (State::Idle, 10_000_000));
     assert_eq!(c.silence_limit(), LINK_LOSS_TICKS);
+}
+
+/// Issue 33: a held job keeps its program's mark (hash, next block never received);
+/// a new host that sends the rest of the same program adopts the job and streams on,
+/// one with another program or another block index leaves it held.
+#[test]
+fn a_held_job_reports_how_far_its_program_came_and_its_rest_continues_it() {
+    let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
+    c.unlock();
+    c.receive(&frame(0, &hello(&c, 1)));
+    let mark = JobMark {
+        program: 0xfeed,
+        next_block: 0,
+        total_blocks: 3,
+        last_line: 0,
+        total_lines: 9,
+    };
+    let begin = |mark| Control::BeginJob {
+        host_timeout_ms: 2_000,
+        mark,
+    };
+    control(&mut c, 1, begin(mark));
+    c.receive(&frame(1, &line(0, 10, 50, 4)));
+    c.receive(&frame(2, &line(10, 20, 50, 6)));
+    silent(&mut c, 3_000);
+    assert_eq!((c.state(), c.pose()[0]), (State::Hold, 20_000_000));
+    c.receive(&frame(0, &hello(&c, 2)));
+    let got = replies(&mut c)
+        .into_iter()
+        .find_map(|m| match m {
+            CtrlMsg::HelloAck { mark, .. } => mark,
+            _ => None,
+        })
+        .expect("HelloAck carries the held job's mark");
+    let expect = JobMark {
+        next_block: 2,
+        last_line: 6,
+        ..mark
+    };
+    assert_eq!(got, expect);
+    // Another program, or a block index that skips or repeats: still held.
+    for (i, wrong) in [
+        JobMark {
+            program: 0xbeef,
+            ..expect
+        },
+        JobMark {
+            next_block: 1,
+            ..expect
+        },
+        JobMark::default(),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        control(&mut c, 10 + i as u16, begin(wrong));
+        assert!(c.status().orphan, "{wrong:?}");
+    }
+    // The rest of the same program: adopted; its block runs after the resume.
+    control(&mut c, 20, begin(expect));
+    assert!(!c.status().orphan);
+    c.receive(&frame(1, &line(20, 30, 50, 9)));
+    control(&mut c, 21, Control::Resume);
+    // Within the host timeout (2 s): starved at the end of the new block.
+    silent(&mut c, 1_000);
+    assert_eq!((c.state(), c.pose()[0]), (State::Starved, 30_000_000));
+    control(&mut c, 22, Control::EndJob);
+    assert_eq!(c.state(), State::Idle);
 }

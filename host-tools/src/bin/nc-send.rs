@@ -129,8 +129,17 @@ enum Command {
     /// paused or held): a controlled stop if anything moves, then idle.
     Abort,
     /// Continue the job the controller holds (another host's unfinished job, or a
-    /// job paused or held) and wait until it ends or pauses again.
-    Resume,
+    /// job paused or held) and wait until it ends or pauses again. With PROGRAM (the
+    /// held job's own, checked by its hash), the blocks the controller never received
+    /// are streamed after it, to the program's end.
+    Resume {
+        /// The held job's program: its blocks not yet on the controller are sent.
+        program: Option<PathBuf>,
+        /// Run only what is queued on the controller, although blocks of the program
+        /// were never sent (the result is then `incomplete`, exit 7).
+        #[arg(long)]
+        queued_only: bool,
+    },
     /// Serve Grbl 1.1's text protocol to a sender (CNCjs, UGS, bCNC) on a
     /// pseudo-terminal, and with --tcp on a TCP port, until Ctrl-C (docs/senders.md).
     Grbl {
@@ -375,7 +384,14 @@ fn run(args: &Args) -> Result<i32, Failure> {
         Some(cmd @ (Command::Grbl { .. } | Command::Serve { .. })) => {
             serve(args, cmd, &machine, &opts, &interrupts)
         }
-        Some(cmd) => command(args, cmd, &machine, &opts, interrupts),
+        Some(cmd) => {
+            let mut opts = opts.clone();
+            if matches!(cmd, Command::Resume { .. }) {
+                // The rest of a program streams as a program does.
+                opts.link.host_timeout = Some(host_timeout);
+            }
+            command(args, cmd, &machine, &opts, interrupts)
+        }
         None => {
             let program = args
                 .program
@@ -459,6 +475,8 @@ fn run_program(
     } else {
         let mut opts = opts.clone();
         opts.sim.deviation = Some(compiled.deviation_meter());
+        // The controller keeps it with the job: `resume PROGRAM` sends the rest.
+        opts.link.mark = job::program_mark(blocks, job::program_lines(program));
         job::run_blocks(
             machine,
             &program.display().to_string(),
@@ -502,6 +520,7 @@ fn command(
     let mut op = Operator::new(Progress::new(Style::for_stderr(quiet), 0), interrupts, None);
     // A simulator has no operator: its pauses resume by themselves, as in a program run.
     op.auto_resume = matches!(opts.target, Target::Sim);
+    let mut incomplete = None;
     let (status, result, code, extra, held) = job::with_link(machine, opts, |link| {
         let held = link.held();
         let moves = matches!(cmd, Command::Jog { .. } | Command::Mdi { .. });
@@ -534,7 +553,21 @@ fn command(
                 link.release_held();
                 (link.wait_idle(&mut op)?, None)
             }
-            Command::Resume => (resume(link, &mut op)?, None),
+            Command::Resume {
+                program,
+                queued_only,
+            } => {
+                let r = job::resume(
+                    link,
+                    program.as_deref(),
+                    *queued_only,
+                    machine,
+                    opts,
+                    &mut op,
+                )?;
+                incomplete = r.incomplete;
+                (r.end, r.blocks_sent)
+            }
             Command::Grbl { .. } | Command::Serve { .. } | Command::Calibrate(_) => {
                 unreachable!("served by grbl::run and station::run")
             }
@@ -545,6 +578,8 @@ fn command(
                 ("alarm", exit::ALARM)
             }
             JobEnd::Done if matches!(cmd, Command::Abort) => ("aborted", exit::OK),
+            // Only what was queued ran: the program is not done.
+            JobEnd::Done if incomplete.is_some() => ("incomplete", exit::HELD),
             JobEnd::Done => ("done", exit::OK),
             JobEnd::Alarm(_) => ("alarm", exit::ALARM),
             JobEnd::Aborted => ("aborted", exit::STOPPED),
@@ -556,6 +591,9 @@ fn command(
         Ok((status, result, code, extra, held))
     })?;
     print_status(&status, machine, result, extra, held, quiet);
+    if let Some(m) = incomplete.filter(|_| result == "incomplete") {
+        eprintln!("INCOMPLETE: {}", job::missing_text(&m));
+    }
     Ok(code)
 }
 
@@ -585,31 +623,6 @@ fn jog<T: Transport>(
         (feed / 60.0 * scale).round() as i64,
     )?;
     job::move_and_wait(link, cmd, op)
-}
-
-/// `resume`: a held job, or another host's job still running out its queue.
-fn resume<T: Transport>(link: &mut Link<T>, op: &mut Operator) -> Result<JobEnd, Failure> {
-    let s = link.request_status()?;
-    // A held job, or another host's job still running out its queue.
-    let running_orphan = s.state == pkmc::protocol::State::Running && link.held().is_some();
-    if s.state != pkmc::protocol::State::Hold && !running_orphan {
-        return Err(Failure::new(
-            exit::ALARM,
-            format!(
-                "{}: nothing to resume: the controller is {}",
-                pkmc_host::link::Transport::name(link.transport()),
-                job::state_text(&s)
-            ),
-        ));
-    }
-    link.control(Control::Resume)?;
-    link.release_held();
-    let end = link.wait_resumed(op)?;
-    if end == JobEnd::Done {
-        // What was queued has run: the job is complete on the controller.
-        link.control(Control::EndJob)?;
-    }
-    Ok(end)
 }
 
 /// What `status` (and the other single commands) print: a line, the alarm and a held

@@ -23,6 +23,7 @@ use std::path::Path;
 mod commands;
 mod compile;
 mod report;
+mod resume;
 mod sim_server;
 
 pub use commands::{
@@ -36,6 +37,7 @@ pub use report::{
     describe_alarm, pose_text, print_report, status_json, CompressionSummary, LinesExecuted,
     PreflightSummary, Report,
 };
+pub use resume::{missing_text, program_lines, program_mark, resume, Resumed};
 use sim_server::outcome_of;
 pub use sim_server::{SimOutcome, SimServer, SimSetup};
 

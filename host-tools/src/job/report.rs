@@ -379,9 +379,11 @@ pub fn print_report(report: &Report, json: bool, check: bool) {
         let _ = writeln!(
             out,
             "PAUSED: a program pause or tool change, and no operator here to resume it (stdin \
-             is not a terminal): the job stays held on the controller with the blocks sent \
-             so far ({} of {}); `nc-send resume` continues them, `nc-send abort` drops them",
-            report.link.blocks_sent, report.blocks_sent
+             is not a terminal): the job stays held on the controller, which was sent \
+             {} of the program's {} blocks and keeps the program's mark; `nc-send resume \
+             {}` (the same file and options) resumes it and sends the rest to the end, \
+             `nc-send abort` drops it",
+            report.link.blocks_sent, report.blocks_sent, report.program
         );
     }
 }

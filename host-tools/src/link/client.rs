@@ -227,6 +227,7 @@ impl<T: Transport> Link<T> {
             stats: ClientStats::default(),
             their_machine: 0,
             held: None,
+            held_mark: None,
             axis_vmax: core::array::from_fn(|i| machine.axes[i].max_velocity),
             machine: machine.clone(),
         };
@@ -249,9 +250,11 @@ impl<T: Transport> Link<T> {
                             version,
                             queue_capacity,
                             held,
+                            mark,
                             machine,
                         } => {
                             link.held = held;
+                            link.held_mark = mark;
                             if version != PROTOCOL_VERSION {
                                 return Err(LinkError::Version {
                                     port: link.io.name().into(),
@@ -310,9 +313,16 @@ impl<T: Transport> Link<T> {
         }
     }
 
+    /// The held job's program and how far the controller received it, if it was
+    /// streamed with a mark (`Control::BeginJob`).
+    pub fn held_mark(&self) -> Option<pkmc::protocol::JobMark> {
+        self.held.and(self.held_mark)
+    }
+
     /// Marks the held job as dealt with (resumed or aborted by this host).
     pub fn release_held(&mut self) {
         self.held = None;
+        self.held_mark = None;
     }
 
     /// Block-queue capacity the controller announced.

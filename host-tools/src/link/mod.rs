@@ -118,6 +118,9 @@ pub struct LinkOptions {
     /// controller starves on host silence and holds the job after this long. `None`:
     /// the short link-loss watch (MDI, the bridge's lines).
     pub host_timeout: Option<Duration>,
+    /// The program's identity and first block, sent with `Control::BeginJob` and kept
+    /// by the controller with the job (`program` 0: none; see `nc-send resume`).
+    pub mark: pkmc::protocol::JobMark,
 }
 
 impl Default for LinkOptions {
@@ -128,6 +131,13 @@ impl Default for LinkOptions {
             link_timeout: LINK_TIMEOUT,
             keepalive: KEEPALIVE,
             host_timeout: None,
+            mark: pkmc::protocol::JobMark {
+                program: 0,
+                next_block: 0,
+                total_blocks: 0,
+                last_line: 0,
+                total_lines: 0,
+            },
         }
     }
 }
@@ -162,6 +172,8 @@ pub struct Link<T: Transport> {
     their_machine: u32,
     /// An earlier session's job the controller holds (from `HelloAck`).
     held: Option<pkmc::protocol::HeldJob>,
+    /// The held job's program mark (from `HelloAck`).
+    held_mark: Option<pkmc::protocol::JobMark>,
     axis_vmax: [i64; 6],
     /// The machine, for planning the blocks before they are streamed.
     machine: MachineConfig,

@@ -81,22 +81,81 @@ impl<T: Transport> Link<T> {
                 return Ok(JobEnd::Alarm(a));
             }
         }
+        self.begin_job(self.opts.mark)?;
+        let pose = start_status.pose;
+        let done = start_status.blocks_done;
+        self.stream_job(blocks, pose, &start_status, done, hooks)
+    }
+
+    /// Takes over the held job of an earlier host whose program is `mark` (as the
+    /// controller reported it: `next_block` the first block it never received) and
+    /// streams the rest of it, `rest` (the program's blocks from `next_block` on,
+    /// the first starting at `start`), to the end: the held job is adopted
+    /// (`BeginJob` with its mark), resumed, and fed on.
+    pub fn continue_job(
+        &mut self,
+        mark: pkmc::protocol::JobMark,
+        rest: &[Block],
+        start: [i64; 6],
+        hooks: &mut dyn JobHooks,
+    ) -> Result<JobEnd, LinkError> {
+        let queued = self.held.map_or(0, |h| h.queued as u32);
+        self.begin_job(mark)?;
+        let s = self.request_status()?;
+        if s.orphan {
+            return Err(LinkError::JobHeld {
+                port: self.port(),
+                job: self.held.unwrap_or(pkmc::protocol::HeldJob {
+                    host: 0,
+                    line: s.line,
+                    done: 0,
+                    queued: 0,
+                    state: s.state,
+                }),
+            });
+        }
+        self.release_held();
+        hooks.status(&s);
+        self.control(Control::Resume)?;
+        // The earlier host's blocks still queued complete first: they count in
+        // `blocks_done` (from 0 at this session's `Hello`) before this job's.
+        self.stream_job(rest, start, &s, queued, hooks)
+    }
+
+    /// `Control::BeginJob` for a streamed program (with the host timeout set).
+    fn begin_job(&mut self, mark: pkmc::protocol::JobMark) -> Result<(), LinkError> {
         if let Some(t) = self.opts.host_timeout {
             // A streamed program: host silence starves it, and holds it only after
             // `t` (the short watch stays for MDI and the bridge's lines).
             let ms = t.as_millis().clamp(1, u32::MAX as u128) as u32;
             self.control(Control::BeginJob {
                 host_timeout_ms: ms,
+                mark,
             })?;
         }
-        let mut job = JobState::new(self.next_seq, self.capacity, &start_status);
+        Ok(())
+    }
+
+    /// Streams `blocks` (the first starting at `pose`) as a job whose status at the
+    /// start is `start_status`; the controller's `blocks_done` is `done_before` when
+    /// the first of them starts.
+    fn stream_job(
+        &mut self,
+        blocks: &[Block],
+        pose: [i64; 6],
+        start_status: &Status,
+        done_before: u32,
+        hooks: &mut dyn JobHooks,
+    ) -> Result<JobEnd, LinkError> {
+        let mut job = JobState::new(self.next_seq, self.capacity, start_status);
+        job.done_before = done_before;
         job.planned_ms.push(0.0);
         job.arcs_before.push(0);
         let mut fed = Fed {
             blocks: Vec::with_capacity(blocks.len()),
-            plans: Plans::new(start_status.pose, &self.machine),
+            plans: Plans::new(pose, &self.machine),
             kin: MachineKinematics::new(&self.machine),
-            end: start_status.pose,
+            end: pose,
             open: true,
             last_fed: Instant::now(),
         };
