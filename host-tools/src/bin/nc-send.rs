@@ -279,6 +279,22 @@ fn target(args: &Args, found: &mut Option<String>) -> Result<(), Failure> {
 /// The longest link timeout accepted, s (one hour).
 const MAX_LINK_TIMEOUT_S: f64 = 3600.0;
 
+/// `--link-timeout` and `--max-buffered-ms` within what can work.
+fn check_link_args(args: &Args) -> Result<(), Failure> {
+    if !(args.link_timeout > 0.0 && args.link_timeout <= MAX_LINK_TIMEOUT_S) {
+        return Err(bad(format!(
+            "--link-timeout {}: must be more than 0 and at most {MAX_LINK_TIMEOUT_S} s",
+            args.link_timeout
+        )));
+    }
+    if args.max_buffered_ms == 0 {
+        return Err(bad(
+            "--max-buffered-ms 0: must be at least 1 (with 0 no block could ever be sent)",
+        ));
+    }
+    Ok(())
+}
+
 fn run(args: &Args) -> Result<i32, Failure> {
     let machine = load_machine(args)?;
     if let Some(Command::Calibrate(c)) = &args.command {
@@ -313,17 +329,7 @@ fn run(args: &Args) -> Result<i32, Failure> {
         cut_after_bytes: Some(n),
         ..FaultConfig::new(0.0, args.seed)
     }));
-    if !(args.link_timeout > 0.0 && args.link_timeout <= MAX_LINK_TIMEOUT_S) {
-        return Err(bad(format!(
-            "--link-timeout {}: must be more than 0 and at most {MAX_LINK_TIMEOUT_S} s",
-            args.link_timeout
-        )));
-    }
-    if args.max_buffered_ms == 0 {
-        return Err(bad(
-            "--max-buffered-ms 0: must be at least 1 (with 0 no block could ever be sent)",
-        ));
-    }
+    check_link_args(args)?;
     if !args.sim && (args.link_faults.is_some() || args.link_cut_after.is_some()) {
         return Err(bad(
             "--link-faults needs --sim: only the simulator's line can be corrupted (--check \
