@@ -48,10 +48,12 @@ async fn dro(page: &Page) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    pkmc_no_browser,
+    ignore = "needs Chromium and chromedriver on PATH (Debian: chromium, chromium-driver)"
+)]
 async fn h4_page_marks_errors_runs_holds_resumes_jogs_teaches_and_agrees_with_nc_send_status() {
-    let Some(mut st) = Station::start(H4).await else {
-        return;
-    };
+    let mut st = Station::start(H4).await;
     let page = st.page("operator").await;
     page.wait(
         "pkmc.machine && pkmc.lastStatus && pkmc.lock && pkmc.lock.holder === pkmc.you",
@@ -289,10 +291,12 @@ async fn h4_page_marks_errors_runs_holds_resumes_jogs_teaches_and_agrees_with_nc
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    pkmc_no_browser,
+    ignore = "needs Chromium and chromedriver on PATH (Debian: chromium, chromium-driver)"
+)]
 async fn hexapod_page_runs_moves_one_arm_shares_its_state_and_stops_a_jog_when_its_page_closes() {
-    let Some(mut st) = Station::start(HEXAPOD).await else {
-        return;
-    };
+    let mut st = Station::start(HEXAPOD).await;
     let first = st.page("first").await;
     first
         .wait(
@@ -459,15 +463,16 @@ fn http_status(url: &str, path_and_query: &str, extra_headers: &str) -> String {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    pkmc_no_browser,
+    ignore = "needs Chromium and chromedriver on PATH (Debian: chromium, chromium-driver)"
+)]
 async fn cartesian_page_steps_overrides_stops_e_stops_saves_and_loads_teach_behind_a_token() {
-    let Some(mut st) = Station::start_with(
+    let mut st = Station::start_with(
         "examples/machines/cartesian-xyz.toml",
         &["--token", "s3cret"],
     )
-    .await
-    else {
-        return;
-    };
+    .await;
     // The token: nothing without it, and no socket for a page of another origin.
     assert!(st.url.ends_with("/?token=s3cret"), "{}", st.url);
     assert!(
@@ -675,9 +680,7 @@ async fn report_page_responsiveness_during_3d_chips() {
         );
         return;
     }
-    let Some(mut st) = Station::start(H4).await else {
-        return;
-    };
+    let mut st = Station::start(H4).await;
     let page = st.page("report").await;
     page.wait(
         "pkmc.lastStatus && pkmc.lock && pkmc.lock.holder === pkmc.you",
