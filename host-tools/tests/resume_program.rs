@@ -118,3 +118,54 @@ fn a_tool_change_with_no_terminal_keeps_the_programs_place_and_resume_program_en
     assert_eq!(end["joints"], reference["final_joints"], "{end}");
     assert!(end["alarm"].is_null(), "{end}");
 }
+
+/// `--from LINE` (LinuxCNC's run-from-line): 3D_Chips restarted at line 2400, in the
+/// middle of its cut, on `--sim` ends where the whole program ends (pose, joints and
+/// drive steps); its pre-flight covers only the restart; a line past the end and line
+/// 0 are refused by name.
+#[test]
+fn a_restart_from_a_middle_line_ends_where_the_whole_program_does() {
+    let Some(chips) = chips() else { return };
+    let chips = chips.to_str().unwrap();
+    let whole = common::ok(&common::nc_send(&["--sim", "--report", "json", chips]));
+    let from = common::ok(&common::nc_send(&[
+        "--sim", "--report", "json", "--from", "2400", chips,
+    ]));
+    for key in [
+        "result",
+        "final_state",
+        "final_pose",
+        "final_joints",
+        "final_joint_steps",
+    ] {
+        assert_eq!(from[key], whole[key], "{key}: {from}");
+    }
+    let (n, all) = (
+        from["blocks_sent"].as_u64().unwrap(),
+        whole["blocks_sent"].as_u64().unwrap(),
+    );
+    assert!(
+        n < all / 2 + 20,
+        "the restart sends the rest only: {n} of {all}"
+    );
+    let t = from["run_time_s"].as_f64().unwrap();
+    assert!(t < whole["run_time_s"].as_f64().unwrap() * 0.6, "{t}");
+    // The dry run's pre-flight starts at the restart.
+    let check = |extra: &[&str]| {
+        let mut a = vec!["--check", "--report", "json"];
+        a.extend_from_slice(extra);
+        a.push(chips);
+        common::ok(&common::nc_send(&a))["preflight"]["samples"]
+            .as_u64()
+            .unwrap()
+    };
+    assert!(check(&["--from", "2400"]) < check(&[]));
+    for (line, says) in [
+        ("99999", "no block at or after line 99999"),
+        ("0", "lines count from 1"),
+    ] {
+        let out = common::nc_send(&["--sim", "--from", line, chips]);
+        assert_eq!(out.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&out.stderr).contains(says));
+    }
+}

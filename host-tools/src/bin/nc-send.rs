@@ -95,6 +95,9 @@ struct Args {
     /// Merging: a turn sharper than this between two moves stays a corner, degrees.
     #[arg(long, value_name = "DEGREES", default_value_t = 30.0)]
     corner_deg: f64,
+    /// Restart the program from this NC line, its modal state rebuilt (docs/nc-send.md).
+    #[arg(long, value_name = "LINE")]
+    from: Option<u32>,
     /// The G-code program.
     program: Option<PathBuf>,
     #[command(subcommand)]
@@ -463,8 +466,15 @@ fn run_program(
     interrupts: Interrupts,
     quiet: bool,
 ) -> Result<i32, Failure> {
-    let compiled = job::compile_job(program, machine, &opts.tools, opts.compress.as_ref())?;
-    let blocks = &compiled.blocks;
+    let (compiled, restart) = match args.from {
+        Some(line) => job::from_line::compile_from(program, machine, opts, line, !quiet)
+            .map(|(c, r)| (c, Some(r)))?,
+        None => (
+            job::compile_job(program, machine, &opts.tools, opts.compress.as_ref())?,
+            None,
+        ),
+    };
+    let (blocks, name) = (&compiled.blocks, program.display().to_string());
     let style = Style::for_stderr(quiet);
     let keys = if quiet || args.check {
         None
@@ -476,21 +486,19 @@ fn run_program(
     }
     let mut op = Operator::new(Progress::new(style, blocks.len()), interrupts, keys);
     op.auto_resume = args.check || matches!(opts.target, Target::Sim);
-    let result = if args.check {
+    let result = if let (true, Some(r)) = (args.check, &restart) {
+        let from = job::from_line::restarted(&compiled, r, machine.home);
+        job::check_compiled(machine, &name, &from, opts, &mut op)
+    } else if args.check {
         job::check(machine, program, opts, &mut op)
     } else {
         let mut opts = opts.clone();
-        opts.sim.deviation = Some(compiled.deviation_meter());
+        // A restart's path is not the programmed one from the machine's pose.
+        opts.sim.deviation = restart.is_none().then(|| compiled.deviation_meter());
         // The controller keeps it with the job: `resume PROGRAM` sends the rest.
-        opts.link.mark = job::program_mark(blocks, job::program_lines(program));
-        job::run_blocks(
-            machine,
-            &program.display().to_string(),
-            blocks,
-            &opts,
-            &mut op,
-        )
-        .map(|mut r| {
+        opts.link.mark = job::from_line::mark_for(&compiled, restart.as_ref(), program);
+        let at = |pose| job::from_line::blocks_at(blocks, restart.as_ref(), pose);
+        job::run_blocks_at(machine, &name, &at, &opts, &mut op).map(|mut r| {
             let summary = job::CompressionSummary::of(&compiled, r.sim.as_ref());
             r.report.compression = Some(summary);
             r

@@ -22,6 +22,7 @@ use std::path::Path;
 
 mod commands;
 mod compile;
+pub mod from_line;
 mod report;
 mod resume;
 mod sim_server;
@@ -243,7 +244,20 @@ pub fn run_blocks(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
+    run_blocks_at(machine, program, &|_| blocks.into(), opts, hooks)
+}
+
+/// [`run_blocks`] of the blocks `blocks_at` makes for the pose where the controller
+/// stands once connected (a restart's approach starts there: [`from_line`]).
+pub fn run_blocks_at<'b>(
+    machine: &MachineConfig,
+    program: &str,
+    blocks_at: &dyn Fn([i64; 6]) -> std::borrow::Cow<'b, [Block]>,
+    opts: &RunOptions<'_>,
+    hooks: &mut dyn JobHooks,
+) -> Result<RunResult, Failure> {
     let (server, path) = open_target(machine, opts)?;
+    let mut count = 0;
     let outcome = (|| -> Result<(JobEnd, Status, ClientStats), Failure> {
         let io = open_port(&path, server.as_ref())?;
         let mut link = Link::connect(io, machine, opts.link)?;
@@ -252,7 +266,9 @@ pub fn run_blocks(
             let status = link.request_status()?;
             return Ok((end, status, link.stats));
         }
-        let end = link.run_job(blocks, hooks)?;
+        let blocks = blocks_at(link.request_status()?.pose);
+        count = blocks.len();
+        let end = link.run_job(&blocks, hooks)?;
         let status = link.request_status()?;
         Ok((end, status, link.stats))
     })();
@@ -261,15 +277,7 @@ pub fn run_blocks(
         None => None,
     };
     let (end, status, stats) = outcome?;
-    let report = Report::new(
-        machine,
-        program,
-        blocks.len(),
-        &end,
-        &status,
-        sim.as_ref(),
-        stats,
-    );
+    let report = Report::new(machine, program, count, &end, &status, sim.as_ref(), stats);
     Ok(RunResult { report, sim })
 }
 

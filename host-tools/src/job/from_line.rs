@@ -1,0 +1,257 @@
+//! `nc-send --from LINE`: a program restarted from a line, as LinuxCNC's run-from-line
+//! does: the whole program is interpreted from its first line (so every modal group,
+//! offset, unit, feed, tool and parameter is what it would be at LINE), the blocks
+//! before LINE are not run, and the machine is brought to where LINE starts by a
+//! move planned safely from wherever it stands:
+//!
+//! 1. straight up (Z only, rapid) to the clearance: the highest Z of the present pose,
+//!    of LINE's start, and of every block end before LINE;
+//! 2. across at the clearance (rapid) to LINE's start in X Y A B C;
+//! 3. the spindle and coolant as the program had set them before LINE (the last M3,
+//!    M4 or M5 with its speed; M7 and M8 on unless an M9 followed); the tool is the
+//!    program's last tool change before LINE, which is not repeated (it is named);
+//! 4. down to LINE's start at the feed of the first feed move from LINE on (a rapid if
+//!    there is none), as the program would have entered it.
+//!
+//! The pre-flight covers those moves and the rest of the program from LINE, not what
+//! comes before it.
+
+use super::{exit, Compiled, Failure};
+use pkmc::config::AXES;
+use pkmc::protocol::{Aux, Block, Motion};
+
+/// Where a program restarts, and what to set up before it.
+#[derive(Clone, Debug)]
+pub struct Restart {
+    /// The line asked for.
+    pub line: u32,
+    /// Index of the first block run (the first at or after `line`).
+    pub index: usize,
+    /// Pose where that block starts.
+    pub start: [i64; AXES],
+    /// The clearance height before the approach (the highest Z so far).
+    pub clearance: i64,
+    /// Spindle and coolant blocks to restore, in order.
+    pub aux: Vec<Block>,
+    /// The tool the program loaded last before `line` (0: none).
+    pub tool: u32,
+    /// Feed of the plunge to `start`, nm/s (0: a rapid).
+    pub feed: i64,
+}
+
+/// Finds the restart at `line` in `compiled` (named `name`).
+pub fn restart_at(compiled: &Compiled, line: u32, name: &str) -> Result<Restart, Failure> {
+    let blocks = &compiled.blocks;
+    if line == 0 {
+        return Err(Failure::new(
+            exit::BAD_INPUT,
+            "--from 0: lines count from 1",
+        ));
+    }
+    let Some(index) = blocks.iter().position(|b| b.line >= line) else {
+        let last = blocks.last().map_or(0, |b| b.line);
+        return Err(Failure::new(
+            exit::BAD_INPUT,
+            format!("--from {line}: {name} has no block at or after line {line} (its last is line {last})"),
+        ));
+    };
+    let moves = |b: &&Block| !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_));
+    let before = &blocks[..index];
+    let start = before
+        .iter()
+        .rev()
+        .find(moves)
+        .map_or(compiled.start, |b| b.target);
+    let clearance = before
+        .iter()
+        .filter(moves)
+        .map(|b| b.target[2])
+        .fold(start[2].max(compiled.start[2]), i64::max);
+    let (mut spindle, mut mist, mut flood, mut tool) = (None, None, None, 0);
+    for b in before {
+        match b.motion {
+            Motion::Aux(Aux::SpindleOff | Aux::SpindleCw(_) | Aux::SpindleCcw(_)) => {
+                spindle = Some(*b)
+            }
+            Motion::Aux(Aux::Mist) => mist = Some(*b),
+            Motion::Aux(Aux::Flood) => flood = Some(*b),
+            Motion::Aux(Aux::CoolantOff) => (mist, flood) = (None, None),
+            Motion::Aux(Aux::ToolChange(t)) => tool = t,
+            _ => {}
+        }
+    }
+    let aux = [spindle, mist, flood].into_iter().flatten().collect();
+    let feed = blocks[index..]
+        .iter()
+        .find(|b| b.motion != Motion::Rapid && moves(b))
+        .map_or(0, |b| b.feed);
+    Ok(Restart {
+        line,
+        index,
+        start,
+        clearance,
+        aux,
+        tool,
+        feed,
+    })
+}
+
+impl Restart {
+    /// The approach from `pose` to the restart's start, then the program's blocks
+    /// from the restart on (see the module documentation).
+    pub fn blocks_from(&self, pose: [i64; AXES], blocks: &[Block]) -> Vec<Block> {
+        let z = self.clearance.max(pose[2]);
+        let at = |motion, target, feed| Block {
+            line: self.line,
+            motion,
+            target,
+            feed,
+            tolerance_nm: 0,
+        };
+        let mut up = pose;
+        up[2] = z;
+        let mut across = self.start;
+        across[2] = z;
+        let mut out = vec![at(Motion::Rapid, up, 0), at(Motion::Rapid, across, 0)];
+        out.extend(self.aux.iter().map(|b| Block {
+            line: self.line,
+            ..*b
+        }));
+        let down = if self.feed > 0 {
+            Motion::Linear
+        } else {
+            Motion::Rapid
+        };
+        out.push(at(down, self.start, self.feed));
+        out.extend_from_slice(&blocks[self.index..]);
+        out
+    }
+
+    /// Blocks of the approach (before the program's own).
+    pub fn approach_len(&self) -> usize {
+        3 + self.aux.len()
+    }
+
+    /// What the restart does, in words (for stderr).
+    pub fn describe(&self, name: &str) -> String {
+        let tool = match self.tool {
+            0 => String::new(),
+            t => format!(
+                "; the tool must be T{t} (the program's last tool change before it, not repeated)"
+            ),
+        };
+        format!(
+            "{name}: from line {} (block {}): up to Z{:.4}, across to X{:.4} Y{:.4}, {} \
+             spindle/coolant block(s) restored, down to Z{:.4}{tool}",
+            self.line,
+            self.index + 1,
+            self.clearance as f64 / 1e6,
+            self.start[0] as f64 / 1e6,
+            self.start[1] as f64 / 1e6,
+            self.aux.len(),
+            self.start[2] as f64 / 1e6
+        )
+    }
+}
+
+/// Compiles `path` for a restart at `line` (said on stderr with `say`): the program interpreted from its start,
+/// its pre-flight from the restart on (the approach from the program's start pose,
+/// then the rest). Returns the whole program and the restart.
+pub fn compile_from(
+    path: &std::path::Path,
+    machine: &pkmc::config::MachineConfig,
+    opts: &super::RunOptions<'_>,
+    line: u32,
+    say: bool,
+) -> Result<(Compiled, Restart), Failure> {
+    let text = crate::input::read_text(path, crate::input::MAX_PROGRAM_BYTES)
+        .map_err(|m| Failure::new(exit::BAD_INPUT, m))?;
+    let name = path.display().to_string();
+    let compress = opts.compress.as_ref();
+    let (compiled, _) =
+        super::compile_located(&text, &name, machine, machine.home, &opts.tools, compress)
+            .map_err(|errs| {
+                let lines: Vec<String> = errs.iter().map(|d| d.to_string()).collect();
+                Failure::new(
+                    exit::BAD_INPUT,
+                    format!(
+                        "{}\n{} error(s); nothing was sent",
+                        lines.join("\n"),
+                        errs.len()
+                    ),
+                )
+            })?;
+    let restart = restart_at(&compiled, line, &name)?;
+    let run = restart.blocks_from(compiled.start, &compiled.blocks);
+    let pre = crate::analysis::preflight::check(&run, machine, compiled.start);
+    if !pre.findings.is_empty() {
+        let lines: Vec<String> = pre
+            .findings
+            .iter()
+            .map(|f| format!("{name}:{}: {} (at {:?})", f.line, f.what, f.at))
+            .collect();
+        return Err(Failure::new(
+            exit::PREFLIGHT,
+            format!(
+                "{}\n{} pre-flight problem(s) from line {line} on; nothing was sent",
+                lines.join("\n"),
+                lines.len()
+            ),
+        ));
+    }
+    if say {
+        eprintln!("{}", restart.describe(&name));
+    }
+    Ok((compiled, restart))
+}
+
+/// The blocks to stream when the machine stands at `pose`: the program, or the
+/// restart's approach and the rest.
+pub fn blocks_at<'b>(
+    blocks: &'b [Block],
+    restart: Option<&Restart>,
+    pose: [i64; AXES],
+) -> std::borrow::Cow<'b, [Block]> {
+    match restart {
+        Some(r) => r.blocks_from(pose, blocks).into(),
+        None => blocks.into(),
+    }
+}
+
+/// `compiled` as it runs from `restart` when the machine stands at `pose`: the
+/// approach and the rest, each block standing for itself.
+pub fn restarted(compiled: &Compiled, restart: &Restart, pose: [i64; AXES]) -> Compiled {
+    let blocks = restart.blocks_from(pose, &compiled.blocks);
+    let n = restart.approach_len();
+    // The approach stands for itself; the rest for the programmed moves it merged.
+    let first = compiled.source[restart.index].start;
+    let mut programmed = blocks[..n].to_vec();
+    programmed.extend_from_slice(&compiled.programmed[first..]);
+    let mut source: Vec<_> = (0..n).map(|i| i..i + 1).collect();
+    source.extend(
+        compiled.source[restart.index..]
+            .iter()
+            .map(|r| r.start - first + n..r.end - first + n),
+    );
+    Compiled {
+        blocks,
+        programmed,
+        source,
+        start: pose,
+    }
+}
+
+/// The program's mark for a run of `compiled` (from its start, or from `restart`:
+/// the controller's count of blocks reaches the restart's block after the approach).
+pub fn mark_for(
+    compiled: &Compiled,
+    restart: Option<&Restart>,
+    path: &std::path::Path,
+) -> pkmc::protocol::JobMark {
+    let mut mark = super::program_mark(&compiled.blocks, super::program_lines(path));
+    if let Some(r) = restart {
+        let approach = r.approach_len() as u32;
+        mark.next_block = (r.index as u32).wrapping_sub(approach);
+    }
+    mark
+}
