@@ -2,12 +2,17 @@
 //! Prints the port to open, then serves until interrupted. `--link-faults RATE`
 //! puts the faulty line of `pkmc_host::sim::faults` between the port and the controller;
 //! `--inject FAULT@SECONDS` injects a fault into the simulated machine (docs/safety.md).
+//! With `--link PATH` it serves through a symbolic link at PATH (printed instead of the
+//! pseudo-terminal), and SIGUSR1 unplugs it: the pseudo-terminal is closed and the link
+//! removed for `--replug-secs`, while the machine runs on, then a new one is served
+//! at the same PATH (as a board's USB cable pulled and plugged back).
 
 use clap::Parser;
 use pkmc_host::sim::faults::{FaultConfig, FaultyLine};
 use serialport::SerialPort;
 use std::path::PathBuf;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 /// Serve a simulated pkmc controller on a pseudo-terminal.
 #[derive(Parser, Debug)]
@@ -34,6 +39,12 @@ struct Args {
     /// the host streams: for a page or a sender that watches the machine move.
     #[arg(long)]
     real_time: bool,
+    /// Serve through a symbolic link at this path (printed in place of the port).
+    #[arg(long, value_name = "PATH")]
+    link: Option<PathBuf>,
+    /// How long SIGUSR1 unplugs the port (needs --link), seconds.
+    #[arg(long, value_name = "S", default_value_t = 2.0)]
+    replug_secs: f64,
     /// Write a CSV row per tick (as `nc-send --trace`) to this file, a line at a time: it is
     /// whole up to the last tick however the simulator is ended.
     #[arg(long, value_name = "FILE.csv")]
@@ -71,23 +82,72 @@ fn serve(args: Args) -> anyhow::Result<()> {
             .map_err(|e| anyhow::anyhow!("--trace {}: {e}", p.display()))?;
         sim.trace_to(Box::new(std::io::LineWriter::new(f)))?;
     }
-    let (mut master, slave) = serialport::TTYPort::pair()?;
-    println!("{}", slave.name().unwrap_or_default());
-    let stop = AtomicBool::new(false);
+    if args.link.is_none() && args.replug_secs != 2.0 {
+        anyhow::bail!("--replug-secs needs --link (the path a replugged port comes back at)");
+    }
+    if !(args.replug_secs.is_finite() && (0.0..=3600.0).contains(&args.replug_secs)) {
+        anyhow::bail!("--replug-secs {}: 0 to 3600 s", args.replug_secs);
+    }
+    if args.link.is_some() {
+        // SIGUSR1: unplug (see the module documentation).
+        let handler = on_usr1 as extern "C" fn(libc::c_int);
+        unsafe { libc::signal(libc::SIGUSR1, handler as libc::sighandler_t) };
+    }
     let mut line = args
         .link_faults
         .map(|rate| FaultyLine::new(FaultConfig::new(rate, args.seed)));
-    pkmc_host::sim::serve::serve(
-        &mut sim,
-        &mut master,
-        &stop,
-        line.as_mut(),
-        if args.real_time {
-            pkmc_host::sim::serve::ServeClock::RealTime
-        } else {
-            pkmc_host::sim::serve::ServeClock::Paced
-        },
-        &mut |_| {},
-    )?;
-    Ok(())
+    let clock = if args.real_time {
+        pkmc_host::sim::serve::ServeClock::RealTime
+    } else {
+        pkmc_host::sim::serve::ServeClock::Paced
+    };
+    let mut first = true;
+    loop {
+        let (mut master, slave) = serialport::TTYPort::pair()?;
+        let name = slave.name().unwrap_or_default();
+        if let Some(l) = &args.link {
+            // Replaced at once (a new link renamed over the old path).
+            let tmp = l.with_extension("pkmc-sim-new");
+            let _ = std::fs::remove_file(&tmp);
+            std::os::unix::fs::symlink(&name, &tmp)?;
+            std::fs::rename(&tmp, l)?;
+        }
+        if first {
+            match &args.link {
+                Some(l) => println!("{}", l.display()),
+                None => println!("{name}"),
+            }
+            first = false;
+        }
+        pkmc_host::sim::serve::serve(
+            &mut sim,
+            &mut master,
+            &UNPLUG,
+            line.as_mut(),
+            clock,
+            &mut |_| {},
+        )?;
+        // Unplugged: the port goes away, the machine runs on.
+        drop((master, slave));
+        if let Some(l) = &args.link {
+            let _ = std::fs::remove_file(l);
+        }
+        let until = Instant::now() + Duration::from_secs_f64(args.replug_secs);
+        let mut next = Instant::now();
+        while Instant::now() < until {
+            if sim.busy() {
+                sim.tick()?;
+            }
+            next += Duration::from_millis(1);
+            std::thread::sleep(next.saturating_duration_since(Instant::now()));
+        }
+        UNPLUG.store(false, Ordering::SeqCst);
+    }
+}
+
+/// Set by SIGUSR1: the served port is unplugged for `--replug-secs`.
+static UNPLUG: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_usr1(_: libc::c_int) {
+    UNPLUG.store(true, Ordering::SeqCst);
 }

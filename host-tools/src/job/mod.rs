@@ -23,6 +23,7 @@ use std::path::Path;
 mod commands;
 mod compile;
 pub mod from_line;
+mod replug;
 mod report;
 mod resume;
 mod sim_server;
@@ -266,9 +267,17 @@ pub fn run_blocks_at<'b>(
             let status = link.request_status()?;
             return Ok((end, status, link.stats));
         }
-        let blocks = blocks_at(link.request_status()?.pose);
+        let pose = link.request_status()?.pose;
+        let blocks = blocks_at(pose);
         count = blocks.len();
-        let end = link.run_job(&blocks, hooks)?;
+        let end = match link.run_job(&blocks, hooks) {
+            // The port went away (a cable pulled): wait for it and go on.
+            Err(e) if replug::applies(&e, opts, &path) => {
+                drop(link);
+                return replug::rejoin(e, &path, machine, opts, &blocks, pose, hooks);
+            }
+            r => r?,
+        };
         let status = link.request_status()?;
         Ok((end, status, link.stats))
     })();
