@@ -31,12 +31,14 @@ impl StallGuard {
             pose: s.pose,
             joints: s.joints,
         };
-        // Idle or in alarm: waiting for the host. Held: braking (the pose changes) or
-        // waiting for the operator (a pause, a tool change, a feed hold). The reported
-        // speed is no sign of progress: it is not zeroed during a dwell.
+        // Idle, starved (its queue run out, stopped on the path) or in alarm: waiting
+        // for the host (a simulator runs free meanwhile, so a host resending after a
+        // damaged frame is seconds late in simulated time). Held: braking (the pose
+        // changes) or waiting for the operator (a pause, a tool change, a feed hold).
+        // The reported speed is no sign of progress: it is not zeroed during a dwell.
         let at_rest = matches!(
             s.state,
-            State::Idle | State::Alarm | State::EStop | State::Hold
+            State::Idle | State::Starved | State::Alarm | State::EStop | State::Hold
         );
         if at_rest || self.mark != Some(mark) {
             self.mark = Some(mark);
