@@ -206,33 +206,43 @@ def motion_span(points):
 # ---------------------------------------------------------------- the programmed path
 
 def canon(program):
-    """rs274's canonical moves of `program`: a polyline of (point, is_feed) with arcs
-    cut into chords within 0.05 um. None where the path is not in machine
-    coordinates (an offset or a rotation in force, other units)."""
+    """rs274's canonical moves of `program` in machine coordinates: a polyline of
+    (point, is_feed), arcs cut into chords within 0.05 um. The canon gives positions in
+    program units without the work offsets (LinuxCNC's task adds G5x and G92 to them):
+    inches are scaled, the offsets added. None where an XY rotation is in force."""
     home = tempfile.mkdtemp(prefix="sbs-rs274-")
     tool_table(f"{home}/tool.tbl")
     out = subprocess.run(["rs274", "-g", "-t", f"{home}/tool.tbl", program], capture_output=True,
                          text=True, env=dict(os.environ, HOME=home), timeout=600)
     shutil.rmtree(home, ignore_errors=True)
     pts = [((0.0, 0.0, 0.0), False)]
-    plane = "XY"
+    plane, scale = "XY", 1.0
+    g5x, g92 = [0.0] * 3, [0.0] * 3
+
+    def machine(p):
+        return tuple(scale * p[k] + g5x[k] + g92[k] for k in range(3))
+
     for line in out.stdout.splitlines():
         head, _, rest = line.partition("(")
         name = head.split()[-1] if head.split() else ""
         args = [a.strip() for a in rest.rstrip(")").split(",")] if rest else []
-        if name in ("SET_G5X_OFFSET", "SET_G92_OFFSET"):
-            if any(abs(float(a)) > 1e-9 for a in args[1 if name == "SET_G5X_OFFSET" else 0:]):
-                return None
+        if name == "USE_LENGTH_UNITS":
+            scale = 25.4 if "INCH" in args[0] else 1.0
+        elif name == "SET_G5X_OFFSET":
+            g5x = [scale * float(a) for a in args[1:4]]
+        elif name == "SET_G92_OFFSET":
+            g92 = [scale * float(a) for a in args[0:3]]
         elif name == "SET_XY_ROTATION" and abs(float(args[0])) > 1e-9:
-            return None
-        elif name == "USE_LENGTH_UNITS" and "MM" not in args[0]:
             return None
         elif name == "SELECT_PLANE":
             plane = args[0].split("_")[-1]
         elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
-            pts.append((tuple(float(a) for a in args[:3]), name == "STRAIGHT_FEED"))
+            pts.append((machine([float(a) for a in args[:3]]), name == "STRAIGHT_FEED"))
         elif name == "ARC_FEED":
-            pts += arc_points(pts[-1][0], [float(a) for a in args[:6]], plane)
+            a = [float(v) for v in args[:6]]
+            # The arc in program units from the previous end, then to machine.
+            prev = tuple((pts[-1][0][k] - g5x[k] - g92[k]) / scale for k in range(3))
+            pts += [(machine(q), True) for q, _ in arc_points(prev, a, plane)]
     return pts
 
 
@@ -253,7 +263,8 @@ def arc_points(start, a, plane):
         while sweep >= -1e-12:
             sweep -= 2 * math.pi
         sweep -= 2 * math.pi * (-turns - 1)
-    step = 2 * math.acos(max(-1.0, 1 - 5e-5 / r)) if r > 5e-5 else math.pi
+    tol = 5e-5 / 25.4  # in the arc's own units (the stricter of mm and inch)
+    step = 2 * math.acos(max(-1.0, 1 - tol / r)) if r > tol else math.pi
     n = max(1, int(math.ceil(abs(sweep) / step)))
     out = []
     for k in range(1, n + 1):
@@ -401,7 +412,12 @@ def main():
         if o.only and not any(name.startswith(p) for p in o.only):
             continue
         path_pts = canon(path) if both and shutil.which("rs274") else None
-        t_p, s_p = run_pkmc(o.nc_send, path, machine)
+        try:
+            t_p, s_p = run_pkmc(o.nc_send, path, machine)
+        except RuntimeError as e:
+            why = str(e).splitlines()[0].replace("|", "/")[:120]
+            print(f"| {name} | – | refused: {why} | – | – | – |", flush=True)
+            continue
         dev_p = deviation(s_p, path_pts) if path_pts else (None, None)
         row = [name, "–", f"{t_p:.3f}", "–", "–", fmt(dev_p)]
         if both and lcnc:
