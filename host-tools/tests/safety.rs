@@ -136,16 +136,19 @@ fn a_drive_fault_names_its_joint() {
     check_position_kept(&r, &[400.0; 3], None);
 }
 
+/// A link lost for 1.5 s during a program no longer alarms (issue 33, docs/safety.md):
+/// the controller runs on with what it has queued, waits on the path if that runs out
+/// (Starved), and the job completes when the link is back, where it would have ended.
+/// Jogs, MDI and homing keep the 1 s LinkLoss watch (the core's starve tests).
 #[test]
-fn a_lost_link_stops_the_machine_on_the_path_and_the_host_hears_why() {
+fn a_lost_link_during_a_program_starves_it_and_the_job_completes() {
     let r = run("linkloss", None, "link-loss@0.8", LONG_X);
-    expect_alarm(&r, "LinkLoss", None, "Alarm");
-    let at = r.report["alarm_time_s"].as_f64().unwrap();
-    // The controller stops after 1 s without a frame, counted on the simulated clock
-    // from the last frame it received (which runs ahead of the host's wall clock, so
-    // that frame may precede the cut): after the cut, at most 1 s after it.
-    assert!((0.8..=1.8 + T).contains(&at), "alarm at {at} s");
-    check_stop(&r, 1000.0);
+    assert_eq!(r.code, Some(0), "exit code: {}", r.report);
+    assert_eq!(r.report["result"], "done");
+    assert_eq!(r.report["alarms"].as_array().map(Vec::len), Some(0));
+    assert_eq!(r.report["final_state"], "Idle");
+    assert_eq!(r.report["final_pose"]["x"].as_f64().unwrap(), 90.0);
+    assert_eq!(r.report["drive_violations"], 0);
     check_position_kept(&r, &[400.0; 3], None);
 }
 
