@@ -626,22 +626,9 @@ impl<'a> Core<'a> {
         let sp = read32(&self.uc, flash::BASE);
         let pc = read32(&self.uc, flash::BASE + 4);
         let uc = &mut self.uc;
-        for r in [
-            RegisterARM::R0,
-            RegisterARM::R1,
-            RegisterARM::R2,
-            RegisterARM::R3,
-            RegisterARM::R4,
-            RegisterARM::R5,
-            RegisterARM::R6,
-            RegisterARM::R7,
-            RegisterARM::R8,
-            RegisterARM::R9,
-            RegisterARM::R10,
-            RegisterARM::R11,
-            RegisterARM::R12,
-        ] {
-            set(uc, r, 0);
+        // R0–R12 (SP and LR are set below).
+        for r in &GPRS[..13] {
+            set(uc, *r, 0);
         }
         set(uc, RegisterARM::IPSR, 0);
         set(uc, RegisterARM::CONTROL, 0);

@@ -100,18 +100,8 @@ pub fn compile_compressed(
     tools: &gcode::ToolTable,
     compress: Option<&gcode::compress::Settings>,
 ) -> Result<Compiled, Failure> {
-    let (compiled, report) =
-        compile_located(text, name, machine, start, tools, compress).map_err(|errs| {
-            let lines: Vec<String> = errs.iter().map(|d| d.to_string()).collect();
-            Failure::new(
-                exit::BAD_INPUT,
-                format!(
-                    "{}\n{} error(s); nothing was sent",
-                    lines.join("\n"),
-                    errs.len()
-                ),
-            )
-        })?;
+    let (compiled, report) = compile_located(text, name, machine, start, tools, compress)
+        .map_err(|errs| refused(&errs))?;
     if !report.findings.is_empty() {
         let lines = findings_text(name, &report.findings);
         return Err(Failure::new(
@@ -165,6 +155,20 @@ pub fn compile_located(
     };
     let report = crate::analysis::preflight::check(&compiled.blocks, machine, start);
     Ok((compiled, report))
+}
+
+/// The front end's errors as the failure nc-send reports: each at its place, and how
+/// many; nothing was sent.
+pub(super) fn refused(errs: &[gcode::Diagnostic]) -> Failure {
+    let lines: Vec<String> = errs.iter().map(|d| d.to_string()).collect();
+    Failure::new(
+        exit::BAD_INPUT,
+        format!(
+            "{}\n{} error(s); nothing was sent",
+            lines.join("\n"),
+            errs.len()
+        ),
+    )
 }
 
 /// The pre-flight findings as lines of text: a run of the same problem on consecutive

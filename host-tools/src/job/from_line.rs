@@ -170,17 +170,7 @@ pub fn compile_from(
     let compress = opts.compress.as_ref();
     let (compiled, _) =
         super::compile_located(&text, &name, machine, machine.home, &opts.tools, compress)
-            .map_err(|errs| {
-                let lines: Vec<String> = errs.iter().map(|d| d.to_string()).collect();
-                Failure::new(
-                    exit::BAD_INPUT,
-                    format!(
-                        "{}\n{} error(s); nothing was sent",
-                        lines.join("\n"),
-                        errs.len()
-                    ),
-                )
-            })?;
+            .map_err(|errs| super::compile::refused(&errs))?;
     let restart = restart_at(&compiled, line, &name)?;
     let run = restart.blocks_from(compiled.start, &compiled.blocks);
     let pre = crate::analysis::preflight::check(&run, machine, compiled.start);
