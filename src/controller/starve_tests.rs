@@ -3,30 +3,9 @@
 //! timeout, holds it for take-over; never drops it. Jogs and MDI keep the short watch.
 
 use super::*;
-use crate::protocol::{
-    decode_frame, encode_frame, AlarmCause, Block, Control, CtrlMsg, FrameReader, HostMsg, Motion,
-    Pushed, PROTOCOL_VERSION,
-};
+use crate::protocol::{AlarmCause, Block, Control, CtrlMsg, HostMsg, Motion, PROTOCOL_VERSION};
 
-fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
-    let mut f = [0u8; MAX_FRAME];
-    let n = encode_frame(seq, msg, &mut f).unwrap();
-    f[..n].to_vec()
-}
-
-fn replies(c: &mut Controller) -> Vec<CtrlMsg> {
-    let mut buf = [0u8; TX_CAPACITY];
-    let n = c.transmit(&mut buf);
-    let mut reader = FrameReader::new();
-    let mut out = Vec::new();
-    for &b in &buf[..n] {
-        if let Pushed::Frame(f) = reader.push(b) {
-            let mut body = [0u8; MAX_BODY];
-            out.push(decode_frame::<CtrlMsg>(f, &mut body).unwrap().1);
-        }
-    }
-    out
-}
+use super::tests::{frame, replies};
 
 /// A line along X from `from_mm` to `x_mm` at `feed_mm_s` on the Cartesian machine,
 /// planned by the host (alone: from rest to rest).

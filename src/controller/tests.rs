@@ -10,13 +10,13 @@ use crate::protocol::{
 use crate::protocol::{Block, Motion};
 use crate::servo::Trip;
 
-fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
+pub(super) fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
     let mut f = [0u8; MAX_FRAME];
     let n = encode_frame(seq, msg, &mut f).unwrap();
     f[..n].to_vec()
 }
 
-fn replies(c: &mut Controller) -> Vec<CtrlMsg> {
+pub(super) fn replies(c: &mut Controller) -> Vec<CtrlMsg> {
     let mut buf = [0u8; TX_CAPACITY];
     let n = c.transmit(&mut buf);
     let mut reader = FrameReader::new();
