@@ -18,14 +18,14 @@ use crate::config::{
     ConfigError, GeometryField, AXIS_NAMES, BOARD_STEPS_PER_TICK, GEOMETRY_MAX, MAX_STEPPERS,
     MAX_WINDOW,
 };
-use crate::geometry::GeometryError;
-use crate::homing::{HomeEvent, Phase};
+use crate::drive::homing::{HomeEvent, Phase};
+use crate::drive::servo::Trip;
 use crate::kinematics::Unreachable;
-use crate::planner::PushError;
-use crate::protocol::{Alarm, AlarmCause, FrameError, NakReason, State, NO_JOINT};
-use crate::servo::Trip;
-use crate::store::StoreError;
+use crate::motion::geometry::GeometryError;
+use crate::motion::planner::PushError;
 use crate::units::{NM_PER_MM, TICK_NS};
+use crate::wire::store::StoreError;
+use crate::wire::{Alarm, AlarmCause, FrameError, NakReason, State, NO_JOINT};
 
 /// Where a text goes: a `core::fmt` formatter, or a defmt one on the MCU.
 trait Out {

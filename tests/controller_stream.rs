@@ -7,11 +7,12 @@ mod common;
 
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::controller::{Controller, Inputs};
-use pkmc::protocol::{
-    decode_frame, encode_frame, Block, CtrlMsg, FrameReader, HostMsg, Motion, Pushed, State,
-    MAX_BODY, MAX_FRAME, PROTOCOL_VERSION,
-};
+use pkmc::motion::block::{Block, Motion};
 use pkmc::units::TICK_HZ;
+use pkmc::wire::{
+    decode_frame, encode_frame, CtrlMsg, FrameReader, HostMsg, Pushed, State, MAX_BODY, MAX_FRAME,
+    PROTOCOL_VERSION,
+};
 use proptest::prelude::*;
 
 fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
@@ -249,7 +250,7 @@ proptest! {
                     let e = [c[0] + co * dx - s * dy, c[1] + s * dx + co * dy];
                     let m = Motion::Arc {
                         center: [nm(c[0]), nm(c[1])],
-                        plane: pkmc::protocol::Plane::Xy,
+                        plane: pkmc::motion::block::Plane::Xy,
                         clockwise: turn < 0.0,
                         turns: 0,
                     };
@@ -280,7 +281,7 @@ proptest! {
         let mut at = *c.pose();
         let mut start = *c.pose();
         for b in &blocks {
-            let path = pkmc::geometry::Path::new(b, &start).unwrap();
+            let path = pkmc::motion::geometry::Path::new(b, &start).unwrap();
             for k in 0..=32 {
                 path.pose_at(&start, (path.length << 16) / 32 * k, &mut at);
                 prop_assume!(at[0].abs() < 95_000_000 && at[1].abs() < 95_000_000);

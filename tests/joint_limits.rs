@@ -8,8 +8,9 @@ mod common;
 use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
 use pkmc::controller::{Controller, Inputs};
 use pkmc::kinematics::MachineKinematics;
-use pkmc::protocol::{encode_frame, Block, HostMsg, Motion, State, MAX_FRAME, PROTOCOL_VERSION};
+use pkmc::motion::block::{Block, Motion};
 use pkmc::units::{NDEG_PER_DEG, NM_PER_MM, TICK_HZ};
+use pkmc::wire::{encode_frame, HostMsg, State, MAX_FRAME, PROTOCOL_VERSION};
 use proptest::prelude::*;
 
 fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
@@ -240,7 +241,7 @@ proptest! {
                 tolerance_nm: if blend { 10_000 } else { 0 },
             };
             // The whole curve within reach.
-            let path = pkmc::geometry::Path::new(&b, &from).unwrap();
+            let path = pkmc::motion::geometry::Path::new(&b, &from).unwrap();
             let mut at = [0i64; AXES];
             for k in 0..=40 {
                 path.pose_at(&from, (path.length << 16) / 40 * k, &mut at);

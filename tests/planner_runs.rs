@@ -5,10 +5,9 @@ mod common;
 
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::controller::{Controller, Inputs};
-use pkmc::protocol::{
-    encode_frame, Block, HostMsg, Motion, Plane, State, MAX_FRAME, PROTOCOL_VERSION,
-};
+use pkmc::motion::block::{Block, Motion, Plane};
 use pkmc::units::{NM_PER_MM, TICK_HZ};
+use pkmc::wire::{encode_frame, HostMsg, State, MAX_FRAME, PROTOCOL_VERSION};
 
 fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
     let mut f = [0u8; MAX_FRAME];

@@ -13,7 +13,7 @@
 use libfuzzer_sys::fuzz_target;
 use pkmc::config::MachineConfig;
 use pkmc::controller::{Controller, Inputs, TX_CAPACITY};
-use pkmc::protocol::{encode_frame, HostMsg, MAX_FRAME, PROTOCOL_VERSION};
+use pkmc::wire::{encode_frame, HostMsg, MAX_FRAME, PROTOCOL_VERSION};
 
 fn framed(seq: u16, msg: &HostMsg) -> Option<Vec<u8>> {
     let mut f = [0u8; MAX_FRAME];

@@ -4,9 +4,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use pkmc::protocol::{
-    decode_frame, encode_frame, CtrlMsg, FrameReader, HostMsg, Pushed, MAX_BODY, MAX_FRAME,
-};
+use pkmc::wire::{decode_frame, encode_frame, CtrlMsg, FrameReader, HostMsg, Pushed, MAX_BODY, MAX_FRAME};
 
 fn round_trip<M>(seq: u16, msg: &M)
 where

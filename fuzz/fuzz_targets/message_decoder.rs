@@ -3,7 +3,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use pkmc::protocol::{CtrlMsg, HostMsg};
+use pkmc::wire::{CtrlMsg, HostMsg};
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(m) = postcard::from_bytes::<HostMsg>(data) {

@@ -10,7 +10,8 @@
 //! the job ended, the simulated motion time and the client's counters.
 
 use pkmc::config::MachineConfig;
-use pkmc::protocol::{Block, Control, Motion};
+use pkmc::motion::block::{Block, Motion};
+use pkmc::wire::Control;
 use pkmc_host::job::{SimServer, SimSetup};
 use pkmc_host::link::{JobEnd, JobHooks, Link, LinkOptions, LinkView, PortTransport};
 use pkmc_host::sim::serve::ServeClock;

@@ -1,5 +1,5 @@
 //! Issue 34: host and controller share one rule for what a valid arc is
-//! (`pkmc::geometry::Path::checked`), and every arc the front end accepts runs: as an
+//! (`pkmc::motion::geometry::Path::checked`), and every arc the front end accepts runs: as an
 //! arc where the rule holds, else as chords within 0.1 µm of it.
 //!
 //! Extreme arcs, written as G-code (millimetres to six decimals, so every position is
@@ -15,10 +15,11 @@
 //! within 0.1 µm of the true arc.
 
 use pkmc::config::{MachineConfig, AXES};
-use pkmc::geometry::Path;
 use pkmc::kinematics::MachineKinematics;
-use pkmc::planner::{plan_into, PlanBlock, Planner, PushError};
-use pkmc::protocol::{self, HostMsg, Motion, PlannedBlock};
+use pkmc::motion::block::{Motion, PlannedBlock};
+use pkmc::motion::geometry::Path;
+use pkmc::motion::planner::{plan_into, PlanBlock, Planner, PushError};
+use pkmc::wire::{self, HostMsg};
 use pkmc_host::gcode::compress::Settings;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed, TestRunner};
@@ -226,7 +227,7 @@ struct Tally {
 /// Runs `blocks` (from `start`) through the controller core as `--check` streams them:
 /// planned, framed, decoded, queued. The index and error of the first refusal.
 fn through_the_controller(
-    blocks: &[pkmc::protocol::Block],
+    blocks: &[pkmc::motion::block::Block],
     start: [i64; AXES],
     machine: &MachineConfig,
 ) -> Result<(), String> {
@@ -236,16 +237,16 @@ fn through_the_controller(
     plan_into(blocks, start, machine, &kin, smoothing, &mut plans)
         .map_err(|(i, e)| format!("the host's planner refused block {i}: {e:?}"))?;
     let mut queue = Planner::new(start);
-    let mut frame = [0u8; protocol::MAX_FRAME];
+    let mut frame = [0u8; wire::MAX_FRAME];
     for (n, (b, p)) in blocks.iter().zip(&plans).enumerate() {
         let planned = PlannedBlock {
             block: *b,
             plan: p.plan(),
         };
         let message = postcard::to_allocvec(&HostMsg::Block(planned)).unwrap();
-        protocol::encode_frame(n as u16, &HostMsg::Block(planned), &mut frame)
+        wire::encode_frame(n as u16, &HostMsg::Block(planned), &mut frame)
             .map_err(|e| format!("block {n} does not fit a frame: {e:?}"))?;
-        let decoded = protocol::decode_block(&message)
+        let decoded = wire::decode_block(&message)
             .ok_or("not a block message")?
             .map_err(|e| format!("block {n} does not decode: {e:?}"))?;
         loop {
@@ -394,7 +395,7 @@ fn check_with_nc_send(text: &str, name: &str) -> (Option<i32>, String) {
 }
 
 /// The streamed blocks of line 3 of `text`, compiled as `--check` compiles it.
-fn line_3_blocks(text: &str) -> Vec<pkmc::protocol::Block> {
+fn line_3_blocks(text: &str) -> Vec<pkmc::motion::block::Block> {
     let (compiled, _) = pkmc_host::job::compile_located(
         text,
         "issue34.ngc",

@@ -39,7 +39,7 @@ fn polyline(program: &Path, machine: Option<&Path>) -> Vec<[f64; 6]> {
     for b in &blocks {
         if !matches!(
             b.motion,
-            pkmc::protocol::Motion::Dwell(_) | pkmc::protocol::Motion::Aux(_)
+            pkmc::motion::block::Motion::Dwell(_) | pkmc::motion::block::Motion::Aux(_)
         ) {
             pts.push(to(&b.target));
         }

@@ -28,8 +28,8 @@
 
 use pkmc::config::MachineConfig;
 use pkmc::kinematics::MachineKinematics;
-use pkmc::planner::{plan_into, Kind, PlanBlock};
-use pkmc::profile::Profile;
+use pkmc::motion::planner::{plan_into, Kind, PlanBlock};
+use pkmc::motion::profile::Profile;
 use std::path::Path;
 
 mod common;
@@ -59,7 +59,7 @@ impl PlannedSpeed {
         let blocks = pkmc_host::job::compile_text(program, "sine", machine, machine.home)
             .unwrap_or_else(|f| panic!("the program compiles: {}", f.message));
         let kin = MachineKinematics::new(machine);
-        let window = pkmc::interp::window_of(machine.motion.smoothing_ticks as u32);
+        let window = pkmc::motion::interp::window_of(machine.motion.smoothing_ticks as u32);
         let mut plan = vec![PlanBlock::default(); blocks.len()];
         plan_into(&blocks, machine.home, machine, &kin, window, &mut plan)
             .unwrap_or_else(|(i, e)| panic!("block {i} plans: {e:?}"));
@@ -70,7 +70,7 @@ impl PlannedSpeed {
                 .get(i + 1)
                 .filter(|n| moves(n))
                 .map_or(0.0, |n| n.entry);
-            let cap = pkmc::planner::cap(b, 100, false);
+            let cap = pkmc::motion::planner::cap(b, 100, false);
             let (p, _) = Profile::plan(b.path.length << 16, b.entry, cap, exit, b.accel);
             let ticks = p.duration() as f64 / 2f64.powi(32);
             let n = ((ticks * 8.0).ceil() as i64).max(8);
@@ -91,7 +91,9 @@ impl PlannedSpeed {
             samples,
             feed_from: feed_from.expect("the program has feed moves"),
             feed_to,
-            time_s: pkmc::planner::planned_ticks(&plan) * pkmc::units::TICK_NS as f64 * 1e-9,
+            time_s: pkmc::motion::planner::planned_ticks(&plan)
+                * pkmc::units::TICK_NS as f64
+                * 1e-9,
         }
     }
 
@@ -344,7 +346,7 @@ fn dense_segments_run_at_the_planned_speed_through_the_real_link() {
 /// refused for want of room, within 1.03 × the plan's time.
 #[test]
 fn tiny_arcs_wait_for_free_bends_and_run_at_the_planned_speed() {
-    const { assert!(400 > 4 * pkmc::planner::BEND_CAPACITY) };
+    const { assert!(400 > 4 * pkmc::motion::planner::BEND_CAPACITY) };
     let mut text = String::from("G21 G90 G17 G64\nG0 X20 Y0\n");
     let at = |deg: f64| {
         let a = deg.to_radians();

@@ -67,7 +67,7 @@ fn the_square_trace_never_exceeds_feed_or_acceleration() {
             .find(|b| b.line == line)
             .expect("line has a block");
         match b.motion {
-            pkmc::protocol::Motion::Rapid => v_max_axis * 3f64.sqrt(),
+            pkmc::motion::block::Motion::Rapid => v_max_axis * 3f64.sqrt(),
             _ => b.feed as f64 * 1e-6,
         }
     };
@@ -237,7 +237,7 @@ fn nc_send_loads_its_machine_into_a_controller_that_has_another_and_it_persists(
     // After a "reset" (a new simulator process on the same flash), the controller
     // comes up with the servo machine it was sent.
     let stored = std::fs::read(&flash).expect("the machine was written to flash");
-    let m = pkmc::store::read_record(&stored).unwrap();
+    let m = pkmc::wire::store::read_record(&stored).unwrap();
     assert_eq!(m.name.as_str(), "cartesian-servo");
     ok(&Sim::start(&flash_arg).send(&job));
 }

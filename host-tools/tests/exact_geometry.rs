@@ -147,7 +147,7 @@ proptest! {
                 prop_assert!(f.message.contains("radius"), "{}", f.message);
             }
             Ok(res) => {
-                let tol = if r0 * 1e6 <= pkmc::geometry::MAX_ARC_RADIUS_NM as f64 + 1.0 {
+                let tol = if r0 * 1e6 <= pkmc::motion::geometry::MAX_ARC_RADIUS_NM as f64 + 1.0 {
                     TOLERANCE_MM
                 } else {
                     CHORDS_MM

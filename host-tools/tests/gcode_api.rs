@@ -109,7 +109,7 @@ fn tool_table_entries_can_be_built_in_code() {
 
 #[test]
 fn canonical_commands_become_protocol_blocks() {
-    use pkmc::protocol::Motion;
+    use pkmc::motion::block::Motion;
     let canon = compile(
         "G0 X1\nG1 Y2 F600\nG2 X2 Y3 I1 J0",
         "t.ngc",

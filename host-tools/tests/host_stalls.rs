@@ -406,13 +406,13 @@ fn a_foreign_hello_mid_job_ends_the_session_with_a_clear_error_and_a_report() {
         .unwrap();
     let pid = host.id();
     std::thread::sleep(Duration::from_millis(2000));
-    let hello = pkmc::protocol::HostMsg::Hello {
-        version: pkmc::protocol::PROTOCOL_VERSION,
-        machine: pkmc::store::identity(&pkmc::config::MachineConfig::cartesian_xyz()),
+    let hello = pkmc::wire::HostMsg::Hello {
+        version: pkmc::wire::PROTOCOL_VERSION,
+        machine: pkmc::wire::store::identity(&pkmc::config::MachineConfig::cartesian_xyz()),
         host: 4242,
     };
-    let mut frame = [0u8; pkmc::protocol::MAX_FRAME];
-    let n = pkmc::protocol::encode_frame(0, &hello, &mut frame).unwrap();
+    let mut frame = [0u8; pkmc::wire::MAX_FRAME];
+    let n = pkmc::wire::encode_frame(0, &hello, &mut frame).unwrap();
     foreign.write_all(&frame[..n]).unwrap();
     let out = wait_within(host, Duration::from_secs(30), "foreign hello");
     let err = String::from_utf8_lossy(&out.stderr);

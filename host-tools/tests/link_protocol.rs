@@ -3,7 +3,8 @@
 //! that no resend can cure, and control commands during a job.
 
 use pkmc::config::MachineConfig;
-use pkmc::protocol::{Block, Control, Motion, Plane, Status};
+use pkmc::motion::block::{Block, Motion, Plane};
+use pkmc::wire::{Control, Status};
 use pkmc_host::link::{JobEnd, JobHooks, Link, LinkError, LinkOptions, LinkView, NoHooks};
 use pkmc_host::sim::serve::InProcess;
 use pkmc_host::sim::Simulator;
@@ -137,7 +138,7 @@ fn an_abort_during_a_job_stops_streaming_and_ends_it_at_rest() {
     };
     assert_eq!(l.run_job(&blocks, &mut hooks).unwrap(), JobEnd::Aborted);
     let s = l.request_status().unwrap();
-    assert_eq!(s.state, pkmc::protocol::State::Idle);
+    assert_eq!(s.state, pkmc::wire::State::Idle);
     assert_eq!(s.free_slots, l.capacity(), "the queue was dropped");
     assert!((s.blocks_done as usize) < blocks.len());
     assert!(
@@ -158,7 +159,7 @@ fn an_immediate_stop_ends_the_job_in_alarm() {
     };
     assert_eq!(l.run_job(&blocks, &mut hooks).unwrap(), JobEnd::Stopped);
     let s = l.request_status().unwrap();
-    assert_eq!(s.state, pkmc::protocol::State::Alarm);
+    assert_eq!(s.state, pkmc::wire::State::Alarm);
     // A new job on a controller in alarm ends at once, reporting it.
     assert!(matches!(
         l.run_job(&blocks[..1], &mut NoHooks).unwrap(),

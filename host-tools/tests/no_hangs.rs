@@ -5,7 +5,8 @@
 //! instead of hanging the suite.
 
 use pkmc::config::MachineConfig;
-use pkmc::protocol::{Block, Control, Motion};
+use pkmc::motion::block::{Block, Motion};
+use pkmc::wire::Control;
 use pkmc_host::job::{self, exit, RunOptions, SimSetup, Target};
 use pkmc_host::link::{JobEnd, Link, LinkError, LinkOptions, NoHooks};
 use pkmc_host::sim::serve::InProcess;
@@ -221,9 +222,15 @@ fn a_simulated_jog_that_cannot_move_stops_as_stalled() {
             // axis the machine lacks: the controller is given a move it cannot make.
             let kin = pkmc::kinematics::MachineKinematics::new(&machine);
             let from = link.request_status()?.pose;
-            let planned =
-                pkmc::planner::plan_jog(&machine, &kin, &from, 3, 5_000_000_000, 1_000_000_000)
-                    .expect("a well-formed jog");
+            let planned = pkmc::motion::planner::plan_jog(
+                &machine,
+                &kin,
+                &from,
+                3,
+                5_000_000_000,
+                1_000_000_000,
+            )
+            .expect("a well-formed jog");
             job::move_and_wait(link, Control::Jog(planned), &mut NoHooks)
         })
         .map(|end| end == JobEnd::Done)
@@ -239,7 +246,7 @@ fn the_stall_error_names_its_line_and_the_simulated_time() {
     let e = LinkError::Stalled {
         port: "in-process simulator".into(),
         line: 12,
-        state: pkmc::protocol::State::Running,
+        state: pkmc::wire::State::Running,
         still: Duration::from_millis(10_500),
     };
     assert_eq!(

@@ -1,9 +1,9 @@
-//! The simulator is paced as the board is (`pkmc::pacing`, `pkmc::debounce`): the
+//! The simulator is paced as the board is (`pkmc::controller::pacing`, `pkmc::drive::debounce`): the
 //! drives follow the controller's commands one tick late, and the switches reach it
 //! through the board's debouncing.
 
 use pkmc::config::MachineConfig;
-use pkmc::protocol::{encode_frame, AlarmCause, Control, HostMsg, MAX_FRAME};
+use pkmc::wire::{encode_frame, AlarmCause, Control, HostMsg, MAX_FRAME};
 use pkmc_host::sim::{FaultKind, Injection, Simulator};
 use std::path::Path;
 
@@ -32,7 +32,7 @@ fn jog_x(sim: &mut Simulator, mm: f64, mm_s: f64) {
     let kin = pkmc::kinematics::MachineKinematics::new(&m);
     let from = *sim.ctrl.pose();
     let planned =
-        pkmc::planner::plan_jog(&m, &kin, &from, 0, (mm * 1e6) as i64, (mm_s * 1e6) as i64)
+        pkmc::motion::planner::plan_jog(&m, &kin, &from, 0, (mm * 1e6) as i64, (mm_s * 1e6) as i64)
             .unwrap();
     control(sim, 1, Control::Jog(planned));
 }

@@ -3,7 +3,7 @@
 //! the machine stops on the path within v²/2a plus one period, then nothing moves,
 //! and the drives stand where the controller believes they are.
 
-use pkmc::protocol::{encode_frame, AlarmCause, Control, HostMsg, State, MAX_FRAME};
+use pkmc::wire::{encode_frame, AlarmCause, Control, HostMsg, State, MAX_FRAME};
 use pkmc_host::sim::Simulator;
 use std::path::Path;
 

@@ -280,7 +280,7 @@ impl MachineConfig {
         // The legs' LQG design, as the machine file's `lqg_gains` (`contour-study
         // --design-lqg`): the identified L(s) at 100 000 counts/mm, weights position
         // 1e-6, integral 0.004, command 1, load noise 2 c.u., encoder noise 29 counts.
-        let leg_lqg = crate::lqg::LqgGains {
+        let leg_lqg = crate::config::LqgGains {
             order: 3,
             phi_minus_i: [
                 [-1.8829388e-3, 3.3761698e-3, 5.70642e-6, 0.0e0],
@@ -363,13 +363,13 @@ mod tests {
 
     #[test]
     fn the_h4_and_hexapod_machines_fit_the_configuration_store() {
-        let mut buf = [0u8; crate::store::MAX_CONFIG_BYTES];
+        let mut buf = [0u8; crate::wire::store::MAX_CONFIG_BYTES];
         for m in [
             MachineConfig::h4_table(),
             MachineConfig::hexapod(),
             MachineConfig::hexapod_xy(),
         ] {
-            let n = crate::store::encode(&m, &mut buf).expect("fits");
+            let n = crate::wire::store::encode(&m, &mut buf).expect("fits");
             let back: MachineConfig = postcard::from_bytes(&buf[..n]).unwrap();
             assert_eq!(back, m);
         }

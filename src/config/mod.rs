@@ -13,8 +13,10 @@
 use serde::{Deserialize, Serialize};
 
 mod builtin;
+mod lqg;
 mod validate;
 
+pub use lqg::{LqgGains, LQG_STATES};
 pub use validate::{BoardChannels, ConfigError, GeometryField};
 
 /// Number of pose axes: X Y Z (linear) and A B C (rotary).
@@ -50,7 +52,7 @@ pub const BOARD_STEPS_PER_TICK: [u32; MAX_STEPPERS] = [
     STEPS_PER_TICK_HRTIM,
 ];
 /// Most ticks of smoothing, the interpolator's moving-average window
-/// ([`MotionConfig::smoothing_ticks`], [`crate::interp`]).
+/// ([`MotionConfig::smoothing_ticks`], [`crate::motion::interp`]).
 pub const MAX_WINDOW: usize = 32;
 
 /// The smoothing window in force for a request of `ticks`: a power of two, at most
@@ -112,7 +114,7 @@ impl StepTiming {
 
     /// Most steps that fit in one tick from `start_ns` after its start (after a DIR
     /// change: from the DIR-setup time), each a [`min_step_period_ns`] apart: the one
-    /// rule of the step scheduler ([`crate::stepper`]) and of the configuration's
+    /// rule of the step scheduler ([`crate::drive::stepper`]) and of the configuration's
     /// speed check.
     ///
     /// [`min_step_period_ns`]: Self::min_step_period_ns
@@ -215,13 +217,13 @@ pub enum Drive {
 }
 
 /// Gains, limits and output stage of one servo channel's position loop, run every
-/// servo period by [`crate::servo::ServoAxis`] (PID on the following error plus velocity
+/// servo period by [`crate::drive::servo::ServoAxis`] (PID on the following error plus velocity
 /// and acceleration feed-forward, LinuxCNC `pid` style).
 ///
 /// "Command units" (c.u.) are the amplifier's input unit, chosen per machine (volts,
 /// or the identified model's "command pulses"); [`dac_per_unit`](Self::dac_per_unit)
 /// turns them into DAC counts. Gains are `f32` because the loop runs in single
-/// precision on the Cortex-M4F FPU (see [`crate::servo`]); equality compares bits.
+/// precision on the Cortex-M4F FPU (see [`crate::drive::servo`]); equality compares bits.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct ServoGains {
     /// Proportional gain, c.u. per encoder count of following error.
@@ -330,7 +332,7 @@ impl PartialEq for ServoGains {
 }
 impl Eq for ServoGains {}
 
-/// How the servo loops of the linear Cartesian axes are coordinated ([`crate::contour`]).
+/// How the servo loops of the linear Cartesian axes are coordinated ([`crate::drive::contour`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum ContourMode {
     /// Each axis on its own (the per-axis feed-forward still applies).
@@ -418,11 +420,11 @@ pub struct ServoConfig {
     /// output stage and feed-forward, and the PID gains.
     pub gains: [ServoGains; MAX_SERVOS],
     /// Each channel's feedback law: 0 the PID of `gains`, k ≥ 1 the LQG design
-    /// `lqg[k − 1]` ([`crate::lqg`]; the feed-forward and limits of `gains` still apply).
+    /// `lqg[k − 1]` ([`crate::drive::lqg`]; the feed-forward and limits of `gains` still apply).
     pub law: [u8; MAX_SERVOS],
     /// The LQG designs the channels use (channels with the same plant share one).
-    pub lqg: heapless::Vec<crate::lqg::LqgGains, MAX_LQG>,
-    /// Coupling of the channels in pose coordinates ([`crate::contour`]).
+    pub lqg: heapless::Vec<crate::config::LqgGains, MAX_LQG>,
+    /// Coupling of the channels in pose coordinates ([`crate::drive::contour`]).
     pub contour: ContourConfig,
 }
 
@@ -436,7 +438,7 @@ impl ServoConfig {
     };
 
     /// The LQG design channel `c` runs, if it runs one.
-    pub fn lqg_of(&self, c: usize) -> Option<&crate::lqg::LqgGains> {
+    pub fn lqg_of(&self, c: usize) -> Option<&crate::config::LqgGains> {
         let k = *self.law.get(c)? as usize;
         k.checked_sub(1).and_then(|i| self.lqg.get(i))
     }
@@ -461,7 +463,7 @@ pub struct JointConfig {
     pub homing: Homing,
 }
 
-/// Homing of one joint by [`crate::homing`]: search for the home switch, back off it
+/// Homing of one joint by [`crate::drive::homing`]: search for the home switch, back off it
 /// slowly until it releases, then (optionally) go on to the encoder's index pulse.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Homing {

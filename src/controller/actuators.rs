@@ -4,10 +4,10 @@
 
 use super::Controller;
 use crate::config::{ContourMode, Drive, MAX_SERVOS, MAX_STEPPERS};
+use crate::drive::servo::{Trip, SETPOINT_FRAC_BITS};
+use crate::drive::stepper::StepTrain;
 use crate::kinematics::MachineKinematics;
-use crate::protocol::State;
-use crate::servo::{Trip, SETPOINT_FRAC_BITS};
-use crate::stepper::StepTrain;
+use crate::wire::State;
 
 /// What the hardware reports each tick.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -25,7 +25,7 @@ pub struct Inputs {
     /// Fault input of each joint's drive (bit j), active: stepper drives and servo
     /// amplifiers alike (the servo loops also see their amplifier's line).
     pub drive_fault: u16,
-    /// Trip latched by each servo channel's loop ([`crate::contour::ServoBank`]).
+    /// Trip latched by each servo channel's loop ([`crate::drive::contour::ServoBank`]).
     pub servo_trip: [Option<Trip>; MAX_SERVOS],
 }
 
@@ -35,7 +35,7 @@ pub struct Outputs {
     /// Step train of each stepper channel; `forward` already includes DIR inversion.
     pub steps: [StepTrain; MAX_STEPPERS],
     /// Target of each servo channel at the end of this tick, counts × 2^16: load into
-    /// [`crate::contour::ServoBank::load_tick`].
+    /// [`crate::drive::contour::ServoBank::load_tick`].
     pub servo_target: [i64; MAX_SERVOS],
     /// Stepper drives enabled.
     pub enable: bool,

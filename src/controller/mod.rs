@@ -4,12 +4,12 @@
 //! back bytes for it, and [`Controller::tick`] advances motion by one period T
 //! ([`crate::units::TICK_NS`]) given the inputs read from the hardware, returning the
 //! outputs to apply (step trains per stepper channel, targets per servo channel for
-//! the 10 kHz loops of [`crate::contour::ServoBank`]). The firmware calls `tick` from
+//! the 10 kHz loops of [`crate::drive::contour::ServoBank`]). The firmware calls `tick` from
 //! its timer interrupt; the simulator calls it with simulated time; both run exactly
 //! this code.
 //!
 //! States: after a reset (or a new machine) the controller is locked in `Alarm`
-//! (cause `Unhomed`): it moves once homed (`Home`, state `Homing`, [`crate::homing`])
+//! (cause `Unhomed`): it moves once homed (`Home`, state `Homing`, [`crate::drive::homing`])
 //! or unlocked (`AlarmReset`). `Idle` (nothing to do) ⇄ `Running` (executing) ⇄ `Hold`
 //! (feed hold, pause or tool change: decelerating on the path or stopped on it,
 //! resumed by `Resume`). Faults:
@@ -19,7 +19,7 @@
 //! | e-stop input | active (level) | state `EStop`, cause `EStop` |
 //! | limit switch | a joint's switch becomes active (not while that joint homes) | `LimitSwitch`, joint |
 //! | drive fault | a stepper drive's fault input, or a servo amplifier's, while the drives are powered | `DriveFault`, joint |
-//! | following error | a servo loop trips ([`crate::servo`]) | `FollowingError`, joint |
+//! | following error | a servo loop trips ([`crate::drive::servo`]) | `FollowingError`, joint |
 //! | link loss | no valid frame for [`LINK_LOSS_TICKS`] while moving (a jog, MDI, homing) | `LinkLoss` |
 //! | host timeout | a streamed job's host silent for its host timeout (`Control::BeginJob`; before that its queue runs out and the state is `Starved`) | `HostTimeout`; the job is held, not dropped |
 //! | joint travel | a block would take a joint outside its travel | `JointLimit`, joint |
@@ -32,27 +32,27 @@
 //! is refused while an e-stop or a drive fault is still active. The drives stay
 //! enabled in `Alarm` (holding position) and are disabled in `EStop` once stopped; a
 //! tripped servo loop disables its own amplifier. Blocks are planned as they are
-//! queued ([`crate::planner`]); control commands bypass the queue.
+//! queued ([`crate::motion::planner`]); control commands bypass the queue.
 
 mod actuators;
+pub mod pacing;
 mod safety;
 mod session;
 
 use crate::config::{BoardChannels, ConfigError, Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS};
-use crate::contour::ContourMap;
-use crate::homing::Homer;
-use crate::interp::{Event, Executor};
+use crate::drive::homing::Homer;
+use crate::drive::stepper::{StepScheduler, StepTrain};
 use crate::kinematics::hexapod_xy_map::MapBuilder;
+use crate::kinematics::ContourMap;
 use crate::kinematics::{Joints, MachineKinematics, Unreachable};
-use crate::planner::Planner;
-use crate::protocol::{
-    Alarm, Aux, FrameDecoder, HeldJob, JobMark, State, MAX_BODY, MAX_FRAME, NO_JOINT,
-};
-use crate::stepper::{StepScheduler, StepTrain};
+use crate::motion::block::Aux;
+use crate::motion::interp::{Event, Executor};
+use crate::motion::planner::Planner;
+use crate::wire::{Alarm, FrameDecoder, HeldJob, JobMark, State, MAX_BODY, MAX_FRAME, NO_JOINT};
 pub use actuators::{Inputs, Outputs};
 use safety::{alarm_of, UNHOMED};
 
-pub use crate::planner::QUEUE_CAPACITY;
+pub use crate::motion::planner::QUEUE_CAPACITY;
 /// Bytes of outgoing frames buffered between two `transmit` calls.
 pub const TX_CAPACITY: usize = 2048;
 /// Ticks between two unsolicited status messages (50 ms at 1 kHz). Freed queue slots
@@ -96,7 +96,7 @@ pub struct Controller {
     board: BoardChannels,
     kin: MachineKinematics,
     reader: FrameDecoder,
-    tx: crate::ring::ByteRing<TX_CAPACITY>,
+    tx: crate::wire::ring::ByteRing<TX_CAPACITY>,
     /// Scratch for outgoing frames: a body and its encoding (fields, so that no call
     /// clears them).
     tx_body: [u8; MAX_BODY],
@@ -123,7 +123,7 @@ pub struct Controller {
     /// The streamed program's identity and how far it was received
     /// (`Control::BeginJob`), kept with its job for a new host (`HelloAck::mark`).
     mark: JobMark,
-    assembler: crate::store::Assembler,
+    assembler: crate::wire::store::Assembler,
     store_pending: bool,
     planner: Planner,
     exec: Executor,
@@ -214,7 +214,7 @@ impl Prepared {
             steps: StepScheduler::new(&machine.joints, &joints),
             joints,
             servo_joint,
-            machine_id: crate::store::identity(machine),
+            machine_id: crate::wire::store::identity(machine),
         })
     }
 }
@@ -264,7 +264,7 @@ impl Controller {
     unsafe fn write(p: *mut Self, machine: MachineConfig, prep: &Prepared) {
         use core::ptr::addr_of_mut as at;
         let pose = machine.home;
-        let window = crate::interp::window_of(machine.motion.smoothing_ticks as u32);
+        let window = crate::motion::interp::window_of(machine.motion.smoothing_ticks as u32);
         // SAFETY: the caller's promise; each write is to a field of `*p`.
         unsafe {
             at!((*p).map).write(MapBuilder::new(&machine));
@@ -273,7 +273,7 @@ impl Controller {
             at!((*p).board).write(prep.board);
             at!((*p).kin).write(prep.kin);
             at!((*p).reader).write(FrameDecoder::new());
-            at!((*p).tx).write(crate::ring::ByteRing::default());
+            at!((*p).tx).write(crate::wire::ring::ByteRing::default());
             at!((*p).tx_body).write([0; MAX_BODY]);
             at!((*p).tx_frame).write([0; MAX_FRAME]);
             at!((*p).tx_seq).write(0);
@@ -287,7 +287,7 @@ impl Controller {
             at!((*p).job_open).write(false);
             at!((*p).patience).write(0);
             at!((*p).mark).write(JobMark::default());
-            at!((*p).assembler).write(crate::store::Assembler::new());
+            at!((*p).assembler).write(crate::wire::store::Assembler::new());
             at!((*p).store_pending).write(false);
             Planner::init_at(at!((*p).planner), pose);
             Executor::init_at(at!((*p).exec), pose);
@@ -433,7 +433,7 @@ impl Controller {
     }
 
     /// Jerk limitation: smooths the path motion over `window` ticks (1 = off); see
-    /// [`crate::interp`].
+    /// [`crate::motion::interp`].
     pub fn set_smoothing(&mut self, window: u32) {
         self.exec.set_smoothing(window);
     }
@@ -493,7 +493,7 @@ impl Controller {
 
     /// The channels' map to the pose that this tick completed (the hexapod-xy with
     /// contour control, every [`crate::kinematics::hexapod_xy_map::MAP_PHASES`]
-    /// ticks): for [`crate::contour::ServoBank::load_map`], with this tick's outputs.
+    /// ticks): for [`crate::drive::contour::ServoBank::load_map`], with this tick's outputs.
     /// Valid until the next tick.
     pub fn contour_map(&self) -> Option<&ContourMap> {
         self.map_fresh.then(|| self.map.map())

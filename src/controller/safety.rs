@@ -9,10 +9,10 @@
 
 use super::{Controller, Inputs, LINK_LOSS_TICKS};
 use crate::config::{Drive, MAX_SERVOS};
-use crate::homing::{HomeEvent, HomeInputs};
+use crate::drive::homing::{HomeEvent, HomeInputs};
+use crate::drive::servo::Trip;
 use crate::kinematics::{Kinematics, Unreachable};
-use crate::protocol::{Alarm, AlarmCause, State, NO_JOINT};
-use crate::servo::Trip;
+use crate::wire::{Alarm, AlarmCause, State, NO_JOINT};
 
 pub(super) fn alarm_of(why: Unreachable, line: u32) -> Alarm {
     let (cause, joint) = match why {

@@ -11,13 +11,14 @@
 use super::safety::UNHOMED;
 use super::{Controller, LinkStats, Prepared, LINK_LOSS_TICKS, QUEUE_CAPACITY};
 use crate::config::MachineConfig;
-use crate::planner::PushError;
-use crate::protocol::{
-    decode_block_into, encode_ack, encode_frame_with, encode_status, Alarm, AlarmCause, Control,
-    CtrlMsg, HeldJob, HostMsgOf, JobMark, NakReason, NotBlock, PlannedBlock, State, Status,
-    MAX_BODY, MAX_FRAME, NO_JOINT, PROTOCOL_VERSION,
-};
+use crate::motion::block::PlannedBlock;
+use crate::motion::planner::PushError;
 use crate::units::TICK_HZ;
+use crate::wire::{
+    decode_block_into, encode_ack, encode_frame_with, encode_status, Alarm, AlarmCause, Control,
+    CtrlMsg, HeldJob, HostMsgOf, JobMark, NakReason, NotBlock, State, Status, MAX_BODY, MAX_FRAME,
+    NO_JOINT, PROTOCOL_VERSION,
+};
 
 impl Controller {
     /// Ticks since the last valid frame from the host.
@@ -225,7 +226,7 @@ impl Controller {
                 }
                 if self.has_work() {
                     self.send(&CtrlMsg::MachineRefused {
-                        error: crate::store::StoreError::Busy,
+                        error: crate::wire::store::StoreError::Busy,
                     });
                     return;
                 }
@@ -304,7 +305,7 @@ impl Controller {
             Ok(p) => p,
             Err(e) => {
                 self.send(&CtrlMsg::MachineRefused {
-                    error: crate::store::StoreError::Invalid(e),
+                    error: crate::wire::store::StoreError::Invalid(e),
                 });
                 return;
             }
@@ -315,7 +316,7 @@ impl Controller {
             self.last_control,
             self.stats,
         );
-        let mut tx = crate::ring::ByteRing::default();
+        let mut tx = crate::wire::ring::ByteRing::default();
         core::mem::swap(&mut tx, &mut self.tx);
         // SAFETY: `self` is a valid, aligned controller; `write` overwrites every field
         // and nothing in it needs dropping.

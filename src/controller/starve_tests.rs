@@ -3,7 +3,8 @@
 //! timeout, holds it for take-over; never drops it. Jogs and MDI keep the short watch.
 
 use super::*;
-use crate::protocol::{AlarmCause, Block, Control, CtrlMsg, HostMsg, Motion, PROTOCOL_VERSION};
+use crate::motion::block::{Block, Motion};
+use crate::wire::{AlarmCause, Control, CtrlMsg, HostMsg, PROTOCOL_VERSION};
 
 use super::tests::{frame, replies};
 
@@ -19,10 +20,10 @@ fn line(from_mm: i64, x_mm: i64, feed_mm_s: i64, line: u32) -> HostMsg {
         tolerance_nm: u32::MAX,
     };
     let kin = MachineKinematics::new(&m);
-    let mut out = [crate::planner::PlanBlock::default()];
+    let mut out = [crate::motion::planner::PlanBlock::default()];
     let start = [from_mm * 1_000_000, 0, 0, 0, 0, 0];
-    crate::planner::plan_into(&[b], start, &m, &kin, 1, &mut out).unwrap();
-    HostMsg::Block(crate::protocol::PlannedBlock {
+    crate::motion::planner::plan_into(&[b], start, &m, &kin, 1, &mut out).unwrap();
+    HostMsg::Block(crate::motion::block::PlannedBlock {
         block: b,
         plan: out[0].plan(),
     })

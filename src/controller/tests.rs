@@ -3,12 +3,12 @@
 
 use super::*;
 use crate::config::MAX_STEPPERS;
-use crate::protocol::{
+use crate::drive::servo::Trip;
+use crate::motion::block::{Block, Motion};
+use crate::wire::{
     decode_frame, encode_frame, AlarmCause, Control, CtrlMsg, FrameReader, HostMsg, NakReason,
     Pushed, PROTOCOL_VERSION,
 };
-use crate::protocol::{Block, Motion};
-use crate::servo::Trip;
 
 pub(super) fn frame(seq: u16, msg: &HostMsg) -> Vec<u8> {
     let mut f = [0u8; MAX_FRAME];
@@ -33,13 +33,13 @@ pub(super) fn replies(c: &mut Controller) -> Vec<CtrlMsg> {
 /// The host's plan of `blocks` from `start` on `m` (unlimited look-ahead).
 fn planned(m: &MachineConfig, start: [i64; 6], blocks: &[Block]) -> Vec<HostMsg> {
     let kin = MachineKinematics::new(m);
-    let mut out = vec![crate::planner::PlanBlock::default(); blocks.len()];
-    crate::planner::plan_into(blocks, start, m, &kin, 1, &mut out).unwrap();
+    let mut out = vec![crate::motion::planner::PlanBlock::default(); blocks.len()];
+    crate::motion::planner::plan_into(blocks, start, m, &kin, 1, &mut out).unwrap();
     blocks
         .iter()
         .zip(&out)
         .map(|(b, p)| {
-            HostMsg::Block(crate::protocol::PlannedBlock {
+            HostMsg::Block(crate::motion::block::PlannedBlock {
                 block: *b,
                 plan: p.plan(),
             })
@@ -92,11 +92,11 @@ fn a_machine_config_on_a_servo_channel_the_board_does_not_wire_is_refused_naming
     // does not wire it.
     let other = MachineConfig::h4_table();
     assert_eq!(other.validate(), Ok(()));
-    let mut payload = [0u8; crate::store::MAX_CONFIG_BYTES];
-    let n = crate::store::encode(&other, &mut payload).unwrap();
-    let id = crate::store::identity(&other);
-    for (chunk_id, off) in (100..).zip((0..n).step_by(crate::store::CHUNK_BYTES)) {
-        let end = (off + crate::store::CHUNK_BYTES).min(n);
+    let mut payload = [0u8; crate::wire::store::MAX_CONFIG_BYTES];
+    let n = crate::wire::store::encode(&other, &mut payload).unwrap();
+    let id = crate::wire::store::identity(&other);
+    for (chunk_id, off) in (100..).zip((0..n).step_by(crate::wire::store::CHUNK_BYTES)) {
+        let end = (off + crate::wire::store::CHUNK_BYTES).min(n);
         c.receive(&frame(
             0,
             &HostMsg::Machine {
@@ -109,7 +109,7 @@ fn a_machine_config_on_a_servo_channel_the_board_does_not_wire_is_refused_naming
         ));
     }
     let refused = CtrlMsg::MachineRefused {
-        error: crate::store::StoreError::Invalid(ConfigError::JointChannel { joint: 3 }),
+        error: crate::wire::store::StoreError::Invalid(ConfigError::JointChannel { joint: 3 }),
     };
     assert!(replies(c).contains(&refused));
     assert_eq!(c.machine(), &MachineConfig::cartesian_xyz());
@@ -127,7 +127,7 @@ fn a_controller_that_disagrees_about_the_machine_refuses_to_move_until_sent_it()
     other.joints[0].limits.max_velocity /= 2;
     other.axes[0].max_velocity /= 2;
     let mut c = Controller::new(MachineConfig::cartesian_xyz()).unwrap();
-    let id = crate::store::identity(&other);
+    let id = crate::wire::store::identity(&other);
     c.receive(&frame(
         0,
         &HostMsg::Hello {
@@ -151,11 +151,11 @@ fn a_controller_that_disagrees_about_the_machine_refuses_to_move_until_sent_it()
         Some(AlarmCause::MachineMismatch)
     );
     // Send the machine in chunks, each twice (a resend), the first once more.
-    let mut payload = [0u8; crate::store::MAX_CONFIG_BYTES];
-    let n = crate::store::encode(&other, &mut payload).unwrap();
-    let offsets = (0..n).step_by(crate::store::CHUNK_BYTES).chain([0]);
+    let mut payload = [0u8; crate::wire::store::MAX_CONFIG_BYTES];
+    let n = crate::wire::store::encode(&other, &mut payload).unwrap();
+    let offsets = (0..n).step_by(crate::wire::store::CHUNK_BYTES).chain([0]);
     for (chunk_id, off) in (100..).zip(offsets) {
-        let end = (off + crate::store::CHUNK_BYTES).min(n);
+        let end = (off + crate::wire::store::CHUNK_BYTES).min(n);
         let msg = HostMsg::Machine {
             id: chunk_id,
             offset: off as u16,
@@ -391,7 +391,8 @@ fn run_with(c: &mut Controller, ticks: usize, inputs: &Inputs) {
 fn jog_cmd(c: &Controller, axis: usize, distance: i64, feed: i64) -> Control {
     let kin = crate::kinematics::MachineKinematics::new(c.machine());
     Control::Jog(
-        crate::planner::plan_jog(c.machine(), &kin, c.pose(), axis, distance, feed).unwrap(),
+        crate::motion::planner::plan_jog(c.machine(), &kin, c.pose(), axis, distance, feed)
+            .unwrap(),
     )
 }
 

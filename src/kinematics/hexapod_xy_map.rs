@@ -1,4 +1,4 @@
-//! The hexapod-xy's channel map for the contour controller (`crate::contour::ContourMap`):
+//! The hexapod-xy's channel map for the contour controller (`crate::kinematics::ContourMap`):
 //! the forward kinematics of platform plus table, linearised at a commanded pose, and
 //! the inverse's Jacobian, in `f32` from the legs' directions
 //! ([`super::hexapod::Hexapod::rows_f32`]).
@@ -26,7 +26,7 @@
 use super::hexapod_xy::{turned_derivatives, HexapodXy};
 use super::{Pose, Unreachable};
 use crate::config::{Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS};
-use crate::contour::{ContourMap, POSE_AXES};
+use crate::kinematics::{ContourMap, POSE_AXES};
 use crate::math::{i64_to_f32, ONE_Q31};
 
 /// Calls of [`MapBuilder::step`] per map.

@@ -24,12 +24,15 @@
 //! Invariants: no allocation, no panics, no unbounded loops, no `f64` (the MCU's FPU is
 //! single precision); results are bit-identical on the MCU and the host.
 
+pub mod contour_map;
 pub mod fixed;
 pub mod h4;
 pub mod hexapod;
 pub mod hexapod_xy;
 pub mod hexapod_xy_map;
 pub mod solve;
+
+pub use contour_map::{ContourMap, PoseVec, POSE_AXES};
 
 #[cfg(test)]
 mod reference;

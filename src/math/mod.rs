@@ -14,7 +14,7 @@
 //! * [`fmin`], [`fmax`]: comparisons inline (ARMv7E-M has no `vminnm`; `f32::min`
 //!   would call a library routine). Neither argument is ever NaN where they are used.
 //! * [`sincos`] (`trig.rs`): sine and cosine of an angle in n° as Q31, for the
-//!   kinematics and the arcs of [`crate::geometry`].
+//!   kinematics and the arcs of [`crate::motion::geometry`].
 //! * [`isqrt`], [`isqrt_wide`] (`root.rs`): integer square roots to ±0.51 from the
 //!   correctly rounded single-precision root [`sqrt_f32`]; [`isqrt_floor`], the exact
 //!   floor root off the hot path.
@@ -26,6 +26,18 @@ mod trig;
 
 pub use root::{isqrt, isqrt_floor, isqrt_wide, sqrt_f32, sqrt_f32_soft, u128_to_f32};
 pub use trig::{mulhr, shr_round, sincos, ONE_Q31};
+
+/// `x` limited to ±`limit` (`limit` ≥ 0). Unlike `f32::clamp` it has no panic path
+/// (that one asserts its bounds are ordered), so the loop stays panic-free.
+pub fn clamp_sym(x: f32, limit: f32) -> f32 {
+    if x > limit {
+        limit
+    } else if x < -limit {
+        -limit
+    } else {
+        x
+    }
+}
 
 /// The tests' pseudo-random sequence (Knuth's MMIX LCG): the next value of `state`.
 #[cfg(test)]

@@ -2,8 +2,8 @@
 
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::kinematics::MachineKinematics;
-use pkmc::planner::{plan_into, PlanBlock};
-use pkmc::protocol::{Block, PlannedBlock};
+use pkmc::motion::block::{Block, PlannedBlock};
+use pkmc::motion::planner::{plan_into, PlanBlock};
 
 /// Plans `blocks` from `start` as the host does (unlimited look-ahead, the controller's
 /// smoothing window `window` in ticks), ready to stream.
@@ -20,7 +20,7 @@ pub fn planned(
         start,
         machine,
         &kin,
-        pkmc::interp::window_of(window),
+        pkmc::motion::interp::window_of(window),
         &mut out,
     )
     .expect("well-formed blocks");

@@ -530,7 +530,7 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64), frames_per_ms: &[u32
         .collect();
     let (depth, untouched) = core.stack_depth();
     // What the configuration pages hold, decoded by the core's own record reader.
-    let flash_machine = pkmc::store::read_record(&b.flash.config)
+    let flash_machine = pkmc::wire::store::read_record(&b.flash.config)
         .map(|m| format!("{:?}", m.name.as_str()))
         .unwrap_or_else(|_| "null".into());
     let chain: Vec<String> = b

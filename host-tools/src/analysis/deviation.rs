@@ -11,7 +11,7 @@
 //! compressor's space: nm over X Y Z, 1° counted as 1 mm.
 
 use pkmc::config::AXES;
-use pkmc::protocol::{Block, Motion};
+use pkmc::motion::block::{Block, Motion};
 use serde::Serialize;
 use std::ops::Range;
 

@@ -12,9 +12,9 @@
 //! smallest margin met, and where, is reported.
 
 use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
-use pkmc::geometry::Path;
 use pkmc::kinematics::{Jacobian, Kinematics, MachineKinematics, Unreachable};
-use pkmc::protocol::Block;
+use pkmc::motion::block::Block;
+use pkmc::motion::geometry::Path;
 use std::collections::BTreeSet;
 
 /// Largest distance between two samples of a path, nm.
@@ -222,7 +222,7 @@ pub fn check(blocks: &[Block], machine: &MachineConfig, start: [i64; AXES]) -> P
 #[cfg(test)]
 mod tests {
     use super::*;
-    use pkmc::protocol::Motion;
+    use pkmc::motion::block::Motion;
 
     fn to(target: [i64; AXES], line: u32) -> Block {
         Block {

@@ -26,9 +26,9 @@
 //! the platform Jacobian); virtual work as in any statics text.
 
 use pkmc::config::{axis_is_rotary, KinematicsConfig, MachineConfig, AXES, MAX_JOINTS};
-use pkmc::geometry::Path;
 use pkmc::kinematics::{Jacobian, Kinematics, MachineKinematics};
-use pkmc::protocol::Block;
+use pkmc::motion::block::Block;
+use pkmc::motion::geometry::Path;
 use pkmc::units::NDEG_PER_DEG;
 
 /// A wrench on the tool: Fx Fy Fz (N), Mx My Mz (N·m) about the tool point, machine
@@ -351,7 +351,7 @@ pub fn check(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use pkmc::protocol::Motion;
+    use pkmc::motion::block::Motion;
 
     #[test]
     fn a_wrench_file_reads_entries_and_names_its_mistakes() {

@@ -418,7 +418,7 @@ fn design_lqg(args: &Args) -> Result<()> {
         let d = design(
             &tf,
             jf.steps_per_unit,
-            1.0 / pkmc::servo::SERVO_HZ as f64,
+            1.0 / pkmc::drive::servo::SERVO_HZ as f64,
             w,
         )?;
         let model = d.loop_figures(&tf, jf.steps_per_unit)?;

@@ -5,7 +5,7 @@
 
 use clap::{Parser, Subcommand};
 use pkmc::config::{axis_is_rotary, MachineConfig, AXIS_NAMES};
-use pkmc::protocol::{Control, HeldJob, Status};
+use pkmc::wire::{Control, HeldJob, Status};
 use pkmc_host::cli::progress::{Interrupts, Operator, Progress, RawKeys, Style};
 use pkmc_host::job::{self, exit, print_report, Failure, RunOptions, SimSetup, Target};
 use pkmc_host::link::{JobEnd, Link, LinkOptions, Transport};

@@ -14,7 +14,7 @@
 //! still raises SIGINT in raw mode (ISIG stays on).
 
 use crate::link::{JobHooks, LinkView};
-use pkmc::protocol::{Control, State, Status};
+use pkmc::wire::{Control, State, Status};
 use std::io::{IsTerminal, Write};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc::Receiver;
@@ -386,7 +386,7 @@ impl JobHooks for Operator {
         // (A hold for this host's own silence is the link's to resume: `note`.)
         let host_timeout = s
             .alarm
-            .is_some_and(|a| a.cause == pkmc::protocol::AlarmCause::HostTimeout);
+            .is_some_and(|a| a.cause == pkmc::wire::AlarmCause::HostTimeout);
         if s.state == State::Hold
             && !host_timeout
             && self.resumed_line.is_none()

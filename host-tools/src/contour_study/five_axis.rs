@@ -29,10 +29,11 @@ use crate::analysis::statics::joint_forces;
 use crate::machine_file::MachineFile;
 use crate::sim::plant::{DiscretePlant, Mismatch, TransferFunction};
 use pkmc::config::{Drive, KinematicsConfig, MachineConfig, AXES, MAX_JOINTS, MAX_SERVOS};
-use pkmc::contour::{ContourMap, PeriodInputs, ServoBank};
+use pkmc::drive::contour::{PeriodInputs, ServoBank};
+use pkmc::drive::servo::{extend_counter, target_q16, DAC_MID, SERVO_HZ, SERVO_PER_TICK};
 use pkmc::kinematics::hexapod_xy_map::MapBuilder;
+use pkmc::kinematics::ContourMap;
 use pkmc::kinematics::{hexapod_xy::HexapodXy, Kinematics, MachineKinematics};
-use pkmc::servo::{extend_counter, target_q16, DAC_MID, SERVO_HZ, SERVO_PER_TICK};
 use pkmc::units::{NM_PER_MM, TICK_HZ};
 
 /// The load-force term of a hydraulic leg.

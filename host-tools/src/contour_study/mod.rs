@@ -25,8 +25,8 @@ pub mod five_axis;
 use crate::machine_file::MachineFile;
 use crate::sim::plant::{DiscretePlant, Mismatch, TransferFunction};
 use pkmc::config::{ContourMode, Drive, KinematicsConfig, MachineConfig, MAX_SERVOS};
-use pkmc::contour::{PeriodInputs, ServoBank};
-use pkmc::servo::{extend_counter, target_q16, DAC_MID, SERVO_HZ, SERVO_PER_TICK};
+use pkmc::drive::contour::{PeriodInputs, ServoBank};
+use pkmc::drive::servo::{extend_counter, target_q16, DAC_MID, SERVO_HZ, SERVO_PER_TICK};
 use pkmc::units::{NM_PER_MM, TICK_HZ};
 
 /// Why the study cannot run on a machine.

@@ -13,7 +13,7 @@
 //!   [`CENTRE_ARC_ABS_NM_INCH`] (G20), or by up to 100 times that when it is at most
 //!   0.1 % of the larger radius. The controller follows the resulting spiral exactly
 //!   (its radius moves linearly), up to a radius change of
-//!   [`pkmc::geometry::ARC_RADIUS_SLACK_NM`] (0.08 mm): a larger spiral, which LinuxCNC
+//!   [`pkmc::motion::geometry::ARC_RADIUS_SLACK_NM`] (0.08 mm): a larger spiral, which LinuxCNC
 //!   accepts, is refused by name.
 //! - R format (`Options::arc_tolerance_nm`, default 0.002 mm): the radius may be at most
 //!   the tolerance shorter than half the chord (the arc is then taken as a half circle).
@@ -80,7 +80,7 @@ pub const CENTRE_ARC_REL: f64 = 0.001;
 /// may differ from its start radius by at most `abs_tolerance` nm, or by at most 100
 /// times that when the difference is at most [`CENTRE_ARC_REL`] of the larger radius.
 /// A difference the controller cannot follow (over
-/// [`pkmc::geometry::ARC_RADIUS_SLACK_NM`]) is refused by name.
+/// [`pkmc::motion::geometry::ARC_RADIUS_SLACK_NM`]) is refused by name.
 pub fn check_end(
     start: [f64; 2],
     end: [f64; 2],
@@ -112,7 +112,7 @@ pub fn check_end(
             ),
         ));
     }
-    let slack = pkmc::geometry::ARC_RADIUS_SLACK_NM as f64;
+    let slack = pkmc::motion::geometry::ARC_RADIUS_SLACK_NM as f64;
     if d > slack {
         return Err((
             ErrorKind::Unsupported,
@@ -142,17 +142,20 @@ pub const CHORD_JOIN_NM: u32 = 40;
 /// How far the path of an arc sent as [`chords`] may be from the true arc, nm: 0.1 µm.
 pub const CHORDS_WITHIN_NM: f64 = 100.0;
 
-/// An arc block the controller does not run exactly (`pkmc::geometry::Path::checked`
-/// refuses it: its radius is above [`pkmc::geometry::MAX_ARC_RADIUS_NM`], its radius
-/// changes by more than [`pkmc::geometry::ARC_RADIUS_SLACK_NM`], or its plan misses the
+/// An arc block the controller does not run exactly (`pkmc::motion::geometry::Path::checked`
+/// refuses it: its radius is above [`pkmc::motion::geometry::MAX_ARC_RADIUS_NM`], its radius
+/// changes by more than [`pkmc::motion::geometry::ARC_RADIUS_SLACK_NM`], or its plan misses the
 /// controller's numeric checks), from `from`, as straight moves along it: its points
 /// at equal steps of angle (the radius moving linearly from the start's to the end's,
 /// the helix axis and A B C linearly), each chord within [`CHORD_SAGITTA_NM`] of the
 /// arc, ending exactly on its target. Every move has the arc's line and feed; the joins
 /// between them blend within [`CHORD_JOIN_NM`], and the last keeps the arc's
 /// tolerance. Not an arc: `vec![*arc]`.
-pub fn chords(arc: &pkmc::protocol::Block, from: &[i64; 6]) -> Vec<pkmc::protocol::Block> {
-    use pkmc::protocol::Motion;
+pub fn chords(
+    arc: &pkmc::motion::block::Block,
+    from: &[i64; 6],
+) -> Vec<pkmc::motion::block::Block> {
+    use pkmc::motion::block::Motion;
     let Motion::Arc {
         center,
         plane,
@@ -215,7 +218,7 @@ pub fn chords(arc: &pkmc::protocol::Block, from: &[i64; 6]) -> Vec<pkmc::protoco
         if target == last && k < n {
             continue;
         }
-        out.push(pkmc::protocol::Block {
+        out.push(pkmc::motion::block::Block {
             motion: Motion::Linear,
             target,
             tolerance_nm: if k == n { arc.tolerance_nm } else { join },
@@ -318,7 +321,7 @@ mod tests {
 
     #[test]
     fn an_arc_of_16_m_over_35_6_mm_is_16_chords_within_40_nm_ending_on_its_target() {
-        use pkmc::protocol::{Block, Motion, Plane};
+        use pkmc::motion::block::{Block, Motion, Plane};
         // G2 X35.6 Y0 I17.8 J-16275.9903 from the origin (issue 34).
         let arc = Block {
             line: 3,
@@ -332,7 +335,7 @@ mod tests {
             feed: 50_000_000,
             tolerance_nm: 0,
         };
-        assert!(pkmc::geometry::Path::checked(&arc, &[0; 6]).is_err());
+        assert!(pkmc::motion::geometry::Path::checked(&arc, &[0; 6]).is_err());
         let c = chords(&arc, &[0; 6]);
         assert_eq!(c.len(), 16);
         assert_eq!(c.last().unwrap().target, arc.target);

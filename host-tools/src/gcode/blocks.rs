@@ -2,7 +2,7 @@
 //!
 //! Motion keeps its geometry (lines, native arcs, G5/G5.1 splines as Bézier blocks);
 //! an arc the controller would not run exactly (the one rule both share,
-//! `pkmc::geometry::Path::checked`) goes as chords within 0.1 µm of it
+//! `pkmc::motion::geometry::Path::checked`) goes as chords within 0.1 µm of it
 //! ([`crate::gcode::arcs::chords`]), never refused;
 //! G93 inverse-time feeds become path speeds from the block's exact length (measured
 //! with the core's own geometry, so host and controller agree; for a spline that length
@@ -14,8 +14,8 @@
 
 use crate::gcode::canon::{Canon, Coolant, Feed, PathMode, Spindle};
 use pkmc::config::AXES;
-use pkmc::geometry::Path;
-use pkmc::protocol::{Aux, Block, Motion};
+use pkmc::motion::block::{Aux, Block, Motion};
+use pkmc::motion::geometry::Path;
 use std::collections::BTreeMap;
 
 /// A program ready to stream.
@@ -246,7 +246,7 @@ fn feed_block(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use pkmc::protocol::Plane;
+    use pkmc::motion::block::Plane;
 
     #[test]
     fn inverse_time_feed_becomes_the_speed_that_takes_that_long() {

@@ -10,7 +10,7 @@
 use pkmc::config::AXES;
 
 /// Arc plane (G17, G18, G19): the protocol's own type, so the two cannot drift.
-pub use pkmc::protocol::Plane;
+pub use pkmc::motion::block::Plane;
 
 /// Feed of a feed move.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -94,7 +94,7 @@ pub enum Canon {
     },
     /// G5: cubic Bézier move (LinuxCNC's cubic spline) from the previous command's end
     /// through the control points start + `c1` and `target` + `c2` to `target`, as
-    /// [`pkmc::protocol::Motion::Cubic`]. Only X and Y move: `c1` and `c2` are zero on
+    /// [`pkmc::motion::block::Motion::Cubic`]. Only X and Y move: `c1` and `c2` are zero on
     /// the other axes, and `target` keeps them where they were.
     Cubic {
         /// NC line.
@@ -110,7 +110,7 @@ pub enum Canon {
     },
     /// G5.1: quadratic Bézier move (LinuxCNC's quadratic B-spline) from the previous
     /// command's end through the control point start + `c` to `target`, as
-    /// [`pkmc::protocol::Motion::Quadratic`]; only X and Y move.
+    /// [`pkmc::motion::block::Motion::Quadratic`]; only X and Y move.
     Quadratic {
         /// NC line.
         line: u32,

@@ -10,7 +10,8 @@ use crate::gcode::canon::Canon;
 use crate::gcode::LineSession;
 use crate::link::{JobHooks, LinkView};
 use pkmc::config::{MachineConfig, AXES};
-use pkmc::protocol::{Block, Control, State, Status};
+use pkmc::motion::block::Block;
+use pkmc::wire::{Control, State, Status};
 use std::collections::{HashMap, VecDeque};
 use std::net::TcpStream;
 use std::time::{Duration, Instant};
@@ -90,7 +91,7 @@ pub(super) struct Bridge<'o> {
     /// The held job was abandoned for Ctrl-C.
     stop_aborted: bool,
     /// The alarm last reported (`ALARM:N`), so that it is said once.
-    pub(super) alarm_told: Option<pkmc::protocol::Alarm>,
+    pub(super) alarm_told: Option<pkmc::wire::Alarm>,
     /// Short moves held back for merging.
     pub(super) merge: super::merge::Merger,
 }

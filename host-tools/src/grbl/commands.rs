@@ -12,7 +12,8 @@ use crate::job::{home_command, Failure};
 use crate::link::{JobEnd, Link, Transport};
 use pkmc::config::{AXES, AXIS_NAMES};
 use pkmc::kinematics::MachineKinematics;
-use pkmc::protocol::{Block, Control, Motion};
+use pkmc::motion::block::{Block, Motion};
+use pkmc::wire::Control;
 
 /// Where `line` may run.
 pub(super) fn needs(line: &str) -> Needs {
@@ -151,7 +152,7 @@ pub(super) fn run_link<T: Transport>(
     let held = b
         .status
         .as_ref()
-        .is_some_and(|s| s.state == pkmc::protocol::State::Hold);
+        .is_some_and(|s| s.state == pkmc::wire::State::Hold);
     let not_idle = |b: &mut Bridge<'_>, why: &str| {
         b.refuse(8, &format!("{t} needs the machine idle: {why}"));
     };
@@ -199,7 +200,7 @@ fn unlock<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(), Fa
     b.status = Some(s.clone());
     if b.locked() {
         let why = match s.state {
-            pkmc::protocol::State::EStop => {
+            pkmc::wire::State::EStop => {
                 "the e-stop is still latched: release it, then '$X'".to_string()
             }
             _ => format!("the controller is still {}", crate::job::state_text(&s)),
@@ -310,7 +311,7 @@ pub(super) fn jog_block(
         return Err((15, f.what.clone()));
     }
     let kin = MachineKinematics::new(b.machine);
-    if let Err(e) = pkmc::planner::plan_move(&block, *from, b.machine, &kin) {
+    if let Err(e) = pkmc::motion::planner::plan_move(&block, *from, b.machine, &kin) {
         return Err((16, format!("cannot be planned: {e}")));
     }
     Ok(block)

@@ -18,7 +18,7 @@
 
 use crate::gcode::compress::{self, Settings};
 use pkmc::config::AXES;
-use pkmc::protocol::{Block, Motion};
+use pkmc::motion::block::{Block, Motion};
 use std::time::{Duration, Instant};
 
 /// Most moves held back for one merge.

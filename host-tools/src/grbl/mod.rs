@@ -24,7 +24,7 @@ use crate::job::{exit, state_text, Failure, RunOptions, Target};
 use crate::link::{JobEnd, Link, Transport};
 use bridge::{Bridge, Needs};
 use pkmc::config::MachineConfig;
-use pkmc::protocol::{Alarm, Control};
+use pkmc::wire::{Alarm, Control};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -237,7 +237,7 @@ fn soft_reset<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<()
     b.mode.check = false;
     b.lines.clear();
     let mut s = link.request_status()?;
-    if s.state == pkmc::protocol::State::Hold && s.speed == 0 {
+    if s.state == pkmc::wire::State::Hold && s.speed == 0 {
         // A feed hold with nothing under it (`!` while idle): a reset ends it.
         link.control(Control::Resume)?;
         s = link.request_status()?;
@@ -289,7 +289,7 @@ fn soft_reset<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<()
 struct NoFeed<'a, 'o>(&'a mut Bridge<'o>);
 
 impl crate::link::JobHooks for NoFeed<'_, '_> {
-    fn status(&mut self, s: &pkmc::protocol::Status) {
+    fn status(&mut self, s: &pkmc::wire::Status) {
         self.0.status = Some(s.clone());
     }
 }

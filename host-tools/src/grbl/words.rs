@@ -4,8 +4,8 @@
 
 use crate::gcode::{ErrorKind, Offsets};
 use pkmc::config::{axis_is_rotary, MachineConfig, AXES, AXIS_NAMES};
-use pkmc::protocol::{AlarmCause, State, Status};
 use pkmc::units::to_user;
+use pkmc::wire::{AlarmCause, State, Status};
 
 /// The version string of `$I` and of the banner.
 pub const VERSION: &str = "1.1h";

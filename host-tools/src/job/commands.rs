@@ -5,7 +5,8 @@ use super::{describe_alarm, exit, open_port, open_target, Failure, RunOptions};
 use crate::link::{JobEnd, JobHooks, Link, LinkOptions, PortTransport, Transport};
 use pkmc::config::{MachineConfig, AXES, AXIS_NAMES};
 use pkmc::kinematics::MachineKinematics;
-use pkmc::protocol::{Block, Control, Motion, State, Status};
+use pkmc::motion::block::{Block, Motion};
+use pkmc::wire::{Control, State, Status};
 
 /// What `home` sends: the homing cycle on a machine with home switches; on one
 /// without, the rapid move to its home pose, planned here from where the controller
@@ -24,7 +25,7 @@ pub fn home_command<T: Transport>(link: &mut Link<T>) -> Result<Control, Failure
         tolerance_nm: 0,
     };
     let kin = MachineKinematics::new(&machine);
-    let planned = pkmc::planner::plan_move(&block, from, &machine, &kin).map_err(|e| {
+    let planned = pkmc::motion::planner::plan_move(&block, from, &machine, &kin).map_err(|e| {
         Failure::new(
             exit::PREFLIGHT,
             format!("home: the move home cannot be planned: {e}"),
@@ -59,7 +60,7 @@ pub fn jog_command<T: Transport>(
     }
     let from = link.request_status()?.pose;
     let kin = MachineKinematics::new(&machine);
-    let planned = pkmc::planner::plan_jog(&machine, &kin, &from, axis, distance, feed)
+    let planned = pkmc::motion::planner::plan_jog(&machine, &kin, &from, axis, distance, feed)
         .map_err(|e| Failure::new(exit::PREFLIGHT, format!("jog: cannot be planned: {e}")))?;
     Ok(Control::Jog(planned))
 }
@@ -75,7 +76,7 @@ pub fn prepare<T: Transport>(
     hooks: &mut dyn JobHooks,
 ) -> Result<Option<JobEnd>, Failure> {
     let s = link.request_status()?;
-    let locked = s.alarm.map(|a| a.cause) == Some(pkmc::protocol::AlarmCause::Unhomed);
+    let locked = s.alarm.map(|a| a.cause) == Some(pkmc::wire::AlarmCause::Unhomed);
     if home {
         if !locked && s.state != State::Idle {
             return Err(Failure::new(
@@ -159,7 +160,7 @@ pub fn move_and_wait<T: Transport>(
 ) -> Result<JobEnd, Failure> {
     link.refuse_if_held()?;
     let before = link.request_status()?;
-    let locked = before.alarm.map(|a| a.cause) == Some(pkmc::protocol::AlarmCause::Unhomed);
+    let locked = before.alarm.map(|a| a.cause) == Some(pkmc::wire::AlarmCause::Unhomed);
     if before.state != State::Idle && !(cmd == Control::Home && locked) {
         return Err(Failure::new(
             exit::ALARM,

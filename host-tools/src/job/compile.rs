@@ -4,7 +4,7 @@
 use super::{exit, Failure};
 use crate::gcode;
 use pkmc::config::{MachineConfig, AXES};
-use pkmc::protocol::Block;
+use pkmc::motion::block::Block;
 use std::path::Path;
 
 /// Reads and compiles a program for `machine`; checks every block end against the
@@ -46,7 +46,7 @@ impl Compiled {
     pub fn curves(&self) -> usize {
         self.blocks
             .iter()
-            .filter(|b| matches!(b.motion, pkmc::protocol::Motion::Cubic { .. }))
+            .filter(|b| matches!(b.motion, pkmc::motion::block::Motion::Cubic { .. }))
             .count()
     }
 }

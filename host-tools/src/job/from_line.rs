@@ -18,7 +18,7 @@
 
 use super::{exit, Compiled, Failure};
 use pkmc::config::AXES;
-use pkmc::protocol::{Aux, Block, Motion};
+use pkmc::motion::block::{Aux, Block, Motion};
 
 /// Where a program restarts, and what to set up before it.
 #[derive(Clone, Debug)]
@@ -237,7 +237,7 @@ pub fn mark_for(
     compiled: &Compiled,
     restart: Option<&Restart>,
     path: &std::path::Path,
-) -> pkmc::protocol::JobMark {
+) -> pkmc::wire::JobMark {
     let mut mark = super::program_mark(&compiled.blocks, super::program_lines(path));
     if let Some(r) = restart {
         let approach = r.approach_len() as u32;

@@ -17,7 +17,8 @@ use crate::analysis::plot::Recorder;
 use crate::link::{ClientStats, JobEnd, JobHooks, Link, LinkError, LinkOptions, PortTransport};
 use crate::sim::serve::InProcess;
 use pkmc::config::MachineConfig;
-use pkmc::protocol::{Block, Status};
+use pkmc::motion::block::Block;
+use pkmc::wire::Status;
 use std::path::Path;
 
 mod commands;
@@ -145,7 +146,7 @@ pub struct StaticsSpec {
 /// The statics of `blocks` under `opts.statics`, if any: a joint over its limit, or a
 /// machine statics does not cover, refuses the program (nothing runs).
 fn statics_gate(
-    blocks: &[pkmc::protocol::Block],
+    blocks: &[pkmc::motion::block::Block],
     machine: &MachineConfig,
     program: &str,
     opts: &RunOptions<'_>,

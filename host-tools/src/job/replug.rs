@@ -7,7 +7,8 @@
 use super::{exit, Failure, RunOptions, Target};
 use crate::link::{ClientStats, JobEnd, JobHooks, Link, LinkError, PortTransport};
 use pkmc::config::MachineConfig;
-use pkmc::protocol::{Block, Motion, Status};
+use pkmc::motion::block::{Block, Motion};
+use pkmc::wire::Status;
 use std::path::Path;
 use std::time::{Duration, Instant};
 

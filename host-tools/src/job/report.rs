@@ -5,8 +5,8 @@ use crate::analysis::plot::lines_digest;
 use crate::link::{ClientStats, JobEnd};
 use crate::sim::faults::FaultReport;
 use pkmc::config::{axis_is_rotary, MachineConfig, AXIS_NAMES};
-use pkmc::protocol::{Alarm, Status};
 use pkmc::units::{to_user, TICK_NS};
+use pkmc::wire::{Alarm, Status};
 use serde::Serialize;
 use std::io::Write;
 
@@ -183,7 +183,7 @@ impl Report {
             alarm_line: alarm.map(|a| a.line),
             alarm_cause: alarm.map(|a| format!("{:?}", a.cause)),
             alarm_joint: alarm
-                .filter(|a| a.joint != pkmc::protocol::NO_JOINT)
+                .filter(|a| a.joint != pkmc::wire::NO_JOINT)
                 .map(|a| a.joint + 1),
             alarm_time_s: sim.and_then(|s| s.alarm_time_s),
             drive_violations: sim.map(|s| s.violation_count),
@@ -216,7 +216,7 @@ impl Report {
 /// An alarm in words: cause, joint and NC line.
 pub fn describe_alarm(a: &Alarm) -> String {
     let mut s = format!("{:?}", a.cause);
-    if a.joint != pkmc::protocol::NO_JOINT {
+    if a.joint != pkmc::wire::NO_JOINT {
         s += &format!(" on joint {}", a.joint as usize + 1);
     }
     if a.line != 0 {

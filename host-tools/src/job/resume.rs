@@ -12,7 +12,8 @@
 use super::{exit, Failure, RunOptions};
 use crate::link::{JobEnd, JobHooks, Link, Transport};
 use pkmc::config::MachineConfig;
-use pkmc::protocol::{Block, Control, JobMark, Motion, State};
+use pkmc::motion::block::{Block, Motion};
+use pkmc::wire::{Control, JobMark, State};
 use std::path::Path;
 
 /// The mark of a program compiled to `blocks` whose text has `lines` lines: what

@@ -7,7 +7,7 @@ use super::{
     STALL_TICKS,
 };
 use pkmc::config::MachineConfig;
-use pkmc::protocol::{
+use pkmc::wire::{
     decode_frame, encode_frame, Alarm, Control, CtrlMsg, FrameReader, HostMsg, NakReason, Pushed,
     State, Status, MAX_BODY, MAX_FRAME, PROTOCOL_VERSION,
 };
@@ -147,7 +147,7 @@ pub trait JobHooks {
     /// Returns whether more may come; once it returns `false` it is not asked again,
     /// and the job ends when every block has executed. By default a job is closed: it
     /// is the blocks [`Link::run_job`] was given.
-    fn feed(&mut self, _link: &LinkView, _out: &mut Vec<pkmc::protocol::Block>) -> bool {
+    fn feed(&mut self, _link: &LinkView, _out: &mut Vec<pkmc::motion::block::Block>) -> bool {
         false
     }
     /// Something the operator should know that is not an error (the job was held for
@@ -192,7 +192,7 @@ impl<T: Transport> Link<T> {
     /// loaded (the controller refuses to move until then).
     pub fn connect(io: T, machine: &MachineConfig, opts: LinkOptions) -> Result<Self, LinkError> {
         let mut link = Self::handshake(io, machine, opts)?;
-        if link.their_machine != pkmc::store::identity(machine) {
+        if link.their_machine != pkmc::wire::store::identity(machine) {
             link.send_machine(machine)?;
         }
         Ok(link)
@@ -203,7 +203,7 @@ impl<T: Transport> Link<T> {
         machine: &MachineConfig,
         opts: LinkOptions,
     ) -> Result<Self, LinkError> {
-        let ours = pkmc::store::identity(machine);
+        let ours = pkmc::wire::store::identity(machine);
         let now = Instant::now();
         let mut link = Link {
             io,
@@ -297,7 +297,7 @@ impl<T: Transport> Link<T> {
 
     /// The unfinished job of an earlier host that the controller held when this link
     /// opened, if any (see `nc-send resume` and `abort`).
-    pub fn held(&self) -> Option<pkmc::protocol::HeldJob> {
+    pub fn held(&self) -> Option<pkmc::wire::HeldJob> {
         self.held
     }
 
@@ -315,7 +315,7 @@ impl<T: Transport> Link<T> {
 
     /// The held job's program and how far the controller received it, if it was
     /// streamed with a mark (`Control::BeginJob`).
-    pub fn held_mark(&self) -> Option<pkmc::protocol::JobMark> {
+    pub fn held_mark(&self) -> Option<pkmc::wire::JobMark> {
         self.held.and(self.held_mark)
     }
 
@@ -403,15 +403,16 @@ impl<T: Transport> Link<T> {
     /// Sends `machine` in chunks, each resent until acknowledged, and waits for the
     /// controller to load it.
     pub(super) fn send_machine(&mut self, machine: &MachineConfig) -> Result<(), LinkError> {
-        let mut payload = [0u8; pkmc::store::MAX_CONFIG_BYTES];
-        let n = pkmc::store::encode(machine, &mut payload).ok_or_else(|| LinkError::Frame {
-            port: self.port(),
-            what: "the machine configuration (too large)".into(),
-        })?;
-        let crc = pkmc::crc::crc32(&payload[..n]);
+        let mut payload = [0u8; pkmc::wire::store::MAX_CONFIG_BYTES];
+        let n =
+            pkmc::wire::store::encode(machine, &mut payload).ok_or_else(|| LinkError::Frame {
+                port: self.port(),
+                what: "the machine configuration (too large)".into(),
+            })?;
+        let crc = pkmc::wire::crc::crc32(&payload[..n]);
         self.machine_answer = None;
-        for off in (0..n).step_by(pkmc::store::CHUNK_BYTES) {
-            let end = (off + pkmc::store::CHUNK_BYTES).min(n);
+        for off in (0..n).step_by(pkmc::wire::store::CHUNK_BYTES) {
+            let end = (off + pkmc::wire::store::CHUNK_BYTES).min(n);
             let id = self.fresh_control_id();
             let data =
                 heapless::Vec::from_slice(&payload[off..end]).map_err(|_| LinkError::Frame {

@@ -1,6 +1,6 @@
 //! Why the link failed: [`LinkError`], each variant naming the port.
 
-use pkmc::protocol::{State, PROTOCOL_VERSION};
+use pkmc::wire::{State, PROTOCOL_VERSION};
 use std::fmt;
 use std::io;
 use std::time::Duration;
@@ -68,7 +68,7 @@ pub enum LinkError {
         /// Port.
         port: String,
         /// The job.
-        job: pkmc::protocol::HeldJob,
+        job: pkmc::wire::HeldJob,
     },
     /// The controller refused our machine configuration.
     MachineRefused {

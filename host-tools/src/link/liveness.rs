@@ -3,7 +3,7 @@
 //! and another program's session on the port in the middle of a job.
 
 use super::{Link, LinkError, Transport};
-use pkmc::protocol::HostMsg;
+use pkmc::wire::HostMsg;
 use std::time::{Duration, Instant};
 
 impl<T: Transport> Link<T> {

@@ -3,7 +3,7 @@
 //! `--check`: each is only a [`Transport`] that moves bytes. Nothing here knows the
 //! simulator; it is reached through its bytes like a board (`crate::sim::serve`).
 //!
-//! Client protocol (see `pkmc::protocol`):
+//! Client protocol (see `pkmc::wire`):
 //!
 //! * Handshake: `Hello` with sequence number 0 and the identity of the host's machine,
 //!   repeated until `HelloAck`; blocks then carry consecutive sequence numbers from 1
@@ -70,7 +70,7 @@ pub use stream::{estimate_ms, TAIL_AFTER};
 pub use transport::{is_timeout, PortTransport, SimClock, Transport};
 
 use pkmc::config::MachineConfig;
-use pkmc::protocol::{Control, CtrlMsg, FrameReader, Status};
+use pkmc::wire::{Control, CtrlMsg, FrameReader, Status};
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
@@ -120,7 +120,7 @@ pub struct LinkOptions {
     pub host_timeout: Option<Duration>,
     /// The program's identity and first block, sent with `Control::BeginJob` and kept
     /// by the controller with the job (`program` 0: none; see `nc-send resume`).
-    pub mark: pkmc::protocol::JobMark,
+    pub mark: pkmc::wire::JobMark,
 }
 
 impl Default for LinkOptions {
@@ -131,7 +131,7 @@ impl Default for LinkOptions {
             link_timeout: LINK_TIMEOUT,
             keepalive: KEEPALIVE,
             host_timeout: None,
-            mark: pkmc::protocol::JobMark {
+            mark: pkmc::wire::JobMark {
                 program: 0,
                 next_block: 0,
                 total_blocks: 0,
@@ -171,9 +171,9 @@ pub struct Link<T: Transport> {
     pub stats: ClientStats,
     their_machine: u32,
     /// An earlier session's job the controller holds (from `HelloAck`).
-    held: Option<pkmc::protocol::HeldJob>,
+    held: Option<pkmc::wire::HeldJob>,
     /// The held job's program mark (from `HelloAck`).
-    held_mark: Option<pkmc::protocol::JobMark>,
+    held_mark: Option<pkmc::wire::JobMark>,
     axis_vmax: [i64; 6],
     /// The machine, for planning the blocks before they are streamed.
     machine: MachineConfig,

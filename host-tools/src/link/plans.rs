@@ -6,18 +6,18 @@
 //! ends at rest after the last block known, and the forward pass starts from the last
 //! sent block's planned entry and what it can reach over its length. The controller
 //! never leaves a block faster than it can stop within the blocks it holds
-//! ([`pkmc::planner::Planner::exit_target`]), so a block sent before its successor was
+//! ([`pkmc::motion::planner::Planner::exit_target`]), so a block sent before its successor was
 //! known is safe; the corner after it is planned as a stop, because a blended corner
 //! takes part of the acceleration of the block before it, which is already sent.
 //!
-//! Fed all at once, this is [`pkmc::planner::plan_into`] exactly: the same calls in the
+//! Fed all at once, this is [`pkmc::motion::planner::plan_into`] exactly: the same calls in the
 //! same order (the passes, the second look at the splines, the passes again).
 
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::kinematics::MachineKinematics;
 use pkmc::math::sqrtf;
-use pkmc::planner::{forward_pass, refine_splines, reverse_pass, Lookahead, PlanBlock};
-use pkmc::protocol::{Block, PlannedBlock};
+use pkmc::motion::block::{Block, PlannedBlock};
+use pkmc::motion::planner::{forward_pass, refine_splines, reverse_pass, Lookahead, PlanBlock};
 
 /// Blocks planned between two calls of the keep-alive (some milliseconds).
 const ALIVE_EVERY: usize = 4096;
@@ -34,7 +34,7 @@ pub(super) struct Plans {
 
 impl Plans {
     pub(super) fn new(start: [i64; AXES], machine: &MachineConfig) -> Self {
-        let smoothing = pkmc::interp::window_of(machine.motion.smoothing_ticks as u32);
+        let smoothing = pkmc::motion::interp::window_of(machine.motion.smoothing_ticks as u32);
         Self {
             la: Lookahead::new(start, smoothing),
             start,
@@ -103,6 +103,6 @@ impl Plans {
 
     /// Motion time of everything planned at 100 % feed, s.
     pub(super) fn time_s(&self) -> f64 {
-        pkmc::planner::planned_ticks(&self.work) * pkmc::units::TICK_NS as f64 * 1e-9
+        pkmc::motion::planner::planned_ticks(&self.work) * pkmc::units::TICK_NS as f64 * 1e-9
     }
 }

@@ -3,7 +3,8 @@
 //! dwell it executes) is stalled (see the module documentation of [`crate::link`]).
 
 use pkmc::config::{AXES, MAX_JOINTS};
-use pkmc::protocol::{Block, Motion, State, Status};
+use pkmc::motion::block::{Block, Motion};
+use pkmc::wire::{State, Status};
 
 /// What a status shows of a controller's progress.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -7,11 +7,10 @@ use super::plans::Plans;
 use super::stall::dwell_ticks;
 use super::window::{Ending, Guard, JobState};
 use super::{Link, LinkError, Transport, CONTROL_RESEND_AFTER, READ_WAIT};
-use pkmc::geometry::Path;
 use pkmc::kinematics::MachineKinematics;
-use pkmc::protocol::{
-    AlarmCause, Block, Control, CtrlMsg, HostMsg, Motion, NakReason, State, Status,
-};
+use pkmc::motion::block::{Block, Motion};
+use pkmc::motion::geometry::Path;
+use pkmc::wire::{AlarmCause, Control, CtrlMsg, HostMsg, NakReason, State, Status};
 use std::time::{Duration, Instant};
 
 /// While a job is fed, the last block known is sent without its successor once no
@@ -94,7 +93,7 @@ impl<T: Transport> Link<T> {
     /// (`BeginJob` with its mark), resumed, and fed on.
     pub fn continue_job(
         &mut self,
-        mark: pkmc::protocol::JobMark,
+        mark: pkmc::wire::JobMark,
         rest: &[Block],
         start: [i64; 6],
         hooks: &mut dyn JobHooks,
@@ -105,7 +104,7 @@ impl<T: Transport> Link<T> {
         if s.orphan {
             return Err(LinkError::JobHeld {
                 port: self.port(),
-                job: self.held.unwrap_or(pkmc::protocol::HeldJob {
+                job: self.held.unwrap_or(pkmc::wire::HeldJob {
                     host: 0,
                     line: s.line,
                     done: 0,
@@ -123,7 +122,7 @@ impl<T: Transport> Link<T> {
     }
 
     /// `Control::BeginJob` for a streamed program (with the host timeout set).
-    fn begin_job(&mut self, mark: pkmc::protocol::JobMark) -> Result<(), LinkError> {
+    fn begin_job(&mut self, mark: pkmc::wire::JobMark) -> Result<(), LinkError> {
         if let Some(t) = self.opts.host_timeout {
             // A streamed program: host silence starves it, and holds it only after
             // `t` (the short watch stays for MDI and the bridge's lines).
@@ -450,7 +449,7 @@ impl<T: Transport> Link<T> {
             NakReason::JobHeld => {
                 return Err(LinkError::JobHeld {
                     port: self.port(),
-                    job: self.held.unwrap_or(pkmc::protocol::HeldJob {
+                    job: self.held.unwrap_or(pkmc::wire::HeldJob {
                         host: 0,
                         line: self.status.as_ref().map_or(0, |s| s.line),
                         done: 0,
@@ -612,7 +611,7 @@ mod tests {
         let half = block(
             Motion::Arc {
                 center: [10 * mm, 0],
-                plane: pkmc::protocol::Plane::Xy,
+                plane: pkmc::motion::block::Plane::Xy,
                 clockwise: true,
                 turns: 0,
             },
@@ -625,7 +624,7 @@ mod tests {
         let long = block(
             Motion::Arc {
                 center: [10 * mm, 0],
-                plane: pkmc::protocol::Plane::Xy,
+                plane: pkmc::motion::block::Plane::Xy,
                 clockwise: false,
                 turns: 1,
             },

@@ -4,7 +4,7 @@
 
 use super::stall::StallGuard;
 use super::{ClientStats, MIN_WINDOW};
-use pkmc::protocol::{Control, Status};
+use pkmc::wire::{Control, Status};
 use std::time::Instant;
 
 #[derive(Clone, Copy, Debug)]
@@ -143,7 +143,7 @@ impl JobState {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use pkmc::protocol::State;
+    use pkmc::wire::State;
 
     fn status() -> Status {
         Status {

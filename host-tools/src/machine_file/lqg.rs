@@ -13,9 +13,9 @@
 use super::{refused, FieldError, MachineFile};
 use crate::sim::lqg::{design, gains_toml};
 use crate::sim::plant::TransferFunction;
+use pkmc::config::LqgGains;
 use pkmc::config::{Drive, MachineConfig, MAX_LQG};
-use pkmc::lqg::LqgGains;
-use pkmc::servo::SERVO_PERIOD_S;
+use pkmc::drive::servo::SERVO_PERIOD_S;
 
 /// `servo.law`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize)]

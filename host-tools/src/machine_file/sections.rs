@@ -125,9 +125,9 @@ pub struct JointFile {
     pub invert_dir: bool,
     /// Stepper timing; the PacSci 6410 when absent.
     pub timing: Option<TimingFile>,
-    /// Servo: the 10 kHz loop's gains ([`pkmc::servo`]); required for a servo joint.
+    /// Servo: the 10 kHz loop's gains ([`pkmc::drive::servo`]); required for a servo joint.
     pub servo: Option<ServoFile>,
-    /// Homing on a switch ([`pkmc::homing`]); without it the joint is not homed.
+    /// Homing on a switch ([`pkmc::drive::homing`]); without it the joint is not homed.
     pub homing: Option<HomingFile>,
     /// Servo: the plant's transfer function, for simulation ([`crate::sim::plant`]).
     pub plant: Option<crate::sim::plant::PlantFile>,
@@ -140,7 +140,7 @@ pub struct JointFile {
     /// Servo: the weights of its LQG design ([`super::lqg`]).
     pub lqg: Option<crate::sim::lqg::LqgWeights>,
     /// Servo: the LQG design's gains, as `contour-study --design-lqg` prints them.
-    pub lqg_gains: Option<pkmc::lqg::LqgGains>,
+    pub lqg_gains: Option<pkmc::config::LqgGains>,
 }
 
 /// A servo joint's `servo = { ... }` table: [`pkmc::config::ServoGains`] in file units
@@ -302,7 +302,7 @@ pub struct MotionFile {
 
 impl MotionFile {
     /// The core form: the smoothing window that keeps every axis's and joint's jerk
-    /// within `jerk` (3·a/(w·T) ≤ J, see `pkmc::interp`), as a power of two of ticks.
+    /// within `jerk` (3·a/(w·T) ≤ J, see `pkmc::motion::interp`), as a power of two of ticks.
     pub fn to_config(
         &self,
         axes: &[LimitsFile],
@@ -323,7 +323,7 @@ impl MotionFile {
                 let ticks = (3.0 * a_max / jerk * pkmc::units::TICK_HZ as f64)
                     .ceil()
                     .max(1.0);
-                let max = pkmc::interp::MAX_WINDOW as f64;
+                let max = pkmc::motion::interp::MAX_WINDOW as f64;
                 if ticks > max {
                     return Err(refused!(
                         "motion.jerk: {jerk} is too low for accelerations of {a_max}: it needs \

@@ -5,8 +5,8 @@
 use super::Result;
 use crate::sim::plant::{DiscretePlant, PlantFile, TransferFunction};
 use pkmc::config::{StepTiming, MAX_SERVOS};
-use pkmc::servo::{DAC_MID, SERVO_HZ};
-use pkmc::stepper::StepTrain;
+use pkmc::drive::servo::{DAC_MID, SERVO_HZ};
+use pkmc::drive::stepper::StepTrain;
 use pkmc::units::units_per_user;
 use serde::Serialize;
 

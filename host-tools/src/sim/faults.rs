@@ -9,13 +9,13 @@
 //! given seed and byte stream.
 //!
 //! Invariant checked here: every frame the receiver accepts (that passes COBS, CRC-32
-//! and message decoding, exactly as `pkmc::protocol::decode_frame` does on both ends)
+//! and message decoding, exactly as `pkmc::wire::decode_frame` does on both ends)
 //! is byte-identical to a frame the sender put on the line. The layer splits the clean
 //! input into frames (what was sent) and decodes the faulty output with the same
 //! decoder as the receiver (what is accepted); an accepted frame that was never sent
 //! is counted as `undetected`, which must stay 0.
 
-use pkmc::protocol::{decode_frame, CtrlMsg, FrameReader, HostMsg, Pushed, MAX_BODY};
+use pkmc::wire::{decode_frame, CtrlMsg, FrameReader, HostMsg, Pushed, MAX_BODY};
 use serde::Serialize;
 use std::collections::HashSet;
 
@@ -264,7 +264,7 @@ impl FaultyLine {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use pkmc::protocol::{encode_frame, MAX_FRAME, PROTOCOL_VERSION};
+    use pkmc::wire::{encode_frame, MAX_FRAME, PROTOCOL_VERSION};
 
     fn hello_frames(n: u16) -> Vec<u8> {
         let mut bytes = Vec::new();

@@ -1,4 +1,4 @@
-//! Design of a servo joint's LQG controller ([`pkmc::lqg`]) from its plant model and
+//! Design of a servo joint's LQG controller ([`pkmc::drive::lqg`]) from its plant model and
 //! a machine file's weights and noise levels.
 //!
 //! * **Model.** The plant G(s) (mm or degrees per c.u., [`TransferFunction`]) times
@@ -40,7 +40,7 @@ mod tests;
 
 use crate::sim::plant::{expm, Complex, TransferFunction};
 use linalg::{add, col, dare, eigenvalues_delta, lqr_gain, mul, response, solve, zeros, Mat};
-use pkmc::lqg::{LqgGains, LQG_STATES};
+use pkmc::config::{LqgGains, LQG_STATES};
 use serde::Deserialize;
 
 /// A servo joint's LQG settings (`lqg = { ... }` in a machine file). The regulator

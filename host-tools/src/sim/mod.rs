@@ -18,10 +18,10 @@
 //! documentation).
 //!
 //! The controller is paced exactly as on the board, by the same core code
-//! ([`pkmc::pacing`]): each tick starts with the servo interrupt's edge period
+//! ([`pkmc::controller::pacing`]): each tick starts with the servo interrupt's edge period
 //! ([`ServoPacer`]: the previous tick's servo targets are loaded, the encoders and
 //! trips are snapshotted), then the tick ([`TickPacer`]) applies the previous tick's
-//! step trains, debounces the switches ([`pkmc::debounce`]) and runs the controller,
+//! step trains, debounces the switches ([`pkmc::drive::debounce`]) and runs the controller,
 //! then the tick's other nine servo periods run. So stepper and servo joints follow
 //! the controller's commands one tick late, and an injected limit or home switch
 //! reaches it after the board's three samples (the e-stop at once), as on the board.
@@ -47,13 +47,13 @@ pub use trace::TraceRow;
 
 use crate::sim::plant::{PlantError, PlantFile};
 use pkmc::config::{Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS, MAX_STEPPERS};
-use pkmc::contour::{PeriodOutputs, ServoBank};
+use pkmc::controller::pacing::{RawInputs, ServoPacer, Snapshot, TickPacer};
 use pkmc::controller::{Controller, Inputs};
-use pkmc::debounce::Switches;
-use pkmc::pacing::{RawInputs, ServoPacer, Snapshot, TickPacer};
-use pkmc::protocol::State;
-use pkmc::servo::SERVO_PER_TICK;
+use pkmc::drive::contour::{PeriodOutputs, ServoBank};
+use pkmc::drive::debounce::Switches;
+use pkmc::drive::servo::SERVO_PER_TICK;
 use pkmc::units::{units_per_user, TICK_NS};
+use pkmc::wire::State;
 use std::io::Write;
 
 /// Why the simulator cannot start or go on.
@@ -126,7 +126,7 @@ pub struct Simulator {
     /// The controller's last outputs.
     last_out: pkmc::controller::Outputs,
     /// The channel map the last tick posted, if it completed one.
-    last_map: Option<pkmc::contour::ContourMap>,
+    last_map: Option<pkmc::kinematics::ContourMap>,
     /// The inputs the last tick passed to the controller.
     last_in: Inputs,
     /// First tick at which the controller was in `Alarm` or `EStop` (not the lock
@@ -204,7 +204,7 @@ impl Simulator {
 
     /// The channel map the last tick completed and posted to the servo loops, if any
     /// ([`pkmc::controller::Controller::contour_map`]).
-    pub fn last_map(&self) -> Option<&pkmc::contour::ContourMap> {
+    pub fn last_map(&self) -> Option<&pkmc::kinematics::ContourMap> {
         self.last_map.as_ref()
     }
 
@@ -225,7 +225,7 @@ impl Simulator {
     ) -> Result<Self> {
         let stored = std::fs::read(&flash)
             .ok()
-            .and_then(|b| pkmc::store::read_record(&b).ok());
+            .and_then(|b| pkmc::wire::store::read_record(&b).ok());
         let mut sim = Self::with_plants(stored.unwrap_or(fallback), plants, [0; MAX_JOINTS])?;
         sim.flash = Some(flash);
         Ok(sim)
@@ -237,8 +237,8 @@ impl Simulator {
         else {
             return Ok(());
         };
-        let mut rec = [0u8; pkmc::store::HEADER_BYTES + pkmc::store::MAX_CONFIG_BYTES];
-        let n = pkmc::store::record(config, &mut rec).ok_or(SimError::TooLarge)?;
+        let mut rec = [0u8; pkmc::wire::store::HEADER_BYTES + pkmc::wire::store::MAX_CONFIG_BYTES];
+        let n = pkmc::wire::store::record(config, &mut rec).ok_or(SimError::TooLarge)?;
         std::fs::write(path, &rec[..n])?;
         Ok(())
     }
@@ -348,7 +348,8 @@ impl Simulator {
         };
         self.servos.iter().enumerate().any(|(c, s)| {
             s.as_ref().is_some_and(|s| {
-                let target = self.last_out.servo_target[c] >> pkmc::servo::SETPOINT_FRAC_BITS;
+                let target =
+                    self.last_out.servo_target[c] >> pkmc::drive::servo::SETPOINT_FRAC_BITS;
                 (s.counts() - target).abs() > 1
             }) && trips[c].is_none()
                 && self.last_out.servo_enable
@@ -498,8 +499,7 @@ impl Simulator {
             self.idle_ticks + 1
         };
         let alarmed = matches!(self.ctrl.state(), State::Alarm | State::EStop)
-            && self.ctrl.status().alarm.map(|a| a.cause)
-                != Some(pkmc::protocol::AlarmCause::Unhomed);
+            && self.ctrl.status().alarm.map(|a| a.cause) != Some(pkmc::wire::AlarmCause::Unhomed);
         if alarmed && self.alarm_tick.is_none() {
             self.alarm_tick = Some(self.ticks);
         }
@@ -522,7 +522,7 @@ mod tests {
         let mut sim = Simulator::new(MachineConfig::cartesian_xyz()).unwrap();
         sim.ctrl.unlock();
         sim.tick().unwrap();
-        assert_eq!(sim.ctrl.state(), pkmc::protocol::State::Idle);
+        assert_eq!(sim.ctrl.state(), pkmc::wire::State::Idle);
         // Two 10 ns STEP pulses on Y's drive 100 ns apart: shorter and faster than it
         // allows.
         let y = sim.steppers[1].as_mut().unwrap();
@@ -533,7 +533,7 @@ mod tests {
         sim.tick().unwrap();
         sim.tick().unwrap();
         let alarm = sim.ctrl.status().alarm.expect("an alarm");
-        assert_eq!(alarm.cause, pkmc::protocol::AlarmCause::DriveFault);
+        assert_eq!(alarm.cause, pkmc::wire::AlarmCause::DriveFault);
         assert_eq!(alarm.joint, 1);
         assert!(sim.violations().0 >= 1);
     }

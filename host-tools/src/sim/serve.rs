@@ -30,7 +30,7 @@
 use crate::link::{is_timeout, Transport};
 use crate::sim::faults::FaultyLine;
 use crate::sim::Simulator;
-use pkmc::protocol::State;
+use pkmc::wire::State;
 use serialport::SerialPort;
 use std::io;
 use std::sync::atomic::{AtomicBool, Ordering};

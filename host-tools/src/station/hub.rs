@@ -3,7 +3,7 @@
 //! all, or a reply to one).
 
 use super::program::Program;
-use pkmc::protocol::Status;
+use pkmc::wire::Status;
 use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};

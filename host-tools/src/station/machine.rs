@@ -10,8 +10,9 @@ use crate::job::{self, Failure};
 use crate::link::{JobEnd, JobHooks, Link, LinkView, Transport};
 use pkmc::config::{MachineConfig, AXES, AXIS_NAMES};
 use pkmc::kinematics::{Kinematics, MachineKinematics};
-use pkmc::protocol::{Block, Control, Motion, Status};
+use pkmc::motion::block::{Block, Motion};
 use pkmc::units::{to_user, units_per_user};
+use pkmc::wire::{Control, Status};
 use serde_json::{json, Value};
 use std::collections::VecDeque;
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
@@ -112,8 +113,8 @@ impl Mdi<'_> {
 
 /// An alarm as the pages word it: its title (the core's wording of the cause; an
 /// e-stop says e-stop) and what the operator does next.
-fn alarm_words(a: &pkmc::protocol::Alarm, estop: bool) -> (String, &'static str) {
-    use pkmc::protocol::AlarmCause as C;
+fn alarm_words(a: &pkmc::wire::Alarm, estop: bool) -> (String, &'static str) {
+    use pkmc::wire::AlarmCause as C;
     if estop {
         let next = if a.cause == C::EStop {
             "Release the e-stop button, then Reset."
@@ -152,15 +153,15 @@ fn status_message(machine: &MachineConfig, hub: &Hub, s: &Status, job: Option<&J
         })
         .collect();
     let alarm = s.alarm.map(|a| {
-        let joint = (a.joint != pkmc::protocol::NO_JOINT).then(|| {
+        let joint = (a.joint != pkmc::wire::NO_JOINT).then(|| {
             hub.machine["joints"][a.joint as usize]["name"]
                 .as_str()
                 .unwrap_or("?")
                 .to_string()
         });
-        let estop = s.state == pkmc::protocol::State::EStop
-            || a.cause == pkmc::protocol::AlarmCause::EStop
-            || (a.cause == pkmc::protocol::AlarmCause::Aborted
+        let estop = s.state == pkmc::wire::State::EStop
+            || a.cause == pkmc::wire::AlarmCause::EStop
+            || (a.cause == pkmc::wire::AlarmCause::Aborted
                 && hub.estop.load(std::sync::atomic::Ordering::Relaxed));
         let (title, next) = alarm_words(&a, estop);
         json!({"cause": format!("{:?}", a.cause), "joint": joint, "line": a.line,

@@ -6,7 +6,7 @@
 use crate::gcode;
 use crate::job::{self, Compiled, RunOptions};
 use pkmc::config::MachineConfig;
-use pkmc::protocol::{Block, Motion};
+use pkmc::motion::block::{Block, Motion};
 use serde_json::{json, Value};
 
 /// Points of the tool path sent to the page, at most.
@@ -230,9 +230,9 @@ struct DryRun {
 }
 
 impl crate::link::JobHooks for DryRun {
-    fn control(&mut self, view: &crate::link::LinkView) -> Option<pkmc::protocol::Control> {
+    fn control(&mut self, view: &crate::link::LinkView) -> Option<pkmc::wire::Control> {
         let s = view.status.as_ref()?;
-        if s.state != pkmc::protocol::State::Hold {
+        if s.state != pkmc::wire::State::Hold {
             self.resumed = None;
             return None;
         }
@@ -240,7 +240,7 @@ impl crate::link::JobHooks for DryRun {
             return None;
         }
         self.resumed = Some(s.line);
-        Some(pkmc::protocol::Control::Resume)
+        Some(pkmc::wire::Control::Resume)
     }
 }
 

@@ -3,7 +3,8 @@
 
 use super::*;
 use pkmc::config::{MAX_JOINTS, MAX_SERVOS};
-use pkmc::contour::{PeriodInputs, POSE_AXES};
+use pkmc::drive::contour::PeriodInputs;
+use pkmc::kinematics::POSE_AXES;
 
 struct Lcg(u64);
 impl Lcg {
@@ -218,13 +219,13 @@ fn servo_cases() {
 fn period_cases() {
     let machine = MachineConfig::h4_table();
     let kin = MachineKinematics::new(&machine);
-    let mut planner = pkmc::planner::Planner::new(machine.home);
-    let mut exec = pkmc::interp::Executor::new(machine.home);
+    let mut planner = pkmc::motion::planner::Planner::new(machine.home);
+    let mut exec = pkmc::motion::interp::Executor::new(machine.home);
     let blocks = period_blocks(machine.home);
-    let mut plans = [pkmc::planner::PlanBlock::default(); 2];
-    let _ = pkmc::planner::plan_into(&blocks, machine.home, &machine, &kin, 1, &mut plans);
+    let mut plans = [pkmc::motion::planner::PlanBlock::default(); 2];
+    let _ = pkmc::motion::planner::plan_into(&blocks, machine.home, &machine, &kin, 1, &mut plans);
     for (b, plan) in blocks.iter().zip(&plans) {
-        let planned = pkmc::protocol::PlannedBlock {
+        let planned = pkmc::motion::block::PlannedBlock {
             block: *b,
             plan: plan.plan(),
         };

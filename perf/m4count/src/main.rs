@@ -150,8 +150,8 @@ pub unsafe extern "C" fn bench_isqrt(n: *const u64, out: *mut u64) {
 pub struct Period {
     machine: MachineConfig,
     kin: MachineKinematics,
-    planner: pkmc::planner::Planner,
-    exec: pkmc::interp::Executor,
+    planner: pkmc::motion::planner::Planner,
+    exec: pkmc::motion::interp::Executor,
 }
 
 /// Bytes the emulator reserves for one [`Period`].
@@ -164,8 +164,8 @@ pub const PERIOD_CHUNK: u32 = 200;
 
 /// A helical arc at a 30° table angle: a line from home to the arc start (turning the
 /// table), then a full clockwise circle of 30 mm radius, both at 40 mm/s.
-fn period_blocks(home: Pose) -> [pkmc::protocol::Block; 2] {
-    use pkmc::protocol::{Block, Motion, Plane};
+fn period_blocks(home: Pose) -> [pkmc::motion::block::Block; 2] {
+    use pkmc::motion::block::{Block, Motion, Plane};
     let mut start = home;
     start[0] += 30_000_000;
     start[3] = 30_000_000_000;
@@ -205,16 +205,16 @@ pub unsafe extern "C" fn bench_period_init(out: *mut Period) {
     // whole `Period` is ever built on the stack.
     unsafe {
         core::ptr::addr_of_mut!((*out).kin).write(MachineKinematics::new(&machine));
-        core::ptr::addr_of_mut!((*out).planner).write(pkmc::planner::Planner::new(home));
-        core::ptr::addr_of_mut!((*out).exec).write(pkmc::interp::Executor::new(home));
+        core::ptr::addr_of_mut!((*out).planner).write(pkmc::motion::planner::Planner::new(home));
+        core::ptr::addr_of_mut!((*out).exec).write(pkmc::motion::interp::Executor::new(home));
         core::ptr::addr_of_mut!((*out).machine).write(machine);
         let p = &mut *out;
         // Planned as the host plans them, then queued as the controller queues them.
         let blocks = period_blocks(home);
-        let mut plans = [pkmc::planner::PlanBlock::default(); 2];
-        let _ = pkmc::planner::plan_into(&blocks, home, &p.machine, &p.kin, 1, &mut plans);
+        let mut plans = [pkmc::motion::planner::PlanBlock::default(); 2];
+        let _ = pkmc::motion::planner::plan_into(&blocks, home, &p.machine, &p.kin, 1, &mut plans);
         for (b, plan) in blocks.iter().zip(&plans) {
-            let planned = pkmc::protocol::PlannedBlock {
+            let planned = pkmc::motion::block::PlannedBlock {
                 block: *b,
                 plan: plan.plan(),
             };

@@ -45,8 +45,8 @@ use crate::programs::{programs, Program};
 use crate::wire;
 use pkmc::config::MachineConfig;
 use pkmc::controller::Controller;
-use pkmc::protocol::Control;
-use pkmc::protocol::State;
+use pkmc::wire::Control;
+use pkmc::wire::State;
 use pkmc_host::job::{compile_compressed, prepare};
 use pkmc_host::link::{JobEnd, JobHooks, Link, LinkOptions, LinkView, NoHooks, Transport};
 use pkmc_host::sim::Simulator;
@@ -347,7 +347,7 @@ pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
     };
     let status = link.request_status().map_err(|e| e.to_string())?;
     let expected = if p.events {
-        matches!(end, JobEnd::Alarm(a) if a.cause == pkmc::protocol::AlarmCause::EStop)
+        matches!(end, JobEnd::Alarm(a) if a.cause == pkmc::wire::AlarmCause::EStop)
             && status.state == State::EStop
             && hooks.next == OPERATOR_EVENTS.len()
     } else {

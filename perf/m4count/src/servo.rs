@@ -14,9 +14,10 @@
 //! checks it: the counted periods take the coupled path).
 
 use pkmc::config::{Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS};
-use pkmc::contour::{ContourMap, PeriodInputs, ServoBank, POSE_AXES};
+use pkmc::kinematics::{ContourMap, POSE_AXES};
+use pkmc::drive::contour::{PeriodInputs, ServoBank};
 use pkmc::kinematics::{Kinematics, MachineKinematics, Pose};
-use pkmc::servo::target_q16;
+use pkmc::drive::servo::target_q16;
 
 /// Bytes the emulator reserves for one [`ServoBank`].
 pub const BANK_BYTES: usize = 4096;
@@ -153,7 +154,7 @@ fn hexapod_xy_bank() -> ServoBank {
     let m = hexapod_xy_machine();
     let kin = MachineKinematics::new(&m);
     let t = helix_targets(&m, &kin);
-    let mut bank = ServoBank::new(&m, &t[0].map(|q| q >> pkmc::servo::SETPOINT_FRAC_BITS));
+    let mut bank = ServoBank::new(&m, &t[0].map(|q| q >> pkmc::drive::servo::SETPOINT_FRAC_BITS));
     bank.load_tick(&t[1]);
     bank.load_tick(&t[2]);
     let MachineKinematics::HexapodXy(k) = &kin else {
@@ -187,7 +188,7 @@ pub fn feedback(bench: u32, k: i64) -> [i64; MAX_SERVOS] {
     let lag = [3, -2, 4, -1, 2, -3, 5, -4];
     core::array::from_fn(|c| {
         let at = t[1][c] + (t[2][c] - t[1][c]) * (k + 1) / 10;
-        (at >> pkmc::servo::SETPOINT_FRAC_BITS) - lag[c]
+        (at >> pkmc::drive::servo::SETPOINT_FRAC_BITS) - lag[c]
     })
 }
 

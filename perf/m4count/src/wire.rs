@@ -6,10 +6,10 @@
 //! (the `wire` line) and checks them against the image's ([`crate::bench_wire_words`]).
 
 use pkmc::config::{MAX_SERVOS, MAX_STEPPERS};
-use pkmc::contour::{ContourMap, POSE_AXES};
+use pkmc::kinematics::{ContourMap, POSE_AXES};
 use pkmc::controller::{Inputs, Outputs};
-use pkmc::servo::Trip;
-use pkmc::stepper::StepTrain;
+use pkmc::drive::servo::Trip;
+use pkmc::drive::stepper::StepTrain;
 
 /// Words of one [`Inputs`]: encoder counts, index (flag, count) per servo channel,
 /// e-stop, limit, home and drive-fault bits, trip (code, error, limit) per channel.

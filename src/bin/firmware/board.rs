@@ -39,7 +39,7 @@
 //!
 //! Why a software-pended tick rather than a second timer: no timer is free in the
 //! default wiring, and pending the tick from the servo interrupt makes it run exactly
-//! every [`pkmc::servo::SERVO_PER_TICK`]th servo period, so the servo loops load each
+//! every [`pkmc::drive::servo::SERVO_PER_TICK`]th servo period, so the servo loops load each
 //! tick's targets at a fixed phase. The servo interrupt is the most urgent so that the
 //! tick (tens to hundreds of µs of planning and kinematics) never delays a servo
 //! period; the controller and the tick's data are shared with thread-mode tasks under a
@@ -70,7 +70,7 @@ use embassy_stm32::timer::{Ch1, Ch2, GeneralInstance4Channel, TimerPin};
 use embassy_stm32::usb::{self, Driver};
 use embassy_stm32::{bind_interrupts, Config, Peri};
 use pkmc::config::MAX_SERVOS;
-use pkmc::servo::{DAC_MID, SERVO_HZ};
+use pkmc::drive::servo::{DAC_MID, SERVO_HZ};
 
 #[cfg(not(feature = "board-servo8"))]
 mod mixed;

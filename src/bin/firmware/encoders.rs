@@ -3,7 +3,7 @@
 //! Each servo channel's counter runs in quadrature-encoder mode (x4, all edges) with a
 //! 16-bit wrap (set up by [`crate::board`]): a timer's encoder interface, or on the
 //! eight-servo wiring also LPTIM1's encoder mode. Every servo period (10 kHz)
-//! [`Encoders::read`] extends each counter with [`pkmc::servo::extend_counter`], so a
+//! [`Encoders::read`] extends each counter with [`pkmc::drive::servo::extend_counter`], so a
 //! position is exact as long as an encoder moves less than 32 767 counts per period
 //! (327 M counts/s). Positions start at the counters' power-up value (0); homing is the
 //! core's business. Channels the wiring lacks stay at 0. Only the servo interrupt
@@ -11,7 +11,7 @@
 
 use embassy_stm32::pac::timer::TimGp16;
 use pkmc::config::MAX_SERVOS;
-use pkmc::servo::extend_counter;
+use pkmc::drive::servo::extend_counter;
 
 use crate::board::SERVO_CHANNELS;
 

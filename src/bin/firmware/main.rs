@@ -8,7 +8,7 @@
 //! switches, advances a [`Controller`] kept in a static on them (debounced) and on the
 //! servo interrupt's snapshot, posts its servo targets to the servo loops, and
 //! refreshes the independent watchdog (the pacing and the debouncing are the core's,
-//! `pkmc::pacing` and `pkmc::debounce`, shared with the simulator: these handlers only
+//! `pkmc::controller::pacing` and `pkmc::drive::debounce`, shared with the simulator: these handlers only
 //! read and write the hardware around them); a USB CDC-ACM link feeding the
 //! controller's `receive` and draining its `transmit`; a heartbeat LED. For the host
 //! it is a launcher that re-runs cargo for the MCU target, so `cargo run --release` at
@@ -78,11 +78,11 @@ mod firmware {
     use embassy_usb::class::cdc_acm::{self, CdcAcmClass, Sender};
     use embassy_usb::driver::EndpointError;
     use embassy_usb::{Builder, UsbDevice};
-    use pkmc::contour::ServoBank;
+    use pkmc::controller::pacing::{RawInputs, TickPacer};
     use pkmc::controller::Controller;
-    use pkmc::debounce::Switches as SwitchStates;
-    use pkmc::pacing::{RawInputs, TickPacer};
-    use pkmc::protocol::{AlarmCause, State};
+    use pkmc::drive::contour::ServoBank;
+    use pkmc::drive::debounce::Switches as SwitchStates;
+    use pkmc::wire::{AlarmCause, State};
     use static_cell::StaticCell;
     use {defmt_rtt as _, panic_probe as _};
 
@@ -179,7 +179,7 @@ mod firmware {
 
     /// Bytes of a stored machine record, padded to the flash write size (8 bytes).
     const RECORD_BYTES: usize =
-        (pkmc::store::HEADER_BYTES + pkmc::store::MAX_CONFIG_BYTES).div_ceil(8) * 8;
+        (pkmc::wire::store::HEADER_BYTES + pkmc::wire::store::MAX_CONFIG_BYTES).div_ceil(8) * 8;
 
     /// Builds the controller for the machine kept in flash (the wiring's built-in
     /// machine when the page holds none, or one on channels this wiring lacks) and moves
@@ -191,7 +191,7 @@ mod firmware {
         let stored = flash
             .blocking_read(board::CONFIG_PAGE_OFFSET, &mut record)
             .ok()
-            .and_then(|_| pkmc::store::read_record(&record).ok());
+            .and_then(|_| pkmc::wire::store::read_record(&record).ok());
         let machine = match stored {
             Some(m) => {
                 info!("machine from flash: {}", m.name.as_str());
@@ -240,8 +240,9 @@ mod firmware {
             Timer::after_millis(100).await;
             let len = with_controller(|c| {
                 let m = c.take_store_request()?;
-                let mut rec = [0u8; pkmc::store::HEADER_BYTES + pkmc::store::MAX_CONFIG_BYTES];
-                let n = pkmc::store::record(m, &mut rec)?;
+                let mut rec =
+                    [0u8; pkmc::wire::store::HEADER_BYTES + pkmc::wire::store::MAX_CONFIG_BYTES];
+                let n = pkmc::wire::store::record(m, &mut rec)?;
                 record.fill(0xFF);
                 record[..n].copy_from_slice(&rec[..n]);
                 Some(n)
@@ -298,7 +299,7 @@ mod firmware {
         board.timer.start();
         info!(
             "servo at {} Hz, tick at {} Hz, watchdog {} ms",
-            pkmc::servo::SERVO_HZ,
+            pkmc::drive::servo::SERVO_HZ,
             pkmc::units::TICK_HZ,
             board::WATCHDOG_MS
         );

@@ -1,9 +1,9 @@
 //! The 10 kHz servo interrupt: the hardware side of [`ServoPacer`], which runs every
-//! servo channel's loop and paces the tick (`pkmc::pacing` has the rules: the command
+//! servo channel's loop and paces the tick (`pkmc::controller::pacing` has the rules: the command
 //! a tick posts is taken at the next tick edge, where the snapshot for the next tick
 //! is left, and late ticks are counted).
 //!
-//! Each servo period ([`on_servo_period`], TIM7 at [`pkmc::servo::SERVO_HZ`]) reads
+//! Each servo period ([`on_servo_period`], TIM7 at [`pkmc::drive::servo::SERVO_HZ`]) reads
 //! the wiring's encoder counters (extended to 64 bits) and amplifier fault inputs (a
 //! line per group of channels: each channel gets its group's), runs
 //! [`ServoPacer::period`], writes its command codes and the amplifier enables (a line
@@ -22,8 +22,8 @@ use core::mem::MaybeUninit;
 use core::sync::atomic::{AtomicBool, Ordering};
 
 use critical_section::Mutex;
-use pkmc::contour::ServoBank;
-use pkmc::pacing::{Command, ServoPacer, ServoStats, Snapshot};
+use pkmc::controller::pacing::{Command, ServoPacer, ServoStats, Snapshot};
+use pkmc::drive::contour::ServoBank;
 use static_cell::StaticCell;
 
 use crate::board::{self, ServoIo};

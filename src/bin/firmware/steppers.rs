@@ -99,7 +99,7 @@ use embassy_stm32::pac::timer::vals::{Ocm, Urs};
 use embassy_stm32::pac::timer::TimAdv;
 use pkmc::config::MAX_STEPPERS;
 use pkmc::controller::Outputs;
-use pkmc::stepper::StepTrain;
+use pkmc::drive::stepper::StepTrain;
 
 /// Periods the repetition counter of TIM1, TIM8 and TIM20 can count (16-bit RCR): the
 /// core's steps per tick of these channels.

@@ -39,7 +39,7 @@ mod tests;
 
 use fit::{fit, fit_free, Goal};
 use pkmc::config::AXES;
-use pkmc::protocol::{Block, Motion};
+use pkmc::motion::block::{Block, Motion};
 use std::ops::Range;
 
 pub use fit::to_polyline;

@@ -43,7 +43,7 @@ fn deviation(input: &[Block], c: &Compressed) -> f64 {
     for (b, src) in c.blocks.iter().zip(&c.source) {
         let mut poly = vec![to_v(&pose)];
         poly.extend(input[src.clone()].iter().map(|b| to_v(&b.target)));
-        let p = pkmc::geometry::Path::new(b, &pose).unwrap();
+        let p = pkmc::motion::geometry::Path::new(b, &pose).unwrap();
         let mut at = [0i64; AXES];
         for k in 0..=200 {
             p.pose_at(&pose, (p.length << 16) / 200 * k, &mut at);

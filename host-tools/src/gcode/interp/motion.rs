@@ -331,7 +331,7 @@ impl Interp<'_> {
             (None, true) => self.centre_from_offsets([(a, wa), (b, wb)], s, e, col)?,
         };
         // Any radius: an arc the controller does not run exactly
-        // (`pkmc::geometry::Path::checked`) is sent as chords (`blocks::from_canon`).
+        // (`pkmc::motion::geometry::Path::checked`) is sent as chords (`blocks::from_canon`).
         let turns = match w.get(b'P') {
             Some(p) => (whole_in(p, 1, i64::from(u32::MAX), "turns P")? - 1) as u32,
             None => 0,

@@ -15,7 +15,7 @@
 //! plane other than XY (G17); a Z A B C word; no end point (X, Y or polar words); only
 //! one of I J; I J omitted on the first G5 of a series, or on a G5.1; G5.1 with I and J
 //! both zero; only one of P Q, or neither; and, beyond LinuxCNC, a curve larger than
-//! the controller interpolates ([`pkmc::geometry::MAX_SPLINE_SPAN`]).
+//! the controller interpolates ([`pkmc::motion::geometry::MAX_SPLINE_SPAN`]).
 //!
 //! Invariants: the emitted offsets are zero but along X and Y; the target's other axes
 //! are the current pose's; a refused spline still ends where it was programmed (as a
@@ -36,8 +36,8 @@ use crate::gcode::canon::{Canon, Feed, Plane};
 use crate::gcode::lexer::{Word, Words};
 use crate::gcode::ErrorKind;
 use pkmc::config::AXES;
-use pkmc::geometry::{Path, MAX_SPLINE_SPAN};
-use pkmc::protocol::Motion;
+use pkmc::motion::block::Motion;
+use pkmc::motion::geometry::{Path, MAX_SPLINE_SPAN};
 
 impl Interp<'_> {
     /// A G5 (`quadratic` false) or G5.1 move of line `b`; `tangent`: the first control
@@ -208,7 +208,7 @@ impl Interp<'_> {
             },
             None => Motion::Quadratic { c: c1 },
         };
-        let block = pkmc::protocol::Block {
+        let block = pkmc::motion::block::Block {
             line,
             motion,
             target: end,
@@ -269,8 +269,8 @@ mod tests {
     use crate::gcode::blocks::{from_canon, BLEND_ANY};
     use crate::gcode::{compile, Options};
     use pkmc::config::AXES;
-    use pkmc::geometry::{coefficients, Path};
-    use pkmc::protocol::{Block, Motion};
+    use pkmc::motion::block::{Block, Motion};
+    use pkmc::motion::geometry::{coefficients, Path};
 
     /// The blocks the controller receives for `program`, and the pose each starts at.
     fn blocks(program: &str) -> Vec<(Block, [i64; AXES])> {

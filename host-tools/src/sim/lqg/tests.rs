@@ -1,7 +1,7 @@
 use super::linalg::{eye, residual, t};
 use super::*;
 use crate::sim::plant::Mismatch;
-use pkmc::lqg::LqgState;
+use pkmc::drive::lqg::LqgState;
 
 const H: f64 = 1e-4;
 const CPU: f64 = 1000.0;

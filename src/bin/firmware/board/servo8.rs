@@ -43,7 +43,7 @@ use embassy_stm32::timer::{Ch1, TimerPin};
 use embassy_stm32::{bind_interrupts, Peri, Peripherals};
 use pkmc::config::{BoardChannels, Drive, MachineConfig, MAX_SERVOS};
 use pkmc::controller::Outputs;
-use pkmc::servo::DAC_MID;
+use pkmc::drive::servo::DAC_MID;
 
 use super::{
     analog, claim_timer, clock_analog, encoder, groups_in_range, hrtim_cha2_pin, start_common,

@@ -2,7 +2,7 @@
 //!
 //! Source: seeds-digest A, constant path speed with dS = V·T per period T — here the
 //! distance per tick comes from the block's [`Profile`] evaluated at the tick's time,
-//! and the pose from the block's exact [`crate::geometry::Path`]. Time carries across
+//! and the pose from the block's exact [`crate::motion::geometry::Path`]. Time carries across
 //! blocks: when a block ends inside a tick, the rest of the tick is spent on the next
 //! block, so a program of segments shorter than one tick's travel still runs at full
 //! speed, and the block boundaries do not round to ticks.
@@ -29,11 +29,11 @@
 //! when it starts, from the speed the previous one left at). No pass over the queue.
 
 use crate::config::AXES;
-use crate::geometry::Path;
 use crate::kinematics::Unreachable;
-use crate::planner::{Kind, Planner};
-use crate::profile::{from_q32, Profile, HELD, TICK_Q32};
-use crate::protocol::Aux;
+use crate::motion::block::Aux;
+use crate::motion::geometry::Path;
+use crate::motion::planner::{Kind, Planner};
+use crate::motion::profile::{from_q32, Profile, HELD, TICK_Q32};
 
 /// Something the controller must act on, found while executing.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

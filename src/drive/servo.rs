@@ -14,7 +14,7 @@
 //!
 //! **Loop** ([`ServoAxis::update`], LinuxCNC `pid` component form), with the following
 //! error e = target − feedback + r (counts, fractional; r is a reference pre-compensation from
-//! [`crate::contour`], zero when uncoupled):
+//! [`crate::drive::contour`], zero when uncoupled):
 //!
 //! ```text
 //! u = kp·e + I + kd·ė + kvff·v + kaff·a + c        (c.u., c = coupling command)
@@ -41,6 +41,7 @@
 //! firmware's arithmetic.
 
 use crate::config::ServoGains;
+use crate::math::clamp_sym;
 use crate::units::TICK_HZ;
 
 /// Servo loop frequency, Hz.
@@ -186,7 +187,7 @@ pub struct AmpIo {
     pub fault: bool,
 }
 
-/// Corrections from contour control ([`crate::contour`]); zero when uncoupled.
+/// Corrections from contour control ([`crate::drive::contour`]); zero when uncoupled.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Coupling {
     /// Added to the reference, counts (CCPM pre-compensation).
@@ -256,7 +257,7 @@ struct Coefs {
 pub struct ServoAxis {
     c: Coefs,
     /// The LQG law's estimate and integral (unused under PID).
-    lqg: crate::lqg::LqgState,
+    lqg: crate::drive::lqg::LqgState,
     integral: f32,
     previous_error: f32,
     enabled: bool,
@@ -282,18 +283,6 @@ pub fn following_error(target_q16: i64, feedback: i64) -> (i32, f32) {
     let whole = to_i32(diff >> SETPOINT_FRAC_BITS);
     let frac = (diff & 0xFFFF) as i32 as f32 * (1.0 / 65_536.0);
     (whole, whole as f32 + frac)
-}
-
-/// `x` limited to ±`limit` (`limit` ≥ 0). Unlike `f32::clamp` it has no panic path
-/// (that one asserts its bounds are ordered), so the loop stays panic-free.
-pub fn clamp_sym(x: f32, limit: f32) -> f32 {
-    if x > limit {
-        limit
-    } else if x < -limit {
-        -limit
-    } else {
-        x
-    }
 }
 
 /// Rounds to nearest, ties away from zero, saturating (one VCVT on the M4F).
@@ -331,7 +320,7 @@ impl ServoAxis {
                 ferror_per_velocity: per_v,
                 ferror_on: gains.ferror > 0,
             },
-            lqg: crate::lqg::LqgState::new(),
+            lqg: crate::drive::lqg::LqgState::new(),
             integral: 0.0,
             previous_error: 0.0,
             enabled: false,
@@ -391,7 +380,7 @@ impl ServoAxis {
         feedback: i64,
         amp: AmpIo,
         coupling: Coupling,
-        lqg: Option<&crate::lqg::LqgGains>,
+        lqg: Option<&crate::config::LqgGains>,
     ) -> ServoOutput {
         let fe = following_error(target.position_q16, feedback);
         self.update_on(target, fe, amp, coupling, lqg)
@@ -405,7 +394,7 @@ impl ServoAxis {
         (raw, exact): (i32, f32),
         amp: AmpIo,
         coupling: Coupling,
-        lqg: Option<&crate::lqg::LqgGains>,
+        lqg: Option<&crate::config::LqgGains>,
     ) -> ServoOutput {
         let error = exact + coupling.reference;
         if self.trip.is_none() && amp.enable && amp.fault {

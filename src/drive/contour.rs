@@ -25,7 +25,7 @@
 //! not the path's where the path leaves rest or turns a corner between pieces.
 //!
 //! **Uncoupled.** Each axis runs its own PID with its velocity and acceleration
-//! feed-forward ([`crate::servo`]).
+//! feed-forward ([`crate::drive::servo`]).
 //!
 //! **Cross-coupled** (Koren): the contour error goes through a PI controller
 //! W = kp + ki/s whose output is distributed to the axes' commands by the direction
@@ -44,7 +44,7 @@
 //! cross-coupled command c is applied as well. The report gives the structure, not the
 //! equations; the form here is this project's reading of it.
 //!
-//! Arithmetic: `f32`, as in [`crate::servo`]; 1/|v| by the bit-level reciprocal square
+//! Arithmetic: `f32`, as in [`crate::drive::servo`]; 1/|v| by the bit-level reciprocal square
 //! root with three Newton steps (no division, no library call). Capacities: the bank
 //! has [`MAX_SERVOS`] channels; every loop is a fixed count.
 
@@ -53,10 +53,12 @@
 
 use crate::config::{ContourConfig, ContourMode, Drive, KinematicsConfig, MachineConfig};
 use crate::config::{ServoGains, MAX_SERVOS};
-use crate::servo::{
-    clamp_sym, following_error, AmpIo, Coupling, ServoAxis, ServoOutput, SetpointInterpolator,
-    Trip, DAC_MID, SERVO_PERIOD_S, SERVO_PER_TICK, SETPOINT_FRAC_BITS,
+use crate::drive::servo::{
+    following_error, AmpIo, Coupling, ServoAxis, ServoOutput, SetpointInterpolator, Trip, DAC_MID,
+    SERVO_PERIOD_S, SERVO_PER_TICK, SETPOINT_FRAC_BITS,
 };
+use crate::kinematics::{ContourMap, PoseVec, POSE_AXES};
+use crate::math::clamp_sym;
 
 /// Slowest path speed at which the contour error is estimated, mm/s.
 pub const MIN_CONTOUR_SPEED: f32 = 0.01;
@@ -71,60 +73,6 @@ pub const MAX_CURVATURE: f32 = 2.0;
 
 /// A vector over the servo channels (uncoupled channels hold zero).
 pub type ChannelVec = [f32; MAX_SERVOS];
-
-/// Pose coordinates the contour controller works in: X Y Z (mm) and the tool
-/// direction's A B (degrees).
-pub const POSE_AXES: usize = 5;
-
-/// A vector over [`POSE_AXES`]: X Y Z in mm, A B in degrees.
-pub type PoseVec = [f32; POSE_AXES];
-
-/// How the servo channels map to the pose near the setpoint: the linearised forward
-/// kinematics `to_pose` = ∂pose/∂q (pose units per channel unit: mm or degrees per mm
-/// or degree of the joint) and the inverse's Jacobian `to_joint` = ∂q/∂pose. A
-/// Cartesian machine's map is constant (ones where a channel follows X, Y or Z); the
-/// hexapod-xy's is recomputed every tick at the commanded pose
-/// ([`crate::kinematics::hexapod_xy::HexapodXy::contour_map`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ContourMap {
-    /// ∂pose/∂q per channel.
-    pub to_pose: [[f32; MAX_SERVOS]; POSE_AXES],
-    /// ∂q/∂pose per channel.
-    pub to_joint: [[f32; POSE_AXES]; MAX_SERVOS],
-}
-
-impl Default for ContourMap {
-    fn default() -> Self {
-        Self::NONE
-    }
-}
-
-impl ContourMap {
-    /// No channel coupled.
-    pub const NONE: ContourMap = ContourMap {
-        to_pose: [[0.0; MAX_SERVOS]; POSE_AXES],
-        to_joint: [[0.0; POSE_AXES]; MAX_SERVOS],
-    };
-
-    /// The channel-indexed map of `machine`'s servo joints from a joint-indexed one
-    /// (joint j in channel j, as
-    /// [`crate::kinematics::hexapod_xy::HexapodXy::contour_map`] returns it).
-    pub fn of_joints(machine: &MachineConfig, jm: &ContourMap) -> Self {
-        let mut map = Self::NONE;
-        for (j, jc) in machine.joints.iter().enumerate().take(MAX_SERVOS) {
-            if let Drive::Servo { channel } = jc.drive {
-                let c = channel as usize;
-                if c < MAX_SERVOS {
-                    for a in 0..POSE_AXES {
-                        map.to_pose[a][c] = jm.to_pose[a][j];
-                    }
-                    map.to_joint[c] = jm.to_joint[j];
-                }
-            }
-        }
-        map
-    }
-}
 
 /// 1/√x for x > 0, relative error below 1e-7: bit-level first guess and three Newton
 /// steps (multiplies only).
@@ -292,7 +240,7 @@ impl ContourLoop {
 /// What the hardware reports each servo period.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PeriodInputs {
-    /// Extended encoder position of each channel, counts ([`crate::servo::extend_counter`]).
+    /// Extended encoder position of each channel, counts ([`crate::drive::servo::extend_counter`]).
     pub feedback: [i64; MAX_SERVOS],
     /// Amplifier fault input of each channel.
     pub fault: [bool; MAX_SERVOS],
@@ -341,7 +289,7 @@ pub struct ServoBank {
     to_joint: [PoseVec; MAX_SERVOS],
     /// Each channel's feedback law and the LQG designs (as [`crate::config::ServoConfig`]).
     law: [u8; MAX_SERVOS],
-    lqg: heapless::Vec<crate::lqg::LqgGains, { crate::config::MAX_LQG }>,
+    lqg: heapless::Vec<crate::config::LqgGains, { crate::config::MAX_LQG }>,
     /// The channels in use, `active[..n_active]`: the period loops over these only.
     active: [u8; MAX_SERVOS],
     n_active: usize,
@@ -423,7 +371,7 @@ impl ServoBank {
     }
 
     /// At each interpolation tick: the channels' next targets, counts × 2^16
-    /// ([`crate::servo::target_q16`]).
+    /// ([`crate::drive::servo::target_q16`]).
     pub fn load_tick(&mut self, targets: &[i64; MAX_SERVOS]) {
         for (s, t) in self.setpoints.iter_mut().zip(targets) {
             s.load(*t);

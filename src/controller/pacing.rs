@@ -18,7 +18,7 @@
 //! **Tick side** ([`TickPacer`], one call per tick). At the start of tick N the caller
 //! applies [`TickPacer::due`], the outputs tick N − 1 computed (step trains, DIR and
 //! ENABLE); then [`TickPacer::tick`] debounces the raw switch samples
-//! ([`crate::debounce`]), builds the controller's [`Inputs`] from them and from edge
+//! ([`crate::drive::debounce`]), builds the controller's [`Inputs`] from them and from edge
 //! N's snapshot, advances the controller, keeps its outputs as the next due ones and
 //! returns the command to post for edge N + 1.
 //!
@@ -35,10 +35,11 @@
 //! firmware under a short critical section: copies only).
 
 use crate::config::{Drive, MachineConfig, MAX_SERVOS};
-use crate::contour::{ContourMap, PeriodInputs, PeriodOutputs, ServoBank};
 use crate::controller::{Controller, Inputs, Outputs};
-use crate::debounce::{SwitchFilter, Switches};
-use crate::servo::{Trip, SERVO_PER_TICK, SETPOINT_FRAC_BITS};
+use crate::drive::contour::{PeriodInputs, PeriodOutputs, ServoBank};
+use crate::drive::debounce::{SwitchFilter, Switches};
+use crate::drive::servo::{Trip, SERVO_PER_TICK, SETPOINT_FRAC_BITS};
+use crate::kinematics::ContourMap;
 
 /// What the servo side saw at the last tick edge, for the tick.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -322,7 +323,7 @@ mod tests {
     fn pad<T: Copy + Default>(a: [T; 4]) -> [T; MAX_SERVOS] {
         core::array::from_fn(|i| a.get(i).copied().unwrap_or_default())
     }
-    use crate::protocol::{encode_frame, Control, HostMsg, MAX_FRAME};
+    use crate::wire::{encode_frame, Control, HostMsg, MAX_FRAME};
 
     /// The H-4 table machine: four servo joints (channels 0–3) and steppers.
     fn machine() -> MachineConfig {
@@ -537,7 +538,8 @@ mod tests {
     fn jog_cmd(c: &Controller, axis: usize, distance: i64, feed: i64) -> Control {
         let kin = crate::kinematics::MachineKinematics::new(c.machine());
         Control::Jog(
-            crate::planner::plan_jog(c.machine(), &kin, c.pose(), axis, distance, feed).unwrap(),
+            crate::motion::planner::plan_jog(c.machine(), &kin, c.pose(), axis, distance, feed)
+                .unwrap(),
         )
     }
 

@@ -14,12 +14,12 @@
 //! rotary axes only is measured in n° instead.
 
 use crate::config::AXES;
-use crate::protocol::{Block, Motion, Plane};
+use crate::motion::block::{Block, Motion, Plane};
 
 mod spline;
 pub use spline::{coefficients, Curve, MAX_SPLINE_SPAN, MIN_SPLINE_NM};
 
-pub use crate::protocol::Shape;
+pub use crate::motion::block::Shape;
 
 /// What a path is, an arc's in-plane part aside.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -45,7 +45,7 @@ impl Form {
 
 /// What every path has: where it ends, its length, and its direction per axis. An
 /// arc's in-plane part is its [`Bend`], kept apart: the controller's queue holds
-/// hundreds of courses and only the arcs among them need a bend (`crate::planner`
+/// hundreds of courses and only the arcs among them need a bend (`crate::motion::planner`
 /// keeps bends in a ring of their own), which makes a queued line 72 bytes shorter.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Course {

@@ -28,7 +28,7 @@ pub fn encode(config: &MachineConfig, out: &mut [u8; MAX_CONFIG_BYTES]) -> Optio
 pub fn identity(config: &MachineConfig) -> u32 {
     let mut buf = [0u8; MAX_CONFIG_BYTES];
     match encode(config, &mut buf) {
-        Some(n) => crate::crc::crc32(&buf[..n]),
+        Some(n) => crate::wire::crc::crc32(&buf[..n]),
         None => 0,
     }
 }
@@ -66,7 +66,7 @@ pub fn record(
     let n = encode(config, &mut payload)?;
     out[..4].copy_from_slice(&MAGIC);
     out[4..6].copy_from_slice(&(n as u16).to_le_bytes());
-    out[6..10].copy_from_slice(&crate::crc::crc32(&payload[..n]).to_le_bytes());
+    out[6..10].copy_from_slice(&crate::wire::crc::crc32(&payload[..n]).to_le_bytes());
     out[HEADER_BYTES..HEADER_BYTES + n].copy_from_slice(&payload[..n]);
     Some(HEADER_BYTES + n)
 }
@@ -81,7 +81,7 @@ pub fn read_record(bytes: &[u8]) -> Result<MachineConfig, StoreError> {
     let payload = bytes
         .get(HEADER_BYTES..HEADER_BYTES + n)
         .ok_or(StoreError::Damaged)?;
-    if n > MAX_CONFIG_BYTES || crate::crc::crc32(payload) != crc {
+    if n > MAX_CONFIG_BYTES || crate::wire::crc::crc32(payload) != crc {
         return Err(StoreError::Damaged);
     }
     decode(payload)
@@ -143,7 +143,7 @@ impl Assembler {
             return Ok(None);
         }
         let payload = &self.buf[..total];
-        if crate::crc::crc32(payload) != crc {
+        if crate::wire::crc::crc32(payload) != crc {
             self.have = [false; MAX_CONFIG_BYTES / CHUNK_BYTES + 1];
             return Err(StoreError::Damaged);
         }
@@ -171,7 +171,7 @@ mod tests {
         let m = MachineConfig::cartesian_xyz();
         let mut payload = [0u8; MAX_CONFIG_BYTES];
         let n = encode(&m, &mut payload).unwrap();
-        let crc = crate::crc::crc32(&payload[..n]);
+        let crc = crate::wire::crc::crc32(&payload[..n]);
         let mut a = Assembler::new();
         let chunks: Vec<usize> = (0..n).step_by(CHUNK_BYTES).collect();
         let mut got = None;

@@ -23,7 +23,7 @@
 
 use super::{Course, Form, GeometryError};
 use crate::config::AXES;
-use crate::protocol::Motion;
+use crate::motion::block::Motion;
 
 /// The part of a spline beyond its [`Course`] (whose `unit` holds a₁).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -290,7 +290,7 @@ impl Course {
 mod tests {
     use super::super::Path;
     use crate::config::AXES;
-    use crate::protocol::{Block, Motion};
+    use crate::motion::block::{Block, Motion};
 
     fn cubic(target: [i64; AXES], c1: [i64; AXES], c2: [i64; AXES]) -> Block {
         Block {
@@ -430,7 +430,7 @@ mod tests {
 
     #[test]
     fn a_plan_for_another_curve_or_length_is_refused() {
-        use crate::geometry::GeometryError;
+        use crate::motion::geometry::GeometryError;
         let start = [0; AXES];
         let b = cubic(
             [10_000_000, 0, 0, 0, 0, 0],
@@ -442,7 +442,7 @@ mod tests {
         // Shorter than the chord, longer than the hull, or a wrong rate.
         assert_eq!(Path::from_plan(&b, &start, 9_000_000, p.shape()), bad);
         assert_eq!(Path::from_plan(&b, &start, p.length * 4, p.shape()), bad);
-        let wrong = crate::protocol::Shape::Spline {
+        let wrong = crate::motion::block::Shape::Spline {
             rate: super::rate_of(p.length) + (1 << 20),
         };
         assert_eq!(Path::from_plan(&b, &start, p.length, wrong), bad);

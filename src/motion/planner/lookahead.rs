@@ -1,0 +1,538 @@
+//! The host's look-ahead: each block's limits and corner ([`Lookahead`]), the reverse
+//! and forward passes, and single planned moves (MDI, jogs).
+
+use super::limits::{bend_jump_limit, corner_need, limits_along, per_tick};
+use crate::config::{MachineConfig, AXES, MAX_JOINTS};
+use crate::kinematics::{MachineKinematics, Unreachable};
+use crate::math::{fmax, fmin, i64_to_f32, sqrtf};
+use crate::motion::block::{Aux, Block, Motion, Plan, PlannedBlock};
+use crate::motion::geometry::{Course, Form, GeometryError, Path};
+use crate::units::TICK_HZ;
+
+/// What a queued block does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// Motion at the machine's limits.
+    Rapid,
+    /// Motion at the programmed feed.
+    Feed,
+    /// Wait this many ticks at rest.
+    Dwell(u32),
+    /// Auxiliary function, executed at rest.
+    Aux(Aux),
+    /// The block cannot be executed (its target is out of reach); reaching it raises
+    /// an alarm.
+    Unreachable(Unreachable),
+}
+
+/// A block in the planner queue.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanBlock {
+    /// NC line.
+    pub line: u32,
+    /// Kind.
+    pub kind: Kind,
+    /// Geometry.
+    pub path: Path,
+    /// Requested feed, nm/tick (∞ for rapids).
+    pub feed: f32,
+    /// Hard speed limit, nm/tick.
+    pub v_limit: f32,
+    /// Acceleration used by the profile, nm/tick²: half of `accel_full` when a corner
+    /// at either end is blended.
+    pub accel: f32,
+    /// Acceleration the limits allow along the block, nm/tick².
+    pub accel_full: f32,
+    /// Share of the acceleration reserved for the turn at the block's start.
+    pub rho_in: f32,
+    /// Hard limit on the entry speed from the corner with the previous block, nm/tick.
+    pub corner: f32,
+    /// Planned entry speed, nm/tick.
+    pub entry: f32,
+}
+
+impl PlanBlock {
+    /// Length in nm as `f32`.
+    pub fn length(&self) -> f32 {
+        i64_to_f32(self.path.length)
+    }
+
+    /// What the host streams for this block.
+    pub fn plan(&self) -> Plan {
+        Plan {
+            length: self.path.length,
+            shape: self.path.shape(),
+            v_limit: self.v_limit,
+            accel: self.accel,
+            entry: self.entry,
+            stop: self.corner == 0.0,
+        }
+    }
+}
+
+impl Default for PlanBlock {
+    /// An auxiliary no-op at the origin (a placeholder for buffers).
+    fn default() -> Self {
+        Self {
+            line: 0,
+            kind: Kind::Dwell(0),
+            path: Path::default(),
+            feed: 0.0,
+            v_limit: 0.0,
+            accel: 1.0,
+            accel_full: 1.0,
+            rho_in: 0.0,
+            corner: 0.0,
+            entry: 0.0,
+        }
+    }
+}
+
+/// The planning state between blocks: where the last block ended and how, so that
+/// the next one's corner can be planned ([`Lookahead::plan`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Lookahead {
+    /// End pose of the last block planned.
+    pub end: [i64; AXES],
+    end_tangent: [f32; AXES],
+    /// d²P/ds² at the end of the last block (splines and arcs; 0 for lines).
+    end_bend: [f32; AXES],
+    end_stops: bool,
+    /// Blending tolerance of the last block planned, nm.
+    end_tolerance: u32,
+    /// Jerk-limitation window, ticks (1: none); see [`crate::motion::interp`].
+    pub smoothing: u32,
+}
+
+/// Soft speed cap of a block (feed × override, 0 in a hold), nm/tick.
+pub fn cap(b: &PlanBlock, feed_override: u16, hold: bool) -> f32 {
+    cap_of(b.kind, b.feed, b.v_limit, feed_override, hold)
+}
+
+pub(super) fn cap_of(kind: Kind, feed: f32, v_limit: f32, feed_override: u16, hold: bool) -> f32 {
+    if hold {
+        return 0.0;
+    }
+    match kind {
+        Kind::Rapid => v_limit,
+        Kind::Feed => fmin(feed * feed_override as f32 / 100.0, v_limit),
+        _ => 0.0,
+    }
+}
+
+impl Lookahead {
+    /// Planning from `pose`, at rest, with a jerk-limitation window of `smoothing`.
+    pub fn new(pose: [i64; AXES], smoothing: u32) -> Self {
+        Self {
+            end: pose,
+            end_tangent: [0.0; AXES],
+            end_bend: [0.0; AXES],
+            end_stops: true,
+            end_tolerance: 0,
+            smoothing,
+        }
+    }
+
+    /// Plans `block` after `prev` (the block planned before it, whose acceleration a
+    /// blended corner may reduce): geometry, limits along it, and its corner. Its
+    /// `entry` is left at the corner limit, for the passes. An unreachable target is
+    /// planned as such (it stops the machine there).
+    pub fn plan(
+        &mut self,
+        block: &Block,
+        prev: Option<&mut PlanBlock>,
+        machine: &MachineConfig,
+        kin: &MachineKinematics,
+    ) -> Result<PlanBlock, GeometryError> {
+        let path = Path::new(block, &self.end)?;
+        let mut kind = kind_of(block, &path);
+        let feed = feed_of(block, &path, kind);
+        // The fastest this block may be asked to go (feed override up to 200 %).
+        let requested = feed * 2.0;
+        let (v_limit, accel) = match kind {
+            Kind::Rapid | Kind::Feed => {
+                match limits_along(&self.end, &path, requested, None, machine, kin) {
+                    Ok(l) => l,
+                    Err(e) => {
+                        kind = Kind::Unreachable(e);
+                        (0.0, 1.0)
+                    }
+                }
+            }
+            _ => (0.0, 1.0),
+        };
+        // With jerk limitation over w ticks the smoothed speed may exceed the
+        // profile's by a·w·T/2 (see below): a curve's or an arc's bend, sized for its
+        // speed limit, would then take more than its share; its limit is lowered by
+        // that.
+        let v_limit = if path.form.bends() && self.smoothing > 1 {
+            fmax(
+                v_limit - accel * self.smoothing as f32 / 2.0,
+                0.25 * v_limit,
+            )
+        } else {
+            v_limit
+        };
+        // Corners compare dP/ds (a spline's tangent is |dP/du|/length ≤ 1 long): where
+        // two splines meet with one direction but different |dP/ds| the tool's speed
+        // jumps by the difference, which the corner limits as it limits a turn.
+        let start_tangent = path.tangent_at(0);
+        let moving = matches!(kind, Kind::Rapid | Kind::Feed);
+        let accel = accel.max(1e-9);
+        let need = if self.end_stops || !moving {
+            None
+        } else {
+            corner_need(&self.end_tangent, &start_tangent, &self.end, machine, kin)
+        };
+        // Split each axis's acceleration at a blended corner: a share ρ for the turn,
+        // the rest for the two blocks' profiles (see the module doc). ρ is what the
+        // turn needs at the speed both blocks ask for, at most one half.
+        // Path tolerance (G64 P): between two tick samples the tool moves in a
+        // straight line, which cuts a corner taken at v (nm/tick) by v·|Δu|/4 at most
+        // (the corner half-way through a tick); keep that within the tolerance.
+        let du = sqrtf(
+            (0..3)
+                .map(|i| {
+                    let d = start_tangent[i] - self.end_tangent[i];
+                    d * d
+                })
+                .sum::<f32>(),
+        );
+        let by_tolerance = if self.end_tolerance == u32::MAX || du < 1e-9 {
+            f32::INFINITY
+        } else {
+            4.0 * self.end_tolerance as f32 / du
+        };
+        let (corner, rho) = match need {
+            None => (0.0, 0.0),
+            Some(n) if n <= 0.0 => (by_tolerance, 0.0),
+            Some(n) => {
+                // With jerk limitation over w ticks the smoothed motion passes the
+                // corner up to a·w·T/2 faster than the profile does, and its one-tick
+                // turn must stay within aᵢ·T/w per axis (a third of the jerk budget, see
+                // [`crate::motion::interp`]); a corner that cannot is a stop, which the executor
+                // lets the smoothing settle into before turning.
+                let w = self.smoothing.max(1) as f32;
+                let a_near = prev.as_ref().map_or(0.0, |p| p.accel_full).max(accel);
+                let by_jerk = (1.0 / (w * n) - a_near * w / 2.0).max(0.0);
+                let limit = by_tolerance.min(if self.smoothing > 1 {
+                    by_jerk
+                } else {
+                    f32::INFINITY
+                });
+                let prev_v = prev.as_ref().map_or(0.0, |p| p.feed.min(p.v_limit));
+                let want = prev_v.min(feed.min(v_limit)).min(limit);
+                // Blocks shorter than a tick's travel put several corners into one
+                // tick, whose turns add up: at v over blocks of length L, v/L of them,
+                // so the share a corner needs is v·n·max(1, v/L), and v ≤ √(ρ·L/n)
+                // as well as ρ/n.
+                let short = prev
+                    .as_ref()
+                    .map_or(path.length, |p| p.path.length.min(path.length))
+                    .max(1) as f32;
+                let per_tick = fmax(1.0, want / short);
+                // max/min rather than clamp: clamp's panic message formats floats, which
+                // costs the firmware kilobytes of formatting code.
+                #[allow(clippy::manual_clamp)]
+                let rho = (want * n * per_tick * 1.0001).max(0.0).min(0.5);
+                let v = fmin(rho / n, sqrtf(rho * short / n));
+                (v.min(limit), rho)
+            }
+        };
+        if rho > 0.0 {
+            if let Some(prev) = prev {
+                prev.accel = prev.accel_full * (1.0 - rho.max(prev.rho_in));
+            }
+        }
+        // Where a spline or an arc meets its neighbour its bend jumps: each axis's and joint's
+        // acceleration changes by v²·Δx″ in one tick, which jerk limitation over w
+        // ticks allows a third of its budget for (aᵢ/w per tick, as a corner's turn).
+        let start_bend = path.bend_at(0);
+        let corner = if self.smoothing > 1 && moving && corner > 0.0 {
+            let jump: [f32; AXES] = core::array::from_fn(|i| start_bend[i] - self.end_bend[i]);
+            fmin(
+                corner,
+                bend_jump_limit(&jump, &self.end, self.smoothing, machine, kin),
+            )
+        } else {
+            corner
+        };
+        self.end_bend = path.bend_at(path.length << 16);
+        self.end = path.end;
+        self.end_tangent = path.tangent_at(path.length << 16);
+        self.end_stops = !moving || block.tolerance_nm == 0;
+        self.end_tolerance = block.tolerance_nm;
+        Ok(PlanBlock {
+            line: block.line,
+            kind,
+            path,
+            feed,
+            v_limit,
+            accel: accel * (1.0 - rho),
+            accel_full: accel,
+            rho_in: rho,
+            corner,
+            entry: corner,
+        })
+    }
+}
+
+/// What a block does, given its geometry (a move of length 0 is a dwell of 0 ticks).
+pub(super) fn kind_of(block: &Block, path: &Course) -> Kind {
+    let kind = match block.motion {
+        Motion::Rapid => Kind::Rapid,
+        Motion::Linear | Motion::Arc { .. } | Motion::Cubic { .. } | Motion::Quadratic { .. } => {
+            Kind::Feed
+        }
+        Motion::Dwell(ms) => Kind::Dwell(((ms as u64 * TICK_HZ as u64).div_ceil(1000)) as u32),
+        Motion::Aux(a) => Kind::Aux(a),
+    };
+    if path.length == 0 && matches!(kind, Kind::Rapid | Kind::Feed) {
+        return Kind::Dwell(0);
+    }
+    kind
+}
+
+/// Requested feed of a block, nm/tick (∞ for rapids and blocks that do not move).
+pub(super) fn feed_of(block: &Block, path: &Course, kind: Kind) -> f32 {
+    match kind {
+        Kind::Feed if path.rotary_only => per_tick(block.feed.saturating_mul(1000)),
+        Kind::Feed => per_tick(block.feed),
+        _ => f32::INFINITY,
+    }
+}
+
+/// Largest entry speed allowed for block `i` (corner, its cap, the previous cap).
+pub(super) fn entry_limit(blocks: &[PlanBlock], i: usize, feed_override: u16, hold: bool) -> f32 {
+    let b = &blocks[i];
+    let prev_cap = if i == 0 {
+        f32::INFINITY
+    } else {
+        cap(&blocks[i - 1], feed_override, hold)
+    };
+    fmin(fmin(b.corner, cap(b, feed_override, hold)), prev_cap)
+}
+
+/// The reverse pass over `blocks` (see the module doc): the last one ends at rest.
+pub fn reverse_pass(blocks: &mut [PlanBlock], feed_override: u16, hold: bool) {
+    let mut next_entry = 0.0f32;
+    for i in (0..blocks.len()).rev() {
+        let limit = entry_limit(blocks, i, feed_override, hold);
+        let b = &mut blocks[i];
+        let reach = sqrtf(next_entry * next_entry + 2.0 * b.accel * b.length());
+        b.entry = fmin(limit, reach);
+        next_entry = b.entry;
+    }
+}
+
+/// The forward pass over `blocks` from `first_entry` (see the module doc).
+pub fn forward_pass(blocks: &mut [PlanBlock], first_entry: f32) {
+    let Some(first) = blocks.first_mut() else {
+        return;
+    };
+    first.entry = first_entry;
+    for i in 0..blocks.len() - 1 {
+        let (e, a, len) = (blocks[i].entry, blocks[i].accel, blocks[i].length());
+        let hi = sqrtf(e * e + 2.0 * a * len);
+        let lo = sqrtf(fmax(e * e - 2.0 * a * len, 0.0));
+        let nb = &mut blocks[i + 1];
+        nb.entry = fmax(fmin(nb.entry, hi), lo);
+    }
+}
+
+/// Plans a whole program from `start` at rest, with unlimited look-ahead (the host's
+/// job): `out[i]` receives block `i`'s plan ([`PlanBlock::plan`] is what is streamed).
+/// `smoothing` is the controller's jerk-limitation window in ticks
+/// ([`crate::config::window_of`] of the machine's). Fails with the index of a block
+/// whose geometry is malformed.
+pub fn plan_into(
+    blocks: &[Block],
+    start: [i64; AXES],
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+    smoothing: u32,
+    out: &mut [PlanBlock],
+) -> Result<(), (usize, GeometryError)> {
+    let mut la = Lookahead::new(start, smoothing);
+    for (i, b) in blocks.iter().enumerate() {
+        let (done, rest) = out.split_at_mut(i);
+        rest[0] = la
+            .plan(b, done.last_mut(), machine, kin)
+            .map_err(|e| (i, e))?;
+    }
+    let out = &mut out[..blocks.len()];
+    reverse_pass(out, 100, false);
+    forward_pass(out, 0.0);
+    if refine_splines(out, 0, start, machine, kin) {
+        reverse_pass(out, 100, false);
+        forward_pass(out, 0.0);
+    }
+    Ok(())
+}
+
+/// A second look at the splines once the passes know how fast each one runs
+/// (`blocks[from..]`; `start`: where `blocks[0]` starts): a spline's bend was given
+/// the acceleration share it needs at its feed ([`split`]), but one that runs slower
+/// (a neighbour's corner, a bend further on, the stop at the end) needs less of it;
+/// its limits are found again for the speed it reaches, which gives its profile the
+/// rest, and its hard speed limit becomes that speed. Nothing else changes; true when
+/// any spline changed (the passes are then run again).
+pub fn refine_splines(
+    blocks: &mut [PlanBlock],
+    from: usize,
+    start: [i64; AXES],
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+) -> bool {
+    let mut changed = false;
+    for i in from..blocks.len() {
+        let b = &blocks[i];
+        if b.path.form != Form::Spline || b.kind != Kind::Feed {
+            continue;
+        }
+        let next = blocks.get(i + 1);
+        let exit = next
+            .filter(|n| matches!(n.kind, Kind::Rapid | Kind::Feed))
+            .map_or(0.0, |n| n.entry);
+        let top = fmin(cap(b, 100, false), b.v_limit);
+        let peak = fmin(
+            sqrtf((b.entry * b.entry + exit * exit) / 2.0 + b.accel * b.length()),
+            top,
+        );
+        if peak >= 0.98 * top || peak <= 0.0 {
+            continue;
+        }
+        let from_pose = if i == 0 {
+            start
+        } else {
+            blocks[i - 1].path.end
+        };
+        let Ok((v, a)) = limits_along(
+            &from_pose,
+            &b.path,
+            b.feed * 2.0,
+            Some(peak * 1.01),
+            machine,
+            kin,
+        ) else {
+            continue;
+        };
+        let rho_out = next.map_or(0.0, |n| n.rho_in);
+        let b = &mut blocks[i];
+        if a > b.accel_full {
+            b.v_limit = fmin(b.v_limit, v);
+            b.accel_full = a;
+            b.accel = a * (1.0 - fmax(b.rho_in, rho_out));
+            changed = true;
+        }
+    }
+    changed
+}
+
+/// Motion time of planned blocks (as [`plan_into`] leaves them) at 100 % feed, ticks:
+/// each block profiled from its entry to the next one's (0 before a block that does
+/// not move, and at the end), dwells counted.
+pub fn planned_ticks(blocks: &[PlanBlock]) -> f64 {
+    let mut ticks = 0.0;
+    for (i, b) in blocks.iter().enumerate() {
+        match b.kind {
+            Kind::Dwell(n) => ticks += n as f64,
+            Kind::Rapid | Kind::Feed => {
+                let exit = blocks
+                    .get(i + 1)
+                    .filter(|n| matches!(n.kind, Kind::Rapid | Kind::Feed))
+                    .map_or(0.0, |n| n.entry);
+                let (p, _) = crate::motion::profile::Profile::plan(
+                    b.path.length << 16,
+                    b.entry,
+                    cap(b, 100, false),
+                    exit,
+                    b.accel,
+                );
+                ticks += p.duration() as f64 / 4_294_967_296.0;
+            }
+            _ => {}
+        }
+    }
+    ticks
+}
+
+/// Plans one move from `start`, from rest to rest, as the host streams it (a jog, the
+/// move home): what [`crate::wire::Control::Jog`] carries.
+pub fn plan_move(
+    block: &Block,
+    start: [i64; AXES],
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+) -> Result<PlannedBlock, GeometryError> {
+    let mut out = [PlanBlock::default()];
+    let window = crate::config::window_of(machine.motion.smoothing_ticks as u32);
+    plan_into(
+        core::slice::from_ref(block),
+        start,
+        machine,
+        kin,
+        window,
+        &mut out,
+    )
+    .map_err(|(_, e)| e)?;
+    Ok(PlannedBlock {
+        block: *block,
+        plan: out[0].plan(),
+    })
+}
+
+/// A jog as the host sends it: `distance` (axis units) along pose axis `axis` from
+/// `from` at `feed` (units/s), clipped to the joint travel ([`jog_target`]) and planned
+/// from rest to rest ([`plan_move`]).
+pub fn plan_jog(
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+    from: &[i64; AXES],
+    axis: usize,
+    distance: i64,
+    feed: i64,
+) -> Result<PlannedBlock, GeometryError> {
+    let block = Block {
+        line: 0,
+        motion: Motion::Linear,
+        target: jog_target(machine, kin, from, axis.min(AXES - 1), distance),
+        feed: feed.max(1),
+        tolerance_nm: 0,
+    };
+    plan_move(&block, *from, machine, kin)
+}
+
+/// The pose a jog of `distance` (axis units) along pose axis `axis` reaches from
+/// `from`, shortened so that every joint stays inside its travel (the soft limits):
+/// the largest reachable distance, by bisection through the inverse kinematics.
+pub fn jog_target(
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+    from: &[i64; AXES],
+    axis: usize,
+    distance: i64,
+) -> [i64; AXES] {
+    let at = |d: i64| {
+        let mut t = *from;
+        t[axis] = t[axis].saturating_add(d);
+        t
+    };
+    let ok = |d: i64| {
+        let mut q = [0; MAX_JOINTS];
+        kin.inverse_checked(&at(d), &machine.joints, &mut q).is_ok()
+    };
+    if ok(distance) {
+        return at(distance);
+    }
+    let (mut lo, mut hi) = (0i64, distance);
+    while (hi - lo).abs() > 1 {
+        let mid = lo + (hi - lo) / 2;
+        if ok(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    at(lo)
+}

@@ -1,0 +1,247 @@
+//! The planner's tests: the passes' invariants, corners, holds, the queue.
+
+use super::limits::*;
+use super::lookahead::*;
+use super::queue::*;
+use crate::config::*;
+use crate::kinematics::*;
+use crate::motion::block::*;
+use crate::motion::geometry::*;
+
+fn line(x: i64, y: i64, feed_mm_s: i64, tol: u32) -> Block {
+    Block {
+        line: 1,
+        motion: Motion::Linear,
+        target: [x, y, 0, 0, 0, 0],
+        feed: feed_mm_s * 1_000_000,
+        tolerance_nm: tol,
+    }
+}
+
+fn planner_with(blocks: &[Block]) -> Vec<PlanBlock> {
+    let m = MachineConfig::cartesian_xyz();
+    let k = MachineKinematics::new(&m);
+    let mut out = vec![PlanBlock::default(); blocks.len()];
+    plan_into(blocks, [0; AXES], &m, &k, 1, &mut out).unwrap();
+    out
+}
+
+fn planned(blocks: &[Block]) -> Vec<PlannedBlock> {
+    blocks
+        .iter()
+        .zip(planner_with(blocks))
+        .map(|(b, p)| PlannedBlock {
+            block: *b,
+            plan: p.plan(),
+        })
+        .collect()
+}
+
+#[test]
+fn the_last_block_always_plans_to_stop() {
+    let p = planner_with(&[
+        line(50_000_000, 0, 50, u32::MAX),
+        line(100_000_000, 0, 50, u32::MAX),
+    ]);
+    let last = p.iter().last().unwrap();
+    // It can stop within its own length from its entry speed.
+    assert!(last.entry * last.entry <= 2.0 * last.accel * last.length() * 1.0001);
+    // Collinear blocks are joined at full speed (50 mm/s = 50 000 nm/tick).
+    assert!((last.entry - 50_000.0).abs() < 1.0, "{}", last.entry);
+}
+
+#[test]
+fn exact_stop_mode_stops_at_every_corner() {
+    let p = planner_with(&[line(50_000_000, 0, 50, 0), line(100_000_000, 0, 50, 0)]);
+    assert_eq!(p.iter().last().unwrap().entry, 0.0);
+}
+
+#[test]
+fn a_right_angle_corner_is_taken_at_half_a_times_t() {
+    let p = planner_with(&[
+        line(50_000_000, 0, 50, u32::MAX),
+        line(50_000_000, 50_000_000, 50, u32::MAX),
+    ]);
+    let e = p.iter().last().unwrap().entry;
+    assert!((e - 500.0).abs() < 1.0, "{e}");
+}
+
+#[test]
+fn a_ten_degree_corner_is_taken_at_the_axis_acceleration_budget() {
+    let (c, s) = (10f64.to_radians().cos(), 10f64.to_radians().sin());
+    let p = planner_with(&[
+        line(50_000_000, 0, 50, u32::MAX),
+        line(
+            50_000_000 + (50e6 * c) as i64,
+            (50e6 * s) as i64,
+            50,
+            u32::MAX,
+        ),
+    ]);
+    // a = 1000 nm/tick² per axis; |Δu_y| = sin 10°: v = 1000 / (2 sin 10°).
+    let want = 1000.0 / (2.0 * s);
+    let e = p.iter().last().unwrap().entry as f64;
+    assert!((e - want).abs() < want * 0.01, "{e} vs {want}");
+}
+
+#[test]
+fn a_path_tolerance_bounds_the_corner_speed() {
+    // G64 P0.001 at a right angle allows 4 · 1000 nm / √2 per tick, more than the
+    // acceleration budget (500 nm/tick): the budget decides.
+    let p = planner_with(&[
+        line(50_000_000, 0, 50, 1_000),
+        line(50_000_000, 50_000_000, 50, 1_000),
+    ]);
+    let e = p.iter().last().unwrap().entry;
+    assert!((e - 500.0).abs() < 1.0, "{e}");
+    // G64 P0.0001: 400 nm / √2 per tick.
+    let p = planner_with(&[
+        line(50_000_000, 0, 50, 100),
+        line(50_000_000, 50_000_000, 50, 100),
+    ]);
+    let e = p.iter().last().unwrap().entry;
+    assert!((e - 400.0 / 2f32.sqrt()).abs() < 0.5, "{e}");
+}
+
+#[test]
+fn a_hold_caps_every_block_at_zero() {
+    let mut p = planner_with(&[
+        line(50_000_000, 0, 50, u32::MAX),
+        line(100_000_000, 0, 50, u32::MAX),
+    ]);
+    reverse_pass(&mut p, 100, true);
+    forward_pass(&mut p, 30_000.0);
+    let e = p.iter().last().unwrap().entry;
+    // Entered at 30 000 nm/tick, the first block (50 mm) can only slow to
+    // sqrt(30000² − 2·1000·5e7) < 0 → 0.
+    assert_eq!(e, 0.0);
+}
+
+#[test]
+fn the_controller_never_leaves_faster_than_it_can_stop_within_its_queue() {
+    let m = MachineConfig::cartesian_xyz();
+    let k = MachineKinematics::new(&m);
+    // 600 collinear 0.05 mm segments at 100 mm/s: the host plans the middle ones
+    // at full speed (its look-ahead sees the whole 30 mm), but a queue holding only
+    // 0.5 mm of them can stop from √(2·a·0.5 mm) only.
+    let blocks: Vec<Block> = (1..=600)
+        .map(|i| line(i * 50_000, 0, 100, u32::MAX))
+        .collect();
+    let plan = planned(&blocks);
+    assert!(plan[200].plan.entry > 99_000.0, "{}", plan[200].plan.entry);
+    let mut p = Planner::new(plan[199].block.target);
+    for b in &plan[200..211] {
+        p.push_planned(b, &m, &k).unwrap();
+    }
+    p.pop();
+    // Ten segments behind: 2 · 1000 nm/tick² · 0.5 mm.
+    let want = (2.0f32 * 1000.0 * LIMIT_MARGIN * 500_000.0).sqrt();
+    let got = p.exit_target();
+    assert!((got - want).abs() < want * 1e-4, "{got} vs {want}");
+    assert!(got <= plan[201].plan.entry);
+    // A full queue lets the planned speed through.
+    let mut p = Planner::new(plan[199].block.target);
+    for b in &plan[200..200 + QUEUE_CAPACITY] {
+        p.push_planned(b, &m, &k).unwrap();
+    }
+    p.pop();
+    assert_eq!(p.exit_target(), plan[201].plan.entry);
+    // Draining the queue brings the budget back to exactly zero.
+    let mut p = Planner::new([0; AXES]);
+    for b in &plan[..11] {
+        p.push_planned(b, &m, &k).unwrap();
+    }
+    while p.pop().is_some() {}
+    assert_eq!(p.exit_target(), 0.0);
+    assert_eq!(p.buffered_ticks(), 0.0);
+}
+
+/// A full circle about `center` from and back to the current point.
+fn circle(x: i64, center: [i64; 2]) -> Block {
+    Block {
+        line: 2,
+        motion: Motion::Arc {
+            center,
+            plane: crate::motion::block::Plane::Xy,
+            clockwise: true,
+            turns: 0,
+        },
+        target: [x, 0, 0, 0, 0, 0],
+        feed: 50_000_000,
+        tolerance_nm: u32::MAX,
+    }
+}
+
+#[test]
+fn arcs_wait_for_a_free_bend_lines_do_not_and_each_arc_runs_on_its_own_bend() {
+    let m = MachineConfig::cartesian_xyz();
+    let k = MachineKinematics::new(&m);
+    // A line to X10, then circles through X10 about X5 and X0 in turn (radii 5 and
+    // 10 mm), more than the ring of bends holds, then a line.
+    let mut blocks = vec![line(10_000_000, 0, 50, u32::MAX)];
+    for i in 0..=BEND_CAPACITY {
+        blocks.push(circle(10_000_000, [5_000_000 * (i as i64 % 2), 0]));
+    }
+    blocks.push(line(20_000_000, 0, 50, u32::MAX));
+    let plan = planned(&blocks);
+    let mut p = Planner::new([0; AXES]);
+    for b in &plan[..=BEND_CAPACITY] {
+        assert_eq!(p.push_planned(b, &m, &k), Ok(()));
+    }
+    assert_eq!(p.free_bends(), 0);
+    assert_eq!(p.free(), QUEUE_CAPACITY - BEND_CAPACITY - 1);
+    // One more arc does not fit; a line does (tried here out of turn, from where the
+    // last arc ends, as it would be sent if it came next).
+    let extra = &plan[BEND_CAPACITY + 1];
+    assert_eq!(p.push_planned(extra, &m, &k), Err(PushError::Full));
+    let mut q = p.clone();
+    assert_eq!(q.push_planned(&plan[BEND_CAPACITY + 2], &m, &k), Ok(()));
+    // The line leaves: still no bend. The first arc leaves: one.
+    assert_eq!(p.pop().map(|b| b.course.form), Some(Form::Line));
+    assert_eq!(p.free_bends(), 0);
+    assert!(p.start());
+    assert_eq!(p.bend().circle().r0, 10_000_000);
+    p.finish();
+    assert_eq!(p.free_bends(), 1);
+    assert_eq!(p.push_planned(extra, &m, &k), Ok(()));
+    // Every arc executes on its own bend, in order.
+    for i in 1..=BEND_CAPACITY {
+        assert!(p.start());
+        let want = if i % 2 == 0 { 10_000_000 } else { 5_000_000 };
+        assert_eq!(p.bend().circle().r0, want, "arc {i}");
+        let mut pose = [0; AXES];
+        let b = *p.executing().unwrap();
+        b.course
+            .pose_at(p.bend(), p.front_start(), b.course.length << 15, &mut pose);
+        let c = 5_000_000 * (i as i64 % 2);
+        assert!((pose[0] - (c - want)).abs() <= 2, "arc {i}: {pose:?}");
+        p.finish();
+    }
+    assert!(p.is_empty());
+    assert_eq!(p.free_bends(), BEND_CAPACITY);
+}
+
+#[test]
+fn a_plan_that_does_not_match_its_block_is_refused() {
+    let m = MachineConfig::cartesian_xyz();
+    let k = MachineKinematics::new(&m);
+    let plan = planned(&[line(10_000_000, 0, 50, u32::MAX)]);
+    let mut p = Planner::new([0; AXES]);
+    let mut short = plan[0];
+    short.plan.length /= 2;
+    assert_eq!(
+        p.push_planned(&short, &m, &k),
+        Err(PushError::Geometry(GeometryError::PlanMismatch))
+    );
+    let mut elsewhere = plan[0];
+    elsewhere.block.target[1] = 3_000_000;
+    elsewhere.block.target[0] = 9_539_392;
+    assert_eq!(
+        p.push_planned(&elsewhere, &m, &k),
+        Err(PushError::Geometry(GeometryError::PlanMismatch))
+    );
+    let mut nan = plan[0];
+    nan.plan.v_limit = f32::NAN;
+    assert!(p.push_planned(&nan, &m, &k).is_err());
+    assert_eq!(p.push_planned(&plan[0], &m, &k), Ok(()));
+}

@@ -1,0 +1,260 @@
+//! Sealing and opening a frame (sequence number, message, CRC-32, whitening, COBS),
+//! and the hand-written writer of the two messages the controller sends most.
+
+use super::messages::{Status, MAX_BODY, MAX_FRAME};
+use crate::config::{AXES, MAX_JOINTS};
+use serde::{Deserialize, Serialize};
+
+/// Why a frame could not be built or read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum FrameError {
+    /// The message does not fit in [`MAX_BODY`].
+    TooLong,
+    /// COBS decoding failed.
+    Cobs,
+    /// Shorter than a sequence number and a CRC.
+    Short,
+    /// CRC mismatch.
+    Crc,
+    /// The body is not a valid message.
+    Message,
+}
+
+/// Encodes `msg` with sequence number `seq` into `out` as a complete frame including
+/// the 0x00 delimiter; returns its length.
+pub fn encode_frame<M: Serialize>(
+    seq: u16,
+    msg: &M,
+    out: &mut [u8; MAX_FRAME],
+) -> Result<usize, FrameError> {
+    encode_frame_with(seq, msg, &mut [0u8; MAX_BODY], out)
+}
+
+/// [`encode_frame`] with the caller's scratch `body` (its contents do not matter; no
+/// buffer is cleared, for the controller's transmit path).
+pub fn encode_frame_with<M: Serialize>(
+    seq: u16,
+    msg: &M,
+    body: &mut [u8; MAX_BODY],
+    out: &mut [u8; MAX_FRAME],
+) -> Result<usize, FrameError> {
+    body[..2].copy_from_slice(&seq.to_le_bytes());
+    let used = postcard::to_slice(msg, &mut body[2..MAX_BODY - 4])
+        .map_err(|_| FrameError::TooLong)?
+        .len();
+    Ok(seal(&body[..2 + used], out))
+}
+
+/// The byte mask of W in the module doc (W is its own inverse).
+pub const WHITEN: u8 = 0xA5;
+
+/// Completes a frame: the COBS encoding of `data` (sequence number and message, at
+/// most `MAX_BODY - 4` bytes) and of its CRC, each byte flipped ([`WHITEN`]), then the
+/// delimiter, written into `out` in one pass; returns its length.
+pub(super) fn seal(data: &[u8], out: &mut [u8; MAX_FRAME]) -> usize {
+    let mut crc = crate::wire::crc::INIT;
+    let (mut code_at, mut at) = (0, 1);
+    if data.len() + 4 < 0xFE {
+        // No run of 254 non-zero bytes fits: only zeros end a block.
+        let mut put = |b: u8| {
+            let b = b ^ WHITEN;
+            if b == 0 {
+                out[code_at] = (at - code_at) as u8;
+                code_at = at;
+            } else {
+                out[at] = b;
+            }
+            at += 1;
+        };
+        for &b in data {
+            crc = crate::wire::crc::update(crc, b);
+            put(b);
+        }
+        for b in (!crc).to_le_bytes() {
+            put(b);
+        }
+    } else {
+        let mut put = |b: u8| {
+            let b = b ^ WHITEN;
+            if b == 0 {
+                out[code_at] = (at - code_at) as u8;
+                code_at = at;
+                at += 1;
+            } else {
+                out[at] = b;
+                at += 1;
+                if at - code_at == 0xFF {
+                    out[code_at] = 0xFF;
+                    code_at = at;
+                    at += 1;
+                }
+            }
+        };
+        for &b in data {
+            crc = crate::wire::crc::update(crc, b);
+            put(b);
+        }
+        for b in (!crc).to_le_bytes() {
+            put(b);
+        }
+    }
+    out[code_at] = (at - code_at) as u8;
+    out[at] = 0;
+    at + 1
+}
+
+/// Variant indices of [`CtrlMsg`] in the message encoding.
+const CTRL_MSG_ACK: u8 = 3;
+const CTRL_MSG_STATUS: u8 = 6;
+
+/// Writes a message in postcard's encoding, for the two messages the controller sends
+/// most ([`encode_ack`], [`encode_status`]): what `postcard::to_slice` writes (tested),
+/// without serde's generic code.
+struct Writer<'a> {
+    buf: &'a mut [u8; MAX_BODY],
+    len: usize,
+}
+
+impl Writer<'_> {
+    fn byte(&mut self, b: u8) {
+        self.buf[self.len] = b;
+        self.len += 1;
+    }
+
+    fn u32(&mut self, mut v: u32) {
+        while v >= 0x80 {
+            self.byte(v as u8 | 0x80);
+            v >>= 7;
+        }
+        self.byte(v as u8);
+    }
+
+    fn u64(&mut self, v: u64) {
+        if v >> 32 == 0 {
+            return self.u32(v as u32);
+        }
+        // Four groups of seven bits from the low word, then the rest.
+        let low = v as u32;
+        for i in 0..4 {
+            self.byte((low >> (7 * i)) as u8 | 0x80);
+        }
+        let mut v = v >> 28;
+        while v >= 0x80 {
+            self.byte(v as u8 | 0x80);
+            v >>= 7;
+        }
+        self.byte(v as u8);
+    }
+
+    fn i64(&mut self, v: i64) {
+        self.u64(((v << 1) ^ (v >> 63)) as u64);
+    }
+}
+
+/// Encodes `CtrlMsg::Ack { seq: acked, free_slots, free_bends, buffered_ms }` with sequence number
+/// `seq` as a complete frame (as [`encode_frame_with`] does); returns its length.
+pub fn encode_ack(
+    seq: u16,
+    acked: u16,
+    free_slots: u16,
+    free_bends: u16,
+    buffered_ms: u32,
+    body: &mut [u8; MAX_BODY],
+    out: &mut [u8; MAX_FRAME],
+) -> usize {
+    let mut w = Writer { buf: body, len: 0 };
+    for b in seq.to_le_bytes() {
+        w.byte(b);
+    }
+    w.byte(CTRL_MSG_ACK);
+    w.u32(acked as u32);
+    w.u32(free_slots as u32);
+    w.u32(free_bends as u32);
+    w.u32(buffered_ms);
+    let n = w.len;
+    seal(&body[..n], out)
+}
+
+/// Encodes `CtrlMsg::Status(s)` with sequence number `seq` as a complete frame (as
+/// [`encode_frame_with`] does); returns its length.
+pub fn encode_status(
+    seq: u16,
+    s: &Status,
+    body: &mut [u8; MAX_BODY],
+    out: &mut [u8; MAX_FRAME],
+) -> usize {
+    // The widest status (every varint at its longest) fits with its CRC.
+    const WIDEST: usize =
+        2 + 1 + 1 + 5 + 5 + 10 * (1 + AXES + 2 * MAX_JOINTS + 1) + 5 + 3 + 3 + 3 + 8 + 1 + 1;
+    const _: () = assert!(WIDEST + 4 <= MAX_BODY);
+    let mut w = Writer { buf: body, len: 0 };
+    for b in seq.to_le_bytes() {
+        w.byte(b);
+    }
+    w.byte(CTRL_MSG_STATUS);
+    w.u32(s.state as u32);
+    w.u32(s.line);
+    w.u32(s.blocks_done);
+    w.u64(s.motion_ticks);
+    for &p in &s.pose {
+        w.i64(p);
+    }
+    for &q in &s.joints {
+        w.i64(q);
+    }
+    for &m in &s.measured {
+        w.i64(m);
+    }
+    w.i64(s.speed);
+    w.u32(s.buffered_ms);
+    w.u32(s.free_slots as u32);
+    w.u32(s.free_bends as u32);
+    w.u32(s.feed_override as u32);
+    match s.alarm {
+        None => w.byte(0),
+        Some(a) => {
+            w.byte(1);
+            w.u32(a.cause as u32);
+            w.byte(a.joint);
+            w.u32(a.line);
+        }
+    }
+    w.byte(s.homed as u8);
+    w.byte(s.orphan as u8);
+    let n = w.len;
+    seal(&body[..n], out)
+}
+
+/// Decodes one frame's bytes (between delimiters, without the 0x00) into its sequence
+/// number and message.
+pub fn decode_frame<'de, M: Deserialize<'de>>(
+    encoded: &[u8],
+    body: &'de mut [u8; MAX_BODY],
+) -> Result<(u16, M), FrameError> {
+    let (seq, message) = decode_body(encoded, body)?;
+    let msg = postcard::from_bytes(message).map_err(|_| FrameError::Message)?;
+    Ok((seq, msg))
+}
+
+/// Decodes one frame's bytes (between delimiters, without the 0x00) into its sequence
+/// number and message bytes, checking its COBS encoding, length and CRC.
+pub fn decode_body<'b>(
+    encoded: &[u8],
+    body: &'b mut [u8; MAX_BODY],
+) -> Result<(u16, &'b [u8]), FrameError> {
+    let n = crate::wire::cobs::decode(encoded, body).map_err(|_| FrameError::Cobs)?;
+    for b in &mut body[..n] {
+        *b ^= WHITEN;
+    }
+    if n < 6 {
+        return Err(FrameError::Short);
+    }
+    let (data, crc) = body[..n].split_at(n - 4);
+    let want = u32::from_le_bytes([crc[0], crc[1], crc[2], crc[3]]);
+    if crate::wire::crc::crc32(data) != want {
+        return Err(FrameError::Crc);
+    }
+    let seq = u16::from_le_bytes([data[0], data[1]]);
+    Ok((seq, &body[2..n - 4]))
+}
