@@ -1,8 +1,11 @@
 #!/usr/bin/env python3
-"""Structure budget of the host tools (issue 15): no source file in host-tools/src
-over 700 lines and no function over 120 lines, except where the file says why; and
-the rooms import only what docs/architecture.md allows (ALLOWED below: the client
-never imports the simulator, the front end nothing but itself).
+"""Structure budget of the core (src/, the firmware included) and of the host tools
+(host-tools/src): no source file over 700 lines and no function over 120 lines,
+except where the file says why; and the rooms import only what docs/architecture.md
+allows. The core's rooms are ordered from the bottom (CORE_ORDER below): a room may
+import only rooms before it, so no import runs upward and there is no circle between
+rooms; the firmware (src/bin) sits on top. The host's rooms import only what ALLOWED
+lists (the client never imports the simulator, the front end nothing but itself).
 
 A file opts out of a limit with a line `// structure: <reason>` (the reason is
 printed). Functions are measured from their `fn` line to the line of the brace
@@ -30,6 +33,11 @@ ALLOWED = {
     "station": {"gcode", "link", "job", "input", "analysis"},
     "calibrate": {"machine_file", "analysis", "input"},
 }
+# The core's rooms, from the bottom: each may import only the rooms before it.
+CORE_ORDER = [
+    "units", "math", "place", "config", "kinematics", "drive", "motion", "wire",
+    "controller", "wording",
+]
 CRATE_PATH = re.compile(r"\bcrate::([a-z_]+)")
 FN = re.compile(r"^\s*(pub(\([a-z]+\))?\s+)?(const\s+)?(async\s+)?(unsafe\s+)?fn\s+(\w+)")
 
@@ -61,8 +69,29 @@ def functions(lines):
         i += 1
 
 
+def core_imports_ok(rel, lines):
+    """Does every `crate::room` that a core file's code (before its tests) names lie
+    below the file's own room?"""
+    room = rel.parts[1].removesuffix(".rs")  # src/<room>/...
+    if room not in CORE_ORDER:
+        return True  # lib.rs; the firmware (src/bin) is its own crate, on top
+    below = set(CORE_ORDER[: CORE_ORDER.index(room)])
+    ok = True
+    for n, line in enumerate(lines, 1):
+        if line.startswith("#[cfg(test)]"):
+            break
+        code = line.split("//")[0]
+        for other in CRATE_PATH.findall(code):
+            if other != room and other not in below:
+                print(f"{rel}:{n}: the core's {room} room may not import crate::{other} (above it)")
+                ok = False
+    return ok
+
+
 def imports_ok(path, rel, lines):
     """Is every `crate::room` that `path`'s code (before its tests) names allowed?"""
+    if rel.parts[0] == "src":
+        return core_imports_ok(rel, lines)
     parts = rel.parts[2:]  # host-tools/src/<room>/...
     room = parts[0].removesuffix(".rs")
     if room not in ALLOWED:
@@ -81,7 +110,8 @@ def imports_ok(path, rel, lines):
 
 def main():
     failed = False
-    for path in sorted((ROOT / "host-tools" / "src").rglob("*.rs")):
+    paths = sorted((ROOT / "src").rglob("*.rs")) + sorted((ROOT / "host-tools" / "src").rglob("*.rs"))
+    for path in paths:
         text = path.read_text()
         lines = text.splitlines()
         rel = path.relative_to(ROOT)
@@ -101,8 +131,8 @@ def main():
     if failed:
         sys.exit(1)
     print(
-        f"host-tools/src: no file over {MAX_FILE} lines, no function over {MAX_FN}, "
-        "every room imports only what it may"
+        f"src and host-tools/src: no file over {MAX_FILE} lines, no function over {MAX_FN}, "
+        "every room imports only what it may (the core's only rooms below it)"
     )
 
 

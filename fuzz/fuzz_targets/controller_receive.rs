@@ -29,6 +29,7 @@ fuzz_target!(|data: &[u8]| {
     let hello = HostMsg::Hello {
         version: PROTOCOL_VERSION,
         machine: c.machine_id(),
+        host: 1,
     };
     c.receive(&framed(0, &hello).expect("hello frames"));
     let mut seq: u16 = 1;

@@ -540,6 +540,8 @@ impl Controller {
 }
 
 #[cfg(test)]
+mod drive_tests;
+#[cfg(test)]
 mod starve_tests;
 #[cfg(test)]
 mod tests;

@@ -362,34 +362,7 @@ impl Controller {
                     self.state = State::Hold;
                 }
             }
-            Control::Resume => {
-                if matches!(self.state, State::Hold | State::Running | State::Starved) {
-                    // Resuming adopts a job left by an earlier session (held, starved,
-                    // or still running out its queue), and clears the link loss or
-                    // host timeout that held it. An adopted job is complete with what
-                    // is queued: its new host sends none of its blocks.
-                    if self.orphan.take().is_some() {
-                        self.job_open = false;
-                    }
-                    self.clear_held_link_loss();
-                }
-                if self.state == State::Starved {
-                    self.state = self.rest_state();
-                }
-                if self.state == State::Hold && !self.abort_pending {
-                    self.planner.hold = false;
-                    self.exec.paused = false;
-                    self.exec.replan(&mut self.planner);
-                    // A pause or hold with nothing after it (M0 then M2): idle at once.
-                    // Running with nothing to run would wait for a tick to turn idle,
-                    // and a tick comes only while there is work (`has_work`).
-                    self.state = if self.path_moving() {
-                        State::Running
-                    } else {
-                        self.rest_state()
-                    };
-                }
-            }
+            Control::Resume => self.resume(),
             Control::Abort => {
                 self.orphan = None;
                 self.mark = JobMark::default();
@@ -469,6 +442,38 @@ impl Controller {
                     ms => (ms.clamp(MIN_HOST_TIMEOUT_MS, MAX_HOST_TIMEOUT_MS) / unit_ms) as u16,
                 };
             }
+        }
+    }
+
+    /// `Control::Resume`: adopts a job left by an earlier session, ends a starved
+    /// wait, and continues after a hold or a pause.
+    #[inline(always)]
+    fn resume(&mut self) {
+        if matches!(self.state, State::Hold | State::Running | State::Starved) {
+            // Resuming adopts a job left by an earlier session (held, starved,
+            // or still running out its queue), and clears the link loss or
+            // host timeout that held it. An adopted job is complete with what
+            // is queued: its new host sends none of its blocks.
+            if self.orphan.take().is_some() {
+                self.job_open = false;
+            }
+            self.clear_held_link_loss();
+        }
+        if self.state == State::Starved {
+            self.state = self.rest_state();
+        }
+        if self.state == State::Hold && !self.abort_pending {
+            self.planner.hold = false;
+            self.exec.paused = false;
+            self.exec.replan(&mut self.planner);
+            // A pause or hold with nothing after it (M0 then M2): idle at once.
+            // Running with nothing to run would wait for a tick to turn idle,
+            // and a tick comes only while there is work (`has_work`).
+            self.state = if self.path_moving() {
+                State::Running
+            } else {
+                self.rest_state()
+            };
         }
     }
 

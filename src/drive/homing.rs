@@ -196,18 +196,7 @@ impl Homer {
                         None => -dir * h.latch_velocity,
                     }
                 }
-                Phase::Return => {
-                    let d = targets[j] - q[j];
-                    let vmax = if h.enabled() {
-                        h.search_velocity.abs().max(h.latch_velocity)
-                    } else {
-                        (jc.limits.max_velocity / 10).max(1)
-                    };
-                    let brake =
-                        isqrt_floor(2 * jc.limits.max_accel as u128 * d.unsigned_abs() as u128)
-                            .min(i64::MAX as u128) as i64;
-                    d.signum() * vmax.min(brake)
-                }
+                Phase::Return => return_speed(jc, targets[j] - q[j]),
                 _ => 0,
             };
             // Ramp the speed towards `want` at the joint's acceleration.
@@ -256,6 +245,22 @@ impl Homer {
         }
         event
     }
+}
+
+/// The speed at which a joint `d` units from its home target returns there: the
+/// search or latch speed (a tenth of its top speed without homing), braking so as to
+/// stop on the target.
+#[inline(always)]
+fn return_speed(jc: &JointConfig, d: i64) -> i64 {
+    let h = jc.homing;
+    let vmax = if h.enabled() {
+        h.search_velocity.abs().max(h.latch_velocity)
+    } else {
+        (jc.limits.max_velocity / 10).max(1)
+    };
+    let brake = isqrt_floor(2 * jc.limits.max_accel as u128 * d.unsigned_abs() as u128)
+        .min(i64::MAX as u128) as i64;
+    d.signum() * vmax.min(brake)
 }
 
 #[cfg(test)]

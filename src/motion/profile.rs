@@ -286,12 +286,8 @@ impl Profile {
             s1,
             length: length_q16,
         };
-        (
-            p,
-            Achieved {
-                exit: from_q32(v1_q),
-            },
-        )
+        let exit = from_q32(v1_q);
+        (p, Achieved { exit })
     }
 
     /// Total duration, ticks Q32 (≥ [`HELD`] when held).

@@ -184,6 +184,65 @@ fn check_block_decoder(message: &[u8]) -> bool {
     }
 }
 
+/// A block message whose fields are `w`'s random values, its motion and shape chosen
+/// by `k`.
+fn random_block(k: usize, w: &mut dyn FnMut() -> i64) -> HostMsg {
+    let motion = match k % 9 {
+        0 => Motion::Rapid,
+        1 => Motion::Dwell(w() as u32),
+        2 => Motion::Aux(Aux::Pause(k % 2 == 0)),
+        3 => Motion::Aux(Aux::SpindleCcw(w() as u32)),
+        4 | 5 => Motion::Arc {
+            center: [w(), w()],
+            plane: [Plane::Xy, Plane::Zx, Plane::Yz][k % 3],
+            clockwise: k % 2 == 1,
+            turns: w() as u16,
+        },
+        6 => Motion::Cubic {
+            c1: [w(), w(), w(), w(), w(), w()],
+            c2: [w(), w(), w(), w(), w(), w()],
+        },
+        7 if k % 2 == 0 => Motion::Quadratic {
+            c: [w(), w(), w(), w(), w(), w()],
+        },
+        _ => Motion::Linear,
+    };
+    let shape = match k % 7 {
+        5 => Shape::Spline { rate: w() as u64 },
+        0 => Shape::Point,
+        1 | 2 => Shape::Arc {
+            plane: [Plane::Xy, Plane::Zx, Plane::Yz][k % 3],
+            center: [w(), w()],
+            r0: w(),
+            dr: w(),
+            phi0: w() as u64,
+            phi_rate: ((w() as i128) << 64) ^ w() as i128,
+            r_rate: w(),
+            unit: [w(), w(), w(), w(), w(), w()],
+        },
+        _ => Shape::Line {
+            unit: [w(), w(), w(), w(), w(), w()],
+        },
+    };
+    HostMsg::Block(PlannedBlock {
+        block: Block {
+            line: w() as u32,
+            motion,
+            target: [w(), w(), w(), w(), w(), w()],
+            feed: w(),
+            tolerance_nm: w() as u32,
+        },
+        plan: Plan {
+            length: w(),
+            shape,
+            v_limit: f32::from_bits(w() as u32),
+            accel: w() as f32,
+            entry: 1.5,
+            stop: k % 2 == 0,
+        },
+    })
+}
+
 #[test]
 fn blocks_decode_by_hand_exactly_as_postcard_decodes_them() {
     let mut x = 0x2545_F491u32;
@@ -200,60 +259,7 @@ fn blocks_decode_by_hand_exactly_as_postcard_decodes_them() {
     let mut decoded = 0;
     for k in 0..3000 {
         let mut w = || wide(&mut rnd);
-        let motion = match k % 9 {
-            0 => Motion::Rapid,
-            1 => Motion::Dwell(w() as u32),
-            2 => Motion::Aux(Aux::Pause(k % 2 == 0)),
-            3 => Motion::Aux(Aux::SpindleCcw(w() as u32)),
-            4 | 5 => Motion::Arc {
-                center: [w(), w()],
-                plane: [Plane::Xy, Plane::Zx, Plane::Yz][k % 3],
-                clockwise: k % 2 == 1,
-                turns: w() as u16,
-            },
-            6 => Motion::Cubic {
-                c1: [w(), w(), w(), w(), w(), w()],
-                c2: [w(), w(), w(), w(), w(), w()],
-            },
-            7 if k % 2 == 0 => Motion::Quadratic {
-                c: [w(), w(), w(), w(), w(), w()],
-            },
-            _ => Motion::Linear,
-        };
-        let shape = match k % 7 {
-            5 => Shape::Spline { rate: w() as u64 },
-            0 => Shape::Point,
-            1 | 2 => Shape::Arc {
-                plane: [Plane::Xy, Plane::Zx, Plane::Yz][k % 3],
-                center: [w(), w()],
-                r0: w(),
-                dr: w(),
-                phi0: w() as u64,
-                phi_rate: ((w() as i128) << 64) ^ w() as i128,
-                r_rate: w(),
-                unit: [w(), w(), w(), w(), w(), w()],
-            },
-            _ => Shape::Line {
-                unit: [w(), w(), w(), w(), w(), w()],
-            },
-        };
-        let msg = HostMsg::Block(PlannedBlock {
-            block: Block {
-                line: w() as u32,
-                motion,
-                target: [w(), w(), w(), w(), w(), w()],
-                feed: w(),
-                tolerance_nm: w() as u32,
-            },
-            plan: Plan {
-                length: w(),
-                shape,
-                v_limit: f32::from_bits(w() as u32),
-                accel: w() as f32,
-                entry: 1.5,
-                stop: k % 2 == 0,
-            },
-        });
+        let msg = random_block(k, &mut w);
         let mut buf = [0u8; MAX_BODY];
         let n = postcard::to_slice(&msg, &mut buf).unwrap().len();
         let good = &buf[..n];

@@ -16,7 +16,10 @@
 use crate::config::AXES;
 use crate::motion::block::{Block, Motion, Plane};
 
+mod course;
 mod spline;
+#[cfg(test)]
+mod tests;
 pub use spline::{coefficients, Curve, MAX_SPLINE_SPAN, MIN_SPLINE_NM};
 
 pub use crate::motion::block::Shape;
@@ -188,6 +191,79 @@ pub const MAX_ARC_RADIUS_NM: i64 = 10_000_000_000;
 /// controller).
 pub const ARC_RADIUS_SLACK_NM: i64 = 80_000;
 
+/// The arc case of [`Path::new`] (host side, `f64`): its radius, sweep and helix
+/// from the block's centre, plane, direction and turns.
+fn arc_path(
+    start: &[i64; AXES],
+    end: [i64; AXES],
+    delta: &[i64; AXES],
+    center: [i64; 2],
+    plane: Plane,
+    clockwise: bool,
+    turns: u16,
+) -> Result<Path, GeometryError> {
+    let (i, j, k) = plane.axes();
+    let (sx, sy) = ((start[i] - center[0]) as f64, (start[j] - center[1]) as f64);
+    let (ex, ey) = ((end[i] - center[0]) as f64, (end[j] - center[1]) as f64);
+    let (r0, r1) = (libm::sqrt(sx * sx + sy * sy), libm::sqrt(ex * ex + ey * ey));
+    if r0 < 0.5 || r1 < 0.5 {
+        return Err(GeometryError::ArcWithoutRadius);
+    }
+    if (r1 - r0).abs() > ARC_RADIUS_SLACK_NM as f64 {
+        return Err(GeometryError::ArcEndOffCircle);
+    }
+    let a0 = libm::atan2(sy, sx);
+    let a1 = libm::atan2(ey, ex);
+    let tau = core::f64::consts::TAU;
+    // Counter-clockwise sweep in (0, 2π] (a full circle when the ends meet).
+    let mut ccw = wrap(a1 - a0, tau);
+    let mut cw = wrap(a0 - a1, tau);
+    if ccw < 1e-12 {
+        ccw = tau;
+    }
+    if cw < 1e-12 {
+        cw = tau;
+    }
+    let sweep_rad = if clockwise {
+        -(cw + tau * turns as f64)
+    } else {
+        ccw + tau * turns as f64
+    };
+    let planar = sweep_rad.abs() * (r0 + r1) / 2.0;
+    let mut lin = *delta;
+    lin[i] = 0;
+    lin[j] = 0;
+    let helix = (lin[k] as f64).abs();
+    let length = libm::sqrt(planar * planar + helix * helix);
+    let mut unit = [0i64; AXES];
+    for (u, d) in unit.iter_mut().zip(&lin) {
+        // Per unit of the stored length, as for lines.
+        *u = unit_q44(*d, libm::round(length).max(1.0));
+    }
+    let turn_of = |rad: f64| rad / tau * TURN_Q64;
+    let len = (libm::round(length) as i64).max(1);
+    let sweep = turn_of(sweep_rad) as i128;
+    let dr = libm::round(r1 - r0) as i64;
+    Ok(Path {
+        course: Course {
+            end,
+            length: libm::round(length) as i64,
+            rotary_only: false,
+            form: Form::Arc,
+            unit,
+        },
+        bend: Bend::Arc(Circle {
+            plane,
+            center,
+            r0: libm::round(r0) as i64,
+            dr,
+            phi0: turn_of(wrap(a0, tau)) as u64,
+            phi_rate: (sweep << 16) / len as i128,
+            r_rate: (((dr as i128) << 40) / len as i128) as i64,
+        }),
+    })
+}
+
 impl Path {
     /// Geometry of `block` starting at `start`.
     pub fn new(block: &Block, start: &[i64; AXES]) -> Result<Path, GeometryError> {
@@ -246,68 +322,7 @@ impl Path {
                 plane,
                 clockwise,
                 turns,
-            } => {
-                let (i, j, k) = plane.axes();
-                let (sx, sy) = ((start[i] - center[0]) as f64, (start[j] - center[1]) as f64);
-                let (ex, ey) = ((end[i] - center[0]) as f64, (end[j] - center[1]) as f64);
-                let (r0, r1) = (libm::sqrt(sx * sx + sy * sy), libm::sqrt(ex * ex + ey * ey));
-                if r0 < 0.5 || r1 < 0.5 {
-                    return Err(GeometryError::ArcWithoutRadius);
-                }
-                if (r1 - r0).abs() > ARC_RADIUS_SLACK_NM as f64 {
-                    return Err(GeometryError::ArcEndOffCircle);
-                }
-                let a0 = libm::atan2(sy, sx);
-                let a1 = libm::atan2(ey, ex);
-                let tau = core::f64::consts::TAU;
-                // Counter-clockwise sweep in (0, 2π] (a full circle when the ends meet).
-                let mut ccw = wrap(a1 - a0, tau);
-                let mut cw = wrap(a0 - a1, tau);
-                if ccw < 1e-12 {
-                    ccw = tau;
-                }
-                if cw < 1e-12 {
-                    cw = tau;
-                }
-                let sweep_rad = if clockwise {
-                    -(cw + tau * turns as f64)
-                } else {
-                    ccw + tau * turns as f64
-                };
-                let planar = sweep_rad.abs() * (r0 + r1) / 2.0;
-                let mut lin = delta;
-                lin[i] = 0;
-                lin[j] = 0;
-                let helix = (lin[k] as f64).abs();
-                let length = libm::sqrt(planar * planar + helix * helix);
-                let mut unit = [0i64; AXES];
-                for (u, d) in unit.iter_mut().zip(&lin) {
-                    // Per unit of the stored length, as for lines.
-                    *u = unit_q44(*d, libm::round(length).max(1.0));
-                }
-                let turn_of = |rad: f64| rad / tau * TURN_Q64;
-                let len = (libm::round(length) as i64).max(1);
-                let sweep = turn_of(sweep_rad) as i128;
-                let dr = libm::round(r1 - r0) as i64;
-                Ok(Path {
-                    course: Course {
-                        end,
-                        length: libm::round(length) as i64,
-                        rotary_only: false,
-                        form: Form::Arc,
-                        unit,
-                    },
-                    bend: Bend::Arc(Circle {
-                        plane,
-                        center,
-                        r0: libm::round(r0) as i64,
-                        dr,
-                        phi0: turn_of(wrap(a0, tau)) as u64,
-                        phi_rate: (sweep << 16) / len as i128,
-                        r_rate: (((dr as i128) << 40) / len as i128) as i64,
-                    }),
-                })
-            }
+            } => arc_path(start, end, &delta, center, plane, clockwise, turns),
             Motion::Cubic { .. } | Motion::Quadratic { .. } => {
                 let a = spline::coefficients(&block.motion, start, &end)
                     .ok_or(GeometryError::SplineOutOfRange)?;
@@ -399,639 +414,5 @@ impl Path {
     /// Pose after `s` (nm Q16) along the path from `start` ([`Course::pose_at`]).
     pub fn pose_at(&self, start: &[i64; AXES], s: i64, pose: &mut [i64; AXES]) {
         self.course.pose_at(&self.bend, start, s, pose);
-    }
-}
-
-impl Course {
-    /// [`Path::from_plan`] written into `self` and, for an arc, `bend`, for the
-    /// controller's receive path: the course and bend are built where they will stay,
-    /// not returned and moved. On error they hold some path, not the block's; `bend`
-    /// is written only for an arc.
-    pub fn set_from_plan(
-        &mut self,
-        bend: &mut Bend,
-        block: &Block,
-        start: &[i64; AXES],
-        length: i64,
-        shape: &Shape,
-    ) -> Result<(), GeometryError> {
-        let end = match block.motion {
-            Motion::Dwell(_) | Motion::Aux(_) => *start,
-            _ => block.target,
-        };
-        let delta: [i64; AXES] = core::array::from_fn(|i| end[i].wrapping_sub(start[i]));
-        let squares = |r: core::ops::Range<usize>| -> u128 {
-            delta[r]
-                .iter()
-                .map(|d| d.unsigned_abs() as u128 * d.unsigned_abs() as u128)
-                .sum()
-        };
-        // A point until proven otherwise.
-        self.end = end;
-        self.length = 0;
-        self.rotary_only = false;
-        self.form = Form::Point;
-        let bad = Err(GeometryError::PlanMismatch);
-        match (block.motion, shape) {
-            (Motion::Dwell(_) | Motion::Aux(_), Shape::Point) if length == 0 => Ok(()),
-            (Motion::Rapid | Motion::Linear, Shape::Point) if length == 0 && delta == [0; AXES] => {
-                Ok(())
-            }
-            (Motion::Rapid | Motion::Linear, Shape::Line { unit }) => {
-                let (lin, rot) = (squares(0..3), squares(3..6));
-                let rotary_only = lin == 0;
-                let sq = if rotary_only { rot } else { lin };
-                // length = round(√sq): (2L − 1)² ≤ 4·sq ≤ (2L + 1)².
-                let l2 = 2 * length.max(0) as u128;
-                if length <= 0
-                    || sq.saturating_mul(4) < (l2 - 1) * (l2 - 1)
-                    || sq.saturating_mul(4) > (l2 + 1) * (l2 + 1)
-                {
-                    return bad;
-                }
-                self.length = length;
-                self.rotary_only = rotary_only;
-                self.form = Form::Line;
-                self.unit = *unit;
-                let mut at = [0; AXES];
-                self.eval(bend, start, length << 16, &mut at);
-                if near(&at, &end) {
-                    Ok(())
-                } else {
-                    bad
-                }
-            }
-            (
-                Motion::Arc {
-                    center,
-                    plane,
-                    clockwise,
-                    turns,
-                },
-                &Shape::Arc {
-                    r0,
-                    dr,
-                    phi0,
-                    phi_rate,
-                    r_rate,
-                    ref unit,
-                    ..
-                },
-            ) => {
-                // The sweep the rate stands for (the host's, less at most
-                // length/2¹⁶ + 1 units: the rate was rounded toward zero).
-                let sweep = phi_rate.wrapping_mul(length as i128) >> 16;
-                let slack = (length as u128 >> 16) + 2;
-                let whole = |n: u32| (n as u128) << 64;
-                let turns_ok = sweep.unsigned_abs() + slack > whole(turns as u32)
-                    && sweep.unsigned_abs() <= whole(turns as u32 + 1);
-                let (i, j, k) = plane.axes();
-                if length <= 0
-                    || !(1..=MAX_ARC_RADIUS_NM).contains(&r0)
-                    || r0 + dr < 1
-                    || dr.unsigned_abs() > ARC_RADIUS_SLACK_NM as u64
-                    || clockwise != (phi_rate < 0)
-                    || !turns_ok
-                    || unit[i] != 0
-                    || unit[j] != 0
-                    || !rate_of(r_rate as i128, (dr as i128) << 24, length)
-                {
-                    return bad;
-                }
-                // Length: √((r̄·|sweep|)² + helix²), to 10⁻⁵ (single precision). The
-                // sweep is converted whole (its turns, then its fraction): cut to 2⁻³²
-                // turn, a sweep of 10⁻⁵ turn (0.2 mm on a 4 m radius) was off by 3·10⁻⁵
-                // and its plan refused.
-                let f = crate::math::i64_to_f32;
-                let sw = sweep.unsigned_abs();
-                let sweep_turns = crate::math::u64_to_f32((sw >> 64) as u64)
-                    + crate::math::u64_to_f32(sw as u64) * (1.0 / 18_446_744_073_709_551_616.0);
-                let planar = (f(r0) + f(dr) / 2.0) * (sweep_turns * core::f32::consts::TAU);
-                let helix = f(delta[k]);
-                let want = planar * planar + helix * helix;
-                let got = f(length) * f(length);
-                // The radii are whole nanometres here (the host's are not): r̄ may
-                // differ by 0.75 nm, the planar length by that times the sweep in
-                // radians (2·10⁻⁵ of a 45 µm radius: more than the relative bound).
-                let rounding = 2.0 + 0.75 * sweep_turns * core::f32::consts::TAU;
-                if (got - want).abs() > 1e-5 * want + 2.0 * f(length) * (2.0 + rounding) {
-                    return bad;
-                }
-                self.length = length;
-                self.form = Form::Arc;
-                self.unit = *unit;
-                // The plane and centre are the block's (they are not sent twice).
-                *bend = Bend::Arc(Circle {
-                    plane,
-                    center,
-                    r0,
-                    dr,
-                    phi0,
-                    phi_rate,
-                    r_rate,
-                });
-                let mut at = [0; AXES];
-                self.eval(bend, start, 0, &mut at);
-                if !near(&at, start) {
-                    return bad;
-                }
-                self.eval(bend, start, length << 16, &mut at);
-                if near(&at, &end) {
-                    Ok(())
-                } else {
-                    bad
-                }
-            }
-            (Motion::Cubic { .. } | Motion::Quadratic { .. }, &Shape::Spline { rate }) => {
-                // Written where it stays (no curve built aside and moved in).
-                if !matches!(bend, Bend::Spline(_)) {
-                    *bend = Bend::Spline(Curve::default());
-                }
-                let Bend::Spline(curve) = bend else {
-                    return bad;
-                };
-                self.set_spline(curve, &block.motion, start, length, rate)
-            }
-            _ => bad,
-        }
-    }
-
-    /// Pose after `s` (nm Q16) along the path from `start` (where it begins: the
-    /// previous block's end); `s ≥ length` gives the exact end. `bend` is the arc's
-    /// (ignored for other forms).
-    pub fn pose_at(&self, bend: &Bend, start: &[i64; AXES], s: i64, pose: &mut [i64; AXES]) {
-        if s >= self.length << 16 || self.length == 0 {
-            *pose = self.end;
-            return;
-        }
-        self.eval(bend, start, s.max(0), pose);
-    }
-
-    /// The path's formula at `s` (nm Q16, ≥ 0), without snapping to the end.
-    fn eval(&self, bend: &Bend, start: &[i64; AXES], s: i64, pose: &mut [i64; AXES]) {
-        let linear = |unit: &[i64; AXES], pose: &mut [i64; AXES]| {
-            for (p, (st, u)) in pose.iter_mut().zip(start.iter().zip(unit)) {
-                // (u Q44 × s Q16) >> 60, rounded; axes that do not move cost nothing.
-                *p = if *u == 0 {
-                    *st
-                } else {
-                    st + (((*u as i128 * s as i128) + (1i128 << 59)) >> 60) as i64
-                };
-            }
-        };
-        match self.form {
-            Form::Point => *pose = self.end,
-            Form::Line => linear(&self.unit, pose),
-            Form::Spline => match bend {
-                Bend::Spline(c) => self.eval_spline(c, start, s, pose),
-                Bend::Arc(_) => *pose = self.end,
-            },
-            Form::Arc => {
-                let Bend::Arc(Circle {
-                    plane,
-                    center,
-                    r0,
-                    phi0,
-                    phi_rate,
-                    r_rate,
-                    ..
-                }) = *bend
-                else {
-                    *pose = self.end;
-                    return;
-                };
-                linear(&self.unit, pose);
-                // At the start (the plan check's first point) no product is needed.
-                let (phi, r) = if s == 0 {
-                    (phi0, r0)
-                } else {
-                    let s = s as i128;
-                    (
-                        phi0.wrapping_add(((phi_rate * s) >> 32) as u64),
-                        r0 + ((r_rate as i128 * s) >> 56) as i64,
-                    )
-                };
-                // The angle as a signed fraction of a turn, then in n° within ±180°
-                // (the sine's fast path).
-                let turn = (phi as i64 as i128 * 360_000_000_000) >> 64;
-                let (sin, cos) = crate::math::sincos(turn as i64);
-                let (i, j, _) = plane.axes();
-                pose[i] = center[0] + ((r as i128 * cos as i128 + (1 << 30)) >> 31) as i64;
-                pose[j] = center[1] + ((r as i128 * sin as i128 + (1 << 30)) >> 31) as i64;
-            }
-        }
-    }
-}
-
-impl Path {
-    /// Unit tangent at `s` (nm Q16), in `f32` per axis (per nm of path).
-    pub fn tangent_at(&self, s: i64) -> [f32; AXES] {
-        let mut t = [0f32; AXES];
-        match self.form {
-            Form::Point => {}
-            Form::Line => {
-                for (t, u) in t.iter_mut().zip(&self.unit) {
-                    *t = (*u as f64 / Q44) as f32;
-                }
-            }
-            Form::Spline => {
-                if let Bend::Spline(c) = &self.bend {
-                    t = self.course.spline_tangent(c, s);
-                }
-            }
-            Form::Arc => {
-                let Circle {
-                    plane,
-                    phi0,
-                    phi_rate,
-                    r0,
-                    dr,
-                    ..
-                } = self.bend.circle();
-                for (t, u) in t.iter_mut().zip(&self.unit) {
-                    *t = (*u as f64 / Q44) as f32;
-                }
-                let s = s.max(0);
-                let f = (s as f64 / 65_536.0) / (self.length.max(1) as f64);
-                let r = r0 as f64 + dr as f64 * f;
-                // d(position)/ds in plane: r·dφ/ds·(−sin, cos) (radius drift ignored),
-                // with the angle found as in `pose_at`; dφ/ds from the rate (turns Q64
-                // per nm Q16).
-                let dphi_ds = phi_rate as f64 / 65_536.0 / TURN_Q64 * core::f64::consts::TAU;
-                let phi = phi0.wrapping_add(((phi_rate * s as i128) >> 32) as u64);
-                let turn = (phi as i64 as i128 * 360_000_000_000) >> 64;
-                let (sin, cos) = crate::math::sincos(turn as i64);
-                let q31 = crate::math::ONE_Q31 as f64;
-                let (i, j, _) = plane.axes();
-                t[i] = (-r * dphi_ds * (sin as f64 / q31)) as f32;
-                t[j] = (r * dphi_ds * (cos as f64 / q31)) as f32;
-            }
-        }
-        t
-    }
-
-    /// d²P/ds² at `s` (nm Q16) per axis (per nm²): a spline's, or an arc's centripetal
-    /// −r·(dφ/ds)²·(cos φ, sin φ) in its plane (its radius's drift ignored); 0 for lines
-    /// and points (host).
-    pub fn bend_at(&self, s: i64) -> [f32; AXES] {
-        match &self.bend {
-            Bend::Spline(c) if self.form == Form::Spline => self.course.spline_bend(c, s),
-            Bend::Arc(c) if self.form == Form::Arc => {
-                let s = s.clamp(0, self.length << 16);
-                let f = (s as f64 / 65_536.0) / (self.length.max(1) as f64);
-                let r = c.r0 as f64 + c.dr as f64 * f;
-                let dphi_ds = c.phi_rate as f64 / 65_536.0 / TURN_Q64 * core::f64::consts::TAU;
-                let phi = c.phi0.wrapping_add(((c.phi_rate * s as i128) >> 32) as u64);
-                let angle = phi as f64 / TURN_Q64 * core::f64::consts::TAU;
-                let k = -r * dphi_ds * dphi_ds;
-                let (i, j, _) = c.plane.axes();
-                let mut b = [0f32; AXES];
-                b[i] = (k * libm::cos(angle)) as f32;
-                b[j] = (k * libm::sin(angle)) as f32;
-                b
-            }
-            _ => [0.0; AXES],
-        }
-    }
-
-    /// Smallest radius of curvature, nm (`None` for straight paths).
-    pub fn radius(&self) -> Option<i64> {
-        let Circle { r0, dr, .. } = self.bend.circle();
-        (self.form == Form::Arc).then_some(r0.min(r0 + dr))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn arc(target: [i64; AXES], center: [i64; 2], clockwise: bool, turns: u16) -> Block {
-        Block {
-            line: 1,
-            motion: Motion::Arc {
-                center,
-                plane: Plane::Xy,
-                clockwise,
-                turns,
-            },
-            target,
-            feed: 1,
-            tolerance_nm: 0,
-        }
-    }
-
-    #[test]
-    fn a_quarter_circle_stays_on_the_circle_and_ends_exactly() {
-        let r = 10_000_000;
-        let b = arc([0, r, 0, 0, 0, 0], [0, 0], false, 0);
-        let from = [r, 0, 0, 0, 0, 0];
-        let p = Path::new(&b, &from).unwrap();
-        let quarter = core::f64::consts::FRAC_PI_2 * r as f64;
-        assert!((p.length as f64 - quarter).abs() < 1.0);
-        let mut pose = [0; AXES];
-        for k in 0..=1000 {
-            let s = (p.length << 16) / 1000 * k;
-            p.pose_at(&from, s, &mut pose);
-            let rad = ((pose[0] as f64).powi(2) + (pose[1] as f64).powi(2)).sqrt();
-            assert!(
-                (rad - r as f64).abs() < 1.0,
-                "off the circle by {} nm",
-                rad - r as f64
-            );
-        }
-        p.pose_at(&from, p.length << 16, &mut pose);
-        assert_eq!(pose, [0, r, 0, 0, 0, 0]);
-    }
-
-    #[test]
-    fn a_full_helix_with_an_extra_turn_has_the_length_of_two_turns() {
-        let r = 5_000_000;
-        let b = arc([r, 0, -2_000_000, 0, 0, 0], [0, 0], true, 1);
-        let from = [r, 0, 0, 0, 0, 0];
-        let p = Path::new(&b, &from).unwrap();
-        let planar = 2.0 * core::f64::consts::TAU * r as f64;
-        let want = (planar * planar + 4e12).sqrt();
-        assert!((p.length as f64 - want).abs() < 1.0);
-        // Halfway: one full turn done (back at angle 0), halfway down.
-        let mut pose = [0; AXES];
-        p.pose_at(&from, p.length << 15, &mut pose);
-        assert!((pose[0] - r).abs() <= 1 && pose[1].abs() <= 1, "{pose:?}");
-        assert!((pose[2] + 1_000_000).abs() <= 1);
-    }
-
-    #[test]
-    fn a_straight_line_lands_within_a_nanometre_of_every_fraction() {
-        let b = Block {
-            line: 1,
-            motion: Motion::Linear,
-            target: [123_456_789, -98_765_432, 5, 0, 0, 0],
-            feed: 1,
-            tolerance_nm: 0,
-        };
-        let p = Path::new(&b, &[0; AXES]).unwrap();
-        let mut pose = [0; AXES];
-        p.pose_at(&[0; AXES], p.length << 15, &mut pose);
-        assert!((pose[0] - 61_728_394).abs() <= 1, "{pose:?}");
-        assert!((pose[1] + 49_382_716).abs() <= 1, "{pose:?}");
-    }
-
-    /// What the host computes for `block` from `start`, checked as the controller does.
-    fn round_trip(block: &Block, start: &[i64; AXES]) -> Result<Path, GeometryError> {
-        let host = Path::new(block, start)?;
-        Path::from_plan(block, start, host.length, host.shape())
-    }
-
-    proptest::proptest! {
-        #[test]
-        fn the_controller_accepts_every_arc_the_host_computes(
-            r_um in 10i64..5_000_000, a0 in 0.0f64..360.0, sweep in 1.0f64..359.0,
-            helix in -50_000_000i64..50_000_000, cw in proptest::bool::ANY, turns in 0u16..3,
-            plane in 0usize..3, dr in -2_000i64..2_000,
-        ) {
-            let plane = [Plane::Xy, Plane::Zx, Plane::Yz][plane];
-            let (i, j, k) = plane.axes();
-            let r = r_um * 1000;
-            let c = [1_000_000i64, -2_000_000];
-            let a1 = if cw { a0 - sweep } else { a0 + sweep };
-            let mut start = [0i64; AXES];
-            start[i] = c[0] + (r as f64 * a0.to_radians().cos()).round() as i64;
-            start[j] = c[1] + (r as f64 * a0.to_radians().sin()).round() as i64;
-            let mut target = start;
-            let r1 = (r + dr).max(1) as f64;
-            target[i] = c[0] + (r1 * a1.to_radians().cos()).round() as i64;
-            target[j] = c[1] + (r1 * a1.to_radians().sin()).round() as i64;
-            target[k] += helix;
-            let b = Block {
-                line: 1,
-                motion: Motion::Arc { center: c, plane, clockwise: cw, turns },
-                target,
-                feed: 1_000_000,
-                tolerance_nm: 0,
-            };
-            let host = Path::new(&b, &start);
-            proptest::prop_assume!(host.is_ok());
-            let host = host.unwrap();
-            proptest::prop_assert_eq!(round_trip(&b, &start), Ok(host));
-        }
-
-        #[test]
-        fn the_controller_accepts_every_line_the_host_computes(
-            d in proptest::array::uniform6(-500_000_000i64..500_000_000),
-            rotary_only in proptest::bool::ANY,
-        ) {
-            let mut target = d;
-            if rotary_only {
-                target[..3].copy_from_slice(&[0, 0, 0]);
-            }
-            let b = Block { line: 1, motion: Motion::Linear, target, feed: 1_000_000, tolerance_nm: 0 };
-            let start = [0; AXES];
-            proptest::prop_assert_eq!(round_trip(&b, &start), Path::new(&b, &start));
-        }
-    }
-
-    #[test]
-    fn an_arc_s_tangent_is_the_derivative_of_its_pose() {
-        for (clockwise, turns) in [(false, 0), (true, 0), (false, 1)] {
-            // A quarter (or one and a quarter) of a 10 mm circle with a 3 mm helix.
-            let b = arc(
-                [0, 10_000_000, 3_000_000, 0, 0, 0],
-                [0, 0],
-                clockwise,
-                turns,
-            );
-            let from = [10_000_000, 0, 0, 0, 0, 0];
-            let p = Path::new(&b, &from).unwrap();
-            for k in 1..8 {
-                let s = (p.length << 16) / 8 * k;
-                let h = 1_000i64 << 16; // 1 µm
-                let (mut a, mut c) = ([0; AXES], [0; AXES]);
-                p.pose_at(&from, s - h, &mut a);
-                p.pose_at(&from, s + h, &mut c);
-                let t = p.tangent_at(s);
-                for i in 0..3 {
-                    let fd = (c[i] - a[i]) as f32 / 2_000.0;
-                    assert!(
-                        (t[i] - fd).abs() < 1e-3,
-                        "{clockwise} {turns} {k} {i}: {t:?} vs {fd}"
-                    );
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn a_tiny_arc_whose_radius_the_controller_rounds_is_accepted() {
-        // A 45.58 µm radius, 314° (found by the property test of issue 16): the whole
-        // nanometre radii move the planar length by 2.7·10⁻⁵, beyond the relative
-        // bound alone.
-        let b = Block {
-            line: 3,
-            motion: Motion::Arc {
-                center: [15_400, 42_900],
-                plane: Plane::Xy,
-                clockwise: false,
-                turns: 0,
-            },
-            target: [-26_200, 24_200, -30_000_000, 0, 0, 0],
-            feed: 50_000_000,
-            tolerance_nm: 0,
-        };
-        let start = [0, 0, -30_000_000, 0, 0, 0];
-        assert_eq!(round_trip(&b, &start), Path::new(&b, &start));
-    }
-
-    #[test]
-    fn a_plan_for_another_arc_is_refused() {
-        let b = arc([0, 10_000_000, 0, 0, 0, 0], [0, 0], false, 0);
-        let start = [10_000_000, 0, 0, 0, 0, 0];
-        let host = Path::new(&b, &start).unwrap();
-        // The other way round (three quarters), or one turn more.
-        let mut other = b;
-        other.motion = Motion::Arc {
-            center: [0, 0],
-            plane: Plane::Xy,
-            clockwise: true,
-            turns: 0,
-        };
-        assert_eq!(
-            Path::from_plan(&other, &start, host.length, host.shape()),
-            Err(GeometryError::PlanMismatch)
-        );
-        let mut more = b;
-        more.motion = Motion::Arc {
-            center: [0, 0],
-            plane: Plane::Xy,
-            clockwise: false,
-            turns: 1,
-        };
-        assert_eq!(
-            Path::from_plan(&more, &start, host.length, host.shape()),
-            Err(GeometryError::PlanMismatch)
-        );
-        // A length that does not match the sweep.
-        assert_eq!(
-            Path::from_plan(&b, &start, host.length * 2, host.shape()),
-            Err(GeometryError::PlanMismatch)
-        );
-    }
-}
-
-#[cfg(test)]
-mod extreme_arcs {
-    use super::*;
-
-    /// xorshift64*: a seeded generator (the same cases every run).
-    struct Rng(u64);
-    impl Rng {
-        fn next(&mut self) -> f64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            (self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 / (1u64 << 53) as f64
-        }
-    }
-
-    /// Issue 34: line 5,557 of a CamBam program, `G3 X10.9764 Y15.2949 I3827.4875
-    /// J1391.3692` (radius 4,072 mm, chord 0.2 mm), with the start written to four
-    /// decimals at 2,000 places along its circle. The length check took the sweep to
-    /// 2⁻³² turn, 3·10⁻⁵ of this one, and refused 182 of these plans as malformed.
-    #[test]
-    fn the_cambam_arc_of_issue_34_runs_exactly_wherever_it_starts() {
-        let off = [3_827_487_500i64, 1_391_369_200];
-        let r = (off[0] as f64).hypot(off[1] as f64);
-        let e = [10_976_400i64, 15_294_900];
-        let u = [-off[0] as f64 / r, -off[1] as f64 / r];
-        let mut refused = 0;
-        for k in 0..2000 {
-            let d = 200_000.0 / r * (0.5 + k as f64 * 1e-3);
-            let ru = [
-                u[0] * d.cos() - u[1] * d.sin(),
-                u[0] * d.sin() + u[1] * d.cos(),
-            ];
-            let ct = [e[0] as f64 - r * ru[0], e[1] as f64 - r * ru[1]];
-            let at = |v: f64| (v / 100.0).round() as i64 * 100;
-            let s = [at(ct[0] + r * u[0]), at(ct[1] + r * u[1])];
-            let b = Block {
-                line: 5557,
-                motion: Motion::Arc {
-                    center: [s[0] + off[0], s[1] + off[1]],
-                    plane: Plane::Xy,
-                    clockwise: false,
-                    turns: 0,
-                },
-                target: [e[0], e[1], 0, 0, 0, 0],
-                feed: 1_000_000,
-                tolerance_nm: 0,
-            };
-            if Path::checked(&b, &[s[0], s[1], 0, 0, 0, 0]).is_err() {
-                refused += 1;
-            }
-        }
-        assert_eq!(refused, 0, "{refused} of 2000 refused");
-    }
-
-    /// The reach of the one rule ([`Path::checked`]): every arc of radius up to
-    /// [`MAX_ARC_RADIUS_NM`], chord 2 nm to 100 mm (radius up to 10⁹ chords), minor
-    /// or major (nearly full circles), every plane, helical or not, runs exactly.
-    /// (Chords of 1 nm may not: the host sends those as lines.)
-    #[test]
-    fn every_arc_within_the_exact_range_over_two_nanometres_runs_exactly() {
-        let mut rng = Rng(0x34);
-        let (mut refused, mut n) = (0, 0);
-        while n < 100_000 {
-            let chord = 10f64.powf(0.31 + rng.next() * 7.7);
-            let r = chord * 10f64.powf(rng.next() * 9.0).max(0.5);
-            if r > MAX_ARC_RADIUS_NM as f64 {
-                continue;
-            }
-            let half = (chord / 2.0 / r).min(1.0).asin();
-            let major = rng.next() < 0.3;
-            let sweep = if major {
-                core::f64::consts::TAU - 2.0 * half
-            } else {
-                2.0 * half
-            };
-            let cw = rng.next() < 0.5;
-            let plane = [Plane::Xy, Plane::Zx, Plane::Yz][(rng.next() * 3.0) as usize];
-            let (i, j, k) = plane.axes();
-            let a0 = rng.next() * core::f64::consts::TAU;
-            let a1 = if cw { a0 - sweep } else { a0 + sweep };
-            let c = [
-                (rng.next() * 2e8 - 1e8) as i64,
-                (rng.next() * 2e8 - 1e8) as i64,
-            ];
-            let mut start = [0i64; AXES];
-            start[i] = c[0] + (r * a0.cos()).round() as i64;
-            start[j] = c[1] + (r * a0.sin()).round() as i64;
-            start[k] = 5_000_000;
-            let mut target = start;
-            target[i] = c[0] + (r * a1.cos()).round() as i64;
-            target[j] = c[1] + (r * a1.sin()).round() as i64;
-            if rng.next() < 0.5 {
-                target[k] += (rng.next() * 2e7 - 1e7) as i64;
-            }
-            let ends = [target[i] - start[i], target[j] - start[j]];
-            if (ends[0] as f64).hypot(ends[1] as f64) < 2.0 {
-                continue;
-            }
-            let b = Block {
-                line: 1,
-                motion: Motion::Arc {
-                    center: c,
-                    plane,
-                    clockwise: cw,
-                    turns: 0,
-                },
-                target,
-                feed: 1,
-                tolerance_nm: 0,
-            };
-            n += 1;
-            if let Err(e) = Path::checked(&b, &start) {
-                refused += 1;
-                std::eprintln!("{e:?}: radius {r} nm, chord {chord} nm: {b:?} from {start:?}");
-            }
-        }
-        assert_eq!(refused, 0, "{refused} of {n} arcs refused");
     }
 }

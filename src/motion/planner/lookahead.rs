@@ -133,6 +133,42 @@ impl Lookahead {
         }
     }
 
+    /// The corner speed (nm/tick) at which the tick that turns from the last block's
+    /// end tangent to `start_tangent` cuts the corner by no more than the last block's
+    /// path tolerance (∞ when it has none or there is no turn). Path tolerance (G64 P):
+    /// between two tick samples the tool moves in a straight line, which cuts a corner
+    /// taken at v (nm/tick) by v·|Δu|/4 at most (the corner half-way through a tick).
+    #[inline(always)]
+    fn tolerance_limit(&self, start_tangent: &[f32; AXES]) -> f32 {
+        let du = sqrtf(
+            (0..3)
+                .map(|i| {
+                    let d = start_tangent[i] - self.end_tangent[i];
+                    d * d
+                })
+                .sum::<f32>(),
+        );
+        if self.end_tolerance == u32::MAX || du < 1e-9 {
+            f32::INFINITY
+        } else {
+            4.0 * self.end_tolerance as f32 / du
+        }
+    }
+
+    /// The corner speed (nm/tick) at which the jump of the acceleration from the last
+    /// block's end bend to `path`'s start bend stays within jerk limitation's budget.
+    #[inline(always)]
+    fn bend_jump_limit(
+        &self,
+        path: &Path,
+        machine: &MachineConfig,
+        kin: &MachineKinematics,
+    ) -> f32 {
+        let start_bend = path.bend_at(0);
+        let jump: [f32; AXES] = core::array::from_fn(|i| start_bend[i] - self.end_bend[i]);
+        bend_jump_limit(&jump, &self.end, self.smoothing, machine, kin)
+    }
+
     /// Plans `block` after `prev` (the block planned before it, whose acceleration a
     /// blended corner may reduce): geometry, limits along it, and its corner. Its
     /// `entry` is left at the corner limit, for the passes. An unreachable target is
@@ -187,22 +223,7 @@ impl Lookahead {
         // Split each axis's acceleration at a blended corner: a share ρ for the turn,
         // the rest for the two blocks' profiles (see the module doc). ρ is what the
         // turn needs at the speed both blocks ask for, at most one half.
-        // Path tolerance (G64 P): between two tick samples the tool moves in a
-        // straight line, which cuts a corner taken at v (nm/tick) by v·|Δu|/4 at most
-        // (the corner half-way through a tick); keep that within the tolerance.
-        let du = sqrtf(
-            (0..3)
-                .map(|i| {
-                    let d = start_tangent[i] - self.end_tangent[i];
-                    d * d
-                })
-                .sum::<f32>(),
-        );
-        let by_tolerance = if self.end_tolerance == u32::MAX || du < 1e-9 {
-            f32::INFINITY
-        } else {
-            4.0 * self.end_tolerance as f32 / du
-        };
+        let by_tolerance = self.tolerance_limit(&start_tangent);
         let (corner, rho) = match need {
             None => (0.0, 0.0),
             Some(n) if n <= 0.0 => (by_tolerance, 0.0),
@@ -247,13 +268,8 @@ impl Lookahead {
         // Where a spline or an arc meets its neighbour its bend jumps: each axis's and joint's
         // acceleration changes by v²·Δx″ in one tick, which jerk limitation over w
         // ticks allows a third of its budget for (aᵢ/w per tick, as a corner's turn).
-        let start_bend = path.bend_at(0);
         let corner = if self.smoothing > 1 && moving && corner > 0.0 {
-            let jump: [f32; AXES] = core::array::from_fn(|i| start_bend[i] - self.end_bend[i]);
-            fmin(
-                corner,
-                bend_jump_limit(&jump, &self.end, self.smoothing, machine, kin),
-            )
+            fmin(corner, self.bend_jump_limit(&path, machine, kin))
         } else {
             corner
         };
