@@ -10,14 +10,14 @@
 //! known is safe; the corner after it is planned as a stop, because a blended corner
 //! takes part of the acceleration of the block before it, which is already sent.
 //!
-//! Fed all at once, this is [`pkmc::motion::planner::plan_into`] exactly: the same calls in the
-//! same order (the passes, the second look at the splines, the passes again).
+//! The pass sequence is the core's own ([`pkmc::motion::planner::replan_from`], which
+//! [`pkmc::motion::planner::plan_into`] runs too): fed all at once, this is `plan_into` exactly.
 
 use pkmc::config::{MachineConfig, AXES};
+use pkmc::motion::geometry::Path;
 use pkmc::kinematics::MachineKinematics;
-use pkmc::math::sqrtf;
+use pkmc::motion::planner::{replan_from, Lookahead, PlanBlock};
 use pkmc::motion::block::{Block, PlannedBlock};
-use pkmc::motion::planner::{forward_pass, refine_splines, reverse_pass, Lookahead, PlanBlock};
 
 /// Blocks planned between two calls of the keep-alive (some milliseconds).
 const ALIVE_EVERY: usize = 4096;
@@ -44,8 +44,8 @@ impl Plans {
     }
 
     /// Plans `blocks` after those already planned, then plans again every block from
-    /// `frozen` (the first never sent) on. Fails with the index of a block whose
-    /// geometry is malformed.
+    /// `frozen` (the first never sent) on, with the core's pass sequence
+    /// ([`replan_from`]). Fails with the index of a block whose geometry is malformed.
     pub(super) fn extend(
         &mut self,
         blocks: &[Block],
@@ -72,33 +72,20 @@ impl Plans {
             });
         }
         let frozen = frozen.min(self.work.len());
-        let first_entry = match frozen.checked_sub(1) {
-            None => 0.0,
-            Some(last) => {
-                let sent = &self.work[last];
-                let e = self.planned[last].plan.entry;
-                sqrtf(e * e + 2.0 * sent.accel * sent.length())
-            }
-        };
-        let passes = |tail: &mut [PlanBlock]| {
-            reverse_pass(tail, 100, false);
-            if let Some(first) = tail.first() {
-                let entry = first.entry.min(first_entry);
-                forward_pass(tail, entry);
-            }
-        };
-        alive();
-        passes(&mut self.work[frozen..]);
-        alive();
-        if refine_splines(&mut self.work, frozen, self.start, machine, kin) {
-            alive();
-            passes(&mut self.work[frozen..]);
-        }
-        alive();
+        replan_from(&mut self.work, frozen, self.start, machine, kin, alive);
         for (i, p) in self.work.iter().enumerate().skip(frozen) {
             self.planned[i].plan = p.plan();
         }
         Ok(())
+    }
+
+    /// Block `i`'s path as the planner derived it, and where it starts (the block's
+    /// geometry is derived once, here, and read by whoever needs it).
+    pub(super) fn path(&self, i: usize) -> ([i64; AXES], &Path) {
+        let from = i
+            .checked_sub(1)
+            .map_or(self.start, |p| self.work[p].path.end);
+        (from, &self.work[i].path)
     }
 
     /// Motion time of everything planned at 100 % feed, s.

@@ -26,6 +26,11 @@ const LOW_WATER_MS: f64 = 150.0;
 /// arc is the core's own ([`Path`]: what the controller executes). Dwells count their
 /// time, auxiliary functions nothing.
 pub fn estimate_ms(from: &[i64; 6], b: &Block, axis_vmax: &[i64; 6]) -> f64 {
+    estimate_on(from, b, Path::new(b, from).ok().as_ref(), axis_vmax)
+}
+
+/// [`estimate_ms`] of `b` whose path from `from` is derived already (`None`: malformed).
+fn estimate_on(from: &[i64; 6], b: &Block, path: Option<&Path>, axis_vmax: &[i64; 6]) -> f64 {
     match b.motion {
         Motion::Rapid => {
             (0..6)
@@ -37,7 +42,7 @@ pub fn estimate_ms(from: &[i64; 6], b: &Block, axis_vmax: &[i64; 6]) -> f64 {
         Motion::Linear | Motion::Arc { .. } | Motion::Cubic { .. } | Motion::Quadratic { .. }
             if b.feed > 0 =>
         {
-            Path::new(b, from).map_or(0.0, |p| p.length as f64 / b.feed as f64 * 1000.0)
+            path.map_or(0.0, |p| p.length as f64 / b.feed as f64 * 1000.0)
         }
         Motion::Linear | Motion::Arc { .. } | Motion::Cubic { .. } | Motion::Quadratic { .. } => {
             0.0
@@ -53,8 +58,6 @@ pub(super) struct Fed {
     pub(super) blocks: Vec<Block>,
     plans: Plans,
     kin: MachineKinematics,
-    /// Pose at the end of the last block known (for the motion estimates).
-    end: [i64; 6],
     /// More blocks may come.
     pub(super) open: bool,
     /// When blocks last came.
@@ -154,7 +157,6 @@ impl<T: Transport> Link<T> {
             blocks: Vec::with_capacity(blocks.len()),
             plans: Plans::new(pose, &self.machine),
             kin: MachineKinematics::new(&self.machine),
-            end: pose,
             open: true,
             last_fed: Instant::now(),
         };
@@ -166,24 +168,15 @@ impl<T: Transport> Link<T> {
         result
     }
 
-    /// Adds `new` to the job: motion estimates, arcs, and plans (the blocks not yet
-    /// sent are planned again with the new ones in view).
+    /// Adds `new` to the job: plans (the blocks not yet sent are planned again with the
+    /// new ones in view), then each block's motion estimate and arcs, its length read
+    /// from the path the planner derived.
     fn append(
         &mut self,
         fed: &mut Fed,
         job: &mut JobState,
         new: &[Block],
     ) -> Result<(), LinkError> {
-        for b in new {
-            let arcs = job.arcs_before.last().copied().unwrap_or(0);
-            job.arcs_before.push(arcs + b.motion.curved() as usize);
-            let total = job.planned_ms.last().copied().unwrap_or(0.0);
-            job.planned_ms
-                .push(total + estimate_ms(&fed.end, b, &self.axis_vmax));
-            if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
-                fed.end = b.target;
-            }
-        }
         let first = fed.blocks.len();
         let machine = self.machine.clone();
         // A large program takes seconds to plan: the link is kept alive meanwhile.
@@ -193,6 +186,14 @@ impl<T: Transport> Link<T> {
                 port: self.port(),
                 line: new[i - first].line,
             })?;
+        for (i, b) in new.iter().enumerate() {
+            let (from, path) = fed.plans.path(first + i);
+            let arcs = job.arcs_before.last().copied().unwrap_or(0);
+            job.arcs_before.push(arcs + b.motion.curved() as usize);
+            let total = job.planned_ms.last().copied().unwrap_or(0.0);
+            job.planned_ms
+                .push(total + estimate_on(&from, b, Some(path), &self.axis_vmax));
+        }
         fed.blocks.extend_from_slice(new);
         fed.last_fed = Instant::now();
         Ok(())

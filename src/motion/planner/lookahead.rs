@@ -376,14 +376,46 @@ pub fn plan_into(
             .plan(b, done.last_mut(), machine, kin)
             .map_err(|e| (i, e))?;
     }
-    let out = &mut out[..blocks.len()];
-    reverse_pass(out, 100, false);
-    forward_pass(out, 0.0);
-    if refine_splines(out, 0, start, machine, kin) {
-        reverse_pass(out, 100, false);
-        forward_pass(out, 0.0);
-    }
+    replan_from(&mut out[..blocks.len()], 0, start, machine, kin, &mut || {});
     Ok(())
+}
+
+/// The look-ahead's pass sequence, the one both [`plan_into`] and the host's link run:
+/// the passes, the second look at the splines, the passes again, over `blocks[from..]`
+/// (`start`: where `blocks[0]` starts). The blocks before `from` are final (sent):
+/// the first replanned block is entered no faster than the last final one reaches over
+/// its length from its own planned entry, and at rest when `from` is 0. `between` is
+/// called between the steps (the host keeps its link alive while a large program is
+/// planned).
+pub fn replan_from(
+    blocks: &mut [PlanBlock],
+    from: usize,
+    start: [i64; AXES],
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+    between: &mut dyn FnMut(),
+) {
+    let from = from.min(blocks.len());
+    let reach = from.checked_sub(1).map(|last| {
+        let sent = &blocks[last];
+        sqrtf(sent.entry * sent.entry + 2.0 * sent.accel * sent.length())
+    });
+    let passes = |tail: &mut [PlanBlock]| {
+        reverse_pass(tail, 100, false);
+        let first_entry = match (reach, tail.first()) {
+            (Some(r), Some(first)) => first.entry.min(r),
+            _ => 0.0,
+        };
+        forward_pass(tail, first_entry);
+    };
+    between();
+    passes(&mut blocks[from..]);
+    between();
+    if refine_splines(blocks, from, start, machine, kin) {
+        between();
+        passes(&mut blocks[from..]);
+    }
+    between();
 }
 
 /// A second look at the splines once the passes know how fast each one runs

@@ -55,6 +55,6 @@ mod tests;
 pub use limits::{LIMIT_MARGIN, LIMIT_SAMPLES, SPLINE_BEND_SHARE, SPLINE_SAMPLES};
 pub use lookahead::{
     cap, forward_pass, jog_target, plan_into, plan_jog, plan_move, planned_ticks, refine_splines,
-    reverse_pass, Kind, Lookahead, PlanBlock,
+    replan_from, reverse_pass, Kind, Lookahead, PlanBlock,
 };
 pub use queue::{Planner, PushError, Queued, BEND_CAPACITY, QUEUE_CAPACITY};
