@@ -8,24 +8,14 @@
 //! each pose is compared with the chords of exactly the curve it lies on (and the
 //! chord either side of it, where a corner is blended): a program that passes the same
 //! place twice is not measured against the wrong pass. Distances are in the
-//! compressor's space: nm over X Y Z, 1° counted as 1 mm.
+//! compressor's space ([`crate::gcode::compress::space`]): nm over X Y Z, 1° counted
+//! as 1 mm.
 
+use crate::gcode::compress::space::{to_fit, Point as V};
 use pkmc::config::AXES;
 use pkmc::motion::block::{Block, Motion};
 use serde::Serialize;
 use std::ops::Range;
-
-type V = [f64; AXES];
-
-fn to_v(p: &[i64; AXES]) -> V {
-    core::array::from_fn(|i| {
-        if i < 3 {
-            p[i] as f64
-        } else {
-            p[i] as f64 / 1000.0
-        }
-    })
-}
 
 /// The largest deviation found, for the report.
 #[derive(Clone, Debug, Default, Serialize, PartialEq)]
@@ -63,13 +53,13 @@ impl Meter {
         source: &[Range<usize>],
         start: [i64; AXES],
     ) -> Self {
-        let mut points = vec![to_v(&start)];
+        let mut points = vec![to_fit(&start)];
         let mut lines = vec![0];
         // Programmed block k ends at point index[k].
         let mut index = Vec::with_capacity(programmed.len());
         for b in programmed {
             if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
-                points.push(to_v(&b.target));
+                points.push(to_fit(&b.target));
                 lines.push(b.line);
             }
             index.push(points.len() - 1);
@@ -95,7 +85,7 @@ impl Meter {
     /// units).
     pub fn record(&mut self, done: u32, pose: &[i64; AXES]) {
         let k = done as usize;
-        let q = to_v(pose);
+        let q = to_fit(pose);
         if let Some((p, prev_k)) = self.prev {
             if prev_k == k {
                 let mid: V = core::array::from_fn(|i| (p[i] + q[i]) / 2.0);

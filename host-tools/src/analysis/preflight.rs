@@ -5,12 +5,14 @@
 //! each sample goes through the controller's inverse kinematics with the travel
 //! check, and every failure is reported with its NC line (one finding per line and
 //! reason). The singularity margin at a sample comes from the singular values of the
-//! Jacobian J = ∂q/∂p of the axes the machine uses (joints per mm, rotary axes counted
-//! per [`ROTARY_MM_PER_DEG`]): the kinematics' analytic Jacobian
+//! Jacobian J = ∂q/∂p of the axes the machine uses (joints per mm, rotary axes and
+//! joints with 1° counted as 1 mm, the fit space of [`crate::gcode::compress::space`]):
+//! the kinematics' analytic Jacobian
 //! ([`Kinematics::jacobian`], the one the planner uses), and the Jacobi eigenvalue
 //! method on JᵀJ: min(σ_min, 1/σ_max), which is 1 for a Cartesian machine and falls to zero at either kind of singularity. The
 //! smallest margin met, and where, is reported.
 
+use crate::gcode::compress::space::units_per_nm;
 use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
 use pkmc::kinematics::{Jacobian, Kinematics, MachineKinematics, Unreachable};
 use pkmc::motion::block::Block;
@@ -19,8 +21,8 @@ use std::collections::BTreeSet;
 
 /// Largest distance between two samples of a path, nm.
 pub const SAMPLE_NM: i64 = 1_000_000;
-/// How many mm of motion a degree of a rotary axis counts as in the margin.
-pub const ROTARY_MM_PER_DEG: f64 = 1.0;
+/// Fit-space nm per mm.
+const NM_PER_MM: f64 = 1e6;
 
 /// One problem found.
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
@@ -131,23 +133,15 @@ pub fn margin(pose: &[i64; AXES], machine: &MachineConfig, kin: &MachineKinemati
         .filter(|&i| machine.axes[i].max_velocity > 0)
         .collect();
     let n = machine.joints.len();
-    // The kinematics' analytic ∂q/∂p, rescaled: columns per mm (or per
-    // ROTARY_MM_PER_DEG of a rotary axis), rows in mm (or ROTARY_MM_PER_DEG per degree).
+    // The kinematics' analytic ∂q/∂p, rescaled: columns per mm, rows in mm (of the
+    // fit space, where a rotary axis's or joint's degree counts as a mm).
     let mut dq: Jacobian = [[0.0; AXES]; MAX_JOINTS];
     kin.jacobian(pose, &mut dq).ok()?;
     let mut jac = vec![vec![0.0f64; axes.len()]; n];
     for (c, &i) in axes.iter().enumerate() {
-        let per_unit = if pkmc::config::axis_is_rotary(i) {
-            1e9 / ROTARY_MM_PER_DEG
-        } else {
-            1e6
-        };
+        let per_unit = NM_PER_MM * units_per_nm(pkmc::config::axis_is_rotary(i));
         for j in 0..n {
-            let scale = if machine.joints[j].rotary {
-                1e-9 * ROTARY_MM_PER_DEG
-            } else {
-                1e-6
-            };
+            let scale = 1.0 / (NM_PER_MM * units_per_nm(machine.joints[j].rotary));
             jac[j][c] = dq[j][i] as f64 * scale * per_unit;
         }
     }

@@ -30,16 +30,19 @@
 //! run fast, are merged into curves of a few degrees each; coarse chords, which stop
 //! at every vertex, into long ones.
 //!
-//! Rotary axes take part in the fit with 1° counted as 1 mm (a curve then keeps them
-//! within the tolerance as well). The fit tolerance is [`Settings::fit_share`] of `P`.
+//! Rotary axes take part in the fit with 1° counted as 1 mm ([`space`]; a curve then
+//! keeps them within the tolerance as well). The fit tolerance is
+//! [`Settings::fit_share`] of `P`.
 
 mod fit;
+pub mod space;
 #[cfg(test)]
 mod tests;
 
 use fit::{fit, fit_free, Goal};
 use pkmc::config::AXES;
 use pkmc::motion::block::{Block, Motion};
+use space::{from_fit, to_fit};
 use std::ops::Range;
 
 pub use fit::to_polyline;
@@ -115,23 +118,8 @@ pub struct Compressed {
     pub source: Vec<Range<usize>>,
 }
 
-/// A point in fit space: X Y Z in nm, A B C with 1° as 1 mm.
-type V = [f64; AXES];
-
-/// Axis units to fit space.
-fn to_v(p: &[i64; AXES]) -> V {
-    core::array::from_fn(|i| {
-        if i < 3 {
-            p[i] as f64
-        } else {
-            p[i] as f64 / 1000.0
-        }
-    })
-}
-
-fn from_v(i: usize, x: f64) -> i64 {
-    (if i < 3 { x } else { x * 1000.0 }).round() as i64
-}
+/// A point in fit space ([`space`]).
+type V = space::Point;
 
 fn sub(a: &V, b: &V) -> V {
     core::array::from_fn(|i| a[i] - b[i])
@@ -159,7 +147,7 @@ fn mergeable(b: &Block, from: &[i64; AXES], s: &Settings) -> bool {
     if b.motion != Motion::Linear || b.tolerance_nm == 0 || b.tolerance_nm == u32::MAX {
         return false;
     }
-    let d = sub(&to_v(&b.target), &to_v(from));
+    let d = sub(&to_fit(&b.target), &to_fit(from));
     let xyz = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
     xyz >= 1.0 && norm(&d) <= s.max_chord_nm
 }
@@ -182,7 +170,7 @@ pub fn compress(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compresse
             continue;
         }
         // The run: blocks i..j, points pts[0] (the start) ..= pts[j − i].
-        let mut pts = vec![to_v(&pose), to_v(&b.target)];
+        let mut pts = vec![to_fit(&pose), to_fit(&b.target)];
         let mut j = i + 1;
         while j < blocks.len() {
             let n = &blocks[j];
@@ -195,11 +183,11 @@ pub fn compress(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compresse
             }
             let k = pts.len();
             let d0 = unit(&sub(&pts[k - 1], &pts[k - 2]));
-            let d1 = unit(&sub(&to_v(&n.target), &pts[k - 1]));
+            let d1 = unit(&sub(&to_fit(&n.target), &pts[k - 1]));
             if dot(&d0, &d1) < cos_corner {
                 break;
             }
-            pts.push(to_v(&n.target));
+            pts.push(to_fit(&n.target));
             j += 1;
         }
         let speed = if s.max_speed > 0.0 {
@@ -280,12 +268,12 @@ fn fit_run(run: &[Block], first: usize, pts: &[V], g: &Goal, s: &Settings, out: 
             Some((b, c1, c2)) => {
                 let end = &run[b - 1];
                 let start = &pts[a];
-                let target = to_v(&end.target);
+                let target = to_fit(&end.target);
                 out.blocks.push(Block {
                     line: run[a].line,
                     motion: Motion::Cubic {
-                        c1: core::array::from_fn(|i| from_v(i, c1[i] - start[i])),
-                        c2: core::array::from_fn(|i| from_v(i, c2[i] - target[i])),
+                        c1: core::array::from_fn(|i| from_fit(i, c1[i] - start[i])),
+                        c2: core::array::from_fn(|i| from_fit(i, c2[i] - target[i])),
                     },
                     ..*end
                 });

@@ -41,13 +41,13 @@ fn deviation(input: &[Block], c: &Compressed) -> f64 {
     let mut pose = [0i64; AXES];
     let mut worst = 0.0f64;
     for (b, src) in c.blocks.iter().zip(&c.source) {
-        let mut poly = vec![to_v(&pose)];
-        poly.extend(input[src.clone()].iter().map(|b| to_v(&b.target)));
+        let mut poly = vec![to_fit(&pose)];
+        poly.extend(input[src.clone()].iter().map(|b| to_fit(&b.target)));
         let p = pkmc::motion::geometry::Path::new(b, &pose).unwrap();
         let mut at = [0i64; AXES];
         for k in 0..=200 {
             p.pose_at(&pose, (p.length << 16) / 200 * k, &mut at);
-            worst = worst.max(to_polyline(&to_v(&at), &poly));
+            worst = worst.max(to_polyline(&to_fit(&at), &poly));
         }
         pose = b.target;
     }
