@@ -23,15 +23,16 @@ ALLOWED = {
     "gcode": set(),
     "link": set(),
     "input": set(),
+    "control": set(),
     "cli": {"link"},
-    "sim": {"link"},
-    "machine_file": {"input", "sim", "analysis", "gcode"},
-    "analysis": {"sim"},
-    "contour_study": {"sim", "machine_file", "analysis"},
-    "job": {"gcode", "link", "sim", "analysis", "machine_file", "input"},
+    "sim": {"link", "control"},
+    "machine_file": {"input", "control", "analysis", "gcode"},
+    "analysis": {"sim", "gcode"},
+    "contour_study": {"control", "machine_file", "analysis"},
+    "job": {"gcode", "link", "sim", "control", "analysis", "machine_file", "input"},
     "grbl": {"gcode", "link", "analysis", "job"},
     "station": {"gcode", "link", "job", "input", "analysis"},
-    "calibrate": {"machine_file", "analysis", "input"},
+    "calibrate": {"machine_file", "analysis", "input", "control"},
 }
 # The core's rooms, from the bottom: each may import only the rooms before it.
 CORE_ORDER = [

@@ -27,6 +27,7 @@ pub mod analysis;
 pub mod calibrate;
 pub mod cli;
 pub mod contour_study;
+pub mod control;
 pub mod gcode;
 pub mod grbl;
 pub mod input;

@@ -229,7 +229,7 @@ impl MachineSide {
     pub fn new(
         machine: MachineConfig,
         at: &[i64],
-        plants: &[Option<pkmc_host::sim::plant::PlantFile>],
+        plants: &[Option<pkmc_host::control::plant::PlantFile>],
         groups: usize,
     ) -> anyhow::Result<Self> {
         let mut steppers: [Option<SimStepper>; MAX_STEPPERS] = Default::default();

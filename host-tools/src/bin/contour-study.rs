@@ -4,8 +4,8 @@
 use anyhow::Result;
 use clap::Parser;
 use pkmc_host::contour_study::{Conditions, Disturbance, RunResult, Scheme, StudyMachine, SEED_B};
+use pkmc_host::control::plant::Mismatch;
 use pkmc_host::machine_file::MachineFile;
-use pkmc_host::sim::plant::Mismatch;
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -399,8 +399,8 @@ fn plot_five_axis(
 
 /// `--design-lqg`: every joint's LQG design from its plant and weights.
 fn design_lqg(args: &Args) -> Result<()> {
-    use pkmc_host::sim::lqg::{design, gains_toml};
-    use pkmc_host::sim::plant::TransferFunction;
+    use pkmc_host::control::lqg::{design, gains_toml};
+    use pkmc_host::control::plant::TransferFunction;
     let path = args
         .machine
         .as_ref()

@@ -7,8 +7,8 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::forward::{forward, measure_jacobian};
-use super::linalg::{at_r, chol_inverse, gram, solve, svd, Mat};
 use super::model::Model;
+use crate::control::linalg::{at_r, chol_inverse, gram, solve_vec, svd, Mat};
 
 /// A source of whitened residuals (measured − model, each divided by its noise).
 pub trait Residual {
@@ -218,7 +218,7 @@ fn combinations(model: &Model, null: &Mat, held: &[usize]) -> Vec<(usize, Vec<(u
     for (i, &h) in held.iter().enumerate() {
         let e: Vec<f64> = (0..k).map(|r| f64::from(u8::from(r == i))).collect();
         // Coefficients c with Σ_r c_r·N_r = the basis vector of `h`.
-        let Some(c) = solve(nft.clone(), e) else {
+        let Some(c) = solve_vec(nft.clone(), e) else {
             continue;
         };
         let others = (0..p)
@@ -289,7 +289,7 @@ pub fn fit(
         for i in 0..nf {
             damped[i][i] += lambda * a[i][i].max(1e-12);
         }
-        let Some(step) = solve(damped, g) else {
+        let Some(step) = solve_vec(damped, g) else {
             lambda *= 10.0;
             continue;
         };

@@ -5,8 +5,8 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::dual::{Dual, Scalar};
-use super::linalg::{solve, Mat};
 use super::model::Model;
+use crate::control::linalg::{solve_vec, Mat};
 
 fn seeded(th: &[f64], x: &[f64], seed_params: bool) -> (Vec<Dual>, Vec<Dual>) {
     let p = th.len();
@@ -42,7 +42,7 @@ pub fn forward(model: &Model, th: &[f64], q: &[f64], guess: &[f64]) -> Option<Ve
         if r.iter().any(|v| !v.is_finite()) {
             return None;
         }
-        let step = solve(jac, r)?;
+        let step = solve_vec(jac, r)?;
         for k in 0..d {
             x[k] += step[k];
         }
@@ -71,7 +71,7 @@ pub fn measure_jacobian(
     let mut inv = vec![vec![0.0; d]; d];
     for k in 0..d {
         let e: Vec<f64> = (0..d).map(|i| f64::from(u8::from(i == k))).collect();
-        let col = solve(cx.clone(), e)?;
+        let col = solve_vec(cx.clone(), e)?;
         for i in 0..d {
             inv[i][k] = col[i];
         }

@@ -22,7 +22,6 @@ pub mod data;
 pub mod dual;
 pub mod fit;
 pub mod forward;
-pub mod linalg;
 pub mod model;
 pub mod plan;
 pub mod plot;

@@ -11,10 +11,10 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::fit::{identifiability, Identifiability, Noise, PoseMeasurements, Residual, Sample};
-use super::linalg::{chol_inverse, svd, Mat};
 use super::model::{Kind, Model};
 use super::truth::Rng;
 use crate::analysis::preflight::margin;
+use crate::control::linalg::{chol_inverse, svd, Mat};
 use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
 use pkmc::kinematics::MachineKinematics;
 

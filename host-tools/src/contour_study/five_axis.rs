@@ -26,8 +26,8 @@
 
 use super::{helix, nearest_on_helix, Scheme, StudyError};
 use crate::analysis::statics::joint_forces;
+use crate::control::plant::{DiscretePlant, Mismatch, TransferFunction};
 use crate::machine_file::MachineFile;
-use crate::sim::plant::{DiscretePlant, Mismatch, TransferFunction};
 use pkmc::config::{Drive, KinematicsConfig, MachineConfig, AXES, MAX_JOINTS, MAX_SERVOS};
 use pkmc::drive::contour::{PeriodInputs, ServoBank};
 use pkmc::drive::servo::{extend_counter, target_q16, DAC_MID, SERVO_HZ, SERVO_PER_TICK};

@@ -1,6 +1,6 @@
 //! The contour-control study of report B (`seeds-digest.md` §B): the report's helix
 //! x = t·cos t, y = t·sin t, z = 3t + 260 mm, t = 0..10 s, run on a machine whose servo
-//! joints carry transfer-function plants ([`crate::sim::plant`]), under four controllers
+//! joints carry transfer-function plants ([`crate::control::plant`]), under four controllers
 //! that share the same per-axis PID gains:
 //!
 //! 1. **uncoupled** — PID only (feed-forward gains zeroed, contour mode uncoupled);
@@ -22,8 +22,8 @@
 
 pub mod five_axis;
 
+use crate::control::plant::{DiscretePlant, Mismatch, TransferFunction};
 use crate::machine_file::MachineFile;
-use crate::sim::plant::{DiscretePlant, Mismatch, TransferFunction};
 use pkmc::config::{ContourMode, Drive, KinematicsConfig, MachineConfig, MAX_SERVOS};
 use pkmc::drive::contour::{PeriodInputs, ServoBank};
 use pkmc::drive::servo::{extend_counter, target_q16, DAC_MID, SERVO_HZ, SERVO_PER_TICK};

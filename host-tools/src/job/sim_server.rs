@@ -67,7 +67,7 @@ pub struct SimSetup<'a> {
     /// Keep the tool path (for plots).
     pub record_path: bool,
     /// Plant of each joint from the machine file (servo joints; `None`: the default).
-    pub plants: Vec<Option<crate::sim::plant::PlantFile>>,
+    pub plants: Vec<Option<crate::control::plant::PlantFile>>,
     /// Faults to inject ([`crate::sim::Injection`]).
     pub inject: Vec<crate::sim::Injection>,
     /// How the served simulator advances its clock (paced to the wall clock while

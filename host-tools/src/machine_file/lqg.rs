@@ -1,7 +1,7 @@
 //! The LQG law of servo joints in a machine file: `servo = { law = "lqg", .. }` runs
 //! the design in `lqg_gains = { .. }` (the gains, as `contour-study --design-lqg`
 //! prints them) in place of the PID; `lqg = { .. }` holds the weights the design came
-//! from ([`crate::sim::lqg::LqgWeights`]). With `lqg`, `lqg_gains` and a `plant`, the
+//! from ([`crate::control::lqg::LqgWeights`]). With `lqg`, `lqg_gains` and a `plant`, the
 //! gains must be the design of that plant and those weights, to 1e-5 of each array's
 //! largest value (not bit for bit: `f64::powi` in the matrix exponential may round
 //! differently between builds): a file whose plant or weights were edited without
@@ -11,10 +11,10 @@
 //! gains (the legs of a hexapod) share one.
 
 use super::{refused, FieldError, MachineFile};
-use crate::sim::lqg::{design, gains_toml};
-use crate::sim::plant::TransferFunction;
-use pkmc::config::LqgGains;
+use crate::control::lqg::{design, gains_toml};
+use crate::control::plant::TransferFunction;
 use pkmc::config::{Drive, MachineConfig, MAX_LQG};
+use pkmc::config::LqgGains;
 use pkmc::drive::servo::SERVO_PERIOD_S;
 
 /// `servo.law`.

@@ -426,7 +426,7 @@ pub fn load_tools(path: &Path) -> Result<crate::gcode::ToolTable, MachineFileErr
 /// joint without one).
 pub fn load_plants(
     path: &Path,
-) -> Result<Vec<Option<crate::sim::plant::PlantFile>>, MachineFileError> {
+) -> Result<Vec<Option<crate::control::plant::PlantFile>>, MachineFileError> {
     let file = read_file(&read(path)?, &path.display().to_string())?;
     Ok(file.joints.into_iter().map(|j| j.plant).collect())
 }

@@ -129,8 +129,8 @@ pub struct JointFile {
     pub servo: Option<ServoFile>,
     /// Homing on a switch ([`pkmc::drive::homing`]); without it the joint is not homed.
     pub homing: Option<HomingFile>,
-    /// Servo: the plant's transfer function, for simulation ([`crate::sim::plant`]).
-    pub plant: Option<crate::sim::plant::PlantFile>,
+    /// Servo: the plant's transfer function, for simulation ([`crate::control::plant`]).
+    pub plant: Option<crate::control::plant::PlantFile>,
     /// Largest force the joint may carry, N (N·m for a rotary joint), for the statics
     /// of a cutting load ([`crate::analysis::statics`]).
     pub force_limit: Option<f64>,
@@ -138,7 +138,7 @@ pub struct JointFile {
     /// machine's `supply_pressure`.
     pub cylinder_area: Option<f64>,
     /// Servo: the weights of its LQG design ([`super::lqg`]).
-    pub lqg: Option<crate::sim::lqg::LqgWeights>,
+    pub lqg: Option<crate::control::lqg::LqgWeights>,
     /// Servo: the LQG design's gains, as `contour-study --design-lqg` prints them.
     pub lqg_gains: Option<pkmc::config::LqgGains>,
 }

@@ -3,7 +3,7 @@
 //! output, an incremental encoder with index marks).
 
 use super::Result;
-use crate::sim::plant::{DiscretePlant, PlantFile, TransferFunction};
+use crate::control::plant::{DiscretePlant, PlantFile, TransferFunction};
 use pkmc::config::{StepTiming, MAX_SERVOS};
 use pkmc::drive::servo::{DAC_MID, SERVO_HZ};
 use pkmc::drive::stepper::StepTrain;
@@ -116,7 +116,7 @@ impl SimStepper {
 }
 
 /// A simulated servo joint: amplifier and mechanics as a transfer function from the
-/// amplifier's command to the joint's displacement ([`crate::sim::plant`]), stepped at the
+/// amplifier's command to the joint's displacement ([`crate::control::plant`]), stepped at the
 /// servo rate, read back through a quadrature encoder (whole counts, 16-bit hardware
 /// counter extended as the firmware does) with index marks.
 #[derive(Clone, Debug)]

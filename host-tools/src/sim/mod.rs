@@ -31,8 +31,6 @@
 mod drives;
 pub mod faults;
 mod inject;
-pub mod lqg;
-pub mod plant;
 pub mod serve;
 mod trace;
 
@@ -45,7 +43,7 @@ pub use inject::{FaultKind, Injection, LINK_CUT};
 use trace::write_row;
 pub use trace::TraceRow;
 
-use crate::sim::plant::{PlantError, PlantFile};
+use crate::control::plant::{PlantError, PlantFile};
 use pkmc::config::{Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS, MAX_STEPPERS};
 use pkmc::controller::pacing::{RawInputs, ServoPacer, Snapshot, TickPacer};
 use pkmc::controller::{Controller, Inputs};

@@ -1,6 +1,6 @@
-use super::linalg::{eye, residual, t};
 use super::*;
-use crate::sim::plant::Mismatch;
+use crate::control::linalg::{eye, residual, t};
+use crate::control::plant::Mismatch;
 use pkmc::drive::lqg::LqgState;
 
 const H: f64 = 1e-4;

@@ -34,12 +34,13 @@
 // Matrix code reads best with its indices.
 #![allow(clippy::needless_range_loop)]
 
-mod linalg;
 #[cfg(test)]
 mod tests;
 
-use crate::sim::plant::{expm, Complex, TransferFunction};
-use linalg::{add, col, dare, eigenvalues_delta, lqr_gain, mul, response, solve, zeros, Mat};
+use crate::control::linalg::{
+    self, add, col, dare, eigenvalues_delta, lqr_gain, mul, response, solve, zeros, Mat,
+};
+use crate::control::plant::{expm, Complex, TransferFunction};
 use pkmc::config::{LqgGains, LQG_STATES};
 use serde::Deserialize;
 
