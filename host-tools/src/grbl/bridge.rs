@@ -7,7 +7,7 @@ use super::input::{Input, Item, RealTime};
 use super::ports::{write_all_patiently, End, Event, Ports};
 use super::words::{self, Mode, BLOCK_BUFFER, RX_BUFFER};
 use crate::gcode::canon::Canon;
-use crate::gcode::LineSession;
+use crate::job::{LineFault, LinePipeline};
 use crate::link::{JobHooks, LinkView};
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::motion::block::Block;
@@ -52,7 +52,8 @@ pub(super) struct Bridge<'o> {
     input: Input,
     /// Lines received and not yet answered, with their byte counts.
     pub(super) lines: VecDeque<(Item, usize)>,
-    pub(super) session: LineSession<'o>,
+    /// The sender's lines through the front end, their modal state kept.
+    pub(super) pipeline: LinePipeline<'o>,
     /// Lines read since the start (the NC line numbers of the blocks).
     pub(super) line_no: u32,
     pub(super) status: Option<Status>,
@@ -121,10 +122,10 @@ impl<'o> Bridge<'o> {
     pub(super) fn new(
         machine: &'o MachineConfig,
         ports: Ports,
-        session: LineSession<'o>,
+        pipeline: LinePipeline<'o>,
         stop: &'o dyn Fn() -> bool,
     ) -> Self {
-        let start = session.interp().pos;
+        let start = pipeline.interp().pos;
         Self {
             machine,
             ports,
@@ -132,7 +133,7 @@ impl<'o> Bridge<'o> {
             active: End::Pty,
             input: Input::default(),
             lines: VecDeque::new(),
-            session,
+            pipeline,
             line_no: 0,
             status: None,
             controls: VecDeque::new(),
@@ -383,7 +384,7 @@ impl<'o> Bridge<'o> {
                 BLOCK_BUFFER.saturating_sub(ahead),
                 RX_BUFFER.saturating_sub(queued_bytes),
             ),
-            wco: self.session.interp().work_offset(),
+            wco: self.pipeline.interp().work_offset(),
             feed_override: self.feed_override,
             rapid_spindle: self.rapid_spindle,
         };
@@ -440,54 +441,36 @@ impl<'o> Bridge<'o> {
     pub(super) fn compile_line(&mut self, text: &str) -> Result<Vec<Block>, (u8, String)> {
         self.line_no += 1;
         let n = self.line_no;
-        let start = self.session.interp().pos;
-        let mut canon = vec![Canon::PathMode {
-            line: n,
-            mode: self.session.interp().path,
-        }];
-        if let Err(d) = self.session.line(text, n, &mut canon) {
-            // The front end may have moved its position before it found the fault:
-            // back to where the machine will be, as after any refused line.
-            self.session.set_position(start);
-            return Err((words::error_code(d.kind), d.to_string()));
-        }
-        if !self.tool_change && canon.iter().any(|c| matches!(c, Canon::ToolChange { .. })) {
+        let tool_change = self.tool_change;
+        let vet = |canon: &[Canon]| {
+            if tool_change || !canon.iter().any(|c| matches!(c, Canon::ToolChange { .. })) {
+                return Ok(());
+            }
             // Grbl 1.1 has no M6 (error:20); a sender that wants the hold asks for it.
-            self.session.set_position(start);
-            return Err((
-                20,
-                format!(
-                    "sender:{n}: M6 (tool change) is not supported, as on Grbl 1.1; \
-                     start the bridge with --tool-change pause to hold for one"
-                ),
-            ));
-        }
-        let ended = self.session.ended();
-        if ended {
-            // M2/M30: what compensation holds ends here; the next line starts afresh.
-            let _ = self.session.finish(n, &mut canon);
-            let pos = self.session.interp().pos;
-            self.session.restart(pos);
-        }
-        let program = crate::gcode::blocks::from_canon(&canon, start);
-        let report = crate::analysis::preflight::check(&program.blocks, self.machine, start);
-        if let Some(f) = report.findings.first() {
-            // The interpreter already moved to the refused target: back to where the
-            // machine will be.
-            self.session.set_position(start);
-            return Err((33, format!("sender:{}: {}", f.line, f.what)));
-        }
-        for text in program.messages.values() {
+            Err(format!(
+                "sender:{n}: M6 (tool change) is not supported, as on Grbl 1.1; \
+                 start the bridge with --tool-change pause to hold for one"
+            ))
+        };
+        let line = self.pipeline.line_vetted(text, n, vet).map_err(|f| {
+            let code = match &f {
+                LineFault::FrontEnd(d) => words::error_code(d.kind),
+                LineFault::Vetted(_) => 20,
+                LineFault::Preflight(_) => 33,
+            };
+            (code, f.to_string())
+        })?;
+        for text in line.messages.values() {
             self.say(&format!("[MSG:{text}]"));
         }
-        if ended {
+        if line.ended {
             self.say("[MSG:Pgm End]");
         }
         if self.mode.check {
             return Ok(Vec::new());
         }
-        self.counts.blocks += program.blocks.len() as u64;
-        Ok(program.blocks)
+        self.counts.blocks += line.blocks.len() as u64;
+        Ok(line.blocks)
     }
 
     /// `ok`.

@@ -73,13 +73,13 @@ pub(super) fn answer_local(b: &mut Bridge<'_>, line: &str, phase: Phase) {
         }
         "$#" => {
             let n = words::reported_axes(b.machine);
-            for l in words::offsets(&b.session.interp().offsets(), n) {
+            for l in words::offsets(&b.pipeline.interp().offsets(), n) {
                 b.say(&l);
             }
             b.ok();
         }
         "$G" => {
-            let gc = b.session.interp().modal_words();
+            let gc = b.pipeline.interp().modal_words();
             b.say(&format!("[GC:{gc}]"));
             b.ok();
         }
@@ -179,7 +179,7 @@ pub(super) fn run_link<T: Transport>(
             b.ok();
             if !b.mode.check {
                 let pose = link.request_status()?.pose;
-                b.session.restart(pose);
+                b.pipeline.restart(pose);
             }
         }
         _ if b.mode.check => not_idle(b, "check mode is on; '$C' turns it off"),
@@ -224,7 +224,7 @@ fn home<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(), Fail
     if b.reset {
         // The line gets no answer: the reset drops it, as on Grbl.
         let s = link.request_status()?;
-        b.session.set_position(s.pose);
+        b.pipeline.set_position(s.pose);
         b.alarm_told = s.alarm;
         b.status = Some(s);
         b.say("ALARM:6");
@@ -250,7 +250,7 @@ fn after_move<T: Transport>(
     end: JobEnd,
 ) -> Result<(), Failure> {
     let s = link.request_status()?;
-    b.session.set_position(s.pose);
+    b.pipeline.set_position(s.pose);
     b.jog_end = s.pose;
     b.status = Some(s);
     if let JobEnd::Alarm(a) = end {
@@ -326,7 +326,7 @@ type Jog = ([i64; AXES], i64);
 
 /// The jog's target (machine frame) and feed (axis units/s) from its words.
 fn jog_target(b: &Bridge<'_>, body: &str, pose: &[i64; AXES]) -> Result<Jog, (u8, String)> {
-    let interp = b.session.interp();
+    let interp = b.pipeline.interp();
     let mut inch = interp.inch;
     let mut absolute = interp.absolute;
     let mut machine_frame = false;

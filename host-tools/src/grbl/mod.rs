@@ -3,7 +3,7 @@
 //! local TCP port, in front of the controller's binary link (CRC, credits, resends).
 //!
 //! Every line a sender writes is read by our own G-code front end with its modal
-//! state kept across lines ([`crate::gcode::LineSession`]), checked against the
+//! state kept across lines ([`crate::job::LinePipeline`]), checked against the
 //! machine's reach (pre-flight), and its blocks are fed into a running job
 //! ([`crate::link::JobHooks::feed`]), planned as they come. `ok` means the line was
 //! accepted into the bridge's buffer ([`words::BLOCK_BUFFER`] blocks ahead of the
@@ -96,14 +96,9 @@ pub fn serve<T: Transport>(
         .map_err(|m| Failure::new(exit::LINK, m))?;
     announce(&ports.pty_path, ports.tcp_addr);
     let start = link.request_status()?;
-    let options = gcode::Options {
-        start: start.pose,
-        axes: crate::job::machine_axes(machine),
-        tools: opts.tools.clone(),
-        ..gcode::Options::default()
-    };
-    let session = gcode::LineSession::new(&options, "sender");
-    let mut b = Bridge::new(machine, ports, session, stop);
+    let options = crate::job::front_end_options(machine, start.pose, &opts.tools);
+    let pipeline = crate::job::LinePipeline::new(&options, machine, "sender");
+    let mut b = Bridge::new(machine, ports, pipeline, stop);
     b.tool_change = opts.tool_change;
     // Runs of short moves merged as nc-send merges them (its --no-compress and
     // --corner-deg apply here too).
@@ -111,7 +106,7 @@ pub fn serve<T: Transport>(
         opts.compress
             .as_ref()
             .map(|s| crate::job::compress_for_machine(s, machine)),
-        b.session.interp().pos,
+        b.pipeline.interp().pos,
     );
     b.status = Some(start);
     let mut asked = Instant::now();
@@ -199,10 +194,10 @@ fn next_line<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(),
     }
     b.set_job(Some((blocks.len(), 0)));
     // The job's first line goes as it is; merging starts with the lines after it.
-    b.merge.restart_at(b.session.interp().pos);
+    b.merge.restart_at(b.pipeline.interp().pos);
     let end = link.run_job(&blocks, b);
     // Whatever is still held goes with the job (an alarm or a reset ended it).
-    b.merge.restart_at(b.session.interp().pos);
+    b.merge.restart_at(b.pipeline.interp().pos);
     if matches!(end, Ok(JobEnd::Done)) {
         b.job_done();
     }
@@ -213,9 +208,9 @@ fn next_line<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(),
     if let JobEnd::Alarm(a) = end {
         report_alarm(b, &a);
     }
-    if b.session.interp().pos != s.pose && !b.reset {
+    if b.pipeline.interp().pos != s.pose && !b.reset {
         // Stopped short (an alarm): the next line starts where the machine is.
-        b.session.set_position(s.pose);
+        b.pipeline.set_position(s.pose);
     }
     Ok(())
 }
@@ -242,7 +237,7 @@ fn soft_reset<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<()
         link.control(Control::Resume)?;
         s = link.request_status()?;
     }
-    b.session.restart(s.pose);
+    b.pipeline.restart(s.pose);
     b.merge.restart_at(s.pose);
     b.status = Some(s.clone());
     b.say(&words::banner());

@@ -127,34 +127,10 @@ pub fn compile_located(
     tools: &gcode::ToolTable,
     compress: Option<&gcode::compress::Settings>,
 ) -> Result<(Compiled, crate::analysis::preflight::Preflight), Vec<gcode::Diagnostic>> {
-    let options = gcode::Options {
-        start,
-        axes: machine_axes(machine),
-        tools: tools.clone(),
-        ..gcode::Options::default()
-    };
+    let options = super::pipeline::front_end_options(machine, start, tools);
     let canon = gcode::compile_canon(text, name, &options)?;
-    let program = crate::gcode::blocks::from_canon(&canon, start);
-    let compiled = match compress {
-        Some(settings) => {
-            let settings = for_machine(settings, machine);
-            let c = gcode::compress::compress(&program.blocks, start, &settings);
-            Compiled {
-                blocks: c.blocks,
-                programmed: program.blocks,
-                source: c.source,
-                start,
-            }
-        }
-        None => Compiled {
-            source: (0..program.blocks.len()).map(|i| i..i + 1).collect(),
-            blocks: program.blocks.clone(),
-            programmed: program.blocks,
-            start,
-        },
-    };
-    let report = crate::analysis::preflight::check(&compiled.blocks, machine, start);
-    Ok((compiled, report))
+    let c = super::pipeline::checked(&canon, machine, start, compress);
+    Ok((c.compiled, c.preflight))
 }
 
 /// The front end's errors as the failure nc-send reports: each at its place, and how

@@ -9,9 +9,11 @@
 //! Every error is a [`Failure`] carrying its exit code ([`exit`]) and a message that
 //! names where it happened (file and line, or port).
 //!
-//! Rooms: [`compile`] (G-code to blocks for a machine), [`sim_server`] (the simulator
-//! `--sim` serves), [`report`] (the summary and exit code), [`commands`] (single
-//! commands, homing or unlocking before a job); this module runs jobs.
+//! Rooms: [`compile`] (G-code to blocks for a machine), [`pipeline`] (canonical
+//! commands to checked blocks, a whole program or a line at a time), [`sim_server`]
+//! (the simulator `--sim` serves), [`report`] (the summary and exit code),
+//! [`commands`] (single commands, homing or unlocking before a job); this module runs
+//! jobs.
 
 use crate::analysis::plot::Recorder;
 use crate::link::{ClientStats, JobEnd, JobHooks, Link, LinkError, LinkOptions, PortTransport};
@@ -24,6 +26,7 @@ use std::path::Path;
 mod commands;
 mod compile;
 pub mod from_line;
+mod pipeline;
 mod replug;
 mod report;
 mod resume;
@@ -41,6 +44,7 @@ pub use report::{
     PreflightSummary, Report,
 };
 pub use resume::{missing_text, program_lines, program_mark, resume, Resumed};
+pub use pipeline::{checked, front_end_options, Checked, LineBlocks, LineFault, LinePipeline};
 use sim_server::outcome_of;
 pub use sim_server::{SimOutcome, SimServer, SimSetup};
 

@@ -69,7 +69,7 @@ pub(super) struct Machine<'a> {
 
 /// The MDI's line-by-line front end.
 pub(super) struct Mdi<'o> {
-    pub(super) session: crate::gcode::LineSession<'o>,
+    pub(super) pipeline: job::LinePipeline<'o>,
     pub(super) lines: u32,
 }
 
@@ -77,37 +77,10 @@ impl Mdi<'_> {
     /// One line from where the machine stands at `pose`: its blocks, checked against
     /// the machine's reach; an error names the MDI line and column and changes
     /// nothing.
-    fn compile(
-        &mut self,
-        text: &str,
-        pose: [i64; AXES],
-        machine: &MachineConfig,
-    ) -> Result<Vec<Block>, Failure> {
-        use crate::gcode::canon::Canon;
-        let bad = |m: String| Failure::new(job::exit::BAD_INPUT, m);
+    fn compile(&mut self, text: &str, pose: [i64; AXES]) -> Result<Vec<Block>, Failure> {
         self.lines += 1;
-        let n = self.lines;
-        self.session.set_position(pose);
-        let mut canon = vec![Canon::PathMode {
-            line: n,
-            mode: self.session.interp().path,
-        }];
-        self.session
-            .line(text, n, &mut canon)
-            .map_err(|d| bad(d.to_string()))?;
-        if self.session.ended() {
-            // M2/M30: the modal state starts afresh on the next line.
-            let _ = self.session.finish(n, &mut canon);
-            let at = self.session.interp().pos;
-            self.session.restart(at);
-        }
-        let program = crate::gcode::blocks::from_canon(&canon, pose);
-        let pre = crate::analysis::preflight::check(&program.blocks, machine, pose);
-        if let Some(f) = pre.findings.first() {
-            self.session.set_position(pose);
-            return Err(bad(format!("MDI:{}: {}", f.line, f.what)));
-        }
-        Ok(program.blocks)
+        self.pipeline.set_position(pose);
+        Ok(self.pipeline.line(text, self.lines)?.blocks)
     }
 }
 
@@ -313,7 +286,7 @@ impl Machine<'_> {
             }
             Cmd::Mdi { text } => {
                 let s = link.request_status()?;
-                let blocks = self.mdi.compile(&text, s.pose, self.machine)?;
+                let blocks = self.mdi.compile(&text, s.pose)?;
                 started("MDI");
                 let mut info = JobInfo::new("mdi", page, blocks.len());
                 self.run(link, &blocks, &mut info)?

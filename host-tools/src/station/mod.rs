@@ -189,19 +189,14 @@ pub fn run(
             crate::job::prepare(link, false, true, &mut crate::link::NoHooks)?;
         }
         let start = link.request_status()?.pose;
-        let options = crate::gcode::Options {
-            start,
-            axes: crate::job::machine_axes(machine),
-            tools: run.tools.clone(),
-            ..crate::gcode::Options::default()
-        };
+        let options = crate::job::front_end_options(machine, start, &run.tools);
         let mut m = machine::Machine {
             last_job: "",
             hub: &hub,
             machine,
             rx,
             mdi: machine::Mdi {
-                session: crate::gcode::LineSession::new(&options, "MDI"),
+                pipeline: crate::job::LinePipeline::new(&options, machine, "MDI"),
                 lines: 0,
             },
             tools: run.tools.clone(),
