@@ -4,7 +4,7 @@
 //! `jog`, `mdi`, `reset`). Exit codes: see `pkmc_host::job::exit` and docs/nc-send.md.
 
 use clap::{Parser, Subcommand};
-use pkmc::config::{axis_is_rotary, MachineConfig, AXIS_NAMES};
+use pkmc::config::MachineConfig;
 use pkmc::wire::{Control, HeldJob, Status};
 use pkmc_host::cli::progress::{Interrupts, Operator, Progress, RawKeys, Style};
 use pkmc_host::job::{self, exit, print_report, Failure, RunOptions, SimSetup, Target};
@@ -515,14 +515,6 @@ fn run_program(
     Ok(result.report.exit_code())
 }
 
-fn axis_index(name: &str) -> Result<usize, Failure> {
-    let upper = name.to_ascii_uppercase();
-    AXIS_NAMES
-        .iter()
-        .position(|a| upper == a.to_string())
-        .ok_or_else(|| bad(format!("jog: unknown axis {name:?} (X Y Z A B C)")))
-}
-
 fn command(
     args: &Args,
     cmd: &Command,
@@ -611,7 +603,8 @@ fn command(
     Ok(code)
 }
 
-/// `jog AXIS DISTANCE --feed F`: mm (or degrees) and mm/min (or °/min) to axis units.
+/// `jog AXIS DISTANCE --feed F`: mm (or degrees) and mm/min (or °/min), checked as
+/// every jog is ([`job::jog_request`]).
 fn jog<T: Transport>(
     link: &mut Link<T>,
     axis: &str,
@@ -619,23 +612,8 @@ fn jog<T: Transport>(
     feed: f64,
     op: &mut Operator,
 ) -> Result<JobEnd, Failure> {
-    let i = axis_index(axis)?;
-    let rotary = axis_is_rotary(i);
-    let scale = pkmc::units::units_per_user(rotary) as f64;
-    if !feed.is_finite() || feed <= 0.0 {
-        return Err(bad(format!(
-            "jog: --feed {feed}: must be a positive number"
-        )));
-    }
-    if !distance.is_finite() {
-        return Err(bad(format!("jog: distance {distance}: must be a number")));
-    }
-    let cmd = job::jog_command(
-        link,
-        i,
-        (distance * scale).round() as i64,
-        (feed / 60.0 * scale).round() as i64,
-    )?;
+    let r = job::jog_request(axis, distance, feed, "--feed")?;
+    let cmd = job::jog_command(link, r.axis, r.distance, r.feed)?;
     job::move_and_wait(link, cmd, op)
 }
 

@@ -34,6 +34,51 @@ pub fn home_command<T: Transport>(link: &mut Link<T>) -> Result<Control, Failure
     Ok(Control::Jog(planned))
 }
 
+/// A jog in axis units: the pose axis, the distance and the feed per second.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct JogRequest {
+    /// Pose axis, 0 to 5 (X Y Z A B C).
+    pub axis: usize,
+    /// Distance, nm or n°; never 0.
+    pub distance: i64,
+    /// Feed, nm/s or n°/s; positive.
+    pub feed: i64,
+}
+
+/// The one check of a jog as an operator asks for it (`nc-send jog`, the station's
+/// jog buttons): `axis` one of X Y Z A B C (either case), `distance` in mm or
+/// degrees, a number and not 0 (a jog of 0 is a slip of the hand), `feed` in mm/min
+/// or degrees/min, a positive number. `feed_field` names the feed as the operator
+/// gave it (`--feed`, `feed`). A refusal names the field and exits 2.
+pub fn jog_request(
+    axis: &str,
+    distance: f64,
+    feed: f64,
+    feed_field: &str,
+) -> Result<JogRequest, Failure> {
+    let bad = |m: String| Failure::new(exit::BAD_INPUT, m);
+    let i = AXIS_NAMES
+        .iter()
+        .position(|n| axis.len() == 1 && axis.starts_with(|c: char| c.eq_ignore_ascii_case(n)))
+        .ok_or_else(|| bad(format!("jog: unknown axis {axis:?} (X Y Z A B C)")))?;
+    if !distance.is_finite() || distance == 0.0 {
+        return Err(bad(format!(
+            "jog: distance {distance}: must be a number other than 0 (a jog of 0 moves nothing)"
+        )));
+    }
+    if !feed.is_finite() || feed <= 0.0 {
+        return Err(bad(format!(
+            "jog: {feed_field} {feed}: must be a positive number"
+        )));
+    }
+    let scale = pkmc::units::units_per_user(pkmc::config::axis_is_rotary(i)) as f64;
+    Ok(JogRequest {
+        axis: i,
+        distance: (distance * scale).round() as i64,
+        feed: (feed / 60.0 * scale).round() as i64,
+    })
+}
+
 /// What `jog` sends: `distance` (axis units) along pose axis `axis` at `feed`
 /// (units/s), clipped to the joint travel and planned here from where the controller
 /// stands. An axis the machine does not have is refused (exit 2).
@@ -196,5 +241,35 @@ pub fn state_text(s: &Status) -> String {
     match s.alarm {
         Some(a) => format!("{} ({})", s.state, describe_alarm(&a)),
         None => s.state.to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_jog_is_checked_once_and_a_jog_of_zero_is_refused_naming_its_field() {
+        let r = jog_request("y", -2.5, 1200.0, "--feed").unwrap();
+        assert_eq!(
+            r,
+            JogRequest {
+                axis: 1,
+                distance: -2_500_000,
+                feed: 20_000_000
+            }
+        );
+        assert_eq!(jog_request("B", 90.0, 60.0, "feed").unwrap().axis, 4);
+        let refused = |axis, distance, feed, field| {
+            let f = jog_request(axis, distance, feed, field).unwrap_err();
+            assert_eq!(f.code, exit::BAD_INPUT);
+            f.message
+        };
+        assert!(refused("X", 0.0, 600.0, "feed").contains("distance 0"));
+        assert!(refused("X", f64::NAN, 600.0, "feed").contains("distance NaN"));
+        assert!(refused("Q", 1.0, 600.0, "feed").contains("unknown axis \"Q\""));
+        assert!(refused("XY", 1.0, 600.0, "feed").contains("unknown axis"));
+        assert!(refused("X", 1.0, 0.0, "--feed").contains("--feed 0"));
+        assert!(refused("X", 1.0, f64::INFINITY, "feed").contains("feed inf"));
     }
 }

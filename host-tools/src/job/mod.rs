@@ -33,7 +33,8 @@ mod resume;
 mod sim_server;
 
 pub use commands::{
-    connect, home_command, jog_command, mdi, move_and_wait, prepare, state_text, with_link,
+    connect, home_command, jog_command, jog_request, mdi, move_and_wait, prepare, state_text, with_link,
+    JogRequest,
 };
 pub use compile::{
     compile_compressed, compile_job, compile_located, compile_program, compile_text,

@@ -11,7 +11,7 @@ use super::compile::{for_machine, machine_axes, Compiled};
 use crate::analysis::preflight::{self, Preflight};
 use crate::gcode::{self, canon::Canon, LineSession};
 use pkmc::config::{MachineConfig, AXES};
-use pkmc::protocol::Block;
+use pkmc::motion::block::Block;
 use std::collections::BTreeMap;
 
 /// The front end's options for `machine`: its axes, the tool table `tools`, the

@@ -14,10 +14,10 @@
 //! [`pkmc::motion::planner::plan_into`] runs too): fed all at once, this is `plan_into` exactly.
 
 use pkmc::config::{MachineConfig, AXES};
-use pkmc::motion::geometry::Path;
 use pkmc::kinematics::MachineKinematics;
-use pkmc::motion::planner::{replan_from, Lookahead, PlanBlock};
 use pkmc::motion::block::{Block, PlannedBlock};
+use pkmc::motion::geometry::Path;
+use pkmc::motion::planner::{replan_from, Lookahead, PlanBlock};
 
 /// Blocks planned between two calls of the keep-alive (some milliseconds).
 const ALIVE_EVERY: usize = 4096;

@@ -13,8 +13,8 @@
 use super::{refused, FieldError, MachineFile};
 use crate::control::lqg::{design, gains_toml};
 use crate::control::plant::TransferFunction;
-use pkmc::config::{Drive, MachineConfig, MAX_LQG};
 use pkmc::config::LqgGains;
+use pkmc::config::{Drive, MachineConfig, MAX_LQG};
 use pkmc::drive::servo::SERVO_PERIOD_S;
 
 /// `servo.law`.

@@ -8,7 +8,7 @@ use super::hub::{lock, Hub};
 use super::{Cmd, Request};
 use crate::job::{self, Failure};
 use crate::link::{JobEnd, JobHooks, Link, LinkView, Transport};
-use pkmc::config::{MachineConfig, AXES, AXIS_NAMES};
+use pkmc::config::{MachineConfig, AXES};
 use pkmc::kinematics::{Kinematics, MachineKinematics};
 use pkmc::motion::block::{Block, Motion};
 use pkmc::units::{to_user, units_per_user};
@@ -436,33 +436,16 @@ fn override_of(percent: f64) -> Result<u16, Failure> {
     Ok(percent.round() as u16)
 }
 
-/// A jog of `distance` (mm or degrees) along `axis` at `feed` (mm/min or °/min).
+/// A jog of `distance` (mm or degrees) along `axis` at `feed` (mm/min or °/min),
+/// checked as every jog is ([`job::jog_request`]).
 fn jog<T: Transport>(
     link: &mut Link<T>,
     axis: &str,
     distance: f64,
     feed: f64,
 ) -> Result<Control, Failure> {
-    let bad = |m: String| Failure::new(job::exit::BAD_INPUT, m);
-    let i = AXIS_NAMES
-        .iter()
-        .position(|n| axis.len() == 1 && axis.starts_with(|c: char| c.eq_ignore_ascii_case(n)))
-        .ok_or_else(|| bad(format!("jog: axis {axis:?}: not one of X Y Z A B C")))?;
-    if !distance.is_finite() || distance == 0.0 {
-        return Err(bad(format!(
-            "jog: distance {distance}: must be a non-zero number"
-        )));
-    }
-    if !feed.is_finite() || feed <= 0.0 {
-        return Err(bad(format!("jog: feed {feed}: must be a positive number")));
-    }
-    let scale = units_per_user(i >= 3) as f64;
-    job::jog_command(
-        link,
-        i,
-        (distance * scale).round() as i64,
-        (feed / 60.0 * scale).round() as i64,
-    )
+    let r = job::jog_request(axis, distance, feed, "feed")?;
+    job::jog_command(link, r.axis, r.distance, r.feed)
 }
 
 /// Moves joint `joint` by `distance` (mm or degrees) alone: the straight line in
