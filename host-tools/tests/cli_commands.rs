@@ -16,7 +16,7 @@ fn status_jog_home_mdi_and_reset_act_on_a_running_controller() {
     let out = sim.send(&["status"]);
     let s = json(&out);
     assert_eq!(s["state"], "Alarm");
-    assert_eq!(s["alarm"], "Unhomed");
+    assert_eq!(s["alarm"], "not homed");
     let out = sim.send(&["jog", "X", "5"]);
     assert_eq!(
         out.status.code(),
@@ -75,7 +75,7 @@ fn commands_also_run_on_the_built_in_simulator() {
     let out = nc_send(&["--sim", "--report", "json", "status"]);
     assert_eq!(
         json(&out)["alarm"],
-        "Unhomed",
+        "not homed",
         "a fresh controller is locked"
     );
     // A move on the simulator unlocks it where it stands first.

@@ -8,6 +8,7 @@ use pkmc::config::MachineConfig;
 use pkmc::wire::{Control, HeldJob, Status};
 use pkmc_host::cli::progress::{Interrupts, Operator, Progress, RawKeys, Style};
 use pkmc_host::job::{self, exit, print_report, Failure, RunOptions, SimSetup, Target};
+use pkmc_host::link::view::{state_name, StatusView};
 use pkmc_host::link::{JobEnd, Link, LinkOptions, Transport};
 use pkmc_host::sim::faults::FaultConfig;
 use std::io::Write;
@@ -636,7 +637,7 @@ fn print_status(
         v["held_job"] = match held {
             Some(h) => serde_json::json!({
                 "host_process": h.host,
-                "state": format!("{:?}", h.state),
+                "state": state_name(h.state),
                 "line": h.line,
                 "blocks_done": h.done,
                 "blocks_queued": h.queued,
@@ -649,22 +650,23 @@ fn print_status(
             serde_json::to_string_pretty(&v).unwrap_or_default()
         );
     } else {
+        let v = StatusView::new(status);
         let _ = writeln!(
             out,
             "{}, line {}, {}, feed {:.0} mm/min, override {}%",
-            status.state,
-            status.line,
-            job::pose_text(status),
-            status.speed as f64 * 60.0 / 1e6,
-            status.feed_override
+            v.state_words,
+            v.line,
+            v.pose_text(),
+            v.feed_mm_min,
+            v.feed_override
         );
-        if let Some(a) = status.alarm {
-            let _ = writeln!(out, "ALARM: {}", job::describe_alarm(&a));
+        if let Some(a) = &v.alarm {
+            let _ = writeln!(out, "ALARM: {}", a.words);
         }
         if let Some(h) = held {
             let _ = writeln!(
                 out,
-                "HELD: an unfinished job of another host (process {}, gone): {:?} at line {}, \
+                "HELD: an unfinished job of another host (process {}, gone): {} at line {}, \
                  {} blocks done, {} still queued; `nc-send resume` continues it, \
                  `nc-send abort` drops it",
                 h.host, h.state, h.line, h.done, h.queued

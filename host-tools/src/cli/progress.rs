@@ -13,6 +13,7 @@
 //! Invariant: the terminal's mode is restored when [`RawKeys`] is dropped, and Ctrl-C
 //! still raises SIGINT in raw mode (ISIG stays on).
 
+use crate::link::view::StatusView;
 use crate::link::{JobHooks, LinkView};
 use pkmc::wire::{Control, State, Status};
 use std::io::{IsTerminal, Write};
@@ -101,7 +102,7 @@ impl Progress {
         } else {
             done as f64 / self.total as f64
         };
-        let feed = s.speed as f64 * 60.0 / 1e6;
+        let view = StatusView::new(s);
         let eta = if frac > 0.01 && frac < 1.0 {
             clock(elapsed.as_secs_f64() * (1.0 - frac) / frac)
         } else if frac >= 1.0 {
@@ -112,12 +113,12 @@ impl Progress {
         let mut text = format!(
             "{:5.1}%  line {:>6}  {:>7.0} mm/min  ETA {eta}  {}",
             frac * 100.0,
-            s.line,
-            feed,
-            s.state
+            view.line,
+            view.feed_mm_min,
+            view.state_words
         );
-        if s.feed_override != 100 {
-            text += &format!("  override {}%", s.feed_override);
+        if view.feed_override != 100 {
+            text += &format!("  override {}%", view.feed_override);
         }
         if self.style == Style::Bar {
             let filled = ((frac * BAR_WIDTH as f64) as usize).min(BAR_WIDTH);

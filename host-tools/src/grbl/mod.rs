@@ -215,11 +215,12 @@ fn next_line<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(),
     Ok(())
 }
 
-/// `ALARM:N` and our cause, joint and line.
+/// `ALARM:N` and our cause, joint and line in the core's words.
 fn report_alarm(b: &mut Bridge<'_>, a: &Alarm) {
     b.alarm_told = Some(*a);
     b.say(&format!("ALARM:{}", words::alarm_code(a.cause)));
-    b.say(&format!("[MSG:{}]", crate::job::describe_alarm(a)));
+    let view = crate::link::view::AlarmView::new(a);
+    b.say(&format!("[MSG:{}]", view.words));
 }
 
 /// Ctrl-X: motion was stopped (the job aborted); lines not yet answered are dropped

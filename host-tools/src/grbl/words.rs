@@ -3,6 +3,7 @@
 //! Lengths are in millimetres and angles in degrees, three decimals.
 
 use crate::gcode::{ErrorKind, Offsets};
+use crate::link::view::StatusView;
 use pkmc::config::{axis_is_rotary, MachineConfig, AXES, AXIS_NAMES};
 use pkmc::units::to_user;
 use pkmc::wire::{AlarmCause, State, Status};
@@ -100,13 +101,13 @@ pub struct Report<'a> {
 /// `<State|MPos:…|FS:feed,speed|Bf:blocks,bytes|Ln:line|Ov:f,r,s|WCO:…|Pn:…>`.
 pub fn status_report(s: &Status, r: &Report<'_>) -> String {
     let n = reported_axes(r.machine);
-    // Path speed, nm/s: shown in mm/min.
-    let feed = s.speed as f64 * 60.0 / 1e6;
+    let view = StatusView::new(s);
+    let mpos: Vec<String> = view.pose[..n].iter().map(|v| format!("{v:.3}")).collect();
     let mut out = format!(
         "<{}|MPos:{}|FS:{:.0},0|Bf:{},{}|Ln:{}|Ov:{},{},{}|WCO:{}",
         state_word(s, r.mode),
-        list(&s.pose, n),
-        feed,
+        mpos.join(","),
+        view.feed_mm_min,
         r.free.0,
         r.free.1,
         s.line,

@@ -1,7 +1,7 @@
 //! The single commands (`home`, `jog`, `mdi`, `reset`, `status`) and what a job
 //! does before it starts (homing or unlocking).
 
-use super::{describe_alarm, exit, open_port, open_target, Failure, RunOptions};
+use super::{exit, open_port, open_target, Failure, RunOptions};
 use crate::link::{JobEnd, JobHooks, Link, LinkOptions, PortTransport, Transport};
 use pkmc::config::{MachineConfig, AXES, AXIS_NAMES};
 use pkmc::kinematics::MachineKinematics;
@@ -236,12 +236,10 @@ pub fn move_and_wait<T: Transport>(
     Ok(end)
 }
 
-/// A controller's state in words, with its alarm when it has one: `alarm (Unhomed)`.
+/// A controller's state in words, with its alarm when it has one: `alarm (not
+/// homed)`.
 pub fn state_text(s: &Status) -> String {
-    match s.alarm {
-        Some(a) => format!("{} ({})", s.state, describe_alarm(&a)),
-        None => s.state.to_string(),
-    }
+    crate::link::view::StatusView::new(s).state_text()
 }
 
 #[cfg(test)]

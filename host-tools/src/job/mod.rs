@@ -33,19 +33,19 @@ mod resume;
 mod sim_server;
 
 pub use commands::{
-    connect, home_command, jog_command, jog_request, mdi, move_and_wait, prepare, state_text, with_link,
-    JogRequest,
+    connect, home_command, jog_command, jog_request, mdi, move_and_wait, prepare, state_text,
+    with_link, JogRequest,
 };
 pub use compile::{
     compile_compressed, compile_job, compile_located, compile_program, compile_text,
     compile_text_with, for_machine as compress_for_machine, machine_axes, Compiled,
 };
+pub use pipeline::{checked, front_end_options, Checked, LineBlocks, LineFault, LinePipeline};
 pub use report::{
-    describe_alarm, pose_text, print_report, status_json, CompressionSummary, LinesExecuted,
-    PreflightSummary, Report,
+    pose_text, print_report, status_json, CompressionSummary, LinesExecuted, PreflightSummary,
+    Report,
 };
 pub use resume::{missing_text, program_lines, program_mark, resume, Resumed};
-pub use pipeline::{checked, front_end_options, Checked, LineBlocks, LineFault, LinePipeline};
 use sim_server::outcome_of;
 pub use sim_server::{SimOutcome, SimServer, SimSetup};
 

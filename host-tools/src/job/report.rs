@@ -2,11 +2,12 @@
 
 use super::{exit, SimOutcome};
 use crate::analysis::plot::lines_digest;
+use crate::link::view::{AlarmView, StatusView};
 use crate::link::{ClientStats, JobEnd};
 use crate::sim::faults::FaultReport;
-use pkmc::config::{axis_is_rotary, MachineConfig, AXIS_NAMES};
-use pkmc::units::{to_user, TICK_NS};
-use pkmc::wire::{Alarm, Status};
+use pkmc::config::{MachineConfig, AXIS_NAMES};
+use pkmc::wire::Status;
+use pkmc::units::TICK_NS;
 use serde::Serialize;
 use std::io::Write;
 
@@ -28,7 +29,7 @@ pub struct Report {
     pub program: String,
     /// "done", "alarm", "aborted" or "stopped".
     pub result: String,
-    /// Controller state at the end.
+    /// Controller state at the end, by its stable name (`Idle`, `Alarm`).
     pub final_state: String,
     /// Final commanded pose: X Y Z in mm, A B C in degrees.
     pub final_pose: std::collections::BTreeMap<String, f64>,
@@ -42,7 +43,7 @@ pub struct Report {
     pub blocks_executed: u32,
     /// Motion time on the controller, s (for `--check`, the planned run time).
     pub run_time_s: f64,
-    /// Alarms, described.
+    /// Alarms, in the core's words (`limit switch on joint 1 at line 1`).
     pub alarms: Vec<String>,
     /// NC line of the alarm, if any.
     pub alarm_line: Option<u32>,
@@ -143,23 +144,13 @@ impl Report {
         sim: Option<&SimOutcome>,
         link: ClientStats,
     ) -> Self {
+        let view = StatusView::with_joints(status, machine);
         let final_pose = (0..6)
-            .map(|i| {
-                (
-                    AXIS_NAMES[i].to_ascii_lowercase().to_string(),
-                    to_user(status.pose[i], axis_is_rotary(i)),
-                )
-            })
-            .collect();
-        let final_joints = machine
-            .joints
-            .iter()
-            .enumerate()
-            .map(|(j, jc)| to_user(status.joints[j], jc.rotary))
+            .map(|i| (AXIS_NAMES[i].to_ascii_lowercase().to_string(), view.pose[i]))
             .collect();
         let alarm = match end {
-            JobEnd::Alarm(a) => Some(*a),
-            _ => status.alarm,
+            JobEnd::Alarm(a) => Some(AlarmView::new(a)),
+            _ => view.alarm.clone(),
         };
         Report {
             machine: machine.name.to_string(),
@@ -172,19 +163,17 @@ impl Report {
                 JobEnd::Paused(_) => "paused",
             }
             .into(),
-            final_state: format!("{:?}", status.state),
+            final_state: view.state,
             final_pose,
-            final_joints,
+            final_joints: view.joints,
             final_joint_steps: sim.map(|s| s.joint_steps.clone()),
             blocks_sent: blocks,
             blocks_executed: status.blocks_done,
             run_time_s: status.motion_ticks as f64 * TICK_NS as f64 * 1e-9,
-            alarms: alarm.iter().map(describe_alarm).collect(),
-            alarm_line: alarm.map(|a| a.line),
-            alarm_cause: alarm.map(|a| format!("{:?}", a.cause)),
-            alarm_joint: alarm
-                .filter(|a| a.joint != pkmc::wire::NO_JOINT)
-                .map(|a| a.joint + 1),
+            alarms: alarm.iter().map(|a| a.words.clone()).collect(),
+            alarm_line: alarm.as_ref().map(|a| a.line),
+            alarm_joint: alarm.as_ref().and_then(|a| a.joint),
+            alarm_cause: alarm.map(|a| a.cause),
             alarm_time_s: sim.and_then(|s| s.alarm_time_s),
             drive_violations: sim.map(|s| s.violation_count),
             link,
@@ -213,67 +202,35 @@ impl Report {
     }
 }
 
-/// An alarm in words: cause, joint and NC line.
-pub fn describe_alarm(a: &Alarm) -> String {
-    let mut s = format!("{:?}", a.cause);
-    if a.joint != pkmc::wire::NO_JOINT {
-        s += &format!(" on joint {}", a.joint as usize + 1);
-    }
-    if a.line != 0 {
-        s += &format!(" at line {}", a.line);
-    }
-    s
-}
-
 /// A pose in words: `X 1.0000 Y …` (mm, degrees).
 pub fn pose_text(s: &Status) -> String {
-    (0..6)
-        .map(|i| {
-            format!(
-                "{} {:.4}",
-                AXIS_NAMES[i],
-                to_user(s.pose[i], axis_is_rotary(i))
-            )
-        })
-        .collect::<Vec<_>>()
-        .join(" ")
+    StatusView::new(s).pose_text()
 }
 
 /// A status as `nc-send status --report json` prints it.
 pub fn status_json(s: &Status, machine: &MachineConfig, result: &str) -> serde_json::Value {
+    let v = StatusView::with_joints(s, machine);
     let pose: serde_json::Map<String, serde_json::Value> = (0..6)
         .map(|i| {
             (
                 AXIS_NAMES[i].to_ascii_lowercase().to_string(),
-                to_user(s.pose[i], axis_is_rotary(i)).into(),
+                v.pose[i].into(),
             )
         })
         .collect();
-    let joints: Vec<f64> = machine
-        .joints
-        .iter()
-        .enumerate()
-        .map(|(j, jc)| to_user(s.joints[j], jc.rotary))
-        .collect();
-    let measured: Vec<f64> = machine
-        .joints
-        .iter()
-        .enumerate()
-        .map(|(j, jc)| to_user(jc.scale.position_of(s.measured[j]), jc.rotary))
-        .collect();
     serde_json::json!({
         "result": result,
-        "state": format!("{:?}", s.state),
-        "line": s.line,
+        "state": v.state,
+        "line": v.line,
         "pose": pose,
-        "joints": joints,
-        "measured": measured,
-        "feed_mm_min": s.speed as f64 * 60.0 / 1e6,
-        "feed_override": s.feed_override,
+        "joints": v.joints,
+        "measured": v.measured,
+        "feed_mm_min": v.feed_mm_min,
+        "feed_override": v.feed_override,
         "buffered_ms": s.buffered_ms,
         "free_slots": s.free_slots,
         "free_bends": s.free_bends,
-        "alarm": s.alarm.map(|a| describe_alarm(&a)),
+        "alarm": v.alarm.map(|a| a.words),
         "homed": s.homed,
     })
 }

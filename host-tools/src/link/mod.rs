@@ -52,7 +52,8 @@
 //! rest (idle, an alarm, a pause or hold waiting for the operator) never counts.
 //!
 //! Rooms: [`transport`] (bytes), [`client`] (frames, handshake, controls, status),
-//! [`stream`] (a job's blocks), [`error`].
+//! [`stream`] (a job's blocks), [`error`], [`view`] (the status as every face shows
+//! it: user units, the core's words).
 
 mod client;
 mod error;
@@ -61,6 +62,7 @@ mod plans;
 mod stall;
 mod stream;
 mod transport;
+pub mod view;
 mod window;
 
 use client::PendingControl;

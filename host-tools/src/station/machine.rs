@@ -7,12 +7,13 @@
 use super::hub::{lock, Hub};
 use super::{Cmd, Request};
 use crate::job::{self, Failure};
+use crate::link::view::{AlarmView, StatusView};
 use crate::link::{JobEnd, JobHooks, Link, LinkView, Transport};
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::kinematics::{Kinematics, MachineKinematics};
 use pkmc::motion::block::{Block, Motion};
-use pkmc::units::{to_user, units_per_user};
 use pkmc::wire::{Control, Status};
+use pkmc::units::{to_user, units_per_user};
 use serde_json::{json, Value};
 use std::collections::VecDeque;
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
@@ -86,7 +87,7 @@ impl Mdi<'_> {
 
 /// An alarm as the pages word it: its title (the core's wording of the cause; an
 /// e-stop says e-stop) and what the operator does next.
-fn alarm_words(a: &pkmc::wire::Alarm, estop: bool) -> (String, &'static str) {
+fn alarm_words(a: &pkmc::wire::Alarm, view: &AlarmView, estop: bool) -> (String, &'static str) {
     use pkmc::wire::AlarmCause as C;
     if estop {
         let next = if a.cause == C::EStop {
@@ -108,23 +109,13 @@ fn alarm_words(a: &pkmc::wire::Alarm, estop: bool) -> (String, &'static str) {
         C::MachineMismatch => "The controller runs another machine: load this one.",
         _ => "Reset to clear the alarm.",
     };
-    (format!("Alarm: {}", a.cause), next)
+    (format!("Alarm: {}", view.cause_words), next)
 }
 
 /// The status message: the controller's status in user units, the job, the lock and
 /// the mechanism.
 fn status_message(machine: &MachineConfig, hub: &Hub, s: &Status, job: Option<&JobInfo>) -> Value {
-    let pose: [f64; AXES] = std::array::from_fn(|i| to_user(s.pose[i], i >= 3));
-    let n = machine.joints.len();
-    let joints: Vec<f64> = (0..n)
-        .map(|j| to_user(s.joints[j], machine.joints[j].rotary))
-        .collect();
-    let measured: Vec<f64> = (0..n)
-        .map(|j| {
-            let jc = &machine.joints[j];
-            to_user(jc.scale.position_of(s.measured[j]), jc.rotary)
-        })
-        .collect();
+    let view = StatusView::with_joints(s, machine);
     let alarm = s.alarm.map(|a| {
         let joint = (a.joint != pkmc::wire::NO_JOINT).then(|| {
             hub.machine["joints"][a.joint as usize]["name"]
@@ -136,10 +127,11 @@ fn status_message(machine: &MachineConfig, hub: &Hub, s: &Status, job: Option<&J
             || a.cause == pkmc::wire::AlarmCause::EStop
             || (a.cause == pkmc::wire::AlarmCause::Aborted
                 && hub.estop.load(std::sync::atomic::Ordering::Relaxed));
-        let (title, next) = alarm_words(&a, estop);
-        json!({"cause": format!("{:?}", a.cause), "joint": joint, "line": a.line,
-               "text": job::describe_alarm(&a), "words": a.to_string(), "estop": estop,
-               "title": title, "next": next})
+        let v = AlarmView::new(&a);
+        let (title, next) = alarm_words(&a, &v, estop);
+        json!({"cause": v.cause, "cause_words": v.cause_words, "joint": joint,
+               "line": v.line, "words": v.words, "estop": estop, "title": title,
+               "next": next})
     });
     if s.alarm.is_none() {
         hub.estop.store(false, std::sync::atomic::Ordering::Relaxed);
@@ -163,19 +155,20 @@ fn status_message(machine: &MachineConfig, hub: &Hub, s: &Status, job: Option<&J
     let r = super::program::round3;
     json!({
         "type": "status",
-        "state": format!("{:?}", s.state),
-        "line": s.line,
+        "state": view.state,
+        "state_words": view.state_words,
+        "line": view.line,
         "homed": s.homed,
-        "pose": pose.map(r),
-        "joints": joints.iter().map(|&v| r(v)).collect::<Vec<_>>(),
-        "measured": measured.iter().map(|&v| r(v)).collect::<Vec<_>>(),
-        "feed": (s.speed as f64 * 60.0 / 1e6).round(),
-        "override": s.feed_override,
+        "pose": view.pose.map(r),
+        "joints": view.joints.iter().map(|&v| r(v)).collect::<Vec<_>>(),
+        "measured": view.measured.iter().map(|&v| r(v)).collect::<Vec<_>>(),
+        "feed": view.feed_mm_min.round(),
+        "override": view.feed_override,
         "buffered_ms": s.buffered_ms,
         "alarm": alarm,
         "job": job,
         "lock": {"holder": holder.as_ref().map(|h| h.0), "name": holder.map(|h| h.1)},
-        "scene": super::scene::scene(machine, &pose, &joints),
+        "scene": super::scene::scene(machine, &view.pose, &view.joints),
     })
 }
 
@@ -410,7 +403,7 @@ impl Machine<'_> {
             JobEnd::Done => {}
             JobEnd::Alarm(a) => self
                 .hub
-                .log("error", &format!("alarm: {}", job::describe_alarm(a))),
+                .log("error", &format!("alarm: {}", AlarmView::new(a).words)),
             JobEnd::Aborted | JobEnd::Stopped => self.hub.log("warn", "stopped"),
             JobEnd::Paused(_) => self.hub.log("info", "paused: Resume continues"),
         }

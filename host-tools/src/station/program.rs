@@ -285,11 +285,7 @@ pub fn teach_points(
     let canon = gcode::compile_canon(
         text,
         name,
-        &gcode::Options {
-            start: machine.home,
-            axes: job::machine_axes(machine),
-            ..gcode::Options::default()
-        },
+        &job::front_end_options(machine, machine.home, &gcode::ToolTable::default()),
     )
     .map_err(|errs| {
         errs.iter()
@@ -308,7 +304,7 @@ pub fn teach_points(
             // The feed is kept in nm/s: 2000 mm/min is 33 333 333 nm/s, which reads
             // back as 1999.99998. To 0.001 mm/min, an F of up to three decimals
             // comes back exactly (one nm/s is 0.00006 mm/min).
-            speed = Some((b.feed as f64 * 60.0 / 1e3).round() / 1e3);
+            speed = Some(round3(crate::link::view::feed_mm_min(b.feed)));
         }
         points.push(std::array::from_fn(|k| {
             b.target[k] as f64 / pkmc::units::units_per_user(k >= 3) as f64

@@ -401,9 +401,7 @@ fn teach(app: &App, cmd: Cmd) -> Result<String, String> {
             let s = lock(&hub.status)
                 .clone()
                 .ok_or("no status from the controller yet")?;
-            t.points.push(std::array::from_fn(|i| {
-                pkmc::units::to_user(s.pose[i], i >= 3)
-            }));
+            t.points.push(crate::link::view::StatusView::new(&s).pose);
             Ok(format!("P{} set", t.points.len()))
         }
         Cmd::TeachRemove { index } if index < n => {

@@ -297,24 +297,20 @@ function updateJoints(st) {
   });
 }
 
-/** The state as the badge words it: the core's words; an e-stop says E-STOP. */
-const STATE_WORDS = {
-  Idle: 'idle', Running: 'running', Hold: 'hold', Homing: 'homing', Alarm: 'alarm',
-  EStop: 'e-stop',
-};
-
+/** The state badge: the core's words as the station sends them (`state_words`); an
+ *  e-stop says E-STOP. `state` is the state's stable name, for the page's logic. */
 function updateMachineState(st) {
   const s = $('state');
   const a = st.alarm;
   const estop = st.state === 'EStop' || !!(a && a.estop);
-  setText(s, estop ? 'E-STOP' : (STATE_WORDS[st.state] || st.state || '—'));
+  setText(s, estop ? 'E-STOP' : (st.state_words || '—'));
   const cls = 'badge st-' + (estop ? 'estop' : String(st.state || 'none').toLowerCase());
   if (s.className !== cls) s.className = cls;
   let text = '';
   if (a) {
     const where = [a.joint ? `joint ${a.joint}` : '', a.line ? `line ${a.line}` : '']
       .filter(Boolean).join(', ');
-    text = `${a.title || a.cause}${where ? ' (' + where + ')' : ''}. ${a.next || ''}`;
+    text = `${a.title || a.words}${where ? ' (' + where + ')' : ''}. ${a.next || ''}`;
   }
   setText($('alarm'), text);
   const now = $('alarm-now');
@@ -330,7 +326,7 @@ function updateMachineState(st) {
   now.replaceChildren(el('span', '', text.split('. ')[0] + '.'), el('span', 'next', a.next || ''));
   const li = el('li');
   const t = el('time', '', new Date().toTimeString().slice(0, 8));
-  li.append(t, `${a.title || a.cause}${a.line ? ' at line ' + a.line : ''}${a.joint ? ', joint ' + a.joint : ''}`);
+  li.append(t, `${a.title || a.words}${a.line ? ' at line ' + a.line : ''}${a.joint ? ', joint ' + a.joint : ''}`);
   li.title = a.next || '';
   $('alarm-history').prepend(li);
   pkmc.alarms.push({ title: a.title, cause: a.cause, line: a.line, joint: a.joint, next: a.next });
