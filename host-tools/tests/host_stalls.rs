@@ -359,7 +359,10 @@ fn a_job_held_for_a_host_that_never_comes_back_is_completed_by_a_new_resume() {
     let s = json(&sim.send(&["--machine", m, "status"]));
     assert_eq!(s["state"], "Hold", "{s}");
     assert!(
-        s["alarm"].as_str().unwrap_or("").contains("host silent too long"),
+        s["alarm"]
+            .as_str()
+            .unwrap_or("")
+            .contains("host silent too long"),
         "{s}"
     );
     assert_eq!(s["held_job"]["host_process"], host.id(), "{s}");
