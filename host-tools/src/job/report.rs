@@ -6,8 +6,8 @@ use crate::link::view::{AlarmView, StatusView};
 use crate::link::{ClientStats, JobEnd};
 use crate::sim::faults::FaultReport;
 use pkmc::config::{MachineConfig, AXIS_NAMES};
-use pkmc::wire::Status;
 use pkmc::units::TICK_NS;
+use pkmc::wire::Status;
 use serde::Serialize;
 use std::io::Write;
 

@@ -6,8 +6,8 @@
 //! (`Idle`, `LimitSwitch`: the names the wire serialises them by).
 
 use pkmc::config::{axis_is_rotary, MachineConfig, AXES, AXIS_NAMES};
-use pkmc::wire::{Alarm, State, Status, NO_JOINT};
 use pkmc::units::to_user;
+use pkmc::wire::{Alarm, State, Status, NO_JOINT};
 
 /// A path speed in nm/s (or n°/s) in mm/min (or degrees/min): the one conversion.
 pub fn feed_mm_min(nm_per_s: i64) -> f64 {
