@@ -95,11 +95,20 @@ pub struct Controller {
     /// against them.
     board: BoardChannels,
     kin: MachineKinematics,
-    /// The link session: frames in and out, sequence numbers, what the host is owed,
-    /// its silence, a machine record being received.
-    link: Link,
+    reader: FrameDecoder,
+    tx: crate::wire::ring::ByteRing<TX_CAPACITY>,
+    /// Scratch for outgoing frames: a body and its encoding (fields, so that no call
+    /// clears them).
+    tx_body: [u8; MAX_BODY],
+    tx_frame: [u8; MAX_FRAME],
+    tx_seq: u16,
+    session: bool,
+    expected_seq: u16,
+    last_control: Option<u16>,
     machine_id: u32,
     mismatch: bool,
+    /// The session's host (`Hello::host`).
+    host: u32,
     /// An earlier session's job, queued or held, not yet resumed or aborted by this
     /// one.
     orphan: Option<HeldJob>,
@@ -114,6 +123,8 @@ pub struct Controller {
     /// The streamed program's identity and how far it was received
     /// (`Control::BeginJob`), kept with its job for a new host (`HelloAck::mark`).
     mark: JobMark,
+    assembler: crate::wire::store::Assembler,
+    store_pending: bool,
     planner: Planner,
     exec: Executor,
     joints: Joints,
@@ -142,44 +153,24 @@ pub struct Controller {
     abort_pending: bool,
     spindle: Aux,
     motion_ticks: u64,
+    /// Ticks since the last periodic status (16 bits: with `patience`, the controller
+    /// stays within the firmware's static RAM; it saturates without a session).
+    since_status: u16,
+    /// An `Ack` of the last block accepted is owed (acks are cumulative: one covers
+    /// every block accepted and every slot freed since the last); encoded by
+    /// `transmit`, not in the `receive` or `tick` that made it due.
+    ack_due: bool,
+    /// A status is owed (requested, or periodic); encoded by `transmit`.
+    status_due: bool,
+    silent_ticks: u32,
+    link_watch: bool,
     last: Inputs,
     out: Outputs,
     /// The hexapod-xy's contour map, built a phase a tick (`update_contour_map`).
     map: MapBuilder,
     /// This tick completed a map.
     map_fresh: bool,
-}
-
-/// The link session of a [`Controller`]: the frames in and out, the host's sequence
-/// numbers and identity, what the host is owed (an ack, a status), its silence, and a
-/// machine record being received.
-pub(super) struct Link {
-    pub(super) reader: FrameDecoder,
-    pub(super) tx: crate::wire::ring::ByteRing<TX_CAPACITY>,
-    /// Scratch for outgoing frames: a body and its encoding (fields, so that no call
-    /// clears them).
-    pub(super) tx_body: [u8; MAX_BODY],
-    pub(super) tx_frame: [u8; MAX_FRAME],
-    pub(super) tx_seq: u16,
-    pub(super) session: bool,
-    pub(super) expected_seq: u16,
-    pub(super) last_control: Option<u16>,
-    /// The session's host (`Hello::host`).
-    pub(super) host: u32,
-    pub(super) assembler: crate::wire::store::Assembler,
-    pub(super) store_pending: bool,
-    /// Ticks since the last periodic status (16 bits: with `patience`, the controller
-    /// stays within the firmware's static RAM; it saturates without a session).
-    pub(super) since_status: u16,
-    /// An `Ack` of the last block accepted is owed (acks are cumulative: one covers
-    /// every block accepted and every slot freed since the last); encoded by
-    /// `transmit`, not in the `receive` or `tick` that made it due.
-    pub(super) ack_due: bool,
-    /// A status is owed (requested, or periodic); encoded by `transmit`.
-    pub(super) status_due: bool,
-    pub(super) silent_ticks: u32,
-    pub(super) link_watch: bool,
-    pub(super) stats: LinkStats,
+    stats: LinkStats,
 }
 
 /// What a controller for a machine needs besides the machine, computed and checked
@@ -281,23 +272,23 @@ impl Controller {
             at!((*p).machine).write(machine);
             at!((*p).board).write(prep.board);
             at!((*p).kin).write(prep.kin);
-            at!((*p).link.reader).write(FrameDecoder::new());
-            at!((*p).link.tx).write(crate::wire::ring::ByteRing::default());
-            at!((*p).link.tx_body).write([0; MAX_BODY]);
-            at!((*p).link.tx_frame).write([0; MAX_FRAME]);
-            at!((*p).link.tx_seq).write(0);
-            at!((*p).link.session).write(false);
-            at!((*p).link.expected_seq).write(0);
-            at!((*p).link.last_control).write(None);
+            at!((*p).reader).write(FrameDecoder::new());
+            at!((*p).tx).write(crate::wire::ring::ByteRing::default());
+            at!((*p).tx_body).write([0; MAX_BODY]);
+            at!((*p).tx_frame).write([0; MAX_FRAME]);
+            at!((*p).tx_seq).write(0);
+            at!((*p).session).write(false);
+            at!((*p).expected_seq).write(0);
+            at!((*p).last_control).write(None);
             at!((*p).machine_id).write(prep.machine_id);
             at!((*p).mismatch).write(false);
-            at!((*p).link.host).write(0);
+            at!((*p).host).write(0);
             at!((*p).orphan).write(None);
             at!((*p).job_open).write(false);
             at!((*p).patience).write(0);
             at!((*p).mark).write(JobMark::default());
-            at!((*p).link.assembler).write(crate::wire::store::Assembler::new());
-            at!((*p).link.store_pending).write(false);
+            at!((*p).assembler).write(crate::wire::store::Assembler::new());
+            at!((*p).store_pending).write(false);
             Planner::init_at(at!((*p).planner), pose);
             Executor::init_at(at!((*p).exec), pose);
             (*p).exec.set_smoothing(window);
@@ -319,14 +310,14 @@ impl Controller {
             at!((*p).abort_pending).write(false);
             at!((*p).spindle).write(Aux::SpindleOff);
             at!((*p).motion_ticks).write(0);
-            at!((*p).link.since_status).write(0);
-            at!((*p).link.ack_due).write(false);
-            at!((*p).link.status_due).write(false);
-            at!((*p).link.silent_ticks).write(0);
-            at!((*p).link.link_watch).write(true);
+            at!((*p).since_status).write(0);
+            at!((*p).ack_due).write(false);
+            at!((*p).status_due).write(false);
+            at!((*p).silent_ticks).write(0);
+            at!((*p).link_watch).write(true);
             at!((*p).last).write(Inputs::default());
             at!((*p).out).write(Outputs::default());
-            at!((*p).link.stats).write(LinkStats::default());
+            at!((*p).stats).write(LinkStats::default());
             (*p).update_servo_targets();
         }
     }
@@ -408,7 +399,7 @@ impl Controller {
 
     /// The host-timeout watch of a starved job is running.
     fn watching_starved(&self) -> bool {
-        self.link.session && self.link.link_watch && self.link.silent_ticks < self.patience_ticks()
+        self.session && self.link_watch && self.silent_ticks < self.patience_ticks()
     }
 
     /// The host timeout of the streamed job, ticks (0: none).
@@ -429,10 +420,10 @@ impl Controller {
     /// The link-loss watch of a held or unfinished job is running (time must advance
     /// for it).
     fn watching_hold(&self) -> bool {
-        self.link.session
-            && self.link.link_watch
+        self.session
+            && self.link_watch
             && self.alarm.is_none()
-            && self.link.silent_ticks < LINK_LOSS_TICKS
+            && self.silent_ticks < LINK_LOSS_TICKS
             && (self.job_held() || self.job_open)
     }
 
@@ -533,16 +524,16 @@ impl Controller {
             State::Alarm | State::EStop if !self.stopping => {}
             _ => self.motion_tick(),
         }
-        if self.link.session && self.planner.len() < queued && self.state != State::Alarm {
+        if self.session && self.planner.len() < queued && self.state != State::Alarm {
             // Credits as slots free: the host refills within a tick or two instead of
             // waiting for the next status.
-            self.link.ack_due = true;
+            self.ack_due = true;
         }
         self.update_outputs();
-        self.link.since_status = self.link.since_status.saturating_add(1);
-        if self.link.session && self.link.since_status as u32 >= STATUS_EVERY_TICKS {
-            self.link.since_status = 0;
-            self.link.status_due = true;
+        self.since_status = self.since_status.saturating_add(1);
+        if self.session && self.since_status as u32 >= STATUS_EVERY_TICKS {
+            self.since_status = 0;
+            self.status_due = true;
         }
         &self.out
     }

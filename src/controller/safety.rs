@@ -263,8 +263,8 @@ impl Controller {
         if let Some(j) = first_bit(rising, n) {
             self.fault(at(AlarmCause::LimitSwitch, Some(j)), false);
         }
-        if self.link.session {
-            self.link.silent_ticks = self.link.silent_ticks.saturating_add(1);
+        if self.session {
+            self.silent_ticks = self.silent_ticks.saturating_add(1);
         }
         let moving = match self.state {
             State::Running | State::Homing => true,
@@ -275,19 +275,19 @@ impl Controller {
         // timeout holds it. A hold's link loss below applies to it too.
         let patient = self.patience > 0
             && matches!(self.state, State::Running | State::Starved | State::Hold);
-        if self.link.link_watch && patient {
-            if self.link.silent_ticks >= self.patience_ticks()
+        if self.link_watch && patient {
+            if self.silent_ticks >= self.patience_ticks()
                 && matches!(self.state, State::Running | State::Starved)
             {
                 self.hold_for_take_over(at(AlarmCause::HostTimeout, None));
-            } else if self.link.silent_ticks >= LINK_LOSS_TICKS
+            } else if self.silent_ticks >= LINK_LOSS_TICKS
                 && self.state == State::Hold
                 && self.alarm.is_none()
                 && self.job_held()
             {
                 self.alarm = Some(at(AlarmCause::LinkLoss, None));
             }
-        } else if self.link.link_watch && self.link.silent_ticks >= LINK_LOSS_TICKS {
+        } else if self.link_watch && self.silent_ticks >= LINK_LOSS_TICKS {
             if moving {
                 self.fault(at(AlarmCause::LinkLoss, None), false);
             } else if self.job_open && self.state == State::Idle {

@@ -23,7 +23,7 @@ use crate::wire::{
 impl Controller {
     /// Ticks since the last valid frame from the host.
     pub fn link_silence_ticks(&self) -> u32 {
-        self.link.silent_ticks
+        self.silent_ticks
     }
 
     /// The silence, ticks, at which the link watch acts next in the present state: the
@@ -41,19 +41,19 @@ impl Controller {
     /// Turns the link-loss watch off (or on): only for a controller fed in the same
     /// process as its host, where there is no link to lose (`nc-send --check`).
     pub fn set_link_watch(&mut self, on: bool) {
-        self.link.link_watch = on;
+        self.link_watch = on;
     }
 
     /// Link counters.
     pub fn link_stats(&self) -> LinkStats {
-        self.link.stats
+        self.stats
     }
 
     /// Feeds bytes received from the link.
     pub fn receive(&mut self, bytes: &[u8]) {
         let mut rest = bytes;
         while !rest.is_empty() {
-            let (taken, frame) = self.link.reader.feed(rest);
+            let (taken, frame) = self.reader.feed(rest);
             rest = &rest[taken..];
             let Some(frame) = frame else {
                 continue;
@@ -67,13 +67,13 @@ impl Controller {
             let mut slot = core::mem::MaybeUninit::uninit();
             match &decode_block_into(message, &mut slot) {
                 Some(Ok(planned)) => {
-                    self.link.silent_ticks = 0;
+                    self.silent_ticks = 0;
                     self.block(seq, planned);
                 }
                 Some(Err(_)) => self.corrupt(),
                 None => match &postcard::from_bytes::<HostMsgOf<NotBlock>>(message) {
                     Ok(msg) => {
-                        self.link.silent_ticks = 0;
+                        self.silent_ticks = 0;
                         self.handle(seq, msg);
                     }
                     Err(_) => self.corrupt(),
@@ -84,7 +84,7 @@ impl Controller {
 
     #[cold]
     pub(super) fn corrupt(&mut self) {
-        self.link.stats.corrupt += 1;
+        self.stats.corrupt += 1;
         self.nak(NakReason::Corrupt);
     }
 
@@ -93,7 +93,7 @@ impl Controller {
     /// slots freed or statuses asked for since the last call).
     pub fn transmit(&mut self, out: &mut [u8]) -> usize {
         self.send_due();
-        self.link.tx.pop_into(out)
+        self.tx.pop_into(out)
     }
 
     /// Adds a frame to the transmit buffer, made by `encode` from the next sequence
@@ -103,48 +103,48 @@ impl Controller {
         &mut self,
         encode: impl FnOnce(u16, &mut [u8; MAX_BODY], &mut [u8; MAX_FRAME]) -> Option<usize>,
     ) -> bool {
-        let seq = self.link.tx_seq;
-        let added = match self.link.tx.tail_mut::<MAX_FRAME>() {
-            Some(room) => encode(seq, &mut self.link.tx_body, room).map(|n| self.link.tx.commit(n)),
-            None => encode(seq, &mut self.link.tx_body, &mut self.link.tx_frame)
-                .filter(|&n| self.link.tx.push_slice(&self.link.tx_frame[..n]))
+        let seq = self.tx_seq;
+        let added = match self.tx.tail_mut::<MAX_FRAME>() {
+            Some(room) => encode(seq, &mut self.tx_body, room).map(|n| self.tx.commit(n)),
+            None => encode(seq, &mut self.tx_body, &mut self.tx_frame)
+                .filter(|&n| self.tx.push_slice(&self.tx_frame[..n]))
                 .map(drop),
         };
         if added.is_some() {
-            self.link.tx_seq = seq.wrapping_add(1);
+            self.tx_seq = seq.wrapping_add(1);
         }
         added.is_some()
     }
 
     pub(super) fn send(&mut self, msg: &CtrlMsg) {
         if !self.push_frame(|seq, body, out| encode_frame_with(seq, msg, body, out).ok()) {
-            self.link.stats.tx_dropped += 1;
+            self.stats.tx_dropped += 1;
         }
     }
 
     /// Encodes the `Ack` and the status owed; what does not fit stays owed.
     pub(super) fn send_due(&mut self) {
-        if self.link.ack_due {
-            let acked = self.link.expected_seq.wrapping_sub(1);
+        if self.ack_due {
+            let acked = self.expected_seq.wrapping_sub(1);
             let (free, bends, ms) = (
                 self.planner.free() as u16,
                 self.planner.free_bends() as u16,
                 self.buffered_ms(),
             );
-            self.link.ack_due = !self.push_frame(|seq, body, out| {
+            self.ack_due = !self.push_frame(|seq, body, out| {
                 Some(encode_ack(seq, acked, free, bends, ms, body, out))
             });
         }
-        if self.link.status_due {
+        if self.status_due {
             let s = self.status();
-            self.link.status_due =
+            self.status_due =
                 !self.push_frame(|seq, body, out| Some(encode_status(seq, &s, body, out)));
         }
     }
 
     pub(super) fn nak(&mut self, reason: NakReason) {
         self.send(&CtrlMsg::Nak {
-            expected: self.link.expected_seq,
+            expected: self.expected_seq,
             reason,
         });
     }
@@ -173,7 +173,7 @@ impl Controller {
                 // A job left by the earlier session stays the earlier host's until the
                 // new one resumes or aborts it.
                 if self.job_held() {
-                    let first = self.orphan.map_or(self.link.host, |o| o.host);
+                    let first = self.orphan.map_or(self.host, |o| o.host);
                     self.orphan = Some(HeldJob {
                         host: first,
                         line: self.exec.line,
@@ -186,10 +186,10 @@ impl Controller {
                     self.patience = 0;
                     self.mark = JobMark::default();
                 }
-                self.link.host = host;
-                self.link.session = true;
-                self.link.expected_seq = seq.wrapping_add(1);
-                self.link.last_control = None;
+                self.host = host;
+                self.session = true;
+                self.expected_seq = seq.wrapping_add(1);
+                self.last_control = None;
                 self.exec.completed = 0;
                 self.motion_ticks = 0;
                 self.mismatch = machine != self.machine_id;
@@ -218,8 +218,8 @@ impl Controller {
                 crc,
                 ref data,
             } => {
-                let fresh = self.link.last_control != Some(id);
-                self.link.last_control = Some(id);
+                let fresh = self.last_control != Some(id);
+                self.last_control = Some(id);
                 self.send(&CtrlMsg::ControlAck { id });
                 if !fresh {
                     return;
@@ -231,7 +231,6 @@ impl Controller {
                     return;
                 }
                 match self
-                    .link
                     .assembler
                     .add(offset as usize, total as usize, crc, data)
                 {
@@ -244,10 +243,10 @@ impl Controller {
                     Err(error) => self.send(&CtrlMsg::MachineRefused { error }),
                 }
             }
-            HostMsgOf::StatusRequest => self.link.status_due = true,
+            HostMsgOf::StatusRequest => self.status_due = true,
             HostMsgOf::Control { id, cmd } => {
-                if self.link.last_control != Some(id) {
-                    self.link.last_control = Some(id);
+                if self.last_control != Some(id) {
+                    self.last_control = Some(id);
                     self.control(cmd);
                 }
                 self.send(&CtrlMsg::ControlAck { id });
@@ -258,14 +257,14 @@ impl Controller {
 
     /// A block message (sequenced).
     pub(super) fn block(&mut self, seq: u16, planned: &PlannedBlock) {
-        if !self.link.session {
+        if !self.session {
             self.nak(NakReason::NoSession);
             return;
         }
-        let ahead = seq.wrapping_sub(self.link.expected_seq) as i16;
+        let ahead = seq.wrapping_sub(self.expected_seq) as i16;
         if ahead < 0 {
             // A duplicate of an accepted frame: acknowledge, do not execute.
-            self.link.ack_due = true;
+            self.ack_due = true;
             return;
         }
         if ahead > 0 {
@@ -282,14 +281,14 @@ impl Controller {
         }
         if matches!(self.state, State::Alarm | State::EStop) {
             // Accepted and dropped: the job is over until the alarm is reset.
-            self.link.expected_seq = seq.wrapping_add(1);
-            self.link.ack_due = true;
+            self.expected_seq = seq.wrapping_add(1);
+            self.ack_due = true;
             return;
         }
         match self.planner.push_planned(planned, &self.machine, &self.kin) {
             Ok(()) => {
-                self.link.expected_seq = seq.wrapping_add(1);
-                self.link.ack_due = true;
+                self.expected_seq = seq.wrapping_add(1);
+                self.ack_due = true;
                 self.job_open = true;
                 self.mark.next_block = self.mark.next_block.wrapping_add(1);
                 self.mark.last_line = planned.block.line;
@@ -312,25 +311,25 @@ impl Controller {
             }
         };
         let (tx_seq, expected_seq, last_control, stats) = (
-            self.link.tx_seq,
-            self.link.expected_seq,
-            self.link.last_control,
-            self.link.stats,
+            self.tx_seq,
+            self.expected_seq,
+            self.last_control,
+            self.stats,
         );
         let mut tx = crate::wire::ring::ByteRing::default();
-        core::mem::swap(&mut tx, &mut self.link.tx);
+        core::mem::swap(&mut tx, &mut self.tx);
         // SAFETY: `self` is a valid, aligned controller; `write` overwrites every field
         // and nothing in it needs dropping.
         unsafe { Self::write(self, config, &prepared) };
-        core::mem::swap(&mut tx, &mut self.link.tx);
+        core::mem::swap(&mut tx, &mut self.tx);
         (
-            self.link.tx_seq,
-            self.link.expected_seq,
-            self.link.last_control,
-            self.link.stats,
+            self.tx_seq,
+            self.expected_seq,
+            self.last_control,
+            self.stats,
         ) = (tx_seq, expected_seq, last_control, stats);
-        self.link.session = true;
-        self.link.store_pending = true;
+        self.session = true;
+        self.store_pending = true;
         self.send(&CtrlMsg::MachineLoaded {
             machine: self.machine_id,
         });
@@ -344,7 +343,7 @@ impl Controller {
     /// A configuration adopted from the host that the firmware should now write to
     /// flash; returned once.
     pub fn take_store_request(&mut self) -> Option<&MachineConfig> {
-        if core::mem::replace(&mut self.link.store_pending, false) {
+        if core::mem::replace(&mut self.store_pending, false) {
             Some(&self.machine)
         } else {
             None
