@@ -190,7 +190,7 @@ fn random_block(k: usize, w: &mut dyn FnMut() -> i64) -> HostMsg {
     let motion = match k % 9 {
         0 => Motion::Rapid,
         1 => Motion::Dwell(w() as u32),
-        2 => Motion::Aux(Aux::Pause(k % 2 == 0)),
+        2 => Motion::Aux(Aux::Pause(k & 1 == 0)),
         3 => Motion::Aux(Aux::SpindleCcw(w() as u32)),
         4 | 5 => Motion::Arc {
             center: [w(), w()],
@@ -202,7 +202,7 @@ fn random_block(k: usize, w: &mut dyn FnMut() -> i64) -> HostMsg {
             c1: [w(), w(), w(), w(), w(), w()],
             c2: [w(), w(), w(), w(), w(), w()],
         },
-        7 if k % 2 == 0 => Motion::Quadratic {
+        7 if k & 1 == 0 => Motion::Quadratic {
             c: [w(), w(), w(), w(), w(), w()],
         },
         _ => Motion::Linear,
@@ -238,7 +238,7 @@ fn random_block(k: usize, w: &mut dyn FnMut() -> i64) -> HostMsg {
             v_limit: f32::from_bits(w() as u32),
             accel: w() as f32,
             entry: 1.5,
-            stop: k % 2 == 0,
+            stop: k & 1 == 0,
         },
     })
 }
@@ -397,7 +397,7 @@ fn acks_and_statuses_encode_by_hand_exactly_as_postcard_encodes_them() {
                 joint: wide() as u8,
                 line: wide() as u32,
             }),
-            homed: k % 2 == 0,
+            homed: k & 1 == 0,
             orphan: k % 5 == 0,
         };
         let msg = CtrlMsg::Status(s.clone());
