@@ -23,7 +23,9 @@ the same program with `nc-send --sim`. It fails on:
 
 Cases: square (cartesian-xyz), dense (0.05 mm segments at F6000 on the H-4),
 estop (an e-stop through its pin during a job), unplug (the USB cable pulled during a
-job: the job starves and is held for take-over), persist (the machine survives a pin reset and a watchdog reset),
+job: the job starves and is held for take-over), stall (nc-send stopped for 5 s during a
+job: it completes exactly), replug (the cable pulled for 2 s with a port that goes away
+and comes back: nc-send reconnects by itself and the job completes exactly), persist (the machine survives a pin reset and a watchdog reset),
 determinism (two free runs agree), replay (a recorded job replays exactly).
 """
 import json
@@ -510,6 +512,84 @@ def case_unplug(o):
             f"abort exit {ab.returncode}; then: {after.stdout.strip().splitlines()[0]}")
 
 
+def disturbed_square(o, name, disturb, link=False):
+    """The square job on the board (steppers: exact steps) with `disturb(board,
+    nc_send_process)` run beside it from its start; the job must complete and end
+    exactly where --sim's undisturbed run ends."""
+    program = os.path.join(ROOT, "examples/square.ngc")
+    sim = job_json(nc_send(o.nc, ["--sim", "--report", "json", program]), f"{name} on --sim")
+    extra = []
+    if link:
+        node = os.path.join(tempfile.mkdtemp(), "ttyACM-vboard")
+        extra = ["--link", node]
+    b = Board(o.vboard, o.elf, None, name, extra)
+    r = nc_send(o.nc, ["--port", b.port, "reset"])
+    if r.returncode != 0:
+        b.fail(f"{name}: reset: {r.stderr}")
+    time.sleep(0.5)
+    t0 = time.time()
+    p = subprocess.Popen([o.nc, "--port", b.port, "--report", "json", program],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    what = disturb(b, p)
+    try:
+        out, err = p.communicate(timeout=300)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        b.fail(f"{name}: the job did not end within 300 s")
+    wall = time.time() - t0
+    if p.returncode != 0:
+        b.fail(f"{name}: the job failed (exit {p.returncode}): {err[-2000:]}")
+    job = job_json(subprocess.CompletedProcess(p.args, p.returncode, out, err), f"{name} on the board")
+    until = b.report()["virtual_s"] + 0.5
+    while b.report()["virtual_s"] < until:
+        time.sleep(0.1)
+    rep = b.report()
+    log = b.log()
+    if b.close() != 0:
+        print(log[-4000:])
+        die(f"{name}: the board stopped with an error")
+    errors = compare(name, None, program, sim, job, rep)
+    if errors:
+        print(log[-3000:])
+        die(f"{name}: " + "; ".join(errors))
+    return (f"{name}: {what}; the square job completed (exit 0, {job['blocks_executed']} blocks, "
+            f"{wall:.1f} s wall against --sim's {sim['run_time_s']} s of motion), final steps "
+            f"{rep['final_joint_steps']} equal to --sim's; link: {json.dumps(job.get('link', {}).get('reconnects'))} reconnects")
+
+
+def case_stall(o):
+    """nc-send stopped (SIGSTOP) for 5 s, 2 s into the square job, then continued:
+    far past the 1 s link watch and the 2 s of buffered motion. The controller runs
+    out its queue, waits starved (docs/safety.md, host silence), and runs on when
+    blocks come again; the job completes exactly."""
+    import signal
+
+    def stall(b, p):
+        time.sleep(2.0)
+        p.send_signal(signal.SIGSTOP)
+        time.sleep(5.0)
+        p.send_signal(signal.SIGCONT)
+        return "nc-send stopped for 5 s at 2 s"
+    return disturbed_square(o, "stall", stall)
+
+
+def case_replug(o):
+    """The USB cable pulled 2.5 s into the square job and plugged in again 2 s later,
+    with the port named by --link, which exists only while the device is enumerated
+    (as a CDC-ACM port's device node does): nc-send reads an error when it goes,
+    waits for the same path, reconnects, takes its own held job over and streams the
+    rest (docs/nc-send.md, replug); the job completes exactly."""
+
+    def pull(b, p):
+        time.sleep(2.5)
+        b.command("unplug")
+        time.sleep(2.0)
+        b.command("plug")
+        return "cable pulled at 2.5 s for 2 s"
+    return disturbed_square(o, "replug", pull, link=True)
+
+
+
 def case_persist(o):
     """The machine loaded by nc-send survives a reset by NRST, one by the watchdog and
     a reset request (AIRCR.SYSRESETREQ, as a debugger makes it)."""
@@ -544,7 +624,8 @@ def main():
     ap.add_argument("--nc-send", dest="nc", default=os.path.join(ROOT, "target/debug/nc-send"))
     ap.add_argument("--vboard", default=os.path.join(ROOT, "vboard/target/release/pkmc-vboard"))
     ap.add_argument("cases", nargs="*", default=["square", "dense", "square8", "dense8", "estop", "limit",
-                                                 "ampfault", "jam", "unplug", "persist", "determinism", "replay"])
+                                                 "ampfault", "jam", "unplug", "stall", "replug", "persist", "determinism",
+                                                 "replay"])
     o = ap.parse_args()
     for what, path in (("nc-send", o.nc), ("pkmc-vboard", o.vboard), ("firmware ELF", o.elf)):
         if not os.path.exists(path):
@@ -581,7 +662,8 @@ def main():
         else:
             notes.append({"estop": case_estop, "unplug": case_unplug, "persist": case_persist,
                           "limit": case_limit, "ampfault": case_ampfault, "jam": case_jam,
-                          "determinism": case_determinism, "replay": case_replay}[case](o))
+                          "determinism": case_determinism, "replay": case_replay,
+                          "stall": case_stall, "replug": case_replug}[case](o))
         print(f"vboard: {case} done in {time.time() - t:.1f} s", flush=True)
     print("\n| job | blocks | motion s | busy % per 1 ms (min / median / p99 / max) | servo start µs "
           "(min / median / p99 / max) | stack deepest / untouched B | blocks/s executed | frames/s accepted "

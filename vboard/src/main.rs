@@ -232,22 +232,15 @@ fn run(args: Args) -> Result<()> {
     let mut log = rtt::Log::new(&image, &raw)?;
     let mut host = usbhost::Host::default();
 
-    let (mut master, slave) = serialport::TTYPort::pair().context("a pseudo-terminal")?;
-    let port = slave.name().context("the pseudo-terminal's name")?;
-    if let Some(link) = &args.link {
-        let _ = std::fs::remove_file(link);
-        std::os::unix::fs::symlink(&port, link)
-            .with_context(|| format!("linking {}", link.display()))?;
-    }
+    let mut node = Some(DeviceNode::open(args.link.as_deref())?);
     println!(
         "{}",
-        args.link
-            .as_ref()
-            .map_or(port.clone(), |l| l.display().to_string())
+        args.link.as_ref().map_or(
+            node.as_ref().map(|n| n.port.clone()).unwrap_or_default(),
+            |l| { l.display().to_string() }
+        )
     );
     std::io::stdout().flush()?;
-    use serialport::SerialPort;
-    master.set_timeout(Duration::from_millis(0))?;
 
     let stop = Arc::new(AtomicBool::new(false));
     let s = stop.clone();
@@ -331,6 +324,19 @@ fn run(args: Args) -> Result<()> {
         for line in host.log.drain(..) {
             eprintln!("vboard: usb: {line}");
         }
+        // With --link, the port is there only while the device is enumerated, as a
+        // CDC-ACM device's /dev/ttyACM node is: a pulled cable removes it (the host
+        // holding it open reads an error), enumeration after a replug makes a new one.
+        if let Some(link) = args.link.as_deref() {
+            if node.is_some() && !host.plugged && host.phase == usbhost::Phase::Detached {
+                node = None;
+                let _ = std::fs::remove_file(link);
+                eprintln!("vboard: {} removed (device detached)", link.display());
+            } else if node.is_none() && host.phase == usbhost::Phase::Configured {
+                node = Some(DeviceNode::open(Some(link))?);
+                eprintln!("vboard: {} back (device enumerated)", link.display());
+            }
+        }
         if now >= next_ms {
             next_ms = now + time::from_ms(1);
             frames_per_ms.push((host.frames_out - frames_seen) as u32);
@@ -391,7 +397,7 @@ fn run(args: Args) -> Result<()> {
             // The pseudo-terminal, both ways (a replay's host bytes instead).
             if replaying.is_some() {
                 host.to_device.extend(&replayed_in);
-            } else if let Ok(n) = master.read(&mut buf) {
+            } else if let Some(Ok(n)) = node.as_mut().map(|n| n.master.read(&mut buf)) {
                 if n > 0 {
                     if let Some(r) = recorder.as_mut() {
                         r.event(now, &replay::Kind::In(buf[..n].to_vec()))?;
@@ -409,8 +415,14 @@ fn run(args: Args) -> Result<()> {
             new_out.clear();
             if !host.from_device.is_empty() {
                 let out: Vec<u8> = host.from_device.iter().copied().collect();
-                if let Ok(n) = master.write(&out) {
-                    host.from_device.drain(..n);
+                match node.as_mut().map(|n| n.master.write(&out)) {
+                    Some(Ok(n)) => {
+                        host.from_device.drain(..n);
+                    }
+                    // No port: what the device sends is lost, as it is when no
+                    // program holds a real port open.
+                    None => host.from_device.clear(),
+                    Some(Err(_)) => {}
                 }
             }
             // Never ahead of the wall clock (a replay has no host to wait for).
@@ -459,8 +471,35 @@ fn run(args: Args) -> Result<()> {
     if let Some(f) = &args.flash {
         std::fs::write(f, &core.uc.get_data().flash.config)?;
     }
-    drop(slave);
+    drop(node);
     outcome
+}
+
+/// The host side of the USB link: a pseudo-terminal pair (its slave is the port a
+/// host program opens) and, with `--link`, the symbolic link that names it.
+struct DeviceNode {
+    master: serialport::TTYPort,
+    _slave: serialport::TTYPort,
+    port: String,
+}
+
+impl DeviceNode {
+    fn open(link: Option<&std::path::Path>) -> anyhow::Result<Self> {
+        use serialport::SerialPort;
+        let (mut master, slave) = serialport::TTYPort::pair().context("a pseudo-terminal")?;
+        let port = slave.name().context("the pseudo-terminal's name")?;
+        if let Some(link) = link {
+            let _ = std::fs::remove_file(link);
+            std::os::unix::fs::symlink(&port, link)
+                .with_context(|| format!("linking {}", link.display()))?;
+        }
+        master.set_timeout(Duration::from_millis(0))?;
+        Ok(Self {
+            master,
+            _slave: slave,
+            port,
+        })
+    }
 }
 
 /// min / median / p99 / max of `v` (sorted here).

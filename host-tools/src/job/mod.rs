@@ -279,8 +279,9 @@ pub fn run_blocks_at<'b>(
         let end = match link.run_job(&blocks, hooks) {
             // The port went away (a cable pulled): wait for it and go on.
             Err(e) if replug::applies(&e, opts, &path) => {
+                let earlier = link.stats;
                 drop(link);
-                return replug::rejoin(e, &path, machine, opts, &blocks, pose, hooks);
+                return replug::rejoin(e, &path, machine, opts, &blocks, pose, earlier, hooks);
             }
             r => r?,
         };

@@ -37,8 +37,12 @@ pub fn rejoin(
     opts: &RunOptions<'_>,
     blocks: &[Block],
     pose: [i64; 6],
+    earlier: ClientStats,
     hooks: &mut dyn JobHooks,
 ) -> Result<(JobEnd, Status, ClientStats), Failure> {
+    // The counts of the links before this one, and how many of the job's blocks the
+    // controller had from them (its mark, read when the port is back).
+    let mut earlier = earlier;
     hooks.note(&format!(
         "{why}: the port went away; waiting up to {} s for it to come back",
         REPLUG_WAIT.as_secs()
@@ -83,6 +87,7 @@ pub fn rejoin(
         };
         let k = held.next_block.wrapping_sub(opts.link.mark.next_block) as usize;
         let k = k.min(blocks.len());
+        let received = k as u64;
         let start = blocks[..k]
             .iter()
             .rev()
@@ -93,14 +98,58 @@ pub fn rejoin(
             k + 1,
             blocks.len()
         ));
+        // The controller counts executed blocks from each session's Hello; the held
+        // job's earlier sessions' count comes with it (`HeldJob::done`).
+        let done_before = link.held().map_or(0, |h| h.done);
         match link.continue_job(held, &blocks[k..], start, hooks) {
             Ok(end) => {
-                let status = link.request_status()?;
-                return Ok((end, status, link.stats));
+                let mut status = link.request_status()?;
+                status.blocks_done = status.blocks_done.wrapping_add(done_before);
+                let mut stats = link.stats;
+                with_earlier(&mut stats, &earlier, received);
+                return Ok((end, status, stats));
             }
             // Gone again: wait again.
-            Err(e) if applies(&e, opts, path) => since = Instant::now(),
+            Err(e) if applies(&e, opts, path) => {
+                let mut stats = link.stats;
+                with_earlier(&mut stats, &earlier, received);
+                earlier = stats;
+                since = Instant::now();
+            }
             Err(e) => return Err(e.into()),
         }
     }
+}
+
+/// `stats` (a link opened after a replug, which sent the job from block `received` on)
+/// made the whole job's: the earlier links' counts added, and the blocks they sent
+/// that the controller never had (lost with the port) counted as sent again, not as
+/// sent twice.
+fn with_earlier(stats: &mut ClientStats, earlier: &ClientStats, received: u64) {
+    let lost = earlier.blocks_sent.saturating_sub(received);
+    let e = earlier;
+    stats.frames_sent += e.frames_sent;
+    stats.bytes_sent += e.bytes_sent;
+    stats.blocks_sent += e.blocks_sent - lost;
+    stats.resent += e.resent + lost;
+    stats.rewinds += e.rewinds;
+    stats.timeouts += e.timeouts;
+    stats.naks += e.naks;
+    let (n, m) = (&mut stats.nak_reasons, &e.nak_reasons);
+    n.corrupt += m.corrupt;
+    n.gap += m.gap;
+    n.queue_full += m.queue_full;
+    n.other += m.other;
+    stats.naks_ignored += e.naks_ignored;
+    stats.controls += e.controls;
+    stats.controls_resent += e.controls_resent;
+    stats.status_requests += e.status_requests;
+    stats.frames_received += e.frames_received;
+    stats.corrupt_received += e.corrupt_received;
+    stats.own_gaps += e.own_gaps;
+    stats.own_gap_max_s = stats.own_gap_max_s.max(e.own_gap_max_s);
+    stats.host_timeout_resumes += e.host_timeout_resumes;
+    // The first link planned the whole job; a later one only its rest.
+    stats.plan_time_s = stats.plan_time_s.max(e.plan_time_s);
+    stats.reconnects += e.reconnects + 1;
 }

@@ -80,6 +80,9 @@ pub struct ClientStats {
     pub own_gaps: u64,
     /// The longest of them, s.
     pub own_gap_max_s: f64,
+    /// Times the port went away mid-job (a cable pulled) and this host reconnected and
+    /// took its job over (`job::replug`); the other counts are the whole job's.
+    pub reconnects: u64,
     /// Times the controller held this job because this host had been silent longer
     /// than the job's host timeout, and this host, back, resumed it.
     pub host_timeout_resumes: u64,
