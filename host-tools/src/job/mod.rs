@@ -279,9 +279,13 @@ pub fn run_blocks_at<'b>(
         let end = match link.run_job(&blocks, hooks) {
             // The port went away (a cable pulled): wait for it and go on.
             Err(e) if replug::applies(&e, opts, &path) => {
-                let earlier = link.stats;
+                let job = replug::Interrupted {
+                    blocks: &blocks,
+                    pose,
+                    stats: link.stats,
+                };
                 drop(link);
-                return replug::rejoin(e, &path, machine, opts, &blocks, pose, earlier, hooks);
+                return replug::rejoin(e, &path, machine, opts, job, hooks);
             }
             r => r?,
         };

@@ -27,22 +27,32 @@ pub fn applies(e: &LinkError, opts: &RunOptions<'_>, path: &str) -> bool {
     marked && gone
 }
 
-/// Waits for the port at `path` to come back, reconnects, and continues the job
-/// whose blocks are `blocks` (the first starting at `pose`) from the first block the
-/// controller never received.
+/// The job a port's loss interrupted: its blocks (the first starting at `pose`) and
+/// the counts of the link that streamed them (the report adds every link's).
+pub struct Interrupted<'b> {
+    /// The job's blocks.
+    pub blocks: &'b [Block],
+    /// Where the first starts.
+    pub pose: [i64; 6],
+    /// The lost link's counts.
+    pub stats: ClientStats,
+}
+
+/// Waits for the port at `path` to come back, reconnects, and continues `job` from
+/// the first block the controller never received.
 pub fn rejoin(
     why: LinkError,
     path: &str,
     machine: &MachineConfig,
     opts: &RunOptions<'_>,
-    blocks: &[Block],
-    pose: [i64; 6],
-    earlier: ClientStats,
+    job: Interrupted<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<(JobEnd, Status, ClientStats), Failure> {
-    // The counts of the links before this one, and how many of the job's blocks the
-    // controller had from them (its mark, read when the port is back).
-    let mut earlier = earlier;
+    let Interrupted {
+        blocks,
+        pose,
+        stats: mut earlier,
+    } = job;
     hooks.note(&format!(
         "{why}: the port went away; waiting up to {} s for it to come back",
         REPLUG_WAIT.as_secs()
