@@ -70,43 +70,34 @@ def functions(lines):
         i += 1
 
 
-def core_imports_ok(rel, lines):
-    """Does every `crate::room` that a core file's code (before its tests) names lie
-    below the file's own room?"""
-    room = rel.parts[1].removesuffix(".rs")  # src/<room>/...
-    if room not in CORE_ORDER:
-        return True  # lib.rs; the firmware (src/bin) is its own crate, on top
-    below = set(CORE_ORDER[: CORE_ORDER.index(room)])
+def rooms_named(rel, room, allowed, lines, what):
+    """Does every `crate::room` that the file's code (before its tests) names lie in
+    `allowed` (or its own room)? Prints each that does not."""
     ok = True
     for n, line in enumerate(lines, 1):
         if line.startswith("#[cfg(test)]"):
             break
         code = line.split("//")[0]
         for other in CRATE_PATH.findall(code):
-            if other != room and other not in below:
-                print(f"{rel}:{n}: the core's {room} room may not import crate::{other} (above it)")
+            if other != room and other not in allowed:
+                print(f"{rel}:{n}: {what} may not import crate::{other}")
                 ok = False
     return ok
 
 
 def imports_ok(path, rel, lines):
-    """Is every `crate::room` that `path`'s code (before its tests) names allowed?"""
+    """Is every `crate::room` that `path`'s code (before its tests) names allowed? In
+    the core, only the rooms below the file's own; in the host, what ALLOWED lists."""
     if rel.parts[0] == "src":
-        return core_imports_ok(rel, lines)
-    parts = rel.parts[2:]  # host-tools/src/<room>/...
-    room = parts[0].removesuffix(".rs")
+        room = rel.parts[1].removesuffix(".rs")  # src/<room>/...
+        if room not in CORE_ORDER:
+            return True  # lib.rs; the firmware (src/bin) is its own crate, on top
+        below = set(CORE_ORDER[: CORE_ORDER.index(room)])
+        return rooms_named(rel, room, below, lines, f"the core's {room} room (only rooms below it)")
+    room = rel.parts[2].removesuffix(".rs")  # host-tools/src/<room>/...
     if room not in ALLOWED:
         return True  # lib.rs, the binaries
-    ok = True
-    for n, line in enumerate(lines, 1):
-        if line.startswith("#[cfg(test)]"):
-            break
-        code = line.split("//")[0]
-        for other in CRATE_PATH.findall(code):
-            if other != room and other not in ALLOWED[room]:
-                print(f"{rel}:{n}: the {room} room may not import crate::{other}")
-                ok = False
-    return ok
+    return rooms_named(rel, room, ALLOWED[room], lines, f"the {room} room")
 
 
 def main():
