@@ -125,21 +125,23 @@ USB_PACKET = 64
 MAX_STEPS = 20_000_000  # instructions: a runaway call stops here
 
 
-def build():
+def build(crate=CRATE, target_dir=TARGET_DIR):
+    """Builds the harness at `crate` (its own workspace, with its own link.ld) for the
+    M4 and for the host (profile `host`) into `target_dir`."""
     # The workspace's lock file, so the measured build resolves the firmware's exact
     # dependency versions (cargo adds the harness package to this copy).
-    shutil.copyfile(os.path.join(ROOT, "Cargo.lock"), os.path.join(CRATE, "Cargo.lock"))
+    shutil.copyfile(os.path.join(ROOT, "Cargo.lock"), os.path.join(crate, "Cargo.lock"))
     env = dict(os.environ)
     env.pop("CARGO_TARGET_DIR", None)
-    link = os.path.join(CRATE, "link.ld")
+    link = os.path.join(crate, "link.ld")
     env["RUSTFLAGS"] = f"-C target-cpu=cortex-m4 -C link-arg=-T{link}"
     env[f"CARGO_TARGET_{TARGET.upper().replace('-', '_')}_LINKER"] = "rust-lld"
     subprocess.run(
-        ["cargo", "build", "--release", "--target", TARGET, "--target-dir", TARGET_DIR],
-        cwd=CRATE, env=env, check=True)
+        ["cargo", "build", "--release", "--target", TARGET, "--target-dir", target_dir],
+        cwd=crate, env=env, check=True)
     env.pop("RUSTFLAGS")
-    subprocess.run(["cargo", "build", "--profile", "host", "--target-dir", TARGET_DIR],
-                   cwd=CRATE, env=env, check=True)
+    subprocess.run(["cargo", "build", "--profile", "host", "--target-dir", target_dir],
+                   cwd=crate, env=env, check=True)
 
 
 def host_cases():

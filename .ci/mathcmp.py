@@ -52,18 +52,7 @@ OUT = m4count.ARG + 0x400  # result words
 
 
 def build():
-    shutil.copyfile(os.path.join(ROOT, "Cargo.lock"), os.path.join(CRATE, "Cargo.lock"))
-    env = dict(os.environ)
-    env.pop("CARGO_TARGET_DIR", None)
-    link = os.path.join(CRATE, "link.ld")
-    env["RUSTFLAGS"] = f"-C target-cpu=cortex-m4 -C link-arg=-T{link}"
-    env[f"CARGO_TARGET_{TARGET.upper().replace('-', '_')}_LINKER"] = "rust-lld"
-    subprocess.run(
-        ["cargo", "build", "--release", "--target", TARGET, "--target-dir", TARGET_DIR],
-        cwd=CRATE, env=env, check=True)
-    env.pop("RUSTFLAGS")
-    subprocess.run(["cargo", "build", "--profile", "host", "--target-dir", TARGET_DIR],
-                   cwd=CRATE, env=env, check=True)
+    m4count.build(CRATE, TARGET_DIR)
 
 
 def versions():
