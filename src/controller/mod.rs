@@ -55,7 +55,8 @@ use safety::{alarm_of, UNHOMED};
 pub use crate::motion::planner::QUEUE_CAPACITY;
 /// Bytes of outgoing frames buffered between two `transmit` calls.
 pub const TX_CAPACITY: usize = 2048;
-/// Ticks between two unsolicited status messages (50 ms at 1 kHz). Freed queue slots
+/// Ticks between two unsolicited status messages while moving (50 ms at 1 kHz; at
+/// rest, one only if the state changed since the last status). Freed queue slots
 /// are reported at once, by an `Ack` of the last block accepted, from the tick that
 /// frees them.
 pub const STATUS_EVERY_TICKS: u32 = 50;
@@ -162,6 +163,9 @@ pub struct Controller {
     ack_due: bool,
     /// A status is owed (requested, or periodic); encoded by `transmit`.
     status_due: bool,
+    /// The state of the last status encoded: at rest, a periodic status goes out only
+    /// when the state is another.
+    reported: State,
     silent_ticks: u32,
     link_watch: bool,
     last: Inputs,
@@ -313,6 +317,7 @@ impl Controller {
             at!((*p).since_status).write(0);
             at!((*p).ack_due).write(false);
             at!((*p).status_due).write(false);
+            at!((*p).reported).write(State::Alarm);
             at!((*p).silent_ticks).write(0);
             at!((*p).link_watch).write(true);
             at!((*p).last).write(Inputs::default());
@@ -427,6 +432,15 @@ impl Controller {
             && (self.job_held() || self.job_open)
     }
 
+    /// Is anything moving, or about to (running, homing, decelerating)? Periodic
+    /// statuses are sent only then: at rest (idle, starved, held, an alarm) the next
+    /// periodic one only if the state is not the one last reported, and any on
+    /// request, so that a controller whose clock runs ahead of its host (the
+    /// simulator) does not flood the link with identical statuses.
+    fn moving(&self) -> bool {
+        matches!(self.state, State::Running | State::Homing) || !self.exec.stopped()
+    }
+
     /// A block executing or queued, or smoothing still catching up.
     pub(super) fn path_moving(&self) -> bool {
         self.exec.busy() || !self.planner.is_empty() || !self.exec.settled()
@@ -533,7 +547,9 @@ impl Controller {
         self.since_status = self.since_status.saturating_add(1);
         if self.session && self.since_status as u32 >= STATUS_EVERY_TICKS {
             self.since_status = 0;
-            self.status_due = true;
+            if self.moving() || self.state != self.reported {
+                self.status_due = true;
+            }
         }
         &self.out
     }

@@ -15,9 +15,9 @@ use crate::motion::block::PlannedBlock;
 use crate::motion::planner::PushError;
 use crate::units::TICK_HZ;
 use crate::wire::{
-    decode_block_into, encode_ack, encode_frame_with, encode_status, Alarm, AlarmCause, Control,
-    CtrlMsg, HeldJob, HostMsgOf, JobMark, NakReason, NotBlock, State, Status, MAX_BODY, MAX_FRAME,
-    NO_JOINT, PROTOCOL_VERSION,
+    decode_block_into, encode_ack, encode_frame_with, encode_status, is_block, Alarm, AlarmCause,
+    Control, CtrlMsg, HeldJob, HostMsgOf, JobMark, NakReason, NotBlock, State, Status, MAX_BODY,
+    MAX_FRAME, NO_JOINT, PROTOCOL_VERSION,
 };
 
 impl Controller {
@@ -62,6 +62,17 @@ impl Controller {
                 self.corrupt();
                 continue;
             };
+            // (The sequence number first: for the block expected it alone says no.)
+            if (seq.wrapping_sub(self.expected_seq) as i16) < 0
+                && self.session
+                && is_block(message)
+            {
+                // A copy of a block accepted already (a resend, or one of the copies
+                // a host sends on a noisy line): acknowledged, not decoded again.
+                self.silent_ticks = 0;
+                self.ack_due = true;
+                continue;
+            }
             // Messages are handled by reference: a block is some 250 bytes, not to be
             // moved around; blocks, the bulk of the traffic, are decoded by hand.
             let mut slot = core::mem::MaybeUninit::uninit();
@@ -137,6 +148,7 @@ impl Controller {
         }
         if self.status_due {
             let s = self.status();
+            self.reported = s.state;
             self.status_due =
                 !self.push_frame(|seq, body, out| Some(encode_status(seq, &s, body, out)));
         }

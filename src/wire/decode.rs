@@ -266,6 +266,13 @@ pub fn decode_block(message: &[u8]) -> Option<Result<PlannedBlock, FrameError>> 
     decode_block_into(message, &mut slot).map(|r| r.copied())
 }
 
+/// Is `message` (a frame's body) a block? Read from its first byte only, without
+/// decoding it: the controller skips the decoding of a copy of a block it has.
+#[inline(always)]
+pub fn is_block(message: &[u8]) -> bool {
+    message.first() == Some(&(HOST_MSG_BLOCK as u8))
+}
+
 /// [`decode_block`] written field by field into `slot` (the controller's receive path:
 /// no temporary of the block, no copy of it); the block, by reference, when it decoded.
 pub fn decode_block_into<'a>(

@@ -27,7 +27,7 @@ pub mod store;
 #[cfg(test)]
 mod tests;
 
-pub use decode::{decode_block, decode_block_into};
+pub use decode::{decode_block, decode_block_into, is_block};
 pub use frame::{
     decode_body, decode_frame, encode_ack, encode_frame, encode_frame_with, encode_status,
     FrameError, WHITEN,
