@@ -183,6 +183,17 @@ impl Progress {
         }
     }
 
+    /// Writes a warning, as [`Progress::say`] does, but also when quiet (the report on
+    /// stdout is for programs; stderr is still the operator's).
+    pub fn warn(&mut self, message: &str) {
+        let message = format!("warning: {message}");
+        if self.style == Style::Quiet {
+            eprintln!("{message}");
+        } else {
+            self.say(&message);
+        }
+    }
+
     /// Draws the final state and ends the bar's line.
     pub fn finish(&mut self) {
         if self.style == Style::Quiet || self.last.is_none() || self.total == 0 {
@@ -414,6 +425,10 @@ impl JobHooks for Operator {
 
     fn note(&mut self, text: &str) {
         self.progress.say(text);
+    }
+
+    fn warn(&mut self, text: &str) {
+        self.progress.warn(text);
     }
 
     fn ends_at_pause(&self) -> bool {

@@ -161,5 +161,8 @@ fn with_earlier(stats: &mut ClientStats, earlier: &ClientStats, received: u64) {
     stats.host_timeout_resumes += e.host_timeout_resumes;
     // The first link planned the whole job; a later one only its rest.
     stats.plan_time_s = stats.plan_time_s.max(e.plan_time_s);
+    stats.copies += e.copies;
+    stats.line_warnings += e.line_warnings;
+    stats.frame_damage_max = stats.frame_damage_max.max(e.frame_damage_max);
     stats.reconnects += e.reconnects + 1;
 }

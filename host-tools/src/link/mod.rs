@@ -24,10 +24,13 @@
 //! * Go-back-N: a `Nak` for a corrupt frame, a gap or a full queue rewinds the stream
 //!   to the block the controller expects; the `Nak`s that the blocks already in flight
 //!   behind the lost one will draw for the same reason are then ignored (counted, not
-//!   acted on). With blocks in flight and no acknowledgement for
-//!   [`LinkOptions::resend_after`], the stream rewinds to the first unacknowledged
-//!   block. The controller re-acknowledges duplicates without executing them, so a
-//!   block is never executed twice and never skipped.
+//!   acted on) for a round trip. With blocks in flight and no acknowledgement for the
+//!   retransmission timeout (the measured round trip's `srtt + 4 rttvar`, 10 ms at
+//!   least, [`LinkOptions::resend_after`] at most), the stream rewinds to the first
+//!   unacknowledged block. On a line that damages many frames each block goes in
+//!   copies (up to four, back to back; [`resend`]). The controller re-acknowledges
+//!   duplicates and copies without executing them, so a block is never executed twice
+//!   and never skipped.
 //! * `Nak` reasons that no resend can cure end the job with a typed [`LinkError`]:
 //!   `Version`, `NoSession` (the controller restarted: the blocks it had are gone) and
 //!   `BadBlock` (naming the NC line).
@@ -52,22 +55,27 @@
 //! rest (idle, an alarm, a pause or hold waiting for the operator) never counts.
 //!
 //! Rooms: [`transport`] (bytes), [`client`] (frames, handshake, controls, status),
-//! [`stream`] (a job's blocks), [`error`], [`view`] (the status as every face shows
-//! it: user units, the core's words).
+//! [`stream`] (a job's blocks), [`resend`] (credits, copies, `Nak`s, the timeout),
+//! [`rtt`] (the measured round trip and damage), [`error`], [`view`] (the status as
+//! every face shows it: user units, the core's words).
 
 mod client;
 mod error;
 mod liveness;
 mod plans;
+mod resend;
+mod rtt;
 mod stall;
+mod stats;
 mod stream;
 mod transport;
 pub mod view;
 mod window;
 
 use client::PendingControl;
-pub use client::{Buffered, ClientStats, JobEnd, JobHooks, LinkView, NakCounts, NoHooks};
+pub use client::{JobEnd, JobHooks, LinkView, NoHooks};
 pub use error::LinkError;
+pub use stats::{Buffered, ClientStats, NakCounts};
 pub use stream::{estimate_ms, TAIL_AFTER};
 pub use transport::{is_timeout, PortTransport, SimClock, Transport};
 
@@ -79,7 +87,8 @@ use std::time::{Duration, Instant};
 /// Default limit of motion buffered in the controller, ms: no block is sent while the
 /// controller reports this much or more.
 pub const MAX_BUFFERED_MS: u32 = 2000;
-/// Default time without an acknowledgement, blocks in flight, before resending.
+/// Default longest time without an acknowledgement, blocks in flight, before
+/// resending (the timeout before the round trip is measured).
 pub const RESEND_AFTER: Duration = Duration::from_millis(200);
 /// Default silence after which the link is declared lost.
 pub const LINK_TIMEOUT: Duration = Duration::from_secs(3);
@@ -110,7 +119,8 @@ pub const STALL_TICKS: u64 = 10 * pkmc::units::TICK_HZ as u64;
 pub struct LinkOptions {
     /// Send no block while the controller reports this much motion buffered, ms.
     pub max_buffered_ms: u32,
-    /// Resend unacknowledged blocks after this long without an acknowledgement.
+    /// Resend unacknowledged blocks after this long without an acknowledgement at most
+    /// (and before the round trip is measured); measured, after `srtt + 4 rttvar`.
     pub resend_after: Duration,
     /// Declare the link lost after this long without a valid frame.
     pub link_timeout: Duration,

@@ -5,12 +5,12 @@
 use super::client::{JobEnd, JobHooks, LinkView, PendingControl};
 use super::plans::Plans;
 use super::stall::dwell_ticks;
-use super::window::{Ending, Guard, JobState};
+use super::window::{Ending, JobState};
 use super::{Link, LinkError, Transport, CONTROL_RESEND_AFTER, READ_WAIT};
 use pkmc::kinematics::MachineKinematics;
 use pkmc::motion::block::{Block, Motion};
 use pkmc::motion::geometry::Path;
-use pkmc::wire::{AlarmCause, Control, CtrlMsg, HostMsg, NakReason, State, Status};
+use pkmc::wire::{AlarmCause, Control, CtrlMsg, HostMsg, State, Status};
 use std::time::{Duration, Instant};
 
 /// While a job is fed, the last block known is sent without its successor once no
@@ -56,7 +56,7 @@ fn estimate_on(from: &[i64; 6], b: &Block, path: Option<&Path>, axis_vmax: &[i64
 /// runs ([`JobHooks::feed`]).
 pub(super) struct Fed {
     pub(super) blocks: Vec<Block>,
-    plans: Plans,
+    pub(super) plans: Plans,
     kin: MachineKinematics,
     /// More blocks may come.
     pub(super) open: bool,
@@ -164,6 +164,8 @@ impl<T: Transport> Link<T> {
         let result = self.job_loop(&mut fed, hooks, &mut job);
         self.stats.plan_time_s = fed.plans.time_s();
         self.stats.buffered = super::Buffered::of(&mut job.buffered_samples);
+        self.stats.rtt_ms = job.rtt.srtt().map_or(0.0, |d| d.as_secs_f64() * 1e3);
+        self.stats.rto_ms = job.rtt.rto(self.opts.resend_after).as_secs_f64() * 1e3;
         self.next_seq = job.seq_of(job.acked.max(job.high));
         result
     }
@@ -257,27 +259,7 @@ impl<T: Transport> Link<T> {
             // Blocks, within credits and the buffered-motion limit.
             if job.ending.is_none() && self.tx.is_empty() {
                 let sendable = self.sendable(fed, job);
-                while job.sent < sendable
-                    && job.sent - job.acked < job.free.min(job.window)
-                    && job.bend_free_for(job.sent)
-                    && job.buffered_ms < self.opts.max_buffered_ms
-                    && (job.sent == job.acked
-                        || job.buffered_ms as f64 + job.in_flight_ms()
-                            < self.opts.max_buffered_ms as f64)
-                {
-                    let seq = job.seq_of(job.sent);
-                    self.queue(seq, &HostMsg::Block(fed.plans.planned[job.sent]))?;
-                    if job.sent < job.high {
-                        self.stats.resent += 1;
-                    } else {
-                        self.stats.blocks_sent += 1;
-                    }
-                    job.sent += 1;
-                    job.high = job.high.max(job.sent);
-                    if job.sent - job.acked == 1 {
-                        job.last_progress = now;
-                    }
-                }
+                self.send_blocks(fed, job, sendable, now)?;
             }
             // Heartbeat: a status request every `keepalive`, so the controller hears
             // the host (it stops after 1 s of silence while moving) and the host hears
@@ -298,14 +280,8 @@ impl<T: Transport> Link<T> {
                     return Ok(end);
                 }
             }
-            // Retransmission timeout (not counting a gap of our own).
-            job.last_progress = self.since(job.last_progress);
-            if job.sent > job.acked && job.last_progress.elapsed() > self.opts.resend_after {
-                self.stats.timeouts += 1;
-                job.rewind_to(job.acked, &mut self.stats);
-                job.guard = None;
-                job.last_progress = Instant::now();
-            }
+            self.judge_line(job, hooks);
+            self.resend_if_late(job);
             if self.last_heard.elapsed() > self.opts.link_timeout {
                 return Err(self.lost(
                     if job.acked < total {
@@ -381,6 +357,7 @@ impl<T: Transport> Link<T> {
                 buffered_ms,
             } => {
                 if let Some(done) = job.index_after(seq) {
+                    job.rtt.acked(done, true);
                     if done > job.acked {
                         job.advance(done);
                     }
@@ -406,91 +383,6 @@ impl<T: Transport> Link<T> {
             CtrlMsg::MachineLoaded { .. } | CtrlMsg::MachineRefused { .. } => {}
         }
         Ok(None)
-    }
-
-    /// A `Nak`: counted by reason; refusals no resend can cure end the job; otherwise
-    /// the stream goes back to the block the controller expects, once per loss (the
-    /// `Nak`s the blocks behind the lost one draw are ignored).
-    fn on_nak(
-        &mut self,
-        expected: u16,
-        reason: NakReason,
-        blocks: &[Block],
-        job: &mut JobState,
-    ) -> Result<(), LinkError> {
-        self.stats.naks += 1;
-        match reason {
-            NakReason::Corrupt => self.stats.nak_reasons.corrupt += 1,
-            NakReason::Gap => self.stats.nak_reasons.gap += 1,
-            NakReason::QueueFull => self.stats.nak_reasons.queue_full += 1,
-            _ => self.stats.nak_reasons.other += 1,
-        }
-        let at = job.index_at(expected);
-        if let Some(at) = at {
-            if at > job.acked {
-                job.advance(at);
-            }
-        }
-        match reason {
-            NakReason::Version => {
-                return Err(LinkError::Version {
-                    port: self.port(),
-                    theirs: None,
-                })
-            }
-            NakReason::NoSession => return Err(LinkError::SessionLost { port: self.port() }),
-            NakReason::MachineMismatch => {
-                return Err(LinkError::MachineMismatch { port: self.port() })
-            }
-            // The job was ours when it began (`run_job` refuses a held one): now it is
-            // held as an earlier host's, so another program said `Hello`.
-            NakReason::JobHeld if job.high > 0 => {
-                return Err(self.superseded("Nak(JobHeld) of our blocks"))
-            }
-            NakReason::JobHeld => {
-                return Err(LinkError::JobHeld {
-                    port: self.port(),
-                    job: self.held.unwrap_or(pkmc::wire::HeldJob {
-                        host: 0,
-                        line: self.status.as_ref().map_or(0, |s| s.line),
-                        done: 0,
-                        queued: 0,
-                        state: self.status.as_ref().map_or(State::Hold, |s| s.state),
-                    }),
-                })
-            }
-            NakReason::BadBlock => {
-                let line = at.and_then(|i| blocks.get(i)).map_or(0, |b| b.line);
-                return Err(LinkError::BadBlock {
-                    port: self.port(),
-                    line,
-                });
-            }
-            NakReason::QueueFull => job.free = 0,
-            _ => {}
-        }
-        if let Some(at) = at {
-            if job.ending.is_none() && at < job.sent {
-                match job.guard.as_mut() {
-                    Some(g) if g.at == at && g.stale_left > 0 => {
-                        g.stale_left -= 1;
-                        self.stats.naks_ignored += 1;
-                    }
-                    _ => {
-                        let stale = job.sent - at - 1;
-                        job.rewind_to(at, &mut self.stats);
-                        job.guard = Some(Guard {
-                            at,
-                            stale_left: stale,
-                        });
-                        job.last_progress = Instant::now();
-                    }
-                }
-            } else {
-                self.stats.naks_ignored += 1;
-            }
-        }
-        Ok(())
     }
 
     /// A status: acknowledges what it shows executed, updates the credits, and ends

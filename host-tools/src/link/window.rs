@@ -2,6 +2,7 @@
 //! the `u16` wrap, credits (free slots, free bends, motion buffered), the congestion
 //! window (halved on a rewind, grown by acknowledgements) and the go-back-N guard.
 
+use super::rtt::{Damage, Rtt};
 use super::stall::StallGuard;
 use super::{ClientStats, MIN_WINDOW};
 use pkmc::wire::{Control, Status};
@@ -13,6 +14,9 @@ pub(super) struct Guard {
     pub(super) at: usize,
     /// `Nak`s for the same index still expected from frames sent before the rewind.
     pub(super) stale_left: usize,
+    /// When the stream went back: after a round trip ([`Rtt::stale_window`]) a `Nak`
+    /// for the same index answers a frame sent since, and is acted on.
+    pub(super) since: Instant,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -49,6 +53,13 @@ pub(super) struct JobState {
     pub(super) ending: Option<Ending>,
     pub(super) planned_ms: Vec<f64>,
     pub(super) stall: StallGuard,
+    /// The measured round trip (retransmission timeout, stale `Nak`s).
+    pub(super) rtt: Rtt,
+    /// The share of frames the line damages, and the copies of each block sent.
+    pub(super) damage: Damage,
+    pub(super) copies: usize,
+    /// The damage the operator was last told of (0: not told).
+    pub(super) warned_at: f64,
 }
 
 impl JobState {
@@ -72,6 +83,10 @@ impl JobState {
             ending: None,
             planned_ms: Vec::new(),
             stall: StallGuard::default(),
+            rtt: Rtt::default(),
+            damage: Damage::default(),
+            copies: 1,
+            warned_at: 0.0,
         }
     }
 
@@ -120,6 +135,7 @@ impl JobState {
         let k = acked - self.acked;
         self.acked = acked;
         self.sent = self.sent.max(acked);
+        self.rtt.acked(acked, false);
         self.window = (self.window + k.min(4)).min(self.capacity);
         self.last_progress = Instant::now();
         if self.guard.is_some_and(|g| g.at < acked) {
@@ -136,6 +152,7 @@ impl JobState {
         }
         stats.rewinds += 1;
         self.sent = at;
+        self.rtt.rewound(at);
         self.window = (self.window / 2).max(MIN_WINDOW);
     }
 }
