@@ -63,9 +63,7 @@ impl Controller {
                 continue;
             };
             // (The sequence number first: for the block expected it alone says no.)
-            if (seq.wrapping_sub(self.expected_seq) as i16) < 0
-                && self.session
-                && is_block(message)
+            if (seq.wrapping_sub(self.expected_seq) as i16) < 0 && self.session && is_block(message)
             {
                 // A copy of a block accepted already (a resend, or one of the copies
                 // a host sends on a noisy line): acknowledged, not decoded again.
