@@ -16,7 +16,7 @@ use crate::gcode::compress::space::units_per_nm;
 use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
 use pkmc::kinematics::{Jacobian, Kinematics, MachineKinematics, Unreachable};
 use pkmc::motion::block::Block;
-use pkmc::motion::geometry::Path;
+use pkmc::motion::geometry::{GeometryError, Path};
 use std::collections::BTreeSet;
 
 /// Largest distance between two samples of a path, nm.
@@ -159,58 +159,114 @@ pub fn margin(pose: &[i64; AXES], machine: &MachineConfig, kin: &MachineKinemati
     Some(s_min.min(if s_max > 0.0 { 1.0 / s_max } else { 0.0 }))
 }
 
+/// Each block's path from the end of the one before (the first from `start`), or why
+/// it is malformed: derived once for a compiled program, and read by the pre-flight
+/// ([`check_paths`]) and the statics ([`super::statics::check_paths`]).
+pub fn paths(blocks: &[Block], start: [i64; AXES]) -> Vec<Result<Path, GeometryError>> {
+    let mut from = start;
+    blocks
+        .iter()
+        .map(|b| {
+            let p = Path::new(b, &from);
+            if let Ok(p) = &p {
+                from = p.end;
+            }
+            p
+        })
+        .collect()
+}
+
 /// Checks `blocks`, starting at `start`, against `machine`.
 pub fn check(blocks: &[Block], machine: &MachineConfig, start: [i64; AXES]) -> Preflight {
-    let kin = MachineKinematics::new(machine);
-    let mut out = Preflight {
-        blocks: blocks.len(),
-        ..Preflight::default()
-    };
-    let mut seen = BTreeSet::new();
-    let mut from = start;
-    let mut q = [0i64; MAX_JOINTS];
-    for b in blocks {
-        let path = match Path::new(b, &from) {
-            Ok(p) => p,
-            Err(e) => {
-                out.findings.push(Finding {
-                    line: b.line,
-                    what: format!("malformed path ({e})"),
-                    at: user_pose(&from),
-                });
-                continue;
-            }
-        };
-        let len = path.length.max(0);
-        let n = (len / SAMPLE_NM + 1).clamp(1, 100_000) as i64;
-        for k in 0..=n {
-            let s = ((len as i128) << 16) * k as i128 / n as i128;
-            let mut pose = [0i64; AXES];
-            path.pose_at(&from, s as i64, &mut pose);
-            out.samples += 1;
-            match kin.inverse_checked(&pose, &machine.joints, &mut q) {
-                Err(why) => {
-                    let what = describe(why, machine);
-                    if seen.insert((b.line, what.clone())) {
-                        out.findings.push(Finding {
-                            line: b.line,
-                            what,
-                            at: user_pose(&pose),
-                        });
-                    }
+    check_paths(blocks, &paths(blocks, start), machine, start)
+}
+
+/// [`check`] of `blocks` whose paths are derived already ([`paths`]).
+pub fn check_paths(
+    blocks: &[Block],
+    paths: &[Result<Path, GeometryError>],
+    machine: &MachineConfig,
+    start: [i64; AXES],
+) -> Preflight {
+    let mut out = Preflight::default();
+    let mut acc = Accumulator::new(machine);
+    acc.add(blocks, paths, start, &mut out);
+    out
+}
+
+/// The pre-flight's working state carried from one run of blocks to the next (the
+/// kinematics, and which problems were reported on which line).
+pub struct Accumulator<'m> {
+    machine: &'m MachineConfig,
+    kin: MachineKinematics,
+    seen: BTreeSet<(u32, String)>,
+}
+
+impl<'m> Accumulator<'m> {
+    /// A fresh pre-flight of a program for `machine`.
+    pub fn new(machine: &'m MachineConfig) -> Self {
+        Self {
+            machine,
+            kin: MachineKinematics::new(machine),
+            seen: BTreeSet::new(),
+        }
+    }
+
+    /// Checks `blocks` (with their `paths`), the first starting at `start`, into `out`.
+    pub fn add(
+        &mut self,
+        blocks: &[Block],
+        paths: &[Result<Path, GeometryError>],
+        start: [i64; AXES],
+        out: &mut Preflight,
+    ) {
+        let (machine, kin) = (self.machine, &self.kin);
+        let seen = &mut self.seen;
+        out.blocks += blocks.len();
+        let mut from = start;
+        let mut q = [0i64; MAX_JOINTS];
+        for (b, path) in blocks.iter().zip(paths) {
+            let path = match path {
+                Ok(p) => p,
+                Err(e) => {
+                    out.findings.push(Finding {
+                        line: b.line,
+                        what: format!("malformed path ({e})"),
+                        at: user_pose(&from),
+                    });
+                    continue;
                 }
-                Ok(()) => {
-                    if let Some(m) = margin(&pose, machine, &kin) {
-                        if out.min_margin.is_none_or(|(best, _)| m < best) {
-                            out.min_margin = Some((m, b.line));
+            };
+            let len = path.length.max(0);
+            let n = (len / SAMPLE_NM + 1).clamp(1, 100_000) as i64;
+            for k in 0..=n {
+                let s = ((len as i128) << 16) * k as i128 / n as i128;
+                let mut pose = [0i64; AXES];
+                path.pose_at(&from, s as i64, &mut pose);
+                out.samples += 1;
+                match kin.inverse_checked(&pose, &machine.joints, &mut q) {
+                    Err(why) => {
+                        let what = describe(why, machine);
+                        if seen.insert((b.line, what.clone())) {
+                            out.findings.push(Finding {
+                                line: b.line,
+                                what,
+                                at: user_pose(&pose),
+                            });
+                        }
+                    }
+                    Ok(()) => {
+                        if let Some(m) = margin(&pose, machine, kin) {
+                            if out.min_margin.is_none_or(|(best, _)| m < best) {
+                                out.min_margin = Some((m, b.line));
+                            }
                         }
                     }
                 }
             }
+            from = path.end;
         }
-        from = path.end;
     }
-    out
 }
 
 #[cfg(test)]

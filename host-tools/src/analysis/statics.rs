@@ -28,7 +28,7 @@
 use pkmc::config::{axis_is_rotary, KinematicsConfig, MachineConfig, AXES, MAX_JOINTS};
 use pkmc::kinematics::{Jacobian, Kinematics, MachineKinematics};
 use pkmc::motion::block::Block;
-use pkmc::motion::geometry::Path;
+use pkmc::motion::geometry::{GeometryError, Path};
 use pkmc::units::NDEG_PER_DEG;
 
 /// A wrench on the tool: Fx Fy Fz (N), Mx My Mz (N·m) about the tool point, machine
@@ -300,6 +300,20 @@ pub fn check(
     loads: &Loads,
     limits: &[Option<f64>],
 ) -> Result<Statics, String> {
+    let paths = super::preflight::paths(blocks, start);
+    check_paths(blocks, &paths, machine, start, loads, limits)
+}
+
+/// [`check`] of `blocks` whose paths are derived already
+/// ([`super::preflight::paths`]).
+pub fn check_paths(
+    blocks: &[Block],
+    paths: &[Result<Path, GeometryError>],
+    machine: &MachineConfig,
+    start: [i64; AXES],
+    loads: &Loads,
+    limits: &[Option<f64>],
+) -> Result<Statics, String> {
     let axes: Vec<usize> = (0..AXES)
         .filter(|&i| machine.axes[i].max_velocity > 0)
         .collect();
@@ -318,8 +332,8 @@ pub fn check(
         ..Statics::default()
     };
     let mut from = start;
-    for b in blocks {
-        let Ok(path) = Path::new(b, &from) else {
+    for (b, path) in blocks.iter().zip(paths) {
+        let Ok(path) = path else {
             continue; // the pre-flight reports it
         };
         let w = loads.at(b.line);

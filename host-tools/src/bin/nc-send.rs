@@ -470,10 +470,7 @@ fn run_program(
     let (compiled, restart) = match args.from {
         Some(line) => job::from_line::compile_from(program, machine, opts, line, !quiet)
             .map(|(c, r)| (c, Some(r)))?,
-        None => (
-            job::compile_job(program, machine, &opts.tools, opts.compress.as_ref())?,
-            None,
-        ),
+        None => (job::compile_for(program, machine, opts)?, None),
     };
     let (blocks, name) = (&compiled.blocks, program.display().to_string());
     let style = Style::for_stderr(quiet);
@@ -491,7 +488,8 @@ fn run_program(
         let from = job::from_line::restarted(&compiled, r, machine.home);
         job::check_compiled(machine, &name, &from, opts, &mut op)
     } else if args.check {
-        job::check(machine, program, opts, &mut op)
+        // The program compiled above, with its pre-flight and statics.
+        job::check_compiled(machine, &name, &compiled, opts, &mut op)
     } else {
         let mut opts = opts.clone();
         // A restart's path is not the programmed one from the machine's pose.

@@ -29,6 +29,12 @@ pub struct Compiled {
     pub source: Vec<std::ops::Range<usize>>,
     /// Where the program starts.
     pub start: [i64; AXES],
+    /// The pre-flight of `blocks` from `start`, as the compile ran it (`None`: not run,
+    /// as for a restart's blocks).
+    pub preflight: Option<crate::analysis::preflight::Preflight>,
+    /// The statics of `blocks` from `start` under the cutting load the compile was
+    /// given (`None`: none given), on the paths the pre-flight read.
+    pub statics: Option<Result<crate::analysis::statics::Statics, String>>,
 }
 
 impl Compiled {
@@ -64,6 +70,26 @@ pub fn compile_job(
         .map_err(|m| Failure::new(exit::BAD_INPUT, m))?;
     let name = path.display().to_string();
     compile_compressed(&text, &name, machine, machine.home, tools, compress)
+}
+
+/// [`compile_job`] with `opts`' tool table, compression and cutting load: the statics
+/// is computed in the compile, on the paths the pre-flight derived
+/// ([`Compiled::statics`]).
+pub fn compile_for(
+    path: &Path,
+    machine: &MachineConfig,
+    opts: &super::RunOptions<'_>,
+) -> Result<Compiled, Failure> {
+    let text = crate::input::read_text(path, crate::input::MAX_PROGRAM_BYTES)
+        .map_err(|m| Failure::new(exit::BAD_INPUT, m))?;
+    let name = path.display().to_string();
+    let options = super::pipeline::front_end_options(machine, machine.home, &opts.tools);
+    let canon = gcode::compile_canon(&text, &name, &options).map_err(|errs| refused(&errs))?;
+    let compress = opts.compress.as_ref();
+    let statics = opts.statics.as_ref();
+    let c = super::pipeline::checked_with(&canon, machine, machine.home, compress, statics);
+    refuse_findings(&name, c.preflight)?;
+    Ok(c.compiled)
 }
 
 /// Compiles program text named `name` for `machine`, starting from pose `start`;
@@ -102,6 +128,15 @@ pub fn compile_compressed(
 ) -> Result<Compiled, Failure> {
     let (compiled, report) = compile_located(text, name, machine, start, tools, compress)
         .map_err(|errs| refused(&errs))?;
+    refuse_findings(name, report)?;
+    Ok(compiled)
+}
+
+/// A pre-flight with findings as the failure nc-send reports (nothing was sent).
+fn refuse_findings(
+    name: &str,
+    report: crate::analysis::preflight::Preflight,
+) -> Result<(), Failure> {
     if !report.findings.is_empty() {
         let lines = findings_text(name, &report.findings);
         return Err(Failure::new(
@@ -113,7 +148,7 @@ pub fn compile_compressed(
             ),
         ));
     }
-    Ok(compiled)
+    Ok(())
 }
 
 /// [`compile_compressed`] with its results as they are: the front end's errors, each

@@ -228,6 +228,7 @@ pub fn restarted(compiled: &Compiled, restart: &Restart, pose: [i64; AXES]) -> C
         programmed,
         source,
         start: pose,
+        ..Compiled::default()
     }
 }
 

@@ -37,10 +37,12 @@ pub use commands::{
     with_link, JogRequest,
 };
 pub use compile::{
-    compile_compressed, compile_job, compile_located, compile_program, compile_text,
+    compile_compressed, compile_for, compile_job, compile_located, compile_program, compile_text,
     compile_text_with, for_machine as compress_for_machine, machine_axes, Compiled,
 };
-pub use pipeline::{checked, front_end_options, Checked, LineBlocks, LineFault, LinePipeline};
+pub use pipeline::{
+    checked, checked_with, front_end_options, Checked, LineBlocks, LineFault, LinePipeline,
+};
 pub use report::{
     pose_text, print_report, status_json, CompressionSummary, LinesExecuted, PreflightSummary,
     Report,
@@ -148,10 +150,11 @@ pub struct StaticsSpec {
     pub limits: Vec<Option<f64>>,
 }
 
-/// The statics of `blocks` under `opts.statics`, if any: a joint over its limit, or a
-/// machine statics does not cover, refuses the program (nothing runs).
+/// The statics of `compiled`'s blocks under `opts.statics`, if any (as the compile
+/// computed it, else here): a joint over its limit, or a machine statics does not
+/// cover, refuses the program (nothing runs).
 fn statics_gate(
-    blocks: &[pkmc::motion::block::Block],
+    compiled: &Compiled,
     machine: &MachineConfig,
     program: &str,
     opts: &RunOptions<'_>,
@@ -159,9 +162,17 @@ fn statics_gate(
     let Some(spec) = &opts.statics else {
         return Ok(None);
     };
-    let s =
-        crate::analysis::statics::check(blocks, machine, machine.home, &spec.loads, &spec.limits)
-            .map_err(|m| Failure::new(exit::BAD_INPUT, format!("{program}: {m}")))?;
+    let s = match &compiled.statics {
+        Some(s) => s.clone(),
+        None => crate::analysis::statics::check(
+            &compiled.blocks,
+            machine,
+            machine.home,
+            &spec.loads,
+            &spec.limits,
+        ),
+    }
+    .map_err(|m| Failure::new(exit::BAD_INPUT, format!("{program}: {m}")))?;
     let over: Vec<String> = s
         .over_limit()
         .map(|p| {
@@ -308,9 +319,9 @@ pub fn run(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
-    let compiled = compile_job(program, machine, &opts.tools, opts.compress.as_ref())?;
+    let compiled = compile_for(program, machine, opts)?;
     let name = program.display().to_string();
-    let statics = statics_gate(&compiled.blocks, machine, &name, opts)?;
+    let statics = statics_gate(&compiled, machine, &name, opts)?;
     let mut opts = opts.clone();
     opts.sim.deviation = Some(compiled.deviation_meter());
     let mut result = run_blocks(machine, &name, &compiled.blocks, &opts, hooks)?;
@@ -330,7 +341,7 @@ pub fn check(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
-    let compiled = compile_job(program, machine, &opts.tools, opts.compress.as_ref())?;
+    let compiled = compile_for(program, machine, opts)?;
     check_compiled(
         machine,
         &program.display().to_string(),
@@ -350,8 +361,16 @@ pub fn check_compiled(
 ) -> Result<RunResult, Failure> {
     let setup = &opts.sim;
     let blocks = &compiled.blocks;
-    let statics = statics_gate(blocks, machine, name, opts)?;
-    let pre = crate::analysis::preflight::check(blocks, machine, machine.home);
+    let statics = statics_gate(compiled, machine, name, opts)?;
+    // The compile's pre-flight when it ran from the machine's home, as this does.
+    let pre = match &compiled.preflight {
+        Some(p) if compiled.start == machine.home => std::borrow::Cow::Borrowed(p),
+        _ => std::borrow::Cow::Owned(crate::analysis::preflight::check(
+            blocks,
+            machine,
+            machine.home,
+        )),
+    };
     let sim = setup.simulator(machine.clone(), exit::BAD_INPUT)?;
     let recorder = std::rc::Rc::new(std::cell::RefCell::new(Recorder::new(
         machine.joints.len(),

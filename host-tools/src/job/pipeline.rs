@@ -48,6 +48,18 @@ pub fn checked(
     start: [i64; AXES],
     compress: Option<&gcode::compress::Settings>,
 ) -> Checked {
+    checked_with(canon, machine, start, compress, None)
+}
+
+/// [`checked`], with the statics of the blocks under `statics`' cutting load: each
+/// block's path is derived once, here, and read by the pre-flight and the statics.
+pub fn checked_with(
+    canon: &[Canon],
+    machine: &MachineConfig,
+    start: [i64; AXES],
+    compress: Option<&gcode::compress::Settings>,
+    statics: Option<&super::StaticsSpec>,
+) -> Checked {
     let program = gcode::blocks::from_canon(canon, start);
     let compiled = match compress {
         Some(settings) => {
@@ -58,6 +70,7 @@ pub fn checked(
                 programmed: program.blocks,
                 source: c.source,
                 start,
+                ..Compiled::default()
             }
         }
         None => Compiled {
@@ -65,9 +78,17 @@ pub fn checked(
             blocks: program.blocks.clone(),
             programmed: program.blocks,
             start,
+            ..Compiled::default()
         },
     };
-    let preflight = preflight::check(&compiled.blocks, machine, start);
+    let mut compiled = compiled;
+    let paths = preflight::paths(&compiled.blocks, start);
+    let preflight = preflight::check_paths(&compiled.blocks, &paths, machine, start);
+    compiled.statics = statics.map(|spec| {
+        let b = &compiled.blocks;
+        crate::analysis::statics::check_paths(b, &paths, machine, start, &spec.loads, &spec.limits)
+    });
+    compiled.preflight = Some(preflight.clone());
     Checked {
         compiled,
         preflight,
