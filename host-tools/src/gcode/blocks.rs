@@ -33,9 +33,48 @@ pub const BLEND_ANY: u32 = u32::MAX;
 /// Converts canonical commands starting at `start` (axis units).
 pub fn from_canon(commands: &[Canon], start: [i64; AXES]) -> Program {
     let mut program = Program::default();
-    let mut pose = start;
-    // LinuxCNC starts in G64 (blending) unless told otherwise.
-    let mut tolerance = BLEND_ANY;
+    Converter::new(start).push(commands, &mut program);
+    program
+}
+
+/// Canonical commands to blocks a piece at a time: what [`from_canon`] carries from
+/// one command to the next (the pose, the path mode), kept between pieces.
+#[derive(Clone, Copy, Debug)]
+pub struct Converter {
+    pose: [i64; AXES],
+    tolerance: u32,
+}
+
+impl Converter {
+    /// At the program's start, `start`.
+    pub fn new(start: [i64; AXES]) -> Self {
+        // LinuxCNC starts in G64 (blending) unless told otherwise.
+        Self {
+            pose: start,
+            tolerance: BLEND_ANY,
+        }
+    }
+
+    /// Where the blocks so far end.
+    pub fn pose(&self) -> [i64; AXES] {
+        self.pose
+    }
+
+    /// Appends the blocks and messages of `commands`, the next ones, to `program`.
+    pub fn push(&mut self, commands: &[Canon], program: &mut Program) {
+        let (pose, tolerance) = (&mut self.pose, &mut self.tolerance);
+        push_into(commands, pose, tolerance, program);
+    }
+}
+
+fn push_into(
+    commands: &[Canon],
+    pose_at: &mut [i64; AXES],
+    tolerance_at: &mut u32,
+    program: &mut Program,
+) {
+    let mut pose = *pose_at;
+    let mut tolerance = *tolerance_at;
     let aux = |line: u32, aux: Aux, pose: [i64; AXES]| Block {
         line,
         motion: Motion::Aux(aux),
@@ -113,7 +152,7 @@ pub fn from_canon(commands: &[Canon], start: [i64; AXES]) -> Program {
             program.blocks.push(b);
         }
     }
-    program
+    (*pose_at, *tolerance_at) = (pose, tolerance);
 }
 
 /// The block of a move command (`None` for the others) from `pose`, with the blending

@@ -133,7 +133,7 @@ pub fn compile_compressed(
 }
 
 /// A pre-flight with findings as the failure nc-send reports (nothing was sent).
-fn refuse_findings(
+pub(super) fn refuse_findings(
     name: &str,
     report: crate::analysis::preflight::Preflight,
 ) -> Result<(), Failure> {

@@ -26,6 +26,7 @@ use std::path::Path;
 mod commands;
 mod compile;
 pub mod from_line;
+pub mod pieces;
 mod pipeline;
 mod replug;
 mod report;

@@ -156,11 +156,10 @@ fn mergeable(b: &Block, from: &[i64; AXES], s: &Settings) -> bool {
 pub fn compress(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compressed {
     let mut out = Compressed::default();
     let mut pose = start;
-    let cos_corner = s.corner_deg.to_radians().cos();
     let mut i = 0;
     while i < blocks.len() {
         let b = &blocks[i];
-        if !mergeable(b, &pose, s) {
+        let Some((j, pts)) = run_from(blocks, i, &pose, s) else {
             out.blocks.push(*b);
             out.source.push(i..i + 1);
             if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
@@ -168,28 +167,7 @@ pub fn compress(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compresse
             }
             i += 1;
             continue;
-        }
-        // The run: blocks i..j, points pts[0] (the start) ..= pts[j − i].
-        let mut pts = vec![to_fit(&pose), to_fit(&b.target)];
-        let mut j = i + 1;
-        while j < blocks.len() {
-            let n = &blocks[j];
-            let last = &blocks[j - 1];
-            if n.feed != b.feed
-                || n.tolerance_nm != b.tolerance_nm
-                || !mergeable(n, &last.target, s)
-            {
-                break;
-            }
-            let k = pts.len();
-            let d0 = unit(&sub(&pts[k - 1], &pts[k - 2]));
-            let d1 = unit(&sub(&to_fit(&n.target), &pts[k - 1]));
-            if dot(&d0, &d1) < cos_corner {
-                break;
-            }
-            pts.push(to_fit(&n.target));
-            j += 1;
-        }
+        };
         let speed = if s.max_speed > 0.0 {
             (b.feed as f64).min(s.max_speed)
         } else {
@@ -204,6 +182,69 @@ pub fn compress(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compresse
         i = j;
     }
     out
+}
+
+/// The run of mergeable blocks starting at `blocks[i]` (from `pose`): its end `j`
+/// and its points (the start, then each block's end), or `None` when `blocks[i]`
+/// is not mergeable (it stands alone). Whether a block joins the run depends only on
+/// it and the two points before it, so a run found in a prefix of the blocks is the
+/// run of the whole unless it reaches the prefix's end.
+fn run_from(
+    blocks: &[Block],
+    i: usize,
+    pose: &[i64; AXES],
+    s: &Settings,
+) -> Option<(usize, Vec<V>)> {
+    let b = &blocks[i];
+    if !mergeable(b, pose, s) {
+        return None;
+    }
+    let cos_corner = s.corner_deg.to_radians().cos();
+    // The run: blocks i..j, points pts[0] (the start) ..= pts[j − i].
+    let mut pts = vec![to_fit(pose), to_fit(&b.target)];
+    let mut j = i + 1;
+    while j < blocks.len() {
+        let n = &blocks[j];
+        let last = &blocks[j - 1];
+        if n.feed != b.feed || n.tolerance_nm != b.tolerance_nm || !mergeable(n, &last.target, s) {
+            break;
+        }
+        let k = pts.len();
+        let d0 = unit(&sub(&pts[k - 1], &pts[k - 2]));
+        let d1 = unit(&sub(&to_fit(&n.target), &pts[k - 1]));
+        if dot(&d0, &d1) < cos_corner {
+            break;
+        }
+        pts.push(to_fit(&n.target));
+        j += 1;
+    }
+    Some((j, pts))
+}
+
+/// Where the last run of `blocks` (from `start`) starts, and the pose there: what
+/// [`compress`] makes of the blocks before it is what it makes of them in any longer
+/// program that begins with `blocks` (a program compressed a piece at a time carries
+/// the last run over to the next piece).
+pub fn last_run_start(blocks: &[Block], start: [i64; AXES], s: &Settings) -> (usize, [i64; AXES]) {
+    let (mut pose, mut i) = (start, 0);
+    let mut last = (0, start);
+    while i < blocks.len() {
+        last = (i, pose);
+        let b = &blocks[i];
+        match run_from(blocks, i, &pose, s) {
+            Some((j, _)) => {
+                pose = blocks[j - 1].target;
+                i = j;
+            }
+            None => {
+                if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
+                    pose = b.target;
+                }
+                i += 1;
+            }
+        }
+    }
+    last
 }
 
 /// Unit tangents at the points of a run: from the nearest points at least `reach`

@@ -22,6 +22,7 @@
 //! Source: LinuxCNC G-code reference, O codes (numbering, subroutines, looping,
 //! conditional, repeat, return values, errors).
 
+pub mod chunked;
 mod lines;
 pub(crate) mod run;
 
