@@ -467,23 +467,55 @@ fn run_program(
     interrupts: Interrupts,
     quiet: bool,
 ) -> Result<i32, Failure> {
+    // A large program: checked and run a piece at a time (bounded memory).
+    let sim = matches!(opts.target, Target::Sim);
+    let streamed = (args.from.is_none() && job::streamed::applies(program, opts)).then(|| {
+        let mut op = operator(args, sim, interrupts.clone(), quiet, 0);
+        let r = job::streamed::check_or_run(machine, program, opts, args.check, &mut op);
+        op.progress.finish();
+        r
+    });
+    let result = match streamed.transpose()?.flatten() {
+        Some(r) => r,
+        None => run_whole(args, program, machine, opts, interrupts, quiet)?,
+    };
+    if let (Some(p), Some(sim)) = (&args.plot, &result.sim) {
+        pkmc_host::analysis::plot::draw(p, &sim.recorder, machine)
+            .map_err(|e| Failure::new(exit::BAD_INPUT, e))?;
+    }
+    print_report(&result.report, quiet, args.check);
+    Ok(result.report.exit_code())
+}
+
+/// The operator of a program's run: progress of `total` blocks, keys on a terminal.
+fn operator(args: &Args, sim: bool, interrupts: Interrupts, quiet: bool, total: usize) -> Operator {
+    let style = Style::for_stderr(quiet);
+    let keys = (!quiet && !args.check).then(RawKeys::start).flatten();
+    if keys.is_some() && style != Style::Quiet {
+        eprintln!("keys: h/space hold, r resume, q stop, +/- feed override");
+    }
+    let mut op = Operator::new(Progress::new(style, total), interrupts, keys);
+    op.auto_resume = args.check || sim;
+    op
+}
+
+/// `run_program` of a program compiled whole.
+fn run_whole(
+    args: &Args,
+    program: &Path,
+    machine: &MachineConfig,
+    opts: &RunOptions<'_>,
+    interrupts: Interrupts,
+    quiet: bool,
+) -> Result<job::RunResult, Failure> {
     let (compiled, restart) = match args.from {
         Some(line) => job::from_line::compile_from(program, machine, opts, line, !quiet)
             .map(|(c, r)| (c, Some(r)))?,
         None => (job::compile_for(program, machine, opts)?, None),
     };
     let (blocks, name) = (&compiled.blocks, program.display().to_string());
-    let style = Style::for_stderr(quiet);
-    let keys = if quiet || args.check {
-        None
-    } else {
-        RawKeys::start()
-    };
-    if keys.is_some() && style != Style::Quiet {
-        eprintln!("keys: h/space hold, r resume, q stop, +/- feed override");
-    }
-    let mut op = Operator::new(Progress::new(style, blocks.len()), interrupts, keys);
-    op.auto_resume = args.check || matches!(opts.target, Target::Sim);
+    let sim = matches!(opts.target, Target::Sim);
+    let mut op = operator(args, sim, interrupts, quiet, blocks.len());
     let result = if let (true, Some(r)) = (args.check, &restart) {
         let from = job::from_line::restarted(&compiled, r, machine.home);
         job::check_compiled(machine, &name, &from, opts, &mut op)
@@ -504,14 +536,7 @@ fn run_program(
         })
     };
     op.progress.finish();
-    drop(op);
-    let result = result?;
-    if let (Some(p), Some(sim)) = (&args.plot, &result.sim) {
-        pkmc_host::analysis::plot::draw(p, &sim.recorder, machine)
-            .map_err(|e| Failure::new(exit::BAD_INPUT, e))?;
-    }
-    print_report(&result.report, quiet, args.check);
-    Ok(result.report.exit_code())
+    result
 }
 
 fn command(

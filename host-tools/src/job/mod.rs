@@ -32,6 +32,7 @@ mod replug;
 mod report;
 mod resume;
 mod sim_server;
+pub mod streamed;
 
 pub use commands::{
     connect, home_command, jog_command, jog_request, mdi, move_and_wait, prepare, state_text,
@@ -342,6 +343,11 @@ pub fn check(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
+    if streamed::applies(program, opts) {
+        if let Some(r) = streamed::check(machine, program, opts, hooks)? {
+            return Ok(r);
+        }
+    }
     let compiled = compile_for(program, machine, opts)?;
     check_compiled(
         machine,
@@ -360,7 +366,6 @@ pub fn check_compiled(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
-    let setup = &opts.sim;
     let blocks = &compiled.blocks;
     let statics = statics_gate(compiled, machine, name, opts)?;
     // The compile's pre-flight when it ran from the machine's home, as this does.
@@ -372,12 +377,47 @@ pub fn check_compiled(
             machine.home,
         )),
     };
+    let deviation = Some(compiled.deviation_meter());
+    let (end, status, stats, outcome) = run_in_process(machine, blocks, deviation, opts, hooks)?;
+    let mut report = Report::new(
+        machine,
+        name,
+        blocks.len(),
+        &end,
+        &status,
+        Some(&outcome),
+        stats,
+    );
+    report.preflight = Some(PreflightSummary {
+        samples: pre.samples,
+        min_singularity_margin: pre.min_margin.map(|(m, _)| m),
+        min_margin_line: pre.min_margin.map(|(_, l)| l),
+    });
+    report.statics = statics;
+    report.compression = Some(CompressionSummary::of(compiled, Some(&outcome)));
+    Ok(RunResult {
+        report,
+        sim: Some(outcome),
+    })
+}
+
+/// Runs `blocks` (and what `hooks` feed while they run) on the controller core in
+/// this process on the simulated clock, as [`check`] does; the recorder measures
+/// `deviation` when given.
+fn run_in_process(
+    machine: &MachineConfig,
+    blocks: &[Block],
+    deviation: Option<crate::analysis::deviation::Meter>,
+    opts: &RunOptions<'_>,
+    hooks: &mut dyn JobHooks,
+) -> Result<(JobEnd, Status, ClientStats, SimOutcome), Failure> {
+    let setup = &opts.sim;
     let sim = setup.simulator(machine.clone(), exit::BAD_INPUT)?;
     let recorder = std::rc::Rc::new(std::cell::RefCell::new(Recorder::new(
         machine.joints.len(),
         setup.record_path,
     )));
-    recorder.borrow_mut().deviation = Some(compiled.deviation_meter());
+    recorder.borrow_mut().deviation = deviation;
     let rec = recorder.clone();
     let io = InProcess::new(sim, Box::new(move |s| rec.borrow_mut().record(s)));
     let mut link = Link::connect(io, machine, LinkOptions::default())?;
@@ -403,24 +443,5 @@ pub fn check_compiled(
     }
     let recorder = recorder.replace(Recorder::default());
     let outcome = outcome_of(&io.sim, None, recorder);
-    let mut report = Report::new(
-        machine,
-        name,
-        blocks.len(),
-        &end,
-        &status,
-        Some(&outcome),
-        stats,
-    );
-    report.preflight = Some(PreflightSummary {
-        samples: pre.samples,
-        min_singularity_margin: pre.min_margin.map(|(m, _)| m),
-        min_margin_line: pre.min_margin.map(|(_, l)| l),
-    });
-    report.statics = statics;
-    report.compression = Some(CompressionSummary::of(compiled, Some(&outcome)));
-    Ok(RunResult {
-        report,
-        sim: Some(outcome),
-    })
+    Ok((end, status, stats, outcome))
 }

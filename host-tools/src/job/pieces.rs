@@ -21,7 +21,7 @@ use std::ops::Range;
 use std::path::Path;
 
 /// Bytes read at a time.
-pub const PIECE_BYTES: usize = 1 << 20;
+pub const PIECE_BYTES: usize = 1 << 18;
 /// Most programmed blocks held over for one run of short moves still open at a
 /// piece's end; a longer run is cut there (its curves may then differ from those of
 /// the program compressed at once).

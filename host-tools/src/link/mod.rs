@@ -68,6 +68,7 @@ mod rtt;
 mod stall;
 mod stats;
 mod stream;
+mod trail;
 mod transport;
 pub mod view;
 mod window;

@@ -13,23 +13,30 @@
 //! The pass sequence is the core's own ([`pkmc::motion::planner::replan_from`], which
 //! [`pkmc::motion::planner::plan_into`] runs too): fed all at once, this is `plan_into` exactly.
 
+use super::trail::Trail;
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::kinematics::MachineKinematics;
 use pkmc::motion::block::{Block, PlannedBlock};
 use pkmc::motion::geometry::Path;
-use pkmc::motion::planner::{replan_from, Lookahead, PlanBlock};
+use pkmc::motion::planner::{planned_ticks, replan_from, Lookahead, PlanBlock};
 
 /// Blocks planned between two calls of the keep-alive (some milliseconds).
 const ALIVE_EVERY: usize = 4096;
+/// Blocks sent and acknowledged that are kept before they are dropped together (a
+/// job shorter than this keeps every plan).
+pub(super) const DROP_EVERY: usize = 1 << 14;
 
 pub(super) struct Plans {
     la: Lookahead,
-    /// Where the job starts.
-    start: [i64; AXES],
-    /// One per block, as the passes leave them.
-    work: Vec<PlanBlock>,
+    /// Where the first block kept starts.
+    base_start: [i64; AXES],
+    /// One per block, as the passes leave them (those before the first kept are
+    /// final, their time is in `ticks_before`).
+    work: Trail<PlanBlock>,
     /// What is (or will be) streamed: `planned[i]` is fixed once block `i` was sent.
-    pub(super) planned: Vec<PlannedBlock>,
+    pub(super) planned: Trail<PlannedBlock>,
+    /// Planned ticks of the blocks dropped.
+    ticks_before: f64,
 }
 
 impl Plans {
@@ -37,9 +44,10 @@ impl Plans {
         let smoothing = pkmc::motion::interp::window_of(machine.motion.smoothing_ticks as u32);
         Self {
             la: Lookahead::new(start, smoothing),
-            start,
-            work: Vec::new(),
-            planned: Vec::new(),
+            base_start: start,
+            work: Trail::default(),
+            planned: Trail::default(),
+            ticks_before: 0.0,
         }
     }
 
@@ -71,25 +79,44 @@ impl Plans {
                 plan: p.plan(),
             });
         }
-        let frozen = frozen.min(self.work.len());
-        replan_from(&mut self.work, frozen, self.start, machine, kin, alive);
-        for (i, p) in self.work.iter().enumerate().skip(frozen) {
-            self.planned[i].plan = p.plan();
+        let frozen = frozen.min(self.work.len()).max(self.work.base());
+        let base = self.work.base();
+        let work = self.work.kept_mut();
+        replan_from(work, frozen - base, self.base_start, machine, kin, alive);
+        for (k, p) in self.work.kept().iter().enumerate().skip(frozen - base) {
+            self.planned[base + k].plan = p.plan();
         }
         Ok(())
+    }
+
+    /// Drops the plans before block `keep` (which must be sent, with the block
+    /// before it) once [`DROP_EVERY`] of them are behind: their time is kept.
+    pub(super) fn drop_before(&mut self, keep: usize) {
+        let base = self.work.base();
+        if keep < base + DROP_EVERY || keep >= self.work.len() {
+            return;
+        }
+        let kept = self.work.kept();
+        let k = keep - base;
+        // The blocks before `keep`, each with its exit into the next.
+        self.ticks_before += planned_ticks(&kept[..=k]) - planned_ticks(&kept[k..=k]);
+        self.base_start = kept[k - 1].path.end;
+        self.work.drop_before(keep);
+        self.planned.drop_before(keep);
     }
 
     /// Block `i`'s path as the planner derived it, and where it starts (the block's
     /// geometry is derived once, here, and read by whoever needs it).
     pub(super) fn path(&self, i: usize) -> ([i64; AXES], &Path) {
-        let from = i
-            .checked_sub(1)
-            .map_or(self.start, |p| self.work[p].path.end);
+        let from = match i.checked_sub(1) {
+            Some(p) if i > self.work.base() => self.work[p].path.end,
+            _ => self.base_start,
+        };
         (from, &self.work[i].path)
     }
 
     /// Motion time of everything planned at 100 % feed, s.
     pub(super) fn time_s(&self) -> f64 {
-        pkmc::motion::planner::planned_ticks(&self.work) * pkmc::units::TICK_NS as f64 * 1e-9
+        (self.ticks_before + planned_ticks(self.work.kept())) * pkmc::units::TICK_NS as f64 * 1e-9
     }
 }

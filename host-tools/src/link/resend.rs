@@ -17,6 +17,7 @@
 use super::client::JobHooks;
 use super::rtt::Damage;
 use super::stream::Fed;
+use super::trail::Trail;
 use super::window::{Guard, JobState};
 use super::{Link, LinkError, Transport};
 use pkmc::motion::block::Block;
@@ -123,7 +124,7 @@ impl<T: Transport> Link<T> {
         &mut self,
         expected: u16,
         reason: NakReason,
-        blocks: &[Block],
+        blocks: &Trail<Block>,
         job: &mut JobState,
     ) -> Result<(), LinkError> {
         self.stats.naks += 1;

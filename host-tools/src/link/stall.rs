@@ -51,7 +51,11 @@ impl StallGuard {
 
 /// Ticks of the dwell a job is executing when status `s` arrives (0 if none): the
 /// stall guard adds them to [`super::STALL_TICKS`].
-pub(super) fn dwell_ticks(blocks: &[Block], done_before: u32, s: &Status) -> u64 {
+pub(super) fn dwell_ticks(
+    blocks: &super::trail::Trail<Block>,
+    done_before: u32,
+    s: &Status,
+) -> u64 {
     let executing = s.blocks_done.wrapping_sub(done_before) as usize;
     match blocks.get(executing).map(|b| b.motion) {
         Some(Motion::Dwell(ms)) => ms as u64 * pkmc::units::TICK_HZ as u64 / 1000,

@@ -3,8 +3,9 @@
 //! [`crate::link`]).
 
 use super::client::{JobEnd, JobHooks, LinkView, PendingControl};
-use super::plans::Plans;
+use super::plans::{Plans, DROP_EVERY};
 use super::stall::dwell_ticks;
+use super::trail::Trail;
 use super::window::{Ending, JobState};
 use super::{Link, LinkError, Transport, CONTROL_RESEND_AFTER, READ_WAIT};
 use pkmc::kinematics::MachineKinematics;
@@ -55,13 +56,32 @@ fn estimate_on(from: &[i64; 6], b: &Block, path: Option<&Path>, axis_vmax: &[i64
 /// A job's blocks as they are known: all of them at the start, or more fed while it
 /// runs ([`JobHooks::feed`]).
 pub(super) struct Fed {
-    pub(super) blocks: Vec<Block>,
+    /// The blocks from the first the controller may still ask for (executing or not
+    /// yet acknowledged) on.
+    pub(super) blocks: Trail<Block>,
     pub(super) plans: Plans,
     kin: MachineKinematics,
     /// More blocks may come.
     pub(super) open: bool,
     /// When blocks last came.
     last_fed: Instant,
+}
+
+impl Fed {
+    /// Drops what the controller can no longer ask for: the blocks before the first
+    /// executing or not yet acknowledged, with their plans and running sums (in
+    /// steps of [`DROP_EVERY`], so a shorter job keeps everything).
+    fn drop_done(&mut self, job: &mut JobState, status: Option<&Status>) {
+        let executed = status.map_or(0, |s| s.blocks_done.wrapping_sub(job.done_before) as usize);
+        let keep = job.acked.min(executed).min(job.high.saturating_sub(1));
+        if keep < self.blocks.base() + DROP_EVERY {
+            return;
+        }
+        self.plans.drop_before(keep);
+        self.blocks.drop_before(keep);
+        job.planned_ms.drop_before(keep);
+        job.arcs_before.drop_before(keep);
+    }
 }
 
 impl<T: Transport> Link<T> {
@@ -154,7 +174,7 @@ impl<T: Transport> Link<T> {
         job.planned_ms.push(0.0);
         job.arcs_before.push(0);
         let mut fed = Fed {
-            blocks: Vec::with_capacity(blocks.len()),
+            blocks: Trail::default(),
             plans: Plans::new(pose, &self.machine),
             kin: MachineKinematics::new(&self.machine),
             open: true,
@@ -280,6 +300,7 @@ impl<T: Transport> Link<T> {
                     return Ok(end);
                 }
             }
+            fed.drop_done(job, self.status.as_ref());
             self.judge_line(job, hooks);
             self.resend_if_late(job);
             if self.last_heard.elapsed() > self.opts.link_timeout {
@@ -348,7 +369,7 @@ impl<T: Transport> Link<T> {
         hooks: &mut dyn JobHooks,
         job: &mut JobState,
     ) -> Result<Option<JobEnd>, LinkError> {
-        let blocks = &fed.blocks[..];
+        let blocks = &fed.blocks;
         match m {
             CtrlMsg::Ack {
                 seq,
@@ -395,7 +416,7 @@ impl<T: Transport> Link<T> {
         hooks: &mut dyn JobHooks,
         job: &mut JobState,
     ) -> Result<Option<JobEnd>, LinkError> {
-        let (blocks, total) = (&fed.blocks[..], fed.blocks.len());
+        let (blocks, total) = (&fed.blocks, fed.blocks.len());
         // Blocks executed were accepted: a lost final `Ack` need not be waited for.
         let executed = s.blocks_done.wrapping_sub(job.done_before) as usize;
         if executed > job.acked && executed <= job.high {

@@ -4,6 +4,7 @@
 
 use super::rtt::{Damage, Rtt};
 use super::stall::StallGuard;
+use super::trail::Trail;
 use super::{ClientStats, MIN_WINDOW};
 use pkmc::wire::{Control, Status};
 use std::time::Instant;
@@ -43,7 +44,7 @@ pub(super) struct JobState {
     /// Free bends (arcs the controller can take) after the last acknowledged block.
     pub(super) free_bends: usize,
     /// `arcs_before[i]`: arcs among the blocks before `i`.
-    pub(super) arcs_before: Vec<usize>,
+    pub(super) arcs_before: Trail<usize>,
     pub(super) buffered_ms: u32,
     pub(super) window: usize,
     pub(super) capacity: usize,
@@ -51,7 +52,7 @@ pub(super) struct JobState {
     pub(super) last_progress: Instant,
     pub(super) done_before: u32,
     pub(super) ending: Option<Ending>,
-    pub(super) planned_ms: Vec<f64>,
+    pub(super) planned_ms: Trail<f64>,
     pub(super) stall: StallGuard,
     /// The measured round trip (retransmission timeout, stale `Nak`s).
     pub(super) rtt: Rtt,
@@ -72,7 +73,7 @@ impl JobState {
             free: status.free_slots as usize,
             end_sent: false,
             free_bends: status.free_bends as usize,
-            arcs_before: Vec::new(),
+            arcs_before: Trail::default(),
             buffered_samples: Vec::new(),
             buffered_ms: status.buffered_ms,
             window: (capacity as usize).max(MIN_WINDOW),
@@ -81,7 +82,7 @@ impl JobState {
             last_progress: Instant::now(),
             done_before: status.blocks_done,
             ending: None,
-            planned_ms: Vec::new(),
+            planned_ms: Trail::default(),
             stall: StallGuard::default(),
             rtt: Rtt::default(),
             damage: Damage::default(),
