@@ -273,10 +273,11 @@ WIDE_DIV = {"__aeabi_ldivmod", "__aeabi_uldivmod", "__udivmoddi4", "__divmoddi4"
 C_MATH_F64 = {"fmin", "fmax", "floor", "ceil", "trunc", "round", "fabs", "fma", "atan", "atan2",
               "sin", "cos", "exp", "log", "pow", "hypot", "cbrt", "fmod"}
 INLINE_WIDE_DIV = "inline 128-bit division loop"
-# Longest basic block taken for LLVM's inline 128-bit division loop; the canary
-# (`bench_wide_division`) checks that a real one is still recognised.
+# Longest loop (instructions, and bytes from the branch's target to the branch) taken for
+# LLVM's inline 128-bit division loop; the canary (`bench_wide_division`) checks that a
+# real one is still recognised.
 WIDE_DIV_MAX_BLOCK = 120
-WIDE_DIV_HEAD_BYTES = 32
+WIDE_DIV_MAX_BYTES = 400
 
 
 def forbidden_kind(name):
@@ -351,19 +352,26 @@ class M4:
             m = re.fullmatch(r"#(0x[0-9a-f]+)", op.strip())
             loops = mnemonic.split(".")[0] in ("b", "beq", "bne", "bhs", "blo", "bhi", "bls", "bge",
                                               "blt", "bgt", "ble", "bmi", "bpl", "bcs", "bcc")
-            # A loop: a branch back into this block or to a short head just before it
-            # (LLVM's division loop starts a few instructions before the block the
-            # emulator sees, where a shift's result joins it).
-            if loops and m and address - WIDE_DIV_HEAD_BYTES <= int(m.group(1), 16) < address + size:
+            # A loop: a branch back to this block or to code before it. The emulator splits
+            # LLVM's division loop where other branches join it, so the block that closes
+            # the loop may hold none of its arithmetic: the whole range from the branch's
+            # target to the branch is read.
+            target = int(m.group(1), 16) if m else None
+            if loops and target is not None and address + size - WIDE_DIV_MAX_BYTES <= target < address + size:
+                start = min(target, address)
+                body = list(self.md.disasm_lite(bytes(uc.mem_read(start, address + size - start)), start))
                 # LLVM's shift-and-subtract loop is short (about 60 instructions on the
                 # M4): a 128-bit shift left by one (limbs joined with `lsr #31`), a
-                # 128-bit compare, subtract and counter (9 instructions with carry).
+                # 128-bit compare, subtract and a wide counter counted down by one (its
+                # upper limbs borrow with `sbc rX, rX, #0`).
                 # Other 64-bit arithmetic has carries too and is not counted: a two-pass
-                # sincos of 64-bit angles, or i64 magnitudes (`asr #31` sign masks), were
-                # once taken for it.
-                carries = sum(1 for i in insns if i[2].split(".")[0] in ("sbc", "sbcs"))
-                joins = sum(1 for i in insns if i[3].replace(" ", "").endswith("lsr#31"))
-                if carries >= 6 and joins >= 3 and n <= WIDE_DIV_MAX_BLOCK:
+                # sincos of 64-bit angles, or i64 magnitudes (`asr #31` sign masks) ahead of
+                # a spline's loop, were once taken for it.
+                carries = sum(1 for i in body if i[2].split(".")[0] in ("sbc", "sbcs"))
+                joins = sum(1 for i in body if i[3].replace(" ", "").endswith("lsr#31"))
+                borrows = sum(1 for i in body if i[2].split(".")[0] in ("sbc", "sbcs")
+                              and i[3].replace(" ", "").endswith(",#0"))
+                if carries >= 6 and joins >= 3 and borrows >= 2 and len(body) <= WIDE_DIV_MAX_BLOCK:
                     self.wide_div_blocks.add(key)
         return n
 
