@@ -529,7 +529,8 @@ fn run_whole(
         // The controller keeps it with the job: `resume PROGRAM` sends the rest.
         opts.link.mark = job::from_line::mark_for(&compiled, restart.as_ref(), program);
         let at = |pose| job::from_line::blocks_at(blocks, restart.as_ref(), pose);
-        job::run_blocks_at(machine, &name, &at, &opts, &mut op).map(|mut r| {
+        let derived = restart.is_none().then(|| compiled.derived()).flatten(); // not a restart's
+        job::run_blocks_at(machine, &name, &at, derived, &opts, &mut op).map(|mut r| {
             let summary = job::CompressionSummary::of(&compiled, r.sim.as_ref());
             r.report.compression = Some(summary);
             r

@@ -35,6 +35,10 @@ pub struct Compiled {
     /// The statics of `blocks` from `start` under the cutting load the compile was
     /// given (`None`: none given), on the paths the pre-flight read.
     pub statics: Option<Result<crate::analysis::statics::Statics, String>>,
+    /// Each block's path from `start` on, as the pre-flight derived them (empty: not
+    /// derived, or a block is malformed): the link plans on them
+    /// ([`Compiled::derived`]).
+    pub paths: Vec<pkmc::motion::geometry::Path>,
 }
 
 impl Compiled {
@@ -45,6 +49,17 @@ impl Compiled {
             &self.blocks,
             &self.source,
             self.start,
+        )
+    }
+
+    /// The paths of `blocks` as the compile derived them, for the link
+    /// ([`crate::link::Link::run_job_on`]); `None` when they were not derived.
+    pub fn derived(&self) -> Option<crate::link::Derived<'_>> {
+        (!self.paths.is_empty() && self.paths.len() == self.blocks.len()).then_some(
+            crate::link::Derived {
+                start: self.start,
+                paths: &self.paths,
+            },
         )
     }
 

@@ -264,15 +264,17 @@ pub fn run_blocks(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
-    run_blocks_at(machine, program, &|_| blocks.into(), opts, hooks)
+    run_blocks_at(machine, program, &|_| blocks.into(), None, opts, hooks)
 }
 
 /// [`run_blocks`] of the blocks `blocks_at` makes for the pose where the controller
-/// stands once connected (a restart's approach starts there: [`from_line`]).
+/// stands once connected (a restart's approach starts there: [`from_line`]); `derived`:
+/// their paths, derived already (only for blocks that `blocks_at` returns unchanged).
 pub fn run_blocks_at<'b>(
     machine: &MachineConfig,
     program: &str,
     blocks_at: &dyn Fn([i64; 6]) -> std::borrow::Cow<'b, [Block]>,
+    derived: Option<crate::link::Derived<'_>>,
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
@@ -289,7 +291,7 @@ pub fn run_blocks_at<'b>(
         let pose = link.request_status()?.pose;
         let blocks = blocks_at(pose);
         count = blocks.len();
-        let end = match link.run_job(&blocks, hooks) {
+        let end = match link.run_job_on(&blocks, derived, hooks) {
             // The port went away (a cable pulled): wait for it and go on.
             Err(e) if replug::applies(&e, opts, &path) => {
                 let job = replug::Interrupted {
@@ -326,7 +328,8 @@ pub fn run(
     let statics = statics_gate(&compiled, machine, &name, opts)?;
     let mut opts = opts.clone();
     opts.sim.deviation = Some(compiled.deviation_meter());
-    let mut result = run_blocks(machine, &name, &compiled.blocks, &opts, hooks)?;
+    let blocks = |_| compiled.blocks.as_slice().into();
+    let mut result = run_blocks_at(machine, &name, &blocks, compiled.derived(), &opts, hooks)?;
     result.report.statics = statics;
     result.report.compression = Some(CompressionSummary::of(&compiled, result.sim.as_ref()));
     Ok(result)
@@ -378,7 +381,9 @@ pub fn check_compiled(
         )),
     };
     let deviation = Some(compiled.deviation_meter());
-    let (end, status, stats, outcome) = run_in_process(machine, blocks, deviation, opts, hooks)?;
+    let derived = compiled.derived();
+    let (end, status, stats, outcome) =
+        run_in_process(machine, blocks, derived, deviation, opts, hooks)?;
     let mut report = Report::new(
         machine,
         name,
@@ -407,6 +412,7 @@ pub fn check_compiled(
 fn run_in_process(
     machine: &MachineConfig,
     blocks: &[Block],
+    derived: Option<crate::link::Derived<'_>>,
     deviation: Option<crate::analysis::deviation::Meter>,
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
@@ -423,7 +429,7 @@ fn run_in_process(
     let mut link = Link::connect(io, machine, LinkOptions::default())?;
     let end = match prepare(&mut link, opts.home, true, hooks)? {
         Some(end) => end,
-        None => link.run_job(blocks, hooks)?,
+        None => link.run_job_on(blocks, derived, hooks)?,
     };
     let status = link.request_status()?;
     let stats = link.stats;

@@ -89,6 +89,10 @@ pub fn checked_with(
         crate::analysis::statics::check_paths(b, &paths, machine, start, &spec.loads, &spec.limits)
     });
     compiled.preflight = Some(preflight.clone());
+    compiled.paths = paths
+        .into_iter()
+        .collect::<Result<_, _>>()
+        .unwrap_or_default();
     Checked {
         compiled,
         preflight,

@@ -135,7 +135,7 @@ pub fn check(
         failed: None,
     };
     let (end, status, stats, outcome) =
-        super::run_in_process(machine, &start, None, opts, &mut feeder)?;
+        super::run_in_process(machine, &start, None, None, opts, &mut feeder)?;
     if let Some(f) = feeder.failed {
         return Err(f);
     }
@@ -210,7 +210,7 @@ pub fn run(
     opts.link.mark = pkmc::wire::JobMark::default();
     let name = path.display().to_string();
     let at = |_| start.as_slice().into();
-    let mut result = super::run_blocks_at(machine, &name, &at, &opts, &mut feeder)?;
+    let mut result = super::run_blocks_at(machine, &name, &at, None, &opts, &mut feeder)?;
     if let Some(f) = feeder.failed {
         return Err(f);
     }

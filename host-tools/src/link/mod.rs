@@ -76,6 +76,7 @@ mod window;
 use client::PendingControl;
 pub use client::{JobEnd, JobHooks, LinkView, NoHooks};
 pub use error::LinkError;
+pub use plans::Derived;
 pub use stats::{Buffered, ClientStats, NakCounts};
 pub use stream::{estimate_ms, TAIL_AFTER};
 pub use transport::{is_timeout, PortTransport, SimClock, Transport};

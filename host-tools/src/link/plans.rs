@@ -16,7 +16,7 @@
 use super::trail::Trail;
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::kinematics::MachineKinematics;
-use pkmc::motion::block::{Block, PlannedBlock};
+use pkmc::motion::block::{Block, Motion, PlannedBlock};
 use pkmc::motion::geometry::Path;
 use pkmc::motion::planner::{planned_ticks, replan_from, Lookahead, PlanBlock};
 
@@ -25,6 +25,36 @@ const ALIVE_EVERY: usize = 4096;
 /// Blocks sent and acknowledged that are kept before they are dropped together (a
 /// job shorter than this keeps every plan).
 pub(super) const DROP_EVERY: usize = 1 << 14;
+
+/// Paths derived already for a job's blocks (by the compile, for its pre-flight):
+/// `paths[i]` is block `i`'s path from the end of block `i - 1`, the first's from
+/// `start`. The link plans on them instead of deriving them again, for every block that
+/// starts where the compile had it start (the first may not: the controller reports
+/// where the job starts).
+#[derive(Clone, Copy, Debug)]
+pub struct Derived<'a> {
+    /// Where the first block starts.
+    pub start: [i64; AXES],
+    /// One path per block.
+    pub paths: &'a [Path],
+}
+
+impl Derived<'_> {
+    /// Block `k`'s path, if it starts at `from` and ends where `block` does (so a
+    /// path of another block is never taken for it).
+    fn path_from(&self, k: usize, block: &Block, from: &[i64; AXES]) -> Option<Path> {
+        let path = self.paths.get(k)?;
+        let start = match k.checked_sub(1) {
+            Some(j) => &self.paths[j].end,
+            None => &self.start,
+        };
+        let end = match block.motion {
+            Motion::Dwell(_) | Motion::Aux(_) => from,
+            _ => &block.target,
+        };
+        (start == from && &path.end == end).then_some(*path)
+    }
+}
 
 pub(super) struct Plans {
     la: Lookahead,
@@ -51,12 +81,14 @@ impl Plans {
         }
     }
 
-    /// Plans `blocks` after those already planned, then plans again every block from
-    /// `frozen` (the first never sent) on, with the core's pass sequence
-    /// ([`replan_from`]). Fails with the index of a block whose geometry is malformed.
+    /// Plans `blocks` after those already planned (on their paths in `derived` where
+    /// those apply), then plans again every block from `frozen` (the first never sent)
+    /// on, with the core's pass sequence ([`replan_from`]). Fails with the index of a
+    /// block whose geometry is malformed.
     pub(super) fn extend(
         &mut self,
         blocks: &[Block],
+        derived: Option<Derived<'_>>,
         frozen: usize,
         machine: &MachineConfig,
         kin: &MachineKinematics,
@@ -72,7 +104,10 @@ impl Plans {
                 Some(p) if p >= frozen => self.work.get_mut(p),
                 _ => None,
             };
-            let p = self.la.plan(b, prev, machine, kin).map_err(|_| i)?;
+            let p = match derived.and_then(|d| d.path_from(k, b, &self.la.end)) {
+                Some(path) => self.la.plan_path(b, path, prev, machine, kin),
+                None => self.la.plan(b, prev, machine, kin).map_err(|_| i)?,
+            };
             self.work.push(p);
             self.planned.push(PlannedBlock {
                 block: *b,
@@ -118,5 +153,103 @@ impl Plans {
     /// Motion time of everything planned at 100 % feed, s.
     pub(super) fn time_s(&self) -> f64 {
         (self.ticks_before + planned_ticks(self.work.kept())) * pkmc::units::TICK_NS as f64 * 1e-9
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gcode;
+
+    /// A program on the H-4 with a run of short moves (merged into curves), an arc and
+    /// corners, from the machine's home.
+    fn compiled() -> (MachineConfig, crate::job::Compiled) {
+        let machine = MachineConfig::h4_table();
+        let mut text = String::from("G64 P0.01\nG91 G1 F1500\n");
+        for i in 1..=80 {
+            let dy = 2.0 * ((i as f64 * 0.1).sin() - ((i - 1) as f64 * 0.1).sin());
+            text.push_str(&format!("X0.25 Y{dy:.4}\n"));
+        }
+        text.push_str("G2 X10 Y0 I5 J0\nG1 Y-5\nX-5 Z-2\nG0 Z2\nM2\n");
+        let tools = gcode::ToolTable::new();
+        let settings = gcode::compress::Settings::default();
+        let compress = Some(&settings);
+        let (c, pre) =
+            crate::job::compile_located(&text, "p", &machine, machine.home, &tools, compress)
+                .unwrap();
+        assert!(pre.findings.is_empty(), "{:?}", pre.findings);
+        (machine, c)
+    }
+
+    fn planned(
+        machine: &MachineConfig,
+        start: [i64; AXES],
+        blocks: &[Block],
+        derived: Option<Derived<'_>>,
+    ) -> Vec<PlannedBlock> {
+        let kin = MachineKinematics::new(machine);
+        let mut plans = Plans::new(start, machine);
+        plans
+            .extend(blocks, derived, 0, machine, &kin, &mut || {})
+            .unwrap();
+        plans.planned.kept().to_vec()
+    }
+
+    #[test]
+    fn the_compiles_paths_plan_as_paths_derived_again_would() {
+        let (machine, c) = compiled();
+        assert_eq!(c.paths.len(), c.blocks.len());
+        assert!(c.curves() > 0 && c.blocks.iter().any(|b| b.motion.curved()));
+        let again = planned(&machine, c.start, &c.blocks, None);
+        assert_eq!(planned(&machine, c.start, &c.blocks, c.derived()), again);
+    }
+
+    #[test]
+    fn the_link_plans_on_the_paths_it_is_given_and_derives_the_first_where_the_job_starts_elsewhere(
+    ) {
+        let (machine, c) = compiled();
+        let again = planned(&machine, c.start, &c.blocks, None);
+        // A path marked (one block's length doubled) shows which paths the link took.
+        let k = c
+            .blocks
+            .iter()
+            .rposition(|b| b.motion == pkmc::motion::block::Motion::Linear);
+        let k = k.unwrap();
+        let mut marked = c.paths.clone();
+        marked[k].course.length *= 2;
+        let on_marked = planned(
+            &machine,
+            c.start,
+            &c.blocks,
+            Some(Derived {
+                start: c.start,
+                paths: &marked,
+            }),
+        );
+        assert_ne!(
+            on_marked[k].plan, again[k].plan,
+            "the given path was not taken"
+        );
+        // A job that starts elsewhere: the first block's path is derived again from
+        // there (a marked first path is not taken), the rest are the compile's.
+        let mut elsewhere = c.start;
+        elsewhere[0] += 1_000;
+        let mut marked = c.paths.clone();
+        marked[0].course.length *= 2;
+        marked[k].course.length *= 2;
+        let given = Derived {
+            start: c.start,
+            paths: &marked,
+        };
+        let moved = planned(&machine, elsewhere, &c.blocks, Some(given));
+        let moved_again = planned(&machine, elsewhere, &c.blocks, None);
+        assert_eq!(moved[0], moved_again[0]);
+        assert_ne!(moved[k].plan, moved_again[k].plan);
+        // Paths of other blocks (shifted by one) are never taken.
+        let shifted = Derived {
+            start: c.start,
+            paths: &c.paths[1..],
+        };
+        assert_eq!(planned(&machine, c.start, &c.blocks, Some(shifted)), again);
     }
 }

@@ -3,7 +3,7 @@
 //! [`crate::link`]).
 
 use super::client::{JobEnd, JobHooks, LinkView, PendingControl};
-use super::plans::{Plans, DROP_EVERY};
+use super::plans::{Derived, Plans, DROP_EVERY};
 use super::stall::dwell_ticks;
 use super::trail::Trail;
 use super::window::{Ending, JobState};
@@ -53,6 +53,14 @@ fn estimate_on(from: &[i64; 6], b: &Block, path: Option<&Path>, axis_vmax: &[i64
     }
 }
 
+/// A job's first blocks: the first starts at `pose`, and their paths may be derived
+/// already.
+struct Fresh<'a> {
+    blocks: &'a [Block],
+    derived: Option<Derived<'a>>,
+    pose: [i64; 6],
+}
+
 /// A job's blocks as they are known: all of them at the start, or more fed while it
 /// runs ([`JobHooks::feed`]).
 pub(super) struct Fed {
@@ -95,6 +103,17 @@ impl<T: Transport> Link<T> {
         blocks: &[Block],
         hooks: &mut dyn JobHooks,
     ) -> Result<JobEnd, LinkError> {
+        self.run_job_on(blocks, None, hooks)
+    }
+
+    /// [`Link::run_job`] of blocks whose paths are `derived` already (the compile's):
+    /// the link plans on them rather than deriving them again.
+    pub fn run_job_on(
+        &mut self,
+        blocks: &[Block],
+        derived: Option<Derived<'_>>,
+        hooks: &mut dyn JobHooks,
+    ) -> Result<JobEnd, LinkError> {
         self.refuse_if_held()?;
         let start_status = self.request_status()?;
         hooks.status(&start_status);
@@ -106,7 +125,12 @@ impl<T: Transport> Link<T> {
         self.begin_job(self.opts.mark)?;
         let pose = start_status.pose;
         let done = start_status.blocks_done;
-        self.stream_job(blocks, pose, &start_status, done, hooks)
+        let job = Fresh {
+            blocks,
+            derived,
+            pose,
+        };
+        self.stream_job(job, &start_status, done, hooks)
     }
 
     /// Takes over the held job of an earlier host whose program is `mark` (as the
@@ -141,7 +165,12 @@ impl<T: Transport> Link<T> {
         self.control(Control::Resume)?;
         // The earlier host's blocks still queued complete first: they count in
         // `blocks_done` (from 0 at this session's `Hello`) before this job's.
-        self.stream_job(rest, start, &s, queued, hooks)
+        let job = Fresh {
+            blocks: rest,
+            derived: None,
+            pose: start,
+        };
+        self.stream_job(job, &s, queued, hooks)
     }
 
     /// `Control::BeginJob` for a streamed program (with the host timeout set).
@@ -158,17 +187,20 @@ impl<T: Transport> Link<T> {
         Ok(())
     }
 
-    /// Streams `blocks` (the first starting at `pose`) as a job whose status at the
-    /// start is `start_status`; the controller's `blocks_done` is `done_before` when
-    /// the first of them starts.
+    /// Streams `job` as a job whose status at the start is `start_status`; the
+    /// controller's `blocks_done` is `done_before` when the first of them starts.
     fn stream_job(
         &mut self,
-        blocks: &[Block],
-        pose: [i64; 6],
+        job: Fresh<'_>,
         start_status: &Status,
         done_before: u32,
         hooks: &mut dyn JobHooks,
     ) -> Result<JobEnd, LinkError> {
+        let Fresh {
+            blocks,
+            derived,
+            pose,
+        } = job;
         let mut job = JobState::new(self.next_seq, self.capacity, start_status);
         job.done_before = done_before;
         job.planned_ms.push(0.0);
@@ -180,7 +212,7 @@ impl<T: Transport> Link<T> {
             open: true,
             last_fed: Instant::now(),
         };
-        self.append(&mut fed, &mut job, blocks)?;
+        self.append(&mut fed, &mut job, blocks, derived)?;
         let result = self.job_loop(&mut fed, hooks, &mut job);
         self.stats.plan_time_s = fed.plans.time_s();
         self.stats.buffered = super::Buffered::of(&mut job.buffered_samples);
@@ -190,20 +222,23 @@ impl<T: Transport> Link<T> {
         result
     }
 
-    /// Adds `new` to the job: plans (the blocks not yet sent are planned again with the
-    /// new ones in view), then each block's motion estimate and arcs, its length read
-    /// from the path the planner derived.
+    /// Adds `new` (whose paths may be `derived` already) to the job: plans (the blocks
+    /// not yet sent are planned again with the new ones in view), then each block's
+    /// motion estimate and arcs, its length read from the path the planner holds.
     fn append(
         &mut self,
         fed: &mut Fed,
         job: &mut JobState,
         new: &[Block],
+        derived: Option<Derived<'_>>,
     ) -> Result<(), LinkError> {
         let first = fed.blocks.len();
         let machine = self.machine.clone();
         // A large program takes seconds to plan: the link is kept alive meanwhile.
         fed.plans
-            .extend(new, job.high, &machine, &fed.kin, &mut || self.keep_alive())
+            .extend(new, derived, job.high, &machine, &fed.kin, &mut || {
+                self.keep_alive()
+            })
             .map_err(|i| LinkError::BadBlock {
                 port: self.port(),
                 line: new[i - first].line,
@@ -265,7 +300,7 @@ impl<T: Transport> Link<T> {
                 new.clear();
                 fed.open = hooks.feed(&view, &mut new);
                 if !new.is_empty() {
-                    self.append(fed, job, &new)?;
+                    self.append(fed, job, &new, None)?;
                 }
             }
             let total = fed.blocks.len();

@@ -8,7 +8,7 @@ use super::hub::{lock, Hub};
 use super::{Cmd, Request};
 use crate::job::{self, Failure};
 use crate::link::view::{AlarmView, StatusView};
-use crate::link::{JobEnd, JobHooks, Link, LinkView, Transport};
+use crate::link::{Derived, JobEnd, JobHooks, Link, LinkView, Transport};
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::kinematics::{Kinematics, MachineKinematics};
 use pkmc::motion::block::{Block, Motion};
@@ -225,13 +225,15 @@ impl Machine<'_> {
         };
         let end = match req.cmd {
             Cmd::Run => {
-                let blocks = self.program_blocks(false)?;
+                let compiled = self.program_to_run()?;
                 started("program");
-                let mut info = JobInfo::new("program", page, blocks.len());
-                self.run(link, &blocks, &mut info)?
+                let mut info = JobInfo::new("program", page, compiled.blocks.len());
+                // The paths the compile derived, carried to the link's planner.
+                let derived = compiled.derived();
+                self.run_on(link, &compiled.blocks, derived, &mut info)?
             }
             Cmd::Step => {
-                let blocks = self.program_blocks(true)?;
+                let blocks = self.programmed_blocks()?;
                 if blocks.is_empty() {
                     return Ok(Some("nothing to run".into()));
                 }
@@ -320,17 +322,22 @@ impl Machine<'_> {
 
     /// The loaded program's blocks to stream, or as programmed (Run by Step); refused
     /// with the first error when it cannot run.
-    fn program_blocks(&self, programmed: bool) -> Result<Vec<Block>, Failure> {
+    /// The program as compiled: its blocks to stream, with their paths.
+    fn program_to_run(&self) -> Result<job::Compiled, Failure> {
+        let p = lock(&self.hub.program);
+        match &p.compiled {
+            Some(c) if p.runnable() => Ok(c.clone()),
+            _ => Err(not_runnable(&p)),
+        }
+    }
+
+    /// The program's blocks one by one, as programmed (Run by Step).
+    fn programmed_blocks(&self) -> Result<Vec<Block>, Failure> {
         let p = lock(&self.hub.program);
         if !p.runnable() {
             return Err(not_runnable(&p));
         }
-        Ok(if programmed {
-            p.programmed()
-        } else {
-            p.blocks()
-        }
-        .to_vec())
+        Ok(p.programmed().to_vec())
     }
 
     fn control<T: Transport>(
@@ -376,9 +383,20 @@ impl Machine<'_> {
         blocks: &[Block],
         info: &mut JobInfo,
     ) -> Result<JobEnd, Failure> {
+        self.run_on(link, blocks, None, info)
+    }
+
+    /// [`Self::run`] of blocks whose paths are `derived` already.
+    fn run_on<T: Transport>(
+        &mut self,
+        link: &mut Link<T>,
+        blocks: &[Block],
+        derived: Option<Derived<'_>>,
+        info: &mut JobInfo,
+    ) -> Result<JobEnd, Failure> {
         self.last_job = info.kind;
         let mut hooks = Hooks { m: self, info };
-        Ok(link.run_job(blocks, &mut hooks)?)
+        Ok(link.run_job_on(blocks, derived, &mut hooks)?)
     }
 
     fn wait_move<T: Transport>(

@@ -181,6 +181,20 @@ impl Lookahead {
         kin: &MachineKinematics,
     ) -> Result<PlanBlock, GeometryError> {
         let path = Path::new(block, &self.end)?;
+        Ok(self.plan_path(block, path, prev, machine, kin))
+    }
+
+    /// [`Lookahead::plan`] of `block` whose path from [`Lookahead::end`] is derived
+    /// already (`Path::new(block, &self.end)`: a host that derived it for its
+    /// pre-flight carries it here rather than deriving it again).
+    pub fn plan_path(
+        &mut self,
+        block: &Block,
+        path: Path,
+        prev: Option<&mut PlanBlock>,
+        machine: &MachineConfig,
+        kin: &MachineKinematics,
+    ) -> PlanBlock {
         let mut kind = kind_of(block, &path);
         let feed = feed_of(block, &path, kind);
         // The fastest this block may be asked to go (feed override up to 200 %).
@@ -278,7 +292,7 @@ impl Lookahead {
         self.end_tangent = path.tangent_at(path.length << 16);
         self.end_stops = !moving || block.tolerance_nm == 0;
         self.end_tolerance = block.tolerance_nm;
-        Ok(PlanBlock {
+        PlanBlock {
             line: block.line,
             kind,
             path,
@@ -289,7 +303,7 @@ impl Lookahead {
             rho_in: rho,
             corner,
             entry: corner,
-        })
+        }
     }
 }
 
