@@ -25,11 +25,14 @@ Cases: square (cartesian-xyz), dense (0.05 mm segments at F6000 on the H-4),
 estop (an e-stop through its pin during a job), unplug (the USB cable pulled during a
 job: the job starves and is held for take-over), stall (nc-send stopped for 5 s during a
 job: it completes exactly), replug (the cable pulled for 2 s with a port that goes away
-and comes back: nc-send reconnects by itself and the job completes exactly), persist (the machine survives a pin reset and a watchdog reset),
+and comes back: nc-send reconnects by itself and the job completes exactly),
+replug-serial (as replug, the board found by nc-send through a by-id directory and
+back under a new port name: found again by its USB serial number), persist (the machine survives a pin reset and a watchdog reset),
 determinism (two free runs agree), replay (a recorded job replays exactly).
 """
 import json
 import math
+import re
 import os
 import subprocess
 import sys
@@ -512,24 +515,35 @@ def case_unplug(o):
             f"abort exit {ab.returncode}; then: {after.stdout.strip().splitlines()[0]}")
 
 
-def disturbed_square(o, name, disturb, link=False):
+def disturbed_square(o, name, disturb, link=False, by_id=False):
     """The square job on the board (steppers: exact steps) with `disturb(board,
     nc_send_process)` run beside it from its start; the job must complete and end
-    exactly where --sim's undisturbed run ends."""
+    exactly where --sim's undisturbed run ends. `link`: the port is a fixed path that
+    exists while the device is enumerated; `by_id`: nc-send finds the board by its USB
+    identity in a by-id directory (its port's name changes at each enumeration)."""
     program = os.path.join(ROOT, "examples/square.ngc")
     sim = job_json(nc_send(o.nc, ["--sim", "--report", "json", program]), f"{name} on --sim")
-    extra = []
+    extra, env, where = [], None, None
     if link:
         node = os.path.join(tempfile.mkdtemp(), "ttyACM-vboard")
         extra = ["--link", node]
+    if by_id:
+        named = tempfile.mkdtemp()
+        extra = ["--by-id", named]
+        env = dict(os.environ, PKMC_SERIAL_BY_ID=named)
     b = Board(o.vboard, o.elf, None, name, extra)
     r = nc_send(o.nc, ["--port", b.port, "reset"])
     if r.returncode != 0:
         b.fail(f"{name}: reset: {r.stderr}")
     time.sleep(0.5)
+    if by_id:
+        where = os.listdir(named)
+        if len(where) != 1 or os.path.realpath(os.path.join(named, where[0])) != os.path.realpath(b.port):
+            b.fail(f"{name}: the by-id directory names {where}, not the board's port {b.port}")
     t0 = time.time()
-    p = subprocess.Popen([o.nc, "--port", b.port, "--report", "json", program],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    port = [] if by_id else ["--port", b.port]
+    p = subprocess.Popen([o.nc] + port + ["--report", "json", program],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     what = disturb(b, p)
     try:
         out, err = p.communicate(timeout=300)
@@ -549,6 +563,14 @@ def disturbed_square(o, name, disturb, link=False):
         print(log[-4000:])
         die(f"{name}: the board stopped with an error")
     errors = compare(name, None, program, sim, job, rep)
+    if by_id:
+        back = re.findall(r"vboard: (\S+) back \(device enumerated\)", log)
+        if not back or os.path.realpath(back[-1]) == os.path.realpath(b.port):
+            errors.append(f"the port did not come back under another name ({b.port}, then {back})")
+        else:
+            what += f"; the port {b.port} came back as {back[-1]} ({where[0]})"
+        if job.get("link", {}).get("reconnects", 0) < 1:
+            errors.append("nc-send did not reconnect")
     if errors:
         print(log[-3000:])
         die(f"{name}: " + "; ".join(errors))
@@ -589,6 +611,23 @@ def case_replug(o):
     return disturbed_square(o, "replug", pull, link=True)
 
 
+def case_replug_serial(o):
+    """As `replug`, with the board found on USB by nc-send (no --port), through a by-id
+    directory of the form udev keeps (`usb-<manufacturer>_<product>_<serial>-if00`,
+    named from the string descriptors the virtual host read from the firmware); the
+    port comes back under a new name after the replug (a new pseudo-terminal, as
+    /dev/ttyACM0 may come back as /dev/ttyACM1), and nc-send finds it by its USB serial
+    number; the job completes exactly."""
+
+    def pull(b, p):
+        time.sleep(2.5)
+        b.command("unplug")
+        time.sleep(2.0)
+        b.command("plug")
+        return "cable pulled at 2.5 s for 2 s"
+    return disturbed_square(o, "replug-serial", pull, by_id=True)
+
+
 
 def case_persist(o):
     """The machine loaded by nc-send survives a reset by NRST, one by the watchdog and
@@ -624,7 +663,7 @@ def main():
     ap.add_argument("--nc-send", dest="nc", default=os.path.join(ROOT, "target/debug/nc-send"))
     ap.add_argument("--vboard", default=os.path.join(ROOT, "vboard/target/release/pkmc-vboard"))
     ap.add_argument("cases", nargs="*", default=["square", "dense", "square8", "dense8", "estop", "limit",
-                                                 "ampfault", "jam", "unplug", "stall", "replug", "persist", "determinism",
+                                                 "ampfault", "jam", "unplug", "stall", "replug", "replug-serial", "persist", "determinism",
                                                  "replay"])
     o = ap.parse_args()
     for what, path in (("nc-send", o.nc), ("pkmc-vboard", o.vboard), ("firmware ELF", o.elf)):
@@ -663,7 +702,8 @@ def main():
             notes.append({"estop": case_estop, "unplug": case_unplug, "persist": case_persist,
                           "limit": case_limit, "ampfault": case_ampfault, "jam": case_jam,
                           "determinism": case_determinism, "replay": case_replay,
-                          "stall": case_stall, "replug": case_replug}[case](o))
+                          "stall": case_stall, "replug": case_replug,
+                          "replug-serial": case_replug_serial}[case](o))
         print(f"vboard: {case} done in {time.time() - t:.1f} s", flush=True)
     print("\n| job | blocks | motion s | busy % per 1 ms (min / median / p99 / max) | servo start µs "
           "(min / median / p99 / max) | stack deepest / untouched B | blocks/s executed | frames/s accepted "

@@ -33,6 +33,7 @@ struct Args {
     machine: Option<PathBuf>,
     seconds: Option<f64>,
     link: Option<PathBuf>,
+    by_id: Option<PathBuf>,
     flash: Option<PathBuf>,
     free_run: bool,
     quiet_log: bool,
@@ -46,7 +47,7 @@ struct Args {
 fn usage() -> ! {
     eprintln!(
         "usage: pkmc-vboard [--elf FIRMWARE.elf] [--machine FILE.toml] [--link PATH]\n\
-         \x20                  [--flash FILE] [--seconds S] [--free-run] [--quiet-log]\n\
+         \x20                  [--by-id DIR] [--flash FILE] [--seconds S] [--free-run] [--quiet-log]\n\
          \x20                  [--trace FILE.csv] [--wiring default|servo8]\n\
          \x20                  [--inject KIND[:JOINT]@SECONDS]...\n\
          \x20                  [--record FILE | --replay FILE]\n\
@@ -63,6 +64,7 @@ fn parse_args() -> Args {
         machine: None,
         seconds: None,
         link: None,
+        by_id: None,
         flash: None,
         free_run: false,
         quiet_log: false,
@@ -82,6 +84,7 @@ fn parse_args() -> Args {
                 a.seconds = Some(value().parse().unwrap_or_else(|_| usage()));
             }
             "--link" => a.link = Some(value().into()),
+            "--by-id" => a.by_id = Some(value().into()),
             "--flash" => a.flash = Some(value().into()),
             "--free-run" => a.free_run = true,
             "--quiet-log" => a.quiet_log = true,
@@ -233,6 +236,11 @@ fn run(args: Args) -> Result<()> {
     let mut host = usbhost::Host::default();
 
     let mut node = Some(DeviceNode::open(args.link.as_deref())?);
+    // The device's name in --by-id's directory, while it is enumerated (named at the
+    // first enumeration, below).
+    let mut by_id_name: Option<PathBuf> = None;
+    let mut named = args.by_id.is_none();
+    let mut old_port: Option<String> = None;
     println!(
         "{}",
         args.link.as_ref().map_or(
@@ -324,17 +332,58 @@ fn run(args: Args) -> Result<()> {
         for line in host.log.drain(..) {
             eprintln!("vboard: usb: {line}");
         }
-        // With --link, the port is there only while the device is enumerated, as a
-        // CDC-ACM device's /dev/ttyACM node is: a pulled cable removes it (the host
-        // holding it open reads an error), enumeration after a replug makes a new one.
-        if let Some(link) = args.link.as_deref() {
+        // With --link or --by-id, the port is there only while the device is
+        // enumerated, as a CDC-ACM device's /dev/ttyACM node is: a pulled cable removes
+        // it (the host holding it open reads an error), enumeration after a replug makes
+        // a new one (a new pseudo-terminal: without --link its name changes, as a
+        // ttyACM number may). With --by-id, DIR names it by its USB identity as udev's
+        // /dev/serial/by-id does.
+        if let (false, Some(dir), Some(n)) = (named, args.by_id.as_deref(), node.as_ref()) {
+            if host.phase == usbhost::Phase::Configured {
+                by_id_name = Some(by_id(dir, &host, &n.port)?);
+                named = true;
+            }
+        }
+        if args.link.is_some() || args.by_id.is_some() {
+            let link = args.link.as_deref();
             if node.is_some() && !host.plugged && host.phase == usbhost::Phase::Detached {
-                node = None;
-                let _ = std::fs::remove_file(link);
-                eprintln!("vboard: {} removed (device detached)", link.display());
+                let gone = node.take().map(|n| n.port).unwrap_or_default();
+                old_port = Some(gone.clone());
+                if let Some(link) = link {
+                    let _ = std::fs::remove_file(link);
+                }
+                if let Some(name) = by_id_name.take() {
+                    let _ = std::fs::remove_file(&name);
+                }
+                eprintln!(
+                    "vboard: {} removed (device detached)",
+                    link.map_or(gone, |l| l.display().to_string())
+                );
             } else if node.is_none() && host.phase == usbhost::Phase::Configured {
-                node = Some(DeviceNode::open(Some(link))?);
-                eprintln!("vboard: {} back (device enumerated)", link.display());
+                // Without --link the device comes back under a new name, as a program
+                // that still holds /dev/ttyACM0 open makes the kernel name the returning
+                // device /dev/ttyACM1 (pseudo-terminals whose name is the old one are
+                // passed over).
+                let mut passed = Vec::new();
+                let n = loop {
+                    let n = DeviceNode::open(link)?;
+                    if link.is_some()
+                        || old_port.as_deref() != Some(n.port.as_str())
+                        || passed.len() > 8
+                    {
+                        break n;
+                    }
+                    passed.push(n);
+                };
+                drop(passed);
+                if let Some(dir) = args.by_id.as_deref() {
+                    by_id_name = Some(by_id(dir, &host, &n.port)?);
+                }
+                eprintln!(
+                    "vboard: {} back (device enumerated)",
+                    link.map_or(n.port.clone(), |l| l.display().to_string())
+                );
+                node = Some(n);
             }
         }
         if now >= next_ms {
@@ -473,6 +522,17 @@ fn run(args: Args) -> Result<()> {
     }
     drop(node);
     outcome
+}
+
+/// Names the device node `port` in `dir` by the USB identity the host read from the
+/// firmware's string descriptors, as udev's `/dev/serial/by-id` does
+/// (`usb-<manufacturer>_<product>_<serial>-if<interface>`, blanks made `_`).
+fn by_id(dir: &std::path::Path, host: &usbhost::Host, port: &str) -> anyhow::Result<PathBuf> {
+    let name = dir.join(host.by_id_name().context("the device's USB strings")?);
+    let _ = std::fs::remove_file(&name);
+    std::os::unix::fs::symlink(port, &name)
+        .with_context(|| format!("linking {}", name.display()))?;
+    Ok(name)
 }
 
 /// The host side of the USB link: a pseudo-terminal pair (its slave is the port a

@@ -130,6 +130,19 @@ fn le16(b: &[u8], o: usize) -> u16 {
 }
 
 impl Host {
+    /// The device's name as udev's `/dev/serial/by-id` gives it:
+    /// `usb-<manufacturer>_<product>_<serial>-if<interface>`, blanks made `_` (systemd's
+    /// `60-serial.rules` and `usb_id`); `None` before its strings were read.
+    pub fn by_id_name(&self) -> Option<String> {
+        if self.strings.len() < 3 {
+            return None;
+        }
+        let id = self.strings[..3]
+            .join("_")
+            .replace(char::is_whitespace, "_");
+        Some(format!("usb-{id}-if{:02}", self.comm_interface))
+    }
+
     fn fail(&mut self, why: String) {
         self.log.push(format!("enumeration failed: {why}"));
         self.phase = Phase::Failed;

@@ -270,13 +270,12 @@ fn load_machine(args: &Args) -> Result<MachineConfig, Failure> {
 }
 
 /// The port or simulator to use; finds the board on USB when neither is given.
-fn target(args: &Args, found: &mut Option<String>) -> Result<(), Failure> {
+fn target(args: &Args, found: &mut Option<pkmc_host::link::usb::Found>) -> Result<(), Failure> {
     if args.sim || args.port.is_some() {
         return Ok(());
     }
-    let board = pkmc_host::cli::discover::find()
-        .map_err(|e| Failure::new(exit::NO_CONTROLLER, e.to_string()))?;
-    *found = Some(board.port);
+    let board = pkmc_host::cli::discover::find();
+    *found = Some(board.map_err(|e| Failure::new(exit::NO_CONTROLLER, e.to_string()))?);
     Ok(())
 }
 
@@ -346,7 +345,8 @@ fn run(args: &Args) -> Result<i32, Failure> {
         ..LinkOptions::default()
     };
     let target = match (&args.port, &found) {
-        (Some(p), _) | (None, Some(p)) => Target::Port(p),
+        (Some(p), _) => Target::Port(p),
+        (None, Some(b)) => Target::board(b),
         (None, None) => Target::Sim,
     };
     if !args.inject.is_empty() && !args.sim {

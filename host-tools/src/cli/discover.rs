@@ -1,29 +1,9 @@
-//! Finding the controller board by its USB identity when no port is given.
-//!
-//! The firmware enumerates as a USB CDC-ACM device with VID 0x1209 (pid.codes) and PID
-//! 0x0001 (`src/bin/firmware/board.rs`, `docs/wiring.md`). `serialport` is built
-//! without libudev; on Linux its `available_ports()` then scans `/sys/class/tty` and,
-//! for USB ports, reads `idVendor`, `idProduct`, `serial`, `manufacturer` and `product`
-//! from the device's sysfs directory (serialport 4.10, `src/posix/enumerate.rs`), so
-//! the USB identity is there without libudev. It panics when `/sys/class/tty` is
-//! missing (a container without sysfs): that case is answered as "no ports" here.
+//! Finding the controller board by its USB identity when no port is given
+//! ([`crate::link::usb`] lists the boards attached).
 
-use serialport::{SerialPortInfo, SerialPortType};
+pub use crate::link::usb::{controllers, Found, USB_PID, USB_VID};
+use serialport::SerialPortInfo;
 use std::fmt;
-
-/// USB vendor ID of the board (pid.codes).
-pub const USB_VID: u16 = 0x1209;
-/// USB product ID of the board (pid.codes test PID).
-pub const USB_PID: u16 = 0x0001;
-
-/// A controller board found on USB.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Found {
-    /// Port to open, e.g. `/dev/ttyACM0`.
-    pub port: String,
-    /// USB serial number, if the device has one.
-    pub serial: Option<String>,
-}
 
 /// Why no single controller could be chosen.
 #[derive(Debug, PartialEq, Eq)]
@@ -74,20 +54,6 @@ impl fmt::Display for DiscoverError {
 
 impl std::error::Error for DiscoverError {}
 
-/// The boards among `ports`.
-pub fn controllers(ports: &[SerialPortInfo]) -> Vec<Found> {
-    ports
-        .iter()
-        .filter_map(|p| match &p.port_type {
-            SerialPortType::UsbPort(u) if u.vid == USB_VID && u.pid == USB_PID => Some(Found {
-                port: p.port_name.clone(),
-                serial: u.serial_number.clone(),
-            }),
-            _ => None,
-        })
-        .collect()
-}
-
 /// Chooses the one board among `ports`.
 pub fn choose(ports: &[SerialPortInfo]) -> Result<Found, DiscoverError> {
     let mut found = controllers(ports);
@@ -102,21 +68,28 @@ pub fn choose(ports: &[SerialPortInfo]) -> Result<Found, DiscoverError> {
 
 /// Lists the serial ports of this computer.
 pub fn list_ports() -> Result<Vec<SerialPortInfo>, DiscoverError> {
-    if cfg!(target_os = "linux") && !std::path::Path::new("/sys/class/tty").is_dir() {
-        return Ok(Vec::new());
-    }
-    serialport::available_ports().map_err(|e| DiscoverError::Enumerate(e.to_string()))
+    crate::link::usb::list_ports().map_err(DiscoverError::Enumerate)
 }
 
-/// Finds the one board attached to this computer.
+/// Finds the one board attached to this computer: among the serial ports, else in the
+/// by-id directory ([`crate::link::usb::by_id`]).
 pub fn find() -> Result<Found, DiscoverError> {
-    choose(&list_ports()?)
+    let ports = list_ports()?;
+    if controllers(&ports).is_empty() {
+        let mut named = crate::link::usb::by_id();
+        match named.len() {
+            0 => {}
+            1 => return Ok(named.remove(0)),
+            _ => return Err(DiscoverError::Several(named)),
+        }
+    }
+    choose(&ports)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use serialport::UsbPortInfo;
+    use serialport::{SerialPortType, UsbPortInfo};
 
     fn usb(name: &str, vid: u16, pid: u16, serial: Option<&str>) -> SerialPortInfo {
         SerialPortInfo {

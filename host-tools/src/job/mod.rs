@@ -121,6 +121,27 @@ pub enum Target<'a> {
     Sim,
     /// A controller on this serial port.
     Port(&'a str),
+    /// The board found on USB at `port`, known by its USB serial number: after a replug
+    /// it is looked for by that number (its port may come back under another name).
+    Board {
+        /// Where it was found.
+        port: &'a str,
+        /// Its USB serial number.
+        serial: &'a str,
+    },
+}
+
+impl<'a> Target<'a> {
+    /// The board `found` on USB: by its serial number when it has one.
+    pub fn board(found: &'a crate::link::usb::Found) -> Self {
+        match &found.serial {
+            Some(serial) => Target::Board {
+                port: &found.port,
+                serial,
+            },
+            None => Target::Port(&found.port),
+        }
+    }
 }
 
 /// How to run a job.
@@ -228,7 +249,7 @@ fn open_target(
             let path = s.port_path.clone();
             Ok((Some(s), path))
         }
-        Target::Port(p) => {
+        Target::Port(p) | Target::Board { port: p, .. } => {
             if opts.sim.trace.is_some() {
                 return Err(Failure::new(
                     exit::BAD_INPUT,

@@ -1,8 +1,9 @@
 //! A port that goes away in the middle of a job (a board's USB cable pulled, the
-//! simulator's pseudo-terminal closed): `nc-send` waits for the same port to come
-//! back (the same path given with `--port`), reconnects, takes its own job over (the
-//! controller held it, with the program's mark, while its host was away) and streams
-//! the rest. It gives up after [`REPLUG_WAIT`] and says how to resume.
+//! simulator's pseudo-terminal closed): `nc-send` waits for the same device to come
+//! back — the same path given with `--port`, or for a board found on USB, the same USB
+//! serial number under whatever port name it comes back with — reconnects, takes its
+//! own job over (the controller held it, with the program's mark, while its host was
+//! away) and streams the rest. It gives up after [`REPLUG_WAIT`] and says how to resume.
 
 use super::{exit, Failure, RunOptions, Target};
 use crate::link::{ClientStats, JobEnd, JobHooks, Link, LinkError, PortTransport};
@@ -18,7 +19,8 @@ pub const REPLUG_WAIT: Duration = Duration::from_secs(60);
 /// Does `e` say the port went away, in a job that can be taken over after a replug
 /// (a program with its mark, on a port)?
 pub fn applies(e: &LinkError, opts: &RunOptions<'_>, path: &str) -> bool {
-    let marked = opts.link.mark.program != 0 && matches!(opts.target, Target::Port(_));
+    let port = matches!(opts.target, Target::Port(_) | Target::Board { .. });
+    let marked = opts.link.mark.program != 0 && port;
     let gone = match e {
         LinkError::Io { .. } => true,
         LinkError::Lost { .. } => !Path::new(path).exists(),
@@ -38,6 +40,23 @@ pub struct Interrupted<'b> {
     pub stats: ClientStats,
 }
 
+/// Where the device that went away is now, if it is back: the same path, or for a
+/// board known by its USB serial number, the port of the board with that number.
+fn locate(opts: &RunOptions<'_>, path: &str) -> Option<String> {
+    match opts.target {
+        Target::Board { serial, .. } => crate::link::usb::port_of(serial),
+        _ => Path::new(path).exists().then(|| path.to_string()),
+    }
+}
+
+/// What the device is waited for as, in words.
+fn device(opts: &RunOptions<'_>, path: &str) -> String {
+    match opts.target {
+        Target::Board { serial, .. } => format!("the board with USB serial number {serial}"),
+        _ => path.to_string(),
+    }
+}
+
 /// Waits for the port at `path` to come back, reconnects, and continues `job` from
 /// the first block the controller never received.
 pub fn rejoin(
@@ -54,31 +73,41 @@ pub fn rejoin(
         stats: mut earlier,
     } = job;
     hooks.note(&format!(
-        "{why}: the port went away; waiting up to {} s for it to come back",
-        REPLUG_WAIT.as_secs()
+        "{why}: the port went away; waiting up to {} s for {} to come back",
+        REPLUG_WAIT.as_secs(),
+        device(opts, path)
     ));
+    let mut path = path.to_string();
+    let resume = match opts.target {
+        Target::Board { .. } => "nc-send resume PROGRAM".to_string(),
+        _ => format!("nc-send --port {path} resume PROGRAM"),
+    };
     let mut since = Instant::now();
     loop {
         if since.elapsed() > REPLUG_WAIT {
             return Err(Failure::new(
                 exit::LINK,
                 format!(
-                    "{path}: the port went away in the middle of the job and did not come \
+                    "{path}: the port went away in the middle of the job and {} did not come \
                      back within {} s; the controller keeps the job (held after its host \
-                     timeout): once the port is back, `nc-send --port {path} resume PROGRAM` \
-                     (the same program and options) continues it to the end, `nc-send abort` \
-                     drops it",
+                     timeout): once the port is back, `{resume}` (the same program and \
+                     options) continues it to the end, `nc-send abort` drops it",
+                    device(opts, &path),
                     REPLUG_WAIT.as_secs()
                 ),
             ));
         }
         std::thread::sleep(Duration::from_millis(200));
-        if !Path::new(path).exists() {
-            continue;
-        }
-        let Ok(io) = PortTransport::open(path) else {
+        let Some(now) = locate(opts, &path) else {
             continue;
         };
+        let Ok(io) = PortTransport::open(&now) else {
+            continue;
+        };
+        if now != path {
+            hooks.note(&format!("{}: back as {now}", device(opts, &path)));
+            path = now;
+        }
         let Ok(mut link) = Link::connect(io, machine, opts.link) else {
             continue;
         };
@@ -120,7 +149,7 @@ pub fn rejoin(
                 return Ok((end, status, stats));
             }
             // Gone again: wait again.
-            Err(e) if applies(&e, opts, path) => {
+            Err(e) if applies(&e, opts, &path) => {
                 let mut stats = link.stats;
                 with_earlier(&mut stats, &earlier, received);
                 earlier = stats;

@@ -70,6 +70,7 @@ mod stats;
 mod stream;
 mod trail;
 mod transport;
+pub mod usb;
 pub mod view;
 mod window;
 
