@@ -13,8 +13,23 @@ use std::time::{Duration, Instant};
 
 #[test]
 fn a_port_closed_for_two_seconds_mid_job_is_waited_for_and_the_job_completes_exactly() {
+    replugged_mid_job("replug", &[]);
+}
+
+/// The same with the program fed a piece at a time (as a file over 16 MiB is:
+/// `PKMC_STREAM_ABOVE_BYTES` lowers the threshold): the job carries the program's
+/// mark, and after the replug its pieces are fed again from the first block the
+/// controller never received.
+#[test]
+fn a_program_fed_a_piece_at_a_time_is_taken_up_again_after_a_replug() {
+    replugged_mid_job("replug-pieces", &[("PKMC_STREAM_ABOVE_BYTES", "1")]);
+}
+
+/// The program run by `nc-send --port` (with `env`) and the port closed for 2 s in
+/// the middle of it: the job ends where `--sim` ends it.
+fn replugged_mid_job(name: &str, env: &[(&str, &str)]) {
     // 81 moves, about 10 s of motion.
-    let p = tmp("replug.ngc");
+    let p = tmp(&format!("{name}.ngc"));
     let mut text = String::from("G21 G90\nG0 X-60 Y0\n");
     for i in 1..=80 {
         text += &format!("G1 X{}.5 Y{} F1200\n", i - 60, i % 7);
@@ -22,7 +37,7 @@ fn a_port_closed_for_two_seconds_mid_job_is_waited_for_and_the_job_completes_exa
     std::fs::write(&p, text + "M2\n").unwrap();
     let p = p.to_str().unwrap();
     let reference = common::ok(&common::nc_send(&["--sim", "--report", "json", p]));
-    let link = tmp("replug-port");
+    let link = tmp(&format!("{name}-port"));
     let _ = std::fs::remove_file(&link);
     let mut sim = Command::new(env!("CARGO_BIN_EXE_pkmc-sim"))
         .args(["--real-time", "--replug-secs", "2", "--link"])
@@ -44,6 +59,7 @@ fn a_port_closed_for_two_seconds_mid_job_is_waited_for_and_the_job_completes_exa
     assert_eq!(send(&["reset"]).status.code(), Some(0));
     let host = Command::new(env!("CARGO_BIN_EXE_nc-send"))
         .args(["--port", port.as_str(), p])
+        .envs(env.iter().copied())
         .current_dir(repo())
         .stdin(Stdio::null())
         .stdout(Stdio::piped())

@@ -34,12 +34,13 @@ fn chips() -> Option<PathBuf> {
     None
 }
 
-/// `nc-send --port PORT --report json ARGS` with stdin not a terminal (nobody can
-/// press resume), killed (and the test failed) past BOUND.
-fn send(sim: &Sim, args: &[&str]) -> Output {
+/// `nc-send --port PORT --report json ARGS` with `env` set and stdin not a terminal
+/// (nobody can press resume), killed (and the test failed) past BOUND.
+fn send_with(sim: &Sim, args: &[&str], env: &[(&str, &str)]) -> Output {
     let mut child = Command::new(env!("CARGO_BIN_EXE_nc-send"))
         .args(["--port", sim.port.as_str(), "--report", "json"])
         .args(args)
+        .envs(env.iter().copied())
         .current_dir(repo())
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
@@ -63,8 +64,24 @@ fn err(out: &Output) -> String {
 
 #[test]
 fn a_tool_change_with_no_terminal_keeps_the_programs_place_and_resume_program_ends_it() {
+    paused_and_resumed(&[]);
+}
+
+/// The same with the program compiled and fed a piece at a time (as a file over
+/// 16 MiB is: `PKMC_STREAM_ABOVE_BYTES` lowers the threshold): the job carries the
+/// program's mark from the first pass, and `resume PROGRAM` checks it and feeds the
+/// pieces from the first block the controller never received.
+#[test]
+fn a_program_fed_a_piece_at_a_time_keeps_its_place_and_resume_program_ends_it() {
+    paused_and_resumed(&[("PKMC_STREAM_ABOVE_BYTES", "1")]);
+}
+
+/// 3D_Chips streamed with no terminal (`env` set for every nc-send), paused at its
+/// M6, then resumed: without the program, with another, and with the program.
+fn paused_and_resumed(env: &[(&str, &str)]) {
     let Some(chips) = chips() else { return };
     let chips = chips.to_str().unwrap();
+    let send = |sim: &Sim, args: &[&str]| send_with(sim, args, env);
     // The reference: the whole program on `--sim` (its pause resumes by itself).
     let reference = common::ok(&common::nc_send(&["--sim", "--report", "json", chips]));
     let sim = Sim::start(&[]);

@@ -31,8 +31,9 @@ pub struct Recorder {
     pub samples: Vec<Sample>,
     /// Number of joints of the machine.
     pub joints: usize,
-    /// NC lines in the order they started executing (consecutive repeats merged).
-    pub lines: Vec<u32>,
+    /// NC lines in the order they started executing (consecutive repeats merged), as
+    /// their count and digest.
+    pub lines: LineLog,
     keep_path: bool,
     stride: u64,
     seen: u64,
@@ -62,7 +63,7 @@ impl Recorder {
         // Every block started, from the controller's log (not the line at the end of
         // the tick, which misses blocks that start and end within one).
         for &line in sim.lines_started() {
-            if line != 0 && self.lines.last() != Some(&line) {
+            if line != 0 {
                 self.lines.push(line);
             }
         }
@@ -103,14 +104,64 @@ impl Recorder {
 
 /// A 64-bit FNV-1a digest of a line sequence, in hex: equal sequences, equal digests.
 pub fn lines_digest(lines: &[u32]) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for l in lines {
-        for b in l.to_le_bytes() {
-            h ^= b as u64;
-            h = h.wrapping_mul(0x0100_0000_01b3);
+    let mut log = LineLog::default();
+    for &l in lines {
+        log.add(l);
+    }
+    log.digest()
+}
+
+/// A sequence of NC lines kept as its length and running digest ([`lines_digest`]),
+/// so that a program of any length costs the same memory; consecutive repeats are
+/// merged by [`LineLog::push`].
+#[derive(Clone, Debug)]
+pub struct LineLog {
+    count: usize,
+    hash: u64,
+    last: Option<u32>,
+}
+
+impl Default for LineLog {
+    fn default() -> Self {
+        Self {
+            count: 0,
+            hash: 0xcbf2_9ce4_8422_2325,
+            last: None,
         }
     }
-    format!("{h:016x}")
+}
+
+impl LineLog {
+    /// `line` after the others, unless it repeats the last.
+    pub fn push(&mut self, line: u32) {
+        if self.last != Some(line) {
+            self.add(line);
+        }
+    }
+
+    fn add(&mut self, line: u32) {
+        for b in line.to_le_bytes() {
+            self.hash ^= b as u64;
+            self.hash = self.hash.wrapping_mul(0x0100_0000_01b3);
+        }
+        self.count += 1;
+        self.last = Some(line);
+    }
+
+    /// Lines in the sequence.
+    pub fn len(&self) -> usize {
+        self.count
+    }
+
+    /// Whether it is empty.
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// The sequence's digest, in hex.
+    pub fn digest(&self) -> String {
+        format!("{:016x}", self.hash)
+    }
 }
 
 /// Image format of a plot, from the file's extension.
@@ -311,4 +362,21 @@ fn render<DB: plotters::prelude::DrawingBackend>(
             .map_err(err)?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_line_log_counts_and_digests_the_lines_with_repeats_merged() {
+        let mut log = LineLog::default();
+        for l in [3, 3, 4, 5, 5, 5, 4, 9] {
+            log.push(l);
+        }
+        assert_eq!(log.len(), 5);
+        assert_eq!(log.digest(), lines_digest(&[3, 4, 5, 4, 9]));
+        assert_ne!(log.digest(), lines_digest(&[3, 4, 5, 9]));
+        assert_eq!(LineLog::default().digest(), lines_digest(&[]));
+    }
 }

@@ -281,6 +281,8 @@ pub struct FirstPass {
     pub programmed: usize,
     /// Curves among the blocks to stream.
     pub curves: usize,
+    /// The program's mark ([`super::resume::program_mark`] of every block).
+    pub mark: pkmc::wire::JobMark,
 }
 
 /// The first pass over the program at `path` for `machine`: every line through the
@@ -299,6 +301,7 @@ pub fn check_file(
     let mut pieces = Pieces::open(path, &options, machine, compress, piece_bytes)?;
     let mut out = FirstPass::default();
     let mut acc = Accumulator::new(machine);
+    let mut mark = super::resume::MarkHasher::default();
     loop {
         let piece = match pieces.next_piece() {
             Ok(Some(p)) => p,
@@ -308,6 +311,7 @@ pub fn check_file(
         };
         let paths = crate::analysis::preflight::paths(&piece.blocks, piece.start);
         acc.add(&piece.blocks, &paths, piece.start, &mut out.preflight);
+        mark.add(&piece.blocks);
         out.blocks += piece.blocks.len();
         out.programmed += piece.programmed.len();
         out.curves += piece
@@ -321,6 +325,7 @@ pub fn check_file(
     }
     let name = path.display().to_string();
     super::compile::refuse_findings(&name, out.preflight.clone())?;
+    out.mark = mark.mark(super::resume::program_lines(path));
     Ok(Some(out))
 }
 
@@ -375,6 +380,9 @@ mod tests {
                 assert_eq!(first.preflight, pre, "{at}");
                 assert_eq!(first.blocks, whole.blocks.len(), "{at}");
                 assert_eq!(first.curves, whole.curves(), "{at}");
+                let lines = super::super::resume::program_lines(&path);
+                let mark = super::super::resume::program_mark(&whole.blocks, lines);
+                assert_eq!(first.mark, mark, "{at}");
             }
         }
         std::fs::remove_file(&path).unwrap();

@@ -125,22 +125,31 @@ pub fn rejoin(
             ));
         };
         let k = held.next_block.wrapping_sub(opts.link.mark.next_block) as usize;
-        let k = k.min(blocks.len());
         let received = k as u64;
-        let start = blocks[..k]
-            .iter()
-            .rev()
-            .find(|b| !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)))
-            .map_or(pose, |b| b.target);
+        // A job fed a piece at a time gives its blocks from `k` on again; one whose
+        // blocks are all in hand continues from them.
+        let (rest, start) = match hooks.rewind(k) {
+            Some(Ok((rest, start))) => (std::borrow::Cow::Owned(rest), start),
+            Some(Err(e)) => return Err(Failure::new(exit::BAD_INPUT, e)),
+            None => {
+                let k = k.min(blocks.len());
+                let start = blocks[..k]
+                    .iter()
+                    .rev()
+                    .find(|b| !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)))
+                    .map_or(pose, |b| b.target);
+                (std::borrow::Cow::Borrowed(&blocks[k..]), start)
+            }
+        };
+        let total = (opts.link.mark.total_blocks as usize).max(blocks.len());
         hooks.note(&format!(
-            "{path}: the port is back; taking the job over at block {} of {}",
+            "{path}: the port is back; taking the job over at block {} of {total}",
             k + 1,
-            blocks.len()
         ));
         // The controller counts executed blocks from each session's Hello; the held
         // job's earlier sessions' count comes with it (`HeldJob::done`).
         let done_before = link.held().map_or(0, |h| h.done);
-        match link.continue_job(held, &blocks[k..], start, hooks) {
+        match link.continue_job(held, &rest, start, hooks) {
             Ok(end) => {
                 let mut status = link.request_status()?;
                 status.blocks_done = status.blocks_done.wrapping_add(done_before);

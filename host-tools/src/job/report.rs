@@ -1,7 +1,6 @@
 //! The machine-readable summary of a job (`--report json`) and its exit code.
 
 use super::{exit, SimOutcome};
-use crate::analysis::plot::lines_digest;
 use crate::link::view::{AlarmView, StatusView};
 use crate::link::{ClientStats, JobEnd};
 use crate::sim::faults::FaultReport;
@@ -16,7 +15,7 @@ use std::io::Write;
 pub struct LinesExecuted {
     /// Distinct lines in execution order (consecutive repeats merged).
     pub count: usize,
-    /// FNV-1a digest of that sequence ([`lines_digest`]).
+    /// FNV-1a digest of that sequence ([`crate::analysis::plot::lines_digest`]).
     pub digest: String,
 }
 
@@ -181,7 +180,7 @@ impl Report {
             faults: sim.and_then(|s| s.faults),
             lines_executed: sim.map(|s| LinesExecuted {
                 count: s.recorder.lines.len(),
-                digest: lines_digest(&s.recorder.lines),
+                digest: s.recorder.lines.digest(),
             }),
             preflight: None,
             statics: None,

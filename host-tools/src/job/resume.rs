@@ -19,32 +19,76 @@ use std::path::Path;
 /// The mark of a program compiled to `blocks` whose text has `lines` lines: what
 /// `BeginJob` sends with its first block.
 pub fn program_mark(blocks: &[Block], lines: u32) -> JobMark {
-    // FNV-1a, 64 bits, over each block's fields as they are streamed.
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |bytes: &[u8]| {
-        for &b in bytes {
-            h ^= b as u64;
-            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    let mut m = MarkHasher::default();
+    m.add(blocks);
+    m.mark(lines)
+}
+
+/// [`program_mark`] a piece of the program at a time (a program streamed a piece at a
+/// time: [`super::streamed`]).
+#[derive(Clone, Debug)]
+pub struct MarkHasher {
+    /// FNV-1a, 64 bits, over each block's fields as they are streamed.
+    h: u64,
+    blocks: u32,
+    max_line: u32,
+}
+
+impl Default for MarkHasher {
+    fn default() -> Self {
+        Self {
+            h: 0xcbf2_9ce4_8422_2325,
+            blocks: 0,
+            max_line: 0,
         }
-    };
-    for b in blocks {
-        eat(format!("{b:?}").as_bytes());
-    }
-    JobMark {
-        program: h.max(1),
-        next_block: 0,
-        total_blocks: blocks.len() as u32,
-        last_line: 0,
-        total_lines: lines.max(blocks.iter().map(|b| b.line).max().unwrap_or(0)),
     }
 }
 
-/// Lines of the program's text (for the mark).
+impl MarkHasher {
+    /// The next blocks of the program.
+    pub fn add(&mut self, blocks: &[Block]) {
+        for b in blocks {
+            for &c in format!("{b:?}").as_bytes() {
+                self.h ^= c as u64;
+                self.h = self.h.wrapping_mul(0x0000_0100_0000_01b3);
+            }
+            self.max_line = self.max_line.max(b.line);
+        }
+        self.blocks = self.blocks.wrapping_add(blocks.len() as u32);
+    }
+
+    /// The mark of the blocks added, for a text of `lines` lines.
+    pub fn mark(&self, lines: u32) -> JobMark {
+        JobMark {
+            program: self.h.max(1),
+            next_block: 0,
+            total_blocks: self.blocks,
+            last_line: 0,
+            total_lines: lines.max(self.max_line),
+        }
+    }
+}
+
+/// Lines of the program's text (for the mark), read a megabyte at a time.
 pub fn program_lines(path: &Path) -> u32 {
-    std::fs::read(path).map_or(0, |t| {
-        let n = t.iter().filter(|&&c| c == b'\n').count();
-        (n + (!t.is_empty() && !t.ends_with(b"\n")) as usize) as u32
-    })
+    use std::io::Read;
+    let Ok(mut f) = std::fs::File::open(path) else {
+        return 0;
+    };
+    let mut buf = vec![0u8; 1 << 20];
+    let (mut n, mut last) = (0usize, b'\n');
+    loop {
+        match f.read(&mut buf) {
+            Ok(0) => break,
+            Ok(k) => {
+                n += buf[..k].iter().filter(|&&c| c == b'\n').count();
+                last = buf[k - 1];
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(_) => return 0,
+        }
+    }
+    (n + (last != b'\n') as usize) as u32
 }
 
 /// What of a held job's program the controller never received, in words.
@@ -59,6 +103,28 @@ pub fn missing_text(m: &JobMark) -> String {
         m.last_line + 1,
         m.total_lines
     )
+}
+
+/// Refuses `path`, whose mark is `ours`, unless it is the program of the held job
+/// whose mark is `held`.
+pub(super) fn same_program(path: &Path, ours: &JobMark, held: &JobMark) -> Result<(), Failure> {
+    if ours.program == held.program && ours.total_blocks == held.total_blocks {
+        return Ok(());
+    }
+    Err(Failure::new(
+        exit::BAD_INPUT,
+        format!(
+            "{}: not the held job's program: its blocks differ ({} blocks, hash {:016x}; \
+             the held job's: {} blocks, hash {:016x}). Give the same file with the same \
+             machine file, tool table and merging options as the run that was paused; \
+             nothing was sent",
+            path.display(),
+            ours.total_blocks,
+            ours.program,
+            held.total_blocks,
+            held.program
+        ),
+    ))
 }
 
 /// How a resume ended.
@@ -134,25 +200,15 @@ fn continue_program<T: Transport>(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<Resumed, Failure> {
+    if super::streamed::applies(path, opts) {
+        if let Some(r) = super::streamed::continue_program(link, held, path, machine, opts, hooks)?
+        {
+            return Ok(r);
+        }
+    }
     let compiled = super::compile_job(path, machine, &opts.tools, opts.compress.as_ref())?;
     let blocks = &compiled.blocks;
-    let ours = program_mark(blocks, program_lines(path));
-    if ours.program != held.program || ours.total_blocks != held.total_blocks {
-        return Err(Failure::new(
-            exit::BAD_INPUT,
-            format!(
-                "{}: not the held job's program: its blocks differ ({} blocks, hash {:016x}; \
-                 the held job's: {} blocks, hash {:016x}). Give the same file with the same \
-                 machine file, tool table and merging options as the run that was paused; \
-                 nothing was sent",
-                path.display(),
-                ours.total_blocks,
-                ours.program,
-                held.total_blocks,
-                held.program
-            ),
-        ));
-    }
+    same_program(path, &program_mark(blocks, program_lines(path)), &held)?;
     let from = held.next_block as usize;
     let start = blocks[..from]
         .iter()

@@ -13,11 +13,12 @@
 //! the whole program).
 
 use super::pieces::{self, Pieces, Stop};
+use super::resume::Resumed;
 use super::{exit, CompressionSummary, Failure, PreflightSummary, Report, RunOptions, RunResult};
-use crate::link::{JobHooks, LinkView};
+use crate::link::{JobHooks, Link, LinkView, Rewound, Transport};
 use pkmc::config::MachineConfig;
-use pkmc::motion::block::Block;
-use pkmc::wire::{Control, Status};
+use pkmc::motion::block::{Block, Motion};
+use pkmc::wire::{Control, JobMark, Status};
 use std::path::Path;
 
 /// Programs larger than this, bytes, are compiled and streamed a piece at a time.
@@ -37,13 +38,82 @@ pub fn applies(path: &Path, opts: &RunOptions<'_>) -> bool {
     opts.statics.is_none() && std::fs::metadata(path).is_ok_and(|m| m.is_file() && m.len() > above)
 }
 
+/// Where the pieces come from: the file and how it is compiled.
+#[derive(Clone, Copy)]
+pub struct Source<'o> {
+    path: &'o Path,
+    options: &'o crate::gcode::Options,
+    machine: &'o MachineConfig,
+    compress: Option<&'o crate::gcode::compress::Settings>,
+}
+
+impl<'o> Source<'o> {
+    /// The pieces from the program's start.
+    fn open(&self) -> Result<Pieces<'o>, Failure> {
+        let bytes = pieces::PIECE_BYTES;
+        Pieces::open(self.path, self.options, self.machine, self.compress, bytes)
+    }
+
+    /// The pieces from block `to` on: the blocks from `to` to at least [`FEED_AHEAD`]
+    /// further, where block `to` starts, and the pieces after them.
+    fn open_at(&self, to: usize) -> Result<(Vec<Block>, [i64; 6], Pieces<'o>), Failure> {
+        let mut pieces = self.open()?;
+        let (mut seen, mut pose) = (0, self.options.start);
+        let mut first = Vec::new();
+        while seen < to {
+            let Some(p) = next(&mut pieces)? else { break };
+            let k = (to - seen).min(p.blocks.len());
+            for b in &p.blocks[..k] {
+                if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
+                    pose = b.target;
+                }
+            }
+            seen += k;
+            first.extend_from_slice(&p.blocks[k..]);
+        }
+        first.extend(first_blocks(&mut pieces)?);
+        Ok((first, pose, pieces))
+    }
+}
+
+/// The next piece, or why the pieces stopped.
+fn next(pieces: &mut Pieces<'_>) -> Result<Option<pieces::Piece>, Failure> {
+    match pieces.next_piece() {
+        Ok(p) => Ok(p),
+        Err(Stop::Read(f)) => Err(f),
+        Err(Stop::NeedsWhole) => Err(Failure::new(
+            exit::BAD_INPUT,
+            "the program changed (it has O-words now)",
+        )),
+    }
+}
+
 /// The job's hooks, feeding the program's pieces while it runs.
 pub struct Feeder<'h, 'o> {
     inner: &'h mut dyn JobHooks,
+    source: Source<'o>,
     pieces: Pieces<'o>,
     /// Why the pieces stopped early (the second pass found what the first did not:
     /// the file changed between them).
     pub failed: Option<Failure>,
+}
+
+impl<'h, 'o> Feeder<'h, 'o> {
+    /// The first blocks of the program at `source` and the hooks that feed the rest.
+    fn start(
+        source: Source<'o>,
+        inner: &'h mut dyn JobHooks,
+    ) -> Result<(Vec<Block>, Self), Failure> {
+        let mut pieces = source.open()?;
+        let first = first_blocks(&mut pieces)?;
+        let feeder = Feeder {
+            inner,
+            source,
+            pieces,
+            failed: None,
+        };
+        Ok((first, feeder))
+    }
 }
 
 impl JobHooks for Feeder<'_, '_> {
@@ -61,6 +131,17 @@ impl JobHooks for Feeder<'_, '_> {
     }
     fn note(&mut self, text: &str) {
         self.inner.note(text);
+    }
+    fn rewind(&mut self, to: usize) -> Option<Rewound> {
+        Some(
+            self.source
+                .open_at(to)
+                .map(|(first, pose, pieces)| {
+                    self.pieces = pieces;
+                    (first, pose)
+                })
+                .map_err(|f| f.message),
+        )
     }
     fn feed(&mut self, link: &LinkView, out: &mut Vec<Block>) -> bool {
         if self.failed.is_some() {
@@ -98,16 +179,9 @@ impl JobHooks for Feeder<'_, '_> {
 fn first_blocks(pieces: &mut Pieces<'_>) -> Result<Vec<Block>, Failure> {
     let mut blocks = Vec::new();
     while blocks.len() < FEED_AHEAD {
-        match pieces.next_piece() {
-            Ok(Some(p)) => blocks.extend(p.blocks),
-            Ok(None) => break,
-            Err(Stop::Read(f)) => return Err(f),
-            Err(Stop::NeedsWhole) => {
-                return Err(Failure::new(
-                    exit::BAD_INPUT,
-                    "the program changed (O-words)",
-                ))
-            }
+        match next(pieces)? {
+            Some(p) => blocks.extend(p.blocks),
+            None => break,
         }
     }
     Ok(blocks)
@@ -127,13 +201,13 @@ pub fn check(
         return Ok(None);
     };
     let options = super::front_end_options(machine, machine.home, &opts.tools);
-    let mut pieces = Pieces::open(path, &options, machine, compress, bytes)?;
-    let start = first_blocks(&mut pieces)?;
-    let mut feeder = Feeder {
-        inner: hooks,
-        pieces,
-        failed: None,
+    let source = Source {
+        path,
+        options: &options,
+        machine,
+        compress,
     };
+    let (start, mut feeder) = Feeder::start(source, hooks)?;
     let (end, status, stats, outcome) =
         super::run_in_process(machine, &start, None, None, opts, &mut feeder)?;
     if let Some(f) = feeder.failed {
@@ -183,9 +257,9 @@ pub fn check_or_run(
 }
 
 /// A run of the program at `path` (over a port or on `--sim`) a piece at a time;
-/// `Ok(None)`: it has O-words, run it whole. The job carries no program mark, so a
-/// replugged port or a `resume PROGRAM` cannot continue it (they need the whole
-/// program's blocks).
+/// `Ok(None)`: it has O-words, run it whole. The job carries the program's mark (from
+/// the first pass): a replugged port, or `resume PROGRAM` after a pause with nobody at
+/// a terminal, continues it ([`JobHooks::rewind`], [`continue_program`]).
 pub fn run(
     machine: &MachineConfig,
     path: &Path,
@@ -198,16 +272,17 @@ pub fn run(
         return Ok(None);
     };
     let options = super::front_end_options(machine, machine.home, &opts.tools);
-    let mut pieces = Pieces::open(path, &options, machine, compress, bytes)?;
-    let start = first_blocks(&mut pieces)?;
-    let mut feeder = Feeder {
-        inner: hooks,
-        pieces,
-        failed: None,
+    let source = Source {
+        path,
+        options: &options,
+        machine,
+        compress,
     };
+    let (start, mut feeder) = Feeder::start(source, hooks)?;
     let mut opts = opts.clone();
     opts.sim.deviation = None;
-    opts.link.mark = pkmc::wire::JobMark::default();
+    // The controller keeps it with the job: a replug or `resume PROGRAM` continues it.
+    opts.link.mark = first.mark;
     let name = path.display().to_string();
     let at = |_| start.as_slice().into();
     let mut result = super::run_blocks_at(machine, &name, &at, None, &opts, &mut feeder)?;
@@ -222,4 +297,101 @@ pub fn run(
         deviation: None,
     });
     Ok(Some(result))
+}
+
+/// `resume PROGRAM` of a held job whose program is run a piece at a time: the first
+/// pass checks the program and its mark against the held job's, then its pieces are
+/// fed from the first block the controller never received. `Ok(None)`: it has O-words
+/// (continue it whole).
+pub fn continue_program<T: Transport>(
+    link: &mut Link<T>,
+    held: JobMark,
+    path: &Path,
+    machine: &MachineConfig,
+    opts: &RunOptions<'_>,
+    hooks: &mut dyn JobHooks,
+) -> Result<Option<Resumed>, Failure> {
+    let compress = opts.compress.as_ref();
+    let bytes = pieces::PIECE_BYTES;
+    let Some(first) = pieces::check_file(path, machine, &opts.tools, compress, bytes)? else {
+        return Ok(None);
+    };
+    super::resume::same_program(path, &first.mark, &held)?;
+    let options = super::front_end_options(machine, machine.home, &opts.tools);
+    let source = Source {
+        path,
+        options: &options,
+        machine,
+        compress,
+    };
+    let (rest, start, pieces) = source.open_at(held.next_block as usize)?;
+    let mut feeder = Feeder {
+        inner: hooks,
+        source,
+        pieces,
+        failed: None,
+    };
+    let end = link.continue_job(held, &rest, start, &mut feeder)?;
+    if let Some(f) = feeder.failed {
+        return Err(f);
+    }
+    Ok(Some(Resumed {
+        end,
+        blocks_sent: Some(first.blocks.saturating_sub(held.next_block as usize)),
+        incomplete: None,
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Blocks fed from block `to` on ([`Source::open_at`], then the pieces after it)
+    /// are the program's from `to` on, and start where block `to - 1` ends.
+    #[test]
+    fn a_program_taken_up_again_at_a_block_goes_on_with_the_same_blocks_from_there() {
+        let machine = MachineConfig::cartesian_xyz();
+        let mut text = String::from("G21 G90 G64 P0.01\nG0 X0 Y0 Z5\nG1 Z0 F1200\n");
+        for k in 0..70_000 {
+            let x = (k % 1000) as f64 * 0.05;
+            let y = (k / 1000) as f64 + 0.2 * (x * 0.7).sin();
+            text += &format!("X{x:.3} Y{y:.3}\n");
+            if k % 7000 == 6999 {
+                text += "G4 P0.1\nM3 S1000\nG1 X0 Y0\n";
+            }
+        }
+        text += "G0 Z5\nM2\n";
+        let path = std::env::temp_dir().join(format!("pkmc-streamed-{}.ngc", std::process::id()));
+        std::fs::write(&path, &text).unwrap();
+        let tools = crate::gcode::ToolTable::new();
+        let settings = crate::gcode::compress::Settings::default();
+        for compress in [None, Some(&settings)] {
+            let (whole, _) =
+                super::super::compile_located(&text, "p", &machine, machine.home, &tools, compress)
+                    .unwrap();
+            let options = super::super::front_end_options(&machine, machine.home, &tools);
+            let source = Source {
+                path: &path,
+                options: &options,
+                machine: &machine,
+                compress,
+            };
+            let n = whole.blocks.len();
+            assert!(n > 2 * FEED_AHEAD || compress.is_some(), "{n} blocks");
+            for to in [1, (n / 2 + 777).min(n - 1), n] {
+                let (mut blocks, pose, mut pieces) = source.open_at(to).unwrap();
+                while let Some(p) = next(&mut pieces).unwrap() {
+                    blocks.extend(p.blocks);
+                }
+                assert_eq!(blocks, whole.blocks[to..], "from block {to}");
+                let before = whole.blocks[..to]
+                    .iter()
+                    .rev()
+                    .find(|b| !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)))
+                    .map_or(machine.home, |b| b.target);
+                assert_eq!(pose, before, "from block {to}");
+            }
+        }
+        std::fs::remove_file(&path).unwrap();
+    }
 }

@@ -7,6 +7,7 @@ use super::{
     STALL_TICKS,
 };
 use pkmc::config::MachineConfig;
+use pkmc::motion::block::Block;
 use pkmc::wire::{
     decode_frame, encode_frame, Alarm, Control, CtrlMsg, FrameReader, HostMsg, NakReason, Pushed,
     State, Status, MAX_BODY, MAX_FRAME, PROTOCOL_VERSION,
@@ -30,6 +31,10 @@ pub enum JobEnd {
     Paused(u32),
 }
 
+/// A fed job's blocks from some block on and where that block starts, or why they
+/// cannot be had ([`JobHooks::rewind`]).
+pub type Rewound = Result<(Vec<Block>, [i64; 6]), String>;
+
 /// What the job runner tells its caller, and asks it.
 pub trait JobHooks {
     /// Every status received.
@@ -50,8 +55,15 @@ pub trait JobHooks {
     /// Returns whether more may come; once it returns `false` it is not asked again,
     /// and the job ends when every block has executed. By default a job is closed: it
     /// is the blocks [`Link::run_job`] was given.
-    fn feed(&mut self, _link: &LinkView, _out: &mut Vec<pkmc::motion::block::Block>) -> bool {
+    fn feed(&mut self, _link: &LinkView, _out: &mut Vec<Block>) -> bool {
         false
+    }
+    /// A fed job taken over again from its block `to` (after a replug): its blocks from
+    /// `to` on as its source gives them again (the first of them; [`JobHooks::feed`]
+    /// then goes on after them), and where block `to` starts. `None`: the job's blocks
+    /// are all in hand (a job whose blocks are fed as they come cannot be rewound).
+    fn rewind(&mut self, _to: usize) -> Option<Rewound> {
+        None
     }
     /// Something the operator should know that is not an error (the job was held for
     /// this host's silence and is resumed, ...).

@@ -75,7 +75,7 @@ pub mod view;
 mod window;
 
 use client::PendingControl;
-pub use client::{JobEnd, JobHooks, LinkView, NoHooks};
+pub use client::{JobEnd, JobHooks, LinkView, NoHooks, Rewound};
 pub use error::LinkError;
 pub use plans::Derived;
 pub use stats::{Buffered, ClientStats, NakCounts};
