@@ -279,11 +279,9 @@ fn target(args: &Args, found: &mut Option<pkmc_host::link::usb::Found>) -> Resul
     Ok(())
 }
 
-/// The longest link timeout accepted, s (one hour).
-const MAX_LINK_TIMEOUT_S: f64 = 3600.0;
-
-/// `--link-timeout` and `--max-buffered-ms` within what can work.
+/// `--link-timeout` (at most an hour) and `--max-buffered-ms` within what can work.
 fn check_link_args(args: &Args) -> Result<(), Failure> {
+    const MAX_LINK_TIMEOUT_S: f64 = 3600.0;
     if !(args.link_timeout > 0.0 && args.link_timeout <= MAX_LINK_TIMEOUT_S) {
         return Err(bad(format!(
             "--link-timeout {}: must be more than 0 and at most {MAX_LINK_TIMEOUT_S} s",
@@ -392,7 +390,7 @@ fn run(args: &Args) -> Result<i32, Failure> {
     let interrupts = Interrupts::install().map_err(|e| Failure::new(exit::LINK, e))?;
     match &args.command {
         Some(cmd @ (Command::Grbl { .. } | Command::Serve { .. })) => {
-            serve(args, cmd, &machine, &opts, &interrupts)
+            serve(args, cmd, &machine, &opts, &interrupts, host_timeout)
         }
         Some(cmd) => {
             let mut opts = opts.clone();
@@ -421,6 +419,7 @@ fn serve(
     machine: &MachineConfig,
     opts: &RunOptions<'_>,
     interrupts: &Interrupts,
+    host_timeout: Duration,
 ) -> Result<i32, Failure> {
     let stop = || interrupts.count() > 0;
     match cmd {
@@ -452,6 +451,7 @@ fn serve(
                         .map_err(|e| bad(format!("{e:#}")))?,
                     None => Vec::new(),
                 },
+                host_timeout: Some(host_timeout),
             };
             pkmc_host::station::run(machine, opts, &station, &stop)
         }

@@ -239,6 +239,13 @@ impl<T: Transport> Link<T> {
         self.held.and(self.held_mark)
     }
 
+    /// What the next jobs' `Control::BeginJob` says: the host timeout (`None`: no
+    /// `BeginJob`, the short link watch of MDI and jogs) and the program's mark.
+    pub fn set_program(&mut self, host_timeout: Option<Duration>, mark: pkmc::wire::JobMark) {
+        self.opts.host_timeout = host_timeout;
+        self.opts.mark = mark;
+    }
+
     /// Marks the held job as dealt with (resumed or aborted by this host).
     pub fn release_held(&mut self) {
         self.held = None;

@@ -66,6 +66,8 @@ pub(super) struct Machine<'a> {
     pub(super) tools: crate::gcode::ToolTable,
     /// The kind of the last job run (for its end's message).
     pub(super) last_job: &'static str,
+    /// The host timeout of a program's run (`None`: the short watch).
+    pub(super) program_timeout: Option<Duration>,
 }
 
 /// The MDI's line-by-line front end.
@@ -225,12 +227,19 @@ impl Machine<'_> {
         };
         let end = match req.cmd {
             Cmd::Run => {
-                let compiled = self.program_to_run()?;
+                let (compiled, lines) = self.program_to_run()?;
                 started("program");
                 let mut info = JobInfo::new("program", page, compiled.blocks.len());
                 // The paths the compile derived, carried to the link's planner.
                 let derived = compiled.derived();
-                self.run_on(link, &compiled.blocks, derived, &mut info)?
+                // With its mark: a job held when the station is gone is continued by
+                // `nc-send resume PROGRAM` (the same file and options), and `resume`
+                // without it says how much was never sent.
+                let mark = job::program_mark(&compiled.blocks, lines);
+                link.set_program(self.program_timeout, mark);
+                let end = self.run_on(link, &compiled.blocks, derived, &mut info);
+                link.set_program(None, pkmc::wire::JobMark::default());
+                end?
             }
             Cmd::Step => {
                 let blocks = self.programmed_blocks()?;
@@ -322,11 +331,13 @@ impl Machine<'_> {
 
     /// The loaded program's blocks to stream, or as programmed (Run by Step); refused
     /// with the first error when it cannot run.
-    /// The program as compiled: its blocks to stream, with their paths.
-    fn program_to_run(&self) -> Result<job::Compiled, Failure> {
+    /// The program as compiled (its blocks to stream, with their paths) and its
+    /// text's lines.
+    fn program_to_run(&self) -> Result<(job::Compiled, u32), Failure> {
         let p = lock(&self.hub.program);
+        let lines = p.text.lines().count() as u32;
         match &p.compiled {
-            Some(c) if p.runnable() => Ok(c.clone()),
+            Some(c) if p.runnable() => Ok((c.clone(), lines)),
             _ => Err(not_runnable(&p)),
         }
     }

@@ -29,6 +29,10 @@ pub struct StationOptions {
     pub program: Option<PathBuf>,
     /// Joint names (from the machine file); empty: named by the machine's kind.
     pub joint_names: Vec<String>,
+    /// How long the controller runs a program from the page on while the station is
+    /// silent, before it holds it (the machine file's `host_timeout_s`); `None`: the
+    /// short link watch, as for MDI and jogs.
+    pub host_timeout: Option<Duration>,
 }
 
 impl Default for StationOptions {
@@ -38,6 +42,7 @@ impl Default for StationOptions {
             token: None,
             program: None,
             joint_names: Vec::new(),
+            host_timeout: Some(crate::machine_file::DEFAULT_HOST_TIMEOUT),
         }
     }
 }
@@ -200,6 +205,10 @@ pub fn run(
                 lines: 0,
             },
             tools: run.tools.clone(),
+            // A program run from the page streams as nc-send's do (host silence
+            // starves it, and holds it after the host timeout, with its mark); MDI,
+            // jogs and teach runs keep the short watch.
+            program_timeout: opts.host_timeout,
         };
         m.serve(link, stop)
     })?;
