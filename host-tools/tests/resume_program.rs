@@ -142,10 +142,31 @@ fn paused_and_resumed(env: &[(&str, &str)]) {
 /// 0 are refused by name.
 #[test]
 fn a_restart_from_a_middle_line_ends_where_the_whole_program_does() {
+    restarted_in_the_middle(&[]);
+}
+
+/// The same with the program compiled and fed a piece at a time (as a file over
+/// 16 MiB is: `PKMC_STREAM_ABOVE_BYTES` lowers the threshold): the pieces are read up
+/// to the restart, and the job is the approach, then the pieces from there on.
+#[test]
+fn a_restart_of_a_program_fed_a_piece_at_a_time_ends_where_the_whole_program_does() {
+    restarted_in_the_middle(&[("PKMC_STREAM_ABOVE_BYTES", "1")]);
+}
+
+/// 3D_Chips restarted at line 2400 with `env` set for nc-send.
+fn restarted_in_the_middle(env: &[(&str, &str)]) {
     let Some(chips) = chips() else { return };
     let chips = chips.to_str().unwrap();
-    let whole = common::ok(&common::nc_send(&["--sim", "--report", "json", chips]));
-    let from = common::ok(&common::nc_send(&[
+    let nc_send = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_nc-send"))
+            .args(args)
+            .envs(env.iter().copied())
+            .current_dir(repo())
+            .output()
+            .expect("nc-send runs")
+    };
+    let whole = common::ok(&nc_send(&["--sim", "--report", "json", chips]));
+    let from = common::ok(&nc_send(&[
         "--sim", "--report", "json", "--from", "2400", chips,
     ]));
     for key in [
@@ -172,7 +193,7 @@ fn a_restart_from_a_middle_line_ends_where_the_whole_program_does() {
         let mut a = vec!["--check", "--report", "json"];
         a.extend_from_slice(extra);
         a.push(chips);
-        common::ok(&common::nc_send(&a))["preflight"]["samples"]
+        common::ok(&nc_send(&a))["preflight"]["samples"]
             .as_u64()
             .unwrap()
     };
@@ -181,7 +202,7 @@ fn a_restart_from_a_middle_line_ends_where_the_whole_program_does() {
         ("99999", "no block at or after line 99999"),
         ("0", "lines count from 1"),
     ] {
-        let out = common::nc_send(&["--sim", "--from", line, chips]);
+        let out = nc_send(&["--sim", "--from", line, chips]);
         assert_eq!(out.status.code(), Some(2));
         assert!(String::from_utf8_lossy(&out.stderr).contains(says));
     }

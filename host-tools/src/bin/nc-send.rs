@@ -467,11 +467,11 @@ fn run_program(
     interrupts: Interrupts,
     quiet: bool,
 ) -> Result<i32, Failure> {
-    // A large program: checked and run a piece at a time (bounded memory).
     let sim = matches!(opts.target, Target::Sim);
-    let streamed = (args.from.is_none() && job::streamed::applies(program, opts)).then(|| {
+    let streamed = job::streamed::applies(program, opts).then(|| {
         let mut op = operator(args, sim, interrupts.clone(), quiet, 0);
-        let r = job::streamed::check_or_run(machine, program, opts, args.check, &mut op);
+        let from = job::streamed::Restarting::at(args.from, !quiet);
+        let r = job::streamed::check_or_run(machine, program, opts, args.check, from, &mut op);
         op.progress.finish();
         r
     });

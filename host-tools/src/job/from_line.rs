@@ -41,65 +41,134 @@ pub struct Restart {
 
 /// Finds the restart at `line` in `compiled` (named `name`).
 pub fn restart_at(compiled: &Compiled, line: u32, name: &str) -> Result<Restart, Failure> {
-    let blocks = &compiled.blocks;
-    if line == 0 {
-        return Err(Failure::new(
-            exit::BAD_INPUT,
-            "--from 0: lines count from 1",
-        ));
-    }
-    let Some(index) = blocks.iter().position(|b| b.line >= line) else {
-        let last = blocks.last().map_or(0, |b| b.line);
-        return Err(Failure::new(
-            exit::BAD_INPUT,
-            format!("--from {line}: {name} has no block at or after line {line} (its last is line {last})"),
-        ));
-    };
-    let moves = |b: &&Block| !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_));
-    let before = &blocks[..index];
-    let start = before
-        .iter()
-        .rev()
-        .find(moves)
-        .map_or(compiled.start, |b| b.target);
-    let clearance = before
-        .iter()
-        .filter(moves)
-        .map(|b| b.target[2])
-        .fold(start[2].max(compiled.start[2]), i64::max);
-    let (mut spindle, mut mist, mut flood, mut tool) = (None, None, None, 0);
-    for b in before {
-        match b.motion {
-            Motion::Aux(Aux::SpindleOff | Aux::SpindleCw(_) | Aux::SpindleCcw(_)) => {
-                spindle = Some(*b)
-            }
-            Motion::Aux(Aux::Mist) => mist = Some(*b),
-            Motion::Aux(Aux::Flood) => flood = Some(*b),
-            Motion::Aux(Aux::CoolantOff) => (mist, flood) = (None, None),
-            Motion::Aux(Aux::ToolChange(t)) => tool = t,
-            _ => {}
+    let mut scan = RestartScan::new(line, compiled.start)?;
+    scan.add(&compiled.blocks);
+    scan.finish(name)
+}
+
+/// The restart at a line, found as the program's blocks come (the whole program, or
+/// its pieces: [`super::streamed`]): the state the blocks before it leave, and the
+/// feed of the first feed move from it on.
+pub struct RestartScan {
+    line: u32,
+    origin: [i64; AXES],
+    /// Blocks seen.
+    seen: usize,
+    /// The first block at or after `line`, once seen.
+    index: Option<usize>,
+    start: [i64; AXES],
+    clearance: i64,
+    spindle: Option<Block>,
+    mist: Option<Block>,
+    flood: Option<Block>,
+    tool: u32,
+    feed: Option<i64>,
+    last_line: u32,
+}
+
+fn moves(b: &Block) -> bool {
+    !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_))
+}
+
+impl RestartScan {
+    /// A scan for `line` of a program that starts at `origin`.
+    pub fn new(line: u32, origin: [i64; AXES]) -> Result<Self, Failure> {
+        if line == 0 {
+            return Err(Failure::new(
+                exit::BAD_INPUT,
+                "--from 0: lines count from 1",
+            ));
         }
+        Ok(Self {
+            line,
+            origin,
+            seen: 0,
+            index: None,
+            start: origin,
+            clearance: origin[2],
+            spindle: None,
+            mist: None,
+            flood: None,
+            tool: 0,
+            feed: None,
+            last_line: 0,
+        })
     }
-    let aux = [spindle, mist, flood].into_iter().flatten().collect();
-    let feed = blocks[index..]
-        .iter()
-        .find(|b| b.motion != Motion::Rapid && moves(b))
-        .map_or(0, |b| b.feed);
-    Ok(Restart {
-        line,
-        index,
-        start,
-        clearance,
-        aux,
-        tool,
-        feed,
-    })
+
+    /// The next of the program's blocks; true once the restart is known (the rest
+    /// need not be given).
+    pub fn add(&mut self, blocks: &[Block]) -> bool {
+        for b in blocks {
+            if self.feed.is_some() {
+                break;
+            }
+            self.last_line = self.last_line.max(b.line);
+            if self.index.is_none() && b.line >= self.line {
+                self.index = Some(self.seen);
+            }
+            self.seen += 1;
+            if self.index.is_some() {
+                if b.motion != Motion::Rapid && moves(b) {
+                    self.feed = Some(b.feed);
+                }
+                continue;
+            }
+            match b.motion {
+                Motion::Aux(Aux::SpindleOff | Aux::SpindleCw(_) | Aux::SpindleCcw(_)) => {
+                    self.spindle = Some(*b)
+                }
+                Motion::Aux(Aux::Mist) => self.mist = Some(*b),
+                Motion::Aux(Aux::Flood) => self.flood = Some(*b),
+                Motion::Aux(Aux::CoolantOff) => (self.mist, self.flood) = (None, None),
+                Motion::Aux(Aux::ToolChange(t)) => self.tool = t,
+                _ if moves(b) => {
+                    self.start = b.target;
+                    self.clearance = self.clearance.max(b.target[2]);
+                }
+                _ => {}
+            }
+        }
+        self.feed.is_some()
+    }
+
+    /// The restart, once the program's blocks (up to [`RestartScan::add`]'s true) were
+    /// given; an error names the program (`name`) and its last line when it has no
+    /// block at or after the line.
+    pub fn finish(self, name: &str) -> Result<Restart, Failure> {
+        let Some(index) = self.index else {
+            let (line, last) = (self.line, self.last_line);
+            return Err(Failure::new(
+                exit::BAD_INPUT,
+                format!("--from {line}: {name} has no block at or after line {line} (its last is line {last})"),
+            ));
+        };
+        let aux = [self.spindle, self.mist, self.flood]
+            .into_iter()
+            .flatten()
+            .collect();
+        Ok(Restart {
+            line: self.line,
+            index,
+            start: self.start,
+            clearance: self.clearance.max(self.origin[2]),
+            aux,
+            tool: self.tool,
+            feed: self.feed.unwrap_or(0),
+        })
+    }
 }
 
 impl Restart {
     /// The approach from `pose` to the restart's start, then the program's blocks
     /// from the restart on (see the module documentation).
     pub fn blocks_from(&self, pose: [i64; AXES], blocks: &[Block]) -> Vec<Block> {
+        let mut out = self.approach(pose);
+        out.extend_from_slice(&blocks[self.index..]);
+        out
+    }
+
+    /// The approach from `pose` to the restart's start.
+    pub fn approach(&self, pose: [i64; AXES]) -> Vec<Block> {
         let z = self.clearance.max(pose[2]);
         let at = |motion, target, feed| Block {
             line: self.line,
@@ -123,7 +192,6 @@ impl Restart {
             Motion::Rapid
         };
         out.push(at(down, self.start, self.feed));
-        out.extend_from_slice(&blocks[self.index..]);
         out
     }
 

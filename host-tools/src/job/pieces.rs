@@ -297,11 +297,31 @@ pub fn check_file(
     compress: Option<&gcode::compress::Settings>,
     piece_bytes: usize,
 ) -> Result<Option<FirstPass>, Failure> {
+    check_file_from(path, machine, tools, compress, piece_bytes, None)
+}
+
+/// [`check_file`] of a restart (`nc-send --from`): the pre-flight covers the restart's
+/// approach from the program's start and the blocks from the restart on.
+pub fn check_file_from(
+    path: &Path,
+    machine: &MachineConfig,
+    tools: &gcode::ToolTable,
+    compress: Option<&gcode::compress::Settings>,
+    piece_bytes: usize,
+    restart: Option<&super::from_line::Restart>,
+) -> Result<Option<FirstPass>, Failure> {
     let options = super::pipeline::front_end_options(machine, machine.home, tools);
     let mut pieces = Pieces::open(path, &options, machine, compress, piece_bytes)?;
     let mut out = FirstPass::default();
     let mut acc = Accumulator::new(machine);
     let mut mark = super::resume::MarkHasher::default();
+    // Blocks before this one are not pre-flighted (those before a restart).
+    let from = restart.map_or(0, |r| r.index);
+    if let Some(r) = restart {
+        let approach = r.approach(machine.home);
+        let paths = crate::analysis::preflight::paths(&approach, machine.home);
+        acc.add(&approach, &paths, machine.home, &mut out.preflight);
+    }
     loop {
         let piece = match pieces.next_piece() {
             Ok(Some(p)) => p,
@@ -309,8 +329,15 @@ pub fn check_file(
             Err(Stop::NeedsWhole) => return Ok(None),
             Err(Stop::Read(f)) => return Err(f),
         };
-        let paths = crate::analysis::preflight::paths(&piece.blocks, piece.start);
-        acc.add(&piece.blocks, &paths, piece.start, &mut out.preflight);
+        let k = from.saturating_sub(out.blocks).min(piece.blocks.len());
+        let start = piece.blocks[..k]
+            .iter()
+            .rev()
+            .find(|b| !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)))
+            .map_or(piece.start, |b| b.target);
+        let checked = &piece.blocks[k..];
+        let paths = crate::analysis::preflight::paths(checked, start);
+        acc.add(checked, &paths, start, &mut out.preflight);
         mark.add(&piece.blocks);
         out.blocks += piece.blocks.len();
         out.programmed += piece.programmed.len();

@@ -12,6 +12,7 @@
 //! not report: the deviation of merged curves from their chords (the meter needs
 //! the whole program).
 
+use super::from_line::{Restart, RestartScan};
 use super::pieces::{self, Pieces, Stop};
 use super::resume::Resumed;
 use super::{exit, CompressionSummary, Failure, PreflightSummary, Report, RunOptions, RunResult};
@@ -19,6 +20,7 @@ use crate::link::{JobHooks, Link, LinkView, Rewound, Transport};
 use pkmc::config::MachineConfig;
 use pkmc::motion::block::{Block, Motion};
 use pkmc::wire::{Control, JobMark, Status};
+use std::cell::Cell;
 use std::path::Path;
 
 /// Programs larger than this, bytes, are compiled and streamed a piece at a time.
@@ -63,10 +65,8 @@ impl<'o> Source<'o> {
         while seen < to {
             let Some(p) = next(&mut pieces)? else { break };
             let k = (to - seen).min(p.blocks.len());
-            for b in &p.blocks[..k] {
-                if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
-                    pose = b.target;
-                }
+            for b in p.blocks[..k].iter().filter(|b| moves(b)) {
+                pose = b.target;
             }
             seen += k;
             first.extend_from_slice(&p.blocks[k..]);
@@ -74,6 +74,11 @@ impl<'o> Source<'o> {
         first.extend(first_blocks(&mut pieces)?);
         Ok((first, pose, pieces))
     }
+}
+
+/// Does `b` move the machine (not a dwell or an auxiliary function)?
+fn moves(b: &Block) -> bool {
+    !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_))
 }
 
 /// The next piece, or why the pieces stopped.
@@ -93,6 +98,10 @@ pub struct Feeder<'h, 'o> {
     inner: &'h mut dyn JobHooks,
     source: Source<'o>,
     pieces: Pieces<'o>,
+    /// A restart's (`--from`): the job's first blocks are its approach from where the
+    /// machine stood when the job began, then the program's from the restart on.
+    restart: Option<(&'o Restart, &'o Cell<[i64; 6]>)>,
+
     /// Why the pieces stopped early (the second pass found what the first did not:
     /// the file changed between them).
     pub failed: Option<Failure>,
@@ -110,9 +119,35 @@ impl<'h, 'o> Feeder<'h, 'o> {
             inner,
             source,
             pieces,
+            restart: None,
             failed: None,
         };
         Ok((first, feeder))
+    }
+}
+
+impl Feeder<'_, '_> {
+    /// The job's blocks from its block `to` on, and where that block starts
+    /// ([`JobHooks::rewind`]); the pieces then go on after them.
+    fn rewound(&mut self, to: usize) -> Result<(Vec<Block>, [i64; 6]), Failure> {
+        let Some((r, began)) = self.restart else {
+            let (first, pose, pieces) = self.source.open_at(to)?;
+            self.pieces = pieces;
+            return Ok((first, pose));
+        };
+        // After a restart the job's first blocks are its approach.
+        let approach = r.approach(began.get());
+        let n = approach.len();
+        let (first, pose, pieces) = self.source.open_at(r.index + to.saturating_sub(n))?;
+        self.pieces = pieces;
+        if to >= n {
+            return Ok((first, pose));
+        }
+        let before = approach[..to].iter().rev().find(|b| moves(b));
+        let at = before.map_or(began.get(), |b| b.target);
+        let mut blocks = approach[to..].to_vec();
+        blocks.extend(first);
+        Ok((blocks, at))
     }
 }
 
@@ -133,15 +168,7 @@ impl JobHooks for Feeder<'_, '_> {
         self.inner.note(text);
     }
     fn rewind(&mut self, to: usize) -> Option<Rewound> {
-        Some(
-            self.source
-                .open_at(to)
-                .map(|(first, pose, pieces)| {
-                    self.pieces = pieces;
-                    (first, pose)
-                })
-                .map_err(|f| f.message),
-        )
+        Some(self.rewound(to).map_err(|f| f.message))
     }
     fn feed(&mut self, link: &LinkView, out: &mut Vec<Block>) -> bool {
         if self.failed.is_some() {
@@ -208,51 +235,72 @@ pub fn check(
         compress,
     };
     let (start, mut feeder) = Feeder::start(source, hooks)?;
+    checked(
+        machine,
+        path,
+        (&first, first.blocks),
+        &start,
+        opts,
+        &mut feeder,
+    )
+    .map(Some)
+}
+
+/// The in-process run of a `--check` that starts with `blocks`, `feeder` feeding the
+/// rest (`total` blocks in all), and its report (`first`: what the first pass found).
+fn checked(
+    machine: &MachineConfig,
+    path: &Path,
+    (first, total): (&pieces::FirstPass, usize),
+    blocks: &[Block],
+    opts: &RunOptions<'_>,
+    feeder: &mut Feeder<'_, '_>,
+) -> Result<RunResult, Failure> {
     let (end, status, stats, outcome) =
-        super::run_in_process(machine, &start, None, None, opts, &mut feeder)?;
-    if let Some(f) = feeder.failed {
+        super::run_in_process(machine, blocks, None, None, opts, feeder)?;
+    if let Some(f) = feeder.failed.take() {
         return Err(f);
     }
     let name = path.display().to_string();
-    let mut report = Report::new(
-        machine,
-        &name,
-        first.blocks,
-        &end,
-        &status,
-        Some(&outcome),
-        stats,
-    );
+    let mut report = Report::new(machine, &name, total, &end, &status, Some(&outcome), stats);
     let pre = &first.preflight;
     report.preflight = Some(PreflightSummary {
         samples: pre.samples,
         min_singularity_margin: pre.min_margin.map(|(m, _)| m),
         min_margin_line: pre.min_margin.map(|(_, l)| l),
     });
-    report.compression = Some(CompressionSummary {
+    report.compression = Some(summary(first));
+    Ok(RunResult {
+        report,
+        sim: Some(outcome),
+    })
+}
+
+/// The compression summary of a program run a piece at a time (the deviation of its
+/// curves is not measured: the meter needs the whole program).
+fn summary(first: &pieces::FirstPass) -> CompressionSummary {
+    CompressionSummary {
         blocks_programmed: first.programmed,
         blocks_streamed: first.blocks,
         curves: first.curves,
         deviation: None,
-    });
-    Ok(Some(RunResult {
-        report,
-        sim: Some(outcome),
-    }))
+    }
 }
 
-/// [`check`] when `check`, else [`run`].
+/// [`check`] when `check`, else [`run`]; from a line (`nc-send --from`) with
+/// `from` ([`restart`]).
 pub fn check_or_run(
     machine: &MachineConfig,
     path: &Path,
     opts: &RunOptions<'_>,
     check: bool,
+    from: Option<Restarting>,
     hooks: &mut dyn JobHooks,
 ) -> Result<Option<RunResult>, Failure> {
-    if check {
-        self::check(machine, path, opts, hooks)
-    } else {
-        run(machine, path, opts, hooks)
+    match from {
+        Some(from) => restart(machine, path, opts, from, check, hooks),
+        None if check => self::check(machine, path, opts, hooks),
+        None => run(machine, path, opts, hooks),
     }
 }
 
@@ -279,24 +327,128 @@ pub fn run(
         compress,
     };
     let (start, mut feeder) = Feeder::start(source, hooks)?;
+    let at = |_| start.as_slice().into();
+    let total = (&first, first.blocks);
+    ran(machine, path, total, first.mark, &at, opts, &mut feeder).map(Some)
+}
+
+/// The run of a job that starts with the blocks `at` gives for the pose where the
+/// machine stands, `feeder` feeding the rest (`total` blocks in all), with the
+/// program's `mark`, and its report.
+fn ran<'b>(
+    machine: &MachineConfig,
+    path: &Path,
+    (first, total): (&pieces::FirstPass, usize),
+    mark: JobMark,
+    at: &dyn Fn([i64; 6]) -> std::borrow::Cow<'b, [Block]>,
+    opts: &RunOptions<'_>,
+    feeder: &mut Feeder<'_, '_>,
+) -> Result<RunResult, Failure> {
     let mut opts = opts.clone();
     opts.sim.deviation = None;
     // The controller keeps it with the job: a replug or `resume PROGRAM` continues it.
-    opts.link.mark = first.mark;
+    opts.link.mark = mark;
     let name = path.display().to_string();
-    let at = |_| start.as_slice().into();
-    let mut result = super::run_blocks_at(machine, &name, &at, None, &opts, &mut feeder)?;
-    if let Some(f) = feeder.failed {
+    let mut result = super::run_blocks_at(machine, &name, at, None, &opts, feeder)?;
+    if let Some(f) = feeder.failed.take() {
         return Err(f);
     }
-    result.report.blocks_sent = first.blocks;
-    result.report.compression = Some(CompressionSummary {
-        blocks_programmed: first.programmed,
-        blocks_streamed: first.blocks,
-        curves: first.curves,
-        deviation: None,
-    });
-    Ok(Some(result))
+    result.report.blocks_sent = total;
+    result.report.compression = Some(summary(first));
+    Ok(result)
+}
+
+/// `nc-send --from LINE` (said on stderr with `say`).
+#[derive(Clone, Copy, Debug)]
+pub struct Restarting {
+    /// The line.
+    pub line: u32,
+    /// Say what the restart does.
+    pub say: bool,
+}
+
+impl Restarting {
+    /// `--from line`, if given.
+    pub fn at(line: Option<u32>, say: bool) -> Option<Self> {
+        line.map(|line| Self { line, say })
+    }
+}
+
+/// `--from LINE` of the program at `path` a piece at a time: the pieces are read up
+/// to the restart ([`RestartScan`]), the first pass pre-flights the approach and the
+/// blocks from the restart on, and the job is the approach from where the machine
+/// stands, then the program's pieces from the restart on ([`crate::job::from_line`]).
+/// `Ok(None)`: it has O-words (restart it whole).
+fn restart(
+    machine: &MachineConfig,
+    path: &Path,
+    opts: &RunOptions<'_>,
+    from: Restarting,
+    check: bool,
+    hooks: &mut dyn JobHooks,
+) -> Result<Option<RunResult>, Failure> {
+    let compress = opts.compress.as_ref();
+    let options = super::front_end_options(machine, machine.home, &opts.tools);
+    let source = Source {
+        path,
+        options: &options,
+        machine,
+        compress,
+    };
+    let name = path.display().to_string();
+    let mut scan = RestartScan::new(from.line, machine.home)?;
+    let mut pieces = source.open()?;
+    loop {
+        match pieces.next_piece() {
+            Ok(Some(p)) if scan.add(&p.blocks) => break,
+            Ok(Some(_)) => {}
+            Ok(None) => break,
+            Err(Stop::NeedsWhole) => return Ok(None),
+            Err(Stop::Read(f)) => return Err(f),
+        }
+    }
+    if !pieces.errors().is_empty() {
+        return Err(super::compile::refused(pieces.errors()));
+    }
+    drop(pieces);
+    let restart = scan.finish(&name)?;
+    let bytes = pieces::PIECE_BYTES;
+    let r = Some(&restart);
+    let Some(first) = pieces::check_file_from(path, machine, &opts.tools, compress, bytes, r)?
+    else {
+        return Ok(None);
+    };
+    if from.say {
+        eprintln!("{}", restart.describe(&name));
+    }
+    let began = Cell::new(machine.home);
+    let (rest, _, pieces) = source.open_at(restart.index)?;
+    let total = restart.approach_len() + first.blocks - restart.index;
+    let mut feeder = Feeder {
+        inner: hooks,
+        source,
+        pieces,
+        restart: Some((&restart, &began)),
+        failed: None,
+    };
+    let with_approach = |pose| {
+        began.set(pose);
+        let mut blocks = restart.approach(pose);
+        blocks.extend_from_slice(&rest);
+        blocks
+    };
+    if check {
+        let blocks = with_approach(machine.home);
+        let total = (&first, total);
+        return checked(machine, path, total, &blocks, opts, &mut feeder).map(Some);
+    }
+    // The controller's count reaches the restart's block after the approach.
+    let mut mark = first.mark;
+    let n = restart.approach_len() as u32;
+    mark.next_block = (restart.index as u32).wrapping_sub(n);
+    let at = |pose| with_approach(pose).into();
+    let total = (&first, total);
+    ran(machine, path, total, mark, &at, opts, &mut feeder).map(Some)
 }
 
 /// `resume PROGRAM` of a held job whose program is run a piece at a time: the first
@@ -329,6 +481,7 @@ pub fn continue_program<T: Transport>(
         inner: hooks,
         source,
         pieces,
+        restart: None,
         failed: None,
     };
     let end = link.continue_job(held, &rest, start, &mut feeder)?;

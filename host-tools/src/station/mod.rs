@@ -42,7 +42,9 @@ impl Default for StationOptions {
             token: None,
             program: None,
             joint_names: Vec::new(),
-            host_timeout: Some(crate::machine_file::DEFAULT_HOST_TIMEOUT),
+            host_timeout: Some(Duration::from_millis(
+                pkmc::controller::DEFAULT_HOST_TIMEOUT_MS as u64,
+            )),
         }
     }
 }
