@@ -595,20 +595,22 @@ def case_stall(o):
     return disturbed_square(o, "stall", stall)
 
 
+def pull_cable(b, p):
+    """The USB cable pulled 2.5 s into a job and plugged in again 2 s later."""
+    time.sleep(2.5)
+    b.command("unplug")
+    time.sleep(2.0)
+    b.command("plug")
+    return "cable pulled at 2.5 s for 2 s"
+
+
 def case_replug(o):
     """The USB cable pulled 2.5 s into the square job and plugged in again 2 s later,
     with the port named by --link, which exists only while the device is enumerated
     (as a CDC-ACM port's device node does): nc-send reads an error when it goes,
     waits for the same path, reconnects, takes its own held job over and streams the
     rest (docs/nc-send.md, replug); the job completes exactly."""
-
-    def pull(b, p):
-        time.sleep(2.5)
-        b.command("unplug")
-        time.sleep(2.0)
-        b.command("plug")
-        return "cable pulled at 2.5 s for 2 s"
-    return disturbed_square(o, "replug", pull, link=True)
+    return disturbed_square(o, "replug", pull_cable, link=True)
 
 
 def case_replug_serial(o):
@@ -618,14 +620,7 @@ def case_replug_serial(o):
     port comes back under a new name after the replug (a new pseudo-terminal, as
     /dev/ttyACM0 may come back as /dev/ttyACM1), and nc-send finds it by its USB serial
     number; the job completes exactly."""
-
-    def pull(b, p):
-        time.sleep(2.5)
-        b.command("unplug")
-        time.sleep(2.0)
-        b.command("plug")
-        return "cable pulled at 2.5 s for 2 s"
-    return disturbed_square(o, "replug-serial", pull, by_id=True)
+    return disturbed_square(o, "replug-serial", pull_cable, by_id=True)
 
 
 

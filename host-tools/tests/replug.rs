@@ -28,13 +28,7 @@ fn a_program_fed_a_piece_at_a_time_is_taken_up_again_after_a_replug() {
 /// The program run by `nc-send --port` (with `env`) and the port closed for 2 s in
 /// the middle of it: the job ends where `--sim` ends it.
 fn replugged_mid_job(name: &str, env: &[(&str, &str)]) {
-    // 81 moves, about 10 s of motion.
-    let p = tmp(&format!("{name}.ngc"));
-    let mut text = String::from("G21 G90\nG0 X-60 Y0\n");
-    for i in 1..=80 {
-        text += &format!("G1 X{}.5 Y{} F1200\n", i - 60, i % 7);
-    }
-    std::fs::write(&p, text + "M2\n").unwrap();
+    let p = common::ten_second_program(&format!("{name}.ngc"));
     let p = p.to_str().unwrap();
     let reference = common::ok(&common::nc_send(&["--sim", "--report", "json", p]));
     let link = tmp(&format!("{name}-port"));

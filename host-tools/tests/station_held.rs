@@ -8,20 +8,14 @@
 
 mod common;
 
-use common::{json, repo, tmp, Sim};
+use common::{json, repo, Sim};
 use std::io::BufRead;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 #[test]
 fn a_program_from_the_station_whose_station_dies_is_held_and_resumed_to_its_end_by_nc_send() {
-    // 81 moves, about 10 s of motion.
-    let p = tmp("station-held.ngc");
-    let mut text = String::from("G21 G90\nG0 X-60 Y0\n");
-    for i in 1..=80 {
-        text += &format!("G1 X{}.5 Y{} F1200\n", i - 60, i % 7);
-    }
-    std::fs::write(&p, text + "M2\n").unwrap();
+    let p = common::ten_second_program("station-held.ngc");
     let p = p.to_str().unwrap();
     let reference = common::ok(&common::nc_send(&["--sim", "--report", "json", p]));
     let sim = Sim::start(&["--real-time"]);

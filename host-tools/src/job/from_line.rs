@@ -16,7 +16,7 @@
 //! The pre-flight covers those moves and the rest of the program from LINE, not what
 //! comes before it.
 
-use super::{exit, Compiled, Failure};
+use super::{exit, moves, Compiled, Failure};
 use pkmc::config::AXES;
 use pkmc::motion::block::{Aux, Block, Motion};
 
@@ -64,10 +64,6 @@ pub struct RestartScan {
     tool: u32,
     feed: Option<i64>,
     last_line: u32,
-}
-
-fn moves(b: &Block) -> bool {
-    !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_))
 }
 
 impl RestartScan {

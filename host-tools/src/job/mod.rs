@@ -114,6 +114,24 @@ impl From<LinkError> for Failure {
     }
 }
 
+/// Does `b` move the machine (not a dwell or an auxiliary function)?
+pub(crate) fn moves(b: &Block) -> bool {
+    !matches!(
+        b.motion,
+        pkmc::motion::block::Motion::Dwell(_) | pkmc::motion::block::Motion::Aux(_)
+    )
+}
+
+/// Where the machine stands after `blocks`, which start at `from`: the last move's
+/// target.
+pub(crate) fn pose_after(blocks: &[Block], from: [i64; 6]) -> [i64; 6] {
+    blocks
+        .iter()
+        .rev()
+        .find(|b| moves(b))
+        .map_or(from, |b| b.target)
+}
+
 /// Where to run a job.
 #[derive(Clone, Copy, Debug)]
 pub enum Target<'a> {

@@ -330,11 +330,7 @@ pub fn check_file_from(
             Err(Stop::Read(f)) => return Err(f),
         };
         let k = from.saturating_sub(out.blocks).min(piece.blocks.len());
-        let start = piece.blocks[..k]
-            .iter()
-            .rev()
-            .find(|b| !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)))
-            .map_or(piece.start, |b| b.target);
+        let start = super::pose_after(&piece.blocks[..k], piece.start);
         let checked = &piece.blocks[k..];
         let paths = crate::analysis::preflight::paths(checked, start);
         acc.add(checked, &paths, start, &mut out.preflight);

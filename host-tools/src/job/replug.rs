@@ -8,7 +8,7 @@
 use super::{exit, Failure, RunOptions, Target};
 use crate::link::{ClientStats, JobEnd, JobHooks, Link, LinkError, PortTransport};
 use pkmc::config::MachineConfig;
-use pkmc::motion::block::{Block, Motion};
+use pkmc::motion::block::Block;
 use pkmc::wire::Status;
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -133,11 +133,7 @@ pub fn rejoin(
             Some(Err(e)) => return Err(Failure::new(exit::BAD_INPUT, e)),
             None => {
                 let k = k.min(blocks.len());
-                let start = blocks[..k]
-                    .iter()
-                    .rev()
-                    .find(|b| !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)))
-                    .map_or(pose, |b| b.target);
+                let start = super::pose_after(&blocks[..k], pose);
                 (std::borrow::Cow::Borrowed(&blocks[k..]), start)
             }
         };

@@ -12,7 +12,7 @@
 use super::{exit, Failure, RunOptions};
 use crate::link::{JobEnd, JobHooks, Link, Transport};
 use pkmc::config::MachineConfig;
-use pkmc::motion::block::{Block, Motion};
+use pkmc::motion::block::Block;
 use pkmc::wire::{Control, JobMark, State};
 use std::path::Path;
 
@@ -210,11 +210,7 @@ fn continue_program<T: Transport>(
     let blocks = &compiled.blocks;
     same_program(path, &program_mark(blocks, program_lines(path)), &held)?;
     let from = held.next_block as usize;
-    let start = blocks[..from]
-        .iter()
-        .rev()
-        .find(|b| !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)))
-        .map_or(compiled.start, |b| b.target);
+    let start = super::pose_after(&blocks[..from], compiled.start);
     let mark = JobMark { ..held };
     let rest = &blocks[from..];
     let end = link.continue_job(mark, rest, start, hooks)?;

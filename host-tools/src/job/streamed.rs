@@ -18,7 +18,7 @@ use super::resume::Resumed;
 use super::{exit, CompressionSummary, Failure, PreflightSummary, Report, RunOptions, RunResult};
 use crate::link::{JobHooks, Link, LinkView, Rewound, Transport};
 use pkmc::config::MachineConfig;
-use pkmc::motion::block::{Block, Motion};
+use pkmc::motion::block::Block;
 use pkmc::wire::{Control, JobMark, Status};
 use std::cell::Cell;
 use std::path::Path;
@@ -50,6 +50,22 @@ pub struct Source<'o> {
 }
 
 impl<'o> Source<'o> {
+    /// The program at `path`, compiled with the front end's `options`, for `machine`
+    /// as `opts` say (their merging options).
+    fn new(
+        path: &'o Path,
+        options: &'o crate::gcode::Options,
+        machine: &'o MachineConfig,
+        opts: &'o RunOptions<'_>,
+    ) -> Self {
+        Source {
+            path,
+            options,
+            machine,
+            compress: opts.compress.as_ref(),
+        }
+    }
+
     /// The pieces from the program's start.
     fn open(&self) -> Result<Pieces<'o>, Failure> {
         let bytes = pieces::PIECE_BYTES;
@@ -65,20 +81,13 @@ impl<'o> Source<'o> {
         while seen < to {
             let Some(p) = next(&mut pieces)? else { break };
             let k = (to - seen).min(p.blocks.len());
-            for b in p.blocks[..k].iter().filter(|b| moves(b)) {
-                pose = b.target;
-            }
+            pose = super::pose_after(&p.blocks[..k], pose);
             seen += k;
             first.extend_from_slice(&p.blocks[k..]);
         }
         first.extend(first_blocks(&mut pieces)?);
         Ok((first, pose, pieces))
     }
-}
-
-/// Does `b` move the machine (not a dwell or an auxiliary function)?
-fn moves(b: &Block) -> bool {
-    !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_))
 }
 
 /// The next piece, or why the pieces stopped.
@@ -143,8 +152,7 @@ impl Feeder<'_, '_> {
         if to >= n {
             return Ok((first, pose));
         }
-        let before = approach[..to].iter().rev().find(|b| moves(b));
-        let at = before.map_or(began.get(), |b| b.target);
+        let at = super::pose_after(&approach[..to], began.get());
         let mut blocks = approach[to..].to_vec();
         blocks.extend(first);
         Ok((blocks, at))
@@ -202,6 +210,18 @@ impl JobHooks for Feeder<'_, '_> {
     }
 }
 
+/// The first pass over the program at `path` ([`pieces::check_file_from`]; from
+/// `restart`'s approach when given); `None`: it has O-words.
+fn first_pass(
+    machine: &MachineConfig,
+    path: &Path,
+    opts: &RunOptions<'_>,
+    restart: Option<&Restart>,
+) -> Result<Option<pieces::FirstPass>, Failure> {
+    let (tools, compress) = (&opts.tools, opts.compress.as_ref());
+    pieces::check_file_from(path, machine, tools, compress, pieces::PIECE_BYTES, restart)
+}
+
 /// The first pieces of the second pass: blocks to start the job with.
 fn first_blocks(pieces: &mut Pieces<'_>) -> Result<Vec<Block>, Failure> {
     let mut blocks = Vec::new();
@@ -222,18 +242,11 @@ pub fn check(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<Option<RunResult>, Failure> {
-    let compress = opts.compress.as_ref();
-    let bytes = pieces::PIECE_BYTES;
-    let Some(first) = pieces::check_file(path, machine, &opts.tools, compress, bytes)? else {
+    let Some(first) = first_pass(machine, path, opts, None)? else {
         return Ok(None);
     };
     let options = super::front_end_options(machine, machine.home, &opts.tools);
-    let source = Source {
-        path,
-        options: &options,
-        machine,
-        compress,
-    };
+    let source = Source::new(path, &options, machine, opts);
     let (start, mut feeder) = Feeder::start(source, hooks)?;
     checked(
         machine,
@@ -314,18 +327,11 @@ pub fn run(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<Option<RunResult>, Failure> {
-    let compress = opts.compress.as_ref();
-    let bytes = pieces::PIECE_BYTES;
-    let Some(first) = pieces::check_file(path, machine, &opts.tools, compress, bytes)? else {
+    let Some(first) = first_pass(machine, path, opts, None)? else {
         return Ok(None);
     };
     let options = super::front_end_options(machine, machine.home, &opts.tools);
-    let source = Source {
-        path,
-        options: &options,
-        machine,
-        compress,
-    };
+    let source = Source::new(path, &options, machine, opts);
     let (start, mut feeder) = Feeder::start(source, hooks)?;
     let at = |_| start.as_slice().into();
     let total = (&first, first.blocks);
@@ -387,14 +393,8 @@ fn restart(
     check: bool,
     hooks: &mut dyn JobHooks,
 ) -> Result<Option<RunResult>, Failure> {
-    let compress = opts.compress.as_ref();
     let options = super::front_end_options(machine, machine.home, &opts.tools);
-    let source = Source {
-        path,
-        options: &options,
-        machine,
-        compress,
-    };
+    let source = Source::new(path, &options, machine, opts);
     let name = path.display().to_string();
     let mut scan = RestartScan::new(from.line, machine.home)?;
     let mut pieces = source.open()?;
@@ -412,10 +412,7 @@ fn restart(
     }
     drop(pieces);
     let restart = scan.finish(&name)?;
-    let bytes = pieces::PIECE_BYTES;
-    let r = Some(&restart);
-    let Some(first) = pieces::check_file_from(path, machine, &opts.tools, compress, bytes, r)?
-    else {
+    let Some(first) = first_pass(machine, path, opts, Some(&restart))? else {
         return Ok(None);
     };
     if from.say {
@@ -463,19 +460,12 @@ pub fn continue_program<T: Transport>(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<Option<Resumed>, Failure> {
-    let compress = opts.compress.as_ref();
-    let bytes = pieces::PIECE_BYTES;
-    let Some(first) = pieces::check_file(path, machine, &opts.tools, compress, bytes)? else {
+    let Some(first) = first_pass(machine, path, opts, None)? else {
         return Ok(None);
     };
     super::resume::same_program(path, &first.mark, &held)?;
     let options = super::front_end_options(machine, machine.home, &opts.tools);
-    let source = Source {
-        path,
-        options: &options,
-        machine,
-        compress,
-    };
+    let source = Source::new(path, &options, machine, opts);
     let (rest, start, pieces) = source.open_at(held.next_block as usize)?;
     let mut feeder = Feeder {
         inner: hooks,
@@ -498,6 +488,7 @@ pub fn continue_program<T: Transport>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use pkmc::motion::block::Motion;
 
     /// Blocks fed from block `to` on ([`Source::open_at`], then the pieces after it)
     /// are the program's from `to` on, and start where block `to - 1` ends.

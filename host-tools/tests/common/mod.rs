@@ -96,6 +96,18 @@ pub fn tmp(name: &str) -> PathBuf {
     dir.join(name)
 }
 
+/// A program of 81 moves, about 10 s of motion on the built-in machine (ending at line
+/// 82), written to the temporary file `name`.
+pub fn ten_second_program(name: &str) -> PathBuf {
+    let p = tmp(name);
+    let mut text = String::from("G21 G90\nG0 X-60 Y0\n");
+    for i in 1..=80 {
+        text += &format!("G1 X{}.5 Y{} F1200\n", i - 60, i % 7);
+    }
+    std::fs::write(&p, text + "M2\n").unwrap();
+    p
+}
+
 /// `pkmc-sim` on a pseudo-terminal, killed when dropped.
 pub struct Sim {
     child: Child,
