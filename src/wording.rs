@@ -138,6 +138,7 @@ impl Words for AlarmCause {
             AlarmCause::HomingFailed => "homing failed",
             AlarmCause::JointSpeed => "joint speed guard",
             AlarmCause::HostTimeout => "host silent too long, job held",
+            AlarmCause::ProbeAtStart => "probe already in the state the probing move seeks",
         })
     }
 }

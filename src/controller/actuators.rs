@@ -27,6 +27,14 @@ pub struct Inputs {
     pub drive_fault: u16,
     /// Trip latched by each servo channel's loop ([`crate::drive::contour::ServoBank`]).
     pub servo_trip: [Option<Trip>; MAX_SERVOS],
+    /// The touch probe's input, active when touching: debounced
+    /// ([`crate::drive::debounce::SWITCH`]).
+    pub probe: bool,
+    /// The probe's input as sampled this tick.
+    pub probe_raw: bool,
+    /// When the probe's input last changed within the last tick, µs after its start
+    /// (a timer's capture; `None`: not known). See [`crate::drive::probe`].
+    pub probe_edge_us: Option<u16>,
 }
 
 /// What the hardware must do this tick.

@@ -36,11 +36,13 @@
 
 mod actuators;
 pub mod pacing;
+mod probing;
 mod safety;
 mod session;
 
 use crate::config::{BoardChannels, ConfigError, Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS};
 use crate::drive::homing::Homer;
+use crate::drive::probe::ProbeLatch;
 use crate::drive::stepper::{StepScheduler, StepTrain};
 use crate::kinematics::hexapod_xy_map::MapBuilder;
 use crate::kinematics::ContourMap;
@@ -175,6 +177,15 @@ pub struct Controller {
     /// This tick completed a map.
     map_fresh: bool,
     stats: LinkStats,
+    /// The probing move's latch and result ([`crate::drive::probe`]).
+    probe: ProbeLatch,
+    /// The steppers' commanded actuator positions after the last two ticks, while a
+    /// probing move runs (`probing`).
+    probe_ref: [[i64; MAX_JOINTS]; 2],
+    /// A probing move touched: it is stopping on the path, then its rest is dropped.
+    probe_stop: bool,
+    /// The probe's result is owed to the host ([`crate::wire::CtrlMsg::Probe`]).
+    probe_due: bool,
 }
 
 /// What a controller for a machine needs besides the machine, computed and checked
@@ -323,6 +334,10 @@ impl Controller {
             at!((*p).last).write(Inputs::default());
             at!((*p).out).write(Outputs::default());
             at!((*p).stats).write(LinkStats::default());
+            at!((*p).probe).write(ProbeLatch::new());
+            at!((*p).probe_ref).write([[0; MAX_JOINTS]; 2]);
+            at!((*p).probe_stop).write(false);
+            at!((*p).probe_due).write(false);
             (*p).update_servo_targets();
         }
     }
@@ -373,6 +388,11 @@ impl Controller {
     pub fn take_line_log(&mut self) -> heapless::Vec<u32, 64> {
         core::mem::take(&mut self.exec.line_log)
     }
+    /// The last probing move's result ([`crate::drive::probe`]).
+    pub fn probe_result(&self) -> Option<crate::drive::probe::ProbeResult> {
+        self.probe.result()
+    }
+
     /// Spindle state last commanded.
     pub fn spindle(&self) -> Aux {
         self.spindle
@@ -532,11 +552,17 @@ impl Controller {
         if self.resync {
             self.resync_servos(inputs);
         }
+        if self.probe.armed() {
+            self.probe_tick();
+        }
         let queued = self.planner.len();
         match self.state {
             State::Homing => self.home_tick(inputs),
             State::Alarm | State::EStop if !self.stopping => {}
             _ => self.motion_tick(),
+        }
+        if self.probe.armed() || self.probe_stop {
+            self.probe_after();
         }
         if self.session && self.planner.len() < queued && self.state != State::Alarm {
             // Credits as slots free: the host refills within a tick or two instead of
@@ -557,6 +583,8 @@ impl Controller {
 
 #[cfg(test)]
 mod drive_tests;
+#[cfg(test)]
+mod probe_tests;
 #[cfg(test)]
 mod starve_tests;
 #[cfg(test)]

@@ -37,7 +37,7 @@
 use crate::config::{Drive, MachineConfig, MAX_SERVOS};
 use crate::controller::{Controller, Inputs, Outputs};
 use crate::drive::contour::{PeriodInputs, PeriodOutputs, ServoBank};
-use crate::drive::debounce::{SwitchFilter, Switches};
+use crate::drive::debounce::{Debouncer, SwitchFilter, Switches, SWITCH};
 use crate::drive::servo::{Trip, SERVO_PER_TICK, SETPOINT_FRAC_BITS};
 use crate::kinematics::ContourMap;
 
@@ -237,17 +237,35 @@ pub struct RawInputs {
     /// Encoder count latched by the hardware at an index pulse since the last tick,
     /// per servo channel (none on the reference board).
     pub index: [Option<i64>; MAX_SERVOS],
+    /// The touch probe's input as sampled, active when touching (debounced by the
+    /// [`TickPacer`] like a switch).
+    pub probe: bool,
+    /// When the probe's input last changed since the last tick, µs after that tick's
+    /// start: a timer's input capture (`None`: no capture).
+    pub probe_edge_us: Option<u16>,
 }
 
 /// The tick's side of the pacing: the switch filters and the outputs due at the start
 /// of the next tick. See the module documentation.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TickPacer {
     switches: SwitchFilter,
+    probe: Debouncer,
     /// Outputs of the last tick, applied at the start of the next.
     due: Outputs,
     /// What the last tick handed to the controller.
     inputs: Inputs,
+}
+
+impl Default for TickPacer {
+    fn default() -> Self {
+        Self {
+            switches: SwitchFilter::new(),
+            probe: SWITCH,
+            due: Outputs::default(),
+            inputs: Inputs::default(),
+        }
+    }
 }
 
 impl TickPacer {
@@ -293,6 +311,9 @@ impl TickPacer {
             home: switches.home,
             drive_fault: raw.drive_fault | amplifier_fault,
             servo_trip: snapshot.trips,
+            probe: self.probe.sample(raw.probe),
+            probe_raw: raw.probe,
+            probe_edge_us: raw.probe_edge_us,
             ..Inputs::default()
         };
         self.inputs = inputs;

@@ -150,6 +150,13 @@ impl Controller {
             self.status_due =
                 !self.push_frame(|seq, body, out| Some(encode_status(seq, &s, body, out)));
         }
+        if self.probe_due && !self.status_due {
+            if let Some(r) = self.probe.result() {
+                let msg = CtrlMsg::Probe(r);
+                self.probe_due =
+                    !self.push_frame(|seq, body, out| encode_frame_with(seq, &msg, body, out).ok());
+            }
+        }
     }
 
     pub(super) fn nak(&mut self, reason: NakReason) {
@@ -253,7 +260,10 @@ impl Controller {
                     Err(error) => self.send(&CtrlMsg::MachineRefused { error }),
                 }
             }
-            HostMsgOf::StatusRequest => self.status_due = true,
+            HostMsgOf::StatusRequest => {
+                self.status_due = true;
+                self.probe_due = self.probe.result().is_some();
+            }
             HostMsgOf::Control { id, cmd } => {
                 if self.last_control != Some(id) {
                     self.last_control = Some(id);
@@ -417,6 +427,7 @@ impl Controller {
                     line: self.exec.line,
                 })
             }
+            Control::Probe { planned, mode } => self.probe_start(&planned, mode),
             Control::Home => self.home(),
             Control::EndJob => {
                 self.job_open = false;
@@ -513,6 +524,8 @@ impl Controller {
             alarm: self.alarm,
             homed: self.homed,
             orphan: self.orphan.is_some(),
+            probe_input: self.last.probe,
+            probes: self.probe.result().map_or(0, |r| r.count),
         }
     }
 }

@@ -185,8 +185,21 @@ pub fn encode_status(
     out: &mut [u8; MAX_FRAME],
 ) -> usize {
     // The widest status (every varint at its longest) fits with its CRC.
-    const WIDEST: usize =
-        2 + 1 + 1 + 5 + 5 + 10 * (1 + AXES + 2 * MAX_JOINTS + 1) + 5 + 3 + 3 + 3 + 8 + 1 + 1;
+    const WIDEST: usize = 2
+        + 1
+        + 1
+        + 5
+        + 5
+        + 10 * (1 + AXES + 2 * MAX_JOINTS + 1)
+        + 5
+        + 3
+        + 3
+        + 3
+        + 8
+        + 1
+        + 1
+        + 1
+        + 3;
     const _: () = assert!(WIDEST + 4 <= MAX_BODY);
     let mut w = Writer { buf: body, len: 0 };
     for b in seq.to_le_bytes() {
@@ -222,6 +235,8 @@ pub fn encode_status(
     }
     w.byte(s.homed as u8);
     w.byte(s.orphan as u8);
+    w.byte(s.probe_input as u8);
+    w.u32(s.probes as u32);
     let n = w.len;
     seal(&body[..n], out)
 }

@@ -3,11 +3,12 @@
 //! frame size bounds.
 
 use crate::config::{AXES, MAX_JOINTS};
+use crate::drive::probe::{ProbeMode, ProbeResult};
 use crate::motion::block::PlannedBlock;
 use serde::{Deserialize, Serialize};
 
 /// Protocol version, exchanged in the handshake; both sides must agree.
-pub const PROTOCOL_VERSION: u16 = 11;
+pub const PROTOCOL_VERSION: u16 = 12;
 /// Largest unencoded frame body (sequence number, message and CRC), bytes: a planned
 /// helix with every field at its widest fits.
 pub const MAX_BODY: usize = 384;
@@ -71,6 +72,19 @@ pub enum Control {
         host_timeout_ms: u32,
         /// The program and the job's first block in it (`program` 0: none).
         mark: JobMark,
+    },
+    /// A probing move (G38.2–G38.5; protocol 12): a move the host planned from the
+    /// controller's pose, from rest to rest, acted on as a `Jog` is (idle, or
+    /// starved in a streamed job, with nothing queued; it must start where the
+    /// controller stands). It watches the touch probe: at the change `mode` seeks
+    /// it latches every joint and stops on the path; at its end without one it
+    /// reports no contact (`Status::probe`, [`crate::drive::probe`]). A probe
+    /// already in the sought state raises alarm `ProbeAtStart`, and nothing moves.
+    Probe {
+        /// The move.
+        planned: PlannedBlock,
+        /// What it waits for.
+        mode: ProbeMode,
     },
 }
 
@@ -208,6 +222,9 @@ pub enum AlarmCause {
     /// (`Control::BeginJob`): the job is held (state `Hold`, queue kept) for its host
     /// or a new one to resume or abort (protocol 10).
     HostTimeout,
+    /// A probing move found the probe already in the state it seeks (touching for
+    /// G38.2/G38.3, clear for G38.4/G38.5): nothing moved (protocol 12).
+    ProbeAtStart,
 }
 
 /// An alarm: its cause, the joint concerned (`NO_JOINT` if none) and the NC line.
@@ -284,6 +301,12 @@ pub struct Status {
     /// ([`HeldJob`]): blocks are refused (`JobHeld`) until `Resume` adopts it or
     /// `Abort` drops it.
     pub orphan: bool,
+    /// The touch probe's input (debounced), active when touching.
+    pub probe_input: bool,
+    /// Probing moves ended (`Control::Probe`; wrapping): each result is sent once as
+    /// [`CtrlMsg::Probe`] when taken, and again after the status that answers a
+    /// `StatusRequest`.
+    pub probes: u16,
 }
 
 /// An unfinished job of an earlier session, reported to the host that opens a new
@@ -358,4 +381,6 @@ pub enum CtrlMsg {
     },
     /// Controller status.
     Status(Status),
+    /// The last probing move's result (protocol 12; see `Status::probes`).
+    Probe(ProbeResult),
 }

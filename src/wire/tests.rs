@@ -398,6 +398,8 @@ fn acks_and_statuses_encode_by_hand_exactly_as_postcard_encodes_them() {
                 line: wide() as u32,
             }),
             homed: k & 1 == 0,
+            probe_input: k & 2 == 0,
+            probes: wide() as u16,
             orphan: k % 5 == 0,
         };
         let msg = CtrlMsg::Status(s.clone());
@@ -480,6 +482,8 @@ fn the_largest_status_fits_in_a_frame() {
         }),
         homed: true,
         orphan: true,
+        probe_input: true,
+        probes: u16::MAX,
     });
     let mut frame = [0u8; MAX_FRAME];
     assert!(encode_frame(u16::MAX, &s, &mut frame).is_ok());

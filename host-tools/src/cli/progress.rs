@@ -495,6 +495,8 @@ mod tests {
             alarm: None,
             homed: false,
             orphan: false,
+            probe_input: false,
+            probes: 0,
         }
     }
 

@@ -436,7 +436,8 @@ impl<T: Transport> Link<T> {
             CtrlMsg::Status(s) => return self.on_status(&s, fed, hooks, job),
             // We said no `Hello` since the job began: another program on the port did.
             CtrlMsg::HelloAck { .. } => return Err(self.superseded("its HelloAck")),
-            CtrlMsg::MachineLoaded { .. } | CtrlMsg::MachineRefused { .. } => {}
+            // A job of blocks sends no probing move: a result is an earlier one's.
+            CtrlMsg::MachineLoaded { .. } | CtrlMsg::MachineRefused { .. } | CtrlMsg::Probe(_) => {}
         }
         Ok(None)
     }

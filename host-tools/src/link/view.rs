@@ -154,6 +154,8 @@ mod tests {
             alarm: None,
             homed: false,
             orphan: false,
+            probe_input: false,
+            probes: 0,
         };
         s.pose[0] = 1_500_000;
         s.pose[3] = -90_000_000_000;

@@ -180,6 +180,8 @@ mod tests {
             alarm: None,
             homed: false,
             orphan: false,
+            probe_input: false,
+            probes: 0,
         }
     }
 

@@ -475,6 +475,9 @@ impl Simulator {
             // through the amplifier fault inputs and the snapshot.
             drive_fault: (self.forced.drive_fault | timing_fault) & !servo_joints,
             index: std::mem::take(&mut self.index),
+            // No probe is modelled: its input is clear.
+            probe: false,
+            probe_edge_us: None,
         };
         let command = self.pacer.tick(&mut self.ctrl, &raw, &snapshot);
         self.tick_lines = self.ctrl.take_line_log();

@@ -154,7 +154,8 @@ mod firmware {
                     home: limits,
                 },
                 // No stepper fault lines and no index inputs on this board (no pin
-                // left); the amplifiers' fault line comes with the snapshot.
+                // left), and no touch probe wired yet (its input reads clear); the
+                // amplifiers' fault line comes with the snapshot.
                 ..RawInputs::default()
             };
             let ticked = CONTROLLER
