@@ -12,8 +12,9 @@ use pkmc::drive::servo::Trip;
 use pkmc::drive::stepper::StepTrain;
 
 /// Words of one [`Inputs`]: encoder counts, index (flag, count) per servo channel,
-/// e-stop, limit, home and drive-fault bits, trip (code, error, limit) per channel.
-pub const INPUT_WORDS: usize = MAX_SERVOS + 2 * MAX_SERVOS + 4 + 3 * MAX_SERVOS;
+/// e-stop, limit, home and drive-fault bits, trip (code, error, limit) per channel,
+/// then the probe (debounced, raw, edge time or -1).
+pub const INPUT_WORDS: usize = MAX_SERVOS + 2 * MAX_SERVOS + 4 + 3 * MAX_SERVOS + 3;
 /// Words of one [`ContourMap`]: its `f32` entries' bits, `to_pose` row by row, then
 /// `to_joint` row by row.
 pub const MAP_WORDS: usize = 2 * POSE_AXES * MAX_SERVOS;
@@ -31,6 +32,9 @@ pub fn inputs_words(inputs: &Inputs) -> [i64; INPUT_WORDS] {
         home,
         drive_fault,
         servo_trip,
+        probe,
+        probe_raw,
+        probe_edge_us,
     } = *inputs;
     let mut w = [0; INPUT_WORDS];
     let mut k = 0;
@@ -62,6 +66,9 @@ pub fn inputs_words(inputs: &Inputs) -> [i64; INPUT_WORDS] {
         put(error as i64);
         put(limit as i64);
     }
+    put(probe as i64);
+    put(probe_raw as i64);
+    put(probe_edge_us.map_or(-1, i64::from));
     w
 }
 
@@ -86,6 +93,9 @@ pub fn inputs_from(w: &[i64; INPUT_WORDS]) -> Inputs {
                 _ => None,
             }
         }),
+        probe: w[INPUT_WORDS - 3] != 0,
+        probe_raw: w[INPUT_WORDS - 2] != 0,
+        probe_edge_us: (w[INPUT_WORDS - 1] >= 0).then_some(w[INPUT_WORDS - 1] as u16),
     }
 }
 
