@@ -104,6 +104,12 @@ fn listing(c: &Canon) -> String {
         Canon::Quadratic {
             target, c, feed: f, ..
         } => format!("quadratic {} c {} {}", pose(target), offset(c), feed(f)),
+        Canon::Probe {
+            target,
+            feed: f,
+            probing,
+            ..
+        } => format!("probe {} {} {}", probing.name(), pose(target), feed(f)),
         Canon::Dwell { ms, .. } => format!("dwell {ms}ms"),
         Canon::PathMode { mode, .. } => match mode {
             PathMode::ExactStop => "path exact-stop".into(),

@@ -88,7 +88,9 @@ impl Controller {
     /// latch, ends a stopped move, and ends a move that reached its end untouched.
     pub(super) fn probe_after(&mut self) {
         if self.probe_stop && self.exec.stopped() {
+            // The move is complete where it stopped: its rest is dropped.
             self.exec.stop();
+            self.exec.completed = self.exec.completed.wrapping_add(1);
             self.planner.clear(self.exec.pose);
             self.planner.hold = false;
             self.probe_stop = false;

@@ -99,6 +99,8 @@ struct Args {
     /// Restart the program from this NC line, its modal state rebuilt (docs/nc-send.md).
     #[arg(long, value_name = "LINE")]
     from: Option<u32>,
+    #[command(flatten)]
+    probe: pkmc_host::sim::probe::ProbeArgs,
     /// The G-code program.
     program: Option<PathBuf>,
     #[command(subcommand)]
@@ -201,33 +203,12 @@ fn bad(message: impl Into<String>) -> Failure {
     Failure::new(exit::BAD_INPUT, message)
 }
 
-/// The cutting load (`--wrench`, `--wrench-file`) with the machine file's force
-/// limits, if a load is given.
-fn load_statics(
-    args: &Args,
-    machine: &pkmc::config::MachineConfig,
-) -> Result<Option<pkmc_host::job::StaticsSpec>, Failure> {
-    use pkmc_host::analysis::statics::Loads;
-    let loads = match (&args.wrench, &args.wrench_file) {
-        (Some(w), _) => {
-            Loads::constant(Loads::parse_wrench(w).map_err(|m| bad(format!("--wrench {w}: {m}")))?)
-        }
-        (None, Some(p)) => {
-            let text = std::fs::read_to_string(p)
-                .map_err(|e| bad(format!("{}: cannot read the loads ({e})", p.display())))?;
-            Loads::parse_file(&text, &p.display().to_string()).map_err(bad)?
-        }
-        (None, None) => return Ok(None),
-    };
-    let limits = match &args.machine {
-        Some(p) => pkmc_host::machine_file::load_force_limits(p).map_err(|e| bad(e.to_string()))?,
-        None => vec![None; machine.joints.len()],
-    };
-    Ok(Some(pkmc_host::job::StaticsSpec { loads, limits }))
+/// The cutting load (`--wrench`, `--wrench-file`), if given, with the force limits.
+fn load_statics(args: &Args, m: &MachineConfig) -> Result<Option<job::StaticsSpec>, Failure> {
+    let (w, file) = (args.wrench.as_deref(), args.wrench_file.as_deref());
+    job::statics_spec(w, file, args.machine.as_deref(), m)
 }
 
-/// The tool table: `--tools FILE` (LinuxCNC's tool-file form), else the machine file's
-/// `[[tools]]`, else none.
 /// The compressor's settings from the command line (`None` with --no-compress).
 fn compress_settings(args: &Args) -> Result<Option<pkmc_host::gcode::compress::Settings>, Failure> {
     if args.no_compress {
@@ -367,6 +348,7 @@ fn run(args: &Args) -> Result<i32, Failure> {
             plants,
             inject: args.inject.clone(),
             deviation: None,
+            probe: args.probe.model(args.seed).map_err(bad)?,
             // A sender watches the machine move: the simulator keeps real time.
             clock: match args.command {
                 Some(Command::Grbl { .. } | Command::Serve { .. }) => {
@@ -508,6 +490,19 @@ fn run_whole(
     interrupts: Interrupts,
     quiet: bool,
 ) -> Result<job::RunResult, Failure> {
+    if args.from.is_none() && job::probing::file_names_g38(program) {
+        let mut op = operator(
+            args,
+            matches!(opts.target, Target::Sim),
+            interrupts.clone(),
+            quiet,
+            0,
+        );
+        let r = job::run_probing(machine, program, opts, &mut op, args.check);
+        if let Some(r) = r.inspect(|_| op.progress.finish())? {
+            return Ok(r);
+        }
+    }
     let (compiled, restart) = match args.from {
         Some(line) => job::from_line::compile_from(program, machine, opts, line, !quiet)
             .map(|(c, r)| (c, Some(r)))?,
@@ -668,11 +663,8 @@ fn print_status(
             }),
             None => serde_json::Value::Null,
         };
-        let _ = writeln!(
-            out,
-            "{}",
-            serde_json::to_string_pretty(&v).unwrap_or_default()
-        );
+        let text = serde_json::to_string_pretty(&v).unwrap_or_default();
+        let _ = writeln!(out, "{text}");
     } else {
         let v = StatusView::new(status);
         let _ = writeln!(

@@ -88,7 +88,8 @@ fn push_into(
             | Canon::Linear { .. }
             | Canon::Arc { .. }
             | Canon::Cubic { .. }
-            | Canon::Quadratic { .. } => move_block(c, tolerance, &pose),
+            | Canon::Quadratic { .. }
+            | Canon::Probe { .. } => move_block(c, tolerance, &pose),
             Canon::Dwell { line, ms } => Some(Block {
                 line: *line,
                 motion: Motion::Dwell(*ms),
@@ -222,6 +223,11 @@ fn move_block(c: &Canon, tolerance: u32, pose: &[i64; AXES]) -> Option<Block> {
             tolerance,
             pose,
         )),
+        // The probing move as it ran (the controller runs it as `Control::Probe`, never
+        // as a block: see `crate::job::probing`), stopping at its end.
+        Canon::Probe {
+            line, target, feed, ..
+        } => Some(feed_block(*line, Motion::Linear, *target, *feed, 0, pose)),
         _ => None,
     }
 }

@@ -121,6 +121,23 @@ pub enum Canon {
         /// Feed.
         feed: Feed,
     },
+    /// G38.2–G38.5: a straight probing move toward `target` that stops where the probe
+    /// changes as `probing` seeks ([`crate::gcode::interp::probe`]). When its outcome
+    /// is known (a run with [`crate::gcode::Options::probes`]) `target` is where the
+    /// move stopped and `outcome` says what it found; otherwise it is the last command
+    /// of the run.
+    Probe {
+        /// NC line.
+        line: u32,
+        /// End pose: the programmed one, or where the move stopped.
+        target: [i64; AXES],
+        /// Feed.
+        feed: Feed,
+        /// Which G38.
+        probing: crate::gcode::interp::probe::Probing,
+        /// What the move found, when known.
+        outcome: Option<crate::gcode::interp::probe::ProbeOutcome>,
+    },
     /// G4: dwell.
     Dwell {
         /// NC line.
@@ -186,6 +203,7 @@ impl Canon {
             | Canon::Arc { line, .. }
             | Canon::Cubic { line, .. }
             | Canon::Quadratic { line, .. }
+            | Canon::Probe { line, .. }
             | Canon::Dwell { line, .. }
             | Canon::PathMode { line, .. }
             | Canon::Spindle { line, .. }
@@ -204,7 +222,8 @@ impl Canon {
             | Canon::Linear { target, .. }
             | Canon::Arc { target, .. }
             | Canon::Cubic { target, .. }
-            | Canon::Quadratic { target, .. } => Some(target),
+            | Canon::Quadratic { target, .. }
+            | Canon::Probe { target, .. } => Some(target),
             _ => None,
         }
     }

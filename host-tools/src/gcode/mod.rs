@@ -97,6 +97,13 @@ pub struct Options {
     /// subroutine calls) before it is stopped as endless; default
     /// [`flow::MAX_REPEATED_LINES`].
     pub repeated_lines: usize,
+    /// The outcomes of the program's first probing moves (G38.2–G38.5), in order: a
+    /// run takes them as the moves' results and stops at the first move past them
+    /// ([`interp::Interp::waiting`]). Default: none.
+    pub probes: Vec<interp::probe::ProbeOutcome>,
+    /// The caller runs probing moves (G38.2–G38.5) as such (nc-send's program runs);
+    /// otherwise they are refused by name. Default: false.
+    pub probing: bool,
 }
 
 impl Default for Options {
@@ -109,6 +116,8 @@ impl Default for Options {
             axes: [true; AXES],
             inch_parameters: false,
             repeated_lines: flow::MAX_REPEATED_LINES,
+            probes: Vec::new(),
+            probing: false,
         }
     }
 }
@@ -174,7 +183,13 @@ pub fn compile_canon(
     }
     if !program.broken {
         flow::run(&program, source, file, &mut interp, &mut out, &mut errors);
-        if let Err(e) = interp.finish(&mut out) {
+        // Stopped at a probing move, the run is not over: the rest is run once its
+        // outcome is known.
+        let finished = match interp.waiting() {
+            true => Ok(()),
+            false => interp.finish(&mut out),
+        };
+        if let Err(e) = finished {
             let line = program.lines.len().max(1);
             errors.push(Diagnostic {
                 file: file.to_string(),
@@ -186,7 +201,7 @@ pub fn compile_canon(
         }
     }
     if let Some(open) = program.opening_percent {
-        if !program.closed && !interp.ended() {
+        if !program.closed && !interp.ended() && !interp.waiting() {
             errors.push(Diagnostic {
                 file: file.to_string(),
                 line: open,

@@ -28,6 +28,7 @@ mod compile;
 pub mod from_line;
 pub mod pieces;
 mod pipeline;
+pub mod probing;
 mod replug;
 mod report;
 mod resume;
@@ -362,6 +363,9 @@ pub fn run(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<RunResult, Failure> {
+    if let Some(r) = run_probing(machine, program, opts, hooks, false)? {
+        return Ok(r);
+    }
     let compiled = compile_for(program, machine, opts)?;
     let name = program.display().to_string();
     let statics = statics_gate(&compiled, machine, &name, opts)?;
@@ -389,6 +393,9 @@ pub fn check(
         if let Some(r) = streamed::check(machine, program, opts, hooks)? {
             return Ok(r);
         }
+    }
+    if let Some(r) = run_probing(machine, program, opts, hooks, true)? {
+        return Ok(r);
     }
     let compiled = compile_for(program, machine, opts)?;
     check_compiled(
@@ -456,6 +463,23 @@ fn run_in_process(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<(JobEnd, Status, ClientStats, SimOutcome), Failure> {
+    let mut work = |link: &mut Link<InProcess>, hooks: &mut dyn JobHooks| {
+        Ok(link.run_job_on(blocks, derived, hooks)?)
+    };
+    run_in_process_with(machine, deviation, opts, hooks, &mut work)
+}
+
+/// What a run does once connected and prepared: how it ends.
+type Work<'w, T> = dyn FnMut(&mut Link<T>, &mut dyn JobHooks) -> Result<JobEnd, Failure> + 'w;
+
+/// [`run_in_process`] of `work`.
+fn run_in_process_with(
+    machine: &MachineConfig,
+    deviation: Option<crate::analysis::deviation::Meter>,
+    opts: &RunOptions<'_>,
+    hooks: &mut dyn JobHooks,
+    work: &mut Work<'_, InProcess>,
+) -> Result<(JobEnd, Status, ClientStats, SimOutcome), Failure> {
     let setup = &opts.sim;
     let sim = setup.simulator(machine.clone(), exit::BAD_INPUT)?;
     let recorder = std::rc::Rc::new(std::cell::RefCell::new(Recorder::new(
@@ -468,7 +492,7 @@ fn run_in_process(
     let mut link = Link::connect(io, machine, LinkOptions::default())?;
     let end = match prepare(&mut link, opts.home, true, hooks)? {
         Some(end) => end,
-        None => link.run_job_on(blocks, derived, hooks)?,
+        None => work(&mut link, hooks)?,
     };
     let status = link.request_status()?;
     let stats = link.stats;
@@ -489,4 +513,99 @@ fn run_in_process(
     let recorder = recorder.replace(Recorder::default());
     let outcome = outcome_of(&io.sim, None, recorder);
     Ok((end, status, stats, outcome))
+}
+
+/// A program that probes (G38, [`probing`]): run a stage at a time on the target, or
+/// in this process (`in_process`: `--check`). `None`: the program does not probe (its
+/// text names no G38, or no probing move is ever reached), and runs as any other.
+pub fn run_probing(
+    machine: &MachineConfig,
+    program: &Path,
+    opts: &RunOptions<'_>,
+    hooks: &mut dyn JobHooks,
+    in_process: bool,
+) -> Result<Option<RunResult>, Failure> {
+    let text = crate::input::read_text(program, crate::input::MAX_PROGRAM_BYTES)
+        .map_err(|m| Failure::new(exit::BAD_INPUT, m))?;
+    if !probing::names_g38(&text) {
+        return Ok(None);
+    }
+    let name = program.display().to_string();
+    let p = probing::ProbingProgram {
+        text: &text,
+        name: &name,
+        machine,
+        start: machine.home,
+        tools: &opts.tools,
+        compress: opts.compress.as_ref(),
+    };
+    if probing::stage(&p, &[])?.probe.is_none() {
+        return Ok(None);
+    }
+    let mut records = Vec::new();
+    let mut sent = 0;
+    let (end, status, stats, sim) = if in_process {
+        let mut work = |link: &mut Link<InProcess>, hooks: &mut dyn JobHooks| {
+            let (end, r, n) = probing::run_on(link, &p, hooks)?;
+            (records, sent) = (r, n);
+            Ok(end)
+        };
+        let (end, status, stats, outcome) =
+            run_in_process_with(machine, None, opts, hooks, &mut work)?;
+        (end, status, stats, Some(outcome))
+    } else {
+        let (server, path) = open_target(machine, opts)?;
+        let outcome = (|| -> Result<(JobEnd, Status, ClientStats), Failure> {
+            let io = open_port(&path, server.as_ref())?;
+            let mut link = Link::connect(io, machine, opts.link)?;
+            let sim = matches!(opts.target, Target::Sim);
+            let end = match prepare(&mut link, opts.home, sim, hooks)? {
+                Some(end) => end,
+                None => {
+                    let (end, r, n) = probing::run_on(&mut link, &p, hooks)?;
+                    (records, sent) = (r, n);
+                    end
+                }
+            };
+            Ok((end, link.request_status()?, link.stats))
+        })();
+        let sim = match server {
+            Some(s) => Some(s.finish()?),
+            None => None,
+        };
+        let (end, status, stats) = outcome?;
+        (end, status, stats, sim)
+    };
+    let mut report = Report::new(machine, &name, sent, &end, &status, sim.as_ref(), stats);
+    report.probes = records;
+    Ok(Some(RunResult { report, sim }))
+}
+
+/// The cutting load (`--wrench F`, `--wrench-file FILE`) with the force limits of the
+/// machine file at `machine_file` (none: the built-in machine, no limits), if a load is
+/// given. Errors name the option or the file.
+pub fn statics_spec(
+    wrench: Option<&str>,
+    wrench_file: Option<&Path>,
+    machine_file: Option<&Path>,
+    machine: &MachineConfig,
+) -> Result<Option<StaticsSpec>, Failure> {
+    use crate::analysis::statics::Loads;
+    let bad = |m: String| Failure::new(exit::BAD_INPUT, m);
+    let loads = match (wrench, wrench_file) {
+        (Some(w), _) => {
+            Loads::constant(Loads::parse_wrench(w).map_err(|m| bad(format!("--wrench {w}: {m}")))?)
+        }
+        (None, Some(p)) => {
+            let text = std::fs::read_to_string(p)
+                .map_err(|e| bad(format!("{}: cannot read the loads ({e})", p.display())))?;
+            Loads::parse_file(&text, &p.display().to_string()).map_err(bad)?
+        }
+        (None, None) => return Ok(None),
+    };
+    let limits = match machine_file {
+        Some(p) => crate::machine_file::load_force_limits(p).map_err(|e| bad(e.to_string()))?,
+        None => vec![None; machine.joints.len()],
+    };
+    Ok(Some(StaticsSpec { loads, limits }))
 }

@@ -72,6 +72,9 @@ pub struct Report {
     /// What the chord compressor did, and how far the interpolated path strayed.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub compression: Option<CompressionSummary>,
+    /// What each probing move found (G38, [`super::probing`]), in order.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub probes: Vec<super::probing::ProbeRecord>,
 }
 
 /// What the compressor made of a program (`--check`, `--sim`, runs on a board).
@@ -185,6 +188,7 @@ impl Report {
             preflight: None,
             statics: None,
             compression: None,
+            probes: Vec::new(),
         }
     }
 

@@ -75,6 +75,9 @@ pub struct SimSetup<'a> {
     pub clock: ServeClock,
     /// Measure how far merged curves stray from their chords.
     pub deviation: Option<crate::analysis::deviation::Meter>,
+    /// A touch probe and what it touches ([`crate::sim::probe`]; `None`: its input
+    /// stays clear).
+    pub probe: Option<crate::sim::probe::ProbeModel>,
 }
 
 impl SimSetup<'_> {
@@ -87,6 +90,7 @@ impl SimSetup<'_> {
     ) -> Result<Simulator, Failure> {
         let mut sim = Simulator::with_plants(machine, self.plants.clone(), [0; MAX_JOINTS])
             .map_err(|e| Failure::new(code, format!("simulator: {e:#}")))?;
+        sim.set_probe(self.probe.clone());
         if let Some(p) = self.trace {
             let f = std::fs::File::create(p).map_err(|e| {
                 Failure::new(

@@ -143,6 +143,7 @@ impl<T: Transport> Link<T> {
             control: None,
             acked_control: None,
             machine_answer: None,
+            probe_result: None,
             status: None,
             stats: super::ClientStats::default(),
             their_machine: 0,
@@ -322,6 +323,7 @@ impl<T: Transport> Link<T> {
                 CtrlMsg::MachineLoaded { .. } | CtrlMsg::MachineRefused { .. } => {
                     self.machine_answer = Some(m.clone())
                 }
+                CtrlMsg::Probe(r) => self.probe_result = Some(*r),
                 _ => {}
             }
         }
@@ -500,6 +502,35 @@ impl<T: Transport> Link<T> {
             }
             if self.given_up(start) {
                 return Err(self.lost("waiting for a status", start));
+            }
+        }
+    }
+
+    /// A fresh status, and the last probing move's result (`None` before any): the
+    /// controller sends the result after the status that answers a request; asked
+    /// again until the result the status counts has come.
+    pub fn request_probe(
+        &mut self,
+    ) -> Result<(Status, Option<pkmc::drive::probe::ProbeResult>), LinkError> {
+        let start = Instant::now();
+        loop {
+            let s = self.request_status()?;
+            if s.probes == 0 {
+                return Ok((s, None));
+            }
+            let until = Instant::now() + Duration::from_millis(200);
+            loop {
+                if let Some(r) = self.probe_result.filter(|r| r.count == s.probes) {
+                    return Ok((s, Some(r)));
+                }
+                if Instant::now() >= until {
+                    break;
+                }
+                let msgs = self.pump(READ_WAIT)?;
+                self.absorb(&msgs);
+            }
+            if self.given_up(start) {
+                return Err(self.lost("waiting for a probe result", start));
             }
         }
     }

@@ -180,6 +180,8 @@ pub struct Link<T: Transport> {
     control: Option<PendingControl>,
     acked_control: Option<u16>,
     machine_answer: Option<CtrlMsg>,
+    /// The last probing move's result the controller sent ([`CtrlMsg::Probe`]).
+    probe_result: Option<pkmc::drive::probe::ProbeResult>,
     /// Last status received.
     pub status: Option<Status>,
     /// Counters.

@@ -31,6 +31,7 @@
 mod drives;
 pub mod faults;
 mod inject;
+pub mod probe;
 pub mod serve;
 mod trace;
 
@@ -139,6 +140,8 @@ pub struct Simulator {
     machine_id: u32,
     /// File standing in for the controller's flash page, if any.
     pub flash: Option<std::path::PathBuf>,
+    /// The touch probe, if one is modelled ([`probe`]).
+    probe: Option<probe::SimProbe>,
 }
 
 /// Ticks the simulator goes on running after the controller's work is done, while a
@@ -184,9 +187,31 @@ impl Simulator {
             trace: None,
             machine_id: 0,
             flash: None,
+            probe: None,
         };
         sim.attach_drives()?;
         Ok(sim)
+    }
+
+    /// Models a touch probe touching `model`'s targets (none: its input stays clear).
+    pub fn set_probe(&mut self, model: Option<probe::ProbeModel>) {
+        self.probe = model.map(probe::SimProbe::new);
+    }
+
+    /// The tool point where the joints truly are, mm (the controller's forward
+    /// kinematics from its own pose as the guess).
+    pub fn true_tool_point(&self) -> [f64; 3] {
+        use pkmc::kinematics::Kinematics;
+        let machine = self.ctrl.machine();
+        let mut q = [0i64; MAX_JOINTS];
+        for (j, slot) in q.iter_mut().enumerate().take(machine.joints.len()) {
+            *slot = self.feedback(j);
+        }
+        let kin = pkmc::kinematics::MachineKinematics::new(machine);
+        let mut pose = *self.ctrl.pose();
+        let guess = pose;
+        let _ = kin.forward(&q, &guess, &mut pose);
+        std::array::from_fn(|i| pose[i] as f64 / 1e6)
     }
 
     /// The inputs the last [`Simulator::tick`] passed to the controller (for harnesses
@@ -437,6 +462,14 @@ impl Simulator {
             None => Snapshot::default(),
         };
         let t0 = self.ticks * TICK_NS as u64;
+        // The probe at this tick's start: before this tick's step trains run.
+        let (probe, probe_edge_us) = match self.probe.is_some() {
+            true => {
+                let p = self.true_tool_point();
+                self.probe.as_mut().map_or((false, None), |sp| sp.sample(p))
+            }
+            false => (false, None),
+        };
         // A drive that sees its timing breached faults (its fault line is high for
         // this tick): the controller stops and names the joint, instead of believing
         // steps the drive may not have made.
@@ -475,9 +508,8 @@ impl Simulator {
             // through the amplifier fault inputs and the snapshot.
             drive_fault: (self.forced.drive_fault | timing_fault) & !servo_joints,
             index: std::mem::take(&mut self.index),
-            // No probe is modelled: its input is clear.
-            probe: false,
-            probe_edge_us: None,
+            probe,
+            probe_edge_us,
         };
         let command = self.pacer.tick(&mut self.ctrl, &raw, &snapshot);
         self.tick_lines = self.ctrl.take_line_log();

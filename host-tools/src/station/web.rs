@@ -65,6 +65,7 @@ fn owned(opts: &RunOptions<'_>) -> RunOptions<'static> {
             inject: Vec::new(),
             clock: Default::default(),
             deviation: None,
+            probe: None,
         },
         link: opts.link,
         home: false,

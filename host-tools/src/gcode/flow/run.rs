@@ -96,7 +96,7 @@ pub(crate) fn run(
         }
         if line.oword == PLAIN {
             r.plain(line);
-            if r.interp.ended() {
+            if r.interp.ended() || r.interp.waiting() {
                 return;
             }
             i += 1;

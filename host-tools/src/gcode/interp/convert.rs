@@ -412,9 +412,11 @@ impl Interp<'_> {
                     Motion::None | Motion::Rapid | Motion::Linear => has_axes || has_polar,
                     // G5 and G5.1 without an end point are an error (LinuxCNC's "all
                     // axes missing with motion code"), named by the spline.
-                    Motion::Arc { .. } | Motion::Cycle(_) | Motion::Cubic | Motion::Quadratic => {
-                        true
-                    }
+                    Motion::Arc { .. }
+                    | Motion::Cycle(_)
+                    | Motion::Cubic
+                    | Motion::Quadratic
+                    | Motion::Probe(_) => true,
                 },
                 None => has_axes || has_polar || (ijk && matches!(self.motion, Motion::Arc { .. })),
             };
@@ -506,6 +508,7 @@ impl Interp<'_> {
                 b.used |= bit(b'R') | bit(b'L') | bit(b'P') | bit(b'Q');
                 self.cycle(w, kind, previous, line, col, out)?;
             }
+            Motion::Probe(kind) => self.probe(w, kind, b, col, out)?,
         }
         Ok(())
     }
@@ -551,6 +554,7 @@ fn motion_of(tenths: i32) -> Motion {
         30 => Motion::Arc { clockwise: false },
         50 => Motion::Cubic,
         51 => Motion::Quadratic,
+        382..=385 => Motion::Probe(super::probe::Probing::of(tenths)),
         730 => Motion::Cycle(Cycle::G73),
         810 => Motion::Cycle(Cycle::G81),
         820 => Motion::Cycle(Cycle::G82),

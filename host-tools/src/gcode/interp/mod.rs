@@ -38,6 +38,7 @@ mod debug;
 mod modal;
 mod motion;
 mod offsets;
+pub mod probe;
 mod rotation;
 mod spline;
 pub mod state;
@@ -129,6 +130,8 @@ pub enum Motion {
     Quadratic,
     /// A canned cycle.
     Cycle(Cycle),
+    /// G38.2–G38.5: a probing move ([`probe`]).
+    Probe(probe::Probing),
 }
 
 /// Feed rate set by F in units-per-minute mode.
@@ -197,6 +200,11 @@ pub struct Interp<'o> {
     /// Cutter radius compensation (G40/G41/G42) and its held moves.
     comp: comp::Comp,
     ended: bool,
+    /// Probing moves run so far (their outcomes are [`Options::probes`]).
+    probes_done: usize,
+    /// The last command is a probing move whose outcome is not known yet: the run
+    /// stops there ([`Interp::waiting`]).
+    waiting: bool,
 }
 
 impl<'o> Interp<'o> {
@@ -232,6 +240,8 @@ impl<'o> Interp<'o> {
             g5_tangent: None,
             comp: comp::Comp::new(),
             ended: false,
+            probes_done: 0,
+            waiting: false,
         };
         s.update_position_params();
         s
@@ -240,6 +250,12 @@ impl<'o> Interp<'o> {
     /// Has the program ended (M2/M30)?
     pub fn ended(&self) -> bool {
         self.ended
+    }
+
+    /// Is the run stopped at a probing move whose outcome it needs (the last command
+    /// out)? Nothing after it can be interpreted until the outcome is known.
+    pub fn waiting(&self) -> bool {
+        self.waiting
     }
 
     /// Executes one line's words, appending commands to `out`.

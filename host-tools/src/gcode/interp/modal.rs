@@ -96,7 +96,9 @@ pub(crate) fn code_name(letter: char, tenths: i32) -> String {
 pub(crate) fn group_of(letter: char, tenths: i32) -> Result<Group, (ErrorKind, String)> {
     use Group::*;
     Ok(match (letter, tenths) {
-        ('G', 0 | 10 | 20 | 30 | 50 | 51 | 730 | 800 | 810 | 820 | 830 | 850 | 890) => Motion,
+        ('G', 0 | 10 | 20 | 30 | 50 | 51 | 382..=385 | 730 | 800 | 810 | 820 | 830 | 850 | 890) => {
+            Motion
+        }
         ('G', 170 | 180 | 190) => Plane,
         ('G', 900 | 910) => Distance,
         ('G', 901 | 911) => ArcDistance,
@@ -126,7 +128,6 @@ fn refusal(letter: char, tenths: i32) -> (ErrorKind, String) {
         ('G', 70) => "G7 lathe diameter mode",
         ('G', 171 | 181 | 191) => "G17.1 G18.1 G19.1 (UVW planes)",
         ('G', 330 | 331) => "G33 spindle-synchronized motion",
-        ('G', 382..=385) => "G38 probing",
         ('G', 432) => "G43.2 additional tool length offset",
         ('G', 700 | 710 | 711 | 712 | 720 | 721 | 722) => "G70-G72 lathe cycles",
         ('G', 740 | 840) => "G74/G84 tapping cycles",

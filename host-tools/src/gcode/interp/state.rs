@@ -37,6 +37,7 @@ impl Interp<'_> {
             Motion::Cubic => "G5",
             Motion::Quadratic => "G5.1",
             Motion::Cycle(c) => c.name(),
+            Motion::Probe(p) => p.name(),
         };
         let system = match self.system() {
             n @ 1..=6 => format!("G{}", 53 + n),

@@ -1,0 +1,176 @@
+//! G38.2–G38.5, straight probing, with LinuxCNC's semantics: a feed move toward the
+//! target that stops where the probe makes contact (G38.2, G38.3) or loses it
+//! (G38.4, G38.5); G38.2 and G38.4 are errors when the move ends without the change.
+//! After the move #5061–#5066 hold the probed position (X Y Z A B C, program
+//! coordinates and units; #5067–#5069, U V W, are 0) and #5070 is 1 on success, 0
+//! otherwise; the move ends where the machine stopped.
+//!
+//! What the move finds is known only once it has run, and what follows may depend on
+//! it (#5061 in an expression, a branch on #5070). So a run stops at a probing move
+//! whose outcome it does not have ([`super::Interp::waiting`]); the host runs the
+//! program up to it, probes, and runs the program again with the outcomes so far
+//! ([`crate::gcode::Options::probes`]), which then go on past it.
+//!
+//! Refused as LinuxCNC refuses them: a probing move with inverse-time feed (G93), with
+//! cutter compensation on, that moves A B or C, that goes nowhere, or without a feed.
+
+use super::{Interp, Res};
+use crate::gcode::canon::Canon;
+use crate::gcode::lexer::Words;
+use crate::gcode::ErrorKind;
+use pkmc::config::AXES;
+
+/// First parameter of the probed position (#5061: X).
+pub const PROBED: usize = 5061;
+/// The probe's success flag (#5070).
+pub const PROBE_SUCCESS: usize = 5070;
+
+/// Which probing move.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Probing {
+    /// It seeks contact (G38.2, G38.3); otherwise its loss (G38.4, G38.5).
+    pub toward: bool,
+    /// Ending without the change is an error (G38.2, G38.4).
+    pub must_change: bool,
+}
+
+impl Probing {
+    /// The move of G38.x for `tenths` 382 ..= 385.
+    pub fn of(tenths: i32) -> Self {
+        Self {
+            toward: tenths <= 383,
+            must_change: tenths == 382 || tenths == 384,
+        }
+    }
+
+    /// Its G code.
+    pub fn name(self) -> &'static str {
+        match (self.toward, self.must_change) {
+            (true, true) => "G38.2",
+            (true, false) => "G38.3",
+            (false, true) => "G38.4",
+            (false, false) => "G38.5",
+        }
+    }
+}
+
+/// What a probing move found (from the controller's latch, through the kinematics).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ProbeOutcome {
+    /// The probe changed as sought.
+    pub changed: bool,
+    /// The pose where it changed (or where the move ended without a change), axis
+    /// units, machine frame (as block targets).
+    pub probed: [i64; AXES],
+    /// Where the machine stopped, axis units, machine frame.
+    pub stopped: [i64; AXES],
+}
+
+impl Interp<'_> {
+    /// A probing move on this line (see the module documentation).
+    pub(super) fn probe(
+        &mut self,
+        w: &Words,
+        probing: Probing,
+        b: &super::Block,
+        col: u32,
+        out: &mut Vec<Canon>,
+    ) -> Res<()> {
+        let name = probing.name();
+        if !self.opts.probing {
+            return super::fail(
+                col,
+                ErrorKind::Unsupported,
+                crate::gcode::unsupported(&format!(
+                    "{name} probing here (it runs in a program run by nc-send)"
+                )),
+            );
+        }
+        if self.inverse_time {
+            return super::fail(
+                col,
+                ErrorKind::ModeConflict,
+                format!("{name} cannot be used with inverse-time feed (G93)"),
+            );
+        }
+        if self.comp.on() {
+            return super::fail(
+                col,
+                ErrorKind::ModeConflict,
+                format!("{name} cannot be used with cutter radius compensation on"),
+            );
+        }
+        let target = self.target(w, false)?;
+        if target[3..] != self.pos[3..] {
+            return super::fail(
+                col,
+                ErrorKind::InvalidTarget,
+                format!("{name} cannot move the rotary axes A B C"),
+            );
+        }
+        if target == self.pos {
+            return super::fail(
+                col,
+                ErrorKind::InvalidTarget,
+                format!("{name}: the move goes nowhere (its end is where it starts)"),
+            );
+        }
+        let feed = self.feed_for(&target, false, b.inverse, name, col)?;
+        let outcome = self.opts.probes.get(self.probes_done).copied();
+        let line = b.line;
+        out.push(Canon::Probe {
+            line,
+            target: outcome.map_or(target, |o| o.stopped),
+            feed,
+            probing,
+            outcome,
+        });
+        let Some(o) = outcome else {
+            self.waiting = true;
+            return Ok(());
+        };
+        self.probes_done += 1;
+        self.pos = o.stopped;
+        let probed = self.program_position(&o.probed);
+        for (i, v) in probed.iter().enumerate() {
+            self.params.set_numbered(PROBED + i, *v);
+        }
+        for k in AXES..9 {
+            self.params.set_numbered(PROBED + k, 0.0);
+        }
+        self.params
+            .set_numbered(PROBE_SUCCESS, if o.changed { 1.0 } else { 0.0 });
+        if probing.must_change && !o.changed {
+            let what = if probing.toward {
+                "contact"
+            } else {
+                "losing contact"
+            };
+            return super::fail(
+                col,
+                ErrorKind::InvalidTarget,
+                format!("{name}: the move ended without {what}"),
+            );
+        }
+        Ok(())
+    }
+
+    /// `pose` (machine frame, axis units) in program coordinates and units, as the
+    /// position parameters read it.
+    fn program_position(&self, pose: &[i64; AXES]) -> [f64; AXES] {
+        let mut p: [i64; AXES] = std::array::from_fn(|i| pose[i] - self.off[i]);
+        if self.rotated() {
+            (p[0], p[1]) = self.xy_to_program(pose[0], pose[1]);
+        }
+        std::array::from_fn(|i| {
+            let v = p[i] as f64;
+            if i >= 3 {
+                v / 1e9
+            } else if self.inch {
+                v / 25.4e6
+            } else {
+                v / 1e6
+            }
+        })
+    }
+}
