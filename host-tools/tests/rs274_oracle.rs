@@ -13,8 +13,9 @@
 //!   printed (4 decimals of program units; how its output is read: `lcnc/mod.rs`).
 //!
 //! Otherwise the difference must be one of `DOCUMENTED`: a refusal (we refuse what
-//! LinuxCNC accepts, by our diagnostic) or a leniency (we accept what it refuses, by
-//! its error), each named in `docs/gcode.md` ("LinuxCNC's interpreter as an oracle"),
+//! LinuxCNC accepts; recognised by our diagnostic), a leniency (we accept what it
+//! refuses; by its error) or a bug of LinuxCNC 2.9 (moves that differ; by the
+//! program), each named in `docs/gcode.md` ("LinuxCNC's interpreter as an oracle"),
 //! which the test checks. It prints the counts — programs, generated cases,
 //! agreements, documented differences, unexplained ones — and fails on any unexplained
 //! difference.
