@@ -1,7 +1,8 @@
 //! Build script: which outside programs the tests can use.
 //!
 //! The operator station's tests drive a real Chromium through chromedriver, and the
-//! senders' tests run CNCjs (npm, in `tests/senders`) and grbl-streamer (PyPI). Where
+//! senders' tests run CNCjs (npm, in `tests/senders`) and grbl-streamer (PyPI), and the
+//! G-code oracle test runs LinuxCNC's interpreter `rs274` (Debian: linuxcnc-uspace). Where
 //! one is missing, this script sets a `cfg` that marks its tests `#[ignore]` with the
 //! reason, so `cargo test`'s own summary counts them as ignored and says why (run
 //! `cargo test -- --ignored` to see them fail for want of it). Under CI (`CI` set)
@@ -42,7 +43,12 @@ fn python(code: &str) -> Option<String> {
 }
 
 fn main() {
-    for cfg in ["pkmc_no_browser", "pkmc_no_cncjs", "pkmc_no_grbl_streamer"] {
+    for cfg in [
+        "pkmc_no_browser",
+        "pkmc_no_cncjs",
+        "pkmc_no_grbl_streamer",
+        "pkmc_no_rs274",
+    ] {
         println!("cargo::rustc-check-cfg=cfg({cfg})");
     }
     watch(Path::new("build.rs"));
@@ -83,6 +89,15 @@ fn main() {
             }
             println!("cargo::rustc-cfg=pkmc_no_grbl_streamer");
             missing.push("grbl-streamer (pip install -r tests/senders/requirements.txt)");
+        }
+    }
+
+    match on_path("rs274") {
+        Some(p) => watch(&p),
+        None => {
+            path_dirs().iter().for_each(|d| watch(d));
+            println!("cargo::rustc-cfg=pkmc_no_rs274");
+            missing.push("LinuxCNC's rs274 (Debian: linuxcnc-uspace)");
         }
     }
 

@@ -12,6 +12,9 @@
 //!   (G91: the hole position advances by X Y, or by `@`/`^` in polar terms, each time)
 //!   rapids to the hole at the current level, down to R, then drills; it retracts to R
 //!   (G99) or to the level before the cycle (G98) when that is higher.
+//! - G85 feeds out to R; G89 dwells and feeds out all the way to the retract level (R
+//!   or, in G98, the level before the cycle), as LinuxCNC 2.9's `convert_cycle_g89`
+//!   does, with no rapid after it.
 //! - G73/G83 feed down by Q at a time; G83 rapids out to R between pecks and back down to
 //!   0.254 mm (0.010 in) above the last depth, G73 only backs off by that much.
 //! - The cycle runs in exact-stop mode: if blending is in force, a `PathMode` exact
@@ -69,9 +72,11 @@ struct Drill {
     feed: Feed,
     /// Hole axes and cycle axis.
     axes: (usize, usize, usize),
-    /// Retract plane and hole bottom, cycle-axis positions.
+    /// Retract plane, hole bottom and the level the hole is left at (R in G99), cycle-
+    /// axis positions.
     r: i64,
     bottom: i64,
+    clear: i64,
     p_ms: u32,
     q: i64,
 }
@@ -126,6 +131,7 @@ impl Interp<'_> {
             axes: (ia, ib, ic),
             r,
             bottom,
+            clear,
             p_ms: words.p_ms,
             q: words.q,
         };
@@ -141,7 +147,10 @@ impl Interp<'_> {
                 }
             }
             self.drill(&drill, aa, bb, out);
-            self.rapid(line, self.at(ia, ib, ic, aa, bb, clear), out);
+            if kind != Cycle::G89 {
+                // G89 fed out to the clear level already.
+                self.rapid(line, self.at(ia, ib, ic, aa, bb, clear), out);
+            }
         }
         if restore {
             out.push(Canon::PathMode {
@@ -373,7 +382,7 @@ impl Interp<'_> {
     }
 
     /// Drills one hole from R: down to the bottom (in pecks for G73/G83), with the
-    /// dwell of G82/G89 and the feed out of G85/G89.
+    /// dwell of G82/G89 and the feed out of G85 (to R) and G89 (to the clear level).
     fn drill(&mut self, d: &Drill, aa: i64, bb: i64, out: &mut Vec<Canon>) {
         let (ia, ib, ic) = d.axes;
         let line = d.line;
@@ -399,7 +408,7 @@ impl Interp<'_> {
             Cycle::G89 => {
                 feed_to(self, d.bottom, out);
                 out.push(Canon::Dwell { line, ms: d.p_ms });
-                feed_to(self, d.r, out);
+                feed_to(self, d.clear, out);
             }
             Cycle::G73 | Cycle::G83 => {
                 let mut depth = d.r - d.q;

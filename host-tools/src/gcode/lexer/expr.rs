@@ -49,8 +49,9 @@ impl Op {
     }
 }
 
-/// Tolerance of EQ and NE (LinuxCNC's).
-const EQUAL_TOLERANCE: f64 = 1e-6;
+/// Tolerance of EQ and NE: LinuxCNC's `TOLERANCE_EQUAL` (its `rs274` says
+/// `[1.00009 EQ 1]` is 1 and `[1.00011 EQ 1]` is 0).
+const EQUAL_TOLERANCE: f64 = 1e-4;
 
 impl Cursor<'_> {
     /// One operand of an expression: number, `[expr]`, parameter, signed operand or
