@@ -254,16 +254,17 @@ pub fn study_command(
             format_number(setup.tip)
         );
     }
-    println!("seed | touches: RMS / max µm before, after | test position error: RMS / max µm before, after | held");
+    println!("seed | touches: RMS / max µm before, after | test position error: RMS / max µm before, after; after in the best frame | held");
     let (mut worst, mut range) = (0.0f64, [f64::MAX, 0.0f64]);
     for seed in 0..seeds {
         let o = sphere_study::run(config, model, &setup, &p, seed, tests)?;
         let [(rb, mb), (ra, ma)] = o.residuals;
         let [(eb, xb), (ea, xa)] = o.errors;
+        let (fa, fx) = o.errors_any_frame;
         worst = worst.max(ea);
         range = [range[0].min(eb), range[1].max(eb)];
         println!(
-            "{seed} | {rb:.1} / {mb:.1}, {ra:.2} / {ma:.2} | {eb:.1} / {xb:.1}, {ea:.2} / {xa:.2} | {}",
+            "{seed} | {rb:.1} / {mb:.1}, {ra:.2} / {ma:.2} | {eb:.1} / {xb:.1}, {ea:.2} / {xa:.2}; {fa:.2} / {fx:.2} | {}",
             held(&p.model, &o.fit)
         );
     }
