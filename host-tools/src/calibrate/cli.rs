@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 pub struct CalibrateArgs {
     /// What else to do than fit.
     #[command(subcommand)]
-    pub action: Option<Action>,
+    pub action: Option<Box<Action>>,
     /// Measurements (CSV: q1… or cmd_X…, and the measured X Y Z and angles; see
     /// docs/calibration.md).
     pub measurements: Option<PathBuf>,
@@ -35,20 +35,70 @@ pub struct CalibrateArgs {
     /// `offset` for joints whose zero the machine file cannot carry); repeatable.
     #[arg(long, value_name = "PREFIX")]
     pub hold: Vec<String>,
+    /// Fit to sphere probing instead: the touches (CSV: q1… or the latched pose cmd_X…,
+    /// `sphere`, optionally dir_x dir_y dir_z; see docs/calibration.md).
+    #[arg(long, value_name = "FILE", conflicts_with = "measurements")]
+    pub probes: Option<PathBuf>,
+    /// The artefact and the probe.
+    #[command(flatten)]
+    pub probe: ProbeOptions,
+}
+
+/// The artefact and the probe (sphere probing).
+#[derive(clap::Args, Debug, Clone)]
+pub struct ProbeOptions {
+    /// A sphere of the artefact: its centre (approximate; fitted) and radius (known),
+    /// mm; repeatable, numbered from 0 in order. Else the file's `# sphere K = X,Y,Z,R`.
+    #[arg(long = "sphere", value_name = "X,Y,Z,R")]
+    pub spheres: Vec<String>,
+    /// The probe tip's radius, mm (else the file's `# tip_radius = R`).
+    #[arg(long = "tip-radius", value_name = "MM")]
+    pub tip_radius: Option<f64>,
+    /// The probe's trigger noise along the surface normal, µm.
+    #[arg(long, default_value_t = 1.0)]
+    pub probe_noise_um: f64,
+}
+
+impl ProbeOptions {
+    fn args(&self, standoff: f64, overtravel: f64) -> super::sphere_cli::ProbeArgs {
+        super::sphere_cli::ProbeArgs {
+            spheres: self.spheres.clone(),
+            tip: self.tip_radius,
+            noise_um: self.probe_noise_um,
+            standoff,
+            overtravel,
+        }
+    }
 }
 
 /// The subcommands.
 #[derive(clap::Subcommand, Debug)]
 pub enum Action {
     /// Propose measurement poses (greedy D-optimal over random usable poses) and write
-    /// them as a pose list, and optionally as a G-code program visiting them.
+    /// them as a pose list, and optionally as a G-code program visiting them; with
+    /// `--sphere`, touches of the spheres and a G38.2 probing program.
     Plan {
         /// How many poses.
         #[arg(long, default_value_t = 60)]
         poses: usize,
-        /// Random usable candidates to choose from.
-        #[arg(long, default_value_t = 400)]
-        candidates: usize,
+        /// How many touches (with --sphere).
+        #[arg(long, default_value_t = 150)]
+        touches: usize,
+        /// Random usable candidates to choose from (default 400 poses, 2000 touches).
+        #[arg(long)]
+        candidates: Option<usize>,
+        /// The artefact and the probe.
+        #[command(flatten)]
+        probe: ProbeOptions,
+        /// A probing move starts this far out from the nominal surface, mm.
+        #[arg(long, default_value_t = 5.0)]
+        standoff: f64,
+        /// A probing move ends this far past the nominal surface, mm.
+        #[arg(long, default_value_t = 3.0)]
+        overtravel: f64,
+        /// Feed of the probing moves, mm/min.
+        #[arg(long, default_value_t = 50.0)]
+        probe_feed: f64,
         /// Seed of the candidates.
         #[arg(long = "plan-seed", default_value_t = 1)]
         plan_seed: u64,
@@ -60,7 +110,8 @@ pub enum Action {
         gcode: Option<PathBuf>,
     },
     /// Measure a simulated true machine (every parameter perturbed by up to its
-    /// scale, seeded) at the poses of a pose list, with Gaussian noise.
+    /// scale, seeded) at the poses of a pose list, with Gaussian noise; a touch list
+    /// (a `sphere` column) is probed instead, on true spheres off by up to ±1 mm.
     Simulate {
         /// The pose list (`calibrate plan --out`).
         poses: PathBuf,
@@ -70,6 +121,9 @@ pub enum Action {
         /// The measurements (CSV).
         #[arg(long, value_name = "FILE")]
         out: PathBuf,
+        /// The artefact and the probe.
+        #[command(flatten)]
+        probe: ProbeOptions,
     },
     /// The simulated-truth study: for seeds 0..N, fit at a plan's poses and compare
     /// with the truth at random test poses.
@@ -90,6 +144,15 @@ pub enum Action {
         /// The seed the plot shows.
         #[arg(long, default_value_t = 0)]
         plot_seed: u64,
+        /// Study sphere probing instead (three balls per machine, or --sphere).
+        #[arg(long)]
+        probe: bool,
+        /// Touches per fit (with --probe).
+        #[arg(long, default_value_t = 150)]
+        touches: usize,
+        /// The artefact and the probe.
+        #[command(flatten)]
+        probe_options: ProbeOptions,
     },
 }
 
@@ -120,37 +183,55 @@ pub fn run(args: &CalibrateArgs, machine: Option<&Path>) -> Result<(), String> {
         position: args.noise_um * 1e-3,
         angle: args.noise_mdeg * 1e-3,
     };
-    match &args.action {
+    match args.action.as_deref() {
+        Some(Action::Plan {
+            probe,
+            touches,
+            candidates,
+            standoff,
+            overtravel,
+            probe_feed,
+            plan_seed,
+            out,
+            gcode,
+            ..
+        }) if !probe.spheres.is_empty() => super::sphere_cli::plan_command(
+            &config,
+            &model,
+            &probe.args(*standoff, *overtravel),
+            *touches,
+            candidates.unwrap_or(2000),
+            *plan_seed,
+            out,
+            gcode.as_deref(),
+            [600.0, *probe_feed],
+        ),
         Some(Action::Plan {
             poses,
             candidates,
             plan_seed,
             out,
             gcode,
-        }) => {
-            let p = plan::plan(&config, &model, *poses, *candidates, *plan_seed, noise)?;
-            write(out, &data::write(&model, &p.poses, &p.joints, None))?;
-            if let Some(g) = gcode {
-                write(g, &plan::gcode(&p, model.measured_axes(), 2.0, 600.0))?;
-            }
-            println!(
-                "{} poses from {candidates} candidates: {} of {} parameters identifiable; \
-                 condition number {:.1} (the first {} candidates: {:.1})",
-                p.poses.len(),
-                p.ident.free.len(),
-                model.params.len(),
-                p.condition,
-                p.poses.len(),
-                p.random_condition
-            );
-            Ok(())
-        }
+            ..
+        }) => pose_plan(
+            &config,
+            &model,
+            (*poses, candidates.unwrap_or(400), *plan_seed),
+            noise,
+            out,
+            gcode.as_deref(),
+        ),
         Some(Action::Simulate {
             poses,
             truth_seed,
             out,
+            probe,
         }) => {
             let table = read_table(poses)?;
+            if table.column("sphere").is_some() {
+                let a = probe.args(5.0, 3.0);
+                return super::sphere_cli::simulate_command(&model, &a, poses, *truth_seed, out);
+            }
             let list =
                 data::poses(&table)?.ok_or(format!("{}: no cmd_X… columns", poses.display()))?;
             let joints = data::joints(&table, &model)?;
@@ -167,10 +248,27 @@ pub fn run(args: &CalibrateArgs, machine: Option<&Path>) -> Result<(), String> {
         }
         Some(Action::Study {
             seeds,
+            tests,
+            probe: true,
+            touches,
+            probe_options,
+            ..
+        }) => super::sphere_cli::study_command(
+            &origin,
+            &config,
+            &model,
+            &probe_options.args(5.0, 3.0),
+            *seeds,
+            *touches,
+            *tests,
+        ),
+        Some(Action::Study {
+            seeds,
             poses,
             tests,
             plot,
             plot_seed,
+            ..
         }) => {
             let p = study_command(&origin, &config, &model, *seeds, *poses, *tests)?;
             if let Some(path) = plot {
@@ -184,8 +282,45 @@ pub fn run(args: &CalibrateArgs, machine: Option<&Path>) -> Result<(), String> {
             }
             Ok(())
         }
-        None => fit_command(args, &text, &model, noise),
+        None => match &args.probes {
+            Some(p) => super::sphere_cli::fit_command(
+                &args.probe.args(5.0, 3.0),
+                p,
+                &text,
+                &model,
+                args.tolerance,
+                &args.hold,
+                args.out.as_deref(),
+            ),
+            None => fit_command(args, &text, &model, noise),
+        },
     }
+}
+
+fn pose_plan(
+    config: &MachineConfig,
+    model: &Model,
+    (poses, candidates, plan_seed): (usize, usize, u64),
+    noise: Noise,
+    out: &Path,
+    gcode: Option<&Path>,
+) -> Result<(), String> {
+    let p = plan::plan(config, model, poses, candidates, plan_seed, noise)?;
+    write(out, &data::write(model, &p.poses, &p.joints, None))?;
+    if let Some(g) = gcode {
+        write(g, &plan::gcode(&p, model.measured_axes(), 2.0, 600.0))?;
+    }
+    println!(
+        "{} poses from {candidates} candidates: {} of {} parameters identifiable; \
+         condition number {:.1} (the first {} candidates: {:.1})",
+        p.poses.len(),
+        p.ident.free.len(),
+        model.params.len(),
+        p.condition,
+        p.poses.len(),
+        p.random_condition
+    );
+    Ok(())
 }
 
 fn study_command(
@@ -268,28 +403,21 @@ fn fit_command(
     let path = args
         .measurements
         .as_ref()
-        .ok_or("calibrate: give the measurements CSV, or plan/simulate/study")?;
+        .ok_or("calibrate: give the measurements CSV (or --probes FILE), or plan/simulate/study")?;
     let table = read_table(path)?;
     let samples = data::measurements(&table, model)?;
     let before = study::residuals(model, &model.nominal(), &samples);
     let mut meas = PoseMeasurements { samples, noise };
-    let requested: Vec<usize> = (0..model.params.len())
-        .filter(|&j| {
-            args.hold
-                .iter()
-                .any(|h| model.params[j].name.starts_with(h.as_str()))
-        })
-        .collect();
-    if let Some(h) = args
-        .hold
-        .iter()
-        .find(|h| !model.params.iter().any(|p| p.name.starts_with(h.as_str())))
-    {
-        return Err(format!("--hold {h}: no parameter's name starts with it"));
-    }
+    let requested = held(model, &args.hold)?;
     let f = fit(model, &mut meas, args.tolerance, &requested)?;
     let after = study::residuals(model, &f.theta, &meas.samples);
-    report(model, &f, meas.samples.len(), before, after);
+    report(
+        model,
+        &f,
+        (meas.samples.len(), "measured poses"),
+        before,
+        after,
+    );
     if let Some(out) = &args.out {
         let (corrected, notes) = super::write::corrected(text, model, &f)?;
         crate::machine_file::parse(&corrected, &out.display().to_string())
@@ -303,6 +431,22 @@ fn fit_command(
     Ok(())
 }
 
+/// The parameters `--hold` names (by the start of their names).
+pub fn held(model: &Model, hold: &[String]) -> Result<Vec<usize>, String> {
+    if let Some(h) = hold
+        .iter()
+        .find(|h| !model.params.iter().any(|p| p.name.starts_with(h.as_str())))
+    {
+        return Err(format!("--hold {h}: no parameter's name starts with it"));
+    }
+    Ok((0..model.params.len())
+        .filter(|&j| {
+            hold.iter()
+                .any(|h| model.params[j].name.starts_with(h.as_str()))
+        })
+        .collect())
+}
+
 fn errors(e: &super::fit::Errors) -> String {
     format!(
         "{:.1} / {:.1}, {:.2} / {:.2}",
@@ -313,16 +457,18 @@ fn errors(e: &super::fit::Errors) -> String {
     )
 }
 
-fn report(
+/// The fit's report: rank, unidentifiable combinations, held and identified
+/// parameters with their 1σ, and the residuals before and after when given.
+pub fn report(
     model: &Model,
     f: &Fit,
-    n: usize,
+    (n, what): (usize, &str),
     before: Option<super::fit::Errors>,
     after: Option<super::fit::Errors>,
 ) {
     let id = &f.ident;
     println!(
-        "{n} measured poses, {} parameters: rank {} (singular values {:.3e} … {:.3e})",
+        "{n} {what}, {} parameters: rank {} (singular values {:.3e} … {:.3e})",
         model.params.len(),
         id.rank,
         id.singular[0],

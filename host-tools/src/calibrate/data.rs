@@ -111,6 +111,20 @@ impl Table {
         self.rows.is_empty()
     }
 
+    /// `file:line:column` of row `r`'s field in column `c`.
+    pub fn place(&self, r: usize, c: usize) -> String {
+        let Some((line, f)) = self.rows.get(r) else {
+            return format!("{}:{}:1", self.origin, self.header_line);
+        };
+        let col = f.get(c).map_or(1, |x| x.0);
+        format!("{}:{line}:{col}", self.origin)
+    }
+
+    /// The file's name as errors give it.
+    pub fn origin(&self) -> &str {
+        &self.origin
+    }
+
     /// `file:line` of row `r`.
     pub fn at(&self, r: usize) -> String {
         format!("{}:{}", self.origin, self.rows[r].0)

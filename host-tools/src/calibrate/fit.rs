@@ -2,8 +2,8 @@
 //! their covariance, and the residuals before and after.
 //!
 //! The residual is a trait ([`Residual`]): [`PoseMeasurements`] compares measured tool
-//! poses with the model's; a sphere-probing residual (every probed point on the sphere)
-//! can be added beside it without touching the fit.
+//! poses with the model's; [`super::sphere::Probing`] asks every probed point to lie on
+//! its sphere.
 #![allow(clippy::needless_range_loop)]
 
 use super::forward::{forward, measure_jacobian};
@@ -168,7 +168,11 @@ pub fn identifiability(
         .collect();
     let mut held = Vec::new();
     for k in 0..null.len() {
-        let weight = |j: usize| if model.params[j].hold_first { 1.5 } else { 1.0 };
+        let weight = |j: usize| match &model.params[j] {
+            p if p.hold_first => 1.5,
+            p if p.hold_last => 0.1,
+            _ => 1.0,
+        };
         let forced = requested.get(k).copied();
         let norm = |c: &Vec<f64>| c.iter().map(|x| x * x).sum::<f64>().sqrt();
         let best = (0..p)

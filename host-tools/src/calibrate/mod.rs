@@ -13,6 +13,9 @@
 //! - [`data`]: the pose-list and measurement CSV files.
 //! - [`write`]: the corrected machine file.
 //! - [`plan`]: measurement poses chosen for conditioning (greedy D-optimal).
+//! - [`sphere`]: calibration from probing spheres (the residual, the probing file);
+//!   [`sphere_plan`] the touches and the probing program; [`sphere_study`] the
+//!   simulated-truth study of it.
 //! - [`plot`]: maps of the tool position error over the workspace, before and after.
 //! - [`truth`]: a simulated "true" machine for tests and worked examples.
 //! - [`cli`]: the `nc-send calibrate` command.
@@ -25,6 +28,10 @@ pub mod forward;
 pub mod model;
 pub mod plan;
 pub mod plot;
+pub mod sphere;
+pub mod sphere_cli;
+pub mod sphere_plan;
+pub mod sphere_study;
 pub mod study;
 pub mod truth;
 pub mod write;

@@ -25,6 +25,9 @@ pub struct Param {
     /// Prefer to hold this one when the data cannot tell it from others (a point's
     /// coordinate over a joint's zero, a convention over a dimension).
     pub hold_first: bool,
+    /// Hold this one only where nothing else can be: the data's own unknowns (a
+    /// probed sphere's centre), so that the machine file keeps the conventions.
+    pub hold_last: bool,
 }
 
 /// The machine kind and the constants that are not parameters.
@@ -68,6 +71,7 @@ fn push(p: &mut Vec<Param>, name: String, value: f64, hold_first: bool) {
         value,
         scale: 0.5,
         hold_first,
+        hold_last: false,
     });
 }
 
@@ -92,6 +96,7 @@ fn push_offsets(p: &mut Vec<Param>, m: &MachineConfig, joints: std::ops::Range<u
             value: 0.0,
             scale: if rotary { 0.3 } else { 0.5 },
             hold_first: false,
+            hold_last: false,
         });
     }
 }

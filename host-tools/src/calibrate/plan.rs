@@ -120,7 +120,8 @@ pub struct Plan {
     pub random_condition: f64,
 }
 
-fn condition(rows: &[Mat], pick: &[usize]) -> f64 {
+/// Condition number of the rows of the candidates `pick`, stacked.
+pub fn condition(rows: &[Mat], pick: &[usize]) -> f64 {
     let stacked: Mat = pick.iter().flat_map(|&i| rows[i].iter().cloned()).collect();
     let cols = stacked.first().map_or(0, Vec::len);
     let (s, _) = svd(&stacked, cols);
@@ -176,16 +177,31 @@ pub fn plan(
                 .collect()
         })
         .collect();
-    let nf = ident.free.len();
+    let pick = d_optimal(&rows, n)?;
+    let first: Vec<usize> = (0..n.min(cand.len())).collect();
+    Ok(Plan {
+        condition: condition(&rows, &pick),
+        random_condition: condition(&rows, &first),
+        poses: pick.iter().map(|&i| cand[i].0).collect(),
+        joints: pick.iter().map(|&i| cand[i].1.clone()).collect(),
+        ident,
+    })
+}
+
+/// Greedy D-optimal design: `n` of the candidates (each its rows of the scaled
+/// Jacobian of the free parameters), each added the one that most increases log det
+/// of the information matrix.
+pub fn d_optimal(rows: &[Mat], n: usize) -> Result<Vec<usize>, String> {
+    let nf = rows.iter().flatten().next().map_or(0, Vec::len);
     let reg = 1e-6 * rows.iter().flatten().flatten().map(|v| v * v).sum::<f64>()
-        / (cand.len() * nf) as f64;
+        / (rows.len() * nf).max(1) as f64;
     let mut info: Mat = (0..nf)
         .map(|i| (0..nf).map(|j| if i == j { reg } else { 0.0 }).collect())
         .collect();
     let mut pick: Vec<usize> = Vec::new();
-    for _ in 0..n.min(cand.len()) {
+    for _ in 0..n.min(rows.len()) {
         let (_, inv) = chol_inverse(&info).ok_or("information matrix not positive")?;
-        let best = (0..cand.len())
+        let best = (0..rows.len())
             .filter(|i| !pick.contains(i))
             .map(|i| (gain(&rows[i], &inv), i))
             .max_by(|a, b| a.0.total_cmp(&b.0))
@@ -200,14 +216,7 @@ pub fn plan(
         }
         pick.push(best);
     }
-    let first: Vec<usize> = (0..n.min(cand.len())).collect();
-    Ok(Plan {
-        condition: condition(&rows, &pick),
-        random_condition: condition(&rows, &first),
-        poses: pick.iter().map(|&i| cand[i].0).collect(),
-        joints: pick.iter().map(|&i| cand[i].1.clone()).collect(),
-        ident,
-    })
+    Ok(pick)
 }
 
 /// log det(I + J·M⁻¹·Jᵀ): how much a pose with rows `j` adds to log det M.

@@ -1,0 +1,223 @@
+//! Issue 36, calibration from probing spheres: for the H-4 and the hexapod, a "true"
+//! machine with every geometric parameter perturbed by up to ±0.5 mm (±0.3° for a
+//! rotary joint's zero), seeds 0..10 (or `CALIBRATE_SEEDS=3,7`), probes three balls
+//! (centres off by up to ±1 mm) at a D-optimal plan's touches with 1 µm of noise
+//! along the surface normal. At 200 random test poses not used in the fit, the tool
+//! position error in the artefact's frame must fall to ≤ 5 µm RMS. Also: the probing
+//! program's structure and the front end on it, the touch list written, simulated,
+//! read back and fitted into a corrected machine file, and the probing file's errors.
+
+use pkmc_host::calibrate::data::Table;
+use pkmc_host::calibrate::fit::fit;
+use pkmc_host::calibrate::model::Model;
+use pkmc_host::calibrate::sphere::{extend, header, touches, Probing};
+use pkmc_host::calibrate::truth::{perturb, Rng};
+use pkmc_host::calibrate::{sphere_plan, sphere_study, write};
+use std::path::Path;
+
+fn machine(name: &str) -> (pkmc::config::MachineConfig, Model) {
+    let path = format!(
+        "{}/../examples/machines/{name}.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let config = pkmc_host::machine_file::load(Path::new(&path)).unwrap();
+    let model = Model::from_config(&config).unwrap();
+    (config, model)
+}
+
+fn seeds() -> Vec<u64> {
+    match std::env::var("CALIBRATE_SEEDS") {
+        Ok(s) => s
+            .split(',')
+            .map(|v| v.trim().parse().expect("CALIBRATE_SEEDS: numbers"))
+            .collect(),
+        Err(_) => (0..10).collect(),
+    }
+}
+
+fn ten_seeds(name: &str) {
+    let (config, model) = machine(name);
+    let setup = sphere_study::default_setup(&model);
+    let t0 = std::time::Instant::now();
+    let p = sphere_plan::plan(&config, &model, &setup, 150, 2000, 1).unwrap();
+    eprintln!(
+        "{name}: plan {:.1} s: {} of {} parameters identified, condition {:.0} (random {:.0})",
+        t0.elapsed().as_secs_f64(),
+        p.ident.free.len(),
+        p.model.params.len(),
+        p.condition,
+        p.random_condition
+    );
+    for seed in seeds() {
+        let o = sphere_study::run(&config, &model, &setup, &p, seed, 200).unwrap();
+        let [(br, bm), (ar, am)] = o.errors;
+        eprintln!(
+            "{name} seed {seed}: test position RMS/max {br:.1}/{bm:.1} µm -> {ar:.2}/{am:.2} µm; touches {:.1}/{:.1} -> {:.2}/{:.2} µm; χ² {:.3}",
+            o.residuals[0].0, o.residuals[0].1, o.residuals[1].0, o.residuals[1].1, o.fit.s2
+        );
+        assert!(br > 20.0, "{name} {seed}: before {br}");
+        assert!(ar <= 5.0, "{name} {seed}: after {ar}");
+    }
+}
+
+#[test]
+fn h4_table_is_calibrated_by_probing_spheres() {
+    ten_seeds("h4-table");
+}
+
+#[test]
+fn hexapod_is_calibrated_by_probing_spheres() {
+    ten_seeds("hexapod");
+}
+
+fn numbers(line: &str) -> Vec<(char, f64)> {
+    line.split_whitespace()
+        .skip(1)
+        .filter_map(|w| {
+            let c = w.chars().next()?;
+            Some((c, w[1..].parse().ok()?))
+        })
+        .collect()
+}
+
+/// The probing program: per touch a clearance move and the start (G1 with every axis
+/// the machine programs), a G38.2 in X Y Z only to the overtravel inside the nominal
+/// surface along the approach, and back. Our front end (no G38 yet) may refuse only
+/// the G38.2 lines; the same program with each G38.2 as a G1 (the moves made when
+/// nothing is touched) compiles.
+#[test]
+fn probing_program_structure() {
+    let (config, model) = machine("h4-table");
+    let setup = sphere_study::default_setup(&model);
+    let p = sphere_plan::plan(&config, &model, &setup, 24, 300, 2).unwrap();
+    let text = sphere_plan::gcode(&model, &setup, &p, model.measured_axes(), 600.0, 50.0);
+    let lines: Vec<&str> = text.lines().collect();
+    let probes: Vec<usize> = (0..lines.len())
+        .filter(|&i| lines[i].starts_with("G38.2 "))
+        .collect();
+    assert_eq!(probes.len(), p.touches.len());
+    assert_eq!(lines.last(), Some(&"M2"));
+    for (t, &i) in p.touches.iter().zip(&probes) {
+        let start = numbers(lines[i - 1]);
+        assert!(lines[i - 1].starts_with("G1 ") && lines[i - 2].starts_with("G1 "));
+        assert_eq!(
+            start.iter().map(|w| w.0).collect::<String>(),
+            "XYZACF",
+            "{}",
+            lines[i - 1]
+        );
+        let end = numbers(lines[i]);
+        assert_eq!(end.iter().map(|w| w.0).collect::<String>(), "XYZF");
+        let c = setup.spheres[t.sphere].centre;
+        let d = (0..3)
+            .map(|k| (end[k].1 - c[k]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let want = setup.spheres[t.sphere].radius + setup.tip - setup.overtravel;
+        assert!((d - want).abs() < 1e-3, "{d} {want}");
+        let s = (0..3)
+            .map(|k| (start[k].1 - c[k]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let want = setup.spheres[t.sphere].radius + setup.tip + setup.standoff;
+        assert!((s - want).abs() < 1e-3, "{s} {want}");
+        assert_eq!(lines[i + 1], lines[i - 1], "back out to the start");
+    }
+    let options = pkmc_host::gcode::Options::default();
+    if let Err(errors) = pkmc_host::gcode::compile(&text, "probe.ngc", &options) {
+        for e in &errors {
+            assert!(
+                lines[e.line - 1].starts_with("G38.2"),
+                "not a probing line: {e}"
+            );
+        }
+        eprintln!("the front end refuses G38.2 for now: {}", errors[0]);
+    }
+    let dry = text.replace("G38.2 ", "G1 ");
+    pkmc_host::gcode::compile(&dry, "dry.ngc", &options).unwrap();
+}
+
+/// A touch list written, probed by a true machine, read back with its comments and
+/// fitted: the touches fall onto the spheres, and the corrected machine file loads
+/// and carries the fitted forearm.
+#[test]
+fn touch_list_round_trip() {
+    let (config, model) = machine("h4-table");
+    let path = format!(
+        "{}/../examples/machines/h4-table.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let machine_text = std::fs::read_to_string(path).unwrap();
+    let setup = sphere_study::default_setup(&model);
+    let p = sphere_plan::plan(&config, &model, &setup, 100, 600, 3).unwrap();
+    let truth = perturb(&model, 5);
+    let mut rng = Rng::new(5);
+    let latched: Vec<Vec<f64>> = p
+        .touches
+        .iter()
+        .map(|t| {
+            let s = &setup.spheres[t.sphere];
+            sphere_study::touch(&model, &truth, s, &setup, t, &mut rng)
+                .unwrap()
+                .0
+        })
+        .collect();
+    let text = sphere_plan::csv(&model, &setup, &p.touches, Some(&latched));
+    let (spheres, tip) = header(&text, "t.csv").unwrap();
+    assert_eq!(spheres, setup.spheres);
+    assert_eq!(tip, Some(setup.tip));
+    let table = Table::parse(&text, "t.csv").unwrap();
+    let ext = extend(&model, &spheres);
+    let mut data = Probing {
+        touches: touches(&table, &model, spheres.len()).unwrap(),
+        radii: spheres.iter().map(|s| s.radius).collect(),
+        tip: setup.tip,
+        noise: setup.noise,
+        machine_params: model.params.len(),
+    };
+    let before = data.gaps(&ext, &ext.nominal()).unwrap();
+    let f = fit(&ext, &mut data, 1e-6, &[]).unwrap();
+    let gaps = data.gaps(&ext, &f.theta).unwrap();
+    let rms = |g: &[f64]| (g.iter().map(|v| v * v).sum::<f64>() / g.len() as f64).sqrt();
+    assert!(rms(&before) > 0.05, "{}", rms(&before));
+    assert!(rms(&gaps) < 0.0015, "{}", rms(&gaps));
+    let forearm = model
+        .params
+        .iter()
+        .position(|p| p.name == "forearm")
+        .unwrap();
+    assert!((f.theta[forearm] - truth[forearm]).abs() < 0.05);
+    let (out, _) = write::corrected(&machine_text, &ext, &f).unwrap();
+    let again = Model::from_config(&pkmc_host::machine_file::parse(&out, "c").unwrap()).unwrap();
+    assert!((again.params[forearm].value - f.theta[forearm]).abs() < 1e-6);
+}
+
+/// The probing file's errors name the file, the line and the column.
+#[test]
+fn probing_file_errors() {
+    let (_, model) = machine("h4-table");
+    let head = "cmd_X,cmd_Y,cmd_Z,cmd_A,cmd_C,sphere";
+    let table = |rows: &str| {
+        Table::parse(
+            &format!("# sphere 0 = 0,0,-140,12.7\n{head}\n{rows}"),
+            "p.csv",
+        )
+        .unwrap()
+    };
+    let e = touches(&table("0,0,-80,0,0,0\n0,0,-80,0,0,2\n"), &model, 1).unwrap_err();
+    assert!(e.starts_with("p.csv:4:13: sphere `2`"), "{e}");
+    let e = touches(&table("0,0,-80,0,0,0.5\n"), &model, 1).unwrap_err();
+    assert!(e.starts_with("p.csv:3:13: sphere `0.5`"), "{e}");
+    let e = touches(&table("0,0,-80,0,0,x\n"), &model, 1).unwrap_err();
+    assert_eq!(e, "p.csv:3:13: `x` in column `sphere` is not a number");
+    let t = Table::parse("X,sphere\n1,0\n", "p.csv").unwrap();
+    let e = touches(&t, &model, 1).unwrap_err();
+    assert!(e.starts_with("p.csv:1:"), "{e}");
+    let t = Table::parse("cmd_X,cmd_Z,sphere,dir_x\n0,-80,0,1\n", "p.csv").unwrap();
+    let e = touches(&t, &model, 1).unwrap_err();
+    assert_eq!(
+        e,
+        "p.csv:2:9: an approach is dir_x, dir_y and dir_z together"
+    );
+    assert!(touches(&table("0,0,-80,0,0,0\n"), &model, 1).is_ok());
+}
