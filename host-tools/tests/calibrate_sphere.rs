@@ -82,9 +82,9 @@ fn numbers(line: &str) -> Vec<(char, f64)> {
 
 /// The probing program: per touch a clearance move and the start (G1 with every axis
 /// the machine programs), a G38.2 in X Y Z only to the overtravel inside the nominal
-/// surface along the approach, and back. Our front end (no G38 yet) may refuse only
-/// the G38.2 lines; the same program with each G38.2 as a G1 (the moves made when
-/// nothing is touched) compiles.
+/// surface along the approach, and back. Run by `nc-send --check`'s path on the
+/// nominal machine with a probe touching the planned balls, every G38.2 touches its
+/// ball, at the surface.
 #[test]
 fn probing_program_structure() {
     let (config, model) = machine("h4-table");
@@ -123,18 +123,54 @@ fn probing_program_structure() {
         assert!((s - want).abs() < 1e-3, "{s} {want}");
         assert_eq!(lines[i + 1], lines[i - 1], "back out to the start");
     }
-    let options = pkmc_host::gcode::Options::default();
-    if let Err(errors) = pkmc_host::gcode::compile(&text, "probe.ngc", &options) {
-        for e in &errors {
-            assert!(
-                lines[e.line - 1].starts_with("G38.2"),
-                "not a probing line: {e}"
-            );
-        }
-        eprintln!("the front end refuses G38.2 for now: {}", errors[0]);
+    let dir = std::env::temp_dir().join(format!("pkmc-sphere-plan-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("probe.ngc");
+    std::fs::write(&file, &text).unwrap();
+    let path = format!(
+        "{}/../examples/machines/h4-table.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let targets = setup
+        .spheres
+        .iter()
+        .map(|s| pkmc_host::sim::probe::Target::Sphere {
+            centre: s.centre,
+            radius: s.radius + setup.tip,
+        });
+    let opts = pkmc_host::job::RunOptions {
+        target: pkmc_host::job::Target::Sim,
+        sim: pkmc_host::job::SimSetup {
+            plants: pkmc_host::machine_file::load_plants(Path::new(&path)).unwrap(),
+            probe: Some(pkmc_host::sim::probe::ProbeModel {
+                targets: targets.collect(),
+                noise_mm: 0.0,
+                delay_us: 0.0,
+                seed: 1,
+            }),
+            ..Default::default()
+        },
+        link: Default::default(),
+        home: false,
+        tools: Default::default(),
+        statics: None,
+        compress: None,
+    };
+    let mut hooks = pkmc_host::link::NoHooks;
+    let r = pkmc_host::job::check(&config, &file, &opts, &mut hooks)
+        .unwrap_or_else(|f| panic!("{}", f.message));
+    assert_eq!(r.report.result, "done", "{:?}", r.report.alarm_cause);
+    assert_eq!(r.report.probes.len(), p.touches.len());
+    for (t, probe) in p.touches.iter().zip(&r.report.probes) {
+        assert!(probe.contact, "{probe:?}");
+        let ball = &setup.spheres[t.sphere];
+        let d = (0..3)
+            .map(|k| (probe.position[k] - ball.centre[k]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let off = d - ball.radius - setup.tip;
+        assert!(off.abs() < 0.002, "{off} mm off: {probe:?}");
     }
-    let dry = text.replace("G38.2 ", "G1 ");
-    pkmc_host::gcode::compile(&dry, "dry.ngc", &options).unwrap();
 }
 
 /// A touch list written, probed by a true machine, read back with its comments and

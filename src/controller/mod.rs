@@ -179,9 +179,9 @@ pub struct Controller {
     stats: LinkStats,
     /// The probing move's latch and result ([`crate::drive::probe`]).
     probe: ProbeLatch,
-    /// The steppers' commanded actuator positions after the last two ticks, while a
-    /// probing move runs (`probing`).
-    probe_ref: [[i64; MAX_JOINTS]; 2],
+    /// The steppers' steps at the next tick's start, while a probing move runs
+    /// (`probing`).
+    probe_ref: [i64; MAX_JOINTS],
     /// A probing move touched: it is stopping on the path, then its rest is dropped.
     probe_stop: bool,
     /// The probe's result is owed to the host ([`crate::wire::CtrlMsg::Probe`]).
@@ -335,7 +335,7 @@ impl Controller {
             at!((*p).out).write(Outputs::default());
             at!((*p).stats).write(LinkStats::default());
             at!((*p).probe).write(ProbeLatch::new());
-            at!((*p).probe_ref).write([[0; MAX_JOINTS]; 2]);
+            at!((*p).probe_ref).write([0; MAX_JOINTS]);
             at!((*p).probe_stop).write(false);
             at!((*p).probe_due).write(false);
             (*p).update_servo_targets();

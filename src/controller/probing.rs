@@ -8,16 +8,15 @@ use crate::motion::block::PlannedBlock;
 use crate::wire::{Alarm, AlarmCause, State, NO_JOINT};
 
 impl Controller {
-    /// Each stepper joint's commanded actuator position now, from its zero, ×
-    /// 2^[`LATCH_FRAC_BITS`] (servo joints: 0, their encoders are read instead).
+    /// Each stepper joint's steps emitted (the trains computed before this tick's),
+    /// from its zero, × 2^[`LATCH_FRAC_BITS`] (servo joints: 0, their encoders are read
+    /// instead). A stepper stands on whole steps: between two tick starts it is taken
+    /// along the steps its train makes in the tick.
     fn stepper_refs(&self) -> [i64; MAX_JOINTS] {
         let mut r = [0; MAX_JOINTS];
         for (j, jc) in self.machine.joints.iter().enumerate() {
             if let Drive::Stepper { .. } = jc.drive {
-                r[j] = self
-                    .steps
-                    .scale(j)
-                    .steps_at_frac(self.joints[j], LATCH_FRAC_BITS);
+                r[j] = (self.steps.steps(j) - self.offset[j]) << LATCH_FRAC_BITS;
             }
         }
         r
@@ -25,9 +24,10 @@ impl Controller {
 
     /// Where each actuator is at this tick's start, from its zero, ×
     /// 2^[`LATCH_FRAC_BITS`]: a servo's encoder as read at the tick edge, a stepper's
-    /// commanded steps of two ticks ago (whose train has just run).
+    /// steps up to the train of two ticks ago (which has just run), kept by the last
+    /// tick.
     fn actuators_now(&self, counts: &[i64; crate::config::MAX_SERVOS]) -> [i64; MAX_JOINTS] {
-        let mut a = self.probe_ref[1];
+        let mut a = self.probe_ref;
         for (j, jc) in self.machine.joints.iter().enumerate() {
             if let Drive::Servo { channel } = jc.drive {
                 a[j] = (counts[channel as usize] - self.offset[j]) << LATCH_FRAC_BITS;
@@ -56,8 +56,7 @@ impl Controller {
             .push_planned(planned, &self.machine, &self.kin)
             .is_ok()
         {
-            let refs = self.stepper_refs();
-            self.probe_ref = [refs; 2];
+            self.probe_ref = self.stepper_refs();
             let now = self.actuators_now(&self.last.encoder_counts);
             self.probe.arm(mode, &now);
         }
@@ -98,18 +97,18 @@ impl Controller {
         if !self.probe.armed() {
             return;
         }
-        self.probe_ref[1] = self.probe_ref[0];
-        self.probe_ref[0] = self.stepper_refs();
+        // Before this tick's trains are computed: the next tick's start.
+        self.probe_ref = self.stepper_refs();
         if !self.path_moving() {
-            // The end: where the actuators will be once the last trains have run.
-            let mut end = self.probe_ref[0];
+            // The end: where the actuators will be once the last trains have run (a
+            // stepper on a whole step).
+            let mut end = [0; MAX_JOINTS];
             for (j, jc) in self.machine.joints.iter().enumerate() {
-                if let Drive::Servo { .. } = jc.drive {
-                    end[j] = self
-                        .steps
-                        .scale(j)
-                        .steps_at_frac(self.joints[j], LATCH_FRAC_BITS);
-                }
+                let scale = self.steps.scale(j);
+                end[j] = match jc.drive {
+                    Drive::Stepper { .. } => scale.steps_at(self.joints[j]) << LATCH_FRAC_BITS,
+                    Drive::Servo { .. } => scale.steps_at_frac(self.joints[j], LATCH_FRAC_BITS),
+                };
             }
             self.probe.finish(false, &end);
             self.probe_due = true;

@@ -13,8 +13,8 @@
 //! the simulator computes it), and the position is interpolated between the
 //! actuators' positions at the start of that tick and of this one. An actuator's
 //! position is what the hardware holds at a tick's start: a servo's encoder as read
-//! at the tick edge, a stepper's commanded steps of two ticks before (a tick's step
-//! train runs during the tick after the one that computed it), with their fractions.
+//! at the tick edge, a stepper's steps emitted two ticks before (a tick's step train
+//! runs during the tick after the one that computed it).
 //! So the latch's time uncertainty is the capture's (1 µs on the board) plus the
 //! straight-line interpolation over one tick; without a capture (`edge_us` unknown)
 //! it is one tick (1 ms: 5 µm at 300 mm/min). A bounce before confirmation drops the
