@@ -109,6 +109,7 @@ fn g38_2_latches_a_point_on_the_sphere_within_1_um_plus_the_noise_up_to_300_mm_m
             assert_eq!(r.report.probes.len(), DIRS.len(), "{name}");
             // 1 µm (or the actuators' resolution, where coarser) plus 4 σ of noise.
             let bound = 0.001f64.max(resolution) + 4.0 * noise_um / 1000.0;
+            let mut worst = 0.0f64;
             for p in &r.report.probes {
                 assert!(p.contact, "{name}: {p:?}");
                 let d = (0..3)
@@ -131,7 +132,14 @@ fn g38_2_latches_a_point_on_the_sphere_within_1_um_plus_the_noise_up_to_300_mm_m
                     past > 0.0 && past < 0.2,
                     "{name} F{feed}: stopped {past} mm in"
                 );
+                worst = worst.max(off.abs());
             }
+            println!(
+                "| {name} | {feed} | {} | {:.2} | {:.2} |",
+                r.report.probes.len(),
+                worst * 1000.0,
+                bound * 1000.0
+            );
         }
     }
 }
