@@ -314,8 +314,11 @@ impl Interp<'_> {
                         format!("{name} with radius R0"),
                     );
                 }
-                let c = arcs::centre_from_radius(s, e, radius as f64, clockwise, tol).map_err(
-                    |(kind, message)| {
+                // A `match`, not `map_err`: that is not inlined, and its result
+                // went through memory.
+                let c = match arcs::centre_from_radius(s, e, radius as f64, clockwise, tol) {
+                    Ok(c) => c,
+                    Err((kind, message)) => {
                         // Ending where it starts without an axis word in its plane:
                         // the line has no in-plane end point at all.
                         let in_plane = [a, b].iter().any(|&i| w.get(AXIS_NAMES[i] as u8).is_some());
@@ -323,9 +326,9 @@ impl Interp<'_> {
                             ErrorKind::InvalidTarget if !in_plane => ErrorKind::ArcNoPlaneAxis,
                             kind => kind,
                         };
-                        LineError { col, kind, message }
-                    },
-                )?;
+                        return Err(LineError::boxed(col, kind, message));
+                    }
+                };
                 [bounded_round(c[0], col)?, bounded_round(c[1], col)?]
             }
             (None, true) => self.centre_from_offsets([(a, wa), (b, wb)], s, e, col)?,
@@ -393,7 +396,7 @@ impl Interp<'_> {
             arcs::CENTRE_ARC_ABS_NM_MM
         };
         arcs::check_end(s, e, [c[0] as f64, c[1] as f64], abs)
-            .map_err(|(kind, message)| LineError { col, kind, message })?;
+            .map_err(|(kind, message)| LineError::boxed(col, kind, message))?;
         Ok(c)
     }
 }
