@@ -71,8 +71,8 @@ pub struct LineError {
 /// A phase's result. The error is boxed: a `Res<()>` is then one pointer, returned in
 /// a register, where a `Result` holding the error itself (32 bytes) went through the
 /// stack and was copied at every `?` with loads spanning two stores, which the processor
-/// does not forward (about 6 % of the compile time of arcspiral.ngc). Errors are rare:
-/// one allocation each costs nothing.
+/// does not forward (see docs/gcode.md, Performance). Errors are rare: one allocation
+/// each costs nothing.
 pub(crate) type Res<T> = Result<T, Box<LineError>>;
 
 impl LineError {
