@@ -26,7 +26,9 @@
 use super::ErrorKind;
 
 /// Centre of the arc from `start` to `end` with radius `radius` (negative: the larger
-/// arc).
+/// arc). Inlined where arcs are made: its result then stays in registers (the
+/// interpreter's hot path on programs of R-format arcs).
+#[inline(always)]
 pub fn centre_from_radius(
     start: [f64; 2],
     end: [f64; 2],
@@ -37,22 +39,12 @@ pub fn centre_from_radius(
     let (dx, dy) = (end[0] - start[0], end[1] - start[1]);
     let chord = (dx * dx + dy * dy).sqrt();
     if chord == 0.0 {
-        return Err((
-            ErrorKind::InvalidTarget,
-            "R-format arc ending where it starts: a full circle needs the centre (I J K)".into(),
-        ));
+        return Err(full_circle_by_radius());
     }
     let r = radius.abs();
     let half = chord / 2.0;
     if half - r > tolerance {
-        return Err((
-            ErrorKind::ArcRadius,
-            format!(
-                "arc radius {} mm too small to reach the end point ({} mm away)",
-                mm(r),
-                mm(chord)
-            ),
-        ));
+        return Err(radius_too_small(r, chord));
     }
     let offset = (r * r - half * half).max(0.0).sqrt();
     // Unit normal to the chord: on its right for G2 with R > 0 (or G3 with R < 0).
@@ -64,6 +56,26 @@ pub fn centre_from_radius(
     };
     let mid = [(start[0] + end[0]) / 2.0, (start[1] + end[1]) / 2.0];
     Ok([mid[0] + offset * nx, mid[1] + offset * ny])
+}
+
+#[cold]
+fn full_circle_by_radius() -> (ErrorKind, String) {
+    (
+        ErrorKind::InvalidTarget,
+        "R-format arc ending where it starts: a full circle needs the centre (I J K)".into(),
+    )
+}
+
+#[cold]
+fn radius_too_small(r: f64, chord: f64) -> (ErrorKind, String) {
+    (
+        ErrorKind::ArcRadius,
+        format!(
+            "arc radius {} mm too small to reach the end point ({} mm away)",
+            mm(r),
+            mm(chord)
+        ),
+    )
 }
 
 /// Checks that `end` lies on the circle about `centre` through `start`, within

@@ -484,11 +484,13 @@ impl Interp<'_> {
                 return fail(first_motion_col, ErrorKind::UnusedAxisWords, what);
             }
             Motion::Rapid => {
-                let t = self.target(w, machine)?;
+                let mut t = [0; AXES];
+                self.target_into(w, machine, &mut t)?;
                 self.straight(line, Straight::Rapid, t, col, out)?;
             }
             Motion::Linear => {
-                let t = self.target(w, machine)?;
+                let mut t = [0; AXES];
+                self.target_into(w, machine, &mut t)?;
                 let feed = self.feed_for(&t, false, b.inverse, "G1", col)?;
                 self.straight(line, Straight::Feed(feed), t, col, out)?;
             }

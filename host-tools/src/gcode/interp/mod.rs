@@ -50,7 +50,7 @@ use super::{ErrorKind, Options, MAX_AXIS_UNITS};
 use crate::gcode::canon::Canon;
 use crate::gcode::canon::{PathMode, Plane, Spindle};
 use convert::{check_unused, Block};
-use modal::Modal;
+use modal::{Group, Modal};
 use pkmc::config::{AXES, AXIS_NAMES};
 use pkmc::units::{NDEG_PER_DEG, NM_PER_MM};
 
@@ -69,14 +69,23 @@ pub struct LineError {
     pub message: String,
 }
 
-pub(crate) type Res<T> = Result<T, LineError>;
+/// A phase's result. The error is boxed: a `Res<()>` is then one pointer, returned in
+/// a register, where a `Result` holding the error itself (32 bytes) went through the
+/// stack and was copied at every `?` with loads spanning two stores, which the processor
+/// does not forward (see docs/gcode.md, Performance). Errors are rare: one allocation
+/// each costs nothing.
+pub(crate) type Res<T> = Result<T, Box<LineError>>;
+
+impl LineError {
+    /// The error, boxed for [`Res`].
+    #[cold]
+    pub(crate) fn boxed(col: u32, kind: ErrorKind, message: String) -> Box<LineError> {
+        Box::new(LineError { col, kind, message })
+    }
+}
 
 pub(crate) fn fail<T>(col: u32, kind: ErrorKind, message: impl Into<String>) -> Res<T> {
-    Err(LineError {
-        col,
-        kind,
-        message: message.into(),
-    })
+    Err(LineError::boxed(col, kind, message.into()))
 }
 
 /// Canned cycles that are expanded on the host.
@@ -279,34 +288,68 @@ impl<'o> Interp<'o> {
         };
         b.codes.fill(w)?;
         self.comp.start_line(out);
-        self.comp_guard(w, &b, true)?;
+        if self.comp.on() {
+            self.comp_guard(w, &b, true)?;
+        }
         // LinuxCNC's order of execution (`Interp::execute_block` and the `convert_*`
         // functions of emc/rs274ngc/interp_convert.cc), with units moved first (see the
         // module doc). Overrides (M48-M53) are refused, so they have no phase.
-        self.convert_comments(w, &b, out);
+        // A phase acts only when its codes or words are on the line: the phases that
+        // are not inlined are only called then (a line of coordinates calls none of
+        // them, a dozen calls fewer per line).
+        let groups = b.codes.groups();
+        let has = |g: Group| groups & g.bit() != 0;
+        if !w.messages.is_empty() {
+            self.convert_comments(w, &b, out);
+        }
         self.convert_units(&b);
         self.convert_feed_mode(&b);
         self.convert_feed_rate(w, &mut b)?;
         self.convert_speed(w, &mut b, out)?;
         self.convert_tool_select(w, &mut b)?;
         self.convert_tool_change(w, &mut b, out)?;
-        self.convert_spindle(&b, out);
-        self.convert_coolant(w, &b, out);
-        self.convert_dwell(w, &mut b, out)?;
+        if has(Group::Spindle) {
+            self.convert_spindle(&b, out);
+        }
+        if has(Group::Coolant) {
+            self.convert_coolant(w, &b, out);
+        }
+        let nonmodal = has(Group::NonModal);
+        if nonmodal {
+            self.convert_dwell(w, &mut b, out)?;
+        }
         self.convert_plane(&b);
-        self.convert_cutter_comp(w, &mut b, out)?;
-        self.comp_guard(w, &b, false)?;
-        self.convert_tool_length(w, &mut b)?;
-        self.convert_coordinate_system(&b)?;
-        self.convert_path_mode(w, &mut b, out)?;
+        if has(Group::Cutter) {
+            self.convert_cutter_comp(w, &mut b, out)?;
+        }
+        if self.comp.on() {
+            self.comp_guard(w, &b, false)?;
+        }
+        if has(Group::ToolLength) {
+            self.convert_tool_length(w, &mut b)?;
+        }
+        if has(Group::System) {
+            self.convert_coordinate_system(&b)?;
+        }
+        if has(Group::Path) {
+            self.convert_path_mode(w, &mut b, out)?;
+        }
         self.convert_distance_mode(&b);
         self.convert_retract_mode(&b);
-        self.convert_nonmodal(w, &mut b, out)?;
+        if nonmodal {
+            self.convert_nonmodal(w, &mut b, out)?;
+        }
         self.convert_motion(w, &mut b, out)?;
         self.comp.hold(out);
-        check_unused(w, &b)?;
-        self.convert_assignments(w)?;
-        self.convert_stop(&b, out)?;
+        if w.present() & !b.used != 0 {
+            check_unused(w, &b)?;
+        }
+        if !w.assigns.is_empty() {
+            self.convert_assignments(w)?;
+        }
+        if has(Group::Stop) {
+            self.convert_stop(&b, out)?;
+        }
         self.update_position_params();
         Ok(())
     }
@@ -453,9 +496,11 @@ pub(crate) fn dwell_ms(p: Word) -> Res<u32> {
     p.num
         .scaled(1000, 1)
         .and_then(|v| u32::try_from(v).ok())
-        .ok_or_else(|| LineError {
-            col: p.col,
-            kind: ErrorKind::OutOfRange,
-            message: format!("dwell time P{} s out of range", p.num),
+        .ok_or_else(|| {
+            LineError::boxed(
+                p.col,
+                ErrorKind::OutOfRange,
+                format!("dwell time P{} s out of range", p.num),
+            )
         })
 }

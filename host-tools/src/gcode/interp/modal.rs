@@ -57,6 +57,14 @@ pub(crate) enum Group {
     Coolant,
 }
 
+impl Group {
+    /// The group's bit in [`Modal::groups`].
+    #[inline(always)]
+    pub(crate) const fn bit(self) -> u32 {
+        1 << self as usize
+    }
+}
+
 /// Number of groups.
 const GROUPS: usize = 18;
 
@@ -202,11 +210,8 @@ impl Modal {
     }
 
     fn add(&mut self, letter: char, c: Code) -> Res<()> {
-        let group = group_of(letter, c.tenths).map_err(|(kind, message)| LineError {
-            col: c.col,
-            kind,
-            message,
-        })?;
+        let group = group_of(letter, c.tenths)
+            .map_err(|(kind, message)| LineError::boxed(c.col, kind, message))?;
         let bit = 1 << group as usize;
         let slot = &mut self.codes[group as usize];
         *slot = match self.present & bit {
@@ -231,6 +236,12 @@ impl Modal {
         };
         self.present |= bit;
         Ok(())
+    }
+
+    /// The groups with a code on the line, one bit each ([`Group::bit`]).
+    #[inline(always)]
+    pub(crate) fn groups(&self) -> u32 {
+        self.present
     }
 
     /// The line's code of `group`, if it has one.

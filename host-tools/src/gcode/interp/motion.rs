@@ -25,10 +25,20 @@ use pkmc::units::NM_PER_MM;
 impl Interp<'_> {
     /// End pose of a straight move from the axis and polar words.
     pub(crate) fn target(&self, w: &Words, machine: bool) -> Res<[i64; AXES]> {
-        if !machine && self.rotated() {
-            return self.rotated_target(w);
-        }
         let mut t = self.pos;
+        self.target_into(w, machine, &mut t)?;
+        Ok(t)
+    }
+
+    /// [`Self::target`] into `t`: the moves' hot path, whose pose returned inside a
+    /// `Result` was copied with loads spanning the separate stores of its axes, which
+    /// the processor does not forward (a stall per move).
+    pub(crate) fn target_into(&self, w: &Words, machine: bool, t: &mut [i64; AXES]) -> Res<()> {
+        if !machine && self.rotated() {
+            *t = self.rotated_target(w)?;
+            return Ok(());
+        }
+        *t = self.pos;
         for (i, slot) in t.iter_mut().enumerate() {
             let Some(word) = w.get(AXIS_NAMES[i] as u8) else {
                 continue;
@@ -49,7 +59,7 @@ impl Interp<'_> {
             t[0] = check_range(x + self.off[0], 0, col)?;
             t[1] = check_range(y + self.off[1], 1, col)?;
         }
-        Ok(t)
+        Ok(())
     }
 
     /// [`Self::target`] in a rotated coordinate system: X and Y (and polar words) are
@@ -237,8 +247,9 @@ impl Interp<'_> {
         out: &mut Vec<Canon>,
     ) -> Res<()> {
         self.comp_arc_allowed(col)?;
-        let end = self.target(w, false)?;
-        let done = self.arc_to(end, w, clockwise, b, col, out);
+        let mut end = [0; AXES];
+        self.target_into(w, false, &mut end)?;
+        let done = self.arc_to(&end, w, clockwise, b, col, out);
         if done.is_err() {
             // A refused arc still ends where it was programmed to: later lines (their
             // G91 moves, their arc centres) start there, so one bad arc is one message,
@@ -248,9 +259,11 @@ impl Interp<'_> {
         done
     }
 
+    /// The arc of [`Self::arc`] to `end` (by reference: a copy of it right after
+    /// `target_into` wrote it would wait for those stores).
     fn arc_to(
         &mut self,
-        end: [i64; AXES],
+        end: &[i64; AXES],
         w: &Words,
         clockwise: bool,
         block: &Block,
@@ -314,8 +327,11 @@ impl Interp<'_> {
                         format!("{name} with radius R0"),
                     );
                 }
-                let c = arcs::centre_from_radius(s, e, radius as f64, clockwise, tol).map_err(
-                    |(kind, message)| {
+                // A `match`, not `map_err`: that is not inlined, and its result
+                // went through memory.
+                let c = match arcs::centre_from_radius(s, e, radius as f64, clockwise, tol) {
+                    Ok(c) => c,
+                    Err((kind, message)) => {
                         // Ending where it starts without an axis word in its plane:
                         // the line has no in-plane end point at all.
                         let in_plane = [a, b].iter().any(|&i| w.get(AXIS_NAMES[i] as u8).is_some());
@@ -323,9 +339,9 @@ impl Interp<'_> {
                             ErrorKind::InvalidTarget if !in_plane => ErrorKind::ArcNoPlaneAxis,
                             kind => kind,
                         };
-                        LineError { col, kind, message }
-                    },
-                )?;
+                        return Err(LineError::boxed(col, kind, message));
+                    }
+                };
                 [bounded_round(c[0], col)?, bounded_round(c[1], col)?]
             }
             (None, true) => self.centre_from_offsets([(a, wa), (b, wb)], s, e, col)?,
@@ -336,8 +352,8 @@ impl Interp<'_> {
             Some(p) => (whole_in(p, 1, i64::from(u32::MAX), "turns P")? - 1) as u32,
             None => 0,
         };
-        let feed = self.feed_for(&end, true, line_inverse, name, col)?;
-        self.arc_move(line, end, centre, clockwise, turns, feed, col, out)
+        let feed = self.feed_for(end, true, line_inverse, name, col)?;
+        self.arc_move(line, *end, centre, clockwise, turns, feed, col, out)
     }
 
     /// The centre of a centre-format arc from `s` to `e` in the plane's axes `axes`
@@ -393,7 +409,7 @@ impl Interp<'_> {
             arcs::CENTRE_ARC_ABS_NM_MM
         };
         arcs::check_end(s, e, [c[0] as f64, c[1] as f64], abs)
-            .map_err(|(kind, message)| LineError { col, kind, message })?;
+            .map_err(|(kind, message)| LineError::boxed(col, kind, message))?;
         Ok(c)
     }
 }

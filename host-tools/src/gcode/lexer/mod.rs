@@ -356,7 +356,41 @@ impl Cursor<'_> {
                 format!("unknown word '{}'", letter as char),
             ));
         }
+        // The common literal read here, inlined, and stored from registers: a `Num`
+        // built on the stack and copied into its slot was read back with a load
+        // spanning its separate stores, which the processor does not forward (a stall
+        // per word). Any other value by `value` (which reads that literal the same way).
+        self.skip_blanks();
+        if let Some((mant, scale)) = self.quick_literal_parts() {
+            let b = bit(letter);
+            if letter != b'G' && letter != b'M' && words.present & b == 0 {
+                // `store` for the common word, each field written on its own (in
+                // `store` the compiler builds the value on the stack).
+                words.present |= b;
+                let slot = &mut words.vals[(letter - b'A') as usize];
+                slot.num = Num::Lit { mant, scale };
+                slot.col = col;
+                if b & MOTION_LETTERS != 0 && words.first_motion_col == 0 {
+                    words.first_motion_col = col;
+                }
+                return Ok(());
+            }
+            return self.store(words, letter, at, col, Num::Lit { mant, scale });
+        }
         let num = self.value(letter as char, 0)?;
+        self.store(words, letter, at, col, num)
+    }
+
+    /// Records the word `letter` (at byte `at`, column `col`) of value `num`.
+    #[inline(always)]
+    fn store(
+        &self,
+        words: &mut Words,
+        letter: u8,
+        at: usize,
+        col: u32,
+        num: Num,
+    ) -> Result<(), LexError> {
         match letter {
             b'G' | b'M' => {
                 let tenths = num.tenths().filter(|t| (0..=99_990).contains(t));

@@ -326,15 +326,19 @@ impl Cursor<'_> {
     /// any other.
     #[inline(always)]
     pub(super) fn quick_literal(&mut self) -> Option<Num> {
+        let (mant, scale) = self.quick_literal_parts()?;
+        Some(Num::Lit { mant, scale })
+    }
+
+    /// [`Self::quick_literal`] as its signed mantissa and decimals.
+    #[inline(always)]
+    pub(super) fn quick_literal_parts(&mut self) -> Option<(i64, u32)> {
         let start = self.i;
         let sign = self.b.get(start).copied();
         let from = start + usize::from(matches!(sign, Some(b'+' | b'-')));
         let (mant, scale, end) = self.plain_literal(from)?;
         self.i = end;
-        Some(Num::Lit {
-            mant: if sign == Some(b'-') { -mant } else { mant },
-            scale,
-        })
+        Some((if sign == Some(b'-') { -mant } else { mant }, scale))
     }
 
     /// The common literal, read without a check per digit: `digits [. digits]` from byte
