@@ -186,6 +186,9 @@ pub struct Controller {
     probe_stop: bool,
     /// The probe's result is owed to the host ([`crate::wire::CtrlMsg::Probe`]).
     probe_due: bool,
+    /// A `ControlAck` owed for a control carrying a planned move (encoded by
+    /// `transmit`).
+    control_ack_due: Option<u16>,
 }
 
 /// What a controller for a machine needs besides the machine, computed and checked
@@ -338,6 +341,7 @@ impl Controller {
             at!((*p).probe_ref).write([0; MAX_JOINTS]);
             at!((*p).probe_stop).write(false);
             at!((*p).probe_due).write(false);
+            at!((*p).control_ack_due).write(None);
             (*p).update_servo_targets();
         }
     }

@@ -57,8 +57,7 @@ impl Controller {
             .is_ok()
         {
             self.probe_ref = self.stepper_refs();
-            let now = self.actuators_now(&self.last.encoder_counts);
-            self.probe.arm(mode, &now);
+            self.probe.arm(mode);
         }
     }
 

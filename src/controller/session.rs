@@ -14,10 +14,11 @@ use crate::config::MachineConfig;
 use crate::motion::block::PlannedBlock;
 use crate::motion::planner::PushError;
 use crate::units::TICK_HZ;
+use crate::wire::PlannedControl;
 use crate::wire::{
-    decode_block_into, encode_ack, encode_frame_with, encode_status, is_block, Alarm, AlarmCause,
-    Control, CtrlMsg, HeldJob, HostMsgOf, JobMark, NakReason, NotBlock, State, Status, MAX_BODY,
-    MAX_FRAME, NO_JOINT, PROTOCOL_VERSION,
+    decode_block_into, decode_planned_control_into, encode_ack, encode_frame_with, encode_status,
+    is_block, Alarm, AlarmCause, Control, CtrlMsg, HeldJob, HostMsgOf, JobMark, NakReason,
+    NotBlock, State, Status, MAX_BODY, MAX_FRAME, NO_JOINT, PROTOCOL_VERSION,
 };
 
 impl Controller {
@@ -74,10 +75,22 @@ impl Controller {
             // Messages are handled by reference: a block is some 250 bytes, not to be
             // moved around; blocks, the bulk of the traffic, are decoded by hand.
             let mut slot = core::mem::MaybeUninit::uninit();
-            match &decode_block_into(message, &mut slot) {
-                Some(Ok(planned)) => {
+            if let Some(block) = decode_block_into(message, &mut slot) {
+                match block {
+                    Ok(planned) => {
+                        self.silent_ticks = 0;
+                        self.block(seq, planned);
+                    }
+                    Err(_) => self.corrupt(),
+                }
+                continue;
+            }
+            // A control carrying a planned move (a jog, a probing move): decoded by
+            // hand as blocks are; anything else with serde.
+            match decode_planned_control_into(message, &mut slot) {
+                Some(Ok((id, what, planned))) => {
                     self.silent_ticks = 0;
-                    self.block(seq, planned);
+                    self.planned_control(id, what, planned);
                 }
                 Some(Err(_)) => self.corrupt(),
                 None => match &postcard::from_bytes::<HostMsgOf<NotBlock>>(message) {
@@ -88,6 +101,33 @@ impl Controller {
                     Err(_) => self.corrupt(),
                 },
             }
+        }
+    }
+
+    /// A control carrying a planned move, as `handle` takes a control: acted on once
+    /// per id, acknowledged every time.
+    #[inline(never)]
+    fn planned_control(&mut self, id: u16, what: PlannedControl, planned: &PlannedBlock) {
+        if self.last_control != Some(id) {
+            self.last_control = Some(id);
+            if !self.mismatch {
+                match what {
+                    PlannedControl::Jog => self.jog(planned),
+                    PlannedControl::Probe(mode) => self.probe_start(planned, mode),
+                }
+            }
+        }
+        // Encoded by `transmit`, as a block's `Ack` is: this receive has the move's
+        // checks to pay for.
+        self.control_ack_due = Some(id);
+    }
+
+    /// `Control::Jog`: acted on only when idle with nothing queued.
+    fn jog(&mut self, planned: &PlannedBlock) {
+        if self.state == State::Idle && !self.has_work() {
+            // Refused (it does not start here, or is malformed): nothing moves, and the
+            // host, which waits for the target, says so.
+            let _ = self.planner.push_planned(planned, &self.machine, &self.kin);
         }
     }
 
@@ -149,6 +189,12 @@ impl Controller {
             self.reported = s.state;
             self.status_due =
                 !self.push_frame(|seq, body, out| Some(encode_status(seq, &s, body, out)));
+        }
+        if let Some(id) = self.control_ack_due {
+            let msg = CtrlMsg::ControlAck { id };
+            if self.push_frame(|seq, body, out| encode_frame_with(seq, &msg, body, out).ok()) {
+                self.control_ack_due = None;
+            }
         }
         if self.probe_due && !self.status_due {
             if let Some(r) = self.probe.result() {
@@ -408,15 +454,7 @@ impl Controller {
                 self.planner.feed_override = p.clamp(1, 200);
                 self.exec.replan(&mut self.planner);
             }
-            Control::Jog(planned) => {
-                if self.state == State::Idle && !self.has_work() {
-                    // Refused (it does not start here, or is malformed): nothing moves,
-                    // and the host, which waits for the target, says so.
-                    let _ = self
-                        .planner
-                        .push_planned(&planned, &self.machine, &self.kin);
-                }
-            }
+            Control::Jog(planned) => self.jog(&planned),
             Control::Stop => {
                 if self.state == State::Homing {
                     self.cancel_homing();

@@ -33,7 +33,7 @@ use serde::{Deserialize, Serialize};
 /// Fraction bits of a latched actuator position.
 pub const LATCH_FRAC_BITS: u32 = 8;
 /// Microseconds per tick (the range of an edge time).
-const TICK_US: i64 = 1_000_000 / crate::units::TICK_HZ as i64;
+const TICK_US: u32 = 1_000_000 / crate::units::TICK_HZ;
 
 /// What a probing move waits for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -70,6 +70,8 @@ pub struct ProbeLatch {
     mode: Option<ProbeMode>,
     /// Actuator positions at the start of the last tick.
     before: [i64; MAX_JOINTS],
+    /// Armed and not yet ticked: `before` is taken at the first tick.
+    fresh: bool,
     /// Latched at the first sought sample, not yet confirmed.
     pending: Option<[i64; MAX_JOINTS]>,
     result: Option<ProbeResult>,
@@ -81,15 +83,17 @@ impl ProbeLatch {
         Self {
             mode: None,
             before: [0; MAX_JOINTS],
+            fresh: false,
             pending: None,
             result: None,
         }
     }
 
-    /// A probing move in `mode` starts with the actuators at `now`.
-    pub fn arm(&mut self, mode: ProbeMode, now: &[i64; MAX_JOINTS]) {
+    /// A probing move in `mode` starts (the machine at rest: the first tick takes
+    /// where the actuators stand).
+    pub fn arm(&mut self, mode: ProbeMode) {
         self.mode = Some(mode);
-        self.before = *now;
+        self.fresh = true;
         self.pending = None;
     }
 
@@ -118,13 +122,20 @@ impl ProbeLatch {
             return false;
         };
         let sought = mode.sought();
+        if self.fresh {
+            self.before = *now;
+            self.fresh = false;
+        }
         if raw != sought {
             self.pending = None;
         } else if self.pending.is_none() {
-            let f = edge_us.map_or(TICK_US, |e| (e as i64).min(TICK_US));
+            // The edge's share of the tick, Q16 (a 32-bit division: the M4 has it; a
+            // 64-bit one would be a library routine in the tick).
+            let f = edge_us.map_or(TICK_US, |e| (e as u32).min(TICK_US));
+            let share = (((f << 16) + TICK_US / 2) / TICK_US) as i64;
             let before = &self.before;
             self.pending = Some(core::array::from_fn(|j| {
-                before[j] + (now[j] - before[j]) * f / TICK_US
+                before[j] + (((now[j] - before[j]) * share + (1 << 15)) >> 16)
             }));
         }
         self.before = *now;
@@ -169,7 +180,8 @@ mod tests {
     #[test]
     fn the_latch_is_taken_back_to_the_edge_and_confirmed_at_the_third_sample() {
         let mut l = ProbeLatch::new();
-        l.arm(ProbeMode::Touch, &pos(0));
+        l.arm(ProbeMode::Touch);
+        l.tick(&pos(0), false, None, false);
         assert!(!l.tick(&pos(1000), false, None, false));
         // The edge 250 µs into the tick from 1000 to 2000.
         assert!(!l.tick(&pos(2000), true, Some(250), false));
@@ -183,7 +195,8 @@ mod tests {
     #[test]
     fn a_bounce_drops_the_latch_and_the_next_contact_latches_again() {
         let mut l = ProbeLatch::new();
-        l.arm(ProbeMode::Touch, &pos(0));
+        l.arm(ProbeMode::Touch);
+        l.tick(&pos(0), false, None, false);
         l.tick(&pos(100), true, Some(500), false);
         l.tick(&pos(200), false, Some(10), false);
         l.tick(&pos(300), true, Some(900), false);
@@ -195,7 +208,8 @@ mod tests {
     #[test]
     fn release_seeks_the_contact_lost_and_without_an_edge_time_latches_the_sample() {
         let mut l = ProbeLatch::new();
-        l.arm(ProbeMode::Release, &pos(0));
+        l.arm(ProbeMode::Release);
+        l.tick(&pos(0), true, None, true);
         assert!(!l.tick(&pos(10), true, None, true));
         l.tick(&pos(20), false, None, true);
         l.tick(&pos(30), false, None, true);
@@ -206,9 +220,10 @@ mod tests {
     #[test]
     fn results_are_numbered_and_a_disarmed_move_leaves_none() {
         let mut l = ProbeLatch::new();
-        l.arm(ProbeMode::Touch, &pos(0));
+        l.arm(ProbeMode::Touch);
+        l.tick(&pos(0), false, None, false);
         l.finish(false, &pos(7));
-        l.arm(ProbeMode::Touch, &pos(7));
+        l.arm(ProbeMode::Touch);
         l.disarm();
         assert!(!l.armed());
         let r = l.result().unwrap();

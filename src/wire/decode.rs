@@ -279,7 +279,6 @@ pub fn decode_block_into<'a>(
     message: &[u8],
     slot: &'a mut core::mem::MaybeUninit<PlannedBlock>,
 ) -> Option<Result<&'a PlannedBlock, FrameError>> {
-    use core::ptr::addr_of_mut as at;
     let mut c = Cursor {
         bytes: message,
         at: 0,
@@ -288,6 +287,16 @@ pub fn decode_block_into<'a>(
     if c.u32() != HOST_MSG_BLOCK || c.bad {
         return None;
     }
+    Some(planned_into(&mut c, slot))
+}
+
+/// The planned block at `c` into `slot`; the block, by reference, when it decoded.
+#[inline(always)]
+fn planned_into<'a>(
+    c: &mut Cursor<'_>,
+    slot: &'a mut core::mem::MaybeUninit<PlannedBlock>,
+) -> Result<&'a PlannedBlock, FrameError> {
+    use core::ptr::addr_of_mut as at;
     let p = slot.as_mut_ptr();
     // SAFETY: every write is to a field of the slot, in bounds and aligned; every field
     // is written (a read that fails yields a default and marks the cursor bad), so the
@@ -308,8 +317,62 @@ pub fn decode_block_into<'a>(
         at!((*q).stop).write(c.bool());
     }
     if c.bad {
-        return Some(Err(FrameError::Message));
+        return Err(FrameError::Message);
     }
     // SAFETY: initialised above.
-    Some(Ok(unsafe { slot.assume_init_ref() }))
+    Ok(unsafe { slot.assume_init_ref() })
+}
+
+/// Variant index of `HostMsg::Control` in the message encoding.
+const HOST_MSG_CONTROL: u32 = 4;
+/// Variant indices of `Control::Jog` and `Control::Probe`.
+const CONTROL_JOG: u32 = 5;
+const CONTROL_PROBE: u32 = 10;
+
+/// A control command that carries a planned move ([`decode_planned_control_into`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlannedControl {
+    /// `Control::Jog`.
+    Jog,
+    /// `Control::Probe` with its mode.
+    Probe(crate::drive::probe::ProbeMode),
+}
+
+/// Decodes a `HostMsg::Control` whose command carries a planned move (`Jog`, `Probe`)
+/// without serde, as [`decode_block_into`] decodes a block: `None` when `message` is
+/// another message, else its id, which command, and the move in `slot` (or
+/// `FrameError::Message` where `postcard::from_bytes` fails).
+pub fn decode_planned_control_into<'a>(
+    message: &[u8],
+    slot: &'a mut core::mem::MaybeUninit<PlannedBlock>,
+) -> Option<Result<(u16, PlannedControl, &'a PlannedBlock), FrameError>> {
+    let mut c = Cursor {
+        bytes: message,
+        at: 0,
+        bad: false,
+    };
+    if c.u32() != HOST_MSG_CONTROL || c.bad {
+        return None;
+    }
+    let id = c.u32();
+    let kind = c.u32();
+    if c.bad || id > u16::MAX as u32 || !(kind == CONTROL_JOG || kind == CONTROL_PROBE) {
+        return None;
+    }
+    let planned = match planned_into(&mut c, slot) {
+        Ok(p) => p,
+        Err(e) => return Some(Err(e)),
+    };
+    let what = match kind {
+        CONTROL_JOG => PlannedControl::Jog,
+        _ => match c.u32() {
+            0 => PlannedControl::Probe(crate::drive::probe::ProbeMode::Touch),
+            1 => PlannedControl::Probe(crate::drive::probe::ProbeMode::Release),
+            _ => return Some(Err(FrameError::Message)),
+        },
+    };
+    if c.bad {
+        return Some(Err(FrameError::Message));
+    }
+    Some(Ok((id as u16, what, planned)))
 }

@@ -27,7 +27,9 @@ pub mod store;
 #[cfg(test)]
 mod tests;
 
-pub use decode::{decode_block, decode_block_into, is_block};
+pub use decode::{
+    decode_block, decode_block_into, decode_planned_control_into, is_block, PlannedControl,
+};
 pub use frame::{
     decode_body, decode_frame, encode_ack, encode_frame, encode_frame_with, encode_status,
     FrameError, WHITEN,

@@ -508,3 +508,94 @@ fn every_single_bit_flip_is_detected() {
         }
     }
 }
+
+/// `decode_planned_control_into` against `postcard::from_bytes::<HostMsg>`: the same
+/// id, command and move for a jog or a probing move, `None` for any other message,
+/// an error exactly where postcard fails.
+fn check_planned_control_decoder(message: &[u8]) -> bool {
+    let mut slot = core::mem::MaybeUninit::uninit();
+    let got = decode_planned_control_into(message, &mut slot);
+    let want = postcard::from_bytes::<HostMsg>(message);
+    let (mut a, mut b) = ([0u8; MAX_BODY], [0u8; MAX_BODY]);
+    match (got, want) {
+        (Some(Ok((id, what, got))), Ok(HostMsg::Control { id: want_id, cmd })) => {
+            let want = match (what, cmd) {
+                (PlannedControl::Jog, Control::Jog(p)) => p,
+                (PlannedControl::Probe(m), Control::Probe { planned, mode }) if m == mode => {
+                    planned
+                }
+                (what, cmd) => panic!("{message:02x?}: decoded {what:?}, postcard {cmd:?}"),
+            };
+            assert_eq!(id, want_id);
+            assert_eq!(
+                postcard::to_slice(got, &mut a).unwrap(),
+                postcard::to_slice(&want, &mut b).unwrap(),
+                "{message:02x?}"
+            );
+            true
+        }
+        (Some(Err(_)), Err(_)) => false,
+        (None, Ok(HostMsg::Control { cmd, .. })) => {
+            assert!(
+                !matches!(cmd, Control::Jog(_) | Control::Probe { .. }),
+                "missed: {message:02x?}"
+            );
+            false
+        }
+        (None, _) => false,
+        (got, want) => panic!("{message:02x?}: decoded {got:?}, postcard {want:?}"),
+    }
+}
+
+#[test]
+fn jogs_and_probing_moves_decode_by_hand_exactly_as_postcard_decodes_them() {
+    use crate::drive::probe::ProbeMode;
+    let mut x = 0x1234_5677u32;
+    let mut rnd = move |n: u32| {
+        x ^= x << 13;
+        x ^= x >> 17;
+        x ^= x << 5;
+        x % n
+    };
+    let mut decoded = 0;
+    for k in 0..1500 {
+        let mut w = || ((rnd(1 << 24) as i64) << 20) >> rnd(40);
+        let HostMsg::Block(planned) = random_block(k, &mut w) else {
+            unreachable!()
+        };
+        let cmd = match k % 3 {
+            0 => Control::Jog(planned),
+            1 => Control::Probe {
+                planned,
+                mode: ProbeMode::Touch,
+            },
+            _ => Control::Probe {
+                planned,
+                mode: ProbeMode::Release,
+            },
+        };
+        let msg = HostMsg::Control {
+            id: rnd(1 << 16) as u16,
+            cmd,
+        };
+        let mut buf = [0u8; MAX_BODY];
+        let good = postcard::to_slice(&msg, &mut buf).unwrap().to_vec();
+        assert!(check_planned_control_decoder(&good));
+        for cut in 0..good.len() {
+            check_planned_control_decoder(&good[..cut]);
+        }
+        for _ in 0..20 {
+            let mut bad = good.clone();
+            let i = rnd(good.len() as u32) as usize;
+            bad[i] ^= 1 << rnd(8);
+            decoded += check_planned_control_decoder(&bad) as u32;
+        }
+    }
+    assert!(decoded > 1000, "{decoded}");
+    // Other controls are not taken.
+    for cmd in [Control::Hold, Control::FeedOverride(50), Control::EndJob] {
+        let mut buf = [0u8; MAX_BODY];
+        let m = postcard::to_slice(&HostMsg::Control { id: 3, cmd }, &mut buf).unwrap();
+        assert!(!check_planned_control_decoder(m));
+    }
+}

@@ -16,6 +16,32 @@ pub struct Program {
     /// Motion ticks before the programmed path starts (its first rapid, where that is
     /// long), by which the operator of an `events` program delays every event.
     pub lead_ticks: u64,
+    /// A ball (centre, radius plus the probe tip's, mm) the simulator's touch probe
+    /// touches: the program probes it (G38.2), and runs a stage at a time as
+    /// `nc-send` runs such a program.
+    pub probe: Option<([f64; 3], f64)>,
+}
+
+/// Touches of a ball at `centre` of radius `r` (mm) from five directions: a rapid to
+/// 4 mm outside, G38.2 at 300 mm/min to 3 mm inside (it stops on the surface), back.
+fn touches(centre: [f64; 3], r: f64) -> String {
+    let mut t = String::from("G21 G90\n");
+    let dirs: [[f64; 3]; 5] = [
+        [0.0, 0.0, 1.0],
+        [1.0, 0.0, 1.0],
+        [0.0, -1.0, 1.0],
+        [-1.0, 1.0, 2.0],
+        [1.0, 1.0, 0.3],
+    ];
+    for u in dirs {
+        let n = (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
+        let at = |d: f64| -> Vec<String> { (0..3).map(|i| f(centre[i] + u[i] / n * d)).collect() };
+        let (s, e) = (at(r + 4.0), at(r - 3.0));
+        t += &format!("G0 X{} Y{} Z{}\n", s[0], s[1], s[2]);
+        t += &format!("G38.2 X{} Y{} Z{} F300\n", e[0], e[1], e[2]);
+        t += &format!("G0 X{} Y{} Z{}\n", s[0], s[1], s[2]);
+    }
+    t + "M2\n"
 }
 
 /// Formats mm or degrees for G-code (0.1 µm, 0.1 µ°).
@@ -190,6 +216,7 @@ pub fn programs() -> Vec<Program> {
                 text,
                 events: what.ends_with("events"),
                 lead_ticks: 0,
+                probe: None,
             })
         };
         add("seg0.05mm", sine(0.05, SINE_MM, x0, z, 5.0, 40.0));
@@ -232,6 +259,15 @@ pub fn programs() -> Vec<Program> {
             })
         };
         add("5axis", five_axis(FIVE_AXIS_SEGMENTS, 20.0, z, angles));
+        let ball = [0.0, 0.0, z - 16.0];
+        out.push(Program {
+            name: format!("{tag}_probe"),
+            machine: m,
+            text: touches(ball, 6.0),
+            events: false,
+            lead_ticks: 0,
+            probe: Some((ball, 6.0)),
+        });
     }
     let (m, z, len) = (2, 275.0, HEXAPOD_XY_SINE_MM);
     let x0 = -len / 2.0;
@@ -244,12 +280,22 @@ pub fn programs() -> Vec<Program> {
             text,
             events: what.ends_with("events"),
             lead_ticks: (lead_s * 1000.0) as u64,
+            probe: None,
         })
     };
     add("seg0.05mm", sine(0.05, len, x0, z, 5.0, 40.0));
     add("events", sine(0.05, len, x0, z, 5.0, 40.0));
     add("helix-b", HELIX_B.into());
     add("helix-b-tilt", HELIX_B_TILT.into());
+    let ball = [0.0, 0.0, 260.0];
+    out.push(Program {
+        name: "hexapod_xy_probe".into(),
+        machine: m,
+        text: touches(ball, 6.0),
+        events: false,
+        lead_ticks: 0,
+        probe: Some((ball, 6.0)),
+    });
     out
 }
 

@@ -153,13 +153,10 @@ impl Recorder {
             )));
         }
         self.log.push(b'T');
-        for w in words
-            .iter()
-            .chain(&wire::outputs_words(
-                self.sim.last_outputs(),
-                self.sim.last_map(),
-            ))
-        {
+        for w in words.iter().chain(&wire::outputs_words(
+            self.sim.last_outputs(),
+            self.sim.last_map(),
+        )) {
             self.log.extend_from_slice(&w.to_le_bytes());
         }
         self.counts.ticks += 1;
@@ -181,6 +178,12 @@ impl Recorder {
 impl Transport for Recorder {
     fn name(&self) -> &str {
         "recorded in-process simulator"
+    }
+
+    /// The simulated clock, as `InProcess` gives it: a client waiting for the machine
+    /// (a probing move, [`pkmc_host::link::Link::wait_idle`]) reads to let it run.
+    fn sim_ticks(&self) -> Option<u64> {
+        Some(self.sim.ticks)
     }
 
     fn write_some(&mut self, bytes: &[u8], _wait: Duration) -> io::Result<usize> {
@@ -311,16 +314,20 @@ pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
     }
     // As `nc-send` compiles a file: runs of short moves in G64 P merged into curves.
     let settings = pkmc_host::gcode::compress::Settings::default();
-    let blocks = compile_compressed(
-        &p.text,
-        &p.name,
-        &machine,
-        machine.home,
-        &Default::default(),
-        Some(&settings),
-    )
-    .map_err(|e| e.message)?
-    .blocks;
+    let blocks = if p.probe.is_some() {
+        Vec::new()
+    } else {
+        compile_compressed(
+            &p.text,
+            &p.name,
+            &machine,
+            machine.home,
+            &Default::default(),
+            Some(&settings),
+        )
+        .map_err(|e| e.message)?
+        .blocks
+    };
     // As `nc-send --machine FILE` simulates it: the servo joints' plants are the file's
     // (the hexapod-xy's: the report's identified plants; the H-4 and the hexapod give
     // none, the simulator's default).
@@ -335,12 +342,43 @@ pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
         }])
         .map_err(|e| format!("{e:#}"))?;
     }
+    if let Some((centre, radius)) = p.probe {
+        use pkmc_host::sim::probe::{ProbeModel, Target};
+        sim.set_probe(Some(ProbeModel {
+            targets: vec![Target::Sphere { centre, radius }],
+            noise_mm: 0.0005,
+            delay_us: 20.0,
+            seed: 1,
+        }));
+    }
     let io = Recorder::new(sim);
     let mut link =
         Link::connect(io, &machine, LinkOptions::default()).map_err(|e| e.to_string())?;
     let mut hooks = Operator::new(p.events, p.lead_ticks);
+    let mut sent = blocks.len();
     let end = match prepare(&mut link, false, true, &mut NoHooks).map_err(|e| e.message)? {
         Some(end) => end,
+        // A program that probes: a stage at a time, as `nc-send` runs it.
+        None if p.probe.is_some() => {
+            let program = pkmc_host::job::probing::ProbingProgram {
+                text: &p.text,
+                name: &p.name,
+                machine: &machine,
+                start: machine.home,
+                tools: &Default::default(),
+                compress: Some(&settings),
+            };
+            let (end, found, n) = pkmc_host::job::probing::run_on(&mut link, &program, &mut hooks)
+                .map_err(|e| e.message)?;
+            if found.len() != 5 || found.iter().any(|r| !r.contact) {
+                return Err(format!(
+                    "{}: the probe did not touch 5 times: {found:?}",
+                    p.name
+                ));
+            }
+            sent = n;
+            end
+        }
         None => link
             .run_job(&blocks, &mut hooks)
             .map_err(|e| e.to_string())?,
@@ -360,7 +398,7 @@ pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
         ));
     }
     let io = link.into_transport();
-    Ok((io.log, io.counts, blocks.len()))
+    Ok((io.log, io.counts, sent))
 }
 
 /// Records every program into `dir` (one `NAME.calls` file each) and prints one line
