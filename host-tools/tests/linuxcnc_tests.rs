@@ -136,21 +136,6 @@ struct Case {
     reference: Reference,
 }
 
-fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
-    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
-        .expect("corpus folder readable")
-        .map(|e| e.expect("corpus entry").path())
-        .collect();
-    entries.sort();
-    for p in entries {
-        if p.is_dir() {
-            walk(&p, out);
-        } else {
-            out.push(p);
-        }
-    }
-}
-
 fn rel(root: &Path, p: &Path) -> String {
     p.strip_prefix(root)
         .expect("under the corpus")
@@ -161,7 +146,7 @@ fn rel(root: &Path, p: &Path) -> String {
 /// Every test of the corpus, in path order.
 fn cases(root: &Path) -> Vec<Case> {
     let mut files = Vec::new();
-    walk(root, &mut files);
+    lcnc::files_under(root, None, &mut files);
     let mut cases = Vec::new();
     for f in &files {
         let name = f.file_name().unwrap().to_string_lossy().into_owned();

@@ -348,21 +348,6 @@ struct Program {
     generated: bool,
 }
 
-fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
-    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
-        .expect("corpus folder readable")
-        .map(|e| e.expect("corpus entry").path())
-        .collect();
-    entries.sort();
-    for p in entries {
-        if p.is_dir() {
-            walk(&p, out);
-        } else if p.extension().is_some_and(|e| e == "ngc") {
-            out.push(p);
-        }
-    }
-}
-
 fn corpus() -> Option<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/corpus");
     dir.is_dir().then_some(dir)
@@ -416,7 +401,7 @@ fn linuxcnc_interpreter_agrees_or_the_difference_is_documented() {
     match corpus() {
         Some(root) => {
             let mut files = Vec::new();
-            walk(&root, &mut files);
+            lcnc::files_under(&root, Some("ngc"), &mut files);
             assert!(!files.is_empty(), "no .ngc programs in shared/corpus");
             for f in files {
                 let bytes = std::fs::read(&f).expect("program readable");

@@ -203,14 +203,7 @@ pub fn simulate_command(
     let list = planned(&table, model, setup.spheres.len())?;
     let th = truth::perturb(model, seed);
     let mut rng = Rng::new(seed ^ 0x5f4e);
-    let spheres: Vec<Sphere> = setup
-        .spheres
-        .iter()
-        .map(|s| Sphere {
-            centre: s.centre.map(|c| c + rng.range(-1.0, 1.0)),
-            radius: s.radius,
-        })
-        .collect();
+    let spheres = sphere_study::displaced(&setup.spheres, &mut rng);
     let mut latched = Vec::new();
     for (r, t) in list.iter().enumerate() {
         let (q, _) =

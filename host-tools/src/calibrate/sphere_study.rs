@@ -130,6 +130,17 @@ pub struct Outcome {
     pub errors_any_frame: (f64, f64),
 }
 
+/// The true balls: `spheres` with each centre off by up to ±1 mm per coordinate.
+pub fn displaced(spheres: &[Sphere], rng: &mut Rng) -> Vec<Sphere> {
+    spheres
+        .iter()
+        .map(|s| Sphere {
+            centre: s.centre.map(|c| c + rng.range(-1.0, 1.0)),
+            radius: s.radius,
+        })
+        .collect()
+}
+
 fn centres(f: &Fit, machine: usize, setup: &Setup) -> Vec<[f64; 3]> {
     let radii: Vec<f64> = setup.spheres.iter().map(|s| s.radius).collect();
     let s = spheres_of(&f.theta, machine, &radii);
@@ -148,14 +159,7 @@ pub fn run(
     let m = model.params.len();
     let truth = perturb(model, seed);
     let mut rng = Rng::new(seed.wrapping_mul(6007).wrapping_add(11));
-    let true_spheres: Vec<Sphere> = setup
-        .spheres
-        .iter()
-        .map(|s| Sphere {
-            centre: s.centre.map(|c| c + rng.range(-1.0, 1.0)),
-            radius: s.radius,
-        })
-        .collect();
+    let true_spheres = displaced(&setup.spheres, &mut rng);
     let mut touches = Vec::new();
     for (i, t) in p.touches.iter().enumerate() {
         let (q, x) = touch(model, &truth, &true_spheres[t.sphere], setup, t, &mut rng)

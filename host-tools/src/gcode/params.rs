@@ -117,6 +117,19 @@ impl Default for Params {
     }
 }
 
+/// A position on pose axis `i` (axis units) as a position parameter reads it: mm, or
+/// inches under G20 (`inch`), for X Y Z; degrees for A B C.
+pub(crate) fn user_units(units: i64, i: usize, inch: bool) -> f64 {
+    let v = units as f64;
+    if i >= 3 {
+        v / 1e9
+    } else if inch {
+        v / 25.4e6
+    } else {
+        v / 1e6
+    }
+}
+
 impl Params {
     /// All numbered parameters 0, no named ones; coordinate system 1 in force.
     pub fn new() -> Self {
@@ -153,14 +166,7 @@ impl Params {
 
     #[cold]
     fn position_param(&self, units: i64, i: usize) -> f64 {
-        let v = units as f64;
-        if i >= 3 {
-            v / 1e9
-        } else if self.inch {
-            v / 25.4e6
-        } else {
-            v / 1e6
-        }
+        user_units(units, i, self.inch)
     }
 
     /// Sets #`n` (ignored out of range; the lexer checks the range).

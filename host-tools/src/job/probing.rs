@@ -168,9 +168,8 @@ pub fn latched_pose(
 ) -> Result<([i64; AXES], [i64; MAX_JOINTS]), Failure> {
     let mut q = [0i64; MAX_JOINTS];
     for (j, jc) in machine.joints.iter().enumerate() {
-        let num = at[j] as i128 * jc.scale.per_units as i128;
         let den = (jc.scale.steps as i128) << LATCH_FRAC_BITS;
-        q[j] = (num + num.signum() * den / 2).checked_div(den).unwrap_or(0) as i64;
+        q[j] = pkmc::units::div_round(at[j] as i128 * jc.scale.per_units as i128, den) as i64;
     }
     let kin = MachineKinematics::new(machine);
     let mut pose = *guess;

@@ -140,8 +140,9 @@ pub struct Simulator {
     machine_id: u32,
     /// File standing in for the controller's flash page, if any.
     pub flash: Option<std::path::PathBuf>,
-    /// The touch probe, if one is modelled ([`probe`]).
-    probe: Option<probe::SimProbe>,
+    /// The touch probe, if one is modelled ([`probe`]), with the machine's kinematics
+    /// that find the tool point.
+    probe: Option<(probe::SimProbe, pkmc::kinematics::MachineKinematics)>,
 }
 
 /// Ticks the simulator goes on running after the controller's work is done, while a
@@ -195,19 +196,22 @@ impl Simulator {
 
     /// Models a touch probe touching `model`'s targets (none: its input stays clear).
     pub fn set_probe(&mut self, model: Option<probe::ProbeModel>) {
-        self.probe = model.map(probe::SimProbe::new);
+        let kin = pkmc::kinematics::MachineKinematics::new(self.ctrl.machine());
+        self.probe = model.map(|m| (probe::SimProbe::new(m), kin));
     }
 
-    /// The tool point where the joints truly are, mm (the controller's forward
-    /// kinematics from its own pose as the guess).
-    pub fn true_tool_point(&self) -> [f64; 3] {
+    /// The tool point where the joints truly are, mm (`kin`: the controller's forward
+    /// kinematics, from its own pose as the guess).
+    fn tool_point(&self, kin: &pkmc::kinematics::MachineKinematics) -> [f64; 3] {
         use pkmc::kinematics::Kinematics;
-        let machine = self.ctrl.machine();
         let mut q = [0i64; MAX_JOINTS];
-        for (j, slot) in q.iter_mut().enumerate().take(machine.joints.len()) {
+        for (j, slot) in q
+            .iter_mut()
+            .enumerate()
+            .take(self.ctrl.machine().joints.len())
+        {
             *slot = self.feedback(j);
         }
-        let kin = pkmc::kinematics::MachineKinematics::new(machine);
         let mut pose = *self.ctrl.pose();
         let guess = pose;
         let _ = kin.forward(&q, &guess, &mut pose);
@@ -273,6 +277,9 @@ impl Simulator {
     fn attach_drives(&mut self) -> Result<()> {
         let machine = self.ctrl.machine().clone();
         self.machine_id = self.ctrl.machine_id();
+        if let Some((_, kin)) = &mut self.probe {
+            *kin = pkmc::kinematics::MachineKinematics::new(&machine);
+        }
         self.steppers = Default::default();
         self.violations_seen = [0; MAX_STEPPERS];
         self.servos = Default::default();
@@ -463,12 +470,14 @@ impl Simulator {
         };
         let t0 = self.ticks * TICK_NS as u64;
         // The probe at this tick's start: before this tick's step trains run.
-        let (probe, probe_edge_us) = match self.probe.is_some() {
-            true => {
-                let p = self.true_tool_point();
-                self.probe.as_mut().map_or((false, None), |sp| sp.sample(p))
+        let (probe, probe_edge_us) = match &self.probe {
+            Some((_, kin)) => {
+                let p = self.tool_point(kin);
+                self.probe
+                    .as_mut()
+                    .map_or((false, None), |(sp, _)| sp.sample(p))
             }
-            false => (false, None),
+            None => (false, None),
         };
         // A drive that sees its timing breached faults (its fault line is high for
         // this tick): the controller stops and names the joint, instead of believing

@@ -490,3 +490,20 @@ pub fn compare(ours: &[OurMove], run: &Run) -> Option<String> {
     let ref_final = run.moves.last().map_or([Approx::ZERO; AXES], |m| m.end);
     off(&ours_final, &ref_final).map(|what| format!("final position: {what}"))
 }
+
+/// Every file under `dir`, in name order, recursively (`ext`: only those with that
+/// extension).
+pub fn files_under(dir: &std::path::Path, ext: Option<&str>, out: &mut Vec<std::path::PathBuf>) {
+    let mut entries: Vec<std::path::PathBuf> = std::fs::read_dir(dir)
+        .expect("corpus folder readable")
+        .map(|e| e.expect("corpus entry").path())
+        .collect();
+    entries.sort();
+    for p in entries {
+        if p.is_dir() {
+            files_under(&p, ext, out);
+        } else if ext.is_none_or(|x| p.extension().is_some_and(|e| e == x)) {
+            out.push(p);
+        }
+    }
+}

@@ -341,15 +341,18 @@ impl Interp<'_> {
     /// #5420–#5425 and #5021–#5026: the current position in program units, in the
     /// program and the machine frame (computed when read).
     pub(super) fn update_position_params(&mut self) {
-        for i in 0..AXES {
-            self.params.position[i] = self.pos[i] - self.off[i];
-        }
+        self.params.position = self.program_frame(&self.pos);
         self.params.machine = self.pos;
-        if self.rotated() {
-            let (x, y) = self.xy_to_program(self.pos[0], self.pos[1]);
-            self.params.position[0] = x;
-            self.params.position[1] = y;
-        }
         self.params.inch = self.inch;
+    }
+
+    /// `pose` (machine frame, axis units) in the program frame: offsets taken off, the
+    /// rotation turned back.
+    pub(super) fn program_frame(&self, pose: &[i64; AXES]) -> [i64; AXES] {
+        let mut p: [i64; AXES] = std::array::from_fn(|i| pose[i] - self.off[i]);
+        if self.rotated() {
+            (p[0], p[1]) = self.xy_to_program(pose[0], pose[1]);
+        }
+        p
     }
 }

@@ -158,19 +158,7 @@ impl Interp<'_> {
     /// `pose` (machine frame, axis units) in program coordinates and units, as the
     /// position parameters read it.
     fn program_position(&self, pose: &[i64; AXES]) -> [f64; AXES] {
-        let mut p: [i64; AXES] = std::array::from_fn(|i| pose[i] - self.off[i]);
-        if self.rotated() {
-            (p[0], p[1]) = self.xy_to_program(pose[0], pose[1]);
-        }
-        std::array::from_fn(|i| {
-            let v = p[i] as f64;
-            if i >= 3 {
-                v / 1e9
-            } else if self.inch {
-                v / 25.4e6
-            } else {
-                v / 1e6
-            }
-        })
+        let p = self.program_frame(pose);
+        std::array::from_fn(|i| crate::gcode::params::user_units(p[i], i, self.inch))
     }
 }
