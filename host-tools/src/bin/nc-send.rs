@@ -349,6 +349,7 @@ fn run(args: &Args) -> Result<i32, Failure> {
             inject: args.inject.clone(),
             deviation: None,
             probe: args.probe.model(args.seed).map_err(bad)?,
+            truth: args.probe.truth(pkmc_host::calibrate::truth::tool_point),
             // A sender watches the machine move: the simulator keeps real time.
             clock: match args.command {
                 Some(Command::Grbl { .. } | Command::Serve { .. }) => {

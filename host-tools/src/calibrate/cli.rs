@@ -39,6 +39,11 @@ pub struct CalibrateArgs {
     /// `sphere`, optionally dir_x dir_y dir_z; see docs/calibration.md).
     #[arg(long, value_name = "FILE", conflicts_with = "measurements")]
     pub probes: Option<PathBuf>,
+    /// With `--probes`: nc-send's JSON report (`--report json`) of the run of the
+    /// plan's probing program. Its probes' latched joints replace the touch list's
+    /// joints, touch by touch in order.
+    #[arg(long, value_name = "REPORT", requires = "probes")]
+    pub probe_report: Option<PathBuf>,
     /// The artefact and the probe.
     #[command(flatten)]
     pub probe: ProbeOptions,
@@ -286,6 +291,7 @@ pub fn run(args: &CalibrateArgs, machine: Option<&Path>) -> Result<(), String> {
             Some(p) => super::sphere_cli::fit_command(
                 &args.probe.args(5.0, 3.0),
                 p,
+                args.probe_report.as_deref(),
                 &text,
                 &model,
                 args.tolerance,

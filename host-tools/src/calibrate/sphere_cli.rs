@@ -67,11 +67,53 @@ fn read(path: &Path) -> Result<(String, Table), String> {
     Ok((text, table))
 }
 
+/// The joints latched by each probing move of `nc-send`'s JSON report at `path`
+/// (`--report json` of the probing program's run), mm or degrees, in order; `joints`:
+/// how many the machine has. Errors name the report and the probe.
+pub fn report_joints(path: &Path, joints: usize) -> Result<Vec<Vec<f64>>, String> {
+    let origin = path.display().to_string();
+    let text = crate::input::read_text(path, crate::input::MAX_PROGRAM_BYTES)?;
+    let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| {
+        format!(
+            "{origin}:{}:{}: not a JSON report: {e}",
+            e.line(),
+            e.column()
+        )
+    })?;
+    let probes = v.get("probes").and_then(|p| p.as_array()).ok_or_else(|| {
+        format!("{origin}: no `probes` in the report (run the probing program with --report json)")
+    })?;
+    let mut out = Vec::new();
+    for (i, p) in probes.iter().enumerate() {
+        let line = p.get("line").and_then(|l| l.as_u64()).unwrap_or(0);
+        let at = format!("{origin}: probes[{i}] (NC line {line})");
+        if p.get("contact").and_then(|c| c.as_bool()) != Some(true) {
+            return Err(format!("{at}: the probe made no contact"));
+        }
+        let q: Vec<f64> = p
+            .get("joints")
+            .and_then(|j| j.as_array())
+            .map(|j| j.iter().filter_map(|v| v.as_f64()).collect())
+            .unwrap_or_default();
+        if q.len() != joints {
+            return Err(format!(
+                "{at}: `joints` holds {} numbers; the machine has {joints} joints",
+                q.len()
+            ));
+        }
+        out.push(q);
+    }
+    Ok(out)
+}
+
 /// `nc-send calibrate --probes FILE`: the fit, its report, and with `out` the
-/// corrected machine file.
+/// corrected machine file. With `latched` (`--probe-report`), the joints of the
+/// touches are those latched in that run's report, touch by touch in order.
+#[allow(clippy::too_many_arguments)]
 pub fn fit_command(
     a: &ProbeArgs,
     path: &Path,
+    latched: Option<&Path>,
     machine_text: &str,
     model: &Model,
     tolerance: f64,
@@ -81,8 +123,24 @@ pub fn fit_command(
     let (text, table) = read(path)?;
     let setup = setup(a, Some((&text, &path.display().to_string())))?;
     let ext = super::sphere::extend(model, &setup.spheres);
+    let mut list = touches(&table, model, setup.spheres.len())?;
+    if let Some(r) = latched {
+        let q = report_joints(r, model.joints())?;
+        if q.len() != list.len() {
+            return Err(format!(
+                "{}: {} probing moves with contact, but {} lists {} touches",
+                r.display(),
+                q.len(),
+                path.display(),
+                list.len()
+            ));
+        }
+        for (t, q) in list.iter_mut().zip(q) {
+            t.q = q;
+        }
+    }
     let mut data = Probing {
-        touches: touches(&table, model, setup.spheres.len())?,
+        touches: list,
         radii: setup.spheres.iter().map(|s| s.radius).collect(),
         tip: setup.tip,
         noise: setup.noise,

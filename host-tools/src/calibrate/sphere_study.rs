@@ -178,11 +178,41 @@ pub fn run(
         noise: setup.noise,
         machine_params: m,
     };
+    assess(
+        config,
+        model,
+        &p.model,
+        setup,
+        &mut data,
+        &truth,
+        &true_spheres,
+        seed,
+        tests,
+    )
+}
+
+/// Fits the touches `data` with the model `ext` (the machine's and the spheres'
+/// centres) twice, the machine held at its nominal file (before) and free (after),
+/// and compares both with the true machine `truth` and its balls `true_spheres` at
+/// `tests` random usable test poses of seed `seed`.
+#[allow(clippy::too_many_arguments)]
+pub fn assess(
+    config: &MachineConfig,
+    model: &Model,
+    ext: &Model,
+    setup: &Setup,
+    data: &mut Probing,
+    truth: &[f64],
+    true_spheres: &[Sphere],
+    seed: u64,
+    tests: usize,
+) -> Result<Outcome, String> {
+    let m = model.params.len();
     let all_machine: Vec<usize> = (0..m).collect();
-    let before = fit(&p.model, &mut data, 1e-6, &all_machine)?;
-    let res_before = rms_max_um(&data.gaps(&p.model, &before.theta).ok_or("lost a touch")?);
-    let after = fit(&p.model, &mut data, 1e-6, &[])?;
-    let res_after = rms_max_um(&data.gaps(&p.model, &after.theta).ok_or("lost a touch")?);
+    let before = fit(ext, data, 1e-6, &all_machine)?;
+    let res_before = rms_max_um(&data.gaps(ext, &before.theta).ok_or("lost a touch")?);
+    let after = fit(ext, data, 1e-6, &[])?;
+    let res_after = rms_max_um(&data.gaps(ext, &after.theta).ok_or("lost a touch")?);
     let truth_c: Vec<[f64; 3]> = true_spheres.iter().map(|s| s.centre).collect();
     let frames = [&before, &after].map(|f| rigid(&centres(f, m, setup), &truth_c));
     let usable = Usable::new(config);
@@ -191,7 +221,7 @@ pub fn run(
     let (mut raw, mut real) = (Vec::new(), Vec::new());
     while errs[0].len() < tests {
         let (_, q, x) = random_pose(model, &usable, &mut test_rng).ok_or("no usable test pose")?;
-        let Some((t, _)) = predict(model, &truth, &q, &x) else {
+        let Some((t, _)) = predict(model, truth, &q, &x) else {
             continue;
         };
         let models = [&before.theta[..m], &after.theta[..m]];

@@ -78,6 +78,8 @@ pub struct SimSetup<'a> {
     /// A touch probe and what it touches ([`crate::sim::probe`]; `None`: its input
     /// stays clear).
     pub probe: Option<crate::sim::probe::ProbeModel>,
+    /// The probe sees this true machine ([`crate::sim::probe::Frame`]).
+    pub truth: Option<crate::sim::probe::Truth>,
 }
 
 impl SimSetup<'_> {
@@ -90,7 +92,8 @@ impl SimSetup<'_> {
     ) -> Result<Simulator, Failure> {
         let mut sim = Simulator::with_plants(machine, self.plants.clone(), [0; MAX_JOINTS])
             .map_err(|e| Failure::new(code, format!("simulator: {e:#}")))?;
-        sim.set_probe(self.probe.clone());
+        sim.set_probe(self.probe.clone(), self.truth.as_ref())
+            .map_err(|e| Failure::new(exit::BAD_INPUT, e))?;
         if let Some(p) = self.trace {
             let f = std::fs::File::create(p).map_err(|e| {
                 Failure::new(

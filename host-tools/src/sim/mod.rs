@@ -51,6 +51,7 @@ use pkmc::controller::{Controller, Inputs};
 use pkmc::drive::contour::{PeriodOutputs, ServoBank};
 use pkmc::drive::debounce::Switches;
 use pkmc::drive::servo::SERVO_PER_TICK;
+use pkmc::kinematics::MachineKinematics;
 use pkmc::units::{units_per_user, TICK_NS};
 use pkmc::wire::State;
 use std::io::Write;
@@ -140,9 +141,9 @@ pub struct Simulator {
     machine_id: u32,
     /// File standing in for the controller's flash page, if any.
     pub flash: Option<std::path::PathBuf>,
-    /// The touch probe, if one is modelled ([`probe`]), with the machine's kinematics
-    /// that find the tool point.
-    probe: Option<(probe::SimProbe, pkmc::kinematics::MachineKinematics)>,
+    /// The touch probe, if one is modelled ([`probe`]), with the kinematics that find
+    /// the tool point.
+    probe: Option<(probe::SimProbe, probe::Frame)>,
 }
 
 /// Ticks the simulator goes on running after the controller's work is done, while a
@@ -194,16 +195,21 @@ impl Simulator {
         Ok(sim)
     }
 
-    /// Models a touch probe touching `model`'s targets (none: its input stays clear).
-    pub fn set_probe(&mut self, model: Option<probe::ProbeModel>) {
-        let kin = pkmc::kinematics::MachineKinematics::new(self.ctrl.machine());
-        self.probe = model.map(|m| (probe::SimProbe::new(m), kin));
+    /// Models a touch probe touching `model`'s targets (none: its input stays clear),
+    /// on the true machine `truth` (`None`: the machine file's geometry;
+    /// [`probe::Frame`]); an error where the true machine cannot be built.
+    pub fn set_probe(
+        &mut self,
+        model: Option<probe::ProbeModel>,
+        truth: Option<&probe::Truth>,
+    ) -> Result<(), String> {
+        let frame = probe::Frame::new(self.ctrl.machine(), truth)?;
+        self.probe = model.map(|m| (probe::SimProbe::new(m), frame));
+        Ok(())
     }
 
-    /// The tool point where the joints truly are, mm (`kin`: the controller's forward
-    /// kinematics, from its own pose as the guess).
-    fn tool_point(&self, kin: &pkmc::kinematics::MachineKinematics) -> [f64; 3] {
-        use pkmc::kinematics::Kinematics;
+    /// The tool point where the joints truly are, mm.
+    fn tool_point(&mut self) -> Option<[f64; 3]> {
         let mut q = [0i64; MAX_JOINTS];
         for (j, slot) in q
             .iter_mut()
@@ -212,10 +218,10 @@ impl Simulator {
         {
             *slot = self.feedback(j);
         }
-        let mut pose = *self.ctrl.pose();
-        let guess = pose;
-        let _ = kin.forward(&q, &guess, &mut pose);
-        std::array::from_fn(|i| pose[i] as f64 / 1e6)
+        let pose = *self.ctrl.pose();
+        let machine = self.ctrl.machine();
+        let (_, frame) = self.probe.as_mut()?;
+        Some(frame.point(machine, &q, &pose))
     }
 
     /// The inputs the last [`Simulator::tick`] passed to the controller (for harnesses
@@ -277,8 +283,12 @@ impl Simulator {
     fn attach_drives(&mut self) -> Result<()> {
         let machine = self.ctrl.machine().clone();
         self.machine_id = self.ctrl.machine_id();
-        if let Some((_, kin)) = &mut self.probe {
-            *kin = pkmc::kinematics::MachineKinematics::new(&machine);
+        if let Some((_, frame)) = &mut self.probe {
+            // The true machine of the new machine file (its own geometry if it has
+            // no calibration model).
+            let truth = frame.truth().cloned();
+            *frame = probe::Frame::new(&machine, truth.as_ref())
+                .unwrap_or_else(|_| probe::Frame::Nominal(MachineKinematics::new(&machine)));
         }
         self.steppers = Default::default();
         self.violations_seen = [0; MAX_STEPPERS];
@@ -470,13 +480,11 @@ impl Simulator {
         };
         let t0 = self.ticks * TICK_NS as u64;
         // The probe at this tick's start: before this tick's step trains run.
-        let (probe, probe_edge_us) = match &self.probe {
-            Some((_, kin)) => {
-                let p = self.tool_point(kin);
-                self.probe
-                    .as_mut()
-                    .map_or((false, None), |(sp, _)| sp.sample(p))
-            }
+        let (probe, probe_edge_us) = match self.tool_point() {
+            Some(p) => self
+                .probe
+                .as_mut()
+                .map_or((false, None), |(sp, _)| sp.sample(p)),
             None => (false, None),
         };
         // A drive that sees its timing breached faults (its fault line is high for

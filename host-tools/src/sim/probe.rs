@@ -3,8 +3,10 @@
 //!
 //! **Where the tool is.** Each tick the simulator takes the joints' true positions
 //! (the steps the stepper drives have made, the servo plants' encoders), runs the
-//! machine's forward kinematics (the controller's own) and gets the tool point at the
-//! tick's start. Between two ticks the point moves in a straight line.
+//! machine's forward kinematics and gets the tool point at the tick's start. Between
+//! two ticks the point moves in a straight line. The kinematics are the controller's
+//! own, or, with a truth seed, a "true" machine's whose geometry differs from the
+//! machine file's ([`Frame`]): a probing run then measures a machine to calibrate.
 //!
 //! **When it triggers.** The probe touches where the point's signed distance to a
 //! target (a sphere's surface, outward positive; a plane's height above it) is at most
@@ -18,6 +20,117 @@
 //!
 //! A sphere's radius is the artefact's plus the probe tip's: the point is the tip's
 //! centre.
+
+use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
+use pkmc::kinematics::{Kinematics, MachineKinematics};
+use pkmc::units::units_per_user;
+use std::sync::Arc;
+
+/// A true machine's tool point: from the joints (mm or degrees) and the controller's
+/// pose (mm, degrees) as the first guess, the tool point in mm in the workpiece frame;
+/// `None` where the true machine has no pose.
+pub type TruePoint = Box<dyn FnMut(&[f64], &[f64; AXES]) -> Option<[f64; 3]> + Send>;
+
+/// How a [`Truth`] builds its tool point for a machine file.
+pub type BuildTruth = dyn Fn(&MachineConfig) -> Result<TruePoint, String> + Send + Sync;
+
+/// A "true" machine for the simulator's probe: its seed, and how its tool point is
+/// built for a machine file (the calibration model with every parameter perturbed by
+/// the seed, wired by `nc-send --probe-truth-seed`).
+#[derive(Clone)]
+pub struct Truth {
+    /// The seed it is drawn with.
+    pub seed: u64,
+    /// Its tool point for a machine file (an error for a machine it cannot perturb).
+    pub build: Arc<BuildTruth>,
+}
+
+impl std::fmt::Debug for Truth {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Truth {{ seed: {} }}", self.seed)
+    }
+}
+
+/// Where the simulator finds the tool point from the joints' true positions: the
+/// controller's own forward kinematics, or a "true" machine whose geometry differs
+/// from the machine file's ([`Truth`]). With the true machine, a probing run measures
+/// the geometry a calibration is to find.
+pub enum Frame {
+    /// The machine file's geometry, through the controller's kinematics.
+    Nominal(MachineKinematics),
+    /// A true machine.
+    True {
+        /// What it is.
+        truth: Truth,
+        /// Its tool point.
+        point: TruePoint,
+        /// The controller's kinematics, for a pose the true machine cannot solve.
+        fallback: MachineKinematics,
+    },
+}
+
+impl Frame {
+    /// The frame of `machine`: the true machine `truth`, or its own geometry.
+    pub(super) fn new(machine: &MachineConfig, truth: Option<&Truth>) -> Result<Frame, String> {
+        let kin = MachineKinematics::new(machine);
+        let Some(truth) = truth else {
+            return Ok(Frame::Nominal(kin));
+        };
+        Ok(Frame::True {
+            point: (truth.build)(machine)?,
+            truth: truth.clone(),
+            fallback: kin,
+        })
+    }
+
+    /// Its true machine, if it has one.
+    pub(super) fn truth(&self) -> Option<&Truth> {
+        match self {
+            Frame::Nominal(_) => None,
+            Frame::True { truth, .. } => Some(truth),
+        }
+    }
+
+    /// The tool point, mm in the workpiece frame, with the joints at `q` (axis units)
+    /// and the controller's pose `pose` (axis units) as the first guess.
+    pub(super) fn point(
+        &mut self,
+        machine: &MachineConfig,
+        q: &[i64; MAX_JOINTS],
+        pose: &[i64; AXES],
+    ) -> [f64; 3] {
+        let nominal = |kin: &MachineKinematics| {
+            let mut p = *pose;
+            let _ = kin.forward(q, pose, &mut p);
+            std::array::from_fn(|i| p[i] as f64 / 1e6)
+        };
+        let (point, fallback) = match self {
+            Frame::Nominal(kin) => return nominal(kin),
+            Frame::True {
+                point, fallback, ..
+            } => (point, fallback),
+        };
+        let qf: Vec<f64> = machine
+            .joints
+            .iter()
+            .enumerate()
+            .map(|(j, jc)| q[j] as f64 / units_per_user(jc.rotary) as f64)
+            .collect();
+        let guess = std::array::from_fn(|i| pose[i] as f64 / units_per_user(i >= 3) as f64);
+        point(&qf, &guess).unwrap_or_else(|| nominal(fallback))
+    }
+}
+
+impl Truth {
+    /// The true machine of `seed`, built for a machine file by `build` (e.g.
+    /// `calibrate::truth::tool_point`).
+    pub fn new(seed: u64, build: fn(&MachineConfig, u64) -> Result<TruePoint, String>) -> Self {
+        Truth {
+            seed,
+            build: Arc::new(move |m| build(m, seed)),
+        }
+    }
+}
 
 /// A surface the probe touches, mm in the workpiece frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -85,9 +198,22 @@ pub struct ProbeArgs {
     /// The simulated probe's switching delay, µs.
     #[arg(long, global = true, value_name = "US", default_value_t = 20.0)]
     pub probe_delay_us: f64,
+    /// Simulator only: the probe sees a "true" machine, the machine file's geometry
+    /// with every parameter moved at random by seed N (up to ±0.5 mm, ±0.3° for a
+    /// rotary joint's zero), as `calibrate simulate` draws it. Parallel machines only.
+    #[arg(long, global = true, value_name = "N")]
+    pub probe_truth_seed: Option<u64>,
 }
 
 impl ProbeArgs {
+    /// The true machine of `--probe-truth-seed`, if given, built by `build`.
+    pub fn truth(
+        &self,
+        build: fn(&MachineConfig, u64) -> Result<TruePoint, String>,
+    ) -> Option<Truth> {
+        self.probe_truth_seed.map(|seed| Truth::new(seed, build))
+    }
+
     /// The model these options describe (`None` without a sphere or a plane); `seed`
     /// seeds its noise. Errors name the option.
     pub fn model(&self, seed: u64) -> Result<Option<ProbeModel>, String> {

@@ -66,6 +66,7 @@ fn owned(opts: &RunOptions<'_>) -> RunOptions<'static> {
             clock: Default::default(),
             deviation: None,
             probe: None,
+            truth: None,
         },
         link: opts.link,
         home: false,
