@@ -4,7 +4,8 @@
 //! O-word flow control needs the whole program and is refused here.
 
 use super::canon::Canon;
-use super::interp::Interp;
+use super::interp::probe::ProbeOutcome;
+use super::interp::{Interp, LineError};
 use super::lexer::{self, Words};
 use super::{flow, Diagnostic, ErrorKind, Options};
 use pkmc::config::AXES;
@@ -70,6 +71,13 @@ impl<'o> LineSession<'o> {
             kind,
             message,
         };
+        if self.interp.waiting() {
+            return Err(fail(
+                1,
+                ErrorKind::ModeConflict,
+                "a probing move waits for its outcome: nothing runs before it is given".into(),
+            ));
+        }
         let program = flow::Program::index(text, false, &self.interp.params);
         if let Some((_, col, kind, message)) = program.errors.first() {
             return Err(fail(lexer::char_col(text, *col), *kind, message.clone()));
@@ -100,14 +108,35 @@ impl<'o> LineSession<'o> {
         .map_err(|(col, kind, message)| fail(col, kind, message))
     }
 
-    /// Emits what cutter compensation still holds (the end of the stream).
-    pub fn finish(&mut self, number: u32, out: &mut Vec<Canon>) -> Result<(), Diagnostic> {
-        self.interp.finish(out).map_err(|e| Diagnostic {
+    /// Is the last line stopped at a probing move (G38.2–G38.5, with
+    /// [`Options::probing`]) whose outcome it needs? Its command is the last one the
+    /// line emitted; no line runs until [`Self::probed`] gives the outcome.
+    pub fn waiting(&self) -> bool {
+        self.interp.waiting()
+    }
+
+    /// The outcome of the probing move on line `number` that the session waits for
+    /// ([`crate::gcode::interp::Interp::probed`]): the position becomes where the
+    /// machine stopped and #5061–#5070 are set; a G38.2 or G38.4 without the change
+    /// is refused at its column (the position and parameters set all the same).
+    pub fn probed(&mut self, outcome: &ProbeOutcome, number: u32) -> Result<(), Diagnostic> {
+        self.interp.probed(outcome).map_err(|e| self.diagnostic(number, *e))
+    }
+
+    fn diagnostic(&self, number: u32, e: LineError) -> Diagnostic {
+        Diagnostic {
             file: self.file.clone(),
             line: number as usize,
             col: e.col as usize,
             kind: e.kind,
             message: e.message,
-        })
+        }
+    }
+
+    /// Emits what cutter compensation still holds (the end of the stream).
+    pub fn finish(&mut self, number: u32, out: &mut Vec<Canon>) -> Result<(), Diagnostic> {
+        self.interp
+            .finish(out)
+            .map_err(|e| self.diagnostic(number, *e))
     }
 }
