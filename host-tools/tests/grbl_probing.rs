@@ -121,7 +121,11 @@ fn a_probe_that_finds_nothing_is_prb_0_or_alarm_5() {
     assert_eq!(c.command("G0 Z[#5063+9]"), vec!["ok"]);
     assert_eq!(c.command("$C"), vec!["[MSG:Disabled]", "ok"]);
     let s = c.status();
-    assert_eq!(field(&s, "MPos")[2], -2.0, "nothing moved in check mode: {s}");
+    assert_eq!(
+        field(&s, "MPos")[2],
+        -2.0,
+        "nothing moved in check mode: {s}"
+    );
     let summary = bridge.stop();
     assert_eq!(summary["errors"], 1, "the G0 in the alarm: {summary}");
 }

@@ -300,7 +300,10 @@ fn grbl_streamer_runs_a_probing_program_and_reads_the_prb_report() {
     assert_eq!(&at[..2], &[2.0, 1.0], "{job}");
     assert!((at[2] + 2.5).abs() <= 0.003, "the plane at -2.5: {job}");
     let end = &summary["status"]["pose"];
-    assert_eq!((end["x"].as_f64(), end["y"].as_f64()), (Some(0.0), Some(0.0)));
+    assert_eq!(
+        (end["x"].as_f64(), end["y"].as_f64()),
+        (Some(0.0), Some(0.0))
+    );
     let z = end["z"].as_f64().unwrap();
     // 2 mm up from where the probe stopped, a little past the contact.
     assert!(

@@ -30,8 +30,10 @@ type Socket = tungstenite::WebSocket<tungstenite::stream::MaybeTlsStream<std::ne
 
 /// Sends command `cmd` (a JSON object's fields) as request `id`.
 fn send(ws: &mut Socket, id: u64, cmd: &str) {
-    ws.send(tungstenite::Message::text(format!(r#"{{"id":{id},{cmd}}}"#)))
-        .unwrap();
+    ws.send(tungstenite::Message::text(format!(
+        r#"{{"id":{id},{cmd}}}"#
+    )))
+    .unwrap();
 }
 
 /// Messages until one satisfies `want` (returned); panics after 20 s.
@@ -91,7 +93,10 @@ fn g38_in_the_stations_mdi_probes_publishes_the_result_and_sets_5061() {
     assert_eq!(started["ok"], true, "{started}");
     let touched = until(&mut ws, probe);
     let p = &touched["probe"];
-    assert_eq!((p["line"].as_u64(), p["code"].as_str()), (Some(1), Some("G38.2")));
+    assert_eq!(
+        (p["line"].as_u64(), p["code"].as_str()),
+        (Some(1), Some("G38.2"))
+    );
     assert_eq!(p["contact"], true, "{touched}");
     assert_eq!(p["joints"].as_array().unwrap().len(), 3, "{touched}");
     // Within 1 µm plus 4 σ of the simulator's default 0.5 µm noise.
@@ -110,9 +115,15 @@ fn g38_in_the_stations_mdi_probes_publishes_the_result_and_sets_5061() {
     until(&mut ws, |v| {
         v["type"] == "status"
             && v["job"].is_null()
-            && v["pose"][2].as_f64().is_some_and(|z| (z - (at + 1.0)).abs() < 2e-3)
+            && v["pose"][2]
+                .as_f64()
+                .is_some_and(|z| (z - (at + 1.0)).abs() < 2e-3)
     });
-    send(&mut ws, 4, r#""cmd":"mdi","text":"G38.2 Z[#5063+1.5] F100""#);
+    send(
+        &mut ws,
+        4,
+        r#""cmd":"mdi","text":"G38.2 Z[#5063+1.5] F100""#,
+    );
     let r = until(&mut ws, reply(4));
     assert_eq!(r["ok"], true, "{r}");
     let missed = until(&mut ws, probe);

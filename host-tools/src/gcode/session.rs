@@ -120,7 +120,9 @@ impl<'o> LineSession<'o> {
     /// machine stopped and #5061–#5070 are set; a G38.2 or G38.4 without the change
     /// is refused at its column (the position and parameters set all the same).
     pub fn probed(&mut self, outcome: &ProbeOutcome, number: u32) -> Result<(), Diagnostic> {
-        self.interp.probed(outcome).map_err(|e| self.diagnostic(number, *e))
+        self.interp
+            .probed(outcome)
+            .map_err(|e| self.diagnostic(number, *e))
     }
 
     fn diagnostic(&self, number: u32, e: LineError) -> Diagnostic {
@@ -187,7 +189,10 @@ mod tests {
             Some(Canon::Probe { outcome: None, .. })
         ));
         let refused = s.line("G0 X0", 4, &mut out).unwrap_err();
-        assert!(refused.message.contains("waits for its outcome"), "{refused}");
+        assert!(
+            refused.message.contains("waits for its outcome"),
+            "{refused}"
+        );
         s.probed(&outcome(true), 3).unwrap();
         assert!(!s.waiting());
         assert_eq!(s.interp().pos, outcome(true).stopped);
@@ -220,7 +225,10 @@ mod tests {
         s.line("G21 G38.2 Z-5 F10", 7, &mut out).unwrap();
         let e = s.probed(&outcome(false), 7).unwrap_err();
         assert_eq!((e.line, e.col), (7, 5), "{e}");
-        assert!(e.message.contains("G38.2: the move ended without contact"), "{e}");
+        assert!(
+            e.message.contains("G38.2: the move ended without contact"),
+            "{e}"
+        );
         assert_eq!(s.interp().pos, outcome(false).stopped);
         assert_eq!(s.interp().params.numbered(5070), 0.0);
         let again = s.probed(&outcome(true), 7).unwrap_err();

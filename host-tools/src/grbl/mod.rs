@@ -223,7 +223,10 @@ fn next_line<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(),
             if b.probe.take().is_some() {
                 b.pipeline.set_position(s.pose);
                 if !b.reset {
-                    b.refuse(9, "the probing move did not run: the motion before it ended in an alarm");
+                    b.refuse(
+                        9,
+                        "the probing move did not run: the motion before it ended in an alarm",
+                    );
                 }
             }
             Ok(())

@@ -292,18 +292,7 @@ impl Machine<'_> {
                 let s = link.request_status()?;
                 let line = self.mdi.compile(&text, s.pose)?;
                 started("MDI");
-                let n = line.blocks.len() + usize::from(line.probe.is_some());
-                let mut info = JobInfo::new("mdi", page, n);
-                let mut end = JobEnd::Done;
-                if !line.blocks.is_empty() {
-                    end = self.run(link, &line.blocks, &mut info)?;
-                }
-                match line.probe {
-                    Some((block, probing)) if end == JobEnd::Done => {
-                        self.mdi_probe(link, &block, probing, &mut info)?
-                    }
-                    _ => end,
-                }
+                self.run_mdi(link, &line, page)?
             }
             Cmd::Joint {
                 joint,
@@ -418,6 +407,27 @@ impl Machine<'_> {
         self.last_job = info.kind;
         let mut hooks = Hooks { m: self, info };
         Ok(link.run_job_on(blocks, derived, &mut hooks)?)
+    }
+
+    /// An MDI line's blocks, then the probing move it ends in (if it does).
+    fn run_mdi<T: Transport>(
+        &mut self,
+        link: &mut Link<T>,
+        line: &job::LineBlocks,
+        page: u64,
+    ) -> Result<JobEnd, Failure> {
+        let n = line.blocks.len() + usize::from(line.probe.is_some());
+        let mut info = JobInfo::new("mdi", page, n);
+        let mut end = JobEnd::Done;
+        if !line.blocks.is_empty() {
+            end = self.run(link, &line.blocks, &mut info)?;
+        }
+        match line.probe {
+            Some((block, probing)) if end == JobEnd::Done => {
+                self.mdi_probe(link, &block, probing, &mut info)
+            }
+            _ => Ok(end),
+        }
     }
 
     /// An MDI line's probing move, run as `nc-send` runs one
