@@ -112,8 +112,16 @@ fn a_probe_that_finds_nothing_is_prb_0_or_alarm_5() {
         "[PRB:0.000,0.000,-1.000:0]",
         "$# in the alarm"
     );
+    // A soft reset keeps the alarm, as Grbl's state outlives its reset.
+    c.send(&[0x18]);
+    c.line_until(|l| l.starts_with("Grbl 1.1h"), Duration::from_secs(5));
+    let unlock = c.line(Duration::from_secs(5)).unwrap();
+    assert!(unlock.contains("ALARM:5"), "{unlock}");
+    assert!(c.status().starts_with("<Alarm|"));
     assert_eq!(c.command("$X"), vec!["[MSG:Caution: Unlocked]", "ok"]);
     assert!(c.status().starts_with("<Idle|"));
+    // A stop on the probing move's line would come after it: refused.
+    assert_eq!(c.command("G38.2 Z-10 F100 M0").last().unwrap(), "error:20");
     // Check mode: nothing moves, the line is answered at once, and the lines after
     // it read the front end as if the probe had touched at the move's end.
     assert_eq!(c.command("$C"), vec!["[MSG:Enabled]", "ok"]);
@@ -127,7 +135,10 @@ fn a_probe_that_finds_nothing_is_prb_0_or_alarm_5() {
         "nothing moved in check mode: {s}"
     );
     let summary = bridge.stop();
-    assert_eq!(summary["errors"], 1, "the G0 in the alarm: {summary}");
+    assert_eq!(
+        summary["errors"], 2,
+        "the G0 in the alarm, the G38.2 with M0: {summary}"
+    );
 }
 
 /// A probe already touching when a G38.2 starts: the controller's `ProbeAtStart`,
