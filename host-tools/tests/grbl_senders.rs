@@ -255,3 +255,59 @@ fn grbl_streamer_hold_and_resume_over_tcp_stop_and_restart_the_machine() {
     );
     assert_eq!(summary["status"]["pose"]["x"], 0.0, "{summary}");
 }
+
+/// grbl-streamer streams a program with a G38.2 onto the simulator's plane: the
+/// bridge holds the G38.2's `ok` until the probe has run, grbl-streamer reads the
+/// `[PRB:…:1]` before it (its `on_probe`, with the machine position of the contact)
+/// and the program goes on from there. (grbl-streamer's preprocessor substitutes
+/// `#` parameters itself, so the program does not read #5063: that is the bridge's
+/// own test, `grbl_probing`.)
+#[test]
+#[cfg_attr(
+    pkmc_no_grbl_streamer,
+    ignore = "needs grbl-streamer: pip install -r tests/senders/requirements.txt"
+)]
+fn grbl_streamer_runs_a_probing_program_and_reads_the_prb_report() {
+    if !have_grbl_streamer() {
+        return;
+    }
+    let program = common::tmp("streamer_probe.ngc");
+    std::fs::write(
+        &program,
+        "G21 G90\nG0 X2 Y1\nG38.2 Z-10 F150\nG91 G0 Z2\nG90 G0 X0 Y0\n",
+    )
+    .unwrap();
+    let program = program.to_str().unwrap();
+    let bridge = Bridge::start(&["--probe-plane", "-2.5"]);
+    let job = streamer(&bridge, program, &["--timeout", "60"]);
+    let summary = bridge.stop();
+    assert_eq!(job["result"], "completed", "{job}");
+    assert_eq!(job["errors"].as_array().unwrap().len(), 0, "{job}");
+    // `$#` at the start says PRB too (zeros); the job's is after t = 0.
+    let probes: Vec<&serde_json::Value> = job["probes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|p| p["t"].as_f64().unwrap() > 0.0)
+        .collect();
+    assert_eq!(probes.len(), 1, "{job}");
+    let at: Vec<f64> = probes[0]["at"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(&at[..2], &[2.0, 1.0], "{job}");
+    assert!((at[2] + 2.5).abs() <= 0.003, "the plane at -2.5: {job}");
+    let end = &summary["status"]["pose"];
+    assert_eq!(
+        (end["x"].as_f64(), end["y"].as_f64()),
+        (Some(0.0), Some(0.0))
+    );
+    let z = end["z"].as_f64().unwrap();
+    // 2 mm up from where the probe stopped, a little past the contact.
+    assert!(
+        z > at[2] + 1.8 && z < at[2] + 2.0,
+        "Z after the probe: {summary}"
+    );
+}

@@ -106,6 +106,7 @@ class Job:
         self.writes = []
         self.errors = []
         self.alarms = []
+        self.probes = []
         self.timeline = []
         self.actions = []
         self.lines_sent = 0
@@ -177,6 +178,10 @@ class Job:
                 line, cmd, ln = data
                 self.errors.append({"t": t, "line": str(line), "command": cmd, "line_number": ln})
                 self.log("on_error %r" % (data,))
+            elif event == "on_probe":
+                # a [PRB:x,y,z:c] line (after a probing move, and in `$#`'s answer):
+                # grbl-streamer passes its x y z
+                self.probes.append({"t": t, "at": list(data[0])})
             elif event == "on_alarm":
                 self.alarms.append({"t": t, "line": str(data[0])})
                 self.log("on_alarm %r" % (data,))
@@ -352,6 +357,7 @@ class Job:
             "lines_received": self.lines_acked,
             "errors": rel_list(self.errors),
             "alarms": rel_list(self.alarms),
+            "probes": rel_list(self.probes),
             "last_status": None if last is None else {
                 "state": gs.cmode if gs else None,
                 "mpos": list(gs.cmpos) if gs else None,

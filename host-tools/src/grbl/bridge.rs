@@ -95,6 +95,11 @@ pub(super) struct Bridge<'o> {
     pub(super) alarm_told: Option<pkmc::wire::Alarm>,
     /// Short moves held back for merging.
     pub(super) merge: super::merge::Merger,
+    /// A probing move accepted, to run once the motion before it has ended
+    /// ([`super::probe`]): the job's feed closes at it.
+    pub(super) probe: Option<super::probe::Pending>,
+    /// The last probe's result (`[PRB:…]`, `$#`).
+    pub(super) last_probe: super::probe::Last,
 }
 
 /// A pseudo-terminal sender counts as present this long after its last byte (a
@@ -157,6 +162,8 @@ impl<'o> Bridge<'o> {
             stop_aborted: false,
             alarm_told: None,
             merge: super::merge::Merger::new(None, start),
+            probe: None,
+            last_probe: super::probe::Last::default(),
         }
     }
 
@@ -422,11 +429,14 @@ impl<'o> Bridge<'o> {
     }
 
     /// Compiles one G-code line into blocks (none in check mode); an error is
-    /// answered here and gives `None`.
+    /// answered here and gives `None`. A line that ends in a probing move is answered
+    /// once the move has run ([`Self::probe`]).
     pub(super) fn compile(&mut self, text: &str) -> Option<Vec<Block>> {
         match self.compile_line(text) {
             Ok(blocks) => {
-                self.ok();
+                if self.probe.is_none() {
+                    self.ok();
+                }
                 Some(blocks)
             }
             Err((code, why)) => {
@@ -436,8 +446,9 @@ impl<'o> Bridge<'o> {
         }
     }
 
-    /// Compiles one G-code line: its blocks (none in check mode), its messages said;
-    /// or Grbl's error number and why, the interpreter left where the machine will be.
+    /// Compiles one G-code line: its blocks (none in check mode), its messages said,
+    /// its probing move kept in [`Self::probe`]; or Grbl's error number and why, the
+    /// interpreter left where the machine will be.
     pub(super) fn compile_line(&mut self, text: &str) -> Result<Vec<Block>, (u8, String)> {
         self.line_no += 1;
         let n = self.line_no;
@@ -467,8 +478,16 @@ impl<'o> Bridge<'o> {
             self.say("[MSG:Pgm End]");
         }
         if self.mode.check {
+            if let Some((block, _)) = line.probe {
+                super::probe::checked(self, &block, n);
+            }
             return Ok(Vec::new());
         }
+        self.probe = line.probe.map(|(block, probing)| super::probe::Pending {
+            block,
+            probing,
+            line: n,
+        });
         self.counts.blocks += line.blocks.len() as u64;
         Ok(line.blocks)
     }
@@ -479,11 +498,14 @@ impl<'o> Bridge<'o> {
         self.say("ok");
     }
 
-    /// Is the controller locked (alarm, e-stop)? Then G-code is refused (error:9).
+    /// Is the controller locked (alarm, e-stop), or the bridge in a probe's alarm?
+    /// Then G-code is refused (error:9).
     pub(super) fn locked(&self) -> bool {
-        self.status
-            .as_ref()
-            .is_some_and(|s| matches!(s.state, State::Alarm | State::EStop))
+        self.mode.alarm
+            || self
+                .status
+                .as_ref()
+                .is_some_and(|s| matches!(s.state, State::Alarm | State::EStop))
     }
 
     /// Takes queued lines while a job runs: G-code lines are compiled and their blocks
@@ -535,6 +557,11 @@ impl<'o> Bridge<'o> {
                 Item::Line(text) => {
                     let blocks = self.compile(&text).unwrap_or_default();
                     self.merge.take(blocks, out);
+                    if self.probe.is_some() {
+                        // A probing move: the job runs out before it (Grbl synchronises).
+                        self.merge.flush(out);
+                        return false;
+                    }
                 }
             }
         }
@@ -626,7 +653,7 @@ impl JobHooks for Bridge<'_> {
     fn feed(&mut self, view: &LinkView, out: &mut Vec<Block>) -> bool {
         self.poll(Duration::ZERO);
         self.job = Some((view.total, view.executed));
-        if self.reset || self.stopping {
+        if self.reset || self.stopping || self.probe.is_some() {
             return false;
         }
         if !self.take_lines(view, out) {

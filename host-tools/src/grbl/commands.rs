@@ -73,7 +73,8 @@ pub(super) fn answer_local(b: &mut Bridge<'_>, line: &str, phase: Phase) {
         }
         "$#" => {
             let n = words::reported_axes(b.machine);
-            for l in words::offsets(&b.pipeline.interp().offsets(), n) {
+            let prb = b.last_probe.line(n);
+            for l in words::offsets(&b.pipeline.interp().offsets(), n, prb) {
                 b.say(&l);
             }
             b.ok();
@@ -195,7 +196,11 @@ fn unlock<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(), Fa
         b.ok();
         return Ok(());
     }
-    link.control(Control::AlarmReset)?;
+    // A failed probe's alarm is the bridge's own.
+    b.mode.alarm = false;
+    if b.locked() {
+        link.control(Control::AlarmReset)?;
+    }
     let s = link.request_status()?;
     b.status = Some(s.clone());
     if b.locked() {
@@ -232,6 +237,8 @@ fn home<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(), Fail
         return Ok(());
     }
     after_move(b, link, end)?;
+    // Homing ends a failed probe's alarm, as `$X` does.
+    b.mode.alarm = false;
     // One answer for the line, as for every line: homing ended in an alarm
     // (reported above) is a refusal.
     if b.locked() {

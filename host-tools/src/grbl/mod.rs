@@ -15,6 +15,7 @@ mod commands;
 mod input;
 mod merge;
 mod ports;
+mod probe;
 mod words;
 
 pub use input::{Input, Item, RealTime};
@@ -96,7 +97,9 @@ pub fn serve<T: Transport>(
         .map_err(|m| Failure::new(exit::LINK, m))?;
     announce(&ports.pty_path, ports.tcp_addr);
     let start = link.request_status()?;
-    let options = crate::job::front_end_options(machine, start.pose, &opts.tools);
+    let mut options = crate::job::front_end_options(machine, start.pose, &opts.tools);
+    // G38 runs here, a line at a time (`probe`).
+    options.probing = true;
     let pipeline = crate::job::LinePipeline::new(&options, machine, "sender");
     let mut b = Bridge::new(machine, ports, pipeline, stop);
     b.tool_change = opts.tool_change;
@@ -190,7 +193,7 @@ fn next_line<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(),
         return Ok(());
     };
     if blocks.is_empty() {
-        return Ok(());
+        return run_probe(b, link);
     }
     b.set_job(Some((blocks.len(), 0)));
     // The job's first line goes as it is; merging starts with the lines after it.
@@ -212,7 +215,37 @@ fn next_line<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(),
         // Stopped short (an alarm): the next line starts where the machine is.
         b.pipeline.set_position(s.pose);
     }
-    Ok(())
+    match end {
+        JobEnd::Done => run_probe(b, link),
+        _ => {
+            // The probing move the job ran out for does not run after an alarm (a
+            // reset drops its line unanswered).
+            if b.probe.take().is_some() {
+                b.pipeline.set_position(s.pose);
+                if !b.reset {
+                    b.refuse(
+                        9,
+                        "the probing move did not run: the motion before it ended in an alarm",
+                    );
+                }
+            }
+            Ok(())
+        }
+    }
+}
+
+/// The probing move a line ended in, once the motion before it has ended.
+fn run_probe<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<(), Failure> {
+    let Some(p) = b.probe.take() else {
+        return Ok(());
+    };
+    if b.reset || b.stopping {
+        // Ctrl-X drops the line unanswered; Ctrl-C takes no more motion.
+        let pose = link.request_status()?.pose;
+        b.pipeline.set_position(pose);
+        return Ok(());
+    }
+    probe::run(b, link, p)
 }
 
 /// `ALARM:N` and our cause, joint and line in the core's words.
@@ -243,10 +276,11 @@ fn soft_reset<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<()
     b.status = Some(s.clone());
     b.say(&words::banner());
     if b.locked() {
-        b.say(&format!(
-            "[MSG:'$H'|'$X' to unlock: the controller is {}]",
-            state_text(&s)
-        ));
+        let why = match b.mode.alarm {
+            true => "a probing move found nothing (ALARM:5)".to_string(),
+            false => format!("the controller is {}", state_text(&s)),
+        };
+        b.say(&format!("[MSG:'$H'|'$X' to unlock: {why}]"));
         return Ok(());
     }
     for i in 0..2 {
@@ -257,6 +291,16 @@ fn soft_reset<T: Transport>(b: &mut Bridge<'_>, link: &mut Link<T>) -> Result<()
         // Grbl echoes a start-up line and its answer on one line (`>G55:ok`), so
         // that the answer is not taken for one to a streamed line.
         let blocks = match b.compile_line(&line) {
+            Ok(_) if b.probe.is_some() => {
+                // Grbl would run it; here a probe is a sender's line of its own.
+                b.probe = None;
+                let pos = b.pipeline.interp().pos;
+                b.pipeline.set_position(pos);
+                b.counts.errors += 1;
+                b.say("[MSG:a start-up line does not probe: send G38 as a line]");
+                b.say(&format!(">{line}:error:20"));
+                continue;
+            }
             Ok(blocks) => {
                 b.counts.ok += 1;
                 b.say(&format!(">{line}:ok"));

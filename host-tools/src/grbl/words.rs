@@ -54,12 +54,16 @@ pub struct Mode {
     /// Blocks accepted (`ok`) are not all executed yet: `Run` even while the
     /// controller has not started them.
     pub pending: bool,
+    /// A G38.2 or G38.4 ended without the change (`ALARM:5`): the bridge is in an
+    /// alarm until `$X` or `$H`, though the controller is not.
+    pub alarm: bool,
 }
 
 /// The state word: `Idle`, `Run`, `Hold:0` (stopped) or `Hold:1` (stopping), `Jog`,
 /// `Home`, `Alarm`, `Check`.
 pub fn state_word(s: &Status, mode: Mode) -> &'static str {
     match s.state {
+        _ if mode.alarm => "Alarm",
         _ if mode.check && matches!(s.state, State::Idle) => "Check",
         // A jog, its queued successors and its cancel's deceleration are all `Jog`.
         State::Idle | State::Running | State::Hold
@@ -116,17 +120,25 @@ pub fn status_report(s: &Status, r: &Report<'_>) -> String {
         r.rapid_spindle.1,
         list(&r.wco, n),
     );
+    let mut pins = String::new();
     if s.state == State::EStop {
-        out.push_str("|Pn:E");
+        pins.push('E');
     } else if s.alarm.is_some_and(|a| a.cause == AlarmCause::LimitSwitch) {
         let axis = s.alarm.map_or(0, |a| a.joint as usize);
-        out.push_str("|Pn:");
-        out.push(
+        pins.push(
             ['X', 'Y', 'Z', 'A', 'B', 'C']
                 .get(axis)
                 .copied()
                 .unwrap_or('X'),
         );
+    }
+    // The probe input triggered (Grbl's `P`).
+    if s.probe_input {
+        pins.push('P');
+    }
+    if !pins.is_empty() {
+        out.push_str("|Pn:");
+        out.push_str(&pins);
     }
     out.push('>');
     out
@@ -139,6 +151,7 @@ pub fn alarm_code(cause: AlarmCause) -> u8 {
         AlarmCause::LimitSwitch => 1,
         AlarmCause::Unreachable | AlarmCause::JointLimit | AlarmCause::Singularity => 2,
         AlarmCause::Aborted | AlarmCause::LinkLoss | AlarmCause::Watchdog => 3,
+        AlarmCause::ProbeAtStart => 4,
         AlarmCause::HomingFailed => 9,
         AlarmCause::EStop => 10,
         AlarmCause::Unhomed => 11,
@@ -252,8 +265,9 @@ fn per_minute(axis: usize, v: i64) -> String {
     value(axis, v.saturating_mul(60))
 }
 
-/// `$#`: work systems, stored positions, G92, tool length offset, probe.
-pub fn offsets(o: &Offsets, n: usize) -> Vec<String> {
+/// `$#`: work systems, stored positions, G92, tool length offset, and `prb`, the last
+/// probe's `[PRB:…]`.
+pub fn offsets(o: &Offsets, n: usize, prb: String) -> Vec<String> {
     let mut out = Vec::new();
     for (k, s) in o.systems.iter().enumerate().take(6) {
         out.push(format!("[G{}:{}]", 54 + k, list(s, n)));
@@ -262,7 +276,7 @@ pub fn offsets(o: &Offsets, n: usize) -> Vec<String> {
     out.push(format!("[G30:{}]", list(&o.g30, n)));
     out.push(format!("[G92:{}]", list(&o.g92, n)));
     out.push(format!("[TLO:{}]", value(2, o.tool[2])));
-    out.push(format!("[PRB:{}:0]", list(&[0; AXES], n)));
+    out.push(prb);
     out
 }
 

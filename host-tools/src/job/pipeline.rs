@@ -9,6 +9,7 @@
 
 use super::compile::{for_machine, machine_axes, Compiled};
 use crate::analysis::preflight::{self, Preflight};
+use crate::gcode::interp::probe::{ProbeOutcome, Probing};
 use crate::gcode::{self, canon::Canon, LineSession};
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::motion::block::Block;
@@ -136,6 +137,11 @@ pub struct LineBlocks {
     pub messages: BTreeMap<u32, String>,
     /// It ended the program (M2, M30): the next line starts afresh.
     pub ended: bool,
+    /// It ends with a probing move (G38.2–G38.5, with [`gcode::Options::probing`]):
+    /// its feed move, pre-flighted, from where `blocks` end, to run after them as
+    /// [`crate::job::probing::probe`] runs one; the pipeline takes no line until
+    /// [`LinePipeline::probed`] gives what it found.
+    pub probe: Option<(Block, Probing)>,
 }
 
 /// G-code a line at a time for `machine`: the modal state kept between lines (G91,
@@ -205,6 +211,19 @@ impl<'o> LinePipeline<'o> {
             return refused(self, LineFault::Vetted(why));
         }
         let ended = self.session.ended();
+        let probing = match canon.last() {
+            _ if !self.session.waiting() => None,
+            Some(Canon::Probe { probing, .. }) if !ended => Some(*probing),
+            // A stop (M0, M1, M2, M30) on the probing move's line comes after it.
+            _ => {
+                let why = format!(
+                    "{}:{number}: a probing move and a stop or program end (M0, M1, M2, \
+                     M30) on one line: put the stop on a line of its own",
+                    self.name
+                );
+                return refused(self, LineFault::Vetted(why));
+            }
+        };
         if ended {
             // M2/M30: what compensation holds ends here; the next line starts afresh.
             let _ = self.session.finish(number, &mut canon);
@@ -216,10 +235,29 @@ impl<'o> LinePipeline<'o> {
             let why = format!("{}:{}: {}", self.name, f.line, f.what);
             return refused(self, LineFault::Preflight(why));
         }
+        let mut blocks = c.compiled.blocks;
+        // The probing move is the last command, so its block is the last block.
+        let probe = probing.and_then(|p| blocks.pop().map(|b| (b, p)));
         Ok(LineBlocks {
-            blocks: c.compiled.blocks,
+            blocks,
             messages: c.messages,
             ended,
+            probe,
         })
+    }
+
+    /// Is a probing move waiting for its outcome ([`LineBlocks::probe`])?
+    pub fn waiting(&self) -> bool {
+        self.session.waiting()
+    }
+
+    /// What the probing move of line `number` found: the next line starts where the
+    /// machine stopped, with #5061–#5070 set. A G38.2 or G38.4 that ended without the
+    /// change is refused at its column (the position and parameters are set all the
+    /// same).
+    pub fn probed(&mut self, outcome: &ProbeOutcome, number: u32) -> Result<(), LineFault> {
+        self.session
+            .probed(outcome, number)
+            .map_err(LineFault::FrontEnd)
     }
 }

@@ -215,9 +215,11 @@ pub fn run_on<T: Transport>(
 }
 
 /// One probing move from where the controller stands: its outcome and record, or
-/// (`None`) how the move ended when it did not end at rest (an alarm).
+/// (`None`) how the move ended when it did not end at rest (an alarm). `block` is the
+/// G38 line's feed move (its start is where the machine stands). The staged program
+/// runs its moves with it, and so do the Grbl bridge and the station's MDI line by line.
 #[allow(clippy::type_complexity)]
-fn probe<T: Transport>(
+pub(crate) fn probe<T: Transport>(
     link: &mut Link<T>,
     machine: &MachineConfig,
     block: &Block,

@@ -196,7 +196,9 @@ pub fn run(
             crate::job::prepare(link, false, true, &mut crate::link::NoHooks)?;
         }
         let start = link.request_status()?.pose;
-        let options = crate::job::front_end_options(machine, start, &run.tools);
+        let mut options = crate::job::front_end_options(machine, start, &run.tools);
+        // G38 in MDI runs its probing move (`machine::Machine::mdi_probe`).
+        options.probing = true;
         let mut m = machine::Machine {
             last_job: "",
             hub: &hub,

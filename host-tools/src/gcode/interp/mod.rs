@@ -212,8 +212,8 @@ pub struct Interp<'o> {
     /// Probing moves run so far (their outcomes are [`Options::probes`]).
     probes_done: usize,
     /// The last command is a probing move whose outcome is not known yet: the run
-    /// stops there ([`Interp::waiting`]).
-    waiting: bool,
+    /// stops there ([`Interp::waiting`]) until it is given ([`Interp::probed`]).
+    waiting: Option<probe::Waiting>,
 }
 
 impl<'o> Interp<'o> {
@@ -250,7 +250,7 @@ impl<'o> Interp<'o> {
             comp: comp::Comp::new(),
             ended: false,
             probes_done: 0,
-            waiting: false,
+            waiting: None,
         };
         s.update_position_params();
         s
@@ -264,7 +264,7 @@ impl<'o> Interp<'o> {
     /// Is the run stopped at a probing move whose outcome it needs (the last command
     /// out)? Nothing after it can be interpreted until the outcome is known.
     pub fn waiting(&self) -> bool {
-        self.waiting
+        self.waiting.is_some()
     }
 
     /// Executes one line's words, appending commands to `out`.

@@ -9,7 +9,10 @@
 //! it (#5061 in an expression, a branch on #5070). So a run stops at a probing move
 //! whose outcome it does not have ([`super::Interp::waiting`]); the host runs the
 //! program up to it, probes, and runs the program again with the outcomes so far
-//! ([`crate::gcode::Options::probes`]), which then go on past it.
+//! ([`crate::gcode::Options::probes`]), which then go on past it. A front end fed
+//! line by line (the Grbl bridge, MDI) is given the outcome instead
+//! ([`super::Interp::probed`]) and goes on from there; both ways apply it with the
+//! same code.
 //!
 //! Refused as LinuxCNC refuses them: a probing move with inverse-time feed (G93), with
 //! cutter compensation on, that moves A B or C, that goes nowhere, or without a feed.
@@ -52,6 +55,15 @@ impl Probing {
             (false, false) => "G38.5",
         }
     }
+}
+
+/// A probing move the run waits at for its outcome.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Waiting {
+    /// Which move.
+    probing: Probing,
+    /// Its column, for a refusal once the outcome is known.
+    col: u32,
 }
 
 /// What a probing move found (from the controller's latch, through the kinematics).
@@ -126,10 +138,35 @@ impl Interp<'_> {
             outcome,
         });
         let Some(o) = outcome else {
-            self.waiting = true;
+            self.waiting = Some(Waiting { probing, col });
             return Ok(());
         };
         self.probes_done += 1;
+        self.apply_outcome(probing, col, &o)
+    }
+
+    /// The outcome of the probing move the run waits for ([`Interp::waiting`]): a
+    /// front end fed line by line is given it once the move has run, as a program
+    /// compiled again is given it in [`crate::gcode::Options::probes`]. The position
+    /// becomes where the machine stopped, #5061–#5070 are set, and a G38.2 or G38.4
+    /// that ended without the change is refused at its column, as in a program.
+    pub fn probed(&mut self, o: &ProbeOutcome) -> Res<()> {
+        let Some(w) = self.waiting.take() else {
+            return super::fail(
+                1,
+                ErrorKind::ModeConflict,
+                "a probing outcome was given with no probing move waiting for one",
+            );
+        };
+        let r = self.apply_outcome(w.probing, w.col, o);
+        self.update_position_params();
+        r
+    }
+
+    /// What the probing move `probing` (at column `col`) found, applied: the position
+    /// where the machine stopped, #5061–#5070, and the refusal of a G38.2 or G38.4
+    /// without the change (the one code of both ways an outcome comes).
+    fn apply_outcome(&mut self, probing: Probing, col: u32, o: &ProbeOutcome) -> Res<()> {
         self.pos = o.stopped;
         let probed = self.program_position(&o.probed);
         for (i, v) in probed.iter().enumerate() {
@@ -149,7 +186,7 @@ impl Interp<'_> {
             return super::fail(
                 col,
                 ErrorKind::InvalidTarget,
-                format!("{name}: the move ended without {what}"),
+                format!("{}: the move ended without {what}", probing.name()),
             );
         }
         Ok(())

@@ -97,6 +97,9 @@ impl Interp<'_> {
     /// command (a jog, homing): the next move starts there.
     pub fn set_position(&mut self, pose: [i64; AXES]) {
         self.pos = pose;
+        // A probing move still waiting for its outcome did not run (line by line: an
+        // alarm or a reset came first).
+        self.waiting = None;
         // A G5 after this is the first of a series.
         self.g5_tangent = None;
         self.update_position_params();
