@@ -23,6 +23,12 @@ pub struct Program {
     pub errors: Vec<(usize, usize, String)>,
     /// The dry run, once made.
     pub check: Option<CheckResult>,
+    /// A program that probes (G38): its probing moves' lines and codes, as far as the
+    /// preview went (the blocks above take each to its programmed end; the run finds
+    /// the real outcomes a stage at a time, `job::probing`).
+    pub probing: Option<Vec<(u32, &'static str)>>,
+    /// The merging it was compiled with (a run that probes compiles it again).
+    pub compress: Option<gcode::compress::Settings>,
 }
 
 /// What the dry run found.
@@ -46,8 +52,28 @@ impl Program {
         let mut p = Program {
             name: name.to_string(),
             text: text.to_string(),
+            compress: opts.compress.clone(),
             ..Program::default()
         };
+        if job::probing::names_g38(text) {
+            let pp = job::probing::ProbingProgram {
+                text,
+                name,
+                machine,
+                start: machine.home,
+                tools: &opts.tools,
+                compress: opts.compress.as_ref(),
+            };
+            match job::probing::preview(&pp) {
+                Err(diags) => p.errors = located(diags),
+                Ok((c, pre, moves)) => {
+                    p.errors = findings(&pre);
+                    p.compiled = Some(c);
+                    p.probing = (!moves.is_empty()).then_some(moves);
+                }
+            }
+            return p;
+        }
         let compiled = job::compile_located(
             text,
             name,
@@ -57,18 +83,9 @@ impl Program {
             opts.compress.as_ref(),
         );
         match compiled {
-            Err(diags) => {
-                p.errors = diags
-                    .into_iter()
-                    .map(|d| (d.line, d.col, d.message))
-                    .collect();
-            }
+            Err(diags) => p.errors = located(diags),
             Ok((c, pre)) => {
-                p.errors = pre
-                    .findings
-                    .iter()
-                    .map(|f| (f.line as usize, 1, f.what.clone()))
-                    .collect();
+                p.errors = findings(&pre);
                 p.compiled = Some(c);
             }
         }
@@ -217,8 +234,29 @@ impl Program {
             "errors": errors,
             "path": path,
             "check": check,
+            "probing": self.probing.as_ref().map(|m| json!({
+                "moves": m.iter().map(|(line, code)| json!({"line": line, "code": code}))
+                    .collect::<Vec<_>>(),
+                "capped": m.len() >= job::probing::PREVIEW_PROBES,
+            })),
         })
     }
+}
+
+/// The front end's errors: line, column, message.
+fn located(diags: Vec<gcode::Diagnostic>) -> Vec<(usize, usize, String)> {
+    diags
+        .into_iter()
+        .map(|d| (d.line, d.col, d.message))
+        .collect()
+}
+
+/// The pre-flight's findings, each at its line, column 1.
+fn findings(pre: &crate::analysis::preflight::Preflight) -> Vec<(usize, usize, String)> {
+    pre.findings
+        .iter()
+        .map(|f| (f.line as usize, 1, f.what.clone()))
+        .collect()
 }
 
 /// The dry run's operator: program pauses (M0, M1, M6) are resumed at once, as
