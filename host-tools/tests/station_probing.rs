@@ -142,6 +142,11 @@ async fn a_program_that_probes_runs_from_the_page_and_the_panel_shows_each_touch
     );
     // Where it stopped: past the surface, within the probe's stopping distance.
     let stopped = row_xyz(&page, 0, "stopped").await;
+    println!(
+        "probed {probed:?}: {:.2} µm from the ball's top (bound {:.2}); stopped {stopped:?}",
+        (probed[2] - top) * 1000.0,
+        bound * 1000.0
+    );
     assert!(
         stopped[2] < probed[2] && stopped[2] > top - 0.2,
         "stopped {stopped:?}"

@@ -399,6 +399,45 @@ mod tests {
     }
 
     #[test]
+    fn a_program_that_probes_is_previewed_with_each_probing_move_to_its_end() {
+        let machine = MachineConfig::cartesian_xyz();
+        // The second probing move depends on the first's outcome (#5063), and a
+        // branch on #5070 takes the touch the preview assumes.
+        let text = "G21 G90\nG0 Z5\nG38.2 Z-10 F300\nO1 if [#5070 EQ 1]\n\
+                    G0 Z[#5063 + 2]\nO1 endif\nG38.3 X10 F300\nG0 X0\nM2\n";
+        let mut p = Program::load("probe.ngc", text, &machine, &opts());
+        assert!(p.runnable(), "{:?}", p.errors);
+        assert_eq!(p.probing, Some(vec![(3, "G38.2"), (7, "G38.3")]));
+        let ends: Vec<[i64; 3]> = p
+            .blocks()
+            .iter()
+            .map(|b| [b.target[0], b.target[1], b.target[2]])
+            .collect();
+        // To Z5, down to the probing move's end, 2 mm above it, along X to the
+        // second's end, back.
+        let mm = 1_000_000;
+        assert_eq!(
+            ends,
+            vec![
+                [0, 0, 5 * mm],
+                [0, 0, -10 * mm],
+                [0, 0, -8 * mm],
+                [10 * mm, 0, -8 * mm],
+                [0, 0, -8 * mm]
+            ]
+        );
+        let msg = p.message();
+        assert_eq!(msg["probing"]["moves"][1]["code"], "G38.3");
+        assert_eq!(msg["probing"]["capped"], false);
+        p.dry_run(&machine, &opts());
+        assert!(p.check.as_ref().unwrap().ok);
+        // Without G38 a program says nothing of probing.
+        let plain = Program::load("plain.ngc", "G0 X1\nM2\n", &machine, &opts());
+        assert_eq!(plain.probing, None);
+        assert!(plain.message()["probing"].is_null());
+    }
+
+    #[test]
     fn the_teach_list_goes_to_g_code_and_back() {
         let machine = MachineConfig::h4_table();
         let axes = job::machine_axes(&machine);
