@@ -97,7 +97,9 @@ async fn a_program_that_probes_runs_from_the_page_and_the_panel_shows_each_touch
     // to its end and says so, Run is offered and Step is not.
     load(&page, TOUCH, 3).await;
     assert_eq!(page.js("pkmc.program.errors.length").await, 0);
-    let note = page.js("document.getElementById('probe-note').textContent").await;
+    let note = page
+        .js("document.getElementById('probe-note').textContent")
+        .await;
     let note = note.as_str().unwrap();
     assert!(
         note.contains("1 probing move(s), line 3") && note.contains("programmed end"),
@@ -108,8 +110,14 @@ async fn a_program_that_probes_runs_from_the_page_and_the_panel_shows_each_touch
             .await,
         "block"
     );
-    assert_eq!(page.js("document.getElementById('run').disabled").await, false);
-    assert_eq!(page.js("document.getElementById('step').disabled").await, true);
+    assert_eq!(
+        page.js("document.getElementById('run').disabled").await,
+        false
+    );
+    assert_eq!(
+        page.js("document.getElementById('step').disabled").await,
+        true
+    );
 
     page.click("#run").await;
     page.wait(
@@ -167,7 +175,10 @@ async fn a_program_that_probes_runs_from_the_page_and_the_panel_shows_each_touch
         "{log}"
     );
     assert!(
-        page.js("pkmc.lastStatus.alarm === null").await.as_bool().unwrap(),
+        page.js("pkmc.lastStatus.alarm === null")
+            .await
+            .as_bool()
+            .unwrap(),
         "no alarm"
     );
 
@@ -209,10 +220,7 @@ async fn a_program_that_probes_runs_from_the_page_and_the_panel_shows_each_touch
     let head = page
         .js("document.querySelector('#probe-list li.probe .phead').textContent")
         .await;
-    assert!(
-        head.as_str().unwrap().contains("no contact"),
-        "{head}"
-    );
+    assert!(head.as_str().unwrap().contains("no contact"), "{head}");
     let refusal = page
         .js("document.querySelector('#probe-list li.refusal').textContent")
         .await;

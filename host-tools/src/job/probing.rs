@@ -112,10 +112,7 @@ pub struct StageRefused {
 }
 
 /// [`stage`], its refusal located.
-fn stage_located(
-    p: &ProbingProgram<'_>,
-    outcomes: &[ProbeOutcome],
-) -> Result<Stage, StageRefused> {
+fn stage_located(p: &ProbingProgram<'_>, outcomes: &[ProbeOutcome]) -> Result<Stage, StageRefused> {
     let mut options = pipeline::front_end_options(p.machine, p.start, p.tools);
     options.probing = true;
     options.probes = outcomes.to_vec();

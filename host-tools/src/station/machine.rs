@@ -254,13 +254,6 @@ impl Machine<'_> {
                 link.set_program(None, pkmc::wire::JobMark::default());
                 end?
             }
-            Cmd::Step if lock(&self.hub.program).probing.is_some() => {
-                return Err(Failure::new(
-                    job::exit::BAD_INPUT,
-                    "Run by Step: not for a program that probes (G38); Run runs it a stage \
-                     at a time",
-                ))
-            }
             Cmd::Step => {
                 let blocks = self.programmed_blocks()?;
                 if blocks.is_empty() {
@@ -362,11 +355,19 @@ impl Machine<'_> {
         }
     }
 
-    /// The program's blocks one by one, as programmed (Run by Step).
+    /// The program's blocks one by one, as programmed (Run by Step; not for a program
+    /// that probes).
     fn programmed_blocks(&self) -> Result<Vec<Block>, Failure> {
         let p = lock(&self.hub.program);
         if !p.runnable() {
             return Err(not_runnable(&p));
+        }
+        if p.probing.is_some() {
+            return Err(Failure::new(
+                job::exit::BAD_INPUT,
+                "Run by Step: not for a program that probes (G38); Run runs it a stage at \
+                 a time",
+            ));
         }
         Ok(p.programmed().to_vec())
     }
