@@ -52,7 +52,7 @@ impl Program {
         let mut p = Program {
             name: name.to_string(),
             text: text.to_string(),
-            compress: opts.compress.clone(),
+            compress: opts.compress,
             ..Program::default()
         };
         if job::probing::names_g38(text) {
