@@ -7,6 +7,7 @@
 //! #5063 + 2 follow from it; the run ends done. A G38.2 that touches nothing is
 //! refused at its line, on the panel. Stop during a stage ends the run as a stop.
 //! The panel stays inside the page at 800 × 1280, 1024 × 768 and 1920 × 1080.
+//! Screenshot: `docs/ui-probing.png` (docs/ui.md).
 
 mod station;
 
@@ -15,15 +16,22 @@ use std::time::Duration;
 
 const H4: &str = "examples/machines/h4-table.toml";
 
+fn repo(p: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join(p)
+}
+
 /// The ball (centre X Y Z, radius: the artefact's plus the tip's), mm, as
 /// `host-tools/tests/probing.rs` puts it within the H-4's reach.
 const BALL: [f64; 4] = [0.0, 0.0, -96.0, 6.0];
 /// The simulated probe's trigger noise, µm (standard deviation).
 const NOISE_UM: f64 = 0.5;
 
-/// Touches the ball's top, then moves 2 mm above the probed point if it touched.
-const TOUCH: &str = "G21 G90\nG0 X0 Y0 Z-86\nG38.2 Z-93 F300\nO100 if [#5070 EQ 1]\n\
-                     G0 Z[#5063 + 2]\nO100 else\nG0 Z-80\nO100 endif\nM2\n";
+/// G54 at the ball's top (Z −90); touches the top, then moves 2 mm above the probed
+/// point (#5063, in G54) if it touched.
+const TOUCH: &str = "G21 G90\nG10 L2 P1 X0 Y0 Z-90\nG54\nG0 X0 Y0 Z4\nG38.2 Z-3 F300\n\
+                     O100 if [#5070 EQ 1]\nG0 Z[#5063 + 2]\nO100 else\nG0 Z10\nO100 endif\nM2\n";
 
 /// A G38.2 high above the ball: it ends without contact.
 const MISS: &str = "G21 G90\nG0 X0 Y0 Z-80\nG38.2 Z-84 F300\nG0 Z-80\nM2\n";
@@ -95,14 +103,14 @@ async fn a_program_that_probes_runs_from_the_page_and_the_panel_shows_each_touch
 
     // Loaded: no error (G38 is no longer refused), the preview takes the probing move
     // to its end and says so, Run is offered and Step is not.
-    load(&page, TOUCH, 3).await;
+    load(&page, TOUCH, 5).await;
     assert_eq!(page.js("pkmc.program.errors.length").await, 0);
     let note = page
         .js("document.getElementById('probe-note').textContent")
         .await;
     let note = note.as_str().unwrap();
     assert!(
-        note.contains("1 probing move(s), line 3") && note.contains("programmed end"),
+        note.contains("1 probing move(s), line 5") && note.contains("programmed end"),
         "{note}"
     );
     assert_eq!(
@@ -135,7 +143,7 @@ async fn a_program_that_probes_runs_from_the_page_and_the_panel_shows_each_touch
     let (class, head) = (rows[0][0].as_str().unwrap(), rows[0][1].as_str().unwrap());
     assert!(class.contains("last"), "the newest is highlighted: {class}");
     assert!(
-        head.contains("line 3") && head.contains("G38.2") && head.ends_with("contact"),
+        head.contains("line 5") && head.contains("G38.2") && head.ends_with("contact"),
         "{head}"
     );
     assert!(!head.contains("no contact"), "{head}");
@@ -158,6 +166,12 @@ async fn a_program_that_probes_runs_from_the_page_and_the_panel_shows_each_touch
     assert!(
         stopped[2] < probed[2] && stopped[2] > top - 0.2,
         "stopped {stopped:?}"
+    );
+    // In the program's frame (G54 at Z −90) the same point, 90 mm up.
+    let program = row_xyz(&page, 0, "program").await;
+    assert!(
+        (program[2] - (probed[2] + 90.0)).abs() <= 0.00011 && program[0] == probed[0],
+        "program frame {program:?}, probed {probed:?}"
     );
     // The branch on #5070 took the touch, and the move went to #5063 + 2.
     let z = page.js("pkmc.lastStatus.pose[2]").await.as_f64().unwrap();
@@ -204,6 +218,9 @@ async fn a_program_that_probes_runs_from_the_page_and_the_panel_shows_each_touch
             serde_json::json!([true, true, true, true]),
             "{w}x{h}: panel in width, row in view, row reachable, nothing cut off"
         );
+        if w == 1920 {
+            page.screenshot(&repo("docs/ui-probing.png")).await;
+        }
     }
     page.set_viewport(1400, 900).await;
 

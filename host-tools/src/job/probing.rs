@@ -239,8 +239,15 @@ pub fn preview(
 pub trait ProbingHooks: JobHooks {
     /// A stage of `blocks` blocks is about to stream.
     fn stage(&mut self, _blocks: usize) {}
-    /// A probing move's result, as soon as it is known.
-    fn probed(&mut self, _record: &ProbeRecord) {}
+    /// Do these hooks want each probed position in the program's frame too (one more
+    /// run of the front end per probing move)?
+    fn wants_program_frame(&self) -> bool {
+        false
+    }
+    /// A probing move's result, as soon as it is known; with the probed X Y Z in the
+    /// program's frame (mm: the work offset, G92 and the tool offset taken off; `None`
+    /// when not asked for, or in a rotated coordinate system).
+    fn probed(&mut self, _record: &ProbeRecord, _program: Option<[f64; 3]>) {}
     /// The program cannot go on: the error at `line`, `col` (the run then ends with
     /// the failure that says so).
     fn refused(&mut self, _line: usize, _col: usize, _message: &str) {}
@@ -274,6 +281,23 @@ impl JobHooks for Plain<'_> {
 }
 
 impl ProbingHooks for Plain<'_> {}
+
+/// The work offset in force at the probing move after `outcomes` (machine units: the
+/// machine position minus it is the program's), from one more run of the front end,
+/// which waits there; `None` in a rotated coordinate system (G10 L2 R), where the
+/// program's frame is more than an offset.
+fn work_offset(p: &ProbingProgram<'_>, outcomes: &[ProbeOutcome]) -> Option<[i64; AXES]> {
+    let mut options = pipeline::front_end_options(p.machine, p.start, p.tools);
+    options.probing = true;
+    options.probes = outcomes.to_vec();
+    let mut interp = gcode::interp::Interp::new(&options);
+    let program = gcode::flow::Program::index(p.text, options.block_delete, &interp.params);
+    let (mut out, mut errors) = (Vec::new(), Vec::new());
+    if !program.broken {
+        gcode::flow::run(&program, p.text, p.name, &mut interp, &mut out, &mut errors);
+    }
+    (interp.waiting() && errors.is_empty() && !interp.rotated()).then(|| interp.work_offset())
+}
 
 /// The pose of the joints `at` (actuator units × 2^[`LATCH_FRAC_BITS`], as latched)
 /// through `machine`'s forward kinematics from `guess`, and the joints (axis units).
@@ -329,12 +353,18 @@ pub fn run_on<T: Transport>(
         let Some((block, probing)) = st.probe else {
             return Ok((JobEnd::Done, records, sent));
         };
+        let offset = match hooks.wants_program_frame() {
+            true => work_offset(p, &outcomes),
+            false => None,
+        };
         let (found, end) = probe(link, p.machine, &block, probing, hooks)?;
         sent += 1;
         let Some((outcome, record)) = found else {
             return Ok((end, records, sent));
         };
-        hooks.probed(&record);
+        let program = offset
+            .map(|off| std::array::from_fn(|i| (outcome.probed[i] - off[i]) as f64 / UNIT[0]));
+        hooks.probed(&record, program);
         outcomes.push(outcome);
         records.push(record);
     }

@@ -43,6 +43,8 @@ pub struct ProbeRun {
     pub program: String,
     /// Each probing move's result, in order (`ProbeRecord`'s JSON).
     pub records: Vec<crate::job::probing::ProbeRecord>,
+    /// Each record's probed X Y Z in the program's frame, mm, where known.
+    pub program_frame: Vec<Option<[f64; 3]>>,
     /// Where the program was refused, when it was: line, column, message.
     pub refusal: Option<(usize, usize, String)>,
     /// Still running.
@@ -58,6 +60,7 @@ impl ProbeRun {
             "type": "probes",
             "program": self.program,
             "records": self.records,
+            "program_frame": self.program_frame,
             "refusal": self.refusal.as_ref()
                 .map(|(line, col, message)| json!({"line": line, "col": col, "message": message})),
             "running": self.running,

@@ -96,12 +96,19 @@ impl probing::ProbingHooks for Hooks<'_, '_> {
         info.total = info.total.max(info.sent);
     }
 
-    fn probed(&mut self, record: &probing::ProbeRecord) {
+    fn wants_program_frame(&self) -> bool {
+        true
+    }
+
+    fn probed(&mut self, record: &probing::ProbeRecord, program: Option<[f64; 3]>) {
         let info = &mut *self.info;
         info.sent += 1;
         info.base = info.sent;
         info.total = info.total.max(info.sent);
-        lock(&self.m.hub.probes).records.push(record.clone());
+        let mut run = lock(&self.m.hub.probes);
+        run.records.push(record.clone());
+        run.program_frame.push(program);
+        drop(run);
         self.m.hub.publish_probes();
     }
 

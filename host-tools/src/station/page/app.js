@@ -677,7 +677,7 @@ function fmtProbe(v) {
 }
 
 function xyzText(label, p) {
-  return `${label} X ${fmtProbe(p[0])}  Y ${fmtProbe(p[1])}  Z ${fmtProbe(p[2])}`;
+  return `${label.padEnd(7)} X ${fmtProbe(p[0])}  Y ${fmtProbe(p[1])}  Z ${fmtProbe(p[2])}`;
 }
 
 const PROBE_END = {
@@ -714,6 +714,8 @@ function renderProbes() {
       r.contact ? 'contact' : 'no contact'));
     li.appendChild(head);
     li.appendChild(el('div', 'pxyz probed', xyzText('probed', r.position) + ` ${unit}`));
+    const pf = (run.program_frame || [])[i];
+    if (pf) li.appendChild(el('div', 'pxyz program', xyzText('program', pf) + ` ${unit}`));
     li.appendChild(el('div', 'pxyz stopped', xyzText('stopped', r.stopped) + ` ${unit}`));
     return li;
   });
