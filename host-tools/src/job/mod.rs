@@ -546,7 +546,7 @@ pub fn run_probing(
     let mut sent = 0;
     let (end, status, stats, sim) = if in_process {
         let mut work = |link: &mut Link<InProcess>, hooks: &mut dyn JobHooks| {
-            let (end, r, n) = probing::run_on(link, &p, hooks)?;
+            let (end, r, n) = probing::run_on(link, &p, &mut probing::Plain(hooks))?;
             (records, sent) = (r, n);
             Ok(end)
         };
@@ -562,7 +562,7 @@ pub fn run_probing(
             let end = match prepare(&mut link, opts.home, sim, hooks)? {
                 Some(end) => end,
                 None => {
-                    let (end, r, n) = probing::run_on(&mut link, &p, hooks)?;
+                    let (end, r, n) = probing::run_on(&mut link, &p, &mut probing::Plain(hooks))?;
                     (records, sent) = (r, n);
                     end
                 }

@@ -99,24 +99,41 @@ pub fn stops_at_probe(canon: &[Canon]) -> bool {
 
 /// Compiles `p` with `outcomes` and returns the stage after them.
 pub fn stage(p: &ProbingProgram<'_>, outcomes: &[ProbeOutcome]) -> Result<Stage, Failure> {
+    stage_located(p, outcomes).map_err(|r| r.failure)
+}
+
+/// Why a stage cannot run: the failure as nc-send reports it, and where in the program
+/// (the first error's line, column and message) when it is the program's fault.
+pub struct StageRefused {
+    /// The whole failure.
+    pub failure: Failure,
+    /// Line, column and what is wrong there.
+    pub at: Option<(usize, usize, String)>,
+}
+
+/// [`stage`], its refusal located.
+fn stage_located(p: &ProbingProgram<'_>, outcomes: &[ProbeOutcome]) -> Result<Stage, StageRefused> {
     let mut options = pipeline::front_end_options(p.machine, p.start, p.tools);
     options.probing = true;
     options.probes = outcomes.to_vec();
-    let canon = gcode::compile_canon(p.text, p.name, &options).map_err(|e| match outcomes {
-        [] => refused(&e),
-        // Past a probing move (a G38.2 or G38.4 that found nothing, or what follows):
-        // the program stops there, with what ran so far.
-        _ => Failure::new(
-            exit::ALARM,
-            format!(
-                "{}\nthe program stopped there, after {} probing move(s)",
-                e.iter()
-                    .map(|d| d.to_string())
-                    .collect::<Vec<_>>()
-                    .join("\n"),
-                outcomes.len()
+    let canon = gcode::compile_canon(p.text, p.name, &options).map_err(|e| StageRefused {
+        at: e.first().map(|d| (d.line, d.col, d.message.clone())),
+        failure: match outcomes {
+            [] => refused(&e),
+            // Past a probing move (a G38.2 or G38.4 that found nothing, or what
+            // follows): the program stops there, with what ran so far.
+            _ => Failure::new(
+                exit::ALARM,
+                format!(
+                    "{}\nthe program stopped there, after {} probing move(s)",
+                    e.iter()
+                        .map(|d| d.to_string())
+                        .collect::<Vec<_>>()
+                        .join("\n"),
+                    outcomes.len()
+                ),
             ),
-        ),
+        },
     })?;
     let from = canon
         .iter()
@@ -144,7 +161,12 @@ pub fn stage(p: &ProbingProgram<'_>, outcomes: &[ProbeOutcome]) -> Result<Stage,
     part.extend_from_slice(&canon[from..end]);
     let start = outcomes.last().map_or(p.start, |o| o.stopped);
     let checked = pipeline::checked(&part, p.machine, start, p.compress);
-    refuse_findings(p.name, checked.preflight)?;
+    let at = checked
+        .preflight
+        .findings
+        .first()
+        .map(|f| (f.line as usize, 1, f.what.clone()));
+    refuse_findings(p.name, checked.preflight).map_err(|failure| StageRefused { failure, at })?;
     let probe = match canon.last() {
         Some(c @ Canon::Probe { probing, .. }) if pending => {
             let at = super::pose_after(&checked.compiled.blocks, start);
@@ -157,6 +179,124 @@ pub fn stage(p: &ProbingProgram<'_>, outcomes: &[ProbeOutcome]) -> Result<Stage,
         compiled: checked.compiled,
         probe,
     })
+}
+
+/// Most probing moves a preview takes to their programmed ends ([`preview`]); past
+/// them it stops at the next one.
+pub const PREVIEW_PROBES: usize = 500;
+
+/// A program that probes, as far as it can be known before it runs: compiled with each
+/// probing move taken to its programmed end and touching there (its outcome a
+/// change, found and stopped at the move's end), up to [`PREVIEW_PROBES`] of them.
+/// What follows a probing move follows from that assumed outcome; the run finds the
+/// real ones. Returns the blocks (each probing move a straight feed move to its end)
+/// with their pre-flight, and each probing move's line and code; or the front end's
+/// errors, each at its place.
+#[allow(clippy::type_complexity)]
+pub fn preview(
+    p: &ProbingProgram<'_>,
+) -> Result<
+    (
+        super::Compiled,
+        crate::analysis::preflight::Preflight,
+        Vec<(u32, &'static str)>,
+    ),
+    Vec<gcode::Diagnostic>,
+> {
+    let mut options = pipeline::front_end_options(p.machine, p.start, p.tools);
+    options.probing = true;
+    let mut moves = Vec::new();
+    loop {
+        let canon = gcode::compile_canon(p.text, p.name, &options)?;
+        let pending = match canon.last() {
+            Some(Canon::Probe {
+                line,
+                target,
+                probing,
+                outcome: None,
+                ..
+            }) => Some((*line, *target, probing.name())),
+            _ => None,
+        };
+        match pending {
+            Some((line, target, code)) if moves.len() < PREVIEW_PROBES => {
+                moves.push((line, code));
+                options.probes.push(ProbeOutcome {
+                    changed: true,
+                    probed: target,
+                    stopped: target,
+                });
+            }
+            _ => {
+                let checked = pipeline::checked(&canon, p.machine, p.start, p.compress);
+                return Ok((checked.compiled, checked.preflight, moves));
+            }
+        }
+    }
+}
+
+/// What a run a stage at a time ([`run_on`]) tells its caller besides the jobs' hooks.
+pub trait ProbingHooks: JobHooks {
+    /// A stage of `blocks` blocks is about to stream.
+    fn stage(&mut self, _blocks: usize) {}
+    /// Do these hooks want each probed position in the program's frame too (one more
+    /// run of the front end per probing move)?
+    fn wants_program_frame(&self) -> bool {
+        false
+    }
+    /// A probing move's result, as soon as it is known; with the probed X Y Z in the
+    /// program's frame (mm: the work offset, G92 and the tool offset taken off; `None`
+    /// when not asked for, or in a rotated coordinate system).
+    fn probed(&mut self, _record: &ProbeRecord, _program: Option<[f64; 3]>) {}
+    /// The program cannot go on: the error at `line`, `col` (the run then ends with
+    /// the failure that says so).
+    fn refused(&mut self, _line: usize, _col: usize, _message: &str) {}
+}
+
+/// A job's hooks, and nothing more, for a run a stage at a time (nc-send's).
+pub struct Plain<'h>(pub &'h mut dyn JobHooks);
+
+impl JobHooks for Plain<'_> {
+    fn status(&mut self, s: &pkmc::wire::Status) {
+        self.0.status(s)
+    }
+    fn control(&mut self, view: &crate::link::LinkView) -> Option<Control> {
+        self.0.control(view)
+    }
+    fn ends_at_pause(&self) -> bool {
+        self.0.ends_at_pause()
+    }
+    fn feed(&mut self, view: &crate::link::LinkView, out: &mut Vec<Block>) -> bool {
+        self.0.feed(view, out)
+    }
+    fn rewind(&mut self, to: usize) -> Option<crate::link::Rewound> {
+        self.0.rewind(to)
+    }
+    fn note(&mut self, text: &str) {
+        self.0.note(text)
+    }
+    fn warn(&mut self, text: &str) {
+        self.0.warn(text)
+    }
+}
+
+impl ProbingHooks for Plain<'_> {}
+
+/// The work offset in force at the probing move after `outcomes` (machine units: the
+/// machine position minus it is the program's), from one more run of the front end,
+/// which waits there; `None` in a rotated coordinate system (G10 L2 R), where the
+/// program's frame is more than an offset.
+fn work_offset(p: &ProbingProgram<'_>, outcomes: &[ProbeOutcome]) -> Option<[i64; AXES]> {
+    let mut options = pipeline::front_end_options(p.machine, p.start, p.tools);
+    options.probing = true;
+    options.probes = outcomes.to_vec();
+    let mut interp = gcode::interp::Interp::new(&options);
+    let program = gcode::flow::Program::index(p.text, options.block_delete, &interp.params);
+    let (mut out, mut errors) = (Vec::new(), Vec::new());
+    if !program.broken {
+        gcode::flow::run(&program, p.text, p.name, &mut interp, &mut out, &mut errors);
+    }
+    (interp.waiting() && errors.is_empty() && !interp.rotated()).then(|| interp.work_offset())
 }
 
 /// The pose of the joints `at` (actuator units × 2^[`LATCH_FRAC_BITS`], as latched)
@@ -187,13 +327,22 @@ pub fn latched_pose(
 pub fn run_on<T: Transport>(
     link: &mut Link<T>,
     p: &ProbingProgram<'_>,
-    hooks: &mut dyn JobHooks,
+    hooks: &mut dyn ProbingHooks,
 ) -> Result<(JobEnd, Vec<ProbeRecord>, usize), Failure> {
     let mut outcomes = Vec::new();
     let mut records = Vec::new();
     let mut sent = 0;
     loop {
-        let st = stage(p, &outcomes)?;
+        let st = match stage_located(p, &outcomes) {
+            Ok(st) => st,
+            Err(r) => {
+                if let Some((line, col, message)) = &r.at {
+                    hooks.refused(*line, *col, message);
+                }
+                return Err(r.failure);
+            }
+        };
+        hooks.stage(st.compiled.blocks.len());
         sent += st.compiled.blocks.len();
         if !st.compiled.blocks.is_empty() {
             let end = link.run_job_on(&st.compiled.blocks, st.compiled.derived(), hooks)?;
@@ -204,11 +353,18 @@ pub fn run_on<T: Transport>(
         let Some((block, probing)) = st.probe else {
             return Ok((JobEnd::Done, records, sent));
         };
+        let offset = match hooks.wants_program_frame() {
+            true => work_offset(p, &outcomes),
+            false => None,
+        };
         let (found, end) = probe(link, p.machine, &block, probing, hooks)?;
         sent += 1;
         let Some((outcome, record)) = found else {
             return Ok((end, records, sent));
         };
+        let program = offset
+            .map(|off| std::array::from_fn(|i| (outcome.probed[i] - off[i]) as f64 / UNIT[0]));
+        hooks.probed(&record, program);
         outcomes.push(outcome);
         records.push(record);
     }

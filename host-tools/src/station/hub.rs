@@ -35,6 +35,40 @@ pub struct Teach {
     pub next: Option<usize>,
 }
 
+/// A run of a program that probes, as the pages show it: each probing move's result
+/// as it came, and how the run ended.
+#[derive(Clone, Debug, Default)]
+pub struct ProbeRun {
+    /// The program's name.
+    pub program: String,
+    /// Each probing move's result, in order (`ProbeRecord`'s JSON).
+    pub records: Vec<crate::job::probing::ProbeRecord>,
+    /// Each record's probed X Y Z in the program's frame, mm, where known.
+    pub program_frame: Vec<Option<[f64; 3]>>,
+    /// Where the program was refused, when it was: line, column, message.
+    pub refusal: Option<(usize, usize, String)>,
+    /// Still running.
+    pub running: bool,
+    /// How it ended (`done`, `alarm`, `stopped`, `paused`, `refused`, `failed`).
+    pub end: Option<&'static str>,
+}
+
+impl ProbeRun {
+    /// The `probes` message.
+    pub fn message(&self) -> Value {
+        json!({
+            "type": "probes",
+            "program": self.program,
+            "records": self.records,
+            "program_frame": self.program_frame,
+            "refusal": self.refusal.as_ref()
+                .map(|(line, col, message)| json!({"line": line, "col": col, "message": message})),
+            "running": self.running,
+            "end": self.end,
+        })
+    }
+}
+
 /// State shared by the web side and the machine thread.
 pub struct Hub {
     all: broadcast::Sender<Arc<str>>,
@@ -47,6 +81,9 @@ pub struct Hub {
     /// The last `status` and `program` messages, for a page that connects.
     last_status: Mutex<Option<Arc<str>>>,
     last_program: Mutex<Option<Arc<str>>>,
+    /// The probing moves of the last run that probed, for the pages.
+    pub probes: Mutex<ProbeRun>,
+    last_probes: Mutex<Option<Arc<str>>>,
     /// The `hello` message's `machine`.
     pub machine: Value,
     /// A page's E-STOP raised the alarm in force (the controller calls it an
@@ -76,6 +113,8 @@ impl Hub {
             status: Mutex::new(None),
             last_status: Mutex::new(None),
             last_program: Mutex::new(None),
+            probes: Mutex::new(ProbeRun::default()),
+            last_probes: Mutex::new(None),
             machine,
         }
     }
@@ -93,7 +132,7 @@ impl Hub {
         let (tx, rx) = mpsc::unbounded_channel();
         let hello = json!({"type": "hello", "you": id, "machine": self.machine});
         let _ = tx.send(hello.to_string().into());
-        for m in [&self.last_program, &self.last_status] {
+        for m in [&self.last_program, &self.last_status, &self.last_probes] {
             if let Some(m) = lock(m).clone() {
                 let _ = tx.send(m);
             }
@@ -231,6 +270,13 @@ impl Hub {
     pub fn publish_program(&self) {
         let msg = lock(&self.program).message();
         *lock(&self.last_program) = Some(msg.to_string().into());
+        self.broadcast(&msg);
+    }
+
+    /// The probing moves of the run to every page (kept for pages that connect later).
+    pub fn publish_probes(&self) {
+        let msg = lock(&self.probes).message();
+        *lock(&self.last_probes) = Some(msg.to_string().into());
         self.broadcast(&msg);
     }
 

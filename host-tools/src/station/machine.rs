@@ -4,6 +4,8 @@
 //! job's hooks take hold, resume, stop, override and the next step, publish every
 //! status, and stop what a page started when that page's heartbeat is lost.
 
+mod staged;
+
 use super::hub::{lock, Hub};
 use super::{Cmd, Request};
 use crate::job::{self, Failure};
@@ -39,6 +41,10 @@ pub(super) struct JobInfo {
     orphaned: bool,
     /// Controls to send, in order.
     controls: VecDeque<Control>,
+    /// A run a stage at a time: the blocks executed before the stage that streams,
+    /// and those sent so far ([`staged`]).
+    base: usize,
+    sent: usize,
 }
 
 impl JobInfo {
@@ -51,6 +57,8 @@ impl JobInfo {
             steps: None,
             orphaned: false,
             controls: VecDeque::new(),
+            base: 0,
+            sent: 0,
         }
     }
 }
@@ -226,6 +234,11 @@ impl Machine<'_> {
             self.hub.reply(page, id, Ok(format!("{what} started")));
         };
         let end = match req.cmd {
+            Cmd::Run if lock(&self.hub.program).probing.is_some() => {
+                let program = self.staged_program()?;
+                started("program");
+                self.run_staged(link, page, program)?
+            }
             Cmd::Run => {
                 let (compiled, lines) = self.program_to_run()?;
                 started("program");
@@ -341,11 +354,19 @@ impl Machine<'_> {
         }
     }
 
-    /// The program's blocks one by one, as programmed (Run by Step).
+    /// The program's blocks one by one, as programmed (Run by Step; not for a program
+    /// that probes).
     fn programmed_blocks(&self) -> Result<Vec<Block>, Failure> {
         let p = lock(&self.hub.program);
         if !p.runnable() {
             return Err(not_runnable(&p));
+        }
+        if p.probing.is_some() {
+            return Err(Failure::new(
+                job::exit::BAD_INPUT,
+                "Run by Step: not for a program that probes (G38); Run runs it a stage at \
+                 a time",
+            ));
         }
         Ok(p.programmed().to_vec())
     }
@@ -665,7 +686,7 @@ impl JobHooks for Hooks<'_, '_> {
     }
 
     fn control(&mut self, view: &LinkView) -> Option<Control> {
-        self.info.executed = view.executed.min(self.info.total);
+        self.info.executed = (self.info.base + view.executed).min(self.info.total);
         self.watch_heartbeat();
         while let Ok(req) = self.m.rx.try_recv() {
             self.during(req);

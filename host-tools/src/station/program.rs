@@ -23,6 +23,12 @@ pub struct Program {
     pub errors: Vec<(usize, usize, String)>,
     /// The dry run, once made.
     pub check: Option<CheckResult>,
+    /// A program that probes (G38): its probing moves' lines and codes, as far as the
+    /// preview went (the blocks above take each to its programmed end; the run finds
+    /// the real outcomes a stage at a time, `job::probing`).
+    pub probing: Option<Vec<(u32, &'static str)>>,
+    /// The merging it was compiled with (a run that probes compiles it again).
+    pub compress: Option<gcode::compress::Settings>,
 }
 
 /// What the dry run found.
@@ -46,8 +52,28 @@ impl Program {
         let mut p = Program {
             name: name.to_string(),
             text: text.to_string(),
+            compress: opts.compress,
             ..Program::default()
         };
+        if job::probing::names_g38(text) {
+            let pp = job::probing::ProbingProgram {
+                text,
+                name,
+                machine,
+                start: machine.home,
+                tools: &opts.tools,
+                compress: opts.compress.as_ref(),
+            };
+            match job::probing::preview(&pp) {
+                Err(diags) => p.errors = located(diags),
+                Ok((c, pre, moves)) => {
+                    p.errors = findings(&pre);
+                    p.compiled = Some(c);
+                    p.probing = (!moves.is_empty()).then_some(moves);
+                }
+            }
+            return p;
+        }
         let compiled = job::compile_located(
             text,
             name,
@@ -57,18 +83,9 @@ impl Program {
             opts.compress.as_ref(),
         );
         match compiled {
-            Err(diags) => {
-                p.errors = diags
-                    .into_iter()
-                    .map(|d| (d.line, d.col, d.message))
-                    .collect();
-            }
+            Err(diags) => p.errors = located(diags),
             Ok((c, pre)) => {
-                p.errors = pre
-                    .findings
-                    .iter()
-                    .map(|f| (f.line as usize, 1, f.what.clone()))
-                    .collect();
+                p.errors = findings(&pre);
                 p.compiled = Some(c);
             }
         }
@@ -217,8 +234,29 @@ impl Program {
             "errors": errors,
             "path": path,
             "check": check,
+            "probing": self.probing.as_ref().map(|m| json!({
+                "moves": m.iter().map(|(line, code)| json!({"line": line, "code": code}))
+                    .collect::<Vec<_>>(),
+                "capped": m.len() >= job::probing::PREVIEW_PROBES,
+            })),
         })
     }
+}
+
+/// The front end's errors: line, column, message.
+fn located(diags: Vec<gcode::Diagnostic>) -> Vec<(usize, usize, String)> {
+    diags
+        .into_iter()
+        .map(|d| (d.line, d.col, d.message))
+        .collect()
+}
+
+/// The pre-flight's findings, each at its line, column 1.
+fn findings(pre: &crate::analysis::preflight::Preflight) -> Vec<(usize, usize, String)> {
+    pre.findings
+        .iter()
+        .map(|f| (f.line as usize, 1, f.what.clone()))
+        .collect()
 }
 
 /// The dry run's operator: program pauses (M0, M1, M6) are resumed at once, as
@@ -358,6 +396,45 @@ mod tests {
             p.errors.iter().map(|e| (e.0, e.1)).collect::<Vec<_>>(),
             vec![(3, 7)]
         );
+    }
+
+    #[test]
+    fn a_program_that_probes_is_previewed_with_each_probing_move_to_its_end() {
+        let machine = MachineConfig::cartesian_xyz();
+        // The second probing move depends on the first's outcome (#5063), and a
+        // branch on #5070 takes the touch the preview assumes.
+        let text = "G21 G90\nG0 Z5\nG38.2 Z-10 F300\nO1 if [#5070 EQ 1]\n\
+                    G0 Z[#5063 + 2]\nO1 endif\nG38.3 X10 F300\nG0 X0\nM2\n";
+        let mut p = Program::load("probe.ngc", text, &machine, &opts());
+        assert!(p.runnable(), "{:?}", p.errors);
+        assert_eq!(p.probing, Some(vec![(3, "G38.2"), (7, "G38.3")]));
+        let ends: Vec<[i64; 3]> = p
+            .blocks()
+            .iter()
+            .map(|b| [b.target[0], b.target[1], b.target[2]])
+            .collect();
+        // To Z5, down to the probing move's end, 2 mm above it, along X to the
+        // second's end, back.
+        let mm = 1_000_000;
+        assert_eq!(
+            ends,
+            vec![
+                [0, 0, 5 * mm],
+                [0, 0, -10 * mm],
+                [0, 0, -8 * mm],
+                [10 * mm, 0, -8 * mm],
+                [0, 0, -8 * mm]
+            ]
+        );
+        let msg = p.message();
+        assert_eq!(msg["probing"]["moves"][1]["code"], "G38.3");
+        assert_eq!(msg["probing"]["capped"], false);
+        p.dry_run(&machine, &opts());
+        assert!(p.check.as_ref().unwrap().ok);
+        // Without G38 a program says nothing of probing.
+        let plain = Program::load("plain.ngc", "G0 X1\nM2\n", &machine, &opts());
+        assert_eq!(plain.probing, None);
+        assert!(plain.message()["probing"].is_null());
     }
 
     #[test]

@@ -73,7 +73,8 @@ pub struct Station {
     machine: PathBuf,
     port: String,
     serve: Option<Proc>,
-    _sim: Proc,
+    /// `pkmc-sim` (none: the station runs nc-send's own simulator, `--sim`).
+    _sim: Option<Proc>,
     driver: Proc,
     driver_port: u16,
     chromium: PathBuf,
@@ -105,6 +106,16 @@ impl Station {
 
     /// [`Station::start`] with more arguments for `nc-send serve`.
     pub async fn start_with(machine: &str, serve_args: &[&str]) -> Station {
+        Self::launch(machine, None, serve_args).await
+    }
+
+    /// The station on nc-send's own simulator (`nc-send --sim ARGS serve`, keeping
+    /// real time), with `sim_args` for it (a simulated probe: `--probe-plane Z`).
+    pub async fn start_sim(machine: &str, sim_args: &[&str]) -> Station {
+        Self::launch(machine, Some(sim_args), &[]).await
+    }
+
+    async fn launch(machine: &str, sim_args: Option<&[&str]>, serve_args: &[&str]) -> Station {
         // Without a browser the build script marks these tests ignored
         // (host-tools/build.rs): one that runs and finds none fails.
         let Some((chromium, chromedriver)) = browser() else {
@@ -117,17 +128,28 @@ impl Station {
         let machine = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("..")
             .join(machine);
-        let mut sim = Command::new(env!("CARGO_BIN_EXE_pkmc-sim"))
-            .arg("--machine")
-            .arg(&machine)
-            .arg("--real-time")
-            .stdout(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let port = first_line(&mut sim, "pkmc-sim");
-        let sim = Proc(sim);
+        let (sim, port, target) = match sim_args {
+            None => {
+                let mut sim = Command::new(env!("CARGO_BIN_EXE_pkmc-sim"))
+                    .arg("--machine")
+                    .arg(&machine)
+                    .arg("--real-time")
+                    .stdout(Stdio::piped())
+                    .spawn()
+                    .unwrap();
+                let port = first_line(&mut sim, "pkmc-sim");
+                let target = vec!["--port".to_string(), port.clone()];
+                (Some(Proc(sim)), port, target)
+            }
+            Some(args) => {
+                let mut target = vec!["--sim".to_string()];
+                target.extend(args.iter().map(|a| a.to_string()));
+                (None, String::new(), target)
+            }
+        };
         let mut serve = Command::new(env!("CARGO_BIN_EXE_nc-send"))
-            .args(["--port", &port, "--machine"])
+            .args(&target)
+            .arg("--machine")
             .arg(&machine)
             .args(["serve", "--listen", "127.0.0.1:0"])
             .args(serve_args)
@@ -217,6 +239,10 @@ impl Station {
     /// Stops the station (Ctrl-C), waits for it to let go of the controller, and asks
     /// the controller for its status with `nc-send status`.
     pub async fn status_after_stopping_the_station(&mut self) -> Value {
+        assert!(
+            self._sim.is_some(),
+            "the station runs its own simulator: no controller is left to ask"
+        );
         if let Some(mut p) = self.serve.take() {
             // SAFETY: a plain signal to our own child.
             unsafe { libc::kill(p.0.id() as i32, libc::SIGINT) };

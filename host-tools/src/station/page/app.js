@@ -49,7 +49,7 @@ const CLIENT_NAME = params.get('name') ||
 
 const pkmc = window.pkmc = {
   stats: { frames: [], status: [], draw: [], handle: [], longtasks: [], slow: [] },
-  lastStatus: null, program: null, machine: null, teach: null,
+  lastStatus: null, program: null, machine: null, teach: null, probes: null,
   you: null, lock: null, log: [], alarms: [], jogEnabled: true,
 };
 
@@ -118,7 +118,8 @@ function send(cmd, args = {}) {
 
 const HANDLERS = {
   hello: onHello, status: onStatus, program: onProgram, teach: onTeach,
-  reply: onReply, log: (m) => addLog(m.level, m.text), file: onFile,
+  reply: onReply, log: (m) => addLog(m.level, m.text), file: onFile, probes: onProbes,
+  probe: onMdiProbe,
 };
 
 function onMessage(data) {
@@ -346,7 +347,8 @@ function updateEnables() {
   const stepping = !!(job && job.step);
   const set = (b, off) => { if (b.disabled !== off) b.disabled = off; };
   set($('run'), bad || locked || busy);
-  set($('step'), bad || locked || (busy && !stepping));
+  // A program that probes runs only as a whole, a stage at a time.
+  set($('step'), bad || !!(p && p.probing) || locked || (busy && !stepping));
   const jogOff = locked || (!!job && !['jog', 'jog_hold', 'joint'].includes(job.kind));
   document.querySelectorAll('#jog-buttons button, #joint-minus, #joint-plus, #mdi-send, #teach-run, #teach-step')
     .forEach((b) => set(b, jogOff));
@@ -500,6 +502,7 @@ function onProgram(p) {
   renderCheck(p.check);
   updateEnables();
   view.setProgramPath(p.path || [], (p.errors || []).map((e) => e.line));
+  renderProbes();
 }
 
 function renderErrors(p) {
@@ -630,6 +633,10 @@ function initProgramPanel() {
     const name = (pkmc.program && pkmc.program.name) || 'editor.ngc';
     send('load', { name, text: ed.value });
   });
+  $('probe-list').addEventListener('click', (e) => {
+    const li = e.target.closest('li');
+    if (li) selectInEditor(Number(li.dataset.line), Number(li.dataset.col) || 0);
+  });
   $('errors').addEventListener('click', (e) => {
     const li = e.target.closest('li');
     if (li) selectInEditor(Number(li.dataset.line), Number(li.dataset.col) || 0);
@@ -652,6 +659,92 @@ function initProgramPanel() {
     send('override', { percent: 100 });
   });
   syncGutter();
+}
+
+// ================================================================= probing panel
+
+/** A run of a program that probes: each probing move's result as it comes. */
+function onProbes(m) {
+  pkmc.probes = m;
+  renderProbes();
+}
+
+/** Most MDI probing results the panel keeps. */
+const MDI_PROBES = 50;
+
+/** A probing move typed into MDI: the panel lists MDI's results (the last 50) until
+ *  a program's run takes it over. Their lines are MDI's, not the editor's. */
+function onMdiProbe(m) {
+  const run = pkmc.probes;
+  const before = run && run.program === 'MDI' ? run.records : [];
+  pkmc.probes = { program: 'MDI', running: false, end: 'mdi', mdi: true,
+    records: [...before, m.probe].slice(-MDI_PROBES) };
+  renderProbes();
+}
+
+/** A length in mm to 4 decimals (0.1 µm), or 5 of an inch while inches are shown. */
+function fmtProbe(v) {
+  if (typeof v !== 'number' || !Number.isFinite(v)) return '—';
+  const x = v / lengthScale();
+  const d = units.inch ? 5 : 4;
+  return Math.abs(x) < 0.5 * 10 ** -d ? (0).toFixed(d) : x.toFixed(d);
+}
+
+function xyzText(label, p) {
+  return `${label.padEnd(7)} X ${fmtProbe(p[0])}  Y ${fmtProbe(p[1])}  Z ${fmtProbe(p[2])}`;
+}
+
+const PROBE_END = {
+  done: 'the run ended: done', alarm: 'the run ended in an alarm',
+  stopped: 'the run was stopped', paused: 'the run ended held at a pause',
+  refused: 'the run stopped: the program cannot go on', failed: 'the run failed',
+  mdi: 'typed into MDI',
+};
+
+/** The panel: shown for a program that probes, or after a run that probed. */
+function renderProbes() {
+  const program = pkmc.program;
+  const run = pkmc.probes;
+  const moves = (program && program.probing && program.probing.moves) || [];
+  const records = (run && run.records) || [];
+  $('probe-panel').classList.toggle('hidden', moves.length === 0 && records.length === 0);
+  let note = '';
+  if (moves.length > 0) {
+    const lines = moves.slice(0, 8).map((m) => m.line).join(', ') + (moves.length > 8 ? ', …' : '');
+    note = `${moves.length}${program.probing.capped ? '+' : ''} probing move(s), line ${lines}. ` +
+      'The path and Check take each to its programmed end as if it touched there; ' +
+      'Run probes a stage at a time and goes on from what the probe finds.';
+  }
+  setText($('probe-note'), note);
+  const unit = units.inch ? 'in' : 'mm';
+  const state = !run ? '' : run.running ? 'running' : (PROBE_END[run.end] || '');
+  setText($('probe-info'), run && run.program ? `${run.program} · ${state}` : '');
+  const items = records.map((r, i) => {
+    const li = el('li', 'probe' + (r.contact ? '' : ' miss') + (i === records.length - 1 ? ' last' : ''));
+    if (!run.mdi) li.dataset.line = String(r.line);
+    const head = el('div', 'phead');
+    head.appendChild(el('span', 'pline', run.mdi ? 'MDI' : `line ${r.line}`));
+    head.appendChild(el('span', 'pcode', r.code));
+    head.appendChild(el('span', 'pcontact ' + (r.contact ? 'yes' : 'no'),
+      r.contact ? 'contact' : 'no contact'));
+    li.appendChild(head);
+    li.appendChild(el('div', 'pxyz probed', xyzText('probed', r.position) + ` ${unit}`));
+    const pf = (run.program_frame || [])[i];
+    if (pf) li.appendChild(el('div', 'pxyz program', xyzText('program', pf) + ` ${unit}`));
+    li.appendChild(el('div', 'pxyz stopped', xyzText('stopped', r.stopped) + ` ${unit}`));
+    return li;
+  });
+  if (run && run.refusal) {
+    const f = run.refusal;
+    const li = el('li', 'refusal', `line ${f.line}:${f.col}: ${f.message} — the program stopped there`);
+    li.dataset.line = String(f.line);
+    li.dataset.col = String(f.col);
+    items.push(li);
+  }
+  const list = $('probe-list');
+  list.replaceChildren(...items);
+  // The newest in view (the list scrolls on its own, never the page).
+  list.scrollTop = list.scrollHeight;
 }
 
 // ===================================================== jog, MDI and joint moves
@@ -1411,6 +1504,7 @@ function setInch(inch) {
   $('units').title = inch ? 'Show lengths in millimetres' : 'Show lengths in inches';
   pkmc.units = u;
   if (pkmc.lastStatus) { updateDro(pkmc.lastStatus); updateJoints(pkmc.lastStatus); }
+  renderProbes();
 }
 
 /** The keyboard jog: arrows X and Y, Page Up and Page Down Z, by the chosen step;
