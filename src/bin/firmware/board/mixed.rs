@@ -1,14 +1,16 @@
 //! The default wiring: seven stepper channels and four servo channels (`docs/wiring.md`,
-//! "Stepper channels" and "Servo channels").
+//! "Stepper channels", "Servo channels" and "Touch probe").
 //!
 //! Timer use: TIM1, TIM8, TIM20, TIM15, TIM16, TIM17 the STEP trains of stepper
-//! channels 0-5; HRTIM1 timer A the STEP train of stepper channel 6; TIM2, TIM3, TIM4,
-//! TIM5 the encoders of servo channels 0-3, whose commands are DAC1 ch1 (PA4), DAC2
-//! ch1 (PA6), and DAC3 ch2 and DAC4 ch1 through OPAMP3 (PB1) and OPAMP4 (PB12) as
-//! followers. One SERVO_EN line enables every amplifier and one SERVO_FAULT line is
-//! every amplifier's fault. Servo channels 4-7 of the core are not wired
-//! ([`CHANNELS`]): a machine using one is refused. One pin is not typed by its
-//! function: PA9 (HRTIM1_CHA2, see [`super::HRTIM1_CHA2_AF`]).
+//! channels 0-5; HRTIM1 timer A the STEP train of stepper channel 6; LPTIM1, TIM3,
+//! TIM4, TIM5 the encoders of servo channels 0-3, whose commands are DAC1 ch1 (PA4),
+//! DAC2 ch1 (PA6), and DAC3 ch2 and DAC4 ch1 through OPAMP3 (PB1) and OPAMP4 (PB12) as
+//! followers; TIM2 the touch probe's input capture on PA2 (`crate::probe`). One
+//! SERVO_EN line enables every amplifier and one SERVO_FAULT line is every
+//! amplifier's fault. Servo channels 4-7 of the core are not wired ([`CHANNELS`]): a
+//! machine using one is refused. Pins not typed by their function: PA9
+//! (HRTIM1_CHA2, see [`super::HRTIM1_CHA2_AF`]), PC0/PC2 (LPTIM1_IN1/IN2) and PA2
+//! (TIM2_CH3, whose AF number is checked against embassy's typed pin).
 
 use embassy_stm32::gpio::{AnyPin, Flex, Level, Output, OutputType, Speed};
 use embassy_stm32::pac;

@@ -24,9 +24,11 @@
 //! COMP4) and LPTIM1 (PB5/PB7). All count x4 with a 16-bit wrap.
 //!
 //! Amplifier lines: one enable and one fault line for the legs, one of each for the
-//! table ([`GROUP_OF`]). Pins without embassy pin traits in this build: PA9
-//! (HRTIM1_CHA2, AF13) and PB5/PB7 (LPTIM1_IN1/IN2, AF11); their AF numbers are the
-//! constants below, checked against stm32-metapac 21.
+//! table ([`GROUP_OF`]). The touch probe: PA2, TIM15 CH1's input capture
+//! (`crate::probe`; TIM15 is otherwise unused here). Pins without embassy pin traits
+//! in this build: PA9 (HRTIM1_CHA2, AF13), PB5/PB7 (LPTIM1_IN1/IN2, AF11) and PA2
+//! (TIM15_CH1, AF9); their AF numbers are the constants below, checked against
+//! stm32-metapac 21.
 
 use embassy_stm32::comp::{self, Comp, Hysteresis, InvertingInput};
 use embassy_stm32::gpio::{AfType, Flex, Level, Output, Pull, Speed};
