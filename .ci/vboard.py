@@ -660,6 +660,11 @@ PROBE_FEED = 1500
 # starts (at constant speed the steps are evenly spread: within a step); the
 # capture's own uncertainty (0.65 us, docs/probing.md) is 0.007 step here.
 PROBE_TOLERANCE_STEPS = 1.5
+# probe8: the latch against the encoders' motion interpolated to the edge, counts: the
+# leg scales count 10 nm, the legs move about 0.8 counts/us here, so the capture's
+# 0.65 us is 0.5 count; one count of rounding each in the latch and the expectation,
+# and the plants' speed changing within the tick.
+PROBE8_TOLERANCE_COUNTS = 3.0
 # The edge's instant after a tick edge, us: mid-tick, not on a boundary.
 PROBE_EDGE_US = 437.3
 
@@ -792,6 +797,63 @@ def case_probe(o):
             f"bounce of 1.2 ms: no contact, drives at the end {rep['final_joint_steps']}")
 
 
+def case_probe8(o):
+    """The touch probe on PA2 through TIM15 CH1's capture (eight-servo wiring), on
+    the hexapod-xy: G38.2 down Z at 600 mm/min, the pin switched PROBE_EDGE_US after
+    a tick edge. The board's plants move at the servo timer's update events (every
+    100 us), so a joint's position at the edge is its encoder then plus the share of
+    the servo period elapsed since the last update (PROBE_EDGE_US mod 100 us) of the
+    counts it moves in a servo period, a tenth of what it moved over that tick (the
+    board's trace). The latch must equal that within PROBE8_TOLERANCE_COUNTS (a latch
+    at the sample would be off by 5.6 servo periods' motion)."""
+    machine = os.path.join(ROOT, "examples/machines/hexapod-xy.toml")
+    tmp = tempfile.mkdtemp()
+    trace = os.path.join(tmp, "probe8.csv")
+    b = Board(o.vboard, o.elf8, machine, "probe8", ["--wiring", "servo8", "--trace", trace])
+    m = ["--machine", machine]
+    if nc_send(o.nc, ["--port", b.port] + m + ["reset"]).returncode != 0:
+        b.fail("probe8: reset refused")
+    time.sleep(0.5)
+    result = {}
+    path = os.path.join(tmp, "probe8.ngc")
+    with open(path, "w") as f:
+        f.write("G21 G90\nG38.2 Z250 F600\nM2\n")
+    def run():
+        result["r"] = nc_send(o.nc, ["--port", b.port, "--report", "json"] + m + [path])
+    t = threading.Thread(target=run)
+    t.start()
+    wait_moving(b, "probe8", joint=0)
+    time.sleep(0.5)
+    b.command(f"probe on {PROBE_EDGE_US}")
+    t.join(120)
+    r = result.get("r")
+    rep = b.report()
+    b.close()
+    if r is None or r.returncode != 0:
+        die(f"probe8: nc-send: {r and r.stderr[-1500:]}")
+    job = job_json(r, "probe8")
+    probes, edges = job.get("probes") or [], rep["probe_edges"]
+    if len(probes) != 1 or not probes[0]["contact"] or len(edges) != 1:
+        die(f"probe8: probes {probes}, edges {edges}")
+    rows = read_trace(trace)
+    te = edges[0]["t_s"]
+    before = [r for r in rows if r[0] <= te][-1]
+    after = [r for r in rows if r[0] > te][0]
+    per_unit = [100000] * 6 + [1000] * 2  # counts per mm (the machine file)
+    latched = [v * k for v, k in zip(probes[0]["joints"], per_unit)]
+    share = (edges[0]["in_tick_us"] % 100.0) / 100.0
+    errors, offs = [], []
+    for j, (l, e) in enumerate(zip(latched, edges[0]["joint_steps"])):
+        expected = e + share * (after[1 + j] - before[1 + j]) / 10
+        offs.append(round(l - expected, 2))
+        if abs(l - expected) > PROBE8_TOLERANCE_COUNTS:
+            errors.append(f"joint {j}: latched {l:.1f} counts, expected {expected:.1f}")
+    if errors:
+        die("probe8: " + "; ".join(errors))
+    return (f"probe8 (PA2, TIM15 CH1 capture, hexapod-xy): edge {edges[0]['in_tick_us']:.3f} us into a tick; "
+            f"encoders then {edges[0]['joint_steps']}, latched minus expected {offs} counts")
+
+
 def main():
     import argparse
     ap = argparse.ArgumentParser()
@@ -802,7 +864,7 @@ def main():
     ap.add_argument("--vboard", default=os.path.join(ROOT, "vboard/target/release/pkmc-vboard"))
     ap.add_argument("cases", nargs="*", default=["square", "dense", "square8", "dense8", "estop", "limit",
                                                  "ampfault", "jam", "unplug", "stall", "replug", "replug-serial", "persist", "determinism",
-                                                 "replay", "probe"])
+                                                 "replay", "probe", "probe8"])
     o = ap.parse_args()
     for what, path in (("nc-send", o.nc), ("pkmc-vboard", o.vboard), ("firmware ELF", o.elf)):
         if not os.path.exists(path):
@@ -841,7 +903,8 @@ def main():
                           "limit": case_limit, "ampfault": case_ampfault, "jam": case_jam,
                           "determinism": case_determinism, "replay": case_replay,
                           "stall": case_stall, "replug": case_replug,
-                          "replug-serial": case_replug_serial, "probe": case_probe}[case](o))
+                          "replug-serial": case_replug_serial, "probe": case_probe,
+                          "probe8": case_probe8}[case](o))
         print(f"vboard: {case} done in {time.time() - t:.1f} s", flush=True)
     print("\n| job | blocks | motion s | busy % per 1 ms (min / median / p99 / max) | servo start µs "
           "(min / median / p99 / max) | stack deepest / untouched B | blocks/s executed | frames/s accepted "
