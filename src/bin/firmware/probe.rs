@@ -15,17 +15,19 @@
 //! **The capture.** The channel maps its own input (CCxS = 01), captures both edges
 //! (CCxP = CCxNP = 1) after a digital filter of eight samples at the 170 MHz kernel
 //! clock (ICxF = 0011: pulses under 47 ns are ignored, every edge is delayed by
-//! 8 to 9 kernel cycles), RM0440, general-purpose timers, "Input capture mode" and
+//! 8 to 10 kernel cycles with the resynchronisation, under 0.06 µs), RM0440, general-purpose timers, "Input capture mode" and
 //! TIMx_CCMR1/TIMx_CCER. No interrupt: the tick polls CCxIF. CCRx holds the *last*
 //! edge before the tick's read (a later capture overwrites it and sets the overcapture
 //! flag CCxOF): after a bounce inside a tick, the edge that settled.
 //!
-//! **The tick's read** ([`Probe::read`]): the flag and CCRx first, then the level, so
-//! that an edge between the two reads is seen with its instant at the next tick
-//! rather than as a level change without an instant. The instant goes to the core as
-//! µs after the previous tick's start, rounded: within ±0.55 µs of the count plus the
-//! filter's 0.05 µs. An edge after this tick's start (read late in the tick) comes out
-//! past 1000 µs, which the core takes as this tick's start.
+//! **The tick's read** ([`Probe::read`]): the flag and CCRx first, then the level. The
+//! instant goes to the core as µs after the previous tick's start, rounded: within
+//! ±0.55 µs of the count plus the filter's 0.06 µs. An edge after this tick's start
+//! but before the read comes out past 1000 µs, which the core takes as this tick's
+//! start; one between the two reads comes without an instant, which the core also
+//! takes as this tick's start: either is late by at most the read's delay after the
+//! tick edge. (The other order would lose that edge's instant to the next tick, whose
+//! level then changes without a capture: a whole tick late.)
 
 use core::sync::atomic::{AtomicU16, Ordering};
 

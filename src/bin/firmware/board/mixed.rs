@@ -216,7 +216,8 @@ pub fn init(p: Peripherals) -> Board {
         ],
     );
 
-    // The probe's pin, checked by type against TIM2_CH3's alternate function.
+    // PA2 must be a TIM2_CH3 pin for this to build (embassy's typed pins); a debug
+    // build also compares the AF numbers.
     defmt::debug_assert!(TimerPin::<TIM2, Ch3>::af_num(&*p.PA2) == TIM2_CH3_AF);
     let probe = probe_capture(p.TIM2, p.PA2.into(), TIM2_CH3_AF);
 
