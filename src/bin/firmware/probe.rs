@@ -14,11 +14,12 @@
 //!
 //! **The capture.** The channel maps its own input (CCxS = 01), captures both edges
 //! (CCxP = CCxNP = 1) after a digital filter of eight samples at the 170 MHz kernel
-//! clock (ICxF = 0011: pulses under 47 ns are ignored, every edge is delayed by
-//! 8 to 10 kernel cycles with the resynchronisation, under 0.06 µs), RM0440, general-purpose timers, "Input capture mode" and
-//! TIMx_CCMR1/TIMx_CCER. No interrupt: the tick polls CCxIF. CCRx holds the *last*
-//! edge before the tick's read (a later capture overwrites it and sets the overcapture
-//! flag CCxOF): after a bounce inside a tick, the edge that settled.
+//! clock (ICxF = 0011: pulses under 47 ns are ignored, every edge is delayed by 8 to
+//! 10 kernel cycles with the resynchronisation, under 0.06 µs), RM0440,
+//! general-purpose timers, "Input capture mode" and TIMx_CCMR1/TIMx_CCER. No
+//! interrupt: the tick polls CCxIF. CCRx holds the *last* edge before the tick's read
+//! (a later capture overwrites it and sets the overcapture flag CCxOF): after a bounce
+//! inside a tick, the edge that settled.
 //!
 //! **The tick's read** ([`Probe::read`]): the flag and CCRx first, then the level. The
 //! instant goes to the core as µs after the previous tick's start, rounded: within
