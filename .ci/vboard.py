@@ -676,12 +676,13 @@ def probe_job(o, b, name, text, tmp):
     return nc_send(o.nc, ["--port", b.port, "--report", "json", path])
 
 
-def wait_moving(b, name, joint=2, timeout=30):
-    """Until the board's drive of `joint` has left where it stood."""
+def wait_moving(b, name, joint=2, timeout=30, by=1):
+    """Until the board's drive of `joint` has moved `by` steps or counts from where it
+    stood."""
     start = b.report()["final_joint_steps"][joint]
     end = time.time() + timeout
     while time.time() < end:
-        if b.report()["final_joint_steps"][joint] != start:
+        if abs(b.report()["final_joint_steps"][joint] - start) >= by:
             return
         time.sleep(0.02)
     b.fail(f"{name}: the probing move did not start within {timeout} s")
@@ -822,7 +823,8 @@ def case_probe8(o):
         result["r"] = nc_send(o.nc, ["--port", b.port, "--report", "json"] + m + [path])
     t = threading.Thread(target=run)
     t.start()
-    wait_moving(b, "probe8", joint=0)
+    # Past a servo's standstill dither: 0.1 mm of leg 1.
+    wait_moving(b, "probe8", joint=0, by=10000)
     time.sleep(0.5)
     b.command(f"probe on {PROBE_EDGE_US}")
     t.join(120)
@@ -843,6 +845,11 @@ def case_probe8(o):
     latched = [v * k for v, k in zip(probes[0]["joints"], per_unit)]
     share = (edges[0]["in_tick_us"] % 100.0) / 100.0
     errors, offs = [], []
+    # Moving at the edge: every leg at least 100 counts (1 um) a tick, so that a latch
+    # at the sample would be off by over 50.
+    moved = [abs(after[1 + j] - before[1 + j]) for j in range(6)]
+    if min(moved) < 100:
+        die(f"probe8: the legs moved {moved} counts over the edge's tick: not a probe in motion")
     for j, (l, e) in enumerate(zip(latched, edges[0]["joint_steps"])):
         expected = e + share * (after[1 + j] - before[1 + j]) / 10
         offs.append(round(l - expected, 2))
