@@ -23,7 +23,8 @@
 //! ST-LINK virtual COM port (PA2/PA3), the HSE and LSE crystals (PF0/PF1, PC14/PC15),
 //! BOOT0 (PB8), the user button (PC13), the LED (PA5) and USB (PA11/PA12) are set
 //! aside; the default wiring uses all 38, the eight-servo wiring takes the LED's PA5 as
-//! a DAC output and leaves two spare. Both keep TIM7 for the 10 kHz servo period,
+//! a DAC output and leaves two spare. Both take PA2, the virtual COM port's transmit
+//! line, for the touch probe's timer capture (`crate::probe`). Both keep TIM7 for the 10 kHz servo period,
 //! which also paces the 1 kHz interpolation tick (run on the otherwise unused `UCPD1`
 //! vector), and TIM6 for the embassy time base; the IWDG watches both interrupts.
 //!
