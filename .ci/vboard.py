@@ -649,6 +649,218 @@ def case_persist(o):
             "(SYSRESETREQ); flash pages decode to h4-table")
 
 
+# The probe case's machine: the built-in cartesian-xyz (steppers on channels 0-2,
+# 400 steps/mm on every axis, src/config/builtin.rs). Feed 1500 mm/min: 25 mm/s,
+# 10 steps of Z per 1 ms tick, so a latch taken at the sample instead of the edge
+# would be off by up to 10 steps.
+PROBE_STEPS_PER_MM = 400
+PROBE_FEED = 1500
+# The latch against the drive's steps at the edge, steps: the drive's count is whole
+# steps (a step under way not yet counted) and the latch interpolates between tick
+# starts (at constant speed the steps are evenly spread: within a step); the
+# capture's own uncertainty (0.65 us, docs/probing.md) is 0.007 step here.
+PROBE_TOLERANCE_STEPS = 1.5
+# probe8: the latch against the encoders' motion interpolated to the edge, counts: the
+# leg scales count 10 nm, the legs move about 0.8 counts/us here, so the capture's
+# 0.65 us is 0.5 count; one count of rounding each in the latch and the expectation,
+# and the plants' speed changing within the tick.
+PROBE8_TOLERANCE_COUNTS = 3.0
+# The edge's instant after a tick edge, us: mid-tick, not on a boundary.
+PROBE_EDGE_US = 437.3
+
+
+def probe_job(o, b, name, text, tmp):
+    path = os.path.join(tmp, f"{name}.ngc")
+    with open(path, "w") as f:
+        f.write(text)
+    return nc_send(o.nc, ["--port", b.port, "--report", "json", path])
+
+
+def wait_moving(b, name, joint=2, timeout=30, by=1):
+    """Until the board's drive of `joint` has moved `by` steps or counts from where it
+    stood."""
+    start = b.report()["final_joint_steps"][joint]
+    end = time.time() + timeout
+    while time.time() < end:
+        if abs(b.report()["final_joint_steps"][joint] - start) >= by:
+            return
+        time.sleep(0.02)
+    b.fail(f"{name}: the probing move did not start within {timeout} s")
+
+
+def case_probe(o):
+    """The touch probe on PA2 (TIM2 CH3's input capture, default wiring) through
+    nc-send's G38 moves: (1) a probe touching at the start: alarm ProbeAtStart,
+    nothing moves; (2) G38.2 down Z at 1500 mm/min, the pin switched PROBE_EDGE_US
+    after a tick edge mid-move: the latched Z equals the drive's steps at that instant
+    within PROBE_TOLERANCE_STEPS, and the move stops just past it; (3) G38.3 with a
+    1.2 ms touch, shorter than the three-sample debounce: no latch, the move runs to
+    its end."""
+    tmp = tempfile.mkdtemp()
+    b = Board(o.vboard, o.elf, None, "probe")
+    if nc_send(o.nc, ["--port", b.port, "reset"]).returncode != 0:
+        b.fail("probe: reset refused")
+    # (1) Touching before the move.
+    b.command("probe on")
+    time.sleep(0.2)
+    r = probe_job(o, b, "probe-at-start", "G21 G90\nG38.2 Z-10 F1500\nM2\n", tmp)
+    job = job_json(r, "probe at start")
+    steps = b.report()["final_joint_steps"]
+    if r.returncode != 5 or job.get("alarm_cause") != "ProbeAtStart":
+        b.fail(f"probe at start: exit {r.returncode}, alarm {job.get('alarm_cause')}, expected ProbeAtStart")
+    if steps != [0, 0, 0]:
+        b.fail(f"probe at start: the drives moved: {steps}")
+    at_start = f"exit {r.returncode}, alarm {job.get('alarm_cause')}, drives {steps}"
+    b.command("probe off")
+    time.sleep(0.2)
+    if nc_send(o.nc, ["--port", b.port, "reset"]).returncode != 0:
+        b.fail("probe: reset after ProbeAtStart refused")
+
+    # (2) Contact mid-move, at a sub-tick instant.
+    result = {}
+    def run():
+        result["r"] = probe_job(o, b, "probe-touch", f"G21 G90\nG38.2 Z-60 F{PROBE_FEED}\nM2\n", tmp)
+    t = threading.Thread(target=run)
+    t.start()
+    wait_moving(b, "probe touch")
+    time.sleep(0.3)  # past the acceleration (25 ms at 1000 mm/s^2): constant speed
+    b.command(f"probe on {PROBE_EDGE_US}")
+    t.join(120)
+    r = result.get("r")
+    if r is None:
+        b.fail("probe touch: nc-send did not end")
+    job = job_json(r, "probe touch")
+    rep = b.report()
+    if r.returncode != 0:
+        b.fail(f"probe touch: exit {r.returncode}: {r.stderr[-1500:]}")
+    edges = rep["probe_edges"]
+    probes = job.get("probes") or []
+    if len(edges) != 3 or not edges[2]["touching"] or len(probes) != 1:
+        b.fail(f"probe touch: edges {edges}, probes {probes}")
+    edge, probe = edges[2], probes[0]
+    if abs(edge["in_tick_us"] - PROBE_EDGE_US) > 0.01:
+        b.fail(f"probe touch: the edge came {edge['in_tick_us']} us into its tick, not {PROBE_EDGE_US}")
+    latched = [round(v * PROBE_STEPS_PER_MM, 3) for v in probe["joints"]]
+    off = [l - e for l, e in zip(latched, edge["joint_steps"])]
+    stopped_z = probe["stopped"][2]
+    final = rep["final_joint_steps"]
+    errors = []
+    if not probe["contact"]:
+        errors.append("no contact reported")
+    if any(abs(d) > PROBE_TOLERANCE_STEPS for d in off):
+        errors.append(f"latched {latched} steps, the drives at the edge {edge['joint_steps']}: "
+                      f"off by {off}, more than {PROBE_TOLERANCE_STEPS}")
+    # Stopped past the contact by the confirmation (two ticks) and the deceleration
+    # (25 mm/s at 1000 mm/s^2: 0.31 mm), far from the move's end; the drives there.
+    past = probe["joints"][2] - stopped_z
+    if not 0.0 < past < 0.5:
+        errors.append(f"stopped {past:.4f} mm past the contact")
+    if final[2] != round(stopped_z * PROBE_STEPS_PER_MM):
+        errors.append(f"drive Z at {final[2]} steps, the controller stopped at {stopped_z} mm")
+    if rep["drive_violations"] != 0:
+        errors.append(f"{rep['drive_violations']} drive violations")
+    if errors:
+        b.fail("probe touch: " + "; ".join(errors))
+    touch = (f"edge {edge['in_tick_us']:.3f} us into a tick at {edge['t_s']:.6f} s, drives then "
+             f"{edge['joint_steps']}, latched {latched} steps (off by {[round(d, 3) for d in off]}); "
+             f"stopped {past:.3f} mm past it, drives {final}")
+
+    # (3) A bounce: touching for 1.2 ms, less than the debounce's three samples.
+    b.command("probe off")
+    time.sleep(0.2)
+    end_z = -75
+    result = {}
+    def run3():
+        result["r"] = probe_job(o, b, "probe-bounce", f"G21 G90\nG38.3 Z{end_z} F{PROBE_FEED}\nM2\n", tmp)
+    t = threading.Thread(target=run3)
+    t.start()
+    wait_moving(b, "probe bounce")
+    time.sleep(0.2)
+    # Both at the same tick edge if the board takes them together; else the release
+    # comes a tick later (a 2.2 ms touch, still under the debounce).
+    b.command("probe on 300\nprobe off 1500")
+    t.join(120)
+    r = result.get("r")
+    if r is None:
+        b.fail("probe bounce: nc-send did not end")
+    job = job_json(r, "probe bounce")
+    rep = b.report()
+    b.close()
+    edges = rep["probe_edges"][4:]
+    probes = job.get("probes") or []
+    if r.returncode != 0 or len(probes) != 1 or probes[0]["contact"]:
+        die(f"probe bounce: exit {r.returncode}, probes {probes}: a 1.2 ms touch latched")
+    if len(edges) != 2 or round((edges[1]["t_s"] - edges[0]["t_s"]) * 1e6) not in (1200, 2200):
+        die(f"probe bounce: the pin's edges {edges}")
+    if rep["final_joint_steps"][2] != end_z * PROBE_STEPS_PER_MM:
+        die(f"probe bounce: drive Z at {rep['final_joint_steps'][2]}, not the move's end")
+    return (f"probe (PA2, TIM2 CH3 capture): at start: {at_start}; touch: {touch}; "
+            f"bounce of 1.2 ms: no contact, drives at the end {rep['final_joint_steps']}")
+
+
+def case_probe8(o):
+    """The touch probe on PA2 through TIM15 CH1's capture (eight-servo wiring), on
+    the hexapod-xy: G38.2 down Z at 600 mm/min, the pin switched PROBE_EDGE_US after
+    a tick edge. The board's plants move at the servo timer's update events (every
+    100 us), so a joint's position at the edge is its encoder then plus the share of
+    the servo period elapsed since the last update (PROBE_EDGE_US mod 100 us) of the
+    counts it moves in a servo period, a tenth of what it moved over that tick (the
+    board's trace). The latch must equal that within PROBE8_TOLERANCE_COUNTS (a latch
+    at the sample would be off by 5.6 servo periods' motion)."""
+    machine = os.path.join(ROOT, "examples/machines/hexapod-xy.toml")
+    tmp = tempfile.mkdtemp()
+    trace = os.path.join(tmp, "probe8.csv")
+    b = Board(o.vboard, o.elf8, machine, "probe8", ["--wiring", "servo8", "--trace", trace])
+    m = ["--machine", machine]
+    if nc_send(o.nc, ["--port", b.port] + m + ["reset"]).returncode != 0:
+        b.fail("probe8: reset refused")
+    time.sleep(0.5)
+    result = {}
+    path = os.path.join(tmp, "probe8.ngc")
+    with open(path, "w") as f:
+        f.write("G21 G90\nG38.2 Z250 F600\nM2\n")
+    def run():
+        result["r"] = nc_send(o.nc, ["--port", b.port, "--report", "json"] + m + [path])
+    t = threading.Thread(target=run)
+    t.start()
+    # Past a servo's standstill dither: 0.1 mm of leg 1.
+    wait_moving(b, "probe8", joint=0, by=10000)
+    time.sleep(0.5)
+    b.command(f"probe on {PROBE_EDGE_US}")
+    t.join(120)
+    r = result.get("r")
+    rep = b.report()
+    b.close()
+    if r is None or r.returncode != 0:
+        die(f"probe8: nc-send: {r and r.stderr[-1500:]}")
+    job = job_json(r, "probe8")
+    probes, edges = job.get("probes") or [], rep["probe_edges"]
+    if len(probes) != 1 or not probes[0]["contact"] or len(edges) != 1:
+        die(f"probe8: probes {probes}, edges {edges}")
+    rows = read_trace(trace)
+    te = edges[0]["t_s"]
+    before = [r for r in rows if r[0] <= te][-1]
+    after = [r for r in rows if r[0] > te][0]
+    per_unit = [100000] * 6 + [1000] * 2  # counts per mm (the machine file)
+    latched = [v * k for v, k in zip(probes[0]["joints"], per_unit)]
+    share = (edges[0]["in_tick_us"] % 100.0) / 100.0
+    errors, offs = [], []
+    # Moving at the edge: every leg at least 100 counts (1 um) a tick, so that a latch
+    # at the sample would be off by over 50.
+    moved = [abs(after[1 + j] - before[1 + j]) for j in range(6)]
+    if min(moved) < 100:
+        die(f"probe8: the legs moved {moved} counts over the edge's tick: not a probe in motion")
+    for j, (l, e) in enumerate(zip(latched, edges[0]["joint_steps"])):
+        expected = e + share * (after[1 + j] - before[1 + j]) / 10
+        offs.append(round(l - expected, 2))
+        if abs(l - expected) > PROBE8_TOLERANCE_COUNTS:
+            errors.append(f"joint {j}: latched {l:.1f} counts, expected {expected:.1f}")
+    if errors:
+        die("probe8: " + "; ".join(errors))
+    return (f"probe8 (PA2, TIM15 CH1 capture, hexapod-xy): edge {edges[0]['in_tick_us']:.3f} us into a tick; "
+            f"encoders then {edges[0]['joint_steps']}, latched minus expected {offs} counts")
+
+
 def main():
     import argparse
     ap = argparse.ArgumentParser()
@@ -659,7 +871,7 @@ def main():
     ap.add_argument("--vboard", default=os.path.join(ROOT, "vboard/target/release/pkmc-vboard"))
     ap.add_argument("cases", nargs="*", default=["square", "dense", "square8", "dense8", "estop", "limit",
                                                  "ampfault", "jam", "unplug", "stall", "replug", "replug-serial", "persist", "determinism",
-                                                 "replay"])
+                                                 "replay", "probe", "probe8"])
     o = ap.parse_args()
     for what, path in (("nc-send", o.nc), ("pkmc-vboard", o.vboard), ("firmware ELF", o.elf)):
         if not os.path.exists(path):
@@ -698,7 +910,8 @@ def main():
                           "limit": case_limit, "ampfault": case_ampfault, "jam": case_jam,
                           "determinism": case_determinism, "replay": case_replay,
                           "stall": case_stall, "replug": case_replug,
-                          "replug-serial": case_replug_serial}[case](o))
+                          "replug-serial": case_replug_serial, "probe": case_probe,
+                          "probe8": case_probe8}[case](o))
         print(f"vboard: {case} done in {time.time() - t:.1f} s", flush=True)
     print("\n| job | blocks | motion s | busy % per 1 ms (min / median / p99 / max) | servo start µs "
           "(min / median / p99 / max) | stack deepest / untouched B | blocks/s executed | frames/s accepted "

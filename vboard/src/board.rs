@@ -84,6 +84,25 @@ pub struct MachineSide {
     pub limits: u16,
     /// Amplifier fault forced per group.
     pub amp_fault: Vec<bool>,
+    /// The touch probe touches (its pin high: `docs/wiring.md`, PROBE).
+    pub probe: bool,
+    /// Probe changes to come: (time, touching).
+    pub probe_plan: Vec<(u64, bool)>,
+    /// Probe changes made.
+    pub probe_edges: Vec<ProbeEdge>,
+}
+
+/// A change of the touch probe at the pin.
+#[derive(Clone, Debug)]
+pub struct ProbeEdge {
+    /// When, units.
+    pub at: u64,
+    /// Touching after it.
+    pub touching: bool,
+    /// Time since the servo timer's update event of the last tick edge, units.
+    pub in_tick: u64,
+    /// Every joint's drive then, as [`MachineSide::joint_steps`].
+    pub steps: Vec<i64>,
 }
 
 /// Counters of the run.
@@ -221,6 +240,9 @@ pub struct Board {
     pub trace_rows: Option<Vec<(u64, Vec<i64>)>>,
     /// See `profile`: (busy per mille, period, histogram).
     pub worst_profile: Option<(u16, u64, std::collections::HashMap<u32, u64>)>,
+    /// The servo timer's update event of the last tick edge (the tick pended in its
+    /// interrupt), units.
+    pub tick_edge: u64,
 }
 
 impl MachineSide {
@@ -266,6 +288,9 @@ impl MachineSide {
             estop: false,
             limits: 0,
             amp_fault: vec![false; groups],
+            probe: false,
+            probe_plan: Vec::new(),
+            probe_edges: Vec::new(),
         })
     }
 
@@ -336,6 +361,7 @@ impl Board {
             masked_pending: false,
             profile: std::env::var_os("VBOARD_PROFILE").map(|_| (0, u64::MAX, Default::default())),
             worst_profile: None,
+            tick_edge: 0,
             trace_rows: None,
         };
         b.reset_peripherals(ResetCause::PowerOn);
@@ -563,8 +589,12 @@ impl Board {
                 "write of {size} bytes of {value:#x} at {addr:#010x} ({name}): not modelled"
             ));
         }
-        // The tick (UCPD1's line, pended by the servo interrupt) marks a trace row.
+        // The tick (UCPD1's line, pended by the servo interrupt) marks a trace row and
+        // the tick edge: the update event whose interrupt this is.
         if addr & !3 == 0xE000_E200 + 4 && value & (1 << (63 - 32)) != 0 {
+            if let Some(i) = self.timer_index(PLANT_CLOCK) {
+                self.tick_edge = self.tims[i].irq_at;
+            }
             let row = self.machine.joint_steps();
             if let Some(rows) = self.trace_rows.as_mut() {
                 rows.push((now, row));
@@ -726,6 +756,64 @@ impl Board {
             let f = self.machine.amp_fault.get(g).copied().unwrap_or(false);
             self.gpio[fault.port].drive(fault.pin, Some(!f));
         }
+        self.drive_probe(self.machine.probe, self.now);
+    }
+
+    /// The probe's pin at `touching` (high) from time `t`, and through its alternate
+    /// function the capture input of its timer.
+    fn drive_probe(&mut self, touching: bool, t: u64) {
+        let Some(w) = self.wiring.probe else {
+            return;
+        };
+        self.gpio[w.pin.port].drive(w.pin.pin, Some(touching));
+        if self.routed((w.pin, w.af)) {
+            if let Some(i) = self.timer_index(w.timer) {
+                self.tims[i].capture_input(w.input, touching, t);
+            }
+        }
+    }
+
+    /// When the servo timer's update event starts the first tick after `now`: a whole
+    /// number of ticks after the last tick edge (None before the first).
+    pub fn next_tick_edge(&self, now: u64) -> Option<u64> {
+        let period = crate::time::from_ms(1);
+        (self.tick_edge != 0)
+            .then(|| self.tick_edge + ((now - self.tick_edge) / period + 1) * period)
+    }
+
+    /// Makes the probe changes due by now, each at its own instant, and records them.
+    /// Called first in [`Board::process`], at the first block boundary at or after
+    /// the instant: a timer a register access of that block already took past it
+    /// captures with its counter there (within a block: under one 0.1 µs count of the
+    /// probe's capture).
+    fn probe_changes(&mut self) {
+        while let Some(k) = (0..self.machine.probe_plan.len())
+            .filter(|&k| self.machine.probe_plan[k].0 <= self.now)
+            .min_by_key(|&k| self.machine.probe_plan[k].0)
+        {
+            let (t, touching) = self.machine.probe_plan.remove(k);
+            if touching == self.machine.probe {
+                continue;
+            }
+            // Everything up to the change's instant first: the drives' steps then,
+            // and the capture counter (the servo timer's update events are counted
+            // by `process`).
+            for tim in &mut self.tims {
+                tim.advance(t);
+            }
+            self.hrtim.advance(t);
+            self.collect_pulses();
+            self.machine.probe = touching;
+            self.drive_probe(touching, t);
+            let period = crate::time::from_ms(1);
+            let edge = ProbeEdge {
+                at: t,
+                touching,
+                in_tick: t.saturating_sub(self.tick_edge) % period,
+                steps: self.machine.joint_steps(),
+            };
+            self.machine.probe_edges.push(edge);
+        }
     }
 
     /// One plant step of every servo channel (at the servo timer's update event):
@@ -856,6 +944,9 @@ impl Board {
         if let Some(e) = self.flash.next_event() {
             t = t.min(e);
         }
+        for &(e, _) in &self.machine.probe_plan {
+            t = t.min(e);
+        }
         t
     }
 
@@ -864,8 +955,13 @@ impl Board {
     pub fn process(&mut self) {
         let now = self.now;
         let plant = self.timer_index(PLANT_CLOCK);
+        let plant_before = plant.map(|i| self.tims[i].update_events);
+        self.probe_changes();
         for i in 0..self.tims.len() {
-            let before = self.tims[i].update_events;
+            let before = match plant_before {
+                Some(b) if Some(i) == plant => b,
+                _ => self.tims[i].update_events,
+            };
             self.tims[i].advance(now);
             if self.tims[i].irq {
                 self.tims[i].irq = false;

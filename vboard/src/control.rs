@@ -138,6 +138,28 @@ pub fn apply(cmd: &str, core: &mut Core, host: &mut Host) -> Result<Outcome, Str
             let g = index(w.next(), cmd, b.machine.amp_fault.len())?;
             b.machine.amp_fault[g] = on_off(w.next(), cmd)?;
         }
+        "probe" => {
+            let touching = on_off(w.next(), cmd)?;
+            let at = match w.next() {
+                None => now,
+                Some(us) => {
+                    let us: f64 = us
+                        .parse()
+                        .ok()
+                        .filter(|u: &f64| (0.0..1e6).contains(u))
+                        .ok_or_else(|| {
+                            format!(
+                                "\"{cmd}\": expected µs after the next tick edge, 0 to 1 000 000"
+                            )
+                        })?;
+                    let edge = b
+                        .next_tick_edge(now)
+                        .ok_or_else(|| format!("\"{cmd}\": no tick has run yet"))?;
+                    edge + (us * time::UNITS_PER_S as f64 / 1e6).round() as u64
+                }
+            };
+            b.machine.probe_plan.push((at, touching));
+        }
         "jam" => {
             let c = index(w.next(), cmd, b.machine.servos.len())?;
             b.machine.servos[c]

@@ -649,8 +649,23 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64), frames_per_ms: &[u32
                 .collect()
         })
         .unwrap_or_default();
+    let probe_edges: Vec<String> = b
+        .machine
+        .probe_edges
+        .iter()
+        .map(|e| {
+            format!(
+                "{{\"t_s\": {:.9}, \"touching\": {}, \"in_tick_us\": {:.3}, \"joint_steps\": {:?}}}",
+                time::to_s(e.at),
+                e.touching,
+                time::to_s(e.in_tick) * 1e6,
+                e.steps
+            )
+        })
+        .collect();
     println!(
         "{{\"virtual_s\": {virt:.6}, \"wall_s\": {:.3}, \"speed\": {:.3}, \"instructions\": {}, \
+         \"probe_edges\": [{}], \
          \"final_joint_steps\": {:?}, \"drive_violations\": {}, \"steps_while_disabled\": {}, \
          \"pulses_not_routed\": {}, \"exceptions\": {{{}}}, \
          \"busy_percent\": {}, \"busy_percent_streaming\": {}, \"busiest_periods_ms\": [{}], \
@@ -661,6 +676,7 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64), frames_per_ms: &[u32
         wall.as_secs_f64(),
         virt / wall.as_secs_f64().max(1e-9),
         b.instructions,
+        probe_edges.join(", "),
         b.machine.joint_steps(),
         b.machine.violations(),
         b.machine.steps_disabled,

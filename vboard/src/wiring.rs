@@ -58,6 +58,19 @@ pub enum CommandSource {
     HrtimPwm(Pin, u32),
 }
 
+/// The touch probe's input: a timer's capture input on a pin.
+#[derive(Clone, Copy, Debug)]
+pub struct ProbeInput {
+    /// The pin (high = touching).
+    pub pin: Pin,
+    /// The timer.
+    pub timer: &'static str,
+    /// Its capture input TIx, 0-based.
+    pub input: usize,
+    /// The pin's alternate function for it.
+    pub af: u32,
+}
+
 /// A wiring.
 pub struct Wiring {
     /// Name.
@@ -78,6 +91,8 @@ pub struct Wiring {
     pub limits: Vec<Pin>,
     /// The heartbeat LED, if wired.
     pub led: Option<Pin>,
+    /// The touch probe, if wired.
+    pub probe: Option<ProbeInput>,
 }
 
 /// The default wiring: seven stepper channels, four servo channels
@@ -86,9 +101,9 @@ pub fn mixed() -> Wiring {
     Wiring {
         name: "default (seven steppers, four servos)",
         steppers: vec![
-            (StepSource::Timer("TIM1", 0, p('A', 8), 6), p('C', 0)),
+            (StepSource::Timer("TIM1", 0, p('A', 8), 6), p('A', 0)),
             (StepSource::Timer("TIM8", 3, p('C', 9), 4), p('C', 1)),
-            (StepSource::Timer("TIM20", 2, p('C', 8), 6), p('C', 2)),
+            (StepSource::Timer("TIM20", 2, p('C', 8), 6), p('A', 1)),
             (StepSource::Timer("TIM15", 0, p('B', 14), 1), p('C', 3)),
             (StepSource::Timer("TIM16", 0, p('B', 4), 1), p('C', 4)),
             (StepSource::Timer("TIM17", 0, p('A', 7), 1), p('C', 5)),
@@ -97,7 +112,7 @@ pub fn mixed() -> Wiring {
         step_enable: Some(p('B', 15)),
         servos: vec![
             (
-                EncoderSink::Timer("TIM2", (p('A', 0), 1), (p('A', 1), 1)),
+                EncoderSink::Lptim((p('C', 0), 1), (p('C', 2), 1)),
                 CommandSource::Dac(0, 0, p('A', 4)),
             ),
             (
@@ -127,6 +142,12 @@ pub fn mixed() -> Wiring {
             p('B', 3),
         ],
         led: Some(p('A', 5)),
+        probe: Some(ProbeInput {
+            pin: p('A', 2),
+            timer: "TIM2",
+            input: 2,
+            af: 1,
+        }),
     }
 }
 
@@ -185,5 +206,11 @@ pub fn servo8() -> Wiring {
             p('C', 9),
         ],
         led: Some(p('C', 4)),
+        probe: Some(ProbeInput {
+            pin: p('A', 2),
+            timer: "TIM15",
+            input: 0,
+            af: 9,
+        }),
     }
 }

@@ -23,7 +23,8 @@
 //! ST-LINK virtual COM port (PA2/PA3), the HSE and LSE crystals (PF0/PF1, PC14/PC15),
 //! BOOT0 (PB8), the user button (PC13), the LED (PA5) and USB (PA11/PA12) are set
 //! aside; the default wiring uses all 38, the eight-servo wiring takes the LED's PA5 as
-//! a DAC output and leaves two spare. Both keep TIM7 for the 10 kHz servo period,
+//! a DAC output and leaves two spare. Both take PA2, the virtual COM port's transmit
+//! line, for the touch probe's timer capture (`crate::probe`). Both keep TIM7 for the 10 kHz servo period,
 //! which also paces the 1 kHz interpolation tick (run on the otherwise unused `UCPD1`
 //! vector), and TIM6 for the embassy time base; the IWDG watches both interrupts.
 //!
@@ -66,7 +67,7 @@ use embassy_stm32::peripherals::{self, PA11, PA12, USB};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::Timer as LowLevelTimer;
 use embassy_stm32::timer::qei::{self, Qei};
-use embassy_stm32::timer::{Ch1, Ch2, GeneralInstance4Channel, TimerPin};
+use embassy_stm32::timer::{Ch1, Ch2, CoreInstance, GeneralInstance4Channel, TimerPin};
 use embassy_stm32::usb::{self, Driver};
 use embassy_stm32::{bind_interrupts, Config, Peri};
 use pkmc::config::MAX_SERVOS;
@@ -76,16 +77,16 @@ use pkmc::drive::servo::{DAC_MID, SERVO_HZ};
 mod mixed;
 #[cfg(not(feature = "board-servo8"))]
 pub use mixed::{
-    builtin_machine, init, ServoIo, StepStats, Steppers, CHANNELS, RECEIVE_PACKETS_PER_MS,
-    SERVO_CHANNELS,
+    builtin_machine, init, ServoIo, StepStats, Steppers, CHANNELS, PROBE_CHANNEL, PROBE_TIMER,
+    RECEIVE_PACKETS_PER_MS, SERVO_CHANNELS,
 };
 
 #[cfg(feature = "board-servo8")]
 mod servo8;
 #[cfg(feature = "board-servo8")]
 pub use servo8::{
-    builtin_machine, init, ServoIo, StepStats, Steppers, CHANNELS, RECEIVE_PACKETS_PER_MS,
-    SERVO_CHANNELS,
+    builtin_machine, init, ServoIo, StepStats, Steppers, CHANNELS, PROBE_CHANNEL, PROBE_TIMER,
+    RECEIVE_PACKETS_PER_MS, SERVO_CHANNELS,
 };
 
 /// USB vendor ID: pid.codes, the open-source vendor ID.
@@ -109,6 +110,10 @@ pub const LIMIT_ACTIVE: Level = Level::High;
 /// Level of a servo-fault input while an amplifier reports a fault: open-collector
 /// fault outputs, wired together per line, pulled up on the board.
 pub const SERVO_FAULT_ACTIVE: Level = Level::Low;
+/// Level of the touch probe's input while the probe touches: a probe whose contacts
+/// are closed at rest (NC, to GND, with the pull-up), so that a broken wire reads as
+/// touching and a probing move toward a workpiece refuses to start.
+pub const PROBE_ACTIVE: Level = Level::High;
 /// Level that enables the servo amplifiers on a servo-enable line.
 pub const SERVO_ENABLE_ACTIVE: Level = Level::High;
 
@@ -300,7 +305,10 @@ pub struct ServoTimer {
 
 impl ServoTimer {
     /// Starts the servo period: from now on `TIM7_DAC` fires every 1 / [`SERVO_HZ`] s at
-    /// priority 0 and the tick can be pended on its vector at priority 1.
+    /// priority 0 and the tick can be pended on its vector at priority 1. The probe's
+    /// capture counter starts right before the servo timer, with two register writes
+    /// and no interrupt between them: it leads it by those few kernel cycles, under one
+    /// of its 17-cycle counts ([`crate::probe`]).
     pub fn start(self) {
         TICK_IRQ.set_priority(TICK_PRIORITY);
         interrupt::TIM7_DAC.set_priority(SERVO_PRIORITY);
@@ -311,7 +319,14 @@ impl ServoTimer {
             TICK_IRQ.enable();
             interrupt::TIM7_DAC.enable();
         }
-        SERVO_TIMER.cr1().modify(|w| w.set_cen(true));
+        critical_section::with(|_| {
+            let mut probe = PROBE_TIMER.cr1().read();
+            probe.set_cen(true);
+            let mut servo = SERVO_TIMER.cr1().read();
+            servo.set_cen(true);
+            PROBE_TIMER.cr1().write_value(probe);
+            SERVO_TIMER.cr1().write_value(servo);
+        });
     }
 }
 
@@ -336,6 +351,8 @@ pub struct Board {
     pub timer: ServoTimer,
     /// The flash, for the machine-configuration page ([`CONFIG_PAGE_OFFSET`]).
     pub flash: BoardFlash,
+    /// The touch probe's input and its capture.
+    pub probe: crate::probe::Probe,
 }
 
 /// Offset (from the start of flash) of the page that keeps the machine configuration:
@@ -533,6 +550,69 @@ fn encoder<T: GeneralInstance4Channel>(
     // firmware only reads its counter.
     crate::encoders::Counter::Timer(unsafe { pac::timer::TimGp16::from_ptr(T::regs()) })
 }
+
+/// The touch probe on `pin` (alternate function `af` of [`PROBE_TIMER`]'s channel
+/// [`PROBE_CHANNEL`], input with the pull-up: see [`PROBE_ACTIVE`]), its timer `tim`
+/// clocked and set up as the capture ([`crate::probe`]), stopped until
+/// [`ServoTimer::start`].
+fn probe_capture<T: CoreInstance>(
+    tim: Peri<'static, T>,
+    pin: Peri<'static, AnyPin>,
+    af: u8,
+) -> crate::probe::Probe {
+    let timer = LowLevelTimer::new(tim);
+    let clock = timer.get_clock_frequency();
+    // Dropping the driver would stop the timer's clock; the firmware owns it forever.
+    core::mem::forget(timer);
+    defmt::assert!(T::regs() == PROBE_TIMER.as_ptr());
+    let mut pin = Flex::new(pin);
+    pin.set_as_af_unchecked(af, AfType::input(Pull::Up));
+    crate::probe::Probe::new(clock.0, pin)
+}
+
+/// An encoder on LPTIM1 in encoder mode on IN1 and IN2 (alternate function `af` of
+/// both pins), counting both edges of both inputs (x4) between 0 and ARR = 0xFFFF (a
+/// 16-bit wrap), clocked by PCLK1 at 170 MHz (each input may toggle at up to a quarter
+/// of that). RM0440, LPTIM "Encoder mode": internal clock (CKSEL 0), prescaler 1,
+/// continuous mode; CFGR is written while the LPTIM is disabled, ARR only while it is
+/// enabled.
+fn lptim_encoder(
+    _lptim: Peri<'static, peripherals::LPTIM1>,
+    in1: Peri<'static, AnyPin>,
+    in2: Peri<'static, AnyPin>,
+    af: u8,
+) -> crate::encoders::Counter {
+    use embassy_stm32::pac::lptim::vals::{Ckpol, ClockSource, Presc};
+    embassy_stm32::rcc::enable_and_reset::<peripherals::LPTIM1>();
+    let l = pac::LPTIM1;
+    l.cfgr().write(|w| {
+        w.set_cksel(ClockSource::INTERNAL);
+        w.set_ckpol(Ckpol::BOTH);
+        w.set_presc(Presc::DIV1);
+        w.set_enc(true);
+    });
+    l.cr().write(|w| w.set_enable(true));
+    l.arr().write(|w| w.set_arr(u16::MAX));
+    let mut polls = 0;
+    while !l.isr().read().arrok() && polls < LPTIM_ARR_POLLS {
+        polls += 1;
+    }
+    l.icr().write(|w| w.set_arrokcf(true));
+    l.cr().write(|w| {
+        w.set_enable(true);
+        w.set_cntstrt(true);
+    });
+    for pin in [in1, in2] {
+        let mut pin = Flex::new(pin);
+        pin.set_as_af_unchecked(af, AfType::input(Pull::None));
+        core::mem::forget(pin);
+    }
+    crate::encoders::Counter::LowPower(l)
+}
+
+/// Polls of LPTIM_ISR.ARROK after writing LPTIM_ARR: the write crosses into the kernel
+/// clock domain within a few of its cycles (PCLK1 here).
+const LPTIM_ARR_POLLS: u32 = 10_000;
 
 /// Programs a basic timer to count at [`BASIC_TIMER_COUNT_HZ`] and overflow at
 /// `overflow_hz`, with its update interrupt enabled in the timer (not yet in the NVIC).

@@ -1,8 +1,8 @@
 //! Servo encoder positions: 16-bit hardware counters extended to `i64` counts.
 //!
 //! Each servo channel's counter runs in quadrature-encoder mode (x4, all edges) with a
-//! 16-bit wrap (set up by [`crate::board`]): a timer's encoder interface, or on the
-//! eight-servo wiring also LPTIM1's encoder mode. Every servo period (10 kHz)
+//! 16-bit wrap (set up by [`crate::board`]): a timer's encoder interface, or LPTIM1's
+//! encoder mode. Every servo period (10 kHz)
 //! [`Encoders::read`] extends each counter with [`pkmc::drive::servo::extend_counter`], so a
 //! position is exact as long as an encoder moves less than 32 767 counts per period
 //! (327 M counts/s). Positions start at the counters' power-up value (0); homing is the
@@ -20,8 +20,8 @@ use crate::board::SERVO_CHANNELS;
 pub enum Counter {
     /// A timer's encoder interface (TIM1-5, TIM8, TIM20): its CNT register.
     Timer(TimGp16),
-    /// LPTIM1 in encoder mode (eight-servo wiring).
-    #[cfg(feature = "board-servo8")]
+    /// LPTIM1 in encoder mode (servo channel 0 of the default wiring, 7 of the
+    /// eight-servo one).
     LowPower(embassy_stm32::pac::lptim::Lptim),
 }
 
@@ -35,7 +35,6 @@ impl Counter {
     fn read(&self) -> u16 {
         match self {
             Self::Timer(t) => t.cnt().read().cnt(),
-            #[cfg(feature = "board-servo8")]
             Self::LowPower(l) => {
                 let first = l.cnt().read().cnt();
                 let second = l.cnt().read().cnt();

@@ -51,6 +51,8 @@ mod board;
 #[cfg(target_os = "none")]
 mod encoders;
 #[cfg(target_os = "none")]
+mod probe;
+#[cfg(target_os = "none")]
 mod servo_period;
 #[cfg(target_os = "none")]
 mod shared;
@@ -115,6 +117,8 @@ mod firmware {
         switches: Switches,
         /// Switch filters and the outputs due at the start of the next tick.
         pacer: TickPacer,
+        /// The touch probe's input and capture.
+        probe: crate::probe::Probe,
         /// Servo periods counted at the last watchdog refresh.
         fed_at: u32,
         /// Ticks run since start-up.
@@ -145,6 +149,9 @@ mod firmware {
                 return;
             };
             io.steppers.apply(io.pacer.due());
+            let (probe, probe_edge_us) = io
+                .probe
+                .read(board::PROBE_ACTIVE == embassy_stm32::gpio::Level::High);
             let limits = io.switches.limits();
             let raw = RawInputs {
                 switches: SwitchStates {
@@ -153,9 +160,10 @@ mod firmware {
                     limit: limits,
                     home: limits,
                 },
+                probe,
+                probe_edge_us,
                 // No stepper fault lines and no index inputs on this board (no pin
-                // left), and no touch probe wired yet (its input reads clear); the
-                // amplifiers' fault line comes with the snapshot.
+                // left); the amplifiers' fault line comes with the snapshot.
                 ..RawInputs::default()
             };
             let ticked = CONTROLLER
@@ -292,6 +300,7 @@ mod firmware {
             steppers: board.steppers,
             switches: board.switches,
             pacer: TickPacer::new(),
+            probe: board.probe,
             fed_at: 0,
             ticks: 0,
         });

@@ -145,6 +145,7 @@ pub fn on_servo_period() {
         let period = s.pacer.period(&feedback, &faults);
         s.io.write(&period.out.dac, &period.out.enable);
         if period.tick {
+            crate::probe::tick_edge();
             board::pend_tick();
         }
     });

@@ -8,9 +8,11 @@
 //! register" (BSRR: set bits 0–15, reset bits 16–31, set wins; BRR resets).
 //!
 //! The board drives each input it has wired ([`Gpio::drive`]); an input nothing drives
-//! reads its pull (up: 1, down or none: 0). A pin in alternate-function mode reads the
-//! level of its function's output, which the board does not feed back: 0 (no firmware
-//! reads an alternate-function pin through IDR).
+//! reads its pull (up: 1, down or none: 0). A pin in alternate-function mode has its
+//! Schmitt trigger on, so IDR reads the pin ("Alternate function configuration"): the
+//! board's drive when the pin is an input of its function, else the level of the
+//! function's output, which the board does not feed back: 0 (no firmware reads an
+//! alternate-function output through IDR).
 
 use super::Unmodelled;
 
@@ -80,6 +82,7 @@ impl Gpio {
         let bit = 1 << pin;
         match self.mode(pin) {
             1 => self.odr & bit != 0,
+            2 if self.driven & bit != 0 => self.external & bit != 0,
             2 => self.af_level & bit != 0,
             3 => false,
             _ => {

@@ -30,6 +30,19 @@
 //!   edges, up or down by the other input's level (table "Counting direction versus
 //!   encoder signals"); the counter wraps between 0 and ARR.
 //! - TIMx_CNT's description: bit 31 is a copy of UIF when UIFREMAP = 1.
+//! - "Input capture mode" (general-purpose chapters; TIMx_CCMR1/2 in input capture
+//!   mode, TIMx_CCER, TIMx_SR, TIMx_CCRx): with CCxS = 01 the channel's input ICx is
+//!   its own TIx, with 10 the other input of its pair (TI2 for channel 1, TI1 for
+//!   channel 2, TI4 for 3, TI3 for 4); TIx passes the digital filter ICxF (N
+//!   consecutive equal samples at f_SAMPLING = f_CK_INT or f_DTS / 2…32, f_DTS from
+//!   CKD; table of ICxF); the edge detector takes the rising edge (CCxP = 0,
+//!   CCxNP = 0), the falling one (1, 0) or both (1, 1); ICxPSC captures every 1st,
+//!   2nd, 4th or 8th edge (its count reset while CCxE = 0). With CCxE = 1 a capture
+//!   copies the counter into CCRx and sets CCxIF; CCxOF is set if CCxIF was still
+//!   set. CCRx is read-only in input mode and reading it clears CCxIF. Modelled
+//!   without the input resynchroniser and the sampling clock's phase: a level passes
+//!   the filter once it has held for N sampling periods from the instant it changed.
+//!   The capture interrupts are not modelled (setting CCxIE stops the run).
 
 use crate::periph::Unmodelled;
 
@@ -144,6 +157,13 @@ pub struct Timer {
     pub update_events: u64,
     /// Encoder inputs (TI1, TI2) as last driven.
     enc: (bool, bool),
+    /// Capture inputs TI1–TI4 as driven, and after the filter (TIxF).
+    ti_raw: [bool; 4],
+    ti: [bool; 4],
+    /// A change of TIx not yet through its filter: the level and when it passes.
+    ti_pending: [Option<(bool, u64)>; 4],
+    /// Edges counted by each channel's input prescaler.
+    ic_events: [u32; 4],
 }
 
 impl Timer {
@@ -178,6 +198,10 @@ impl Timer {
             irq_at: 0,
             update_events: 0,
             enc: (false, false),
+            ti_raw: [false; 4],
+            ti: [false; 4],
+            ti_pending: [None; 4],
+            ic_events: [0; 4],
         }
     }
 
@@ -325,9 +349,121 @@ impl Timer {
         self.ccr_active = self.ccr;
     }
 
+    /// Runs the timer up to `now`: the input changes that pass their filters by then
+    /// (each captured at its own instant), then the counter.
+    pub fn advance(&mut self, now: u64) {
+        while let Some((n, level, t)) = self.next_filtered(now) {
+            self.ti_pending[n] = None;
+            self.advance_counter(t);
+            self.filtered_edge(n, level);
+        }
+        self.advance_counter(now);
+    }
+
+    /// The earliest pending input change that passes its filter by `now`.
+    fn next_filtered(&self, now: u64) -> Option<(usize, bool, u64)> {
+        (0..4)
+            .filter_map(|n| self.ti_pending[n].map(|(l, t)| (n, l, t)))
+            .filter(|&(_, _, t)| t <= now)
+            .min_by_key(|&(_, _, t)| t)
+    }
+
+    /// CCxS of channel `ch`: 0 output, 1 input TIx, 2 the pair's other input, 3 TRC.
+    fn ccs(&self, ch: usize) -> u32 {
+        (self.ccmr[ch / 2] >> ((ch % 2) * 8)) & 3
+    }
+
+    /// The delay of TIn's digital filter (ICnF of channel n in input mode; none in
+    /// output mode), time units: N sampling periods (table of ICxF).
+    fn filter_delay(&self, n: usize) -> u64 {
+        if n >= self.channels() || self.ccs(n) == 0 {
+            return 0;
+        }
+        let icf = (self.ccmr[n / 2] >> ((n % 2) * 8 + 4)) & 0xF;
+        let dts = self.clock_units << ((self.cr1 >> 8) & 3).min(2);
+        let (period, samples) = match icf {
+            0 => (0, 0),
+            1 => (self.clock_units, 2),
+            2 => (self.clock_units, 4),
+            3 => (self.clock_units, 8),
+            4 => (dts * 2, 6),
+            5 => (dts * 2, 8),
+            6 => (dts * 4, 6),
+            7 => (dts * 4, 8),
+            8 => (dts * 8, 6),
+            9 => (dts * 8, 8),
+            10 => (dts * 16, 5),
+            11 => (dts * 16, 6),
+            12 => (dts * 16, 8),
+            13 => (dts * 32, 5),
+            14 => (dts * 32, 6),
+            _ => (dts * 32, 8),
+        };
+        period * samples
+    }
+
+    /// Drives capture input TIn (0-based) to `level` at time `t`: a change starts
+    /// through TIn's filter; a change back before it passed is a pulse the filter
+    /// removes.
+    pub fn capture_input(&mut self, n: usize, level: bool, t: u64) {
+        self.advance(t);
+        if self.ti_raw[n] == level {
+            return;
+        }
+        self.ti_raw[n] = level;
+        if self.ti_pending[n].take().is_some() {
+            return;
+        }
+        self.ti_pending[n] = Some((level, t + self.filter_delay(n)));
+        self.advance(t);
+    }
+
+    /// TIn's filtered level changed to `level` (the counter is at that instant): every
+    /// enabled input channel on TIn whose edge detector takes the edge captures.
+    fn filtered_edge(&mut self, n: usize, level: bool) {
+        self.ti[n] = level;
+        for ch in 0..self.channels().min(4) {
+            let source = match self.ccs(ch) {
+                1 => ch,
+                2 => ch ^ 1,
+                _ => continue,
+            };
+            if source != n || self.ccer & (1 << (4 * ch)) == 0 {
+                continue;
+            }
+            let p = self.ccer & (1 << (4 * ch + 1)) != 0;
+            let np = self.ccer & (1 << (4 * ch + 3)) != 0;
+            let taken = match (p, np) {
+                (false, false) => level,
+                (true, false) => !level,
+                (true, true) => true,
+                (false, true) => false, // reserved
+            };
+            if !taken {
+                continue;
+            }
+            let psc = (self.ccmr[ch / 2] >> ((ch % 2) * 8 + 2)) & 3;
+            self.ic_events[ch] += 1;
+            if self.ic_events[ch] < 1 << psc {
+                continue;
+            }
+            self.ic_events[ch] = 0;
+            let ccif = 1 << (1 + ch);
+            if self.sr & ccif != 0 {
+                self.sr |= 1 << (9 + ch); // CCxOF
+            }
+            self.sr |= ccif;
+            self.ccr[ch] = self.cnt_at;
+            self.ccr_active[ch] = self.cnt_at;
+        }
+    }
+
     /// Runs the counter up to `now`: overflows, update events, one-pulse stops and the
     /// channels' output edges.
-    pub fn advance(&mut self, now: u64) {
+    fn advance_counter(&mut self, now: u64) {
+        if now < self.since {
+            return; // already past (an input change applied late: see `capture_input`)
+        }
         if !self.running() || self.cr1 & (CR1_DIR | CR1_CMS) != 0 {
             if self.since < now {
                 self.since = now;
@@ -397,7 +533,13 @@ impl Timer {
             reg::PSC => self.psc,
             reg::ARR => self.arr,
             reg::RCR if self.has_rcr() => self.rcr,
-            o @ reg::CCR1..=reg::CCR4 => self.ccr[((o - reg::CCR1) / 4) as usize],
+            o @ reg::CCR1..=reg::CCR4 => {
+                let ch = ((o - reg::CCR1) / 4) as usize;
+                if ch < self.channels() && self.ccs(ch) != 0 {
+                    self.sr &= !(1 << (1 + ch)); // reading CCRx clears CCxIF
+                }
+                self.ccr[ch]
+            }
             reg::BDTR if self.has_rcr() => self.bdtr,
             reg::CCR5 | reg::CCR6 if self.kind == Kind::Advanced => {
                 self.ccr[4 + ((offset - reg::CCR5) / 4) as usize]
@@ -444,7 +586,12 @@ impl Timer {
             }
             reg::CR2 => self.cr2 = value,
             reg::SMCR => self.smcr = value,
-            reg::DIER => self.dier = value,
+            reg::DIER => {
+                if value & 0x1E != 0 {
+                    return Err(Unmodelled); // capture/compare interrupts: unused
+                }
+                self.dier = value
+            }
             reg::SR => self.sr &= value, // rc_w0
             reg::EGR => {
                 if value & 1 != 0 {
@@ -469,6 +616,11 @@ impl Timer {
             reg::CCMR2 => self.ccmr[1] = value,
             reg::CCMR3 if self.kind == Kind::Advanced => self.ccmr[2] = value,
             reg::CCER => {
+                for ch in 0..4 {
+                    if value & (1 << (4 * ch)) == 0 {
+                        self.ic_events[ch] = 0; // ICxPSC's count reset while CCxE = 0
+                    }
+                }
                 self.ccer = value;
                 self.freeze_outputs(now);
             }
@@ -512,6 +664,9 @@ impl Timer {
     }
 
     fn write_ccr(&mut self, ch: usize, value: u32) {
+        if ch < 4 && ch < self.channels() && self.ccs(ch) != 0 {
+            return; // read-only in input mode
+        }
         self.ccr[ch] = value & self.mask();
         let preload = self.ccmr[ch / 2] & (1 << ((ch % 2) * 8 + 3)) != 0;
         if !preload {
@@ -633,6 +788,56 @@ mod tests {
             }
         }
         assert_eq!(t.read(reg::CNT, 0).ok(), Some(0xFFFC));
+    }
+
+    /// TIM2 counting at 1 unit per count (PSC 0), CH3 capturing both edges of TI3
+    /// through the filter `icf`.
+    fn capture_timer(icf: u32) -> Timer {
+        let mut t = Timer::new("TIM2", Kind::General { wide: true }, 1);
+        t.write(reg::ARR, 59_999, 0).ok();
+        t.write(reg::CCMR2, 0b01 | icf << 4, 0).ok();
+        t.write(reg::CCER, 0b1011 << 8, 0).ok();
+        t.write(reg::CR1, CR1_CEN, 0).ok();
+        t
+    }
+
+    #[test]
+    fn input_capture_latches_the_counter_at_each_edge_through_the_filter() {
+        // ICxF = 0011: eight samples at f_CK_INT, 8 units here.
+        let mut t = capture_timer(0b0011);
+        t.capture_input(2, true, 1000);
+        assert_eq!(
+            t.read(reg::SR, 1005).ok(),
+            Some(0),
+            "not through the filter yet"
+        );
+        assert_eq!(t.read(reg::SR, 1008).ok(), Some(1 << 3));
+        // Reading CCR3 gives the count at the filtered edge and clears CC3IF.
+        assert_eq!(t.read(reg::CCR1 + 8, 2000).ok(), Some(1008));
+        assert_eq!(t.read(reg::SR, 2000).ok(), Some(0));
+        // Two edges before a read: the last one stays, with the overcapture flag.
+        t.capture_input(2, false, 3000);
+        t.capture_input(2, true, 3500);
+        assert_eq!(t.read(reg::SR, 4000).ok(), Some(1 << 3 | 1 << 11));
+        assert_eq!(t.read(reg::CCR1 + 8, 4000).ok(), Some(3508));
+        // A pulse shorter than the filter is no edge.
+        t.capture_input(2, false, 5000);
+        t.capture_input(2, true, 5005);
+        assert_eq!(t.read(reg::SR, 6000).ok(), Some(1 << 11));
+    }
+
+    #[test]
+    fn input_capture_takes_only_the_selected_edge_and_wraps_with_arr() {
+        let mut t = capture_timer(0);
+        // Rising edges only (CC3P = CC3NP = 0).
+        t.write(reg::CCER, 1 << 8, 0).ok();
+        t.capture_input(2, true, 70_000);
+        t.capture_input(2, false, 70_100);
+        assert_eq!(t.read(reg::CCR1 + 8, 70_200).ok(), Some(10_000));
+        assert_eq!(t.read(reg::SR, 70_200).ok(), Some(1 << 0));
+        // CCR3 is read-only in input mode.
+        t.write(reg::CCR1 + 8, 5, 70_300).ok();
+        assert_eq!(t.read(reg::CCR1 + 8, 70_300).ok(), Some(10_000));
     }
 
     #[test]

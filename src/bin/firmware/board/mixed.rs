@@ -1,20 +1,22 @@
 //! The default wiring: seven stepper channels and four servo channels (`docs/wiring.md`,
-//! "Stepper channels" and "Servo channels").
+//! "Stepper channels", "Servo channels" and "Touch probe").
 //!
 //! Timer use: TIM1, TIM8, TIM20, TIM15, TIM16, TIM17 the STEP trains of stepper
-//! channels 0-5; HRTIM1 timer A the STEP train of stepper channel 6; TIM2, TIM3, TIM4,
-//! TIM5 the encoders of servo channels 0-3, whose commands are DAC1 ch1 (PA4), DAC2
-//! ch1 (PA6), and DAC3 ch2 and DAC4 ch1 through OPAMP3 (PB1) and OPAMP4 (PB12) as
-//! followers. One SERVO_EN line enables every amplifier and one SERVO_FAULT line is
-//! every amplifier's fault. Servo channels 4-7 of the core are not wired
-//! ([`CHANNELS`]): a machine using one is refused. One pin is not typed by its
-//! function: PA9 (HRTIM1_CHA2, see [`super::HRTIM1_CHA2_AF`]).
+//! channels 0-5; HRTIM1 timer A the STEP train of stepper channel 6; LPTIM1, TIM3,
+//! TIM4, TIM5 the encoders of servo channels 0-3, whose commands are DAC1 ch1 (PA4),
+//! DAC2 ch1 (PA6), and DAC3 ch2 and DAC4 ch1 through OPAMP3 (PB1) and OPAMP4 (PB12) as
+//! followers; TIM2 the touch probe's input capture on PA2 (`crate::probe`). One
+//! SERVO_EN line enables every amplifier and one SERVO_FAULT line is every
+//! amplifier's fault. Servo channels 4-7 of the core are not wired ([`CHANNELS`]): a
+//! machine using one is refused. Pins not typed by their function: PA9
+//! (HRTIM1_CHA2, see [`super::HRTIM1_CHA2_AF`]), PC0/PC2 (LPTIM1_IN1/IN2) and PA2
+//! (TIM2_CH3, whose AF number is checked against embassy's typed pin).
 
 use embassy_stm32::gpio::{AnyPin, Flex, Level, Output, OutputType, Speed};
 use embassy_stm32::pac;
 use embassy_stm32::pac::dac::vals::Mode as DacMode;
 use embassy_stm32::peripherals::{
-    DAC1, DAC2, DAC3, DAC4, HRTIM1, OPAMP3, OPAMP4, PA4, PA6, PA9, PB1, PB12, RCC,
+    DAC1, DAC2, DAC3, DAC4, HRTIM1, OPAMP3, OPAMP4, PA4, PA6, PA9, PB1, PB12, RCC, TIM2,
 };
 use embassy_stm32::timer::simple_pwm::PwmPin;
 use embassy_stm32::timer::{AdvancedInstance4Channel, Ch1, Ch3, Ch4, TimerChannel, TimerPin};
@@ -22,8 +24,8 @@ use embassy_stm32::{Peri, Peripherals};
 use pkmc::config::{BoardChannels, MachineConfig, BOARD_STEPS_PER_TICK, MAX_SERVOS, MAX_STEPPERS};
 
 use super::{
-    analog, claim_timer, clock_analog, encoder, groups_in_range, hrtim_cha2_pin, opposite,
-    start_common, start_dacs, start_followers, AmpLines, Board, Switches,
+    analog, claim_timer, clock_analog, encoder, groups_in_range, hrtim_cha2_pin, lptim_encoder,
+    opposite, probe_capture, start_common, start_dacs, start_followers, AmpLines, Board, Switches,
 };
 use crate::encoders::Encoders;
 use crate::steppers::{periods, HrStepTimer, StepChannel, StepOutput, StepTimer};
@@ -47,6 +49,21 @@ const _: () = assert!(groups_in_range(&GROUP_OF, 1));
 /// H-4 job near 45 % with its motion time unchanged; two slowed it (the executor takes
 /// up to a block a tick, a thousand a second).
 pub const RECEIVE_PACKETS_PER_MS: u32 = 4;
+
+/// The touch probe's capture timer: TIM2, freed by servo channel 0's encoder moving to
+/// LPTIM1; channel 3 ([`PROBE_CHANNEL`]) on PA2 ([`TIM2_CH3_AF`]).
+// SAFETY: the address is TIM2's, and only `crate::probe` touches it; its 32-bit
+// counter is used on 16 bits.
+pub const PROBE_TIMER: pac::timer::TimGp16 =
+    unsafe { pac::timer::TimGp16::from_ptr(pac::TIM2.as_ptr()) };
+/// The probe's capture channel of [`PROBE_TIMER`], 0-based: CH3.
+pub const PROBE_CHANNEL: usize = 2;
+/// Alternate function of TIM2_CH3 on PA2 (stm32-metapac 21, STM32G474RE; embassy's
+/// `TimerPin<TIM2, Ch3>` for PA2 says the same, see below).
+const TIM2_CH3_AF: u8 = 1;
+/// Alternate function of LPTIM1_IN1 on PC0 and of LPTIM1_IN2 on PC2 (stm32-metapac 21,
+/// STM32G474RE); embassy-stm32 has no pin traits for LPTIM inputs.
+const LPTIM1_IN_AF: u8 = 1;
 
 /// Level that enables the stepper drives on STEP_EN (buffered to every drive's ENABLE).
 pub const STEPPER_ENABLE_ACTIVE: Level = Level::High;
@@ -127,7 +144,7 @@ pub fn init(p: Peripherals) -> Board {
         // 0: TIM1_CH1 on PA8 (AF6).
         StepChannel::new(
             step_timer::<_, Ch1>(p.TIM1, p.PA8, steps_per_tick!(0, pac::TIM1.rcr())),
-            dir(p.PC0.into()),
+            dir(p.PA0.into()),
         ),
         // 1: TIM8_CH4 on PC9 (AF4).
         StepChannel::new(
@@ -137,7 +154,7 @@ pub fn init(p: Peripherals) -> Board {
         // 2: TIM20_CH3 on PC8 (AF6).
         StepChannel::new(
             step_timer::<_, Ch3>(p.TIM20, p.PC8, steps_per_tick!(2, pac::TIM20.rcr())),
-            dir(p.PC2.into()),
+            dir(p.PA1.into()),
         ),
         // 3: TIM15_CH1 on PB14 (AF1).
         StepChannel::new(
@@ -161,7 +178,7 @@ pub fn init(p: Peripherals) -> Board {
     let steppers = Steppers::new(channels, enable, STEPPER_ENABLE_ACTIVE);
 
     let encoders = Encoders::new([
-        encoder(p.TIM2, p.PA0, p.PA1),  // servo 0: TIM2 CH1/CH2, AF1
+        lptim_encoder(p.LPTIM1, p.PC0.into(), p.PC2.into(), LPTIM1_IN_AF), // servo 0
         encoder(p.TIM3, p.PC6, p.PC7),  // servo 1: TIM3 CH1/CH2, AF2
         encoder(p.TIM4, p.PB6, p.PB7),  // servo 2: TIM4 CH1/CH2, AF2
         encoder(p.TIM5, p.PB2, p.PC12), // servo 3: TIM5 CH1 AF2 / CH2 AF1
@@ -199,7 +216,13 @@ pub fn init(p: Peripherals) -> Board {
         ],
     );
 
+    // PA2 must be a TIM2_CH3 pin for this to build (embassy's typed pins); a debug
+    // build also compares the AF numbers.
+    defmt::debug_assert!(TimerPin::<TIM2, Ch3>::af_num(&*p.PA2) == TIM2_CH3_AF);
+    let probe = probe_capture(p.TIM2, p.PA2.into(), TIM2_CH3_AF);
+
     Board {
+        probe,
         flash: super::flash(p.FLASH),
         usb,
         led: Output::new(p.PA5, Level::Low, Speed::Low),

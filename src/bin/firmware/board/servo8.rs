@@ -24,20 +24,21 @@
 //! COMP4) and LPTIM1 (PB5/PB7). All count x4 with a 16-bit wrap.
 //!
 //! Amplifier lines: one enable and one fault line for the legs, one of each for the
-//! table ([`GROUP_OF`]). Pins without embassy pin traits in this build: PA9
-//! (HRTIM1_CHA2, AF13) and PB5/PB7 (LPTIM1_IN1/IN2, AF11); their AF numbers are the
-//! constants below, checked against stm32-metapac 21.
+//! table ([`GROUP_OF`]). The touch probe: PA2, TIM15 CH1's input capture
+//! (`crate::probe`; TIM15 is otherwise unused here). Pins without embassy pin traits
+//! in this build: PA9 (HRTIM1_CHA2, AF13), PB5/PB7 (LPTIM1_IN1/IN2, AF11) and PA2
+//! (TIM15_CH1, AF9); their AF numbers are the constants below, checked against
+//! stm32-metapac 21.
 
 use embassy_stm32::comp::{self, Comp, Hysteresis, InvertingInput};
 use embassy_stm32::gpio::{AfType, Flex, Level, Output, Pull, Speed};
 use embassy_stm32::interrupt::{self, InterruptExt};
 use embassy_stm32::pac;
 use embassy_stm32::pac::dac::vals::Mode as DacMode;
-use embassy_stm32::pac::lptim::vals::{Ckpol, ClockSource, Presc};
 use embassy_stm32::pac::timer::vals::{CcmrInputCcs, Sms};
 use embassy_stm32::peripherals::{
-    COMP4, DAC1, DAC2, DAC3, DAC4, HRTIM1, LPTIM1, OPAMP3, OPAMP4, OPAMP5, OPAMP6, PA4, PA5, PA6,
-    PA8, PA9, PB1, PB11, PB12, PB5, PB7, RCC, TIM4,
+    COMP4, DAC1, DAC2, DAC3, DAC4, HRTIM1, OPAMP3, OPAMP4, OPAMP5, OPAMP6, PA4, PA5, PA6, PA8, PA9,
+    PB1, PB11, PB12, RCC, TIM4,
 };
 use embassy_stm32::timer::{Ch1, TimerPin};
 use embassy_stm32::{bind_interrupts, Peri, Peripherals};
@@ -46,8 +47,8 @@ use pkmc::controller::Outputs;
 use pkmc::drive::servo::DAC_MID;
 
 use super::{
-    analog, claim_timer, clock_analog, encoder, groups_in_range, hrtim_cha2_pin, start_common,
-    start_dacs, start_followers, AmpLines, Board, Switches,
+    analog, claim_timer, clock_analog, encoder, groups_in_range, hrtim_cha2_pin, lptim_encoder,
+    probe_capture, start_common, start_dacs, start_followers, AmpLines, Board, Switches,
 };
 use crate::encoders::{Counter, Encoders};
 
@@ -72,15 +73,24 @@ const _: () = assert!(groups_in_range(&GROUP_OF, 2));
 /// 130 dense blocks a second on this machine, far below what two packets carry.
 pub const RECEIVE_PACKETS_PER_MS: u32 = 2;
 
+/// The touch probe's capture timer: TIM15, which this wiring does not otherwise use,
+/// channel 1 ([`PROBE_CHANNEL`]) on PA2 ([`TIM15_CH1_AF`]). TIM15's registers up to
+/// CCR2 have the general-purpose 16-bit layout (RM0440, TIM15 register map).
+// SAFETY: the address is TIM15's, and only `crate::probe` touches it.
+pub const PROBE_TIMER: pac::timer::TimGp16 =
+    unsafe { pac::timer::TimGp16::from_ptr(pac::TIM15.as_ptr()) };
+/// The probe's capture channel of [`PROBE_TIMER`], 0-based: CH1.
+pub const PROBE_CHANNEL: usize = 0;
+/// Alternate function of TIM15_CH1 on PA2 (stm32-metapac 21, STM32G474RE); embassy's
+/// timer pin traits cover four-channel timers only.
+const TIM15_CH1_AF: u8 = 9;
+
 /// Alternate function of LPTIM1_IN1 on PB5 and of LPTIM1_IN2 on PB7 (stm32-metapac 21,
 /// STM32G474RE); embassy-stm32 has no pin traits for LPTIM inputs.
 const LPTIM1_IN_AF: u8 = 11;
 /// TIM4_TISEL.TI2SEL value that takes TI2 from COMP4's output (RM0440, TIMx_TISEL of
 /// TIM2/3/4/5: tim_ti2_in4; ST's STM32G4 HAL `TIM_TIM4_TI2_COMP4`).
 const TIM4_TI2_FROM_COMP4: u8 = 4;
-/// Polls of LPTIM_ISR.ARROK after writing LPTIM_ARR: the write crosses into the kernel
-/// clock domain within a few of its cycles (PCLK1 here).
-const LPTIM_ARR_POLLS: u32 = 10_000;
 
 bind_interrupts!(
     /// COMP4's interrupt, which embassy's comparator driver wants bound for its
@@ -184,7 +194,7 @@ pub fn init(p: Peripherals) -> Board {
         encoder(p.TIM8, p.PC6, p.PC7),  // leg 5: TIM8 CH1/CH2, AF4
         encoder(p.TIM20, p.PB2, p.PC2), // leg 6: TIM20 CH1 AF3 / CH2 AF6
         comparator_encoder(p.TIM4, p.PB6, p.COMP4, p.PB0), // table X
-        lptim_encoder(p.LPTIM1, p.PB5, p.PB7), // table Y
+        lptim_encoder(p.LPTIM1, p.PB5.into(), p.PB7.into(), LPTIM1_IN_AF), // table Y
     ]);
     // Amplifiers disabled before their command outputs come up (at zero command):
     // enables PB15 (legs) and PB13 (table), faults PB14 (legs) and PC3 (table).
@@ -228,6 +238,7 @@ pub fn init(p: Peripherals) -> Board {
     );
     // PC5 is spare: left in its reset state (analog).
     let _ = p.PC5;
+    let probe = probe_capture(p.TIM15, p.PA2.into(), TIM15_CH1_AF);
 
     Board {
         flash: super::flash(p.FLASH),
@@ -240,6 +251,7 @@ pub fn init(p: Peripherals) -> Board {
         switches,
         servo,
         timer,
+        probe,
     }
 }
 
@@ -336,43 +348,6 @@ fn comparator_encoder(
     r.arr().write(|w| w.set_arr(u16::MAX));
     r.cr1().modify(|w| w.set_cen(true));
     Counter::Timer(r)
-}
-
-/// Table Y's encoder: LPTIM1 in encoder mode on IN1 (PB5) and IN2 (PB7), counting both
-/// edges of both inputs (x4) between 0 and ARR = 0xFFFF (a 16-bit wrap), clocked by
-/// PCLK1 at 170 MHz (each input may toggle at up to a quarter of that). RM0440, LPTIM
-/// "Encoder mode": internal clock (CKSEL 0), prescaler 1, continuous mode; CFGR is
-/// written while the LPTIM is disabled, ARR only while it is enabled.
-fn lptim_encoder(
-    _lptim: Peri<'static, LPTIM1>,
-    in1: Peri<'static, PB5>,
-    in2: Peri<'static, PB7>,
-) -> Counter {
-    embassy_stm32::rcc::enable_and_reset::<LPTIM1>();
-    let l = pac::LPTIM1;
-    l.cfgr().write(|w| {
-        w.set_cksel(ClockSource::INTERNAL);
-        w.set_ckpol(Ckpol::BOTH);
-        w.set_presc(Presc::DIV1);
-        w.set_enc(true);
-    });
-    l.cr().write(|w| w.set_enable(true));
-    l.arr().write(|w| w.set_arr(u16::MAX));
-    let mut polls = 0;
-    while !l.isr().read().arrok() && polls < LPTIM_ARR_POLLS {
-        polls += 1;
-    }
-    l.icr().write(|w| w.set_arrokcf(true));
-    l.cr().write(|w| {
-        w.set_enable(true);
-        w.set_cntstrt(true);
-    });
-    for pin in [Flex::new(in1), Flex::new(in2)] {
-        let mut pin = pin;
-        pin.set_as_af_unchecked(LPTIM1_IN_AF, AfType::input(Pull::None));
-        core::mem::forget(pin);
-    }
-    Counter::LowPower(l)
 }
 
 /// HRTIM1 timer A's prescaler ratio for the PWM: CKPSC 2, fHRTIM × 8 = 1.36 GHz, one
