@@ -94,7 +94,7 @@ impl Interp<'_> {
                 col,
                 ErrorKind::Unsupported,
                 crate::gcode::unsupported(&format!(
-                    "{name} probing here (it runs in a program run by nc-send)"
+                    "{name} probing here (probing runs in programs run by nc-send or the station, in the station's MDI and through the Grbl bridge)"
                 )),
             );
         }
