@@ -344,12 +344,15 @@ pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
     }
     if let Some((centre, radius)) = p.probe {
         use pkmc_host::sim::probe::{ProbeModel, Target};
-        sim.set_probe(Some(ProbeModel {
-            targets: vec![Target::Sphere { centre, radius }],
-            noise_mm: 0.0005,
-            delay_us: 20.0,
-            seed: 1,
-        }));
+        sim.set_probe(
+            Some(ProbeModel {
+                targets: vec![Target::Sphere { centre, radius }],
+                noise_mm: 0.0005,
+                delay_us: 20.0,
+                seed: 1,
+            }),
+            None,
+        )?;
     }
     let io = Recorder::new(sim);
     let mut link =
@@ -368,8 +371,12 @@ pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
                 tools: &Default::default(),
                 compress: Some(&settings),
             };
-            let (end, found, n) = pkmc_host::job::probing::run_on(&mut link, &program, &mut hooks)
-                .map_err(|e| e.message)?;
+            let (end, found, n) = pkmc_host::job::probing::run_on(
+                &mut link,
+                &program,
+                &mut pkmc_host::job::probing::Plain(&mut hooks),
+            )
+            .map_err(|e| e.message)?;
             if found.len() != 5 || found.iter().any(|r| !r.contact) {
                 return Err(format!(
                     "{}: the probe did not touch 5 times: {found:?}",
