@@ -34,6 +34,7 @@
 //! keeps them within the tolerance as well). The fit tolerance is
 //! [`Settings::fit_share`] of `P`.
 
+pub mod blend;
 mod fit;
 pub mod space;
 #[cfg(test)]
@@ -77,6 +78,12 @@ pub struct Settings {
     pub accel: f64,
     /// The machine's smallest X Y Z speed, nm/s (0: unknown).
     pub max_speed: f64,
+    /// Corners between feed moves within `G64 P` are rounded by blends ([`blend`]).
+    pub blend: bool,
+    /// Turns of less than this, degrees, are not blended.
+    pub blend_min_deg: f64,
+    /// A blend trims at most this share of either block's length.
+    pub blend_share: f64,
 }
 
 impl Default for Settings {
@@ -93,6 +100,9 @@ impl Default for Settings {
             free_gain: 1.2,
             accel: 0.0,
             max_speed: 0.0,
+            blend: true,
+            blend_min_deg: 0.5,
+            blend_share: 0.45,
         }
     }
 }
@@ -152,8 +162,23 @@ fn mergeable(b: &Block, from: &[i64; AXES], s: &Settings) -> bool {
     xyz >= 1.0 && norm(&d) <= s.max_chord_nm
 }
 
-/// Compresses `blocks` (starting at `start`) with settings `s`.
+/// Compresses `blocks` (starting at `start`) with settings `s`, corners blended
+/// ([`blend`]).
 pub fn compress(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compressed {
+    let runs = compress_runs(blocks, start, s);
+    if !s.blend {
+        return runs;
+    }
+    let mut out = Compressed::default();
+    let mut b = blend::Blender::new(s, start);
+    b.push(blocks, &runs, 0, &mut out);
+    b.finish(&mut out);
+    out
+}
+
+/// Compresses `blocks` (starting at `start`) with settings `s`: runs into curves,
+/// corners not blended.
+pub fn compress_runs(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compressed {
     let mut out = Compressed::default();
     let mut pose = start;
     let mut i = 0;
