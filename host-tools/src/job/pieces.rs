@@ -4,8 +4,10 @@
 //! UTF-8, the size limit), run through the front end with its state carried
 //! ([`gcode::flow::chunked`]), made into blocks ([`gcode::blocks::Converter`]) and
 //! merged into curves with the last run of short moves held over to the next piece
-//! ([`gcode::compress::last_run_start`]), so the blocks are those of the whole
-//! program compiled at once. [`check_file`] is the first pass over a file: every line
+//! ([`gcode::compress::last_run_start`]) and the last blendable block held over for
+//! the corner's blend ([`gcode::compress::blend::Blender`]), so the blocks are those
+//! of the whole program compiled at once (a piece's `programmed` may then hold the
+//! programmed moves of a block handed out with the next piece). [`check_file`] is the first pass over a file: every line
 //! and the pre-flight of every block, keeping only counts and findings.
 //!
 //! A program with O-words (subroutines, branches, loops) runs only as a whole: it is

@@ -1,7 +1,7 @@
 //! The chord compressor: runs of short `G1` moves (CAM output for surfaces: thousands
 //! of chords of a fraction of a millimetre) become cubic spline blocks
 //! ([`Motion::Cubic`]) that stay within the program's `G64 P` tolerance of the
-//! programmed polyline and pass through its real corners.
+//! programmed polyline; its real corners are rounded within the tolerance too.
 //!
 //! **Which moves.** Consecutive feed moves (`G1`) with the same feed and the same
 //! finite blending tolerance (`G64 P`; never in `G61`, nor in `G64` without P, which
@@ -29,6 +29,11 @@
 //! acceleration, [`Settings::accel`]): dense chords of a gentle curve, which already
 //! run fast, are merged into curves of a few degrees each; coarse chords, which stop
 //! at every vertex, into long ones.
+//!
+//! **Corners.** Once the runs are curves, each corner between two feed moves (lines or
+//! curves) within `G64 P` that move X Y Z only is rounded by a cubic blend, tangent
+//! to both, within `P` of the programmed polyline ([`blend`]; [`compress_runs`] is the
+//! compressor without it).
 //!
 //! Rotary axes take part in the fit with 1° counted as 1 mm ([`space`]; a curve then
 //! keeps them within the tolerance as well). The fit tolerance is
