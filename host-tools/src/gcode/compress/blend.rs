@@ -367,6 +367,53 @@ fn to_polyline(q: &V, pts: &[V]) -> (f64, usize) {
     best
 }
 
+/// |dP/du| of `g` at `at` over its largest between `lo` and `hi`: its |dP/ds| there
+/// as the controller runs the part between them.
+fn speed_ratio(g: &Geo, lo: f64, hi: f64, at: f64) -> f64 {
+    let here = norm(&g.deriv(at));
+    let most = (0..=32)
+        .map(|k| norm(&g.deriv(lo + (hi - lo) * k as f64 / 32.0)))
+        .fold(here, f64::max);
+    if most > 0.0 {
+        here / most
+    } else {
+        1.0
+    }
+}
+
+/// The blend from `pa` (leaving along `da`) to `pb` (arriving along `db`) whose
+/// |dP/ds| at its ends is `ra` and `rb` (those of the blocks it joins, so the speed
+/// does not jump there): inner control points at `ra`·k and `rb`·k along the
+/// tangents, with k such that the largest |dP/du| is 3k. For two lines (`ra` = `rb` =
+/// 1) the ends and the middle are equally fast.
+fn blend_curve(pa: &V, pb: &V, da: &V, db: &V, ra: f64, rb: f64, chord: f64) -> Geo {
+    let curve = |k: f64| {
+        Geo::Cubic([
+            *pa,
+            core::array::from_fn(|i| pa[i] + ra * k * da[i]),
+            core::array::from_fn(|i| pb[i] - rb * k * db[i]),
+            *pb,
+        ])
+    };
+    let excess = |k: f64| {
+        let g = curve(k);
+        (0..=32)
+            .map(|j| norm(&g.deriv(j as f64 / 32.0)))
+            .fold(0.0, f64::max)
+            - 3.0 * k
+    };
+    let (mut lo, mut hi) = (0.0, chord);
+    for _ in 0..40 {
+        let mid = (lo + hi) / 2.0;
+        if excess(mid) > 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    curve(lo)
+}
+
 /// The blend of the corner between `a` and `b`, if one fits (module doc).
 fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
     let tol = a.block.tolerance_nm.min(b.block.tolerance_nm) as f64 * s.fit_share - ROUNDING_NM;
@@ -397,14 +444,13 @@ fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
         let pb = to_fit(&round(&b.geo.at(ub), &keep));
         let (da, db) = (unit(&a.geo.deriv(ua)), unit(&b.geo.deriv(ub)));
         let chord = norm(&sub(&pb, &pa));
-        let c = (dot(&da, &db).clamp(-1.0, 1.0).acos() / 2.0).cos();
-        let h = chord / (2.0 + c);
-        let g = Geo::Cubic([
-            pa,
-            core::array::from_fn(|i| pa[i] + h * da[i]),
-            core::array::from_fn(|i| pb[i] - h * db[i]),
-            pb,
-        ]);
+        // |dP/ds| of the trimmed blocks where they meet the blend (the second's up to
+        // its end: its own end trim is not known yet).
+        let (ra, rb) = (
+            speed_ratio(&a.geo, a.u0, ua, ua),
+            speed_ratio(&b.geo, ub, 1.0, ub),
+        );
+        let g = blend_curve(&pa, &pb, &da, &db, ra, rb, chord);
         let line = Block {
             line: a.last_line,
             feed: a.block.feed.min(b.block.feed),
