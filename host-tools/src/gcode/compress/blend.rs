@@ -22,6 +22,11 @@
 //! *programmed* polyline (the chords the two blocks stand for), less
 //! [`ROUNDING_NM`].
 //!
+//! **Shape.** The inner control points lie along the tangents, at distances in the
+//! ratio of the trimmed blocks' |dP/ds| where they meet the blend, scaled so that the
+//! blend's |dP/ds| at its ends (its |dP/du| over the largest, as the controller runs
+//! it) is theirs: the speed does not jump at the joins.
+//!
 //! **Blocks.** The blend carries the NC line of the programmed move that ends at the
 //! corner, the smaller feed of the two and the first's tolerance; it stands for the
 //! programmed chords it spans ([`Compressed::source`]). A trimmed curve is the
@@ -384,7 +389,7 @@ fn speed_ratio(g: &Geo, lo: f64, hi: f64, at: f64) -> f64 {
 /// The blend from `pa` (leaving along `da`) to `pb` (arriving along `db`) whose
 /// |dP/ds| at its ends is `ra` and `rb` (those of the blocks it joins, so the speed
 /// does not jump there): inner control points at `ra`·k and `rb`·k along the
-/// tangents, with k such that the largest |dP/du| is 3k. For two lines (`ra` = `rb` =
+/// tangents, with the least k such that the largest |dP/du| is 3k. For two lines (`ra` = `rb` =
 /// 1) the ends and the middle are equally fast.
 fn blend_curve(pa: &V, pb: &V, da: &V, db: &V, ra: f64, rb: f64, chord: f64) -> Geo {
     let curve = |k: f64| {
@@ -402,16 +407,17 @@ fn blend_curve(pa: &V, pb: &V, da: &V, db: &V, ra: f64, rb: f64, chord: f64) -> 
             .fold(0.0, f64::max)
             - 3.0 * k
     };
+    // The least such k (for two lines every k past it keeps the ends fastest).
     let (mut lo, mut hi) = (0.0, chord);
     for _ in 0..40 {
         let mid = (lo + hi) / 2.0;
-        if excess(mid) > 0.0 {
+        if excess(mid) > 1e-9 * chord {
             lo = mid;
         } else {
             hi = mid;
         }
     }
-    curve(lo)
+    curve(hi)
 }
 
 /// The blend of the corner between `a` and `b`, if one fits (module doc).
