@@ -123,6 +123,12 @@ fn merged_and_plain(program: &Path, machine: Option<&str>, tol_mm: f64, name: &s
     );
     let merged = run(&[], &tm);
     let plain = run(&["--no-compress"], &tp);
+    // Curves without corner blends: what merging alone makes of the program.
+    let unblended = run(&["--no-blend"], &tmp(&format!("{name}_unblended.csv")));
+    let runs = unblended["compression"]["blocks_streamed"]
+        .as_u64()
+        .unwrap();
+    let t_runs = unblended["run_time_s"].as_f64().unwrap();
     let c = &merged["compression"];
     let (programmed, streamed) = (
         c["blocks_programmed"].as_u64().unwrap(),
@@ -139,9 +145,16 @@ fn merged_and_plain(program: &Path, machine: Option<&str>, tol_mm: f64, name: &s
         c["deviation"]["deviation_mm"]
     );
     assert_eq!(merged["result"], "done");
+    eprintln!("{name}: without corner blends {runs} blocks streamed, {t_runs:.3} s");
+    assert!(runs * 10 <= programmed, "{name}: {runs} of {programmed}");
+    // A blend adds one block at a corner between two blocks.
     assert!(
-        streamed * 10 <= programmed,
-        "{name}: {streamed} of {programmed}"
+        streamed < 2 * runs,
+        "{name}: {streamed} blocks, {runs} without blends"
+    );
+    assert!(
+        t_merged <= t_runs,
+        "{name}: {t_merged} s > {t_runs} s without blends"
     );
     assert!(t_merged <= t_plain, "{name}: {t_merged} s > {t_plain} s");
     assert!(dev <= tol_mm, "{name}: deviation {dev} mm > {tol_mm} mm");

@@ -96,6 +96,10 @@ struct Args {
     /// Merging: a turn sharper than this between two moves stays a corner, degrees.
     #[arg(long, value_name = "DEGREES", default_value_t = 30.0)]
     corner_deg: f64,
+    /// Merging: leave corners between feed moves as corners (by default they are
+    /// rounded by blends within G64 P).
+    #[arg(long)]
+    no_blend: bool,
     /// Restart the program from this NC line, its modal state rebuilt (docs/nc-send.md).
     #[arg(long, value_name = "LINE")]
     from: Option<u32>,
@@ -222,6 +226,7 @@ fn compress_settings(args: &Args) -> Result<Option<pkmc_host::gcode::compress::S
     }
     Ok(Some(pkmc_host::gcode::compress::Settings {
         corner_deg: args.corner_deg,
+        blend: !args.no_blend,
         ..Default::default()
     }))
 }

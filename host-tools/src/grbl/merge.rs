@@ -13,7 +13,9 @@
 //!   for [`QUIET`] with nothing more waiting.
 //!
 //! A run cut by the last three ends at a vertex of the programmed polyline, as any run
-//! does at a corner: the curves on either side meet there. A reset (0x18) or an alarm
+//! does at a corner: the curves on either side meet there. Corners within what is
+//! merged at once are blended as `nc-send` blends them ([`compress::blend`]); the
+//! corner between two merges is not (the first goes out before the second comes). A reset (0x18) or an alarm
 //! drops what is held, as Grbl drops its planner buffer.
 
 use crate::gcode::compress::{self, Settings};

@@ -4,8 +4,10 @@
 //! UTF-8, the size limit), run through the front end with its state carried
 //! ([`gcode::flow::chunked`]), made into blocks ([`gcode::blocks::Converter`]) and
 //! merged into curves with the last run of short moves held over to the next piece
-//! ([`gcode::compress::last_run_start`]), so the blocks are those of the whole
-//! program compiled at once. [`check_file`] is the first pass over a file: every line
+//! ([`gcode::compress::last_run_start`]) and the last blendable block held over for
+//! the corner's blend ([`gcode::compress::blend::Blender`]), so the blocks are those
+//! of the whole program compiled at once (a piece's `programmed` may then hold the
+//! programmed moves of a block handed out with the next piece). [`check_file`] is the first pass over a file: every line
 //! and the pre-flight of every block, keeping only counts and findings.
 //!
 //! A program with O-words (subroutines, branches, loops) runs only as a whole: it is
@@ -165,6 +167,9 @@ pub struct Pieces<'o> {
     front: Chunked<'o>,
     conv: Converter,
     compress: Option<gcode::compress::Settings>,
+    /// Corners blended across pieces: the last blendable block of a piece waits for
+    /// the next piece's first.
+    blender: Option<gcode::compress::blend::Blender>,
     /// Programmed blocks not yet handed out (an open run of short moves).
     held: Vec<Block>,
     /// Where `held` starts, and how many programmed blocks came before it.
@@ -186,11 +191,15 @@ impl<'o> Pieces<'o> {
     ) -> Result<Self, Failure> {
         let lines = Lines::open(path, crate::input::MAX_PROGRAM_BYTES, piece_bytes)?;
         let front = Chunked::new(options, &lines.name);
+        let compress = compress.map(|s| super::compile::for_machine(s, machine));
         Ok(Self {
             lines,
             front,
             conv: Converter::new(options.start),
-            compress: compress.map(|s| super::compile::for_machine(s, machine)),
+            blender: compress
+                .as_ref()
+                .map(|s| gcode::compress::blend::Blender::new(s, options.start)),
+            compress,
             held: Vec::new(),
             held_start: options.start,
             held_index: 0,
@@ -244,17 +253,24 @@ impl<'o> Pieces<'o> {
         };
         let rest = self.held.split_off(cut);
         let programmed = std::mem::replace(&mut self.held, rest);
-        let start = self.held_start;
+        let mut start = self.held_start;
         let first = self.held_index;
         self.held_start = pose;
         self.held_index += programmed.len();
-        let (blocks, source) = match &self.compress {
-            Some(s) => {
-                let c = gcode::compress::compress(&programmed, start, s);
-                let source = c.source.into_iter().map(|r| r.start + first..r.end + first);
-                (c.blocks, source.collect())
+        let (blocks, source) = match (&self.compress, &mut self.blender) {
+            (Some(s), Some(blender)) => {
+                // Compressed as the whole would be; its corners blended as the
+                // whole's, the last blendable block held for the next piece.
+                let c = gcode::compress::compress_runs(&programmed, start, s);
+                let mut out = gcode::compress::Compressed::default();
+                start = blender.emitted();
+                blender.push(&programmed, &c, first, &mut out);
+                if last {
+                    blender.finish(&mut out);
+                }
+                (out.blocks, out.source)
             }
-            None => (
+            _ => (
                 programmed.clone(),
                 (first..first + programmed.len())
                     .map(|i| i..i + 1)

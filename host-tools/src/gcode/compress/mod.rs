@@ -1,7 +1,7 @@
 //! The chord compressor: runs of short `G1` moves (CAM output for surfaces: thousands
 //! of chords of a fraction of a millimetre) become cubic spline blocks
 //! ([`Motion::Cubic`]) that stay within the program's `G64 P` tolerance of the
-//! programmed polyline and pass through its real corners.
+//! programmed polyline; its real corners are rounded within the tolerance too.
 //!
 //! **Which moves.** Consecutive feed moves (`G1`) with the same feed and the same
 //! finite blending tolerance (`G64 P`; never in `G61`, nor in `G64` without P, which
@@ -30,10 +30,16 @@
 //! run fast, are merged into curves of a few degrees each; coarse chords, which stop
 //! at every vertex, into long ones.
 //!
+//! **Corners.** Once the runs are curves, each corner between two feed moves (lines or
+//! curves) within `G64 P` that move X Y Z only is rounded by a cubic blend, tangent
+//! to both, within `P` of the programmed polyline ([`blend`]; [`compress_runs`] is the
+//! compressor without it).
+//!
 //! Rotary axes take part in the fit with 1° counted as 1 mm ([`space`]; a curve then
 //! keeps them within the tolerance as well). The fit tolerance is
 //! [`Settings::fit_share`] of `P`.
 
+pub mod blend;
 mod fit;
 pub mod space;
 #[cfg(test)]
@@ -77,6 +83,12 @@ pub struct Settings {
     pub accel: f64,
     /// The machine's smallest X Y Z speed, nm/s (0: unknown).
     pub max_speed: f64,
+    /// Corners between feed moves within `G64 P` are rounded by blends ([`blend`]).
+    pub blend: bool,
+    /// Turns of less than this, degrees, are not blended.
+    pub blend_min_deg: f64,
+    /// A blend trims at most this share of either block's length.
+    pub blend_share: f64,
 }
 
 impl Default for Settings {
@@ -93,6 +105,9 @@ impl Default for Settings {
             free_gain: 1.2,
             accel: 0.0,
             max_speed: 0.0,
+            blend: true,
+            blend_min_deg: 0.5,
+            blend_share: 0.45,
         }
     }
 }
@@ -152,8 +167,23 @@ fn mergeable(b: &Block, from: &[i64; AXES], s: &Settings) -> bool {
     xyz >= 1.0 && norm(&d) <= s.max_chord_nm
 }
 
-/// Compresses `blocks` (starting at `start`) with settings `s`.
+/// Compresses `blocks` (starting at `start`) with settings `s`, corners blended
+/// ([`blend`]).
 pub fn compress(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compressed {
+    let runs = compress_runs(blocks, start, s);
+    if !s.blend {
+        return runs;
+    }
+    let mut out = Compressed::default();
+    let mut b = blend::Blender::new(s, start);
+    b.push(blocks, &runs, 0, &mut out);
+    b.finish(&mut out);
+    out
+}
+
+/// Compresses `blocks` (starting at `start`) with settings `s`: runs into curves,
+/// corners not blended.
+pub fn compress_runs(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compressed {
     let mut out = Compressed::default();
     let mut pose = start;
     let mut i = 0;

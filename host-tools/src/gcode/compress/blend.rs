@@ -1,0 +1,493 @@
+//! Corner blends within `G64 P`: where two feed moves (lines or merged curves) meet
+//! at an angle, the end of the first and the start of the second are trimmed by a
+//! length d and a cubic blend ([`Motion::Cubic`]) joins them, leaving along the first's
+//! tangent and arriving along the second's, so the path is tangent-continuous there.
+//!
+//! **Why.** The controller passes a corner within one tick, so its speed there is
+//! limited by the acceleration that turns the velocity in one tick (about a·T/|Δu|:
+//! under 1 mm/s at 90° on a machine of 1000 mm/s²): every corner is nearly a stop. A
+//! blend of smallest radius r is passed at about √(a·r).
+//!
+//! **Which corners.** Both blocks are `G1` lines or cubics with a finite, non-zero
+//! tolerance (`G64 P`; never `G61`, nor `G64` without P), neither moves A B C (the
+//! blend is X Y Z only), and the path turns there by more than
+//! [`Settings::blend_min_deg`]. A dwell, an auxiliary function or any other block
+//! between them leaves the corner as it is.
+//!
+//! **How far.** d is at most [`Settings::blend_share`] of either block's length (so the
+//! trims at both ends of a block never meet); it starts at the length where a
+//! symmetric blend of straight legs turning by θ strays d·sin θ/4 from them, and
+//! shrinks until every sample of the blend (rounded to whole units, as it is sent)
+//! lies within [`Settings::fit_share`] of the smaller `P` of the two blocks from the
+//! *programmed* polyline (the chords the two blocks stand for), less
+//! [`ROUNDING_NM`].
+//!
+//! **Shape.** The inner control points lie along the tangents, at distances in the
+//! ratio of the trimmed blocks' |dP/ds| where they meet the blend, scaled so that the
+//! blend's |dP/ds| at its ends (its |dP/du| over the largest, as the controller runs
+//! it) is theirs: the speed does not jump at the joins.
+//!
+//! **Blocks.** The blend carries the NC line of the programmed move that ends at the
+//! corner, the smaller feed of the two and the first's tolerance; it stands for the
+//! programmed chords it spans ([`Compressed::source`]). A trimmed curve is the
+//! original one cut by de Casteljau at the parameters of the trims; a trimmed line
+//! gets a new end. A corner's blend depends only on the two blocks as the run
+//! compressor made them, so a program blended a piece at a time ([`Blender`] keeps
+//! the last block of a piece until the next comes) is the program blended at once.
+
+use super::space::{from_fit, to_fit};
+use super::{dot, norm, sub, unit, Compressed, Settings, V};
+use pkmc::config::AXES;
+use pkmc::motion::block::{Block, Motion};
+use std::ops::Range;
+
+#[cfg(test)]
+#[path = "blend_tests.rs"]
+mod tests;
+
+/// Margin for the rounding of the blend's points to whole units, nm.
+pub const ROUNDING_NM: f64 = 3.0;
+/// Samples of a blend checked against the polyline.
+const SAMPLES: usize = 48;
+/// Steps of the arc-length table of a curve.
+const STEPS: usize = 64;
+/// Each try shrinks d by this.
+const SHRINK: f64 = 0.85;
+/// Tries before a corner stays a corner.
+const TRIES: usize = 40;
+
+/// A block's geometry in fit space: a line or a cubic Bézier.
+#[derive(Clone, Copy, Debug)]
+enum Geo {
+    Line([V; 2]),
+    Cubic([V; 4]),
+}
+
+fn lerp(a: &V, b: &V, t: f64) -> V {
+    core::array::from_fn(|i| a[i] + (b[i] - a[i]) * t)
+}
+
+impl Geo {
+    fn of(b: &Block, from: &[i64; AXES]) -> Option<Self> {
+        let (p0, p3) = (to_fit(from), to_fit(&b.target));
+        match b.motion {
+            Motion::Linear => Some(Geo::Line([p0, p3])),
+            Motion::Cubic { c1, c2 } => {
+                let c1: [i64; AXES] = core::array::from_fn(|i| from[i] + c1[i]);
+                let c2: [i64; AXES] = core::array::from_fn(|i| b.target[i] + c2[i]);
+                Some(Geo::Cubic([p0, to_fit(&c1), to_fit(&c2), p3]))
+            }
+            _ => None,
+        }
+    }
+
+    fn at(&self, u: f64) -> V {
+        match self {
+            Geo::Line([a, b]) => lerp(a, b, u),
+            Geo::Cubic(p) => {
+                let (a, b, c) = (
+                    lerp(&p[0], &p[1], u),
+                    lerp(&p[1], &p[2], u),
+                    lerp(&p[2], &p[3], u),
+                );
+                let (d, e) = (lerp(&a, &b, u), lerp(&b, &c, u));
+                lerp(&d, &e, u)
+            }
+        }
+    }
+
+    /// dP/du.
+    fn deriv(&self, u: f64) -> V {
+        match self {
+            Geo::Line([a, b]) => sub(b, a),
+            Geo::Cubic(p) => {
+                let (d0, d1, d2) = (sub(&p[1], &p[0]), sub(&p[2], &p[1]), sub(&p[3], &p[2]));
+                let (a, b) = (lerp(&d0, &d1, u), lerp(&d1, &d2, u));
+                lerp(&a, &b, u).map(|x| 3.0 * x)
+            }
+        }
+    }
+
+    /// Cumulative arc length at u = k/STEPS.
+    fn table(&self) -> Vec<f64> {
+        let mut t = vec![0.0];
+        let mut prev = self.at(0.0);
+        for k in 1..=STEPS {
+            let p = self.at(k as f64 / STEPS as f64);
+            t.push(t[k - 1] + norm(&sub(&p, &prev)));
+            prev = p;
+        }
+        t
+    }
+
+    /// The parameter where the arc length from the start is `s`.
+    fn u_at(&self, table: &[f64], s: f64) -> f64 {
+        if let Geo::Line(_) = self {
+            return (s / table[STEPS]).clamp(0.0, 1.0);
+        }
+        let k = table.partition_point(|&x| x < s).clamp(1, STEPS);
+        let (a, b) = (table[k - 1], table[k]);
+        let f = if b > a { (s - a) / (b - a) } else { 0.0 };
+        ((k - 1) as f64 + f.clamp(0.0, 1.0)) / STEPS as f64
+    }
+
+    /// The part between parameters `u0` and `u1`.
+    fn part(&self, u0: f64, u1: f64) -> Geo {
+        match self {
+            Geo::Line(_) => Geo::Line([self.at(u0), self.at(u1)]),
+            Geo::Cubic(_) => {
+                let h = (u1 - u0) / 3.0;
+                let (a, b) = (self.at(u0), self.at(u1));
+                let (da, db) = (self.deriv(u0), self.deriv(u1));
+                Geo::Cubic([
+                    a,
+                    core::array::from_fn(|i| a[i] + h * da[i]),
+                    core::array::from_fn(|i| b[i] - h * db[i]),
+                    b,
+                ])
+            }
+        }
+    }
+}
+
+/// A point of fit space in whole axis units; axes 3.. (A B C, which do not move in a
+/// blended block) are `keep`'s.
+fn round(p: &V, keep: &[i64; AXES]) -> [i64; AXES] {
+    core::array::from_fn(|i| if i < 3 { from_fit(i, p[i]) } else { keep[i] })
+}
+
+/// The block for `g` (whose ends are already whole units), with `b`'s line, feed and
+/// tolerance.
+fn block_of(g: &Geo, b: &Block, keep: &[i64; AXES]) -> Block {
+    match g {
+        Geo::Line([_, e]) => Block {
+            motion: Motion::Linear,
+            target: round(e, keep),
+            ..*b
+        },
+        Geo::Cubic(p) => {
+            let (s, e) = (round(&p[0], keep), round(&p[3], keep));
+            let (c1, c2) = (round(&p[1], keep), round(&p[2], keep));
+            Block {
+                motion: Motion::Cubic {
+                    c1: core::array::from_fn(|i| c1[i] - s[i]),
+                    c2: core::array::from_fn(|i| c2[i] - e[i]),
+                },
+                target: e,
+                ..*b
+            }
+        }
+    }
+}
+
+/// A block that may take part in a blend, held until the next comes.
+#[derive(Clone, Debug)]
+struct Held {
+    block: Block,
+    geo: Geo,
+    table: Vec<f64>,
+    /// Where the block starts as streamed (after the trim of a blend before it), and
+    /// its parameter there.
+    start: [i64; AXES],
+    u0: f64,
+    /// The programmed blocks it stands for, and the programmed polyline (the start,
+    /// then each one's end), in fit space.
+    source: Range<usize>,
+    points: Vec<V>,
+    /// NC line of the last programmed move (the one ending at the block's end).
+    last_line: u32,
+}
+
+impl Held {
+    fn length(&self) -> f64 {
+        self.table[STEPS]
+    }
+}
+
+/// Blends corners of a stream of compressed blocks, holding each blendable block
+/// until the next comes (module doc).
+#[derive(Clone, Debug)]
+pub struct Blender {
+    s: Settings,
+    held: Option<Held>,
+    /// The end of the last block pushed (as the run compressor made it).
+    pose: [i64; AXES],
+    /// The end of the last block handed out.
+    emitted: [i64; AXES],
+}
+
+/// Can `b`, from `from`, take part in a blend?
+fn blendable(b: &Block, from: &[i64; AXES]) -> bool {
+    let rotary_still = match b.motion {
+        Motion::Linear => true,
+        Motion::Cubic { c1, c2 } => c1[3..].iter().chain(&c2[3..]).all(|&x| x == 0),
+        _ => return false,
+    };
+    b.tolerance_nm != 0
+        && b.tolerance_nm != u32::MAX
+        && rotary_still
+        && b.target[3..] == from[3..]
+        && b.target[..3] != from[..3]
+}
+
+impl Blender {
+    /// A blender with settings `s` whose first block starts at `start`.
+    pub fn new(s: &Settings, start: [i64; AXES]) -> Self {
+        Self {
+            s: *s,
+            held: None,
+            pose: start,
+            emitted: start,
+        }
+    }
+
+    /// Where the next block handed out starts.
+    pub fn emitted(&self) -> [i64; AXES] {
+        self.emitted
+    }
+
+    /// Takes the blocks of `c`, compressed from `programmed` (whose first block is
+    /// programmed block `first` of the whole program), and hands out what is done.
+    pub fn push(
+        &mut self,
+        programmed: &[Block],
+        c: &Compressed,
+        first: usize,
+        out: &mut Compressed,
+    ) {
+        for (b, r) in c.blocks.iter().zip(&c.source) {
+            let source = r.start + first..r.end + first;
+            self.push_one(b, source, &programmed[r.clone()], out);
+        }
+    }
+
+    /// Hands out the block held (at the end of the program).
+    pub fn finish(&mut self, out: &mut Compressed) {
+        if let Some(h) = self.held.take() {
+            self.emit(&h, 1.0, out);
+        }
+    }
+
+    fn push_one(
+        &mut self,
+        b: &Block,
+        source: Range<usize>,
+        programmed: &[Block],
+        out: &mut Compressed,
+    ) {
+        if matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
+            self.finish(out);
+            self.put(*b, source, out);
+            return;
+        }
+        let from = self.pose;
+        self.pose = b.target;
+        if !self.s.blend || !blendable(b, &from) {
+            self.finish(out);
+            self.put(*b, source, out);
+            return;
+        }
+        let geo = Geo::of(b, &from).expect("a line or a cubic");
+        let mut points = vec![to_fit(&from)];
+        points.extend(programmed.iter().map(|p| to_fit(&p.target)));
+        let mut next = Held {
+            block: *b,
+            table: geo.table(),
+            geo,
+            start: from,
+            u0: 0.0,
+            source,
+            points,
+            last_line: programmed.last().map_or(b.line, |p| p.line),
+        };
+        if let Some(h) = self.held.take() {
+            match corner(&h, &next, &self.s) {
+                Some(j) => {
+                    self.emit(&h, j.ua, out);
+                    self.put(j.block, j.source, out);
+                    next.u0 = j.ub;
+                    next.start = j.block.target;
+                }
+                None => self.emit(&h, 1.0, out),
+            }
+        }
+        self.held = Some(next);
+    }
+
+    fn put(&mut self, b: Block, source: Range<usize>, out: &mut Compressed) {
+        if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
+            self.emitted = b.target;
+        }
+        out.blocks.push(b);
+        out.source.push(source);
+    }
+
+    /// Hands out `h` up to parameter `u1`.
+    fn emit(&mut self, h: &Held, u1: f64, out: &mut Compressed) {
+        if h.u0 == 0.0 && u1 == 1.0 {
+            return self.put(h.block, h.source.clone(), out);
+        }
+        let mut g = h.geo.part(h.u0, u1);
+        // The ends as streamed: the start where the blend before ended, the end the
+        // block's own unless a blend follows.
+        if u1 == 1.0 {
+            match &mut g {
+                Geo::Line(p) => p[1] = to_fit(&h.block.target),
+                Geo::Cubic(p) => p[3] = to_fit(&h.block.target),
+            }
+        }
+        if let Geo::Cubic(p) = &mut g {
+            p[0] = to_fit(&h.start);
+        }
+        let b = block_of(&g, &h.block, &h.start);
+        self.put(b, h.source.clone(), out);
+    }
+}
+
+/// A corner's blend.
+struct Corner {
+    ua: f64,
+    ub: f64,
+    block: Block,
+    source: Range<usize>,
+}
+
+/// Distance from `q` to the polyline `pts`, and the index of its nearest chord's end.
+fn to_polyline(q: &V, pts: &[V]) -> (f64, usize) {
+    let mut best = (f64::INFINITY, 1);
+    for e in 1..pts.len() {
+        let (a, b) = (&pts[e - 1], &pts[e]);
+        let ab = sub(b, a);
+        let l2 = dot(&ab, &ab);
+        let t = if l2 > 0.0 {
+            (dot(&ab, &sub(q, a)) / l2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let d = norm(&sub(q, &lerp(a, b, t)));
+        if d < best.0 {
+            best = (d, e);
+        }
+    }
+    best
+}
+
+/// |dP/du| of `g` at `at` over its largest between `lo` and `hi`: its |dP/ds| there
+/// as the controller runs the part between them.
+fn speed_ratio(g: &Geo, lo: f64, hi: f64, at: f64) -> f64 {
+    let here = norm(&g.deriv(at));
+    let most = (0..=32)
+        .map(|k| norm(&g.deriv(lo + (hi - lo) * k as f64 / 32.0)))
+        .fold(here, f64::max);
+    if most > 0.0 {
+        here / most
+    } else {
+        1.0
+    }
+}
+
+/// The blend from `pa` (leaving along `da`) to `pb` (arriving along `db`) whose
+/// |dP/ds| at its ends is `ra` and `rb` (those of the blocks it joins, so the speed
+/// does not jump there): inner control points at `ra`·k and `rb`·k along the
+/// tangents, with the least k such that the largest |dP/du| is 3k. For two lines (`ra` = `rb` =
+/// 1) the ends and the middle are equally fast.
+fn blend_curve(pa: &V, pb: &V, da: &V, db: &V, ra: f64, rb: f64, chord: f64) -> Geo {
+    let curve = |k: f64| {
+        Geo::Cubic([
+            *pa,
+            core::array::from_fn(|i| pa[i] + ra * k * da[i]),
+            core::array::from_fn(|i| pb[i] - rb * k * db[i]),
+            *pb,
+        ])
+    };
+    let excess = |k: f64| {
+        let g = curve(k);
+        (0..=32)
+            .map(|j| norm(&g.deriv(j as f64 / 32.0)))
+            .fold(0.0, f64::max)
+            - 3.0 * k
+    };
+    // The least such k (for two lines every k past it keeps the ends fastest).
+    let (mut lo, mut hi) = (0.0, chord);
+    for _ in 0..40 {
+        let mid = (lo + hi) / 2.0;
+        if excess(mid) > 1e-9 * chord {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    curve(hi)
+}
+
+/// The blend of the corner between `a` and `b`, if one fits (module doc).
+fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
+    let tol = a.block.tolerance_nm.min(b.block.tolerance_nm) as f64 * s.fit_share - ROUNDING_NM;
+    let (ea, eb) = (a.geo.deriv(1.0), b.geo.deriv(0.0));
+    if norm(&ea) < 1.0 || norm(&eb) < 1.0 {
+        return None;
+    }
+    let (ta, tb) = (unit(&ea), unit(&eb));
+    let cos = dot(&ta, &tb).clamp(-1.0, 1.0);
+    let turn = cos.acos();
+    if tol <= 0.0 || turn < s.blend_min_deg.to_radians() || turn > 179f64.to_radians() {
+        return None;
+    }
+    let most = s.blend_share * a.length().min(b.length());
+    let mut d = most.min(4.0 * tol / turn.sin().max(0.25));
+    // The programmed polyline around the corner: the first's chords, then the
+    // second's (whose start is the first's last point).
+    let mut pts = a.points.clone();
+    pts.extend_from_slice(&b.points[1..]);
+    let keep = a.block.target;
+    for _ in 0..TRIES {
+        if d < 1.0 {
+            return None;
+        }
+        let ua = a.geo.u_at(&a.table, a.length() - d);
+        let ub = b.geo.u_at(&b.table, d);
+        let pa = to_fit(&round(&a.geo.at(ua), &keep));
+        let pb = to_fit(&round(&b.geo.at(ub), &keep));
+        let (da, db) = (unit(&a.geo.deriv(ua)), unit(&b.geo.deriv(ub)));
+        let chord = norm(&sub(&pb, &pa));
+        // |dP/ds| of the trimmed blocks where they meet the blend (the second's up to
+        // its end: its own end trim is not known yet).
+        let (ra, rb) = (
+            speed_ratio(&a.geo, a.u0, ua, ua),
+            speed_ratio(&b.geo, ub, 1.0, ub),
+        );
+        let g = blend_curve(&pa, &pb, &da, &db, ra, rb, chord);
+        let line = Block {
+            line: a.last_line,
+            feed: a.block.feed.min(b.block.feed),
+            ..a.block
+        };
+        let block = block_of(&g, &line, &keep);
+        // The blend as it is sent.
+        let sent = Geo::of(&block, &round(&pa, &keep)).expect("a cubic");
+        let fits = (0..=SAMPLES).all(|k| {
+            let q = sent.at(k as f64 / SAMPLES as f64);
+            to_polyline(&q, &pts).0 <= tol
+        });
+        if fits && chord >= 1.0 {
+            let first = to_polyline(&pa, &pts).1 - 1;
+            let last = to_polyline(&pb, &pts).1 - 1;
+            let n = a.points.len() - 1;
+            let at = |k: usize| {
+                if k < n {
+                    a.source.start + k
+                } else {
+                    b.source.start + (k - n)
+                }
+            };
+            return Some(Corner {
+                ua,
+                ub,
+                block,
+                source: at(first)..at(last.max(first)) + 1,
+            });
+        }
+        d *= SHRINK;
+    }
+    None
+}

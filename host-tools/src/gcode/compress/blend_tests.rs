@@ -1,0 +1,217 @@
+//! Corner blends: tangent-continuous, within P of the programmed polyline, only
+//! where the program blends within a tolerance and only in X Y Z.
+
+use super::super::{compress, compress_runs};
+use super::*;
+
+const P: u32 = 100_000; // G64 P0.1
+
+fn g1(x: f64, y: f64, line: u32, tol: u32) -> Block {
+    Block {
+        line,
+        motion: Motion::Linear,
+        target: [
+            (x * 1e6).round() as i64,
+            (y * 1e6).round() as i64,
+            0,
+            0,
+            0,
+            0,
+        ],
+        feed: 50_000_000,
+        tolerance_nm: tol,
+    }
+}
+
+/// The streamed blocks' geometry (from `start`), each sampled finely.
+fn samples(c: &Compressed, start: [i64; AXES]) -> Vec<V> {
+    let mut from = start;
+    let mut out = vec![];
+    for b in &c.blocks {
+        if let Some(g) = Geo::of(b, &from) {
+            out.extend((0..=200).map(|k| g.at(k as f64 / 200.0)));
+        }
+        from = b.target;
+    }
+    out
+}
+
+/// Largest distance of the streamed path from the programmed polyline, nm.
+fn deviation(programmed: &[Block], c: &Compressed, start: [i64; AXES]) -> f64 {
+    let mut pts = vec![to_fit(&start)];
+    pts.extend(programmed.iter().map(|b| to_fit(&b.target)));
+    samples(c, start)
+        .iter()
+        .map(|q| to_polyline(q, &pts).0)
+        .fold(0.0, f64::max)
+}
+
+/// Largest angle, degrees, between the end direction of each block and the start
+/// direction of the next.
+fn largest_turn(c: &Compressed, start: [i64; AXES]) -> f64 {
+    let mut from = start;
+    let mut ends = vec![];
+    for b in &c.blocks {
+        let g = Geo::of(b, &from).unwrap();
+        ends.push((unit(&g.deriv(0.0)), unit(&g.deriv(1.0))));
+        from = b.target;
+    }
+    ends.windows(2)
+        .map(|w| dot(&w[0].1, &w[1].0).clamp(-1.0, 1.0).acos().to_degrees())
+        .fold(0.0, f64::max)
+}
+
+/// Two straight legs of 10 mm turning by `turn` degrees at (10, 0).
+fn corner(turn: f64, tol: u32) -> Vec<Block> {
+    let r = turn.to_radians();
+    vec![
+        g1(10.0, 0.0, 1, tol),
+        g1(10.0 + 10.0 * r.cos(), 10.0 * r.sin(), 2, tol),
+    ]
+}
+
+#[test]
+fn a_corner_between_lines_is_blended_tangentially_within_p() {
+    let s = Settings::default();
+    for turn in [90.0, 150.0] {
+        let p = corner(turn, P);
+        let c = compress(&p, [0; AXES], &s);
+        let kinds: Vec<_> = c
+            .blocks
+            .iter()
+            .map(|b| b.motion == Motion::Linear)
+            .collect();
+        assert_eq!(kinds, [true, false, true], "{turn}°: line, blend, line");
+        assert_eq!(
+            c.blocks[2].target, p[1].target,
+            "{turn}°: ends where programmed"
+        );
+        assert!(largest_turn(&c, [0; AXES]) < 0.01, "{turn}°: tangent");
+        let dev = deviation(&p, &c, [0; AXES]);
+        // Within P, and not needlessly small: the corner's speed grows with the blend.
+        assert!(dev <= P as f64 * s.fit_share, "{turn}°: {dev} nm");
+        assert!(dev > 0.5 * P as f64 * s.fit_share, "{turn}°: only {dev} nm");
+        // The blend carries the line of the move ending at the corner, and the
+        // chords it spans.
+        assert_eq!(c.blocks[1].line, 1);
+        assert_eq!(
+            (
+                c.source[0].clone(),
+                c.source[1].clone(),
+                c.source[2].clone()
+            ),
+            (0..1, 0..2, 1..2)
+        );
+    }
+}
+
+/// Chords of 0.2 mm along a quarter circle of radius 20 mm, then a sharp turn into
+/// another quarter circle: two merged curves meeting at a corner.
+fn arcs() -> Vec<Block> {
+    let mut out = vec![];
+    let n = 157;
+    for k in 1..=n {
+        let a = k as f64 / n as f64 * std::f64::consts::FRAC_PI_2;
+        out.push(g1(20.0 * a.sin(), 20.0 - 20.0 * a.cos(), k, P));
+    }
+    // From (20, 20) on, leaving at 90° to the arriving direction.
+    for k in 1..=n {
+        let a = k as f64 / n as f64 * std::f64::consts::FRAC_PI_2;
+        out.push(g1(20.0 + 20.0 * a.sin(), 40.0 - 20.0 * a.cos(), n + k, P));
+    }
+    out
+}
+
+#[test]
+fn a_corner_between_curves_is_blended_tangentially_within_p() {
+    let s = Settings::default();
+    let p = arcs();
+    let runs = compress_runs(&p, [0; AXES], &s);
+    let c = compress(&p, [0; AXES], &s);
+    assert!(runs
+        .blocks
+        .iter()
+        .all(|b| matches!(b.motion, Motion::Cubic { .. })));
+    assert!(
+        largest_turn(&runs, [0; AXES]) > 80.0,
+        "the runs meet at a corner"
+    );
+    assert_eq!(c.blocks.len(), runs.blocks.len() + 1, "one blend");
+    assert!(largest_turn(&c, [0; AXES]) < 0.05);
+    let dev = deviation(&p, &c, [0; AXES]);
+    assert!(dev <= P as f64 * s.fit_share, "{dev} nm");
+    assert_eq!(c.blocks.last().unwrap().target, p.last().unwrap().target);
+}
+
+#[test]
+fn no_blend_in_g61_in_g64_without_p_nor_where_a_b_c_move() {
+    let s = Settings::default();
+    for tol in [0, u32::MAX] {
+        let p = corner(90.0, tol);
+        assert_eq!(compress(&p, [0; AXES], &s).blocks, p, "tolerance {tol}");
+    }
+    let mut p = corner(90.0, P);
+    p[1].target[3] = 5_000_000; // A moves in the second
+    assert_eq!(compress(&p, [0; AXES], &s).blocks, p);
+    // A turn below the least is left as it is (lines too long to merge); with blends
+    // off, nothing is blended.
+    let p = corner(0.2, P);
+    let lines = Settings {
+        max_chord_nm: 1e3,
+        ..s
+    };
+    assert_eq!(compress(&p, [0; AXES], &lines).blocks, p);
+    let p = corner(0.6, P);
+    assert_eq!(compress(&p, [0; AXES], &lines).blocks.len(), 3);
+    let off = Settings { blend: false, ..s };
+    let p = corner(90.0, P);
+    assert_eq!(compress(&p, [0; AXES], &off).blocks, p);
+    // A dwell between the moves leaves the corner alone.
+    let mut p = corner(90.0, P);
+    p.insert(
+        1,
+        Block {
+            motion: Motion::Dwell(100),
+            target: p[0].target,
+            ..p[0]
+        },
+    );
+    assert_eq!(compress(&p, [0; AXES], &s).blocks, p);
+}
+
+#[test]
+fn blending_in_pieces_is_blending_at_once() {
+    let s = Settings::default();
+    let mut p = arcs();
+    p.extend(corner(150.0, P).iter().map(|b| Block {
+        target: [
+            b.target[0] + 40_000_000,
+            b.target[1] + 40_000_000,
+            0,
+            0,
+            0,
+            0,
+        ],
+        ..*b
+    }));
+    let whole = compress(&p, [0; AXES], &s);
+    let runs = compress_runs(&p, [0; AXES], &s);
+    assert!(
+        whole.blocks.len() >= runs.blocks.len() + 3,
+        "blends: {}",
+        whole.blocks.len()
+    );
+    for cut in 1..runs.blocks.len() {
+        let mut b = Blender::new(&s, [0; AXES]);
+        let mut out = Compressed::default();
+        for part in [0..cut, cut..runs.blocks.len()] {
+            let piece = Compressed {
+                blocks: runs.blocks[part.clone()].to_vec(),
+                source: runs.source[part].to_vec(),
+            };
+            b.push(&p, &piece, 0, &mut out);
+        }
+        b.finish(&mut out);
+        assert_eq!(out, whole, "cut at {cut}");
+    }
+}
