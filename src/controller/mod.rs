@@ -37,6 +37,7 @@
 mod actuators;
 pub mod pacing;
 mod probing;
+pub mod recorder;
 mod safety;
 mod session;
 

@@ -1,0 +1,500 @@
+//! The data recorder (issue 35, first part): up to [`MAX_SIGNALS`] signals from a
+//! fixed list ([`Signal`]), sampled every servo period or every tick with a chosen
+//! decimation, kept in a RAM ring, captured around a trigger ([`Trigger`]) with a
+//! chosen number of pre-trigger samples, and read out afterwards in order
+//! ([`Recorder::read`]).
+//!
+//! **Memory.** The ring is [`RING_BYTES`] bytes, taken from the controller's look-ahead
+//! queue: [`RING_SLOTS`] of its line-sized slots of 160 bytes on the MCU
+//! (`motion::planner::QUEUE_CAPACITY` is that much shorter; `docs/recorder.md`). A
+//! sample is the signals' values side by side, little-endian, each 2 or 4 bytes
+//! ([`Signal::width`]): the following error, the DAC code or step rate and the state
+//! fit 16 bits (saturated), positions, speed, contour error and line take 32. So the
+//! ring holds `RING_BYTES / sample width` samples: 120 of eight 16-bit signals
+//! (12 ms at 10 kHz, 120 ms at 1 kHz), 60 of eight 32-bit ones.
+//!
+//! **Sampling.** The caller forms the values of the configured signals and hands them
+//! to [`Recorder::sample`] once per servo period or tick (as [`Setup::servo`] says);
+//! every `decimate`th call stores one sample. The fast path is a counter, a
+//! comparison and the stores of the sample's bytes. Events (a job started, an NC
+//! line began, an alarm was raised) are told with [`Recorder::event`] as they happen,
+//! between samples; they latch, so decimation cannot miss them.
+//!
+//! **Capture.** Armed, the recorder stores samples continuously in the ring. At the
+//! trigger (its sample is the first of the trigger condition) it keeps up to `pre`
+//! samples before it, the trigger's sample and as many after as fill the ring, and
+//! stops ([`Phase::Done`]). A trigger before `pre` samples were stored keeps those
+//! there are ([`Capture::pre`]).
+//!
+//! Invariants: no allocation, no time source; the ring is never read while the
+//! recorder writes it (readout is of a finished capture).
+
+use crate::config::MAX_JOINTS;
+
+/// Signals a capture can hold.
+pub const MAX_SIGNALS: usize = 8;
+/// Queue slots of 160 bytes (on the MCU) given to the ring.
+pub const RING_SLOTS: usize = 12;
+/// The ring's size, bytes.
+pub const RING_BYTES: usize = RING_SLOTS * 160;
+
+/// A signal the recorder can sample. Its wire id is `kind << 4 | joint`
+/// ([`Signal::id`], [`Signal::from_id`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Signal {
+    /// Joint's commanded position, actuator counts or steps (kind 0).
+    Commanded(u8),
+    /// Joint's measured position, actuator counts or steps (kind 1).
+    Measured(u8),
+    /// Joint's following error, commanded − measured, counts; 16 bits (kind 2).
+    FollowingError(u8),
+    /// Joint's DAC code (servo) or step rate, steps per tick (stepper); 16 bits
+    /// (kind 3).
+    Output(u8),
+    /// The path speed, µm/s (kind 8).
+    PathSpeed,
+    /// The contour error's size, nm (kind 9).
+    ContourError,
+    /// The contour error's direction in the path's plane, millidegrees (kind 10).
+    ContourDirection,
+    /// The NC line being executed (kind 11).
+    Line,
+    /// The controller's state, as `wire::State`'s index; 16 bits (kind 12).
+    State,
+}
+
+/// A recorder request the recorder refuses, naming what is wrong and where.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RecorderError {
+    /// Signal number `index` of the request has an id that names no signal.
+    BadSignal {
+        /// Its place in the request's list.
+        index: u8,
+        /// The id.
+        id: u8,
+    },
+    /// No signals, or more than [`MAX_SIGNALS`].
+    SignalCount {
+        /// Signals asked for.
+        count: u8,
+    },
+    /// A decimation of 0.
+    Decimation,
+    /// The level trigger names signal number `index`, beyond the request's signals.
+    TriggerSignal {
+        /// The signal number it names.
+        index: u8,
+    },
+    /// `pre` pre-trigger samples asked; the ring holds `capacity` of these signals.
+    PreTrigger {
+        /// Pre-trigger samples asked for.
+        pre: u16,
+        /// Samples the ring holds.
+        capacity: u16,
+    },
+}
+
+impl Signal {
+    /// The signal of wire id `id`, or `None`.
+    pub fn from_id(id: u8) -> Option<Self> {
+        let joint = id & 0x0f;
+        let per_joint = (joint as usize) < MAX_JOINTS;
+        Some(match id >> 4 {
+            0 if per_joint => Self::Commanded(joint),
+            1 if per_joint => Self::Measured(joint),
+            2 if per_joint => Self::FollowingError(joint),
+            3 if per_joint => Self::Output(joint),
+            8 if joint == 0 => Self::PathSpeed,
+            9 if joint == 0 => Self::ContourError,
+            10 if joint == 0 => Self::ContourDirection,
+            11 if joint == 0 => Self::Line,
+            12 if joint == 0 => Self::State,
+            _ => return None,
+        })
+    }
+
+    /// The signal's wire id.
+    pub fn id(self) -> u8 {
+        match self {
+            Self::Commanded(j) => j,
+            Self::Measured(j) => 0x10 | j,
+            Self::FollowingError(j) => 0x20 | j,
+            Self::Output(j) => 0x30 | j,
+            Self::PathSpeed => 0x80,
+            Self::ContourError => 0x90,
+            Self::ContourDirection => 0xa0,
+            Self::Line => 0xb0,
+            Self::State => 0xc0,
+        }
+    }
+
+    /// Bytes a sample of this signal takes in the ring.
+    pub fn width(self) -> u8 {
+        match self {
+            Self::FollowingError(_) | Self::Output(_) | Self::State => 2,
+            _ => 4,
+        }
+    }
+}
+
+/// What starts a capture.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Trigger {
+    /// The first sample after arming.
+    Now,
+    /// A job starts (`Control::BeginJob`, or the first block of one).
+    JobStart,
+    /// NC line `n` begins executing.
+    Line(u32),
+    /// Any alarm is raised.
+    Alarm,
+    /// The request's signal number `signal` crosses `level`: upward when `rising`
+    /// (from below it to at or above it), else downward.
+    Level {
+        /// The signal's number in the request.
+        signal: u8,
+        /// The level.
+        level: i32,
+        /// Upward crossing; else downward.
+        rising: bool,
+    },
+}
+
+/// An event between samples that a trigger may wait for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Event {
+    /// A job started.
+    JobStart,
+    /// This NC line began executing.
+    Line(u32),
+    /// An alarm was raised.
+    Alarm,
+}
+
+/// A capture's request.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Setup {
+    /// The signals' wire ids; `count` of them are used.
+    pub signals: [u8; MAX_SIGNALS],
+    /// Signals used.
+    pub count: u8,
+    /// Sample in every servo period (10 kHz) rather than every tick (1 kHz).
+    pub servo: bool,
+    /// Store every `decimate`th period or tick (at least 1).
+    pub decimate: u16,
+    /// What starts the capture.
+    pub trigger: Trigger,
+    /// Samples to keep before the trigger's.
+    pub pre: u16,
+}
+
+/// Where a capture is.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Phase {
+    /// Nothing armed.
+    #[default]
+    Off,
+    /// Recording, waiting for the trigger.
+    Armed,
+    /// Triggered, filling the samples after it.
+    Triggered,
+    /// The capture is complete: read it out.
+    Done,
+}
+
+/// What a capture holds, for its readout.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Capture {
+    /// Where it is.
+    pub phase: Phase,
+    /// Samples in the capture (when done), or stored so far.
+    pub samples: u16,
+    /// Samples before the trigger's.
+    pub pre: u16,
+    /// Bytes a sample takes.
+    pub width: u16,
+}
+
+/// The recorder. See the module documentation.
+#[derive(Clone, Debug)]
+pub struct Recorder {
+    setup: Setup,
+    signals: [Signal; MAX_SIGNALS],
+    width: u16,
+    /// Samples the ring holds at this width.
+    capacity: u16,
+    phase: Phase,
+    /// Calls until the next stored sample.
+    countdown: u16,
+    /// The next sample's index in the ring.
+    head: u16,
+    /// Samples stored since arming (saturating at `capacity`).
+    stored: u16,
+    /// Samples still to store after the trigger.
+    remaining: u16,
+    pre_kept: u16,
+    /// An awaited event happened since the last stored sample.
+    pending: bool,
+    /// The level signal's last stored value.
+    last_level: Option<i32>,
+    ring: [u8; RING_BYTES],
+}
+
+impl Default for Recorder {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Recorder {
+    /// A recorder with nothing armed.
+    pub const fn new() -> Self {
+        Self {
+            setup: Setup {
+                signals: [0; MAX_SIGNALS],
+                count: 0,
+                servo: false,
+                decimate: 1,
+                trigger: Trigger::Now,
+                pre: 0,
+            },
+            signals: [Signal::PathSpeed; MAX_SIGNALS],
+            width: 0,
+            capacity: 0,
+            phase: Phase::Off,
+            countdown: 0,
+            head: 0,
+            stored: 0,
+            remaining: 0,
+            pre_kept: 0,
+            pending: false,
+            last_level: None,
+            ring: [0; RING_BYTES],
+        }
+    }
+
+    /// Writes a recorder with nothing armed into `p`, field by field (the MCU's stack
+    /// need not hold the ring).
+    ///
+    /// # Safety
+    /// `p` valid for writes and aligned.
+    pub unsafe fn init_at(p: *mut Self) {
+        use core::ptr::addr_of_mut as at;
+        // SAFETY: the caller's promise; every field is written, the ring as zeros.
+        unsafe {
+            at!((*p).ring).write_bytes(0, 1);
+            at!((*p).setup).write(Setup {
+                signals: [0; MAX_SIGNALS],
+                count: 0,
+                servo: false,
+                decimate: 1,
+                trigger: Trigger::Now,
+                pre: 0,
+            });
+            at!((*p).signals).write([Signal::PathSpeed; MAX_SIGNALS]);
+            at!((*p).width).write(0);
+            at!((*p).capacity).write(0);
+            at!((*p).phase).write(Phase::Off);
+            at!((*p).countdown).write(0);
+            at!((*p).head).write(0);
+            at!((*p).stored).write(0);
+            at!((*p).remaining).write(0);
+            at!((*p).pre_kept).write(0);
+            at!((*p).pending).write(false);
+            at!((*p).last_level).write(None);
+        }
+    }
+
+    /// Checks `setup` and arms it, dropping any capture held.
+    pub fn arm(&mut self, setup: &Setup) -> Result<(), RecorderError> {
+        let count = setup.count;
+        if count == 0 || count as usize > MAX_SIGNALS {
+            return Err(RecorderError::SignalCount { count });
+        }
+        if setup.decimate == 0 {
+            return Err(RecorderError::Decimation);
+        }
+        let mut signals = [Signal::PathSpeed; MAX_SIGNALS];
+        let mut width = 0u16;
+        for (i, (s, &id)) in signals
+            .iter_mut()
+            .zip(&setup.signals[..count as usize])
+            .enumerate()
+        {
+            *s = Signal::from_id(id).ok_or(RecorderError::BadSignal { index: i as u8, id })?;
+            width += s.width() as u16;
+        }
+        if let Trigger::Level { signal, .. } = setup.trigger {
+            if signal >= count {
+                return Err(RecorderError::TriggerSignal { index: signal });
+            }
+        }
+        let capacity = (RING_BYTES / width as usize) as u16;
+        if setup.pre >= capacity {
+            return Err(RecorderError::PreTrigger {
+                pre: setup.pre,
+                capacity,
+            });
+        }
+        // Field by field: the ring stays where it is (no copy of it on the stack).
+        self.setup = *setup;
+        self.signals = signals;
+        self.width = width;
+        self.capacity = capacity;
+        self.phase = Phase::Armed;
+        self.countdown = 0;
+        self.head = 0;
+        self.stored = 0;
+        self.remaining = 0;
+        self.pre_kept = 0;
+        self.pending = false;
+        self.last_level = None;
+        Ok(())
+    }
+
+    /// Stops recording and drops the capture.
+    pub fn disarm(&mut self) {
+        self.phase = Phase::Off;
+    }
+
+    /// The request armed last.
+    pub fn setup(&self) -> &Setup {
+        &self.setup
+    }
+
+    /// The configured signals (the first [`Setup::count`]).
+    pub fn signals(&self) -> &[Signal] {
+        &self.signals[..self.setup.count as usize]
+    }
+
+    /// Recording: samples are wanted, every servo period when `servo`, else every tick.
+    pub fn wants(&self, servo: bool) -> bool {
+        matches!(self.phase, Phase::Armed | Phase::Triggered) && self.setup.servo == servo
+    }
+
+    /// Tells the recorder of an event; latched for the next stored sample when it is
+    /// the armed trigger's.
+    pub fn event(&mut self, event: Event) {
+        if self.phase != Phase::Armed {
+            return;
+        }
+        self.pending |= match (self.setup.trigger, event) {
+            (Trigger::JobStart, Event::JobStart) | (Trigger::Alarm, Event::Alarm) => true,
+            (Trigger::Line(n), Event::Line(l)) => n == l,
+            _ => false,
+        };
+    }
+
+    /// One period's or tick's values of the configured signals (in their order; the
+    /// values beyond [`Setup::count`] are ignored). Stores every `decimate`th.
+    pub fn sample(&mut self, values: &[i32; MAX_SIGNALS]) {
+        if !matches!(self.phase, Phase::Armed | Phase::Triggered) {
+            return;
+        }
+        if self.countdown > 0 {
+            self.countdown -= 1;
+            return;
+        }
+        self.countdown = self.setup.decimate - 1;
+        self.store(values);
+        if self.phase == Phase::Armed {
+            if self.triggered(values) {
+                self.pre_kept = self.setup.pre.min(self.stored - 1);
+                self.remaining = self.capacity - 1 - self.pre_kept;
+                self.phase = Phase::Triggered;
+                if self.remaining == 0 {
+                    self.phase = Phase::Done;
+                }
+            }
+        } else {
+            self.remaining -= 1;
+            if self.remaining == 0 {
+                self.phase = Phase::Done;
+            }
+        }
+    }
+
+    fn store(&mut self, values: &[i32; MAX_SIGNALS]) {
+        let mut at = self.head as usize * self.width as usize;
+        for (s, &v) in self.signals[..self.setup.count as usize].iter().zip(values) {
+            if s.width() == 2 {
+                let v = v.clamp(i16::MIN as i32, i16::MAX as i32) as i16;
+                self.ring[at..at + 2].copy_from_slice(&v.to_le_bytes());
+                at += 2;
+            } else {
+                self.ring[at..at + 4].copy_from_slice(&v.to_le_bytes());
+                at += 4;
+            }
+        }
+        self.head += 1;
+        if self.head == self.capacity {
+            self.head = 0;
+        }
+        if self.stored < self.capacity {
+            self.stored += 1;
+        }
+    }
+
+    fn triggered(&mut self, values: &[i32; MAX_SIGNALS]) -> bool {
+        match self.setup.trigger {
+            Trigger::Now => true,
+            Trigger::Level {
+                signal,
+                level,
+                rising,
+            } => {
+                let v = values[signal as usize];
+                let crossed = self.last_level.is_some_and(|last| {
+                    if rising {
+                        last < level && v >= level
+                    } else {
+                        last > level && v <= level
+                    }
+                });
+                self.last_level = Some(v);
+                crossed
+            }
+            _ => core::mem::take(&mut self.pending),
+        }
+    }
+
+    /// Where the capture is.
+    pub fn capture(&self) -> Capture {
+        Capture {
+            phase: self.phase,
+            samples: if self.phase == Phase::Done {
+                self.capacity
+            } else {
+                self.stored
+            },
+            pre: self.pre_kept,
+            width: self.width,
+        }
+    }
+
+    /// Copies the finished capture's bytes from byte `offset` (samples in time order,
+    /// oldest first) into `out`; returns the bytes copied (0 past the end, or when no
+    /// capture is finished).
+    pub fn read(&self, offset: usize, out: &mut [u8]) -> usize {
+        if self.phase != Phase::Done {
+            return 0;
+        }
+        let total = self.capacity as usize * self.width as usize;
+        if offset >= total {
+            return 0;
+        }
+        // Done means the ring is full: the oldest sample is the one `head` overwrites
+        // next.
+        let start = self.head as usize * self.width as usize;
+        let n = out.len().min(total - offset);
+        let from = (start + offset) % total;
+        let first = n.min(total - from);
+        out[..first].copy_from_slice(&self.ring[from..from + first]);
+        out[first..n].copy_from_slice(&self.ring[..n - first]);
+        n
+    }
+}
+
+#[cfg(test)]
+#[path = "recorder_tests.rs"]
+mod tests;
