@@ -37,7 +37,7 @@
 mod actuators;
 pub mod pacing;
 mod probing;
-pub mod recorder;
+mod recording;
 mod safety;
 mod session;
 
@@ -190,6 +190,12 @@ pub struct Controller {
     /// A `ControlAck` owed for a control carrying a planned move (encoded by
     /// `transmit`).
     control_ack_due: Option<u16>,
+    /// The data recorder, its ring taken from the queue (`drive::recorder`).
+    recorder: crate::drive::recorder::Recorder,
+    /// Why the last arm request was refused.
+    record_refused: Option<crate::drive::recorder::RecorderError>,
+    /// The events the recorder last saw (`recording`).
+    seen: recording::Seen,
 }
 
 /// What a controller for a machine needs besides the machine, computed and checked
@@ -343,6 +349,9 @@ impl Controller {
             at!((*p).probe_stop).write(false);
             at!((*p).probe_due).write(false);
             at!((*p).control_ack_due).write(None);
+            crate::drive::recorder::Recorder::init_at(at!((*p).recorder));
+            at!((*p).record_refused).write(None);
+            at!((*p).seen).write(recording::Seen::default());
             (*p).update_servo_targets();
         }
     }
@@ -575,6 +584,7 @@ impl Controller {
             self.ack_due = true;
         }
         self.update_outputs();
+        self.record_tick();
         self.since_status = self.since_status.saturating_add(1);
         if self.session && self.since_status as u32 >= STATUS_EVERY_TICKS {
             self.since_status = 0;

@@ -9,5 +9,6 @@ pub mod debounce;
 pub mod homing;
 pub mod lqg;
 pub mod probe;
+pub mod recorder;
 pub mod servo;
 pub mod stepper;

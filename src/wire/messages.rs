@@ -4,11 +4,12 @@
 
 use crate::config::{AXES, MAX_JOINTS};
 use crate::drive::probe::{ProbeMode, ProbeResult};
+use crate::drive::recorder::{Capture, RecorderError, Setup, MAX_SIGNALS};
 use crate::motion::block::PlannedBlock;
 use serde::{Deserialize, Serialize};
 
 /// Protocol version, exchanged in the handshake; both sides must agree.
-pub const PROTOCOL_VERSION: u16 = 12;
+pub const PROTOCOL_VERSION: u16 = 13;
 /// Largest unencoded frame body (sequence number, message and CRC), bytes: a planned
 /// helix with every field at its widest fits.
 pub const MAX_BODY: usize = 384;
@@ -86,6 +87,12 @@ pub enum Control {
         /// What it waits for.
         mode: ProbeMode,
     },
+    /// Arms the recorder with this request (`drive::recorder`), dropping any capture
+    /// it holds; refused (`CtrlMsg::Record` with the error) when the request is bad
+    /// (protocol 13).
+    RecordArm(Setup),
+    /// Stops the recorder and drops its capture (protocol 13).
+    RecordDisarm,
 }
 
 /// A streamed program's identity and how far the controller has received it
@@ -152,6 +159,13 @@ pub enum HostMsgOf<B> {
         id: u16,
         /// The command.
         cmd: Control,
+    },
+    /// Asks where the recorder is and, once its capture is done, the capture's bytes
+    /// from byte `offset` (answered by `CtrlMsg::Record`; protocol 13). Outside the
+    /// block sequence, like a status request: it neither waits for nor delays blocks.
+    RecordRead {
+        /// Byte offset into the capture.
+        offset: u32,
     },
 }
 
@@ -383,4 +397,30 @@ pub enum CtrlMsg {
     Status(Status),
     /// The last probing move's result (protocol 12; see `Status::probes`).
     Probe(ProbeResult),
+    /// The recorder's answer to `HostMsg::RecordRead` or to a refused
+    /// `Control::RecordArm` (protocol 13).
+    Record(RecordReply),
+}
+
+/// Bytes of a capture one `CtrlMsg::Record` carries.
+pub const RECORD_CHUNK: usize = 240;
+
+/// What the controller answers about its recorder (`CtrlMsg::Record`).
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RecordReply {
+    /// Where the capture is.
+    pub capture: Capture,
+    /// The signals' wire ids (`drive::recorder::Signal::id`), in the capture's order.
+    pub signals: heapless::Vec<u8, MAX_SIGNALS>,
+    /// Sampled every servo period (else every tick).
+    pub servo: bool,
+    /// Periods or ticks between samples.
+    pub decimate: u16,
+    /// The last arm request was refused: why.
+    pub refused: Option<RecorderError>,
+    /// Where `data` starts in the capture, bytes.
+    pub offset: u32,
+    /// The capture's bytes from `offset` (empty before the capture is done or past its
+    /// end).
+    pub data: heapless::Vec<u8, RECORD_CHUNK>,
 }

@@ -30,6 +30,7 @@
 //! recorder writes it (readout is of a finished capture).
 
 use crate::config::MAX_JOINTS;
+use serde::{Deserialize, Serialize};
 
 /// Signals a capture can hold.
 pub const MAX_SIGNALS: usize = 8;
@@ -64,7 +65,7 @@ pub enum Signal {
 }
 
 /// A recorder request the recorder refuses, naming what is wrong and where.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum RecorderError {
     /// Signal number `index` of the request has an id that names no signal.
     BadSignal {
@@ -80,6 +81,9 @@ pub enum RecorderError {
     },
     /// A decimation of 0.
     Decimation,
+    /// Sampling every servo period, which this controller does not do yet (its
+    /// servo side does not sample; `controller::recording`).
+    ServoPeriod,
     /// The level trigger names signal number `index`, beyond the request's signals.
     TriggerSignal {
         /// The signal number it names.
@@ -138,7 +142,7 @@ impl Signal {
 }
 
 /// What starts a capture.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Trigger {
     /// The first sample after arming.
     Now,
@@ -172,7 +176,7 @@ pub enum Event {
 }
 
 /// A capture's request.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Setup {
     /// The signals' wire ids; `count` of them are used.
     pub signals: [u8; MAX_SIGNALS],
@@ -189,7 +193,7 @@ pub struct Setup {
 }
 
 /// Where a capture is.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Phase {
     /// Nothing armed.
     #[default]
@@ -203,7 +207,7 @@ pub enum Phase {
 }
 
 /// What a capture holds, for its readout.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Capture {
     /// Where it is.
     pub phase: Phase,
