@@ -194,8 +194,6 @@ pub struct Controller {
     recorder: crate::drive::recorder::Recorder,
     /// Why the last arm request was refused.
     record_refused: Option<crate::drive::recorder::RecorderError>,
-    /// The events the recorder last saw (`recording`).
-    seen: recording::Seen,
 }
 
 /// What a controller for a machine needs besides the machine, computed and checked
@@ -351,7 +349,6 @@ impl Controller {
             at!((*p).control_ack_due).write(None);
             crate::drive::recorder::Recorder::init_at(at!((*p).recorder));
             at!((*p).record_refused).write(None);
-            at!((*p).seen).write(recording::Seen::default());
             (*p).update_servo_targets();
         }
     }

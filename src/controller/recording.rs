@@ -1,97 +1,97 @@
 //! The controller's side of the data recorder ([`crate::drive::recorder`]): arming it
-//! and reading it out over the link (`Control::RecordArm`, `Control::RecordDisarm`,
-//! `HostMsg::RecordRead`), its events and its samples at the tick.
+//! and reading it out over the link (`HostMsg::Record`), its events and its samples at the tick.
 //!
-//! At the tick the signals are formed from what the controller holds: a joint's
-//! commanded position is its actuator reference (counts or steps, the homing offset
-//! taken off, as `Status::measured`), the following error commanded − measured, the
-//! output a stepper's steps this tick (signed); a servo channel's DAC code, the
-//! contour error and its direction are the servo period's and read 0 at the tick.
+//! At the tick the signals are formed from what the controller holds: a servo joint's
+//! commanded position is its channel's target for the end of this tick and its
+//! measured position the encoder's count at the tick edge (counts, the homing offset
+//! taken off, as `Status::measured`), the following error their difference; a
+//! stepper's are both its steps emitted (no feedback: no following error), its output
+//! its steps this tick (signed). A servo channel's DAC code, the contour error and its
+//! direction are the servo period's and read 0 at the tick.
 //! Sampling every servo period is refused until the servo side samples
 //! ([`SERVO_SAMPLING`]).
 
 use super::Controller;
-use crate::config::{Drive, MAX_JOINTS};
-use crate::drive::recorder::{Event, Setup, Signal, MAX_SIGNALS};
+use crate::config::{Drive, MAX_JOINTS, MAX_SERVOS};
+use crate::drive::recorder::{
+    RecorderError, Reply, Setup, MAX_SIGNALS, REPLY_HEADER,
+};
+use crate::wire::store::CHUNK_BYTES;
 use crate::drive::servo::SETPOINT_FRAC_BITS;
 use crate::units::TICK_HZ;
-use crate::wire::{CtrlMsg, RecordReply, State, RECORD_CHUNK};
+use crate::wire::{CtrlMsg, RECORD_ARM, RECORD_DISARM, RECORD_READ};
 
 /// The servo side samples for the recorder (not yet: a request for the servo period
-/// is refused as `RecorderError::Decimation`'s neighbour, `ServoPeriod`).
+/// is refused with `RecorderError::ServoPeriod`).
 pub const SERVO_SAMPLING: bool = false;
 
-/// What the recorder last saw of the events it waits for.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub(super) struct Seen {
-    job: bool,
-    line: u32,
-    alarm: bool,
-}
-
 impl Controller {
-    /// `Control::RecordArm`: arms the recorder, or answers why not.
-    pub(super) fn record_arm(&mut self, setup: &Setup) {
-        let result = if setup.servo && !SERVO_SAMPLING {
-            Err(crate::drive::recorder::RecorderError::ServoPeriod)
-        } else {
-            self.recorder.arm(setup)
+    /// `HostMsg::Record`: a read, answered at once, or a control (arm, disarm),
+    /// acted on once per id and acknowledged; a bad request is answered with
+    /// `CtrlMsg::Record` naming what is wrong.
+    #[inline(never)]
+    pub(super) fn record(&mut self, id: u16, req: &[u8]) {
+        let (what, arg) = match req.split_first() {
+            Some((&what, arg)) => (what, arg),
+            None => (RECORD_READ, &[][..]),
         };
-        self.record_refused = result.err();
-        if self.record_refused.is_some() {
-            self.record_reply(0);
+        if what == RECORD_READ {
+            return self.record_reply(u32::from_le_bytes(arg.try_into().unwrap_or([0; 4])));
         }
-        self.seen = Seen {
-            job: self.job_open,
-            line: self.exec.line,
-            alarm: self.alarm.is_some(),
-        };
+        if self.last_control != Some(id) {
+            self.last_control = Some(id);
+            let result = match what {
+                RECORD_ARM => Setup::unpack(arg).and_then(|setup| {
+                    if setup.servo && !SERVO_SAMPLING {
+                        Err(RecorderError::ServoPeriod)
+                    } else {
+                        self.recorder.arm(&setup)
+                    }
+                }),
+                RECORD_DISARM => {
+                    self.recorder.disarm();
+                    Ok(())
+                }
+                _ => Err(RecorderError::Malformed { at: 255 }),
+            };
+            self.record_refused = result.err();
+            if self.record_refused.is_some() {
+                self.record_reply(0);
+            }
+        }
+        self.send(&CtrlMsg::ControlAck { id });
     }
 
-    /// `Control::RecordDisarm`.
-    pub(super) fn record_disarm(&mut self) {
-        self.recorder.disarm();
-        self.record_refused = None;
-    }
-
-    /// Answers `HostMsg::RecordRead`: where the recorder is, and the capture's bytes
+    /// Answers a read (`HostMsg::Record`): where the recorder is, and the capture's bytes
     /// from `offset` once it is done.
     #[inline(never)]
     pub(super) fn record_reply(&mut self, offset: u32) {
-        let mut data = [0; RECORD_CHUNK];
-        let n = self.recorder.read(offset as usize, &mut data);
+        let mut body = [0; CHUNK_BYTES];
+        let n = self.recorder.read(offset as usize, &mut body[REPLY_HEADER..]);
         let setup = self.recorder.setup();
-        let msg = CtrlMsg::Record(RecordReply {
+        let reply = Reply {
             capture: self.recorder.capture(),
-            signals: heapless::Vec::from_slice(&setup.signals[..setup.count as usize])
-                .unwrap_or_default(),
+            signals: setup.signals,
+            count: setup.count,
             servo: setup.servo,
             decimate: setup.decimate,
             refused: self.record_refused,
             offset,
-            data: heapless::Vec::from_slice(&data[..n]).unwrap_or_default(),
-        });
+        };
+        if let Some(header) = body.first_chunk_mut::<REPLY_HEADER>() {
+            reply.pack(header);
+        }
+        let msg = CtrlMsg::Record(
+            heapless::Vec::from_slice(&body[..REPLY_HEADER + n]).unwrap_or_default(),
+        );
         self.send(&msg);
     }
 
     /// The tick's part: events, then a sample when one is wanted (last in the tick).
     #[inline(never)]
     pub(super) fn record_tick(&mut self) {
-        let now = Seen {
-            job: self.job_open,
-            line: self.exec.line,
-            alarm: self.alarm.is_some(),
-        };
-        if now.job && !self.seen.job {
-            self.recorder.event(Event::JobStart);
-        }
-        if now.line != self.seen.line {
-            self.recorder.event(Event::Line(now.line));
-        }
-        if now.alarm && !self.seen.alarm {
-            self.recorder.event(Event::Alarm);
-        }
-        self.seen = now;
+        self.recorder
+            .observe(self.job_open, self.exec.line, self.alarm.is_some());
         if !self.recorder.wants(false) {
             return;
         }
@@ -102,50 +102,52 @@ impl Controller {
         self.recorder.sample(&values);
     }
 
-    fn signal(&self, s: Signal) -> i32 {
-        let joints = self.machine.joints.len();
-        let commanded = |j: usize| {
-            (self.actuator_q16(j, self.joints[j]) >> SETPOINT_FRAC_BITS) - self.offset[j]
+    /// The value of the signal of wire id `id` (checked by the recorder's `arm`:
+    /// kind `id >> 4`, joint `id & 15`; see `drive::recorder::Signal`). Positions are
+    /// actuator counts or steps from the joint's zero, as `Status::measured`, kept to
+    /// their low 32 bits.
+    #[inline(never)]
+    fn signal(&self, id: u8) -> i32 {
+        let j = (id & 0x0f) as usize;
+        let kind = id >> 4;
+        if kind >= 4 {
+            return match kind {
+                // Q32 units a tick to units a second (shifted first: no overflow).
+                8 => (((self.exec.speed >> 12) * TICK_HZ as i64) >> 20) as i32,
+                11 => self.exec.line as i32,
+                12 => self.state as i32,
+                _ => 0,
+            };
+        }
+        let Some(jc) = self.machine.joints.get(j) else {
+            return 0;
         };
-        let measured = |j: usize| self.measured()[j];
-        let v: i64 = match s {
-            Signal::Commanded(j) if (j as usize) < joints => commanded(j as usize),
-            Signal::Measured(j) if (j as usize) < joints => measured(j as usize),
-            Signal::FollowingError(j) if (j as usize) < joints => {
-                commanded(j as usize) - measured(j as usize)
+        // Commanded, measured: a servo joint's target for the end of this tick and its
+        // encoder at the tick edge; a stepper's steps emitted, both (no feedback).
+        let (cmd, at) = match jc.drive {
+            Drive::Servo { channel } => {
+                let c = channel as usize % MAX_SERVOS;
+                (
+                    self.out.servo_target[c] >> SETPOINT_FRAC_BITS,
+                    self.last.encoder_counts[c],
+                )
             }
-            Signal::Output(j) if (j as usize) < joints => {
-                match self.machine.joints[j as usize].drive {
-                    Drive::Stepper { .. } => {
-                        let t = &self.trains[j as usize];
-                        if t.forward {
-                            t.count as i64
-                        } else {
-                            -(t.count as i64)
-                        }
-                    }
-                    Drive::Servo { .. } => 0,
+            Drive::Stepper { .. } => {
+                if kind == 3 {
+                    let t = &self.trains[j];
+                    return if t.forward { t.count as i32 } else { -(t.count as i32) };
                 }
+                let s = self.steps.steps(j);
+                (s, s)
             }
-            Signal::PathSpeed => ((self.exec.speed as i128 * TICK_HZ as i128) >> 32) as i64,
-            Signal::Line => self.exec.line as i64,
-            Signal::State => state_index(self.state) as i64,
-            _ => 0,
         };
-        v.clamp(i32::MIN as i64, i32::MAX as i64) as i32
-    }
-}
-
-/// `State`'s index, as the wire numbers it.
-fn state_index(s: State) -> u8 {
-    match s {
-        State::Idle => 0,
-        State::Running => 1,
-        State::Hold => 2,
-        State::Homing => 3,
-        State::Alarm => 4,
-        State::EStop => 5,
-        State::Starved => 6,
+        let off = self.offset[j];
+        match kind {
+            0 => (cmd - off) as i32,
+            1 => (at - off) as i32,
+            2 => (cmd - at) as i32,
+            _ => 0,
+        }
     }
 }
 

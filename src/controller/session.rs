@@ -317,7 +317,7 @@ impl Controller {
                 }
                 self.send(&CtrlMsg::ControlAck { id });
             }
-            HostMsgOf::RecordRead { offset } => self.record_reply(offset),
+            HostMsgOf::Record { id, ref req } => self.record(id, req),
             HostMsgOf::Block(never) => match never {},
         }
     }
@@ -468,8 +468,6 @@ impl Controller {
             }
             Control::Probe { planned, mode } => self.probe_start(&planned, mode),
             Control::Home => self.home(),
-            Control::RecordArm(setup) => self.record_arm(&setup),
-            Control::RecordDisarm => self.record_disarm(),
             Control::EndJob => {
                 self.job_open = false;
                 self.mark = JobMark::default();

@@ -17,8 +17,8 @@
 //! to [`Recorder::sample`] once per servo period or tick (as [`Setup::servo`] says);
 //! every `decimate`th call stores one sample. The fast path is a counter, a
 //! comparison and the stores of the sample's bytes. Events (a job started, an NC
-//! line began, an alarm was raised) are told with [`Recorder::event`] as they happen,
-//! between samples; they latch, so decimation cannot miss them.
+//! line began, an alarm was raised) are read from what [`Recorder::observe`] is told
+//! every tick; they latch, so decimation cannot miss them.
 //!
 //! **Capture.** Armed, the recorder stores samples continuously in the ring. At the
 //! trigger (its sample is the first of the trigger condition) it keeps up to `pre`
@@ -30,7 +30,6 @@
 //! recorder writes it (readout is of a finished capture).
 
 use crate::config::MAX_JOINTS;
-use serde::{Deserialize, Serialize};
 
 /// Signals a capture can hold.
 pub const MAX_SIGNALS: usize = 8;
@@ -65,7 +64,7 @@ pub enum Signal {
 }
 
 /// A recorder request the recorder refuses, naming what is wrong and where.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RecorderError {
     /// Signal number `index` of the request has an id that names no signal.
     BadSignal {
@@ -81,6 +80,12 @@ pub enum RecorderError {
     },
     /// A decimation of 0.
     Decimation,
+    /// The request holds a bad value at byte `at` ([`Setup::unpack`]), or (`at`
+    /// 255) asks for nothing the recorder does.
+    Malformed {
+        /// The byte's place.
+        at: u8,
+    },
     /// Sampling every servo period, which this controller does not do yet (its
     /// servo side does not sample; `controller::recording`).
     ServoPeriod,
@@ -142,7 +147,7 @@ impl Signal {
 }
 
 /// What starts a capture.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Trigger {
     /// The first sample after arming.
     Now,
@@ -164,19 +169,8 @@ pub enum Trigger {
     },
 }
 
-/// An event between samples that a trigger may wait for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Event {
-    /// A job started.
-    JobStart,
-    /// This NC line began executing.
-    Line(u32),
-    /// An alarm was raised.
-    Alarm,
-}
-
 /// A capture's request.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Setup {
     /// The signals' wire ids; `count` of them are used.
     pub signals: [u8; MAX_SIGNALS],
@@ -193,7 +187,7 @@ pub struct Setup {
 }
 
 /// Where a capture is.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Phase {
     /// Nothing armed.
     #[default]
@@ -207,7 +201,7 @@ pub enum Phase {
 }
 
 /// What a capture holds, for its readout.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Capture {
     /// Where it is.
     pub phase: Phase,
@@ -219,12 +213,13 @@ pub struct Capture {
     pub width: u16,
 }
 
-/// The recorder. See the module documentation.
-#[derive(Clone, Debug)]
-pub struct Recorder {
+/// The recorder's book-keeping (all but the ring).
+#[derive(Clone, Copy, Debug)]
+struct Book {
     setup: Setup,
-    signals: [Signal; MAX_SIGNALS],
     width: u16,
+    /// Bit i: signal i is stored in 16 bits.
+    narrow: u8,
     /// Samples the ring holds at this width.
     capacity: u16,
     phase: Phase,
@@ -241,7 +236,38 @@ pub struct Recorder {
     pending: bool,
     /// The level signal's last stored value.
     last_level: Option<i32>,
-    ring: [u8; RING_BYTES],
+}
+
+const OFF: Book = Book {
+    setup: Setup {
+        signals: [0; MAX_SIGNALS],
+        count: 0,
+        servo: false,
+        decimate: 1,
+        trigger: Trigger::Now,
+        pre: 0,
+    },
+    width: 0,
+    narrow: 0,
+    capacity: 0,
+    phase: Phase::Off,
+    countdown: 0,
+    head: 0,
+    stored: 0,
+    remaining: 0,
+    pre_kept: 0,
+    pending: false,
+    last_level: None,
+};
+
+/// The recorder. See the module documentation.
+#[derive(Clone, Debug)]
+pub struct Recorder {
+    s: Book,
+    /// What [`Recorder::observe`] was told last: job open, line, alarm.
+    seen: (bool, u32, bool),
+    /// The samples, in halfwords.
+    ring: [u16; RING_BYTES / 2],
 }
 
 impl Default for Recorder {
@@ -254,26 +280,9 @@ impl Recorder {
     /// A recorder with nothing armed.
     pub const fn new() -> Self {
         Self {
-            setup: Setup {
-                signals: [0; MAX_SIGNALS],
-                count: 0,
-                servo: false,
-                decimate: 1,
-                trigger: Trigger::Now,
-                pre: 0,
-            },
-            signals: [Signal::PathSpeed; MAX_SIGNALS],
-            width: 0,
-            capacity: 0,
-            phase: Phase::Off,
-            countdown: 0,
-            head: 0,
-            stored: 0,
-            remaining: 0,
-            pre_kept: 0,
-            pending: false,
-            last_level: None,
-            ring: [0; RING_BYTES],
+            s: OFF,
+            seen: (false, 0, false),
+            ring: [0; RING_BYTES / 2],
         }
     }
 
@@ -284,32 +293,16 @@ impl Recorder {
     /// `p` valid for writes and aligned.
     pub unsafe fn init_at(p: *mut Self) {
         use core::ptr::addr_of_mut as at;
-        // SAFETY: the caller's promise; every field is written, the ring as zeros.
+        // SAFETY: the caller's promise; both fields are written, the ring as zeros.
         unsafe {
             at!((*p).ring).write_bytes(0, 1);
-            at!((*p).setup).write(Setup {
-                signals: [0; MAX_SIGNALS],
-                count: 0,
-                servo: false,
-                decimate: 1,
-                trigger: Trigger::Now,
-                pre: 0,
-            });
-            at!((*p).signals).write([Signal::PathSpeed; MAX_SIGNALS]);
-            at!((*p).width).write(0);
-            at!((*p).capacity).write(0);
-            at!((*p).phase).write(Phase::Off);
-            at!((*p).countdown).write(0);
-            at!((*p).head).write(0);
-            at!((*p).stored).write(0);
-            at!((*p).remaining).write(0);
-            at!((*p).pre_kept).write(0);
-            at!((*p).pending).write(false);
-            at!((*p).last_level).write(None);
+            at!((*p).s).write(OFF);
+            at!((*p).seen).write((false, 0, false));
         }
     }
 
     /// Checks `setup` and arms it, dropping any capture held.
+    #[inline(never)]
     pub fn arm(&mut self, setup: &Setup) -> Result<(), RecorderError> {
         let count = setup.count;
         if count == 0 || count as usize > MAX_SIGNALS {
@@ -318,15 +311,14 @@ impl Recorder {
         if setup.decimate == 0 {
             return Err(RecorderError::Decimation);
         }
-        let mut signals = [Signal::PathSpeed; MAX_SIGNALS];
         let mut width = 0u16;
-        for (i, (s, &id)) in signals
-            .iter_mut()
-            .zip(&setup.signals[..count as usize])
-            .enumerate()
-        {
-            *s = Signal::from_id(id).ok_or(RecorderError::BadSignal { index: i as u8, id })?;
+        let mut narrow = 0u8;
+        for (i, &id) in setup.signals[..count as usize].iter().enumerate() {
+            let s = Signal::from_id(id).ok_or(RecorderError::BadSignal { index: i as u8, id })?;
             width += s.width() as u16;
+            if s.width() == 2 {
+                narrow |= 1 << i;
+            }
         }
         if let Trigger::Level { signal, .. } = setup.trigger {
             if signal >= count {
@@ -340,107 +332,113 @@ impl Recorder {
                 capacity,
             });
         }
-        // Field by field: the ring stays where it is (no copy of it on the stack).
-        self.setup = *setup;
-        self.signals = signals;
-        self.width = width;
-        self.capacity = capacity;
-        self.phase = Phase::Armed;
-        self.countdown = 0;
-        self.head = 0;
-        self.stored = 0;
-        self.remaining = 0;
-        self.pre_kept = 0;
-        self.pending = false;
-        self.last_level = None;
+        // The ring stays where it is (no copy of it on the stack).
+        self.s = Book {
+            setup: *setup,
+            width,
+            narrow,
+            capacity,
+            phase: Phase::Armed,
+            ..OFF
+        };
         Ok(())
     }
 
     /// Stops recording and drops the capture.
     pub fn disarm(&mut self) {
-        self.phase = Phase::Off;
+        self.s.phase = Phase::Off;
     }
 
     /// The request armed last.
     pub fn setup(&self) -> &Setup {
-        &self.setup
+        &self.s.setup
     }
 
-    /// The configured signals (the first [`Setup::count`]).
-    pub fn signals(&self) -> &[Signal] {
-        &self.signals[..self.setup.count as usize]
+    /// The configured signals' wire ids (the first [`Setup::count`]).
+    pub fn signals(&self) -> &[u8] {
+        &self.s.setup.signals[..self.s.setup.count as usize]
     }
 
     /// Recording: samples are wanted, every servo period when `servo`, else every tick.
     pub fn wants(&self, servo: bool) -> bool {
-        matches!(self.phase, Phase::Armed | Phase::Triggered) && self.setup.servo == servo
+        matches!(self.s.phase, Phase::Armed | Phase::Triggered) && self.s.setup.servo == servo
     }
 
-    /// Tells the recorder of an event; latched for the next stored sample when it is
-    /// the armed trigger's.
-    pub fn event(&mut self, event: Event) {
-        if self.phase != Phase::Armed {
-            return;
+    /// Tells the recorder, every tick, of the events it may wait for: a job is open
+    /// (`job`; its start is the tick it opens), the NC line executing (`line`; a line
+    /// begins the tick it changes to), an alarm is raised (`alarm`; its raising is the
+    /// tick it appears). An awaited event is latched for the next stored sample.
+    pub fn observe(&mut self, job: bool, line: u32, alarm: bool) {
+        let (was_job, was_line, was_alarm) = self.seen;
+        if self.s.phase == Phase::Armed {
+            self.s.pending |= match self.s.setup.trigger {
+                Trigger::JobStart => job && !was_job,
+                Trigger::Line(n) => line == n && line != was_line,
+                Trigger::Alarm => alarm && !was_alarm,
+                _ => false,
+            };
         }
-        self.pending |= match (self.setup.trigger, event) {
-            (Trigger::JobStart, Event::JobStart) | (Trigger::Alarm, Event::Alarm) => true,
-            (Trigger::Line(n), Event::Line(l)) => n == l,
-            _ => false,
-        };
+        self.seen = (job, line, alarm);
     }
 
     /// One period's or tick's values of the configured signals (in their order; the
     /// values beyond [`Setup::count`] are ignored). Stores every `decimate`th.
     pub fn sample(&mut self, values: &[i32; MAX_SIGNALS]) {
-        if !matches!(self.phase, Phase::Armed | Phase::Triggered) {
+        if !matches!(self.s.phase, Phase::Armed | Phase::Triggered) {
             return;
         }
-        if self.countdown > 0 {
-            self.countdown -= 1;
+        if self.s.countdown > 0 {
+            self.s.countdown -= 1;
             return;
         }
-        self.countdown = self.setup.decimate - 1;
+        self.s.countdown = self.s.setup.decimate - 1;
         self.store(values);
-        if self.phase == Phase::Armed {
+        if self.s.phase == Phase::Armed {
             if self.triggered(values) {
-                self.pre_kept = self.setup.pre.min(self.stored - 1);
-                self.remaining = self.capacity - 1 - self.pre_kept;
-                self.phase = Phase::Triggered;
-                if self.remaining == 0 {
-                    self.phase = Phase::Done;
+                self.s.pre_kept = self.s.setup.pre.min(self.s.stored - 1);
+                self.s.remaining = self.s.capacity - 1 - self.s.pre_kept;
+                self.s.phase = Phase::Triggered;
+                if self.s.remaining == 0 {
+                    self.s.phase = Phase::Done;
                 }
             }
         } else {
-            self.remaining -= 1;
-            if self.remaining == 0 {
-                self.phase = Phase::Done;
+            self.s.remaining -= 1;
+            if self.s.remaining == 0 {
+                self.s.phase = Phase::Done;
             }
         }
     }
 
     fn store(&mut self, values: &[i32; MAX_SIGNALS]) {
-        let mut at = self.head as usize * self.width as usize;
-        for (s, &v) in self.signals[..self.setup.count as usize].iter().zip(values) {
-            if s.width() == 2 {
-                let v = v.clamp(i16::MIN as i32, i16::MAX as i32) as i16;
-                self.ring[at..at + 2].copy_from_slice(&v.to_le_bytes());
-                at += 2;
+        // Halfwords: a 16-bit signal takes one, a 32-bit signal two, low half first
+        // (so the ring's bytes are the sample's little-endian bytes).
+        let mut at = self.s.head as usize * (self.s.width as usize / 2);
+        for (i, &v) in values.iter().enumerate().take(self.s.setup.count as usize) {
+            if self.s.narrow & (1 << i) != 0 {
+                if let Some(h) = self.ring.get_mut(at) {
+                    *h = v.clamp(i16::MIN as i32, i16::MAX as i32) as u16;
+                }
+                at += 1;
             } else {
-                self.ring[at..at + 4].copy_from_slice(&v.to_le_bytes());
-                at += 4;
+                if let Some(h) = self.ring.get_mut(at..at + 2) {
+                    h[0] = v as u16;
+                    h[1] = (v >> 16) as u16;
+                }
+                at += 2;
             }
         }
-        self.head += 1;
-        if self.head == self.capacity {
-            self.head = 0;
+        self.s.head += 1;
+        if self.s.head == self.s.capacity {
+            self.s.head = 0;
         }
-        if self.stored < self.capacity {
-            self.stored += 1;
+        if self.s.stored < self.s.capacity {
+            self.s.stored += 1;
         }
     }
 
     fn triggered(&mut self, values: &[i32; MAX_SIGNALS]) -> bool {
-        match self.setup.trigger {
+        match self.s.setup.trigger {
             Trigger::Now => true,
             Trigger::Level {
                 signal,
@@ -448,31 +446,31 @@ impl Recorder {
                 rising,
             } => {
                 let v = values[signal as usize];
-                let crossed = self.last_level.is_some_and(|last| {
+                let crossed = self.s.last_level.is_some_and(|last| {
                     if rising {
                         last < level && v >= level
                     } else {
                         last > level && v <= level
                     }
                 });
-                self.last_level = Some(v);
+                self.s.last_level = Some(v);
                 crossed
             }
-            _ => core::mem::take(&mut self.pending),
+            _ => core::mem::take(&mut self.s.pending),
         }
     }
 
     /// Where the capture is.
     pub fn capture(&self) -> Capture {
         Capture {
-            phase: self.phase,
-            samples: if self.phase == Phase::Done {
-                self.capacity
+            phase: self.s.phase,
+            samples: if self.s.phase == Phase::Done {
+                self.s.capacity
             } else {
-                self.stored
+                self.s.stored
             },
-            pre: self.pre_kept,
-            width: self.width,
+            pre: self.s.pre_kept,
+            width: self.s.width,
         }
     }
 
@@ -480,24 +478,31 @@ impl Recorder {
     /// oldest first) into `out`; returns the bytes copied (0 past the end, or when no
     /// capture is finished).
     pub fn read(&self, offset: usize, out: &mut [u8]) -> usize {
-        if self.phase != Phase::Done {
+        if self.s.phase != Phase::Done {
             return 0;
         }
-        let total = self.capacity as usize * self.width as usize;
+        let total = self.s.capacity as usize * self.s.width as usize;
         if offset >= total {
             return 0;
         }
         // Done means the ring is full: the oldest sample is the one `head` overwrites
         // next.
-        let start = self.head as usize * self.width as usize;
+        let start = self.s.head as usize * self.s.width as usize;
         let n = out.len().min(total - offset);
-        let from = (start + offset) % total;
-        let first = n.min(total - from);
-        out[..first].copy_from_slice(&self.ring[from..from + first]);
-        out[first..n].copy_from_slice(&self.ring[..n - first]);
+        let mut at = (start + offset) % total;
+        for b in &mut out[..n] {
+            *b = (self.ring[at / 2] >> (8 * (at & 1))) as u8;
+            at += 1;
+            if at == total {
+                at = 0;
+            }
+        }
         n
     }
 }
+
+mod pack;
+pub use pack::{Reply, REPLY_HEADER, SETUP_BYTES};
 
 #[cfg(test)]
 #[path = "recorder_tests.rs"]

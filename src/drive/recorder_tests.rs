@@ -37,7 +37,7 @@ fn samples(r: &Recorder) -> Vec<Vec<i32>> {
         .map(|s| {
             let mut out = Vec::new();
             let mut i = 0;
-            for sig in r.signals() {
+            for sig in r.signals().iter().map(|&id| Signal::from_id(id).unwrap()) {
                 if sig.width() == 2 {
                     out.push(i16::from_le_bytes([s[i], s[i + 1]]) as i32);
                 } else {
@@ -217,11 +217,8 @@ fn an_alarm_between_decimated_samples_triggers_the_next() {
     r.arm(&setup(&[0x20], 10, Trigger::Alarm, 30)).unwrap();
     // 960 samples of one 16-bit signal, one each 10 calls.
     for v in 0..12_000 {
-        if v == 705 {
-            r.event(Event::JobStart);
-            r.event(Event::Line(7));
-            r.event(Event::Alarm);
-        }
+        // An alarm raised at 705 and still there after: one event.
+        r.observe(v >= 705, 7, v >= 705);
         r.sample(&[v; MAX_SIGNALS]);
     }
     let s = samples(&r);
@@ -237,8 +234,7 @@ fn a_line_trigger_waits_for_its_line() {
     let mut r = recorder();
     r.arm(&setup(&[0xb0], 1, Trigger::Line(42), 2)).unwrap();
     for line in 40..50 {
-        r.event(Event::Line(line));
-        r.event(Event::Alarm);
+        r.observe(true, line, true);
         r.sample(&[line as i32; MAX_SIGNALS]);
         if line < 42 {
             assert_eq!(r.capture().phase, Phase::Armed);
@@ -251,10 +247,14 @@ fn a_line_trigger_waits_for_its_line() {
 #[test]
 fn an_early_trigger_keeps_the_samples_there_are() {
     let mut r = recorder();
+    // A job already open when armed is no job start.
+    r.observe(true, 0, false);
     r.arm(&setup(&[0x80], 1, Trigger::JobStart, 100)).unwrap();
+    r.observe(true, 0, false);
+    r.observe(false, 0, false);
     r.sample(&[1; MAX_SIGNALS]);
     r.sample(&[2; MAX_SIGNALS]);
-    r.event(Event::JobStart);
+    r.observe(true, 0, false);
     for v in 3..1000 {
         r.sample(&[v; MAX_SIGNALS]);
     }

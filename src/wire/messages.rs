@@ -4,7 +4,7 @@
 
 use crate::config::{AXES, MAX_JOINTS};
 use crate::drive::probe::{ProbeMode, ProbeResult};
-use crate::drive::recorder::{Capture, RecorderError, Setup, MAX_SIGNALS};
+use crate::drive::recorder::REPLY_HEADER;
 use crate::motion::block::PlannedBlock;
 use serde::{Deserialize, Serialize};
 
@@ -87,12 +87,6 @@ pub enum Control {
         /// What it waits for.
         mode: ProbeMode,
     },
-    /// Arms the recorder with this request (`drive::recorder`), dropping any capture
-    /// it holds; refused (`CtrlMsg::Record` with the error) when the request is bad
-    /// (protocol 13).
-    RecordArm(Setup),
-    /// Stops the recorder and drops its capture (protocol 13).
-    RecordDisarm,
 }
 
 /// A streamed program's identity and how far the controller has received it
@@ -160,12 +154,21 @@ pub enum HostMsgOf<B> {
         /// The command.
         cmd: Control,
     },
-    /// Asks where the recorder is and, once its capture is done, the capture's bytes
-    /// from byte `offset` (answered by `CtrlMsg::Record`; protocol 13). Outside the
-    /// block sequence, like a status request: it neither waits for nor delays blocks.
-    RecordRead {
-        /// Byte offset into the capture.
-        offset: u32,
+    /// The recorder (protocol 13); `req`'s first byte says what.
+    /// * [`RECORD_READ`] and a byte offset (u32, little-endian): where the recorder is
+    ///   and, once its capture is done, the capture's bytes from the offset (answered
+    ///   by `CtrlMsg::Record`). Outside the block sequence, like a status request: it
+    ///   neither waits for blocks nor delays them; `id` is not looked at.
+    /// * [`RECORD_ARM`] and the request (`drive::recorder::Setup::pack`): arms the
+    ///   recorder, dropping any capture it holds. A control: acknowledged by
+    ///   `ControlAck { id }`, acted on once per id; a refusal is answered by
+    ///   `CtrlMsg::Record` with the error.
+    /// * [`RECORD_DISARM`]: stops the recorder and drops its capture (a control).
+    Record {
+        /// The control's id.
+        id: u16,
+        /// What, and its argument.
+        req: heapless::Vec<u8, { crate::wire::store::CHUNK_BYTES }>,
     },
 }
 
@@ -399,28 +402,17 @@ pub enum CtrlMsg {
     Probe(ProbeResult),
     /// The recorder's answer to `HostMsg::RecordRead` or to a refused
     /// `Control::RecordArm` (protocol 13).
-    Record(RecordReply),
+    /// (`drive::recorder::Reply::pack`, then up to [`RECORD_CHUNK`] bytes of the
+    /// capture).
+    Record(heapless::Vec<u8, { crate::wire::store::CHUNK_BYTES }>),
 }
+
+/// `HostMsg::Record`: read the recorder.
+pub const RECORD_READ: u8 = 0;
+/// `HostMsg::Record`: arm the recorder.
+pub const RECORD_ARM: u8 = 1;
+/// `HostMsg::Record`: stop the recorder.
+pub const RECORD_DISARM: u8 = 2;
 
 /// Bytes of a capture one `CtrlMsg::Record` carries.
-pub const RECORD_CHUNK: usize = 240;
-
-/// What the controller answers about its recorder (`CtrlMsg::Record`).
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-pub struct RecordReply {
-    /// Where the capture is.
-    pub capture: Capture,
-    /// The signals' wire ids (`drive::recorder::Signal::id`), in the capture's order.
-    pub signals: heapless::Vec<u8, MAX_SIGNALS>,
-    /// Sampled every servo period (else every tick).
-    pub servo: bool,
-    /// Periods or ticks between samples.
-    pub decimate: u16,
-    /// The last arm request was refused: why.
-    pub refused: Option<RecorderError>,
-    /// Where `data` starts in the capture, bytes.
-    pub offset: u32,
-    /// The capture's bytes from `offset` (empty before the capture is done or past its
-    /// end).
-    pub data: heapless::Vec<u8, RECORD_CHUNK>,
-}
+pub const RECORD_CHUNK: usize = crate::wire::store::CHUNK_BYTES - REPLY_HEADER;
