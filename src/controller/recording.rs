@@ -119,7 +119,7 @@ impl Controller {
                 _ => 0,
             };
         }
-        let Some(jc) = self.machine.joints.get(j) else {
+        let (Some(jc), true) = (self.machine.joints.get(j), j < MAX_JOINTS) else {
             return 0;
         };
         // Commanded, measured: a servo joint's target for the end of this tick and its
