@@ -211,6 +211,11 @@ impl<T: Transport> Link<T> {
         &self.io
     }
 
+    /// The transport, to act on (a simulator's clock: its ticks at rest).
+    pub fn transport_mut(&mut self) -> &mut T {
+        &mut self.io
+    }
+
     /// Gives the transport back.
     pub fn into_transport(self) -> T {
         self.io

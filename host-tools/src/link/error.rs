@@ -103,6 +103,13 @@ pub enum LinkError {
         /// How it showed.
         seen: &'static str,
     },
+    /// The controller's recorder refused a request.
+    Recorder {
+        /// Port.
+        port: String,
+        /// Why.
+        error: pkmc::drive::recorder::RecorderError,
+    },
     /// A message did not fit in a frame (a bug).
     Frame {
         /// Port.
@@ -203,6 +210,9 @@ impl fmt::Display for LinkError {
                  it, `nc-send resume` continues what is queued, `nc-send abort` drops it"
             ),
             LinkError::Frame { port, what } => write!(f, "{port}: cannot frame {what}"),
+            LinkError::Recorder { port, error } => {
+                write!(f, "{port}: the controller's recorder refused the request: {error}")
+            }
         }
     }
 }

@@ -1,0 +1,150 @@
+//! The client's side of the controller's data recorder (`pkmc::drive::recorder`,
+//! protocol 13): arming it, asking where it is, and reading a finished capture out,
+//! each a small frame beside a running job's blocks (a read is answered at once and
+//! neither waits for blocks nor holds them back).
+
+use super::{Link, LinkError, Transport};
+use pkmc::drive::recorder::{Phase, Reply, Setup, Signal};
+use pkmc::wire::{CtrlMsg, HostMsg, RECORD_ARM, RECORD_DISARM, RECORD_READ};
+use std::time::{Duration, Instant};
+
+/// A finished capture, read out.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Recording {
+    /// The capture's signals, in its order.
+    pub signals: Vec<Signal>,
+    /// Sampled every servo period (else every tick).
+    pub servo: bool,
+    /// Periods or ticks between samples.
+    pub decimate: u16,
+    /// Samples before the trigger's.
+    pub pre: usize,
+    /// Each sample's values, oldest first.
+    pub samples: Vec<Vec<i32>>,
+}
+
+impl Recording {
+    /// Seconds between samples.
+    pub fn period_s(&self) -> f64 {
+        let hz = if self.servo {
+            pkmc::drive::servo::SERVO_HZ as f64
+        } else {
+            pkmc::units::TICK_HZ as f64
+        };
+        self.decimate as f64 / hz
+    }
+
+    /// The capture's samples from `bytes` (a whole capture, as the controller reads it
+    /// out), each signal 2 or 4 bytes little-endian.
+    pub fn decode(signals: Vec<Signal>, bytes: &[u8]) -> Vec<Vec<i32>> {
+        let width: usize = signals.iter().map(|s| s.width() as usize).sum();
+        bytes
+            .chunks_exact(width.max(1))
+            .map(|s| {
+                let mut at = 0;
+                signals
+                    .iter()
+                    .map(|sig| {
+                        let v = if sig.width() == 2 {
+                            i16::from_le_bytes([s[at], s[at + 1]]) as i32
+                        } else {
+                            i32::from_le_bytes([s[at], s[at + 1], s[at + 2], s[at + 3]])
+                        };
+                        at += sig.width() as usize;
+                        v
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+}
+
+impl<T: Transport> Link<T> {
+    /// Arms the recorder with `setup`; a request the controller refuses is an error
+    /// naming why.
+    pub fn record_arm(&mut self, setup: &Setup) -> Result<(), LinkError> {
+        let mut req = heapless::Vec::new();
+        let _ = req.push(RECORD_ARM);
+        let _ = req.extend_from_slice(&setup.pack());
+        let id = self.fresh_control_id();
+        self.stats.controls += 1;
+        self.until_acked(id, &HostMsg::Record { id, req }, "arming the recorder")?;
+        let (reply, _) = self.record_query(0)?;
+        match reply.refused {
+            Some(error) => Err(LinkError::Recorder {
+                port: self.port(),
+                error,
+            }),
+            None => Ok(()),
+        }
+    }
+
+    /// Stops the recorder and drops its capture.
+    pub fn record_disarm(&mut self) -> Result<(), LinkError> {
+        let mut req = heapless::Vec::new();
+        let _ = req.push(RECORD_DISARM);
+        let id = self.fresh_control_id();
+        self.stats.controls += 1;
+        self.until_acked(id, &HostMsg::Record { id, req }, "stopping the recorder")
+    }
+
+    /// Where the recorder is, and the capture's bytes from `offset` once it is done.
+    pub fn record_query(&mut self, offset: u32) -> Result<(Reply, Vec<u8>), LinkError> {
+        let mut req = heapless::Vec::new();
+        let _ = req.push(RECORD_READ);
+        let _ = req.extend_from_slice(&offset.to_le_bytes());
+        let msg = HostMsg::Record { id: 0, req };
+        let start = Instant::now();
+        loop {
+            self.queue(0, &msg)?;
+            self.flush()?;
+            let until = Instant::now() + Duration::from_millis(100);
+            while Instant::now() < until {
+                let msgs = self.pump(Duration::from_millis(5))?;
+                self.absorb(&msgs);
+                for m in msgs {
+                    if let CtrlMsg::Record(bytes) = m {
+                        if let Some((reply, data)) = Reply::unpack(&bytes) {
+                            if reply.offset == offset {
+                                return Ok((reply, data.to_vec()));
+                            }
+                        }
+                    }
+                }
+            }
+            if self.given_up(start) {
+                return Err(self.lost("waiting for the recorder", start));
+            }
+        }
+    }
+
+    /// Reads the finished capture out; `None` while it is not finished (armed and
+    /// waiting for its trigger, or filling the samples after it) or nothing is armed.
+    pub fn record_read(&mut self) -> Result<Option<Recording>, LinkError> {
+        let (first, mut bytes) = self.record_query(0)?;
+        if first.capture.phase != Phase::Done {
+            return Ok(None);
+        }
+        let total = first.capture.samples as usize * first.capture.width as usize;
+        while bytes.len() < total {
+            let (reply, data) = self.record_query(bytes.len() as u32)?;
+            if data.is_empty() || reply.capture.phase != Phase::Done {
+                // Re-armed while it was read: that capture is gone.
+                return Ok(None);
+            }
+            bytes.extend_from_slice(&data);
+        }
+        bytes.truncate(total);
+        let signals: Vec<Signal> = first.signals[..first.count as usize]
+            .iter()
+            .filter_map(|&id| Signal::from_id(id))
+            .collect();
+        Ok(Some(Recording {
+            samples: Recording::decode(signals.clone(), &bytes),
+            signals,
+            servo: first.servo,
+            decimate: first.decimate,
+            pre: first.capture.pre as usize,
+        }))
+    }
+}
