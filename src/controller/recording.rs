@@ -13,12 +13,10 @@
 
 use super::Controller;
 use crate::config::{Drive, MAX_JOINTS, MAX_SERVOS};
-use crate::drive::recorder::{
-    RecorderError, Reply, Setup, MAX_SIGNALS, REPLY_HEADER,
-};
-use crate::wire::store::CHUNK_BYTES;
+use crate::drive::recorder::{RecorderError, Reply, Setup, MAX_SIGNALS, REPLY_HEADER};
 use crate::drive::servo::SETPOINT_FRAC_BITS;
 use crate::units::TICK_HZ;
+use crate::wire::store::CHUNK_BYTES;
 use crate::wire::{CtrlMsg, RECORD_ARM, RECORD_DISARM, RECORD_READ};
 
 /// The servo side samples for the recorder (not yet: a request for the servo period
@@ -67,7 +65,9 @@ impl Controller {
     #[inline(never)]
     pub(super) fn record_reply(&mut self, offset: u32) {
         let mut body = [0; CHUNK_BYTES];
-        let n = self.recorder.read(offset as usize, &mut body[REPLY_HEADER..]);
+        let n = self
+            .recorder
+            .read(offset as usize, &mut body[REPLY_HEADER..]);
         let setup = self.recorder.setup();
         let reply = Reply {
             capture: self.recorder.capture(),
@@ -135,7 +135,11 @@ impl Controller {
             Drive::Stepper { .. } => {
                 if kind == 3 {
                     let t = &self.trains[j];
-                    return if t.forward { t.count as i32 } else { -(t.count as i32) };
+                    return if t.forward {
+                        t.count as i32
+                    } else {
+                        -(t.count as i32)
+                    };
                 }
                 let s = self.steps.steps(j);
                 (s, s)

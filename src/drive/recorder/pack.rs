@@ -28,9 +28,11 @@ impl Setup {
             Trigger::JobStart => (1, 0, 0),
             Trigger::Line(l) => (2, 0, l),
             Trigger::Alarm => (3, 0, 0),
-            Trigger::Level { signal, level, rising } => {
-                (if rising { 4 } else { 5 }, signal, level as u32)
-            }
+            Trigger::Level {
+                signal,
+                level,
+                rising,
+            } => (if rising { 4 } else { 5 }, signal, level as u32),
         };
         let mut out = [0; SETUP_BYTES];
         out[0] = self.count;
@@ -48,7 +50,9 @@ impl Setup {
     /// themselves are checked by [`super::Recorder::arm`].
     pub fn unpack(b: &[u8]) -> Result<Self, RecorderError> {
         let Ok(b) = <&[u8; SETUP_BYTES]>::try_from(b) else {
-            return Err(RecorderError::Malformed { at: b.len().min(SETUP_BYTES) as u8 });
+            return Err(RecorderError::Malformed {
+                at: b.len().min(SETUP_BYTES) as u8,
+            });
         };
         let servo = match b[9] {
             0 => false,
@@ -61,7 +65,11 @@ impl Setup {
             1 => Trigger::JobStart,
             2 => Trigger::Line(arg),
             3 => Trigger::Alarm,
-            k @ (4 | 5) => Trigger::Level { signal: b[15], level: arg as i32, rising: k == 4 },
+            k @ (4 | 5) => Trigger::Level {
+                signal: b[15],
+                level: arg as i32,
+                rising: k == 4,
+            },
             _ => return Err(RecorderError::Malformed { at: 14 }),
         };
         let mut signals = [0; MAX_SIGNALS];
@@ -75,7 +83,6 @@ impl Setup {
             pre: u16::from_le_bytes([b[12], b[13]]),
         })
     }
-
 }
 
 /// The controller's answer about its recorder: where the capture is, what it holds,
@@ -140,11 +147,17 @@ impl Reply {
         let (a, b2) = (u16_of(11), u16_of(13));
         let refused = match h[10] {
             0 => None,
-            1 => Some(RecorderError::BadSignal { index: a as u8, id: b2 as u8 }),
+            1 => Some(RecorderError::BadSignal {
+                index: a as u8,
+                id: b2 as u8,
+            }),
             2 => Some(RecorderError::SignalCount { count: a as u8 }),
             3 => Some(RecorderError::Decimation),
             4 => Some(RecorderError::TriggerSignal { index: a as u8 }),
-            5 => Some(RecorderError::PreTrigger { pre: a, capacity: b2 }),
+            5 => Some(RecorderError::PreTrigger {
+                pre: a,
+                capacity: b2,
+            }),
             6 => Some(RecorderError::Malformed { at: a as u8 }),
             7 => Some(RecorderError::ServoPeriod),
             _ => return None,
@@ -156,7 +169,12 @@ impl Reply {
         let mut signals = [0; MAX_SIGNALS];
         signals.copy_from_slice(&h[16..24]);
         let reply = Self {
-            capture: Capture { phase, samples: u16_of(1), pre: u16_of(3), width: u16_of(5) },
+            capture: Capture {
+                phase,
+                samples: u16_of(1),
+                pre: u16_of(3),
+                width: u16_of(5),
+            },
             signals,
             count,
             servo: h[7] == 1,
