@@ -437,7 +437,10 @@ impl<T: Transport> Link<T> {
             // We said no `Hello` since the job began: another program on the port did.
             CtrlMsg::HelloAck { .. } => return Err(self.superseded("its HelloAck")),
             // A job of blocks sends no probing move: a result is an earlier one's.
-            CtrlMsg::MachineLoaded { .. } | CtrlMsg::MachineRefused { .. } | CtrlMsg::Probe(_) => {}
+            CtrlMsg::MachineLoaded { .. }
+            | CtrlMsg::MachineRefused { .. }
+            | CtrlMsg::Probe(_)
+            | CtrlMsg::Record(_) => {}
         }
         Ok(None)
     }
