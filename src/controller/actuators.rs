@@ -35,6 +35,12 @@ pub struct Inputs {
     /// When the probe's input last changed within the last tick, µs after its start
     /// (a timer's capture; `None`: not known). See [`crate::drive::probe`].
     pub probe_edge_us: Option<u16>,
+    /// Each servo channel's DAC code averaged over the tick's servo periods (the data
+    /// recorder's output signal at the tick).
+    pub servo_dac: [u16; MAX_SERVOS],
+    /// The contour error of the last servo period: X Y Z in nm, the tool direction's
+    /// A B in µ° (the data recorder's).
+    pub contour: [i32; crate::kinematics::POSE_AXES],
 }
 
 /// What the hardware must do this tick.

@@ -194,6 +194,10 @@ pub struct Controller {
     recorder: crate::drive::recorder::Recorder,
     /// Why the last arm request was refused.
     record_refused: Option<crate::drive::recorder::RecorderError>,
+    /// Ticks since the recorder's last streamed piece.
+    stream_wait: u8,
+    /// A test signal running on a servo joint (`drive::excite`).
+    excite: Option<crate::drive::excite::Signal>,
 }
 
 /// What a controller for a machine needs besides the machine, computed and checked
@@ -349,6 +353,8 @@ impl Controller {
             at!((*p).control_ack_due).write(None);
             crate::drive::recorder::Recorder::init_at(at!((*p).recorder));
             at!((*p).record_refused).write(None);
+            at!((*p).stream_wait).write(0);
+            at!((*p).excite).write(None);
             (*p).update_servo_targets();
         }
     }
@@ -581,6 +587,7 @@ impl Controller {
             self.ack_due = true;
         }
         self.update_outputs();
+        self.excite_tick();
         self.record_tick();
         self.since_status = self.since_status.saturating_add(1);
         if self.session && self.since_status as u32 >= STATUS_EVERY_TICKS {

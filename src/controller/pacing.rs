@@ -39,7 +39,13 @@ use crate::controller::{Controller, Inputs, Outputs};
 use crate::drive::contour::{PeriodInputs, PeriodOutputs, ServoBank};
 use crate::drive::debounce::{Debouncer, SwitchFilter, Switches, SWITCH};
 use crate::drive::servo::{Trip, SERVO_PER_TICK, SETPOINT_FRAC_BITS};
-use crate::kinematics::ContourMap;
+use crate::kinematics::{ContourMap, POSE_AXES};
+
+/// A contour error in the loops' units (mm, degrees) as whole nm and µ° (both a
+/// millionth).
+fn contour_units(e: &[f32; POSE_AXES]) -> [i32; POSE_AXES] {
+    e.map(|x| (x * 1.0e6) as i32)
+}
 
 /// What the servo side saw at the last tick edge, for the tick.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -53,6 +59,12 @@ pub struct Snapshot {
     pub fault: [bool; MAX_SERVOS],
     /// Servo periods run since start-up (wrapping).
     pub periods: u32,
+    /// Each channel's DAC code averaged over the [`SERVO_PER_TICK`] periods up to the
+    /// edge (edge included), rounded (for the data recorder).
+    pub dac: [u16; MAX_SERVOS],
+    /// The contour error estimated in the edge period: X Y Z in nm, the tool
+    /// direction's A B in µ° (for the data recorder; zero when uncoupled).
+    pub contour: [i32; POSE_AXES],
 }
 
 /// What a tick hands to the servo loops, taken at the next tick edge.
@@ -124,6 +136,8 @@ pub struct ServoPacer {
     /// Fault input of each channel seen active since the last edge.
     fault_seen: [bool; MAX_SERVOS],
     stats: ServoStats,
+    /// Each channel's DAC codes summed since the last edge.
+    dac_sum: [u32; MAX_SERVOS],
     snapshot: Snapshot,
     /// Posted by the last tick, not yet taken.
     command: Option<Command>,
@@ -139,6 +153,7 @@ impl ServoPacer {
             phase: 0,
             fault_seen: [false; MAX_SERVOS],
             stats: ServoStats::default(),
+            dac_sum: [0; MAX_SERVOS],
             snapshot: Snapshot {
                 counts: *counts,
                 ..Snapshot::default()
@@ -176,6 +191,9 @@ impl ServoPacer {
             enable: self.enable,
         });
         self.stats.periods = self.stats.periods.wrapping_add(1);
+        for (sum, &code) in self.dac_sum.iter_mut().zip(&out.dac) {
+            *sum += code as u32;
+        }
         self.phase += 1;
         if self.phase == SERVO_PER_TICK {
             self.phase = 0;
@@ -187,8 +205,13 @@ impl ServoPacer {
                 trips: self.bank.trips(),
                 fault: self.fault_seen,
                 periods: self.stats.periods,
+                dac: self
+                    .dac_sum
+                    .map(|sum| ((sum + SERVO_PER_TICK as u32 / 2) / SERVO_PER_TICK as u32) as u16),
+                contour: contour_units(&out.contour_error),
             };
             self.fault_seen = [false; MAX_SERVOS];
+            self.dac_sum = [0; MAX_SERVOS];
         }
         ServoPeriod { out, tick: edge }
     }
@@ -314,6 +337,8 @@ impl TickPacer {
             probe: self.probe.sample(raw.probe),
             probe_raw: raw.probe,
             probe_edge_us: raw.probe_edge_us,
+            servo_dac: snapshot.dac,
+            contour: snapshot.contour,
             ..Inputs::default()
         };
         self.inputs = inputs;

@@ -6,18 +6,29 @@
 //! measured position the encoder's count at the tick edge (counts, the homing offset
 //! taken off, as `Status::measured`), the following error their difference; a
 //! stepper's are both its steps emitted (no feedback: no following error), its output
-//! its steps this tick (signed). A servo channel's DAC code, the contour error and its
-//! direction are the servo period's and read 0 at the tick.
+//! its steps this tick (signed). A servo channel's DAC code is the mean of the tick's
+//! servo periods, the contour errors (path and tool direction) the last period's.
 //! Sampling every servo period is refused until the servo side samples
 //! ([`SERVO_SAMPLING`]).
 
 use super::Controller;
 use crate::config::{Drive, MAX_JOINTS, MAX_SERVOS};
-use crate::drive::recorder::{RecorderError, Reply, Setup, MAX_SIGNALS, REPLY_HEADER};
+use crate::drive::excite::{Excite, Signal as ExciteSignal};
+use crate::drive::recorder::{
+    Capture, Phase, RecorderError, Reply, Setup, MAX_SIGNALS, REPLY_HEADER,
+};
 use crate::drive::servo::SETPOINT_FRAC_BITS;
 use crate::units::TICK_HZ;
 use crate::wire::store::CHUNK_BYTES;
-use crate::wire::{CtrlMsg, RECORD_ARM, RECORD_DISARM, RECORD_READ};
+use crate::wire::{
+    encode_frame_with, CtrlMsg, State, MAX_FRAME, RECORD_ARM, RECORD_CHUNK, RECORD_DISARM,
+    RECORD_EXCITE, RECORD_READ,
+};
+
+/// Streaming: ticks a sample may wait before a piece goes out not full.
+pub const STREAM_WAIT: u8 = 10;
+/// Streaming: bytes of the link's send buffer kept free for everything else.
+pub const STREAM_HEADROOM: usize = 768;
 
 /// The servo side samples for the recorder (not yet: a request for the servo period
 /// is refused with `RecorderError::ServoPeriod`).
@@ -48,8 +59,12 @@ impl Controller {
                 }),
                 RECORD_DISARM => {
                     self.recorder.disarm();
+                    self.excite = None;
                     Ok(())
                 }
+                RECORD_EXCITE => Excite::unpack(arg)
+                    .map_err(|at| RecorderError::Malformed { at: at + 1 })
+                    .and_then(|e| self.excite_start(e)),
                 _ => Err(RecorderError::Malformed { at: 255 }),
             };
             self.record_refused = result.err();
@@ -87,7 +102,8 @@ impl Controller {
         self.send(&msg);
     }
 
-    /// The tick's part: events, then a sample when one is wanted (last in the tick).
+    /// The tick's part: events, then a sample when one is wanted (last in the tick),
+    /// then, streaming, a piece of the samples not sent yet.
     #[inline(never)]
     pub(super) fn record_tick(&mut self) {
         self.recorder
@@ -100,6 +116,104 @@ impl Controller {
             *v = self.signal(*s);
         }
         self.recorder.sample(&values);
+        if self.recorder.capture().phase == Phase::Streaming {
+            self.record_stream();
+        }
+    }
+
+    /// Streaming: sends the samples not sent yet once they fill a piece or have
+    /// waited [`STREAM_WAIT`] ticks, and only while the link's send buffer keeps room
+    /// for [`STREAM_HEADROOM`] bytes besides (the job's acknowledgements and status
+    /// come first). Samples that wait too long are overwritten in the ring: the
+    /// host sees the gap in their numbers.
+    fn record_stream(&mut self) {
+        let width = self.recorder.capture().width.max(1) as usize;
+        let waiting = self.recorder.capture().samples as usize;
+        self.stream_wait = self.stream_wait.saturating_add(1);
+        let full = waiting >= RECORD_CHUNK / width;
+        if waiting == 0
+            || !(full || self.stream_wait >= STREAM_WAIT)
+            || self.tx.free() < STREAM_HEADROOM + MAX_FRAME
+        {
+            return;
+        }
+        let mut body = [0; CHUNK_BYTES];
+        let (first, n) = self.recorder.unsent(&mut body[REPLY_HEADER..]);
+        let setup = self.recorder.setup();
+        let reply = Reply {
+            capture: Capture {
+                phase: Phase::Streaming,
+                samples: n,
+                pre: 0,
+                width: width as u16,
+            },
+            signals: setup.signals,
+            count: setup.count,
+            servo: setup.servo,
+            decimate: setup.decimate,
+            refused: None,
+            offset: first,
+        };
+        if let Some(header) = body.first_chunk_mut::<REPLY_HEADER>() {
+            reply.pack(header);
+        }
+        let bytes = REPLY_HEADER + n as usize * width;
+        let msg = CtrlMsg::Record(heapless::Vec::from_slice(&body[..bytes]).unwrap_or_default());
+        if self.push_frame(|seq, b, out| encode_frame_with(seq, &msg, b, out).ok()) {
+            self.recorder.sent(n);
+            self.stream_wait = 0;
+        }
+    }
+
+    /// Checks a test signal's request against the machine and starts it.
+    fn excite_start(&mut self, e: Excite) -> Result<(), RecorderError> {
+        let joint = e.joint;
+        let idle = self.state == State::Idle && self.homed && !self.job_open;
+        if !idle || !self.planner.is_empty() || self.moving() {
+            return Err(RecorderError::ExciteBusy);
+        }
+        let Some(Drive::Servo { channel }) =
+            self.machine.joints.get(joint as usize).map(|j| j.drive)
+        else {
+            return Err(RecorderError::ExciteJoint { joint });
+        };
+        let jc = self.machine.joints[joint as usize];
+        let limit = self.machine.servo.gains[channel as usize % MAX_SERVOS].min_ferror;
+        if e.amplitude >= limit {
+            let limit = limit.min(u16::MAX as u32) as u16;
+            return Err(RecorderError::ExciteAmplitude { joint, limit });
+        }
+        let q = self.joints[joint as usize];
+        let reach = jc.scale.position_of(e.amplitude as i64 + 1);
+        if q - reach < jc.min || q + reach > jc.max {
+            return Err(RecorderError::ExciteTravel { joint });
+        }
+        self.excite = Some(ExciteSignal::new(e));
+        Ok(())
+    }
+
+    /// The test signal's part of the tick (after the outputs): its offset on the
+    /// joint's servo target; it stops at once on an alarm or when anything else would
+    /// move.
+    #[inline(never)]
+    pub(super) fn excite_tick(&mut self) {
+        let busy = self.state != State::Idle || self.job_open || !self.planner.is_empty();
+        let Some(sig) = self.excite.as_mut() else {
+            return;
+        };
+        let j = sig.joint();
+        let offset = if busy || self.alarm.is_some() {
+            None
+        } else {
+            sig.next()
+        };
+        match (offset, self.machine.joints.get(j).map(|jc| jc.drive)) {
+            (Some(o), Some(Drive::Servo { channel })) => {
+                self.out.servo_target[channel as usize % MAX_SERVOS] +=
+                    (o as i64) << SETPOINT_FRAC_BITS;
+            }
+            _ => self.excite = None,
+        }
     }
 
     /// The value of the signal of wire id `id` (checked by the recorder's `arm`:
@@ -114,6 +228,8 @@ impl Controller {
             return match kind {
                 // Q32 units a tick to units a second (shifted first: no overflow).
                 8 => (((self.exec.speed >> 12) * TICK_HZ as i64) >> 20) as i32,
+                9 => norm(&self.last.contour[..3]),
+                10 => norm(&self.last.contour[3..]),
                 11 => self.exec.line as i32,
                 12 => self.state as i32,
                 _ => 0,
@@ -127,6 +243,9 @@ impl Controller {
         let (cmd, at) = match jc.drive {
             Drive::Servo { channel } => {
                 let c = channel as usize % MAX_SERVOS;
+                if kind == 3 {
+                    return self.last.servo_dac[c] as i32;
+                }
                 (
                     self.out.servo_target[c] >> SETPOINT_FRAC_BITS,
                     self.last.encoder_counts[c],
@@ -153,6 +272,12 @@ impl Controller {
             _ => 0,
         }
     }
+}
+
+/// The length of a vector of whole nm or µ°, rounded (saturating).
+fn norm(v: &[i32]) -> i32 {
+    let sq: f32 = v.iter().map(|&x| x as f32 * x as f32).sum();
+    (crate::math::sqrtf(sq) + 0.5) as i32
 }
 
 const _: () = assert!(MAX_JOINTS <= 16);

@@ -48,15 +48,16 @@ pub enum Signal {
     Measured(u8),
     /// Joint's following error, commanded − measured, counts; 16 bits (kind 2).
     FollowingError(u8),
-    /// Joint's DAC code (servo) or step rate, steps per tick (stepper); 16 bits
-    /// (kind 3).
+    /// Joint's DAC code (servo: the period's, or at the tick the mean of its periods)
+    /// or step rate, steps per tick (stepper); 16 bits (kind 3).
     Output(u8),
     /// The path speed, µm/s (kind 8).
     PathSpeed,
-    /// The contour error's size, nm (kind 9).
+    /// The contour error of the path, the size of its X Y Z part, nm (kind 9).
     ContourError,
-    /// The contour error's direction in the path's plane, millidegrees (kind 10).
-    ContourDirection,
+    /// The contour error of the tool's direction, the size of its A B part, µ° (kind
+    /// 10; zero on machines that do not tilt the tool).
+    DirectionError,
     /// The NC line being executed (kind 11).
     Line,
     /// The controller's state, as `wire::State`'s index; 16 bits (kind 12).
@@ -94,6 +95,27 @@ pub enum RecorderError {
         /// The signal number it names.
         index: u8,
     },
+    /// A test signal (`drive::excite`) while the machine is not homed and standing
+    /// idle with nothing queued.
+    ExciteBusy,
+    /// A test signal on joint `joint`, which is not driven by a servo channel.
+    ExciteJoint {
+        /// The joint.
+        joint: u8,
+    },
+    /// A test signal's amplitude not below joint `joint`'s standstill
+    /// following-error limit of `limit` counts.
+    ExciteAmplitude {
+        /// The joint.
+        joint: u8,
+        /// The limit, counts.
+        limit: u16,
+    },
+    /// A test signal that would take joint `joint` outside its travel.
+    ExciteTravel {
+        /// The joint.
+        joint: u8,
+    },
     /// `pre` pre-trigger samples asked; the ring holds `capacity` of these signals.
     PreTrigger {
         /// Pre-trigger samples asked for.
@@ -115,7 +137,7 @@ impl Signal {
             3 if per_joint => Self::Output(joint),
             8 if joint == 0 => Self::PathSpeed,
             9 if joint == 0 => Self::ContourError,
-            10 if joint == 0 => Self::ContourDirection,
+            10 if joint == 0 => Self::DirectionError,
             11 if joint == 0 => Self::Line,
             12 if joint == 0 => Self::State,
             _ => return None,
@@ -131,7 +153,7 @@ impl Signal {
             Self::Output(j) => 0x30 | j,
             Self::PathSpeed => 0x80,
             Self::ContourError => 0x90,
-            Self::ContourDirection => 0xa0,
+            Self::DirectionError => 0xa0,
             Self::Line => 0xb0,
             Self::State => 0xc0,
         }
@@ -157,6 +179,11 @@ pub enum Trigger {
     Line(u32),
     /// Any alarm is raised.
     Alarm,
+    /// No capture: continuous mode. The ring is a queue of the samples not yet sent,
+    /// which the controller streams as they come ([`Recorder::unsent`],
+    /// [`Recorder::sent`]); when the link falls behind, the oldest are overwritten
+    /// and their loss shows as a gap in the samples' numbers.
+    Stream,
     /// The request's signal number `signal` crosses `level`: upward when `rising`
     /// (from below it to at or above it), else downward.
     Level {
@@ -198,6 +225,8 @@ pub enum Phase {
     Triggered,
     /// The capture is complete: read it out.
     Done,
+    /// Streaming continuously ([`Trigger::Stream`]).
+    Streaming,
 }
 
 /// What a capture holds, for its readout.
@@ -227,7 +256,8 @@ struct Book {
     countdown: u16,
     /// The next sample's index in the ring.
     head: u16,
-    /// Samples stored since arming (saturating at `capacity`).
+    /// Samples stored since arming (saturating at `capacity`); streaming, those not
+    /// sent yet.
     stored: u16,
     /// Samples still to store after the trigger.
     remaining: u16,
@@ -236,6 +266,8 @@ struct Book {
     pending: bool,
     /// The level signal's last stored value.
     last_level: Option<i32>,
+    /// Streaming: samples stored since arming (the next one's number), wrapping.
+    taken: u32,
 }
 
 const OFF: Book = Book {
@@ -258,6 +290,7 @@ const OFF: Book = Book {
     pre_kept: 0,
     pending: false,
     last_level: None,
+    taken: 0,
 };
 
 /// The recorder. See the module documentation.
@@ -326,7 +359,8 @@ impl Recorder {
             }
         }
         let capacity = (RING_BYTES / width as usize) as u16;
-        if setup.pre >= capacity {
+        let stream = setup.trigger == Trigger::Stream;
+        if setup.pre >= capacity || (stream && setup.pre != 0) {
             return Err(RecorderError::PreTrigger {
                 pre: setup.pre,
                 capacity,
@@ -338,7 +372,11 @@ impl Recorder {
             width,
             narrow,
             capacity,
-            phase: Phase::Armed,
+            phase: if stream {
+                Phase::Streaming
+            } else {
+                Phase::Armed
+            },
             ..OFF
         };
         Ok(())
@@ -361,7 +399,10 @@ impl Recorder {
 
     /// Recording: samples are wanted, every servo period when `servo`, else every tick.
     pub fn wants(&self, servo: bool) -> bool {
-        matches!(self.s.phase, Phase::Armed | Phase::Triggered) && self.s.setup.servo == servo
+        matches!(
+            self.s.phase,
+            Phase::Armed | Phase::Triggered | Phase::Streaming
+        ) && self.s.setup.servo == servo
     }
 
     /// Tells the recorder, every tick, of the events it may wait for: a job is open
@@ -384,7 +425,10 @@ impl Recorder {
     /// One period's or tick's values of the configured signals (in their order; the
     /// values beyond [`Setup::count`] are ignored). Stores every `decimate`th.
     pub fn sample(&mut self, values: &[i32; MAX_SIGNALS]) {
-        if !matches!(self.s.phase, Phase::Armed | Phase::Triggered) {
+        if !matches!(
+            self.s.phase,
+            Phase::Armed | Phase::Triggered | Phase::Streaming
+        ) {
             return;
         }
         if self.s.countdown > 0 {
@@ -393,7 +437,9 @@ impl Recorder {
         }
         self.s.countdown = self.s.setup.decimate - 1;
         self.store(values);
-        if self.s.phase == Phase::Armed {
+        if self.s.phase == Phase::Streaming {
+            self.s.taken = self.s.taken.wrapping_add(1);
+        } else if self.s.phase == Phase::Armed {
             if self.triggered(values) {
                 self.s.pre_kept = self.s.setup.pre.min(self.s.stored - 1);
                 self.s.remaining = self.s.capacity - 1 - self.s.pre_kept;
@@ -458,6 +504,33 @@ impl Recorder {
             }
             _ => core::mem::take(&mut self.s.pending),
         }
+    }
+
+    /// Streaming: the number of the oldest sample not sent yet, and how many there
+    /// are, copied oldest first into `out` (as many whole samples as fit). `(n, 0)`
+    /// when nothing waits or the recorder is not streaming.
+    pub fn unsent(&self, out: &mut [u8]) -> (u32, u16) {
+        if self.s.phase != Phase::Streaming || self.s.width == 0 {
+            return (self.s.taken, 0);
+        }
+        let width = self.s.width as usize;
+        let n = self.s.stored.min((out.len() / width) as u16);
+        let first = (self.s.head + self.s.capacity - self.s.stored) % self.s.capacity;
+        let total = self.s.capacity as usize * width;
+        let mut at = first as usize * width;
+        for b in &mut out[..n as usize * width] {
+            *b = (self.ring[at / 2] >> (8 * (at & 1))) as u8;
+            at += 1;
+            if at == total {
+                at = 0;
+            }
+        }
+        (self.s.taken.wrapping_sub(self.s.stored as u32), n)
+    }
+
+    /// Streaming: the oldest `n` unsent samples went out.
+    pub fn sent(&mut self, n: u16) {
+        self.s.stored -= n.min(self.s.stored);
     }
 
     /// Where the capture is.

@@ -411,8 +411,11 @@ pub enum CtrlMsg {
 pub const RECORD_READ: u8 = 0;
 /// `HostMsg::Record`: arm the recorder.
 pub const RECORD_ARM: u8 = 1;
-/// `HostMsg::Record`: stop the recorder.
+/// `HostMsg::Record`: stop the recorder (and a test signal).
 pub const RECORD_DISARM: u8 = 2;
+/// `HostMsg::Record`: start a test signal on a servo joint (`drive::excite::Excite`;
+/// a control, refused by `CtrlMsg::Record` naming why).
+pub const RECORD_EXCITE: u8 = 3;
 
 /// Bytes of a capture one `CtrlMsg::Record` carries.
 pub const RECORD_CHUNK: usize = crate::wire::store::CHUNK_BYTES - REPLY_HEADER;

@@ -37,6 +37,21 @@ impl fmt::Display for crate::drive::recorder::RecorderError {
                 "sampling every servo period is not done by this controller yet: sample \
                  every tick",
             ),
+            E::ExciteBusy => f.write_str(
+                "a test signal needs a homed machine standing idle, with no job and                  nothing queued",
+            ),
+            E::ExciteJoint { joint } => write!(
+                f,
+                "joint {joint} is not driven by a servo channel: only servo joints take                  a test signal"
+            ),
+            E::ExciteAmplitude { joint, limit } => write!(
+                f,
+                "the test signal's amplitude must be below joint {joint}'s standstill                  following-error limit of {limit} counts"
+            ),
+            E::ExciteTravel { joint } => write!(
+                f,
+                "the test signal would take joint {joint} outside its travel"
+            ),
         }
     }
 }

@@ -5,12 +5,14 @@
 //! A request ([`Setup::pack`], [`SETUP_BYTES`]): the signal count, eight signal ids
 //! (those past the count unused), servo (0 or 1), decimation (u16), pre-trigger
 //! samples (u16), the trigger's kind (0 now, 1 job start, 2 NC line, 3 any alarm, 4
-//! rising level, 5 falling level), its signal number (u8) and its line or level (u32
+//! rising level, 5 falling level, 6 continuous), its signal number (u8) and its line or level (u32
 //! or i32): 20 bytes.
 //!
 //! An answer ([`Reply`]): a header of [`REPLY_HEADER`] bytes (phase, samples, pre,
 //! width, servo, decimation, the refusal's code and two arguments, the signal count,
-//! eight signal ids, the data's offset) and the capture's bytes from that offset.
+//! eight signal ids, the data's offset) and the capture's bytes from that offset. A
+//! streamed piece (phase streaming) has the same header: `samples` is the number of
+//! samples it carries and `offset` the first one's number since arming.
 
 use super::{Capture, Phase, RecorderError, Setup, Trigger, MAX_SIGNALS};
 
@@ -28,6 +30,7 @@ impl Setup {
             Trigger::JobStart => (1, 0, 0),
             Trigger::Line(l) => (2, 0, l),
             Trigger::Alarm => (3, 0, 0),
+            Trigger::Stream => (6, 0, 0),
             Trigger::Level {
                 signal,
                 level,
@@ -65,6 +68,7 @@ impl Setup {
             1 => Trigger::JobStart,
             2 => Trigger::Line(arg),
             3 => Trigger::Alarm,
+            6 => Trigger::Stream,
             k @ (4 | 5) => Trigger::Level {
                 signal: b[15],
                 level: arg as i32,
@@ -124,6 +128,10 @@ impl Reply {
             Some(RecorderError::PreTrigger { pre, capacity }) => (5, pre, capacity),
             Some(RecorderError::Malformed { at }) => (6, at as u16, 0),
             Some(RecorderError::ServoPeriod) => (7, 0, 0),
+            Some(RecorderError::ExciteBusy) => (8, 0, 0),
+            Some(RecorderError::ExciteJoint { joint }) => (9, joint as u16, 0),
+            Some(RecorderError::ExciteAmplitude { joint, limit }) => (10, joint as u16, limit),
+            Some(RecorderError::ExciteTravel { joint }) => (11, joint as u16, 0),
         };
         out[10] = code;
         out[11..13].copy_from_slice(&a.to_le_bytes());
@@ -142,6 +150,7 @@ impl Reply {
             1 => Phase::Armed,
             2 => Phase::Triggered,
             3 => Phase::Done,
+            4 => Phase::Streaming,
             _ => return None,
         };
         let (a, b2) = (u16_of(11), u16_of(13));
@@ -160,6 +169,13 @@ impl Reply {
             }),
             6 => Some(RecorderError::Malformed { at: a as u8 }),
             7 => Some(RecorderError::ServoPeriod),
+            8 => Some(RecorderError::ExciteBusy),
+            9 => Some(RecorderError::ExciteJoint { joint: a as u8 }),
+            10 => Some(RecorderError::ExciteAmplitude {
+                joint: a as u8,
+                limit: b2,
+            }),
+            11 => Some(RecorderError::ExciteTravel { joint: a as u8 }),
             _ => return None,
         };
         let count = h[15];
