@@ -33,6 +33,7 @@ ALLOWED = {
     "grbl": {"gcode", "link", "analysis", "job"},
     "station": {"gcode", "link", "job", "input", "analysis"},
     "calibrate": {"machine_file", "analysis", "input", "control"},
+    "scope": {"link", "job", "analysis", "control", "machine_file", "input", "gcode"},
 }
 # The core's rooms, from the bottom: each may import only the rooms before it.
 CORE_ORDER = [

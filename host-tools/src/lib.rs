@@ -34,5 +34,6 @@ pub mod input;
 pub mod job;
 pub mod link;
 pub mod machine_file;
+pub mod scope;
 pub mod sim;
 pub mod station;

@@ -92,6 +92,7 @@ impl Controller {
             decimate: setup.decimate,
             refused: self.record_refused,
             offset,
+            streamed: false,
         };
         if let Some(header) = body.first_chunk_mut::<REPLY_HEADER>() {
             reply.pack(header);
@@ -153,6 +154,7 @@ impl Controller {
             decimate: setup.decimate,
             refused: None,
             offset: first,
+            streamed: true,
         };
         if let Some(header) = body.first_chunk_mut::<REPLY_HEADER>() {
             reply.pack(header);

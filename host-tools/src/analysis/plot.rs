@@ -190,7 +190,7 @@ pub fn format_of(path: &std::path::Path) -> Result<Format, String> {
 /// Plot size, pixels.
 pub const SIZE: (u32, u32) = (1500, 1000);
 
-fn register_font() {
+pub(crate) fn register_font() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
         // DejaVu Sans, embedded: no system fonts are needed.

@@ -180,6 +180,9 @@ enum Command {
     /// Calibrate the machine file's geometry from measured tool poses; `plan` the poses
     /// to measure (docs/calibration.md). Runs on this computer, no controller.
     Calibrate(pkmc_host::calibrate::cli::CalibrateArgs),
+    /// Record signals with the controller's data recorder, during a program if given
+    /// one, to CSV and a plot (docs/recorder.md).
+    Record(pkmc_host::scope::cli::RecordArgs),
 }
 
 fn main() {
@@ -229,19 +232,6 @@ fn compress_settings(args: &Args) -> Result<Option<pkmc_host::gcode::compress::S
         blend: !args.no_blend,
         ..Default::default()
     }))
-}
-
-fn load_tools(args: &Args) -> Result<pkmc_host::gcode::ToolTable, Failure> {
-    if let Some(p) = &args.tools {
-        let text = pkmc_host::input::read_text(p, pkmc_host::input::MAX_MACHINE_FILE_BYTES)
-            .map_err(bad)?;
-        return pkmc_host::gcode::ToolTable::parse(&text, &p.display().to_string())
-            .map_err(|d| bad(d.to_string()));
-    }
-    match &args.machine {
-        Some(p) => pkmc_host::machine_file::load_tools(p).map_err(|e| bad(e.to_string())),
-        None => Ok(pkmc_host::gcode::ToolTable::new()),
-    }
 }
 
 fn load_machine(args: &Args) -> Result<MachineConfig, Failure> {
@@ -342,7 +332,7 @@ fn run(args: &Args) -> Result<i32, Failure> {
         Some(p) => pkmc_host::machine_file::load_plants(p).map_err(|e| bad(format!("{e:#}")))?,
         None => Vec::new(),
     };
-    let tools = load_tools(args)?;
+    let tools = job::load_tools(args.tools.as_deref(), args.machine.as_deref())?;
     let statics = load_statics(args, &machine)?;
     let opts = RunOptions {
         target,
@@ -555,7 +545,10 @@ fn command(
     let mut incomplete = None;
     let (status, result, code, extra, held) = job::with_link(machine, opts, |link| {
         let held = link.held();
-        let moves = matches!(cmd, Command::Jog { .. } | Command::Mdi { .. });
+        let moves = matches!(
+            cmd,
+            Command::Jog { .. } | Command::Mdi { .. } | Command::Record(_)
+        );
         if moves && matches!(opts.target, Target::Sim) {
             // A fresh simulator is locked after its reset: unlock it where it stands.
             job::prepare(link, false, true, &mut op)?;
@@ -576,6 +569,10 @@ fn command(
                 distance,
                 feed,
             } => (jog(link, axis, *distance, *feed, &mut op)?, None),
+            Command::Record(r) => (
+                pkmc_host::scope::cli::run(link, r, machine, opts, &mut op)?,
+                None,
+            ),
             Command::Mdi { line } => {
                 let (blocks, end) = job::mdi(link, machine, line, &opts.tools, &mut op)?;
                 (end, Some(blocks.len()))

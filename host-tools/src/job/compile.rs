@@ -257,3 +257,21 @@ pub fn for_machine(
 pub fn machine_axes(machine: &MachineConfig) -> [bool; AXES] {
     std::array::from_fn(|i| machine.axes[i].max_velocity > 0)
 }
+
+/// The tool table: from `tools` (a tool file) if given, else from the machine file's
+/// `[[tools]]`, else empty.
+pub fn load_tools(
+    tools: Option<&Path>,
+    machine: Option<&Path>,
+) -> Result<gcode::ToolTable, Failure> {
+    let bad = |m: String| Failure::new(exit::BAD_INPUT, m);
+    if let Some(p) = tools {
+        let text = crate::input::read_text(p, crate::input::MAX_MACHINE_FILE_BYTES).map_err(bad)?;
+        return gcode::ToolTable::parse(&text, &p.display().to_string())
+            .map_err(|d| bad(d.to_string()));
+    }
+    match machine {
+        Some(p) => crate::machine_file::load_tools(p).map_err(|e| bad(e.to_string())),
+        None => Ok(gcode::ToolTable::new()),
+    }
+}

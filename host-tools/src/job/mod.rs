@@ -41,7 +41,7 @@ pub use commands::{
 };
 pub use compile::{
     compile_compressed, compile_for, compile_job, compile_located, compile_program, compile_text,
-    compile_text_with, for_machine as compress_for_machine, machine_axes, Compiled,
+    compile_text_with, for_machine as compress_for_machine, load_tools, machine_axes, Compiled,
 };
 pub use pipeline::{
     checked, checked_with, front_end_options, Checked, LineBlocks, LineFault, LinePipeline,

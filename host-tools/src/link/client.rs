@@ -144,6 +144,7 @@ impl<T: Transport> Link<T> {
             acked_control: None,
             machine_answer: None,
             probe_result: None,
+            streamed: Vec::new(),
             status: None,
             stats: super::ClientStats::default(),
             their_machine: 0,
@@ -329,6 +330,7 @@ impl<T: Transport> Link<T> {
                     self.machine_answer = Some(m.clone())
                 }
                 CtrlMsg::Probe(r) => self.probe_result = Some(*r),
+                CtrlMsg::Record(bytes) => self.keep_streamed(bytes),
                 _ => {}
             }
         }

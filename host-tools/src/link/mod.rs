@@ -79,7 +79,7 @@ use client::PendingControl;
 pub use client::{JobEnd, JobHooks, LinkView, NoHooks, Rewound};
 pub use error::LinkError;
 pub use plans::Derived;
-pub use record::Recording;
+pub use record::{Piece, Recording};
 pub use stats::{Buffered, ClientStats, NakCounts};
 pub use stream::{estimate_ms, TAIL_AFTER};
 pub use transport::{is_timeout, PortTransport, SimClock, Transport};
@@ -184,6 +184,8 @@ pub struct Link<T: Transport> {
     machine_answer: Option<CtrlMsg>,
     /// The last probing move's result the controller sent ([`CtrlMsg::Probe`]).
     probe_result: Option<pkmc::drive::probe::ProbeResult>,
+    /// The recorder's streamed pieces not taken yet ([`Link::record_take`]).
+    streamed: Vec<record::Piece>,
     /// Last status received.
     pub status: Option<Status>,
     /// Counters.

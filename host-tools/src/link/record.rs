@@ -4,8 +4,9 @@
 //! neither waits for blocks nor holds them back).
 
 use super::{Link, LinkError, Transport};
+use pkmc::drive::excite::Excite;
 use pkmc::drive::recorder::{Phase, Reply, Setup, Signal};
-use pkmc::wire::{CtrlMsg, HostMsg, RECORD_ARM, RECORD_DISARM, RECORD_READ};
+use pkmc::wire::{CtrlMsg, HostMsg, RECORD_ARM, RECORD_DISARM, RECORD_EXCITE, RECORD_READ};
 use std::time::{Duration, Instant};
 
 /// A finished capture, read out.
@@ -59,7 +60,86 @@ impl Recording {
     }
 }
 
+/// A piece of the recorder's continuous stream: consecutive samples from number
+/// `first` (counted since arming, wrapping). A gap between pieces is samples the
+/// controller overwrote because the link fell behind.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Piece {
+    /// The first sample's number.
+    pub first: u32,
+    /// The signals, in order.
+    pub signals: Vec<Signal>,
+    /// Sampled every servo period (else every tick).
+    pub servo: bool,
+    /// Periods or ticks between samples.
+    pub decimate: u16,
+    /// Each sample's values.
+    pub samples: Vec<Vec<i32>>,
+}
+
+/// The signals a recorder answer names.
+fn signals_of(reply: &Reply) -> Vec<Signal> {
+    reply.signals[..(reply.count as usize).min(reply.signals.len())]
+        .iter()
+        .filter_map(|&id| Signal::from_id(id))
+        .collect()
+}
+
 impl<T: Transport> Link<T> {
+    /// Keeps a streamed piece of the recorder (other recorder answers are the
+    /// queries' own).
+    pub(super) fn keep_streamed(&mut self, bytes: &[u8]) {
+        let Some((reply, data)) = Reply::unpack(bytes) else {
+            return;
+        };
+        if !reply.streamed || reply.capture.samples == 0 {
+            return;
+        }
+        let signals = signals_of(&reply);
+        let mut samples = Recording::decode(signals.clone(), data);
+        samples.truncate(reply.capture.samples as usize);
+        self.streamed.push(Piece {
+            first: reply.offset,
+            signals,
+            servo: reply.servo,
+            decimate: reply.decimate,
+            samples,
+        });
+    }
+
+    /// The streamed pieces received since the last call, oldest first.
+    pub fn record_take(&mut self) -> Vec<Piece> {
+        std::mem::take(&mut self.streamed)
+    }
+
+    /// Reads what the port has (streamed pieces, status) for up to `wait`, without
+    /// sending anything.
+    pub fn record_listen(&mut self, wait: Duration) -> Result<(), LinkError> {
+        let msgs = self.pump(wait)?;
+        self.absorb(&msgs);
+        Ok(())
+    }
+
+    /// Starts a test signal on a servo joint (`pkmc::drive::excite`); a request the
+    /// controller refuses (machine busy or not homed, not a servo joint, amplitude,
+    /// travel) is an error naming why.
+    pub fn record_excite(&mut self, excite: &Excite) -> Result<(), LinkError> {
+        let mut req = heapless::Vec::new();
+        let _ = req.push(RECORD_EXCITE);
+        let _ = req.extend_from_slice(&excite.pack());
+        let id = self.fresh_control_id();
+        self.stats.controls += 1;
+        self.until_acked(id, &HostMsg::Record { id, req }, "starting the test signal")?;
+        let (reply, _) = self.record_query(0)?;
+        match reply.refused {
+            Some(error) => Err(LinkError::Recorder {
+                port: self.port(),
+                error,
+            }),
+            None => Ok(()),
+        }
+    }
+
     /// Arms the recorder with `setup`; a request the controller refuses is an error
     /// naming why.
     pub fn record_arm(&mut self, setup: &Setup) -> Result<(), LinkError> {
@@ -105,7 +185,7 @@ impl<T: Transport> Link<T> {
                 for m in msgs {
                     if let CtrlMsg::Record(bytes) = m {
                         if let Some((reply, data)) = Reply::unpack(&bytes) {
-                            if reply.offset == offset {
+                            if !reply.streamed && reply.offset == offset {
                                 return Ok((reply, data.to_vec()));
                             }
                         }
@@ -135,10 +215,7 @@ impl<T: Transport> Link<T> {
             bytes.extend_from_slice(&data);
         }
         bytes.truncate(total);
-        let signals: Vec<Signal> = first.signals[..first.count as usize]
-            .iter()
-            .filter_map(|&id| Signal::from_id(id))
-            .collect();
+        let signals = signals_of(&first);
         Ok(Some(Recording {
             samples: Recording::decode(signals.clone(), &bytes),
             signals,

@@ -437,10 +437,9 @@ impl<T: Transport> Link<T> {
             // We said no `Hello` since the job began: another program on the port did.
             CtrlMsg::HelloAck { .. } => return Err(self.superseded("its HelloAck")),
             // A job of blocks sends no probing move: a result is an earlier one's.
-            CtrlMsg::MachineLoaded { .. }
-            | CtrlMsg::MachineRefused { .. }
-            | CtrlMsg::Probe(_)
-            | CtrlMsg::Record(_) => {}
+            CtrlMsg::MachineLoaded { .. } | CtrlMsg::MachineRefused { .. } | CtrlMsg::Probe(_) => {}
+            // The recorder streaming beside the job: kept for whoever reads it.
+            CtrlMsg::Record(bytes) => self.keep_streamed(&bytes),
         }
         Ok(None)
     }

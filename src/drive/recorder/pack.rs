@@ -12,7 +12,8 @@
 //! width, servo, decimation, the refusal's code and two arguments, the signal count,
 //! eight signal ids, the data's offset) and the capture's bytes from that offset. A
 //! streamed piece (phase streaming) has the same header: `samples` is the number of
-//! samples it carries and `offset` the first one's number since arming.
+//! samples it carries, `offset` the first one's number since arming, and bit 1 of
+//! the servo byte is set.
 
 use super::{Capture, Phase, RecorderError, Setup, Trigger, MAX_SIGNALS};
 
@@ -105,8 +106,11 @@ pub struct Reply {
     pub decimate: u16,
     /// Why the last arm request was refused.
     pub refused: Option<RecorderError>,
-    /// Where the data after the header starts in the capture, bytes.
+    /// Where the data after the header starts in the capture, bytes; in a streamed
+    /// piece, the number of its first sample.
     pub offset: u32,
+    /// A piece of the continuous stream (sent unasked), not an answer to a read.
+    pub streamed: bool,
 }
 
 impl Reply {
@@ -117,7 +121,7 @@ impl Reply {
         out[1..3].copy_from_slice(&c.samples.to_le_bytes());
         out[3..5].copy_from_slice(&c.pre.to_le_bytes());
         out[5..7].copy_from_slice(&c.width.to_le_bytes());
-        out[7] = self.servo as u8;
+        out[7] = self.servo as u8 | (self.streamed as u8) << 1;
         out[8..10].copy_from_slice(&self.decimate.to_le_bytes());
         let (code, a, b) = match self.refused {
             None => (0, 0, 0),
@@ -193,7 +197,8 @@ impl Reply {
             },
             signals,
             count,
-            servo: h[7] == 1,
+            servo: h[7] & 1 == 1,
+            streamed: h[7] & 2 == 2,
             decimate: u16_of(8),
             refused,
             offset: u32::from_le_bytes([h[24], h[25], h[26], h[27]]),
