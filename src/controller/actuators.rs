@@ -44,7 +44,7 @@ pub struct Inputs {
 }
 
 /// What the hardware must do this tick.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Outputs {
     /// Step train of each stepper channel; `forward` already includes DIR inversion.
     pub steps: [StepTrain; MAX_STEPPERS],
@@ -58,6 +58,25 @@ pub struct Outputs {
     /// The servo loops must restart, clearing their trips, standing at their present
     /// feedback (which `servo_target` now equals): rebuild the bank from it.
     pub servo_reset: bool,
+    /// The data recorder's signals the servo side samples every period of the next
+    /// tick (wire ids with the channel in place of the joint;
+    /// [`crate::controller::pacing::NOT_SERVO`] for none), read back by
+    /// [`Controller::record_servo`].
+    pub servo_record: [u8; crate::drive::recorder::MAX_SIGNALS],
+}
+
+impl Default for Outputs {
+    fn default() -> Self {
+        Self {
+            steps: [StepTrain::default(); MAX_STEPPERS],
+            servo_target: [0; MAX_SERVOS],
+            enable: false,
+            servo_enable: false,
+            servo_reset: false,
+            servo_record: [crate::controller::pacing::NOT_SERVO;
+                crate::drive::recorder::MAX_SIGNALS],
+        }
+    }
 }
 
 impl Controller {

@@ -38,8 +38,23 @@ use crate::config::{Drive, MachineConfig, MAX_SERVOS};
 use crate::controller::{Controller, Inputs, Outputs};
 use crate::drive::contour::{PeriodInputs, PeriodOutputs, ServoBank};
 use crate::drive::debounce::{Debouncer, SwitchFilter, Switches, SWITCH};
-use crate::drive::servo::{Trip, SERVO_PER_TICK, SETPOINT_FRAC_BITS};
+use crate::drive::recorder::MAX_SIGNALS;
+use crate::drive::servo::{following_error, Trip, SERVO_PER_TICK, SETPOINT_FRAC_BITS};
 use crate::kinematics::{ContourMap, POSE_AXES};
+
+/// A signal the servo side does not sample (the tick's own), in
+/// [`Command::record`].
+pub const NOT_SERVO: u8 = 0xff;
+
+/// One tick's servo-period samples for the data recorder: each period's values of
+/// the signals asked for, periods in time order.
+pub type ServoSamples = [[i32; MAX_SIGNALS]; SERVO_PER_TICK];
+
+/// The length of a contour error (mm or degrees) in nm or µ°, rounded.
+fn norm_f32(v: &[f32]) -> i32 {
+    let sq: f32 = v.iter().map(|&x| x * x).sum();
+    (crate::math::sqrtf(sq) * 1.0e6 + 0.5) as i32
+}
 
 /// A contour error in the loops' units (mm, degrees) as whole nm and µ° (both a
 /// millionth).
@@ -79,6 +94,9 @@ pub struct Command {
     pub enable: bool,
     /// The channels' map to the pose for the next tick, when it changes along the path.
     pub map: Option<ContourMap>,
+    /// The data recorder's signals to sample every servo period of the next tick
+    /// (`Outputs::servo_record`).
+    pub record: [u8; MAX_SIGNALS],
 }
 
 impl Command {
@@ -89,6 +107,7 @@ impl Command {
             targets: counts.map(|c| c << SETPOINT_FRAC_BITS),
             enable: false,
             map: None,
+            record: [NOT_SERVO; MAX_SIGNALS],
         }
     }
 
@@ -100,6 +119,7 @@ impl Command {
             targets: out.servo_target,
             enable: out.servo_enable,
             map: map.copied(),
+            record: out.servo_record,
         }
     }
 }
@@ -138,6 +158,14 @@ pub struct ServoPacer {
     stats: ServoStats,
     /// Each channel's DAC codes summed since the last edge.
     dac_sum: [u32; MAX_SERVOS],
+    /// The recorder's signals sampled this tick ([`Command::record`]).
+    record: [u8; MAX_SIGNALS],
+    /// The recorder's samples of two ticks, by [`ServoPacer::staged`]'s bank: this
+    /// tick's being written, the last one's for the tick to read; and their signals.
+    staged: [ServoSamples; 2],
+    staged_ids: [[u8; MAX_SIGNALS]; 2],
+    /// The bank written this tick.
+    bank_w: usize,
     snapshot: Snapshot,
     /// Posted by the last tick, not yet taken.
     command: Option<Command>,
@@ -154,6 +182,10 @@ impl ServoPacer {
             fault_seen: [false; MAX_SERVOS],
             stats: ServoStats::default(),
             dac_sum: [0; MAX_SERVOS],
+            record: [NOT_SERVO; MAX_SIGNALS],
+            staged: [[[0; MAX_SIGNALS]; SERVO_PER_TICK]; 2],
+            staged_ids: [[NOT_SERVO; MAX_SIGNALS]; 2],
+            bank_w: 0,
             snapshot: Snapshot {
                 counts: *counts,
                 ..Snapshot::default()
@@ -174,6 +206,8 @@ impl ServoPacer {
         }
         let edge = self.phase == 0;
         if edge {
+            // The last tick's samples are complete: the tick reads them from now on.
+            self.bank_w ^= 1;
             match self.command.take() {
                 Some(command) => {
                     self.bank.load_tick(&command.targets);
@@ -181,6 +215,7 @@ impl ServoPacer {
                         self.bank.load_map(map);
                     }
                     self.enable = command.enable;
+                    self.record = command.record;
                 }
                 None => self.stats.late_ticks = self.stats.late_ticks.wrapping_add(1),
             }
@@ -191,6 +226,12 @@ impl ServoPacer {
             enable: self.enable,
         });
         self.stats.periods = self.stats.periods.wrapping_add(1);
+        if edge {
+            self.staged_ids[self.bank_w] = self.record;
+        }
+        if self.record.iter().any(|&id| id != NOT_SERVO) {
+            self.stage(feedback, &out);
+        }
         for (sum, &code) in self.dac_sum.iter_mut().zip(&out.dac) {
             *sum += code as u32;
         }
@@ -214,6 +255,35 @@ impl ServoPacer {
             self.dac_sum = [0; MAX_SERVOS];
         }
         ServoPeriod { out, tick: edge }
+    }
+
+    /// This period's values of the recorder's servo-side signals (their wire ids with
+    /// the channel in place of the joint; [`NOT_SERVO`]: the tick's own).
+    fn stage(&mut self, feedback: &[i64; MAX_SERVOS], out: &PeriodOutputs) {
+        let row = &mut self.staged[self.bank_w][self.phase % SERVO_PER_TICK];
+        for (v, &id) in row.iter_mut().zip(&self.record) {
+            let c = (id & 0x0f) as usize % MAX_SERVOS;
+            *v = match id >> 4 {
+                0 => (self.bank.setpoint(c) >> SETPOINT_FRAC_BITS) as i32,
+                1 => feedback[c] as i32,
+                2 => following_error(self.bank.setpoint(c), feedback[c]).0,
+                3 => out.dac[c] as i32,
+                9 => norm_f32(&out.contour_error[..3]),
+                10 => norm_f32(&out.contour_error[3..]),
+                _ => 0,
+            };
+        }
+    }
+
+    /// The recorder's samples of the last complete tick, `SERVO_PER_TICK / 2`
+    /// periods from period `half · SERVO_PER_TICK / 2` (the firmware copies them in
+    /// two short critical sections), and the signals they are of. Valid until the
+    /// next tick edge.
+    pub fn staged(&self, half: usize) -> (&[u8; MAX_SIGNALS], &[[i32; MAX_SIGNALS]]) {
+        let r = self.bank_w ^ 1;
+        let n = SERVO_PER_TICK / 2;
+        let from = (half % 2) * n;
+        (&self.staged_ids[r], &self.staged[r][from..from + n])
     }
 
     /// Replaces the bank at once (the controller asked for a servo reset: a bank of
@@ -434,6 +504,7 @@ mod tests {
                         targets: counts.map(|c| (c + 40 * (tick + 1)) << SETPOINT_FRAC_BITS),
                         enable: true,
                         map: None,
+                        record: [NOT_SERVO; MAX_SIGNALS],
                     };
                     p.post(c);
                     posted = c;
@@ -453,6 +524,7 @@ mod tests {
             targets: at.map(|c| c << SETPOINT_FRAC_BITS),
             enable: true,
             map: None,
+            record: [NOT_SERVO; MAX_SIGNALS],
         };
         let mut p = pacer(&at);
         one_tick(&mut p, &feedback);
@@ -531,6 +603,7 @@ mod tests {
             targets: [0; MAX_SERVOS],
             enable: true,
             map: None,
+            record: [NOT_SERVO; MAX_SIGNALS],
         });
         let fault = pad([true, false, false, false]);
         let s = p.period(&counts, &fault);
@@ -551,6 +624,7 @@ mod tests {
             targets: [0; MAX_SERVOS],
             enable: true,
             map: None,
+            record: [NOT_SERVO; MAX_SIGNALS],
         });
         // Trip channel 0, then reset the bank standing at new counts.
         p.period(&counts, &pad([true, false, false, false]));

@@ -8,9 +8,13 @@
 //! stepper's are both its steps emitted (no feedback: no following error), its output
 //! its steps this tick (signed). A servo channel's DAC code is the mean of the tick's
 //! servo periods, the contour errors (path and tool direction) the last period's.
-//! Sampling every servo period is refused until the servo side samples
-//! ([`SERVO_SAMPLING`]).
+//! Sampling every servo period, the servo side stages each period's values of the
+//! per-joint signals of servo joints and of the contour errors (`Outputs::servo_record`,
+//! `pacing::ServoPacer::staged`), and the caller hands them over after the next tick
+//! ([`Controller::record_servo`]); the other signals keep that tick's values over its
+//! periods.
 
+use super::pacing::NOT_SERVO;
 use super::Controller;
 use crate::config::{Drive, MAX_JOINTS, MAX_SERVOS};
 use crate::drive::excite::{Excite, Signal as ExciteSignal};
@@ -30,10 +34,6 @@ pub const STREAM_WAIT: u8 = 10;
 /// Streaming: bytes of the link's send buffer kept free for everything else.
 pub const STREAM_HEADROOM: usize = 768;
 
-/// The servo side samples for the recorder (not yet: a request for the servo period
-/// is refused with `RecorderError::ServoPeriod`).
-pub const SERVO_SAMPLING: bool = false;
-
 impl Controller {
     /// `HostMsg::Record`: a read, answered at once, or a control (arm, disarm),
     /// acted on once per id and acknowledged; a bad request is answered with
@@ -50,13 +50,7 @@ impl Controller {
         if self.last_control != Some(id) {
             self.last_control = Some(id);
             let result = match what {
-                RECORD_ARM => Setup::unpack(arg).and_then(|setup| {
-                    if setup.servo && !SERVO_SAMPLING {
-                        Err(RecorderError::ServoPeriod)
-                    } else {
-                        self.recorder.arm(&setup)
-                    }
-                }),
+                RECORD_ARM => Setup::unpack(arg).and_then(|setup| self.recorder.arm(&setup)),
                 RECORD_DISARM => {
                     self.recorder.disarm();
                     self.excite = None;
@@ -107,8 +101,16 @@ impl Controller {
     /// then, streaming, a piece of the samples not sent yet.
     #[inline(never)]
     pub(super) fn record_tick(&mut self) {
+        // A job starts when its first block is queued, or (a move sent alone, as MDI
+        // and jogs are) when the machine starts running.
+        let job = self.job_open || self.state == State::Running;
         self.recorder
-            .observe(self.job_open, self.exec.line, self.alarm.is_some());
+            .observe(job, self.exec.line, self.alarm.is_some());
+        self.out.servo_record = [NOT_SERVO; MAX_SIGNALS];
+        if self.recorder.wants(true) {
+            self.out.servo_record = self.servo_ids();
+            return;
+        }
         if !self.recorder.wants(false) {
             return;
         }
@@ -117,6 +119,67 @@ impl Controller {
             *v = self.signal(*s);
         }
         self.recorder.sample(&values);
+        if self.recorder.capture().phase == Phase::Streaming {
+            self.record_stream();
+        }
+    }
+
+    /// The recorder samples every servo period: after each tick, hand it the servo
+    /// side's samples ([`Controller::record_servo`]).
+    pub fn records_servo(&self) -> bool {
+        self.recorder.wants(true)
+    }
+
+    /// The recorder's signals as the servo side samples them: a servo joint's
+    /// per-joint signal with its channel in place of the joint, the contour errors as
+    /// they are, the rest [`NOT_SERVO`] (the tick's own, held over its periods).
+    fn servo_ids(&self) -> [u8; MAX_SIGNALS] {
+        let mut ids = [NOT_SERVO; MAX_SIGNALS];
+        for (out, &id) in ids.iter_mut().zip(self.recorder.signals()) {
+            let kind = id >> 4;
+            let drive = self
+                .machine
+                .joints
+                .get((id & 0x0f) as usize)
+                .map(|j| j.drive);
+            *out = match (kind, drive) {
+                (0..=3, Some(Drive::Servo { channel })) => kind << 4 | (channel & 0x0f),
+                (9 | 10, _) => id,
+                _ => NOT_SERVO,
+            };
+        }
+        ids
+    }
+
+    /// The servo side's samples of a tick (or part of one: `rows`, periods in time
+    /// order) of the signals `ids` ([`crate::controller::pacing::ServoPacer::staged`]),
+    /// stored when the recorder samples every servo period and they are of its
+    /// signals (the two ticks after arming have none). The signals the servo side
+    /// does not sample take this tick's values; positions are counted from the
+    /// joint's zero.
+    #[inline(never)]
+    pub fn record_servo(&mut self, ids: &[u8; MAX_SIGNALS], rows: &[[i32; MAX_SIGNALS]]) {
+        if !self.recorder.wants(true) || *ids != self.servo_ids() {
+            return;
+        }
+        let mut held = [0i32; MAX_SIGNALS];
+        let mut offsets = [0i32; MAX_SIGNALS];
+        for (i, &id) in self.recorder.signals().iter().enumerate() {
+            if ids[i] == NOT_SERVO {
+                held[i] = self.signal(id);
+            } else if id >> 4 <= 1 {
+                offsets[i] = self.offset[(id & 0x0f) as usize % MAX_JOINTS] as i32;
+            }
+        }
+        for row in rows {
+            let mut values = held;
+            for i in 0..MAX_SIGNALS {
+                if ids[i] != NOT_SERVO {
+                    values[i] = row[i].wrapping_sub(offsets[i]);
+                }
+            }
+            self.recorder.sample(&values);
+        }
         if self.recorder.capture().phase == Phase::Streaming {
             self.record_stream();
         }

@@ -404,6 +404,12 @@ impl ServoBank {
         self.correction = ContourCorrection::default();
     }
 
+    /// Channel `c`'s setpoint of the last period, counts × 2^16 (for the data
+    /// recorder).
+    pub fn setpoint(&self, c: usize) -> i64 {
+        self.setpoints[c % MAX_SERVOS].position()
+    }
+
     /// One servo period of every channel in use, in one pass over the channels: each
     /// channel's loop takes the contour correction formed from the previous period's
     /// errors (a delay of one period, 100 µs, against the contour loop's bandwidth of

@@ -10,8 +10,8 @@
 //! sample is the signals' values side by side, little-endian, each 2 or 4 bytes
 //! ([`Signal::width`]): the following error, the DAC code or step rate and the state
 //! fit 16 bits (saturated), positions, speed, contour error and line take 32. So the
-//! ring holds `RING_BYTES / sample width` samples: 120 of eight 16-bit signals
-//! (12 ms at 10 kHz, 120 ms at 1 kHz), 60 of eight 32-bit ones.
+//! ring holds `RING_BYTES / sample width` samples: 100 of eight 16-bit signals
+//! (10 ms at 10 kHz, 100 ms at 1 kHz), 50 of eight 32-bit ones.
 //!
 //! **Sampling.** The caller forms the values of the configured signals and hands them
 //! to [`Recorder::sample`] once per servo period or tick (as [`Setup::servo`] says);
@@ -34,7 +34,7 @@ use crate::config::MAX_JOINTS;
 /// Signals a capture can hold.
 pub const MAX_SIGNALS: usize = 8;
 /// Queue slots of 160 bytes (on the MCU) given to the ring.
-pub const RING_SLOTS: usize = 12;
+pub const RING_SLOTS: usize = 10;
 /// The ring's size, bytes.
 pub const RING_BYTES: usize = RING_SLOTS * 160;
 
@@ -87,9 +87,6 @@ pub enum RecorderError {
         /// The byte's place.
         at: u8,
     },
-    /// Sampling every servo period, which this controller does not do yet (its
-    /// servo side does not sample; `controller::recording`).
-    ServoPeriod,
     /// The level trigger names signal number `index`, beyond the request's signals.
     TriggerSignal {
         /// The signal number it names.
@@ -173,7 +170,8 @@ impl Signal {
 pub enum Trigger {
     /// The first sample after arming.
     Now,
-    /// A job starts (`Control::BeginJob`, or the first block of one).
+    /// A job starts (its first block is queued), or a move sent alone (MDI, a jog)
+    /// starts running.
     JobStart,
     /// NC line `n` begins executing.
     Line(u32),

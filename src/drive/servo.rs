@@ -172,6 +172,16 @@ impl SetpointInterpolator {
         (self.velocity, self.accel)
     }
 
+    /// The setpoint [`advance`](Self::advance) gave last (the previous target before
+    /// the first advance of a tick), counts × 2^16.
+    pub fn position(&self) -> i64 {
+        match self.step {
+            0 => self.start,
+            s if s >= SERVO_PER_TICK => self.start + self.delta,
+            s => self.start + ((self.delta * STEP_Q32[s - 1] as i64 + (1 << 31)) >> 32),
+        }
+    }
+
     /// The last loaded target, counts × 2^16.
     pub fn target(&self) -> i64 {
         self.start + self.delta

@@ -33,10 +33,6 @@ impl fmt::Display for crate::drive::recorder::RecorderError {
             ),
             E::Malformed { at: 255 } => f.write_str("a recorder request of an unknown kind"),
             E::Malformed { at } => write!(f, "the recorder request is malformed at byte {at}"),
-            E::ServoPeriod => f.write_str(
-                "sampling every servo period is not done by this controller yet: sample \
-                 every tick",
-            ),
             E::ExciteBusy => f.write_str(
                 "a test signal needs a homed machine standing idle, with no job and                  nothing queued",
             ),

@@ -538,6 +538,13 @@ impl Simulator {
                 pacer.restart(ServoBank::new(self.ctrl.machine(), &snapshot.counts));
             }
             pacer.post(command);
+            if self.ctrl.records_servo() {
+                // As the firmware: the last complete tick's servo-period samples.
+                for half in 0..2 {
+                    let (ids, rows) = pacer.staged(half);
+                    self.ctrl.record_servo(ids, rows);
+                }
+            }
         }
         for _ in 1..SERVO_PER_TICK {
             self.servo_period(&fault);

@@ -174,6 +174,13 @@ mod firmware {
                         servo_period::restart(ServoBank::new(c.machine(), &snapshot.counts));
                     }
                     servo_period::post(command);
+                    if c.records_servo() {
+                        for half in 0..2 {
+                            if let Some((ids, rows)) = servo_period::staged(half) {
+                                c.record_servo(&ids, &rows);
+                            }
+                        }
+                    }
                     Some(())
                 })
                 .flatten()

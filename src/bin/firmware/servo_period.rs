@@ -24,6 +24,8 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use critical_section::Mutex;
 use pkmc::controller::pacing::{Command, ServoPacer, ServoStats, Snapshot};
 use pkmc::drive::contour::ServoBank;
+use pkmc::drive::recorder::MAX_SIGNALS;
+use pkmc::drive::servo::SERVO_PER_TICK;
 use static_cell::StaticCell;
 
 use crate::board::{self, ServoIo};
@@ -66,6 +68,20 @@ fn with_pacer<R>(f: impl FnOnce(&mut ServoPacer) -> R) -> Option<R> {
 /// The snapshot of the last tick edge.
 pub fn snapshot() -> Snapshot {
     with_pacer(|p| p.snapshot()).unwrap_or_default()
+}
+
+/// Half `half` of the data recorder's servo-period samples of the last complete
+/// tick, and their signals ([`ServoPacer::staged`]), copied in a short critical
+/// section (168 bytes, about half of what a whole tick's would hold it).
+pub fn staged(
+    half: usize,
+) -> Option<([u8; MAX_SIGNALS], [[i32; MAX_SIGNALS]; SERVO_PER_TICK / 2])> {
+    with_pacer(|p| {
+        let (ids, rows) = p.staged(half);
+        let mut out = [[0; MAX_SIGNALS]; SERVO_PER_TICK / 2];
+        out.copy_from_slice(rows);
+        (*ids, out)
+    })
 }
 
 /// The tick's command on its way to the servo interrupt, handed over without a

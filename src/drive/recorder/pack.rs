@@ -131,7 +131,6 @@ impl Reply {
             Some(RecorderError::TriggerSignal { index }) => (4, index as u16, 0),
             Some(RecorderError::PreTrigger { pre, capacity }) => (5, pre, capacity),
             Some(RecorderError::Malformed { at }) => (6, at as u16, 0),
-            Some(RecorderError::ServoPeriod) => (7, 0, 0),
             Some(RecorderError::ExciteBusy) => (8, 0, 0),
             Some(RecorderError::ExciteJoint { joint }) => (9, joint as u16, 0),
             Some(RecorderError::ExciteAmplitude { joint, limit }) => (10, joint as u16, limit),
@@ -172,7 +171,6 @@ impl Reply {
                 capacity: b2,
             }),
             6 => Some(RecorderError::Malformed { at: a as u8 }),
-            7 => Some(RecorderError::ServoPeriod),
             8 => Some(RecorderError::ExciteBusy),
             9 => Some(RecorderError::ExciteJoint { joint: a as u8 }),
             10 => Some(RecorderError::ExciteAmplitude {

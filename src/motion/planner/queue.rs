@@ -12,11 +12,12 @@ use crate::motion::geometry::{Bend, Course, Form, GeometryError, Shape};
 
 /// Blocks the controller buffers: enough that the H-4's stopping distance at its top
 /// speed, along its XYZ diagonal at 346 mm/s (17.3 mm at 3464 mm/s²), fits in 0.05 mm
-/// segments (346 of them) with 6 to spare for the link's latency; with the bends,
+/// segments (346 of them) with 3 to spare for the link's latency; with the bends,
 /// about all the RAM allows (see `docs/performance.md`; three slots went to the touch
-/// probe's latch, thirteen to the data recorder's ring and state, `docs/recorder.md`). Programs of dense chords in `G64 P` are streamed as curves,
-/// which need far fewer.
-pub const QUEUE_CAPACITY: usize = 352;
+/// probe's latch, sixteen to the data recorder: its ring, its state and the servo
+/// side's samples, `docs/recorder.md`). Programs of dense chords in `G64 P` are
+/// streamed as curves, which need far fewer.
+pub const QUEUE_CAPACITY: usize = 349;
 
 /// Arcs and curves the controller buffers (their curved parts, [`Bend`]s of 112 bytes
 /// on the MCU, are kept apart from the queue's slots, which are line-sized). 48 curves
