@@ -344,6 +344,89 @@ GENERATED = {
 }
 
 
+def case_record(o):
+    """The data recorder on the board (docs/recorder.md): the dense H-4 job streamed
+    twice by `nc-send record --trigger stream`, first without the recorder's stream
+    (the job alone) then with eight signals streamed every tick. Fails when a sample
+    is lost on the way, when the streamed job's motion takes longer than the job
+    alone (the stream starved the blocks), or on the budgets; reports the bytes a
+    second each way. Then a capture every servo period (10 kHz) of joint 0's
+    following error, DAC code, commanded and measured position during the dense
+    job again, checked for periods that differ within a tick."""
+    machine = os.path.join(ROOT, "examples/machines/h4-table.toml")
+    tmp = tempfile.mkdtemp()
+    program = os.path.join(tmp, "dense-h4.ngc")
+    dense_program(program)
+    m = ["--machine", machine]
+    b = Board(o.vboard, o.elf, machine, "record")
+    if nc_send(o.nc, ["--port", b.port] + m + ["reset"]).returncode != 0:
+        b.fail("record: reset failed")
+    time.sleep(0.5)
+    b.command("mark")
+
+    def run(args):
+        before = b.report()
+        t0 = before["virtual_s"]
+        r = nc_send(o.nc, ["--port", b.port] + m + args)
+        after = b.report()
+        if r.returncode != 0:
+            b.fail(f"record: nc-send {' '.join(args[:3])}: exit {r.returncode}: {r.stderr[-1500:]}")
+        span = after["virtual_s"] - t0
+        moved = [x - y for x, y in zip(after["usb_bytes_in_out"], before["usb_bytes_in_out"])]
+        return r, span, moved, after
+
+    alone_csv = os.path.join(tmp, "alone.csv")
+    # The job once to take the machine to its end, so that both measured runs start
+    # there (the program's first move, a rapid back to the start, is then the same).
+    run([program])
+    # The job alone: `record` with one tick-rate signal and a trigger at the job's
+    # start, so that the same client runs the job the same way.
+    _, span0, bytes0, rep0 = run(["record", "--signals", "line", "--trigger", "job",
+                                  "--during", program, "--csv", alone_csv])
+    csv = os.path.join(tmp, "stream.csv")
+    signals = "cmd:0,cmd:1,cmd:2,cmd:3,ferr:0,ferr:1,out:0,speed"
+    r, span1, bytes1, rep1 = run(["record", "--signals", signals, "--trigger", "stream",
+                                  "--during", program, "--csv", csv])
+    rows = [line.split(",") for line in open(csv).read().splitlines()[1:]]
+    numbers = [int(x[0]) for x in rows]
+    lost = numbers[-1] - numbers[0] + 1 - len(numbers) if numbers else -1
+    speed = [int(x[-1]) for x in rows]
+    moving = [i for i, v in enumerate(speed) if v > 0]
+    motion_ms = moving[-1] - moving[0] + 1 if moving else 0
+    errors = budgets("record", rep1)
+    if lost != 0 or "were lost" in r.stderr:
+        errors.append(f"{lost} samples lost: {r.stderr[-500:]}")
+    # The job alone: its motion time from the board's own count of ticks moving is not
+    # reported, so compare the two runs' spans (virtual time from start to end).
+    if span1 > span0 * 1.02 + 0.05:
+        errors.append(f"the streamed job took {span1:.3f} s against {span0:.3f} s alone")
+    servo_csv = os.path.join(tmp, "servo.csv")
+    r2, _, _, rep2 = run(["record", "--signals", "ferr:0,out:0,cmd:0,meas:0", "--servo",
+                          "--trigger", "line:600", "--pre", "50", "--during", program,
+                          "--csv", servo_csv])
+    srows = [list(map(int, line.split(",")[2:])) for line in open(servo_csv).read().splitlines()[1:]]
+    cmd = [x[2] for x in srows]
+    changes = sum(1 for a, c in zip(cmd, cmd[1:]) if a != c)
+    errors += budgets("record (servo period)", rep2)
+    if len(srows) < 100 or changes < len(srows) // 3:
+        errors.append(f"servo-period capture: {len(srows)} samples, commanded position changed "
+                      f"{changes} times")
+    b.close()
+    if errors:
+        die("record: " + "; ".join(errors))
+    secs = max(span1, 1e-9)
+    busy1 = rep1["busy_percent_streaming"]
+    return (f"record: the dense H-4 job with 8 signals streamed every tick: {len(rows)} samples, 0 lost, "
+            f"motion {motion_ms} ms; {span1:.3f} s from start to end against {span0:.3f} s with the "
+            f"recorder not streaming; from the board {bytes1[0]} B ({bytes1[0] / secs / 1000:.1f} kB/s) "
+            f"against {bytes0[0]} B not streaming ({bytes0[0] / max(span0, 1e-9) / 1000:.1f} kB/s), "
+            f"to the board {bytes1[1]} B ({bytes1[1] / secs / 1000:.1f} kB/s) against {bytes0[1]} B; "
+            f"busiest 1 ms {busy1['max']} %, servo start jitter {rep1['servo_latency_us']['jitter']} µs; "
+            f"a servo-period capture of the same job from line 600 ({len(srows)} samples at 10 kHz, "
+            f"commanded position changing in {changes} of its periods), servo start jitter "
+            f"{rep2['servo_latency_us']['jitter']} µs")
+
+
 def table_row(name, sim, job, rep, wall):
     busy = rep["busy_percent_streaming"] if rep["busy_percent_streaming"]["periods"] else rep["busy_percent"]
     lat = rep["servo_latency_us"]
@@ -871,7 +954,7 @@ def main():
     ap.add_argument("--vboard", default=os.path.join(ROOT, "vboard/target/release/pkmc-vboard"))
     ap.add_argument("cases", nargs="*", default=["square", "dense", "square8", "dense8", "estop", "limit",
                                                  "ampfault", "jam", "unplug", "stall", "replug", "replug-serial", "persist", "determinism",
-                                                 "replay", "probe", "probe8"])
+                                                 "replay", "probe", "probe8", "record"])
     o = ap.parse_args()
     for what, path in (("nc-send", o.nc), ("pkmc-vboard", o.vboard), ("firmware ELF", o.elf)):
         if not os.path.exists(path):
@@ -911,7 +994,7 @@ def main():
                           "determinism": case_determinism, "replay": case_replay,
                           "stall": case_stall, "replug": case_replug,
                           "replug-serial": case_replug_serial, "probe": case_probe,
-                          "probe8": case_probe8}[case](o))
+                          "probe8": case_probe8, "record": case_record}[case](o))
         print(f"vboard: {case} done in {time.time() - t:.1f} s", flush=True)
     print("\n| job | blocks | motion s | busy % per 1 ms (min / median / p99 / max) | servo start µs "
           "(min / median / p99 / max) | stack deepest / untouched B | blocks/s executed | frames/s accepted "

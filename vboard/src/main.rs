@@ -430,7 +430,7 @@ fn run(args: Args) -> Result<()> {
                 eprintln!("vboard: {cmd} at {:.4} s", time::to_s(now));
                 match control::apply(&cmd, &mut core, &mut host) {
                     Ok(control::Outcome::Report) => {
-                        report(&core, started.elapsed(), host.packets, &frames_per_ms)
+                        report(&core, started.elapsed(), (host.packets, host.bytes), &frames_per_ms)
                     }
                     Ok(control::Outcome::Quit) => stop.store(true, Ordering::SeqCst),
                     Ok(control::Outcome::Done) => {}
@@ -487,7 +487,7 @@ fn run(args: Args) -> Result<()> {
     for line in log.poll(&mut core.uc).unwrap_or_default() {
         eprintln!("{line}");
     }
-    report(&core, started.elapsed(), host.packets, &frames_per_ms);
+    report(&core, started.elapsed(), (host.packets, host.bytes), &frames_per_ms);
     if let (Some(r), Ok(())) = (&replaying, &outcome) {
         if r.unseen() > 0 {
             bail!(
@@ -573,7 +573,12 @@ fn quartiles(v: &mut [u64]) -> [u64; 4] {
 }
 
 /// Prints the run's figures as one JSON object on stdout.
-fn report(core: &Core, wall: Duration, packets: (u64, u64), frames_per_ms: &[u32]) {
+fn report(
+    core: &Core,
+    wall: Duration,
+    (packets, bytes): ((u64, u64), (u64, u64)),
+    frames_per_ms: &[u32],
+) {
     // The link's accepted frames a second: the most in any 100 ms.
     let window = 100.min(frames_per_ms.len().max(1));
     let peak = frames_per_ms
@@ -672,7 +677,7 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64), frames_per_ms: &[u32
          \"servo_latency_us\": {{\"min\": {:.3}, \"median\": {:.3}, \"p99\": {:.3}, \"max\": {:.3}, \"jitter\": {:.3}}}, \
          \"worst_servo_latency_us\": [{}], \
          \"stack\": {{\"top\": {}, \"deepest\": {depth}, \"untouched\": {untouched}, \"lowest_sp_chain\": [{}]}}, \
-         \"watchdog_resets\": {}, \"software_resets\": {}, \"pin_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}, \"flash_machine\": {flash_machine}, \"usb_packets_in_out\": [{}, {}], \"pwm_code_range\": [{}, {}], \"led_toggles\": {}, \"fp_lazy_saves\": {}, \"fp_lazy_skipped\": {}, \"frames_per_s_peak_100ms\": {peak}}}",
+         \"watchdog_resets\": {}, \"software_resets\": {}, \"pin_resets\": {}, \"flash_erases\": {}, \"flash_programs\": {}, \"flash_machine\": {flash_machine}, \"usb_packets_in_out\": [{}, {}], \"usb_bytes_in_out\": [{}, {}], \"pwm_code_range\": [{}, {}], \"led_toggles\": {}, \"fp_lazy_saves\": {}, \"fp_lazy_skipped\": {}, \"frames_per_s_peak_100ms\": {peak}}}",
         wall.as_secs_f64(),
         virt / wall.as_secs_f64().max(1e-9),
         b.instructions,
@@ -700,6 +705,8 @@ fn report(core: &Core, wall: Duration, packets: (u64, u64), frames_per_ms: &[u32
         b.flash.programs,
         packets.0,
         packets.1,
+        bytes.0,
+        bytes.1,
         b.stats.pwm_range.0,
         b.stats.pwm_range.1,
         b.stats.led_toggles,

@@ -82,8 +82,10 @@ pub struct Host {
     pub log: Vec<String>,
     /// Time the device was configured (virtual), per enumeration.
     pub configured_at: Vec<u64>,
-    /// Bulk packets moved each way.
+    /// Bulk packets moved each way (in: from the device).
     pub packets: (u64, u64),
+    /// Bulk bytes moved each way (in: from the device).
+    pub bytes: (u64, u64),
     /// Frames (COBS-delimited: a zero byte ends each) delivered to the device.
     pub frames_out: u64,
     strings: Vec<String>,
@@ -108,6 +110,7 @@ impl Default for Host {
             log: Vec::new(),
             configured_at: Vec::new(),
             packets: (0, 0),
+            bytes: (0, 0),
             frames_out: 0,
             strings: Vec::new(),
         }
@@ -372,6 +375,7 @@ impl Host {
                 Handshake::Ack(_) => {
                     self.to_device.drain(..n);
                     self.packets.1 += 1;
+                    self.bytes.1 += n as u64;
                     self.frames_out += chunk.iter().filter(|&&b| b == 0).count() as u64;
                 }
                 Handshake::Nak => {}
@@ -382,6 +386,7 @@ impl Host {
             match dev.input(self.address, self.bulk_in) {
                 Handshake::Ack(d) => {
                     self.packets.0 += 1;
+                    self.bytes.0 += d.len() as u64;
                     self.from_device.extend(d);
                     if !dev.valid(self.bulk_in, false) {
                         break;
