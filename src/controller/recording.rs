@@ -270,7 +270,7 @@ impl Controller {
         let offset = if busy || self.alarm.is_some() {
             None
         } else {
-            sig.next()
+            sig.offset()
         };
         match (offset, self.machine.joints.get(j).map(|jc| jc.drive)) {
             (Some(o), Some(Drive::Servo { channel })) => {

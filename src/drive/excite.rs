@@ -110,7 +110,7 @@ impl Signal {
     }
 
     /// The next tick's offset, counts; `None` once it has ended (its last offset was 0).
-    pub fn next(&mut self) -> Option<i32> {
+    pub fn offset(&mut self) -> Option<i32> {
         if self.tick >= self.req.length {
             return None;
         }
@@ -177,14 +177,14 @@ mod tests {
     #[test]
     fn steps_alternate_and_end_at_zero() {
         let mut s = Signal::new(req(0, 2, 9));
-        let v: Vec<i32> = core::iter::from_fn(|| s.next()).collect();
+        let v: Vec<i32> = core::iter::from_fn(|| s.offset()).collect();
         assert_eq!(v, [0, 0, 50, 50, 0, 0, 50, 50, 0]);
     }
 
     #[test]
     fn prbs_is_balanced_and_maximal() {
         let mut s = Signal::new(req(1, 1, 32_767 + 1));
-        let v: Vec<i32> = core::iter::from_fn(|| s.next()).collect();
+        let v: Vec<i32> = core::iter::from_fn(|| s.offset()).collect();
         assert_eq!(v.len(), 32_768);
         assert_eq!(*v.last().unwrap(), 0);
         let ones = v[..32_767].iter().filter(|&&x| x == 50).count();
@@ -193,7 +193,7 @@ mod tests {
         assert!(v[..32_767].iter().all(|&x| x == 50 || x == -50));
         // The register's state repeats first after 32 767 bits.
         let mut t = Signal::new(req(1, 1, 70_000));
-        let w: Vec<i32> = core::iter::from_fn(|| t.next()).collect();
+        let w: Vec<i32> = core::iter::from_fn(|| t.offset()).collect();
         assert_eq!(w[..200], w[32_767..32_967]);
         assert_ne!(w[..200], w[100..300]);
     }
