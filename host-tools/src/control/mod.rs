@@ -5,6 +5,7 @@
 //! file designs its servo gains here, the simulator steps its plants from here, and the
 //! contour study draws its plants from here. It imports nothing else of the crate.
 
+pub mod ident;
 pub mod linalg;
 pub mod lqg;
 pub mod plant;
