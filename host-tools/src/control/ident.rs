@@ -55,6 +55,9 @@ pub struct Record {
 pub struct IdentOptions {
     /// Periods per block (D).
     pub decimation: usize,
+    /// Passes of the D-tap boxcar before decimation (1: block means; 2: a triangle
+    /// of 2D − 1 taps, which averages the encoder's noise over the block).
+    pub filter_passes: usize,
     /// Largest denominator order tried (of the velocity model when integrating).
     pub max_na: usize,
     /// Largest numerator length tried.
@@ -73,6 +76,7 @@ impl Default for IdentOptions {
     fn default() -> Self {
         Self {
             decimation: 20,
+            filter_passes: 4,
             max_na: 3,
             max_nb: 3,
             max_nk: 1,
@@ -123,6 +127,8 @@ pub enum IdentError {
 pub struct Arx {
     /// Block period D·h, s.
     pub period_s: f64,
+    /// Sample period h of the record, s.
+    pub sample_s: f64,
     /// 1, a₁ … a_na.
     pub a: Vec<f64>,
     /// b₀ … b_{nb−1}, the coefficients of q^−nk … q^−(nk+nb−1).
@@ -178,7 +184,7 @@ impl Arx {
         if self.integrating {
             same_instant / Complex::new(0.0, w * t)
         } else {
-            let x = 0.5 * w * t;
+            let x = 0.5 * w * self.sample_s;
             let sinc = if x == 0.0 { 1.0 } else { x.sin() / x };
             same_instant * Complex::expj(-x).scale(sinc)
         }
@@ -269,28 +275,41 @@ struct Blocks {
     u: Vec<f64>,
     out: Vec<f64>,
     period_s: f64,
+    sample_s: f64,
 }
 
-fn blocks(rec: &Record, d: usize, integrating: bool) -> Blocks {
-    let n = (rec.y.len().saturating_sub(1)) / d;
-    let u = (0..n)
-        .map(|j| rec.u[j * d..(j + 1) * d].iter().sum::<f64>() / d as f64)
-        .collect();
-    let out = (0..=n)
-        .map(|j| {
-            if !integrating {
-                rec.y[j * d]
-            } else if j == 0 {
-                0.0
-            } else {
-                rec.y[j * d] - rec.y[(j - 1) * d]
-            }
-        })
-        .collect();
+/// The anti-alias filter: a boxcar of `d` taps applied `passes` times, its weights
+/// summing to 1.
+fn boxcars(d: usize, passes: usize) -> Vec<f64> {
+    let one = vec![1.0 / d as f64; d];
+    (0..passes.max(1)).fold(vec![1.0], |f, _| polymul(&f, &one))
+}
+
+fn blocks(rec: &Record, o: &IdentOptions) -> Blocks {
+    let d = o.decimation.max(1);
+    let f = boxcars(d, o.filter_passes);
+    let filtered = |x: &dyn Fn(usize) -> f64, k: usize| {
+        f.iter().enumerate().map(|(i, c)| c * x(k - i)).sum::<f64>()
+    };
+    let (y, u) = (&rec.y, &rec.u);
+    let (mut bu, mut out) = (Vec::new(), Vec::new());
+    let mut k = f.len() - 1;
+    while k + 1 < y.len() {
+        out.push(if o.integrating {
+            d as f64 * filtered(&|i| y[i + 1] - y[i], k)
+        } else {
+            filtered(&|i| y[i + 1], k)
+        });
+        if k >= f.len() - 1 + d {
+            bu.push(filtered(&|i| u[i], k));
+        }
+        k += d;
+    }
     Blocks {
-        u,
+        u: bu,
         out,
         period_s: d as f64 * rec.h,
+        sample_s: rec.h,
     }
 }
 
@@ -344,32 +363,81 @@ fn lstsq(mut x: Vec<Vec<f64>>, mut r: Vec<f64>) -> Option<Vec<f64>> {
     Some(theta.iter().zip(&norms).map(|(t, s)| t / s).collect())
 }
 
-/// The ARX model of orders (na, nb, nk) fitted on the outputs `range` of `b`.
+/// θ = [a₁ … a_na, b₀ … b_{nb−1}, c] of out = −Σaᵢ·out₋ᵢ + Σbᵢ·u₋ₙₖ₋ᵢ + c·one
+/// fitted on the outputs `range` (u[j − 1] at the instant of out[j]).
+fn regress(
+    (out, u, one): (&[f64], &[f64], &[f64]),
+    (na, nb, nk): (usize, usize, usize),
+    range: (usize, usize),
+) -> Option<Vec<f64>> {
+    let (mut rows, mut rhs) = (Vec::new(), Vec::new());
+    for j in range.0..range.1 {
+        let mut row: Vec<f64> = (1..=na).map(|i| -out[j - i]).collect();
+        row.extend((0..nb).map(|i| u[j - nk - i]));
+        row.push(one[j]);
+        rows.push(row);
+        rhs.push(out[j]);
+    }
+    lstsq(rows, rhs)
+}
+
+/// `x` through 1/A(q).
+fn through_inverse(a: &[f64], x: &[f64]) -> Vec<f64> {
+    let mut y: Vec<f64> = Vec::with_capacity(x.len());
+    for (k, v) in x.iter().enumerate() {
+        let past: f64 = (1..a.len().min(k + 1)).map(|i| a[i] * y[k - i]).sum();
+        y.push(v - past);
+    }
+    y
+}
+
+/// Steiglitz–McBride passes after the ARX fit.
+const REFINE_PASSES: usize = 8;
+
+/// The model of orders (na, nb, nk) fitted on the outputs `range` of `b`: least
+/// squares ARX, then [`REFINE_PASSES`] Steiglitz–McBride passes (both signals and
+/// the constant through 1/Â of the previous pass, the ARX fit repeated), which
+/// move the equation-error estimate towards the output-error one — the model that
+/// best reproduces the output from the input (Steiglitz and McBride, IEEE Trans.
+/// Automatic Control 10, 1965). A pass that leaves the unit circle is not taken.
 fn fit(
     b: &Blocks,
-    (na, nb, nk): (usize, usize, usize),
+    orders: (usize, usize, usize),
     range: (usize, usize),
     integ: bool,
 ) -> Option<Arx> {
-    let (mut rows, mut rhs) = (Vec::new(), Vec::new());
-    for j in range.0..range.1 {
-        let mut row: Vec<f64> = (1..=na).map(|i| -b.out[j - i]).collect();
-        row.extend((0..nb).map(|i| b.u[j - nk - i]));
-        row.push(1.0);
-        rows.push(row);
-        rhs.push(b.out[j]);
+    let (na, nb, nk) = orders;
+    let ones = vec![1.0; b.out.len()];
+    let model = |theta: Vec<f64>| {
+        let mut a = vec![1.0];
+        a.extend(&theta[..na]);
+        Arx {
+            period_s: b.period_s,
+            sample_s: b.sample_s,
+            a,
+            b: theta[na..na + nb].to_vec(),
+            nk,
+            offset: theta[na + nb],
+            integrating: integ,
+        }
+    };
+    let mut m = model(regress((&b.out, &b.u, &ones), orders, range)?);
+    for _ in 0..if na > 0 { REFINE_PASSES } else { 0 } {
+        if !admissible(&m) {
+            break;
+        }
+        let f = |x: &[f64]| through_inverse(&m.a, x);
+        let (out, u, one) = (f(&b.out), f(&b.u), f(&ones));
+        let Some(theta) = regress((&out, &u, &one), orders, range) else {
+            break;
+        };
+        let next = model(theta);
+        if !admissible(&next) {
+            break;
+        }
+        m = next;
     }
-    let theta = lstsq(rows, rhs)?;
-    let mut a = vec![1.0];
-    a.extend(&theta[..na]);
-    Some(Arx {
-        period_s: b.period_s,
-        a,
-        b: theta[na..na + nb].to_vec(),
-        nk,
-        offset: theta[na + nb],
-        integrating: integ,
-    })
+    Some(m)
 }
 
 /// Validation fit of `m` on the outputs from `split` on, %.
@@ -403,11 +471,10 @@ fn check(rec: &Record) -> Result<(), IdentError> {
 /// Identifies the plant of `rec` (see the module documentation).
 pub fn identify(rec: &Record, o: &IdentOptions) -> Result<Identified, IdentError> {
     check(rec)?;
+    let b = blocks(rec, o);
     let d = o.decimation.max(1);
-    let b = blocks(rec, d, o.integrating);
-    let first_out = usize::from(o.integrating);
     let max_nk = o.max_nk.max(1);
-    let lag = (o.max_na + first_out).max(max_nk + o.max_nb - 1);
+    let lag = o.max_na.max(max_nk + o.max_nb - 1);
     let n = b.out.len();
     let params = o.max_na + o.max_nb + 1;
     let needed = lag + 8 * params;
@@ -431,7 +498,7 @@ pub fn identify(rec: &Record, o: &IdentOptions) -> Result<Identified, IdentError
     for na in usize::from(!o.integrating)..=o.max_na {
         for nb in 1..=o.max_nb.max(1) {
             for nk in 1..=max_nk {
-                let j0 = (na + first_out).max(nk + nb - 1);
+                let j0 = na.max(nk + nb - 1);
                 let m = fit(&b, (na, nb, nk), (j0, split), o.integrating);
                 let fit_percent = m
                     .filter(admissible)
@@ -466,7 +533,7 @@ pub fn identify(rec: &Record, o: &IdentOptions) -> Result<Identified, IdentError
     good.sort_by_key(|c| (c.na + c.nb, c.na, c.nk));
     let record_s = rec.y.len() as f64 * rec.h;
     for c in good {
-        let j0 = (c.na + first_out).max(c.nk + c.nb - 1);
+        let j0 = c.na.max(c.nk + c.nb - 1);
         let orders = (c.na, c.nb, c.nk);
         let all = fit(&b, orders, (j0, n), o.integrating).filter(admissible);
         let arx = all.or_else(|| fit(&b, orders, (j0, split), o.integrating));
@@ -553,8 +620,7 @@ fn pow(x: Complex, k: usize) -> Complex {
 /// mean removed. `None` below two cycles per segment or above the block rate's
 /// Nyquist frequency.
 pub fn empirical_response(rec: &Record, o: &IdentOptions, ws: &[f64]) -> Vec<Option<Complex>> {
-    let d = o.decimation.max(1);
-    let b = blocks(rec, d, o.integrating);
+    let b = blocks(rec, o);
     // out[j] and U[j − 1] describe the same instant.
     let (x, y) = (&b.u, &b.out[1..]);
     let n = x.len().min(y.len());
@@ -592,7 +658,7 @@ pub fn empirical_response(rec: &Record, o: &IdentOptions, ws: &[f64]) -> Vec<Opt
                 start += seg / 2;
             }
             let g = cross.scale(1.0 / power);
-            let x2 = 0.5 * w * t;
+            let x2 = 0.5 * w * rec.h;
             Some(if o.integrating {
                 g / Complex::new(0.0, w * t)
             } else {

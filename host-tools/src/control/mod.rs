@@ -9,3 +9,4 @@ pub mod ident;
 pub mod linalg;
 pub mod lqg;
 pub mod plant;
+pub mod tune;
