@@ -10,3 +10,4 @@ pub mod linalg;
 pub mod lqg;
 pub mod plant;
 pub mod tune;
+pub mod tune_plot;

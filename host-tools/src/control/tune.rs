@@ -314,3 +314,54 @@ pub fn bode(
         })
         .collect())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const H: f64 = 1e-4;
+    const CPU: f64 = 1000.0;
+
+    fn default_plant() -> TransferFunction {
+        TransferFunction::new(&[0.3], &[0.02, 1.0, 0.0]).unwrap()
+    }
+
+    #[test]
+    fn a_design_meets_its_crossover_and_phase_margin_on_its_model() {
+        let g = default_plant();
+        let t = design_pid(&g, CPU, H, &PidSpec::new(40.0)).unwrap();
+        assert!(
+            (t.margins.crossover_rad_s / 40.0 - 1.0).abs() < 0.01,
+            "{t:?}"
+        );
+        assert!((t.margins.phase_margin_deg - 60.0).abs() < 0.5, "{t:?}");
+        assert!(t.kd > 0.0 && t.ki > 0.0 && t.margins.stable);
+    }
+
+    #[test]
+    fn the_feed_forwards_invert_the_default_plant() {
+        // 1/G = (0.02 s² + s)/0.3: kvff = 1/300, kaff = 0.02/300 c.u. per count.
+        let [kvff, kaff] = feed_forward(&default_plant(), CPU);
+        assert!((kvff - 1.0 / 300.0).abs() < 1e-12 && (kaff - 0.02 / 300.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_step_error_is_zero_for_the_same_response_and_grows_with_a_gain_error() {
+        let g = default_plant();
+        let y = closed_loop_step(&g, CPU, H, [0.1, 1.0, 0.0], 10_000);
+        assert!((y[9_999] - 1.0).abs() < 0.01);
+        assert_eq!(step_error(&y, &y, H).ratio, 0.0);
+        let off = TransferFunction::new(&[0.45], &[0.02, 1.0, 0.0]).unwrap();
+        let z = closed_loop_step(&off, CPU, H, [0.1, 1.0, 0.0], 10_000);
+        assert!(step_error(&y, &z, H).ratio > 0.1);
+    }
+
+    #[test]
+    fn too_high_a_crossover_is_refused() {
+        let g = default_plant();
+        assert_eq!(
+            design_pid(&g, CPU, H, &PidSpec::new(4e4)),
+            Err(TuneError::Spec)
+        );
+    }
+}
