@@ -6,8 +6,8 @@
 //! * **The loop as the core runs it** ([`pkmc::drive::servo`]): e = target −
 //!   feedback in counts, I ← I + ki·T·e (this period's error included),
 //!   u = kp·e + I + kd·(e − e₋₁)/T, the command held over the period (zero-order
-//!   hold) and the encoder read at the start of the next: C(z) = kp + ki·T·z/(z − 1)
-//!   + kd·(z − 1)/(T·z), P(z) the plant discretised with a zero-order hold at T, both
+//!   hold) and the encoder read at the start of the next:
+//!   C(z) = kp + ki·T·z/(z − 1) + kd·(z − 1)/(T·z), P(z) the plant discretised with a zero-order hold at T, both
 //!   from [`crate::control::lqg::pid_loop_response`], so that the sample-and-hold
 //!   delay is in every figure. Gains are per encoder count, as in
 //!   [`pkmc::config::ServoGains`].
