@@ -510,15 +510,45 @@ pub fn pid_loop_figures(
     [kp, ki, kd]: [f64; 3],
 ) -> Result<LoopFigures, LqgError> {
     let p = model(plant, counts_per_unit, period_s)?;
-    let h = period_s;
+    Ok(figures(&pid(period_s, [kp, ki, kd]), &p, period_s))
+}
+
+/// The core's PID as a compensator from y to u (gains per count, period `h` s).
+fn pid(h: f64, [kp, ki, kd]: [f64; 3]) -> Discrete {
     // State [I of the last period; e of the last period], e = −y.
-    let pid = Discrete {
+    Discrete {
         e: vec![vec![0.0, 0.0], vec![0.0, -1.0]],
         b: vec![-ki * h, -1.0],
         c: vec![1.0, -kd / h],
         d: -(kp + kd / h + ki * h),
-    };
-    Ok(figures(&pid, &p, h))
+    }
+}
+
+/// The frequency responses behind [`pid_loop_figures`] at each of `ws` rad/s: the
+/// plant P(z) as the core sees it (`plant` held over each period, sampled at its end:
+/// encoder counts per c.u.) and the loop gain L(z) = C(z)·P(z) of the core's PID
+/// (z = e^{jωT}, T = `period_s`).
+pub fn pid_loop_response(
+    plant: &TransferFunction,
+    counts_per_unit: f64,
+    period_s: f64,
+    gains: [f64; 3],
+    ws: &[f64],
+) -> Result<Vec<(Complex, Complex)>, LqgError> {
+    let p = model(plant, counts_per_unit, period_s)?;
+    let k = pid(period_s, gains);
+    Ok(ws
+        .iter()
+        .map(|&w| {
+            let pz = response(&p.e, &p.gamma, &p.c, 0.0, w, period_s);
+            let kz = response(&k.e, &k.b, &k.c, k.d, w, period_s);
+            let l = Complex {
+                re: -(kz.re * pz.re - kz.im * pz.im),
+                im: -(kz.re * pz.im + kz.im * pz.re),
+            };
+            (pz, l)
+        })
+        .collect())
 }
 
 fn figures(k: &Discrete, p: &Model, h: f64) -> LoopFigures {

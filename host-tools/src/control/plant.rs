@@ -74,6 +74,28 @@ pub struct Complex {
 }
 
 impl Complex {
+    /// re + j·im.
+    pub const fn new(re: f64, im: f64) -> Complex {
+        Complex { re, im }
+    }
+    /// e^{jθ}.
+    pub fn expj(theta: f64) -> Complex {
+        Complex {
+            re: theta.cos(),
+            im: theta.sin(),
+        }
+    }
+    /// Times a real number.
+    pub fn scale(self, k: f64) -> Complex {
+        Complex {
+            re: self.re * k,
+            im: self.im * k,
+        }
+    }
+    /// Argument, rad, in (−π, π].
+    pub fn arg(self) -> f64 {
+        self.im.atan2(self.re)
+    }
     fn mul(self, o: Complex) -> Complex {
         Complex {
             re: self.re * o.re - self.im * o.im,
@@ -96,6 +118,34 @@ impl Complex {
     /// Magnitude.
     pub fn abs(self) -> f64 {
         self.re.hypot(self.im)
+    }
+}
+
+impl std::ops::Add for Complex {
+    type Output = Complex;
+    fn add(self, o: Complex) -> Complex {
+        Complex::new(self.re + o.re, self.im + o.im)
+    }
+}
+
+impl std::ops::Sub for Complex {
+    type Output = Complex;
+    fn sub(self, o: Complex) -> Complex {
+        Complex::sub(self, o)
+    }
+}
+
+impl std::ops::Mul for Complex {
+    type Output = Complex;
+    fn mul(self, o: Complex) -> Complex {
+        Complex::mul(self, o)
+    }
+}
+
+impl std::ops::Div for Complex {
+    type Output = Complex;
+    fn div(self, o: Complex) -> Complex {
+        Complex::div(self, o)
     }
 }
 
