@@ -182,3 +182,162 @@ fn a_capture_every_servo_period_holds_each_periods_values() {
         "{dac:?}"
     );
 }
+
+/// `nc-send record` through the real link (`--sim`): a continuous stream of eight
+/// signals during a job, every sample numbered with none lost; and arguments refused
+/// by name before anything is sent.
+#[test]
+fn nc_send_record_streams_a_job_through_the_link() {
+    let dir = std::env::temp_dir().join(format!("pkmc-record-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let program = dir.join("moves.ngc");
+    std::fs::write(&program, "G21 G90\nG1 X30 Y10 F1500\nG1 X0 Y0\nM2\n").unwrap();
+    let csv = dir.join("stream.csv");
+    let plot = dir.join("stream.svg");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_nc-send"))
+        .args(["--sim", "--machine", MACHINE, "record", "--signals"])
+        .arg("cmd:0,meas:0,ferr:0,out:0,cmd:1,speed,line,state")
+        .args(["--trigger", "stream", "--during"])
+        .arg(&program)
+        .arg("--csv")
+        .arg(&csv)
+        .arg("--plot")
+        .arg(&plot)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stderr.contains("lost"), "{stderr}");
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some(
+            "sample,t_s,cmd0_counts,meas0_counts,ferr0_counts,out0_dac_or_steps,cmd1_counts,\
+             speed_nm_s,line,state"
+        )
+    );
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    // Numbered without a gap, a millisecond apart.
+    for (i, r) in rows.iter().enumerate() {
+        assert_eq!(r[0], rows[0][0] + i as f64);
+        assert!((r[1] - (r[0] * 1e-3)).abs() < 1e-9);
+    }
+    // The job is in it: X goes out to 30 mm (30 000 counts) and back; lines 2 and 3
+    // run; the machine runs, then stands.
+    let x_max = rows.iter().map(|r| r[2]).fold(f64::MIN, f64::max);
+    assert!((x_max - 30_000.0).abs() <= 1.0, "X reached {x_max} counts");
+    assert!(rows.iter().any(|r| r[8] == 2.0) && rows.iter().any(|r| r[8] == 3.0));
+    let running = pkmc::wire::State::Running as i32 as f64;
+    assert!(rows.iter().filter(|r| r[9] == running).count() > 1000);
+    // The following error is the difference of the two positions, as the loop's.
+    assert!(rows
+        .iter()
+        .all(|r| r[4] == (r[2] - r[3]).clamp(-32768.0, 32767.0)));
+    assert!(std::fs::metadata(&plot).unwrap().len() > 1000);
+    // Refusals name what is wrong, before anything is sent.
+    for (args, says) in [
+        (vec!["--signals", "ferr"], "needs a joint"),
+        (
+            vec!["--signals", "ferr:0", "--trigger", "rise:3:10"],
+            "not in --signals",
+        ),
+        (
+            vec!["--signals", "ferr:0", "--decimate", "0"],
+            "--decimate 0",
+        ),
+        (
+            vec!["--signals", "ferr:0", "--plot", "a.pdf"],
+            ".svg or .png",
+        ),
+    ] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_nc-send"))
+            .args(["--sim", "--machine", MACHINE, "record"])
+            .args(&args)
+            .arg("--csv")
+            .arg(dir.join("x.csv"))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(says), "{args:?}: {stderr}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The tuning test signal: refused by name where it would not be safe, and when
+/// taken it moves the joint by its amplitude and back, the following-error trip in
+/// force (no alarm at an amplitude below the standstill limit).
+#[test]
+fn the_test_signal_is_refused_where_unsafe_and_moves_the_joint_when_taken() {
+    use pkmc::drive::excite::Excite;
+    let (mut link, _) = linked(&[]);
+    let req = |joint: u8, amplitude: u32| Excite {
+        joint,
+        kind: 0,
+        amplitude,
+        hold: 150,
+        length: 450,
+        seed: 1,
+    };
+    // Z is a stepper; X's standstill limit is 0.2 mm = 200 counts.
+    let err = link.record_excite(&req(2, 10)).unwrap_err();
+    assert!(
+        err.to_string()
+            .contains("joint 2 is not driven by a servo channel"),
+        "{err}"
+    );
+    let err = link.record_excite(&req(0, 200)).unwrap_err();
+    assert!(
+        err.to_string().contains("below joint 0's standstill"),
+        "{err}"
+    );
+    assert!(err.to_string().contains("200 counts"), "{err}");
+    // Unlocked where it stood, not homed: refused.
+    let err = link.record_excite(&req(0, 150)).unwrap_err();
+    assert!(err.to_string().contains("needs a homed machine"), "{err}");
+    let home = pkmc_host::job::home_command(&mut link).unwrap();
+    link.control(home).unwrap();
+    assert_eq!(link.wait_idle(&mut NoHooks).unwrap(), JobEnd::Done);
+    // 0.1 mm below the top of X's travel (100 mm): a step of 0.15 mm is refused.
+    let go = |link: &mut Link<InProcess>, text: &str| {
+        let m = link.machine().clone();
+        let at = link.request_status().unwrap().pose;
+        let blocks = pkmc_host::job::compile_text(text, "move", &m, at).unwrap();
+        assert_eq!(link.run_job(&blocks, &mut NoHooks).unwrap(), JobEnd::Done);
+    };
+    go(&mut link, "G1 X99.9 F3000\n");
+    let err = link.record_excite(&req(0, 150)).unwrap_err();
+    assert!(err.to_string().contains("outside its travel"), "{err}");
+    go(&mut link, "G1 X50 F3000\n");
+    // A step of 150 counts on X for 150 ms, recorded every fourth tick.
+    let mut every4 = setup(&[0x00, 0x10, 0xc0], Trigger::Now, 0);
+    every4.decimate = 4;
+    link.record_arm(&every4).unwrap();
+    link.record_excite(&req(0, 150)).unwrap();
+    let rec = complete(&mut link, 700, false);
+    let cmd: Vec<i32> = rec.samples.iter().map(|s| s[0]).collect();
+    let meas: Vec<i32> = rec.samples.iter().map(|s| s[1]).collect();
+    let base = cmd[0];
+    assert!(cmd.iter().all(|&c| c == base || c == base + 150), "{cmd:?}");
+    assert!(cmd.contains(&(base + 150)));
+    // The joint follows the step (this machine's loop overshoots it by about a third
+    // and settles slowly: its present gains are untuned).
+    let top = *meas[37..76].iter().max().unwrap();
+    assert!(
+        top >= base + 140 && top <= base + 250,
+        "peak {top}, base {base}: {meas:?}"
+    );
+    // And back: the last samples stand at the start again.
+    let end = *meas.last().unwrap();
+    assert!(
+        (end - base).abs() <= 10,
+        "measured at the end {end}, base {base}"
+    );
+    assert!(rec
+        .samples
+        .iter()
+        .all(|s| s[2] != pkmc::wire::State::Alarm as i32));
+}

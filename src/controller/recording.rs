@@ -233,10 +233,6 @@ impl Controller {
     /// Checks a test signal's request against the machine and starts it.
     fn excite_start(&mut self, e: Excite) -> Result<(), RecorderError> {
         let joint = e.joint;
-        let idle = self.state == State::Idle && self.homed && !self.job_open;
-        if !idle || !self.planner.is_empty() || self.moving() {
-            return Err(RecorderError::ExciteBusy);
-        }
         let Some(Drive::Servo { channel }) =
             self.machine.joints.get(joint as usize).map(|j| j.drive)
         else {
@@ -247,6 +243,10 @@ impl Controller {
         if e.amplitude >= limit {
             let limit = limit.min(u16::MAX as u32) as u16;
             return Err(RecorderError::ExciteAmplitude { joint, limit });
+        }
+        let idle = self.state == State::Idle && self.homed && !self.job_open;
+        if !idle || !self.planner.is_empty() || self.moving() {
+            return Err(RecorderError::ExciteBusy);
         }
         let q = self.joints[joint as usize];
         let reach = jc.scale.position_of(e.amplitude as i64 + 1);
