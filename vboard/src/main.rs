@@ -429,9 +429,12 @@ fn run(args: Args) -> Result<()> {
                 }
                 eprintln!("vboard: {cmd} at {:.4} s", time::to_s(now));
                 match control::apply(&cmd, &mut core, &mut host) {
-                    Ok(control::Outcome::Report) => {
-                        report(&core, started.elapsed(), (host.packets, host.bytes), &frames_per_ms)
-                    }
+                    Ok(control::Outcome::Report) => report(
+                        &core,
+                        started.elapsed(),
+                        (host.packets, host.bytes),
+                        &frames_per_ms,
+                    ),
                     Ok(control::Outcome::Quit) => stop.store(true, Ordering::SeqCst),
                     Ok(control::Outcome::Done) => {}
                     Ok(control::Outcome::Mark) => frames_per_ms.clear(),
@@ -487,7 +490,12 @@ fn run(args: Args) -> Result<()> {
     for line in log.poll(&mut core.uc).unwrap_or_default() {
         eprintln!("{line}");
     }
-    report(&core, started.elapsed(), (host.packets, host.bytes), &frames_per_ms);
+    report(
+        &core,
+        started.elapsed(),
+        (host.packets, host.bytes),
+        &frames_per_ms,
+    );
     if let (Some(r), Ok(())) = (&replaying, &outcome) {
         if r.unseen() > 0 {
             bail!(
