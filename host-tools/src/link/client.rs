@@ -65,6 +65,11 @@ pub trait JobHooks {
     fn rewind(&mut self, _to: usize) -> Option<Rewound> {
         None
     }
+    /// The recorder's streamed pieces received so far while a job or a move runs
+    /// (its continuous mode), asked on every turn of the loop: hooks that show them as
+    /// they come take them out of `pieces`; what they leave stays on the link for
+    /// [`Link::record_take`] after the job.
+    fn recorded(&mut self, _pieces: &mut Vec<super::record::Piece>) {}
     /// Something the operator should know that is not an error (the job was held for
     /// this host's silence and is resumed, ...).
     fn note(&mut self, _text: &str) {}
@@ -608,6 +613,7 @@ impl<T: Transport> Link<T> {
         loop {
             let s = self.request_status()?;
             hooks.status(&s);
+            hooks.recorded(&mut self.streamed);
             self.check_stall(&mut guard, &s, 0)?;
             let view = LinkView {
                 status: Some(s.clone()),

@@ -296,6 +296,7 @@ impl<T: Transport> Link<T> {
             if let Some(cmd) = hooks.control(&view) {
                 self.controls.push_back(cmd);
             }
+            hooks.recorded(&mut self.streamed);
             if fed.open && job.ending.is_none() {
                 new.clear();
                 fed.open = hooks.feed(&view, &mut new);

@@ -5,6 +5,7 @@
 //! status, and stop what a page started when that page's heartbeat is lost.
 
 mod mdi;
+mod scope;
 mod staged;
 
 use super::hub::{lock, Hub};
@@ -202,6 +203,7 @@ impl Machine<'_> {
                 self.publish(&s, None);
                 asked = Instant::now();
             }
+            self.scope_poll(link)?;
             match self.rx.recv_timeout(Duration::from_millis(5)) {
                 Ok(req) => {
                     let (page, id) = (req.page, req.id);
@@ -276,6 +278,7 @@ impl Machine<'_> {
                 return self.control(link, Control::Stop);
             }
             Cmd::Reset => return self.control(link, Control::AlarmReset),
+            Cmd::ScopeArm { .. } | Cmd::ScopeStop => return self.scope_command(link, req.cmd),
             Cmd::Override { percent } => {
                 return self.control(link, Control::FeedOverride(override_of(percent)?))
             }
@@ -572,6 +575,11 @@ impl Hooks<'_, '_> {
             }
             Cmd::JogStop if self.info.kind == "jog_hold" => self.queue(Control::Abort),
             Cmd::JogStop => Ok("no continuous jog runs".into()),
+            Cmd::ScopeStop => {
+                lock(&self.m.hub.scope).disarm = true;
+                self.m.scope_off();
+                Ok("scope stopped (the recorder is disarmed when the job ends)".into())
+            }
             Cmd::Override { percent } => override_of(percent)
                 .map_err(|f| f.message)
                 .and_then(|p| self.queue(Control::FeedOverride(p))),
@@ -646,6 +654,12 @@ impl JobHooks for Hooks<'_, '_> {
             self.during(req);
         }
         self.info.controls.pop_front()
+    }
+
+    fn recorded(&mut self, pieces: &mut Vec<crate::link::Piece>) {
+        if !pieces.is_empty() {
+            self.m.scope_pieces(std::mem::take(pieces));
+        }
     }
 
     fn feed(&mut self, view: &LinkView, out: &mut Vec<Block>) -> bool {
