@@ -17,7 +17,11 @@ use std::time::{Duration, Instant};
 
 const SERVO: &str = "examples/machines/cartesian-servo.toml";
 const PROGRAM: &str = "examples/square.ngc";
-const SIGNALS: &str = "ferr:0,cmd:0,meas:0,state";
+/// The capture's signals: Z's joint (the program starts with a move up) and the
+/// path speed.
+const SIGNALS: &str = "cmd:2,meas:2,ferr:2,speed";
+/// The live traces' signals: X's joint (the square's sides).
+const LIVE: &str = "ferr:0,cmd:0,meas:0,state";
 const TRIGGER: &str = "job";
 const PRE: u32 = 20;
 
@@ -175,10 +179,11 @@ async fn the_scope_panel_streams_live_captures_on_a_trigger_and_exports_nc_send_
     let samples = page.js("pkmc.scope.state.samples").await.as_u64().unwrap();
     assert!(samples > PRE as u64, "{samples} samples");
     let span = page.js("pkmc.scope.state.span").await;
+    let state = page.js("JSON.stringify(pkmc.scope.state)").await;
     let first = span[0].as_f64().unwrap();
     assert!(
         (first + PRE as f64 * 0.001).abs() < 1e-9,
-        "the first sample is {PRE} ticks before the trigger: {span}"
+        "the first sample is {PRE} ticks before the trigger: {span} {state}"
     );
     let traces = page
         .js("document.querySelectorAll('#scope-svg svg polyline, #scope-svg svg path').length")
@@ -225,7 +230,7 @@ async fn the_scope_panel_streams_live_captures_on_a_trigger_and_exports_nc_send_
     assert!(tb > ta && (dt - (tb - ta)).abs() < 2e-6, "{rows}");
     let zw = t(&zoomed, 1) - t(&zoomed, 0);
     assert!((dt - 0.6 * zw).abs() < 0.05 * zw, "B − A is 60 % of the view: {rows}");
-    assert_eq!(rows[2][0], "ferr0_counts");
+    assert_eq!(rows[2][0], "cmd2_counts");
     for r in 2..6 {
         assert!((num(r, 3) - (num(r, 2) - num(r, 1))).abs() < 0.5, "{rows}");
     }
@@ -241,7 +246,7 @@ async fn the_scope_panel_streams_live_captures_on_a_trigger_and_exports_nc_send_
     );
 
     // Live: the traces grow while a job runs, and the following error moves.
-    page.type_into("#scope-signals", SIGNALS).await;
+    page.type_into("#scope-signals", LIVE).await;
     page.click("#scope-live").await;
     page.wait(
         "pkmc.scope.state.mode === 'live' && pkmc.scope.state.samples > 0",

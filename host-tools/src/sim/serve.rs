@@ -339,8 +339,12 @@ pub fn serve(
             // free slot.
             board.fed = now;
         }
+        // A recorder that samples keeps real time: its samples are the board's, one a
+        // tick, however little else happens.
+        let recording = sim.ctrl.recording() && clock != ServeClock::Free;
         let paced = busy
             && (clock == ServeClock::RealTime
+                || recording
                 || clock == ServeClock::Paced
                     && status.buffered_ms < PACE_BELOW_MS
                     && now.duration_since(board.fed) < PACE_AFTER_BLOCKS);
@@ -379,7 +383,7 @@ pub fn serve(
     }
     // The host is done: servo joints still settling on their last targets finish
     // doing so (the controller itself has nothing left to do).
-    while !sim.ctrl.has_work() && sim.busy() {
+    while !sim.ctrl.has_work() && sim.busy() && !sim.ctrl.recording() {
         sim.tick()
             .map_err(|e| board.error("simulate", io::Error::other(e)))?;
         on_tick(sim);

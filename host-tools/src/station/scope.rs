@@ -20,7 +20,7 @@ pub const LIVE_SAMPLES: usize = 60_000;
 const LIVE_PUBLISH: Duration = Duration::from_millis(100);
 
 /// A drawing's height per signal, and its width's bounds, pixels.
-const PANEL_PX: u32 = 150;
+const PANEL_PX: u32 = 120;
 const WIDTH_PX: (f64, f64) = (320.0, 2400.0);
 
 /// A drawing's samples for the page's cursors: at most this many (more are thinned).
