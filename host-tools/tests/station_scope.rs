@@ -33,11 +33,9 @@ fn repo(p: &str) -> PathBuf {
 /// height (viewport pixels), after scrolling it into view.
 async fn plot_box(page: &Page) -> [f64; 4] {
     let r = page
-        .js(
-            "(() => { const o = document.getElementById('scope-over'); \
+        .js("(() => { const o = document.getElementById('scope-over'); \
              o.scrollIntoView({block: 'center'}); const r = o.getBoundingClientRect(); \
-             return [r.left, r.top, r.width, r.height]; })()",
-        )
+             return [r.left, r.top, r.width, r.height]; })()")
         .await;
     let n = |i: usize| r[i].as_f64().unwrap();
     [n(0), n(1), n(2), n(3)]
@@ -72,9 +70,12 @@ async fn downloaded(page: &Page, name: &str) -> Vec<u8> {
     let path = page.downloads.join(name);
     let t = Instant::now();
     loop {
-        let partial = std::fs::read_dir(&page.downloads)
-            .unwrap()
-            .any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".crdownload"));
+        let partial = std::fs::read_dir(&page.downloads).unwrap().any(|e| {
+            e.unwrap()
+                .file_name()
+                .to_string_lossy()
+                .ends_with(".crdownload")
+        });
         if path.is_file() && !partial {
             return std::fs::read(&path).unwrap();
         }
@@ -193,17 +194,25 @@ async fn the_scope_panel_streams_live_captures_on_a_trigger_and_exports_nc_send_
     // Zoom: a drag across the middle half of the time axis.
     let [left, top, _, _] = plot_box(&page).await;
     let (x0, x1, y) = time_axis(&page).await;
-    let before = page.js("[pkmc.scope.plot.layout.t0, pkmc.scope.plot.layout.t1]").await;
-    let (a, b) = (x0 + 0.25 * (x1 - x0), x0 + 0.75 * (x1 - x0));
-    page.pointer_path(&[(left + a, top + y), (left + (a + b) / 2.0, top + y), (left + b, top + y)])
+    let before = page
+        .js("[pkmc.scope.plot.layout.t0, pkmc.scope.plot.layout.t1]")
         .await;
+    let (a, b) = (x0 + 0.25 * (x1 - x0), x0 + 0.75 * (x1 - x0));
+    page.pointer_path(&[
+        (left + a, top + y),
+        (left + (a + b) / 2.0, top + y),
+        (left + b, top + y),
+    ])
+    .await;
     page.wait(
         &format!("pkmc.scope.plot.layout.t0 > {} + 1e-6", before[0]),
         "the zoomed drawing comes",
         Timeout::S(10),
     )
     .await;
-    let zoomed = page.js("[pkmc.scope.plot.layout.t0, pkmc.scope.plot.layout.t1]").await;
+    let zoomed = page
+        .js("[pkmc.scope.plot.layout.t0, pkmc.scope.plot.layout.t1]")
+        .await;
     let t = |v: &Value, i: usize| v[i].as_f64().unwrap();
     let full = t(&before, 1) - t(&before, 0);
     assert!(
@@ -214,8 +223,10 @@ async fn the_scope_panel_streams_live_captures_on_a_trigger_and_exports_nc_send_
     // Two cursors, a click each: their times, the values there, and B − A.
     let [left, top, _, _] = plot_box(&page).await;
     let (x0, x1, y) = time_axis(&page).await;
-    page.pointer_path(&[(left + x0 + 0.2 * (x1 - x0), top + y)]).await;
-    page.pointer_path(&[(left + x0 + 0.8 * (x1 - x0), top + y)]).await;
+    page.pointer_path(&[(left + x0 + 0.2 * (x1 - x0), top + y)])
+        .await;
+    page.pointer_path(&[(left + x0 + 0.8 * (x1 - x0), top + y)])
+        .await;
     let rows = page
         .wait(
             "(() => { const r = [...document.querySelectorAll('#scope-cursors tr')]\
@@ -229,7 +240,10 @@ async fn the_scope_panel_streams_live_captures_on_a_trigger_and_exports_nc_send_
     let (ta, tb, dt) = (num(1, 1), num(1, 2), num(1, 3));
     assert!(tb > ta && (dt - (tb - ta)).abs() < 2e-6, "{rows}");
     let zw = t(&zoomed, 1) - t(&zoomed, 0);
-    assert!((dt - 0.6 * zw).abs() < 0.05 * zw, "B − A is 60 % of the view: {rows}");
+    assert!(
+        (dt - 0.6 * zw).abs() < 0.05 * zw,
+        "B − A is 60 % of the view: {rows}"
+    );
     assert_eq!(rows[2][0], "cmd2_counts");
     for r in 2..6 {
         assert!((num(r, 3) - (num(r, 2) - num(r, 1))).abs() < 0.5, "{rows}");
@@ -274,8 +288,12 @@ async fn the_scope_panel_streams_live_captures_on_a_trigger_and_exports_nc_send_
     drawn(&page, "the live traces are drawn").await;
     let [left, top, _, _] = plot_box(&page).await;
     let (x0, x1, y) = time_axis(&page).await;
-    page.pointer_path(&[(left + x0 + 0.3 * (x1 - x0), top + y)]).await;
-    page.pointer_path(&[(left + x0 + 0.55 * (x1 - x0), top + y)]).await;
+    page.pointer_path(&[(left + x0 + 0.12 * (x1 - x0), top + y)])
+        .await;
+    page.pointer_path(&[(left + x0 + 0.45 * (x1 - x0), top + y)])
+        .await;
+    page.js("document.getElementById('scope-panel').scrollIntoView({block: 'start'})")
+        .await;
     page.screenshot(&repo("docs/ui-scope.png")).await;
     page.click("#scope-stop").await;
     page.wait(

@@ -192,7 +192,10 @@ async fn scope_csv(State(app): State<Arc<App>>, Query(q): Q) -> Response {
     (
         [
             (header::CONTENT_TYPE, "text/csv; charset=utf-8"),
-            (header::CONTENT_DISPOSITION, "attachment; filename=\"scope.csv\""),
+            (
+                header::CONTENT_DISPOSITION,
+                "attachment; filename=\"scope.csv\"",
+            ),
             (header::CACHE_CONTROL, "no-cache"),
         ],
         table.csv(),
