@@ -375,9 +375,6 @@ impl Simulator {
             || self.ctrl.state() == State::Running
             || self.steps_due()
             || self.ctrl.fresh()
-            // A recorder that samples: its samples (pre-trigger ones, a stream) come
-            // with time, at rest too, as on a board.
-            || self.ctrl.recording()
         {
             // (A controller that has not read its inputs since a machine was loaded
             // does so on its next tick, as a board's would within a period.)

@@ -332,7 +332,10 @@ pub fn serve(
         let limit_wall = Duration::from_nanos(limit as u64 * pkmc::units::TICK_NS as u64);
         let starved =
             sim.ctrl.link_silence_ticks() + 1 >= limit && board.delivered.elapsed() < limit_wall;
-        let busy = sim.busy() && !starved;
+        // A recorder that samples is time passing too, at rest as well (its
+        // pre-trigger samples, a stream between jobs), as on a board.
+        let recording = sim.ctrl.recording() && clock != ServeClock::Free;
+        let busy = (sim.busy() || recording) && !starved;
         let status = sim.ctrl.status();
         if status.free_slots == 0 || status.free_bends == 0 {
             // A full queue (or ring of arcs): a streaming host waits only for the next
@@ -341,7 +344,6 @@ pub fn serve(
         }
         // A recorder that samples keeps real time: its samples are the board's, one a
         // tick, however little else happens.
-        let recording = sim.ctrl.recording() && clock != ServeClock::Free;
         let paced = busy
             && (clock == ServeClock::RealTime
                 || recording
@@ -383,7 +385,7 @@ pub fn serve(
     }
     // The host is done: servo joints still settling on their last targets finish
     // doing so (the controller itself has nothing left to do).
-    while !sim.ctrl.has_work() && sim.busy() && !sim.ctrl.recording() {
+    while !sim.ctrl.has_work() && sim.busy() {
         sim.tick()
             .map_err(|e| board.error("simulate", io::Error::other(e)))?;
         on_tick(sim);
