@@ -8,6 +8,9 @@
 const $ = (id) => document.getElementById(id);
 const pkmc = window.pkmc;
 const SVG_NS = 'http://www.w3.org/2000/svg';
+/** Live, a new drawing at most this often (ms): the server draws it, and the
+ * machine's own work comes first. */
+const LIVE_REDRAW = 200;
 /** A drawing asked for and not come within this long is given up (ms). */
 const PLOT_TIMEOUT = 3000;
 /** A press that moves less than this is a click (cursor), more a zoom (pixels). */
@@ -19,6 +22,8 @@ const scope = pkmc.scope = {
   state: null, // the last `scope` message
   plot: null, // the last `scope_plot` message
   asked: 0, // when a drawing was asked (0: none in flight)
+  readyAt: 0, // live: no new drawing asked before this (performance.now())
+  timer: null, // the ask waiting for readyAt
   dirty: false, // ask again when the one in flight comes
   range: null, // zoom: [t0, t1] s, or null (all; the window while live)
   cursors: [null, null], // A and B, s
@@ -68,6 +73,8 @@ function onPlot(m) {
   over.setAttribute('viewBox', `0 0 ${m.layout.width} ${m.layout.height}`);
   drawOver();
   renderReadout();
+  const live = scope.state && scope.state.mode === 'live';
+  scope.readyAt = performance.now() + (live ? LIVE_REDRAW : 0);
   if (scope.dirty || (scope.state && scope.state.version !== m.version)) askPlot();
 }
 
@@ -103,6 +110,17 @@ function askPlot() {
   }
   if (!$('scope-panel').open) {
     scope.dirty = true;
+    return;
+  }
+  const wait = scope.readyAt - performance.now();
+  if (wait > 0) {
+    scope.dirty = true;
+    if (!scope.timer) {
+      scope.timer = setTimeout(() => {
+        scope.timer = null;
+        askPlot();
+      }, wait);
+    }
     return;
   }
   scope.dirty = false;
