@@ -285,16 +285,7 @@ async fn the_scope_panel_streams_live_captures_on_a_trigger_and_exports_nc_send_
         .await;
     assert!(ferr.as_f64().unwrap() > 0.0, "a following error: {ferr}");
     page.wait_idle(Timeout::S(30)).await;
-    drawn(&page, "the live traces are drawn").await;
-    let [left, top, _, _] = plot_box(&page).await;
-    let (x0, x1, y) = time_axis(&page).await;
-    page.pointer_path(&[(left + x0 + 0.12 * (x1 - x0), top + y)])
-        .await;
-    page.pointer_path(&[(left + x0 + 0.45 * (x1 - x0), top + y)])
-        .await;
-    page.js("document.getElementById('scope-panel').scrollIntoView({block: 'start'})")
-        .await;
-    page.screenshot(&repo("docs/ui-scope.png")).await;
+    // Stopped, the samples stay: all of them drawn, two cursors on them.
     page.click("#scope-stop").await;
     page.wait(
         "pkmc.scope.state.mode === 'off'",
@@ -302,4 +293,20 @@ async fn the_scope_panel_streams_live_captures_on_a_trigger_and_exports_nc_send_
         Timeout::S(5),
     )
     .await;
+    drawn(&page, "the run's traces are drawn").await;
+    let [left, top, _, _] = plot_box(&page).await;
+    let (x0, x1, y) = time_axis(&page).await;
+    page.pointer_path(&[(left + x0 + 0.3 * (x1 - x0), top + y)])
+        .await;
+    page.pointer_path(&[(left + x0 + 0.62 * (x1 - x0), top + y)])
+        .await;
+    page.wait(
+        "document.querySelectorAll('#scope-cursors tr').length === 6",
+        "the cursors' table",
+        Timeout::S(5),
+    )
+    .await;
+    page.js("document.getElementById('scope-cursors').scrollIntoView({block: 'end'})")
+        .await;
+    page.screenshot(&repo("docs/ui-scope.png")).await;
 }
