@@ -2,7 +2,7 @@
 //! `operator_station.rs`), on nc-send's own simulator (`--sim`, real time) of the
 //! servo machine: bad signals and triggers are refused on the panel naming the
 //! field; a capture triggered by the job's start with pre-trigger samples is shown
-//! when done, zoomed by a drag across it and read with two cursors; its CSV,
+//! when done, while the program still runs, zoomed by a drag across it and read with two cursors; its CSV,
 //! downloaded from the panel, equals byte for byte the one `nc-send record` writes
 //! for the same machine, signals, trigger, pre-trigger and program; the live traces
 //! grow while a job runs and show a following error that is not zero.
@@ -169,13 +169,22 @@ async fn the_scope_panel_streams_live_captures_on_a_trigger_and_exports_nc_send_
     )
     .await;
     tokio::time::sleep(Duration::from_millis(300)).await;
-    page.click_and_wait_idle("#run", Timeout::S(30)).await;
-    page.wait(
-        "pkmc.scope.state.mode === 'done'",
-        "the capture is read out",
-        Timeout::S(10),
-    )
-    .await;
+    page.click("#run").await;
+    page.wait_moving("the program runs").await;
+    // Read out beside the program's blocks as soon as it is done, while the program
+    // still runs (it takes 12 s; the capture, 0.14 s from its start).
+    let during = page
+        .wait(
+            "pkmc.scope.state.mode === 'done' && [!!pkmc.lastStatus.job]",
+            "the capture is read out",
+            Timeout::S(10),
+        )
+        .await;
+    assert_eq!(
+        during[0], true,
+        "the program still runs when the capture shows"
+    );
+    page.wait_idle(Timeout::S(30)).await;
     drawn(&page, "the capture is drawn").await;
     let samples = page.js("pkmc.scope.state.samples").await.as_u64().unwrap();
     assert!(samples > PRE as u64, "{samples} samples");

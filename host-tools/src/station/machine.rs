@@ -47,6 +47,8 @@ pub(super) struct JobInfo {
     /// and those sent so far ([`staged`]).
     base: usize,
     sent: usize,
+    /// A capture read out while the job runs.
+    scope: scope::Reading,
 }
 
 impl JobInfo {
@@ -61,6 +63,7 @@ impl JobInfo {
             controls: VecDeque::new(),
             base: 0,
             sent: 0,
+            scope: Default::default(),
         }
     }
 }
@@ -660,6 +663,14 @@ impl JobHooks for Hooks<'_, '_> {
         if !pieces.is_empty() {
             self.m.scope_pieces(std::mem::take(pieces));
         }
+    }
+
+    fn record_ask(&mut self) -> Option<u32> {
+        self.info.scope.ask(self.m.hub)
+    }
+
+    fn record_answer(&mut self, reply: &pkmc::drive::recorder::Reply, data: &[u8]) {
+        self.info.scope.answer(self.m.hub, reply, data);
     }
 
     fn feed(&mut self, view: &LinkView, out: &mut Vec<Block>) -> bool {

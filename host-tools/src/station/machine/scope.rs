@@ -1,14 +1,16 @@
 //! The scope panel's part of the machine thread: the recorder armed and stopped as
 //! the page asks, its streamed pieces handed to the hub as they come (between jobs
 //! here; while a job or a move runs, by the job's hooks), and a triggered capture
-//! read out once it is done (when no job runs: the thread is inside the job until
-//! it ends).
+//! read out once it is done (between jobs here; while a program, an MDI line or the
+//! teach list streams, by the job's hooks beside its blocks; a jog's or a probing
+//! move's end is waited for).
 
-use super::super::hub::lock;
+use super::super::hub::{lock, Hub};
 use super::super::scope::{check, Mode};
 use super::{Cmd, Machine};
 use crate::job::{self, Failure};
-use crate::link::{Link, LinkError, Transport};
+use crate::link::{Link, LinkError, Read, Readout, Transport};
+use pkmc::drive::recorder::Reply;
 use std::time::{Duration, Instant};
 
 /// How often an armed capture is asked whether it is done.
@@ -116,5 +118,54 @@ impl Machine<'_> {
             _ => {}
         }
         Ok(())
+    }
+}
+
+/// A capture read out while a job runs: the job's hooks ask for its pieces beside the
+/// job's blocks ([`crate::link::JobHooks::record_ask`]) and take the answers in.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Reading {
+    readout: Readout,
+    /// When the last question went.
+    asked: Option<Instant>,
+}
+
+/// A question not answered within this long is asked again.
+const ASK_AGAIN: Duration = Duration::from_millis(200);
+
+impl Reading {
+    /// The offset to ask for now, if any: while a capture is armed, whether it is done
+    /// every [`ASK_EVERY`], then its pieces one after the other.
+    pub(super) fn ask(&mut self, hub: &Hub) -> Option<u32> {
+        if lock(&hub.scope).mode != Mode::Armed {
+            return None;
+        }
+        let wait = if self.readout.offset() == 0 {
+            ASK_EVERY
+        } else {
+            ASK_AGAIN
+        };
+        if self.asked.is_some_and(|t| t.elapsed() < wait) {
+            return None;
+        }
+        self.asked = Some(Instant::now());
+        Some(self.readout.offset())
+    }
+
+    /// An answer: the next piece is asked for at once; a whole capture goes to the
+    /// panel.
+    pub(super) fn answer(&mut self, hub: &Hub, reply: &Reply, data: &[u8]) {
+        match self.readout.answer(reply, data) {
+            Read::More => self.asked = None,
+            Read::NotDone => {}
+            Read::Done(rec) => {
+                let mut s = lock(&hub.scope);
+                if s.mode == Mode::Armed {
+                    s.captured(&rec);
+                }
+                drop(s);
+                hub.publish_scope();
+            }
+        }
     }
 }
