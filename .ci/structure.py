@@ -31,7 +31,7 @@ ALLOWED = {
     "contour_study": {"control", "machine_file", "analysis"},
     "job": {"gcode", "link", "sim", "control", "analysis", "machine_file", "input"},
     "grbl": {"gcode", "link", "analysis", "job"},
-    "station": {"gcode", "link", "job", "input", "analysis"},
+    "station": {"gcode", "link", "job", "input", "analysis", "scope"},
     "calibrate": {"machine_file", "analysis", "input", "control"},
     "scope": {"link", "job", "analysis", "control", "machine_file", "input", "gcode"},
 }

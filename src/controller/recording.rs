@@ -35,6 +35,12 @@ pub const STREAM_WAIT: u8 = 10;
 pub const STREAM_HEADROOM: usize = 768;
 
 impl Controller {
+    /// Is the recorder sampling (armed, filling after its trigger, or streaming)?
+    /// Time passes for it even at rest: a simulator ticks on while it is.
+    pub fn recording(&self) -> bool {
+        self.recorder.wants(false) || self.recorder.wants(true)
+    }
+
     /// `HostMsg::Record`: a read, answered at once, or a control (arm, disarm),
     /// acted on once per id and acknowledged; a bad request is answered with
     /// `CtrlMsg::Record` naming what is wrong.

@@ -65,6 +65,20 @@ pub trait JobHooks {
     fn rewind(&mut self, _to: usize) -> Option<Rewound> {
         None
     }
+    /// The recorder's streamed pieces received so far while a job or a move runs
+    /// (its continuous mode), asked on every turn of the loop: hooks that show them as
+    /// they come take them out of `pieces`; what they leave stays on the link for
+    /// [`Link::record_take`] after the job.
+    fn recorded(&mut self, _pieces: &mut Vec<super::record::Piece>) {}
+    /// Asked on every turn of a streamed job's loop: the offset of a read of the
+    /// recorder's capture to send now, beside the job's blocks (`None`: none). Its
+    /// answer comes to [`JobHooks::record_answer`]; a lost one is asked again.
+    fn record_ask(&mut self) -> Option<u32> {
+        None
+    }
+    /// A recorder answer to a read (not a streamed piece) received while a streamed
+    /// job runs: its header and its bytes.
+    fn record_answer(&mut self, _reply: &pkmc::drive::recorder::Reply, _data: &[u8]) {}
     /// Something the operator should know that is not an error (the job was held for
     /// this host's silence and is resumed, ...).
     fn note(&mut self, _text: &str) {}
@@ -608,6 +622,7 @@ impl<T: Transport> Link<T> {
         loop {
             let s = self.request_status()?;
             hooks.status(&s);
+            hooks.recorded(&mut self.streamed);
             self.check_stall(&mut guard, &s, 0)?;
             let view = LinkView {
                 status: Some(s.clone()),

@@ -79,7 +79,7 @@ use client::PendingControl;
 pub use client::{JobEnd, JobHooks, LinkView, NoHooks, Rewound};
 pub use error::LinkError;
 pub use plans::Derived;
-pub use record::{Piece, Recording};
+pub use record::{Piece, Read, Readout, Recording};
 pub use stats::{Buffered, ClientStats, NakCounts};
 pub use stream::{estimate_ms, TAIL_AFTER};
 pub use transport::{is_timeout, PortTransport, SimClock, Transport};

@@ -201,27 +201,81 @@ impl<T: Transport> Link<T> {
     /// Reads the finished capture out; `None` while it is not finished (armed and
     /// waiting for its trigger, or filling the samples after it) or nothing is armed.
     pub fn record_read(&mut self) -> Result<Option<Recording>, LinkError> {
-        let (first, mut bytes) = self.record_query(0)?;
-        if first.capture.phase != Phase::Done {
-            return Ok(None);
-        }
-        let total = first.capture.samples as usize * first.capture.width as usize;
-        while bytes.len() < total {
-            let (reply, data) = self.record_query(bytes.len() as u32)?;
-            if data.is_empty() || reply.capture.phase != Phase::Done {
-                // Re-armed while it was read: that capture is gone.
-                return Ok(None);
+        let mut readout = Readout::default();
+        loop {
+            let (reply, data) = self.record_query(readout.offset())?;
+            match readout.answer(&reply, &data) {
+                Read::More => {}
+                Read::NotDone => return Ok(None),
+                Read::Done(rec) => return Ok(Some(rec)),
             }
-            bytes.extend_from_slice(&data);
         }
+    }
+
+    /// A recorder read of the capture's bytes from `offset` sent beside a running job
+    /// (its answer comes to [`super::JobHooks::record_answer`]).
+    pub(super) fn ask_recorder(&mut self, offset: u32) -> Result<(), LinkError> {
+        let mut req = heapless::Vec::new();
+        let _ = req.push(RECORD_READ);
+        let _ = req.extend_from_slice(&offset.to_le_bytes());
+        self.queue(0, &HostMsg::Record { id: 0, req })
+    }
+}
+
+/// A finished capture read out a piece at a time: which bytes to ask for next
+/// ([`Readout::offset`]), and each answer taken in ([`Readout::answer`]). Used by
+/// [`Link::record_read`], and by job hooks that read a capture while a job runs.
+#[derive(Clone, Debug, Default)]
+pub struct Readout {
+    /// The first answer (the capture's signals, size and pre-trigger samples).
+    first: Option<Reply>,
+    bytes: Vec<u8>,
+}
+
+/// Where a [`Readout`] is after an answer.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Read {
+    /// Not complete: ask for [`Readout::offset`] next (an answer that was not to the
+    /// last question is ignored).
+    More,
+    /// The capture is not finished, or was re-armed while it was read (the readout
+    /// starts again).
+    NotDone,
+    /// The whole capture.
+    Done(Recording),
+}
+
+impl Readout {
+    /// The offset to ask for next, bytes.
+    pub fn offset(&self) -> u32 {
+        self.bytes.len() as u32
+    }
+
+    /// Takes in the answer `reply` with its `data`.
+    pub fn answer(&mut self, reply: &Reply, data: &[u8]) -> Read {
+        if reply.streamed || reply.offset != self.offset() {
+            return Read::More;
+        }
+        if reply.capture.phase != Phase::Done || (self.first.is_some() && data.is_empty()) {
+            *self = Self::default();
+            return Read::NotDone;
+        }
+        let first = *self.first.get_or_insert(*reply);
+        let total = first.capture.samples as usize * first.capture.width as usize;
+        self.bytes.extend_from_slice(data);
+        if self.bytes.len() < total {
+            return Read::More;
+        }
+        let mut bytes = std::mem::take(&mut self.bytes);
+        *self = Self::default();
         bytes.truncate(total);
         let signals = signals_of(&first);
-        Ok(Some(Recording {
+        Read::Done(Recording {
             samples: Recording::decode(signals.clone(), &bytes),
             signals,
             servo: first.servo,
             decimate: first.decimate,
             pre: first.capture.pre as usize,
-        }))
+        })
     }
 }

@@ -296,6 +296,10 @@ impl<T: Transport> Link<T> {
             if let Some(cmd) = hooks.control(&view) {
                 self.controls.push_back(cmd);
             }
+            hooks.recorded(&mut self.streamed);
+            if let Some(offset) = hooks.record_ask() {
+                self.ask_recorder(offset)?;
+            }
             if fed.open && job.ending.is_none() {
                 new.clear();
                 fed.open = hooks.feed(&view, &mut new);
@@ -439,7 +443,15 @@ impl<T: Transport> Link<T> {
             // A job of blocks sends no probing move: a result is an earlier one's.
             CtrlMsg::MachineLoaded { .. } | CtrlMsg::MachineRefused { .. } | CtrlMsg::Probe(_) => {}
             // The recorder streaming beside the job: kept for whoever reads it.
-            CtrlMsg::Record(bytes) => self.keep_streamed(&bytes),
+            CtrlMsg::Record(bytes) => {
+                self.keep_streamed(&bytes);
+                // A read asked by the hooks beside the job: theirs.
+                if let Some((reply, data)) = pkmc::drive::recorder::Reply::unpack(&bytes) {
+                    if !reply.streamed {
+                        hooks.record_answer(&reply, data);
+                    }
+                }
+            }
         }
         Ok(None)
     }

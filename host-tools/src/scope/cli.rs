@@ -89,6 +89,21 @@ pub fn run<T: Transport>(
     };
     link.record_take();
     link.record_arm(&setup)?;
+    if compiled.is_some() && !matches!(setup.trigger, Trigger::Now | Trigger::Stream) {
+        // The pre-trigger samples are taken from the arming on: a program started at
+        // once would trigger before they exist (the capture keeps only those there
+        // are), so it waits until they can.
+        let hz = if setup.servo {
+            pkmc::drive::servo::SERVO_HZ
+        } else {
+            pkmc::units::TICK_HZ
+        };
+        let fill = setup.pre as f64 * setup.decimate as f64 / hz as f64 + 0.02;
+        let until = Instant::now() + Duration::from_secs_f64(fill);
+        while Instant::now() < until {
+            link.record_listen(Duration::from_millis(5))?;
+        }
+    }
     let end = match &compiled {
         Some(c) => link.run_job(&c.blocks, hooks)?,
         None => JobEnd::Done,

@@ -1,6 +1,8 @@
 //! A recorder table drawn as stacked traces against time (.svg or .png, by the
-//! file's extension): one panel per signal, its column name as the title, and the
-//! trigger (time 0) marked on a capture.
+//! file's extension, or an SVG text for the station's scope panel): one panel per
+//! signal, its column name as the title, and the trigger (time 0) marked on a
+//! capture. The drawing also gives where it put things ([`Layout`]), so a page can
+//! place cursors over it.
 
 use super::{column, Table};
 use crate::analysis::plot::{format_of, register_font, Format};
@@ -11,6 +13,39 @@ use plotters::prelude::*;
 const WIDTH: u32 = 1400;
 const PANEL: u32 = 220;
 
+/// Where a drawing put its traces, in the image's pixels: the time axis (common to
+/// every panel) and each panel's value axis.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Layout {
+    /// The image's width.
+    pub width: u32,
+    /// The image's height.
+    pub height: u32,
+    /// The time at the plotting area's left end, s.
+    pub t0: f64,
+    /// The time at its right end, s.
+    pub t1: f64,
+    /// The plotting area's left end.
+    pub x0: i32,
+    /// Its right end.
+    pub x1: i32,
+    /// Each panel's plotting area, top and bottom, and the values there.
+    pub panels: Vec<PanelLayout>,
+}
+
+/// One panel's value axis.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct PanelLayout {
+    /// The plotting area's top.
+    pub top: i32,
+    /// Its bottom.
+    pub bottom: i32,
+    /// The value at the bottom.
+    pub low: f64,
+    /// The value at the top.
+    pub high: f64,
+}
+
 /// Draws `table` into `path`.
 pub fn draw(path: &std::path::Path, table: &Table) -> Result<(), String> {
     register_font();
@@ -20,30 +55,74 @@ pub fn draw(path: &std::path::Path, table: &Table) -> Result<(), String> {
     match format_of(path)? {
         Format::Svg => {
             let root = SVGBackend::new(path, size).into_drawing_area();
-            render(&root, table).map_err(fail)?;
+            render(&root, table, None, size).map_err(fail)?;
             root.present().map_err(|e| fail(e.to_string()))
         }
         Format::Png => {
             let root = BitMapBackend::new(path, size).into_drawing_area();
-            render(&root, table).map_err(fail)?;
+            render(&root, table, None, size).map_err(fail)?;
             root.present().map_err(|e| fail(e.to_string()))
         }
     }
 }
 
-fn render<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, t: &Table) -> Result<(), String> {
+/// Draws the samples of `table` between times `range` (s; `None`: all of them) as
+/// SVG text `width` pixels wide and `panel` high per signal; returns it with where
+/// the traces are.
+pub fn svg(
+    table: &Table,
+    range: Option<(f64, f64)>,
+    width: u32,
+    panel: u32,
+) -> Result<(String, Layout), String> {
+    register_font();
+    let size = (width, panel * table.signals.len().max(1) as u32 + 20);
+    let mut text = String::new();
+    let layout = {
+        let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
+        let layout = render(&root, table, range, size)?;
+        root.present().map_err(|e| e.to_string())?;
+        layout
+    };
+    Ok((text, layout))
+}
+
+/// The time range drawn: `range` when given (widened to one sample period at least),
+/// else the table's first to last sample.
+fn time_range(t: &Table, range: Option<(f64, f64)>) -> (f64, f64) {
+    let (a, b) = match (range, t.rows.first(), t.rows.last()) {
+        (Some(r), _, _) => r,
+        (None, Some(a), Some(b)) => (t.time(a.0), t.time(b.0)),
+        _ => (0.0, 1.0),
+    };
+    (a, b.max(a + t.period_s.max(1e-6)))
+}
+
+fn render<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    t: &Table,
+    range: Option<(f64, f64)>,
+    size: (u32, u32),
+) -> Result<Layout, String> {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(err)?;
     let panels = root.split_evenly((t.signals.len().max(1), 1));
-    let (t0, t1) = match (t.rows.first(), t.rows.last()) {
-        (Some(a), Some(b)) => (t.time(a.0), t.time(b.0).max(t.time(a.0) + t.period_s)),
-        _ => (0.0, 1.0),
+    let (t0, t1) = time_range(t, range);
+    // The samples drawn: those in the range (a trace is not drawn past its edges).
+    let inside = |time: f64| time >= t0 - 1e-9 && time <= t1 + 1e-9;
+    let mut layout = Layout {
+        width: size.0,
+        height: size.1,
+        t0,
+        t1,
+        ..Layout::default()
     };
     for (k, (area, sig)) in panels.iter().zip(&t.signals).enumerate() {
         let values: Vec<(f64, f64)> = t
             .rows
             .iter()
             .map(|(n, v)| (t.time(*n), v[k] as f64))
+            .filter(|p| inside(p.0))
             .collect();
         let (mut lo, mut hi) = values
             .iter()
@@ -70,7 +149,7 @@ fn render<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, t: &Table) -> Resul
         chart
             .draw_series(LineSeries::new(values, BLUE.stroke_width(1)))
             .map_err(err)?;
-        if t.zero != 0 {
+        if t.zero != 0 && (t0..=t1).contains(&0.0) {
             chart
                 .draw_series(LineSeries::new(
                     [(0.0, lo - pad), (0.0, hi + pad)],
@@ -78,6 +157,14 @@ fn render<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, t: &Table) -> Resul
                 ))
                 .map_err(err)?;
         }
+        let (xs, ys) = chart.plotting_area().get_pixel_range();
+        (layout.x0, layout.x1) = (xs.start, xs.end);
+        layout.panels.push(PanelLayout {
+            top: ys.start,
+            bottom: ys.end,
+            low: lo - pad,
+            high: hi + pad,
+        });
     }
-    Ok(())
+    Ok(layout)
 }

@@ -332,15 +332,21 @@ pub fn serve(
         let limit_wall = Duration::from_nanos(limit as u64 * pkmc::units::TICK_NS as u64);
         let starved =
             sim.ctrl.link_silence_ticks() + 1 >= limit && board.delivered.elapsed() < limit_wall;
-        let busy = sim.busy() && !starved;
+        // A recorder that samples is time passing too, at rest as well (its
+        // pre-trigger samples, a stream between jobs), as on a board.
+        let recording = sim.ctrl.recording() && clock != ServeClock::Free;
+        let busy = (sim.busy() || recording) && !starved;
         let status = sim.ctrl.status();
         if status.free_slots == 0 || status.free_bends == 0 {
             // A full queue (or ring of arcs): a streaming host waits only for the next
             // free slot.
             board.fed = now;
         }
+        // A recorder that samples keeps real time: its samples are the board's, one a
+        // tick, however little else happens.
         let paced = busy
             && (clock == ServeClock::RealTime
+                || recording
                 || clock == ServeClock::Paced
                     && status.buffered_ms < PACE_BELOW_MS
                     && now.duration_since(board.fed) < PACE_AFTER_BLOCKS);

@@ -84,6 +84,9 @@ pub struct Hub {
     /// The probing moves of the last run that probed, for the pages.
     pub probes: Mutex<ProbeRun>,
     last_probes: Mutex<Option<Arc<str>>>,
+    /// The scope panel: the recorder's request and samples.
+    pub scope: Mutex<super::scope::Scope>,
+    last_scope: Mutex<Option<Arc<str>>>,
     /// The `hello` message's `machine`.
     pub machine: Value,
     /// A page's E-STOP raised the alarm in force (the controller calls it an
@@ -115,6 +118,8 @@ impl Hub {
             last_program: Mutex::new(None),
             probes: Mutex::new(ProbeRun::default()),
             last_probes: Mutex::new(None),
+            scope: Mutex::new(Default::default()),
+            last_scope: Mutex::new(None),
             machine,
         }
     }
@@ -132,7 +137,12 @@ impl Hub {
         let (tx, rx) = mpsc::unbounded_channel();
         let hello = json!({"type": "hello", "you": id, "machine": self.machine});
         let _ = tx.send(hello.to_string().into());
-        for m in [&self.last_program, &self.last_status, &self.last_probes] {
+        for m in [
+            &self.last_program,
+            &self.last_status,
+            &self.last_probes,
+            &self.last_scope,
+        ] {
             if let Some(m) = lock(m).clone() {
                 let _ = tx.send(m);
             }
@@ -277,6 +287,13 @@ impl Hub {
     pub fn publish_probes(&self) {
         let msg = lock(&self.probes).message();
         *lock(&self.last_probes) = Some(msg.to_string().into());
+        self.broadcast(&msg);
+    }
+
+    /// The scope panel's state to every page (kept for pages that connect later).
+    pub fn publish_scope(&self) {
+        let msg = lock(&self.scope).message();
+        *lock(&self.last_scope) = Some(msg.to_string().into());
         self.broadcast(&msg);
     }
 

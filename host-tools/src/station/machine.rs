@@ -5,6 +5,7 @@
 //! status, and stop what a page started when that page's heartbeat is lost.
 
 mod mdi;
+mod scope;
 mod staged;
 
 use super::hub::{lock, Hub};
@@ -46,6 +47,8 @@ pub(super) struct JobInfo {
     /// and those sent so far ([`staged`]).
     base: usize,
     sent: usize,
+    /// A capture read out while the job runs.
+    scope: scope::Reading,
 }
 
 impl JobInfo {
@@ -60,6 +63,7 @@ impl JobInfo {
             controls: VecDeque::new(),
             base: 0,
             sent: 0,
+            scope: Default::default(),
         }
     }
 }
@@ -202,6 +206,7 @@ impl Machine<'_> {
                 self.publish(&s, None);
                 asked = Instant::now();
             }
+            self.scope_poll(link)?;
             match self.rx.recv_timeout(Duration::from_millis(5)) {
                 Ok(req) => {
                     let (page, id) = (req.page, req.id);
@@ -276,6 +281,7 @@ impl Machine<'_> {
                 return self.control(link, Control::Stop);
             }
             Cmd::Reset => return self.control(link, Control::AlarmReset),
+            Cmd::ScopeArm { .. } | Cmd::ScopeStop => return self.scope_command(link, req.cmd),
             Cmd::Override { percent } => {
                 return self.control(link, Control::FeedOverride(override_of(percent)?))
             }
@@ -572,6 +578,11 @@ impl Hooks<'_, '_> {
             }
             Cmd::JogStop if self.info.kind == "jog_hold" => self.queue(Control::Abort),
             Cmd::JogStop => Ok("no continuous jog runs".into()),
+            Cmd::ScopeStop => {
+                lock(&self.m.hub.scope).disarm = true;
+                self.m.scope_off();
+                Ok("scope stopped (the recorder is disarmed when the job ends)".into())
+            }
             Cmd::Override { percent } => override_of(percent)
                 .map_err(|f| f.message)
                 .and_then(|p| self.queue(Control::FeedOverride(p))),
@@ -646,6 +657,20 @@ impl JobHooks for Hooks<'_, '_> {
             self.during(req);
         }
         self.info.controls.pop_front()
+    }
+
+    fn recorded(&mut self, pieces: &mut Vec<crate::link::Piece>) {
+        if !pieces.is_empty() {
+            self.m.scope_pieces(std::mem::take(pieces));
+        }
+    }
+
+    fn record_ask(&mut self) -> Option<u32> {
+        self.info.scope.ask(self.m.hub)
+    }
+
+    fn record_answer(&mut self, reply: &pkmc::drive::recorder::Reply, data: &[u8]) {
+        self.info.scope.answer(self.m.hub, reply, data);
     }
 
     fn feed(&mut self, view: &LinkView, out: &mut Vec<Block>) -> bool {

@@ -10,6 +10,7 @@ mod hub;
 mod machine;
 mod program;
 mod scene;
+mod scope;
 mod web;
 
 use crate::job::{exit, Failure, RunOptions, Target};
@@ -110,6 +111,22 @@ pub(crate) enum Cmd {
     Home,
     Reset,
     Estop,
+    /// Arms the recorder (`stream`: live traces).
+    ScopeArm {
+        signals: String,
+        trigger: String,
+        pre: f64,
+        decimate: f64,
+    },
+    ScopeStop,
+    /// A drawing of the scope's samples for this page: `from`..`to` (s), else the
+    /// last `window` s, else all; `width` pixels wide.
+    ScopeView {
+        from: Option<f64>,
+        to: Option<f64>,
+        window: Option<f64>,
+        width: f64,
+    },
 }
 
 impl Cmd {

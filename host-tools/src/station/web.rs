@@ -24,6 +24,7 @@ use tokio::sync::broadcast::error::RecvError;
 const INDEX: &str = include_str!("page/index.html");
 const APP: &str = include_str!("page/app.js");
 const STYLE: &str = include_str!("page/style.css");
+const SCOPE: &str = include_str!("page/scope.js");
 
 /// What every request handler sees.
 struct App {
@@ -106,6 +107,8 @@ pub fn start(
         .route("/", get(index))
         .route("/app.js", get(app_js))
         .route("/style.css", get(style))
+        .route("/scope.js", get(scope_js))
+        .route("/scope.csv", get(scope_csv))
         .route("/ws", get(ws))
         .with_state(app);
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
@@ -167,6 +170,37 @@ async fn app_js() -> Response {
 
 async fn style() -> Response {
     asset("text/css; charset=utf-8", STYLE)
+}
+
+async fn scope_js() -> Response {
+    asset("text/javascript; charset=utf-8", SCOPE)
+}
+
+/// The scope's samples as CSV, a download: [`crate::scope::Table::csv`], the text
+/// `nc-send record --csv` writes for the same capture.
+async fn scope_csv(State(app): State<Arc<App>>, Query(q): Q) -> Response {
+    if let Err(r) = authorised(&app, &q) {
+        return *r;
+    }
+    let Some(table) = lock(&app.hub.scope).table() else {
+        return (
+            StatusCode::NOT_FOUND,
+            "the scope has recorded nothing yet: Live or Arm first",
+        )
+            .into_response();
+    };
+    (
+        [
+            (header::CONTENT_TYPE, "text/csv; charset=utf-8"),
+            (
+                header::CONTENT_DISPOSITION,
+                "attachment; filename=\"scope.csv\"",
+            ),
+            (header::CACHE_CONTROL, "no-cache"),
+        ],
+        table.csv(),
+    )
+        .into_response()
 }
 
 /// A page from another site may not open the socket (a browser sends its Origin; the
@@ -273,9 +307,37 @@ fn handle(app: &Arc<App>, page: u64, text: &str) {
             );
             hub.reply(page, id, Ok("saved".into()));
         }
+        Cmd::ScopeView {
+            from,
+            to,
+            window,
+            width,
+        } => {
+            let app = app.clone();
+            tokio::task::spawn_blocking(move || {
+                let scope = lock(&app.hub.scope).clone();
+                match super::scope::plot_message(&scope, from, to, window, width) {
+                    Ok(m) => app.hub.send_to(page, &m),
+                    Err(why) => app.hub.reply(page, id, Err(why)),
+                }
+            });
+        }
         cmd => {
             if let Err(why) = hub.may_command(page) {
                 return hub.reply(page, id, Err(why));
+            }
+            if let Cmd::ScopeArm {
+                signals,
+                trigger,
+                pre,
+                decimate,
+            } = &cmd
+            {
+                if let Err(why) = super::scope::check(signals, trigger, *pre, *decimate) {
+                    lock(&hub.scope).error = Some(why.clone());
+                    hub.publish_scope();
+                    return hub.reply(page, id, Err(why));
+                }
             }
             command(app, page, id, cmd);
         }

@@ -428,6 +428,29 @@ impl Page {
         self.client.perform_actions(down).await.unwrap();
     }
 
+    /// Presses the mouse button at the first point (viewport pixels), moves through
+    /// the others, and lets go at the last: a click when there is one point, a drag
+    /// otherwise.
+    pub async fn pointer_path(&self, points: &[(f64, f64)]) {
+        let mut a = MouseActions::new("mouse".into());
+        for (i, &(x, y)) in points.iter().enumerate() {
+            a = a.then(PointerAction::MoveTo {
+                duration: (i > 0).then(|| Duration::from_millis(60)),
+                x: x.round(),
+                y: y.round(),
+            });
+            if i == 0 {
+                a = a.then(PointerAction::Down {
+                    button: MOUSE_BUTTON_LEFT,
+                });
+            }
+        }
+        a = a.then(PointerAction::Up {
+            button: MOUSE_BUTTON_LEFT,
+        });
+        self.client.perform_actions(a).await.unwrap();
+    }
+
     /// Lets the mouse button go.
     pub async fn release(&self) {
         let up = MouseActions::new("mouse".into()).then(PointerAction::Up {

@@ -122,6 +122,10 @@ const HANDLERS = {
   probe: onMdiProbe,
 };
 
+// The scope panel's script (scope.js) sends and receives through these.
+pkmc.send = send;
+pkmc.handlers = HANDLERS;
+
 function onMessage(data) {
   const t0 = performance.now();
   const type = handleMessage(data);
