@@ -90,13 +90,17 @@ CALLS_DIR = os.path.join(TARGET_DIR, "calls")  # recorded programs (perf/m4count
 # figure adds). The 4-axis bank is back within issue 9's 20 000 (10 x 2 000) since the
 # period runs in one pass (docs/performance.md); the hexapod-xy's bank (six LQG legs,
 # two PID table axes, CCPM through the pose map): its measurement + ~10 %.
-# The pacer benches (the servo interrupt's whole work: the edge's command, the bank, the
-# snapshot and, `_rec8`, the data recorder staging 8 signals) are held to their bank's
-# budget per tick.
 BUDGETS = {"h4_ik": 600, "hexapod_ik": 1000, "servo_ccpm_4axes_tick": 20_000, "h4_period": 1500,
-           "hexapod_xy_ik": 2000, "servo_hexapod_xy_8ch_tick": 36_000,
-           "pacer_ccpm_4axes_tick": 20_000, "pacer_ccpm_4axes_rec8_tick": 20_000,
-           "pacer_hexapod_xy_8ch_tick": 36_000, "pacer_hexapod_xy_8ch_rec8_tick": 36_000}
+           "hexapod_xy_ik": 2000, "servo_hexapod_xy_8ch_tick": 36_000}
+# Reported against a budget without failing the run (issue 35): the data recorder sampling
+# every servo period, `servo_*_rec8_tick`, the bank's tick plus what staging 8 signals adds
+# to the servo interrupt's ten periods (the pacer benches' `_rec8_tick` minus their
+# `_tick`, see REC8), beside the bank's budget; and the pacer benches (the servo
+# interrupt's whole work: the edge's command, the bank, the DAC sums, the snapshot and,
+# `_rec8`, the staging), beside their bank's. docs/recorder.md, "Real time".
+REPORTED = {"servo_ccpm_4axes_rec8_tick": 20_000, "servo_hexapod_xy_8ch_rec8_tick": 36_000,
+            "pacer_ccpm_4axes_tick": 20_000, "pacer_ccpm_4axes_rec8_tick": 20_000,
+            "pacer_hexapod_xy_8ch_tick": 36_000, "pacer_hexapod_xy_8ch_rec8_tick": 36_000}
 # Machines whose whole-call real-time budgets --enforce-realtime enforces (all of them;
 # a machine left out would be printed with its verdict but not fail the run).
 ENFORCED_MACHINES = {0, 1, 2}
@@ -108,6 +112,11 @@ SERVO_BENCHES = {0: "servo_ccpm_4axes", 1: "servo_hexapod_xy_8ch"}
 # whose feedback each runs.
 PACER_BENCHES = {0: "pacer_ccpm_4axes", 1: "pacer_ccpm_4axes_rec8", 2: "pacer_hexapod_xy_8ch",
                  3: "pacer_hexapod_xy_8ch_rec8"}
+# Derived servo rows: a bank's tick with the recorder's staging (bank, pacer without and
+# with the recorder), e.g. the 1 ms figure of the programs that record every servo period.
+REC8 = {"servo_ccpm_4axes_rec8_tick": ("servo_ccpm_4axes", "pacer_ccpm_4axes", "pacer_ccpm_4axes_rec8"),
+        "servo_hexapod_xy_8ch_rec8_tick": ("servo_hexapod_xy_8ch", "pacer_hexapod_xy_8ch",
+                                           "pacer_hexapod_xy_8ch_rec8")}
 # The servo bench whose worst period stands for a machine's ten servo periods in its
 # 1 ms figure (the hexapod has no servo channel: the 4-axis bank stands for it), unless
 # the program names its own (the recording programs that sample every servo period: the
@@ -743,8 +752,8 @@ def report_whole_calls(m4, replays, servo_periods):
     print("wrapper; receive = one USB packet; frame = the part of a receive that completes one frame;")
     print(f"period = a tick + the receive and transmit calls since the previous tick + "
           f"the {SERVO_PER_TICK} servo periods of a tick of the machine ("
-          + ", ".join(f"{MACHINES[m]}: {SERVO_OF_MACHINE[m]} sum {servo_periods[m]}" for m in sorted(servo_periods)
-                      if isinstance(m, int))
+          + ", ".join(f"{MACHINES[m]}: {SERVO_OF_MACHINE[m]} sum {servo_periods[m]}"
+                      for m in sorted(k for k in servo_periods if isinstance(k, int)))
           + "".join(f"; {b} sum {servo_periods[b]} for the programs that name it"
                     for b in sorted(k for k in servo_periods if not isinstance(k, int)))
           + "); record_servo = one handover of servo-period samples to the recorder, after")
@@ -810,16 +819,24 @@ def main():
     programs = record_programs()
     m4 = M4(ELF)
     stats = kinematics_cases(m4, cases)
+    for key, (bank, off, on) in REC8.items():
+        if all(f"{b}_tick" in stats for b in (bank, off, on)):
+            stats[key] = [max(stats[f"{bank}_tick"]) + max(stats[f"{on}_tick"]) - max(stats[f"{off}_tick"])]
 
     failed = False
     print(f"{'function':28} {'cases':>5} {'min':>6} {'mean':>7} {'max':>6} {'budget':>7}")
+    reported_over = []
     for key in sorted(stats):
         v = stats[key]
-        budget = BUDGETS.get(key)
+        budget = BUDGETS.get(key, REPORTED.get(key))
         over = budget is not None and max(v) > budget
-        failed |= over
+        if over and key in REPORTED:
+            reported_over.append(key)
+        else:
+            failed |= over
         b = f"{budget:7d}" if budget else "      -"
-        print(f"{key:28} {len(v):5d} {min(v):6d} {sum(v) / len(v):7.1f} {max(v):6d} {b}{'  OVER' if over else ''}")
+        flag = "" if not over else "  OVER (reported, not enforced)" if key in REPORTED else "  OVER"
+        print(f"{key:28} {len(v):5d} {min(v):6d} {sum(v) / len(v):7.1f} {max(v):6d} {b}{flag}")
     for key in BUDGETS:
         if key not in stats:
             failed = True
@@ -848,6 +865,9 @@ def main():
         if bench + "_tick" not in stats:
             sys.exit(f"m4count: a program names the servo bench {bench}, which was not run")
         servo_periods[bench] = max(stats[bench + "_tick"])
+    # The servo interrupt's whole work (the pacer) beside the bank alone, per machine.
+    pacer_extra = {m: max(stats[f"pacer_{SERVO_OF_MACHINE[m][len('servo_'):]}_tick"]) - servo_periods[m]
+                   for m in servo_periods if isinstance(m, int)}
     replays = []
     t2 = time.time()
     for name, machine, path, blocks, bench in programs:
@@ -895,6 +915,12 @@ def main():
                                                "OVER (not enforced)" if enforceable else
                                                "OVER (not enforced)")
             print(f"{prefix + label:34} {worst[0]:8d} {budget:8d}  {verdict} ({worst[1]})")
+            if key == "period":
+                # Not enforced: the same with the servo interrupt's whole work (the pacer:
+                # the edge's command, the DAC sums, the snapshot) instead of the bank alone.
+                whole = max((r.period[0] + pacer_extra.get(r.machine, 0), r.name) for r in rs)
+                print(f"{prefix + '  (servo periods as the pacer)':34} {whole[0]:8d} {budget:8d}  "
+                      f"{'within' if whole[0] <= budget else 'over'}, not enforced ({whole[1]})")
     helpers = sorted(f for fs in seen.get("", {}).values() for f in fs)
     helper_verdict = "PASS" if not helpers else ("OVER" if "helpers" in enforced else "OVER (not enforced)")
     print(f"{'forbidden helpers executed':34} {len(helpers):8d} {0:8d}  {helper_verdict}")
@@ -909,7 +935,8 @@ def main():
     print(f"every emulated result equals the host's (Controller: {size} bytes on the M4); "
           f"{t1 - t0:.1f} s to the kinematics, {replayed / 1e6:.0f} million instructions of whole "
           f"calls replayed in {t3 - t2:.0f} s, {time.time() - t0:.1f} s in all"
-          + (f"; over budget but not enforced: {', '.join(over_free)}" if over_free else ""))
+          + (f"; over budget but not enforced: {', '.join(over_free + reported_over)}"
+             if over_free or reported_over else ""))
     sys.exit(1 if failed or rt_failed else 0)
 
 

@@ -366,7 +366,7 @@ pub fn programs() -> Vec<Program> {
         servo_bench: None,
     });
     // The data recorder streaming 8 signals beside the job, every tick and every
-    // servo period (whose 1 ms figure adds the pacer's periods staging them).
+    // servo period (whose 1 ms figure adds the staging to the bank's periods).
     for base in ["hexapod_xy_seg0.05mm", "hexapod_xy_helix-b-tilt"] {
         let Some(p) = out.iter().find(|p| p.name == base) else {
             continue;
@@ -374,7 +374,7 @@ pub fn programs() -> Vec<Program> {
         let (machine, text, lead_ticks) = (p.machine, p.text.clone(), p.lead_ticks);
         for (tag, record, servo_bench) in [
             ("rec1k", record_tick(), None),
-            ("rec10k", record_servo(), Some("pacer_hexapod_xy_8ch_rec8")),
+            ("rec10k", record_servo(), Some("servo_hexapod_xy_8ch_rec8")),
         ] {
             out.push(Program {
                 name: format!("{base}_{tag}"),
