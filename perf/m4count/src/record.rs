@@ -466,8 +466,9 @@ fn streamed_enough(
 
 /// Records every program into `dir` (one `NAME.calls` file each) and prints one line
 /// per program: `program NAME MACHINE FILE BLOCKS TICKS PACKETS FRAMES TRANSMITS
-/// SERVO`, SERVO the servo bench whose tick stands for the program's servo periods
-/// in its 1 ms figure (`-`: the machine's bank, as `.ci/m4count.py` chooses it).
+/// SERVO REC`, SERVO the servo bench whose tick stands for the program's servo periods
+/// in its 1 ms figure (`-`: the machine's bank, as `.ci/m4count.py` chooses it), REC
+/// `armed` when the program arms the data recorder (else `-`).
 pub fn record_all(dir: &Path) -> Result<(), String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     for p in programs() {
@@ -477,7 +478,7 @@ pub fn record_all(dir: &Path) -> Result<(), String> {
         std::fs::write(dir.join(format!("{}.ngc", p.name)), &p.text)
             .map_err(|e| format!("{}: {e}", path.display()))?;
         println!(
-            "program {} {} {} {blocks} {} {} {} {} {}",
+            "program {} {} {} {blocks} {} {} {} {} {} {}",
             p.name,
             p.machine,
             path.display(),
@@ -485,7 +486,8 @@ pub fn record_all(dir: &Path) -> Result<(), String> {
             c.packets,
             c.frames,
             c.transmits,
-            p.servo_bench.unwrap_or("-")
+            p.servo_bench.unwrap_or("-"),
+            if p.record.is_some() { "armed" } else { "-" }
         );
     }
     // The controller's size on the host, for comparison with the target's.
