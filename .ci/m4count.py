@@ -21,12 +21,20 @@ per block). Per-instruction hooks are not used: QEMU skips the code hook for
 instructions of an IT block whose condition fails, which a block count includes (they
 still take an issue slot on the core). Every emulated result must equal the host's.
 
+Servo periods: `ServoBank::period` of whole banks (`servo_*`, perf/m4count/src/servo.rs)
+and the servo interrupt's whole `ServoPacer::period` on the same banks (`pacer_*`,
+pacer.rs): the tick edge's command, the bank, the snapshot and, `_rec8`, the data
+recorder staging 8 signals every period; the staged samples must equal the host's too.
+
 Whole calls: each recorded program is replayed on one emulated `Controller`, built in
 emulated RAM for its machine, call by call in the recorded order: `receive` of each
-USB packet, `tick` with the recorded inputs, `transmit` into 64-byte buffers. Every
-tick's outputs and every transmitted byte must equal the host's. Counted per call:
-the whole `Controller::receive`, `tick` or `transmit` call including the few
-instructions of its C-ABI wrapper (`bench_ctrl_*`). A receive is also split at the
+USB packet, `tick` with the recorded inputs, `record_servo` with the servo-period
+samples the simulator handed to the data recorder after a tick (programs that record
+every servo period), `transmit` into 64-byte buffers. Every tick's outputs and every
+transmitted byte must equal the host's. Counted per call:
+the whole `Controller::receive`, `tick`, `record_servo` or `transmit` call including
+the few instructions of its C-ABI wrapper (`bench_ctrl_*`); a tick's budget is the tick
+with the `record_servo` calls after it (the firmware makes them under the same lock). A receive is also split at the
 frames it completes (per frame: from the call's start, or the end of the previous
 frame's work, to the first read of the byte after the frame's delimiter, found by a
 memory-read hook on the packet). The worst 1 ms period is one tick plus every
@@ -34,8 +42,9 @@ receive and transmit call between it and the previous tick plus the ten servo pe
 of one tick of the program's machine (SERVO_OF_MACHINE: the sum of the ten measured
 periods of `servo_ccpm_4axes` for the H-4 and the hexapod, of `servo_hexapod_xy_8ch`
 for the hexapod-xy: the first period of a tick computes the path frame, the other nine
-reuse it); the lock-held
-figure is the longest single call (the firmware makes each under the controller's
+reuse it; a program may name another bench, as those recording every servo period name
+the pacer staging the recorder's signals); the lock-held
+figure is the longest single call (a tick with its `record_servo` calls as one) (the firmware makes each under the controller's
 lock). Executed symbols of every counted call are checked for soft-float `f64`
 helpers, 64/128-bit division (the helpers, and LLVM's inline expansion of 128-bit
 division, recognised as a block that loops on itself with six or more
@@ -83,6 +92,15 @@ CALLS_DIR = os.path.join(TARGET_DIR, "calls")  # recorded programs (perf/m4count
 # two PID table axes, CCPM through the pose map): its measurement + ~10 %.
 BUDGETS = {"h4_ik": 600, "hexapod_ik": 1000, "servo_ccpm_4axes_tick": 20_000, "h4_period": 1500,
            "hexapod_xy_ik": 2000, "servo_hexapod_xy_8ch_tick": 36_000}
+# Reported against a budget without failing the run (issue 35): the data recorder sampling
+# every servo period, `servo_*_rec8_tick`, the bank's tick plus what staging 8 signals adds
+# to the servo interrupt's ten periods (the pacer benches' `_rec8_tick` minus their
+# `_tick`, see REC8), beside the bank's budget; and the pacer benches (the servo
+# interrupt's whole work: the edge's command, the bank, the DAC sums, the snapshot and,
+# `_rec8`, the staging), beside their bank's. docs/recorder.md, "Real time".
+REPORTED = {"servo_ccpm_4axes_rec8_tick": 20_000, "servo_hexapod_xy_8ch_rec8_tick": 36_000,
+            "pacer_ccpm_4axes_tick": 20_000, "pacer_ccpm_4axes_rec8_tick": 20_000,
+            "pacer_hexapod_xy_8ch_tick": 36_000, "pacer_hexapod_xy_8ch_rec8_tick": 36_000}
 # Machines whose whole-call real-time budgets --enforce-realtime enforces (all of them;
 # a machine left out would be printed with its verdict but not fail the run).
 ENFORCED_MACHINES = {0, 1, 2}
@@ -90,13 +108,24 @@ ENFORCED_MACHINES = {0, 1, 2}
 # servo.rs (`bank`).
 MACHINES = {0: "h4", 1: "hexapod", 2: "hexapod_xy"}
 SERVO_BENCHES = {0: "servo_ccpm_4axes", 1: "servo_hexapod_xy_8ch"}
+# The pacer benches by index, as perf/m4count/src/pacer.rs (`pacer`), and the servo bench
+# whose feedback each runs.
+PACER_BENCHES = {0: "pacer_ccpm_4axes", 1: "pacer_ccpm_4axes_rec8", 2: "pacer_hexapod_xy_8ch",
+                 3: "pacer_hexapod_xy_8ch_rec8"}
+# Derived servo rows: a bank's tick with the recorder's staging (bank, pacer without and
+# with the recorder), e.g. the 1 ms figure of the programs that record every servo period.
+REC8 = {"servo_ccpm_4axes_rec8_tick": ("servo_ccpm_4axes", "pacer_ccpm_4axes", "pacer_ccpm_4axes_rec8"),
+        "servo_hexapod_xy_8ch_rec8_tick": ("servo_hexapod_xy_8ch", "pacer_hexapod_xy_8ch",
+                                           "pacer_hexapod_xy_8ch_rec8")}
 # The servo bench whose worst period stands for a machine's ten servo periods in its
-# 1 ms figure (the hexapod has no servo channel: the 4-axis bank stands for it).
+# 1 ms figure (the hexapod has no servo channel: the 4-axis bank stands for it), unless
+# the program names its own (the recording programs that sample every servo period: the
+# pacer staging the recorder's signals).
 SERVO_OF_MACHINE = {0: "servo_ccpm_4axes", 1: "servo_ccpm_4axes", 2: "servo_hexapod_xy_8ch"}
 # Real-time budgets of whole controller calls (issue 9), instructions; enforced with
 # --enforce-realtime only.
 RT_BUDGETS = [
-    ("tick", "any tick", 10_000),
+    ("tick", "any tick (+ its record_servo)", 10_000),
     ("frame", "any receive of one frame", 5_000),
     ("period", "worst 1 ms period", 102_000),
     ("lock", "lock held (longest single call)", 20_000),
@@ -111,10 +140,13 @@ ARG = RAM + 0x2000  # argument buffers
 BANK = RAM + 0x3000  # ServoBank (4096 bytes reserved)
 PERIOD = RAM + 0x4000  # Period (96 KiB reserved: up to RAM + 0x1C000)
 PERIOD_WARMUP, PERIOD_CHUNK = 1600, 200  # as perf/m4count/src/main.rs
+PACER = RAM + 0x6_0000  # ServoPacer (8192 bytes reserved, PACER_BYTES in pacer.rs)
+MAX_SIGNALS = 8  # the recorder's signals (record_servo's rows)
 CALL = RAM + 0x1_C000  # whole-call buffers: a packet, input words (up to 128), output
 # words (up to 256), one `Inputs` (INPUTS_BYTES, as perf/m4count/src/main.rs), a
-# transmit buffer
+# transmit buffer, record_servo's ids and rows (up to 16 rows)
 PACKET, IN_WORDS_A, OUT_WORDS_A, INPUTS, TXBUF = CALL, CALL + 0x100, CALL + 0x500, CALL + 0xD00, CALL + 0x1500
+REC_IDS, REC_ROWS = CALL + 0x1600, CALL + 0x1640
 CTRL = RAM + 0x2_0000  # Controller (CTRL_BYTES reserved)
 CTRL_BYTES = 192 * 1024  # as perf/m4count/src/main.rs
 STACK_TOP = RAM + RAM_SIZE  # the stack grows down from the end of RAM (to CTRL + CTRL_BYTES)
@@ -157,14 +189,16 @@ def host_cases():
 
 def record_programs():
     """Runs the programs through nc-send's client on the host; returns, per program,
-    (name, machine, log path, blocks)."""
+    (name, machine, log path, blocks, servo bench of its 1 ms figure or None, whether it
+    arms the data recorder)."""
     out = subprocess.run([HOST_BIN, "--record", CALLS_DIR], cwd=CRATE, check=True,
                          capture_output=True, text=True).stdout
     programs = []
     for line in out.splitlines():
         f = line.split()
         if f and f[0] == "program":
-            programs.append((f[1], int(f[2]), f[3], int(f[4])))
+            programs.append((f[1], int(f[2]), f[3], int(f[4]), None if f[9] == "-" else f[9],
+                             f[10] == "armed"))
     return programs
 
 
@@ -502,6 +536,31 @@ def kinematics_cases(m4, cases):
             record(name, n)
             if k == SERVO_PER_TICK - 1:
                 record(f"{name}_tick", sum(stats[name][-SERVO_PER_TICK:]))
+        elif kind == "pacer":
+            # pacer P k f[S] d[S] e[P]: as servo, on pacer bench P (perf/m4count/src/pacer.rs)
+            s, p = WIRE["servos"], WIRE["pose_axes"]
+            bench, k, f, dac, err = vals[0], vals[1], vals[2:2 + s], vals[2 + s:2 + 2 * s], vals[2 + 2 * s:]
+            name = PACER_BENCHES[bench]
+            if k == 0:
+                _, n = m4.call("bench_pacer_init", bench, PACER)
+                record(f"{name}_init", n)
+            m4.write_i64(pose_a, f)
+            _, n = m4.call("bench_pacer_period", PACER, pose_a, out_a)
+            got = m4.uc.mem_read(out_a, 2 * s + 4 * p)
+            check("DAC codes", list(struct.unpack(f"<{s}H", got[:2 * s])), dac, c)
+            check("contour error", list(struct.unpack(f"<{p}I", got[2 * s:])), err, c)
+            record(name, n)
+            if k == SERVO_PER_TICK - 1:
+                record(f"{name}_tick", sum(stats[name][-SERVO_PER_TICK:]))
+        elif kind == "staged":
+            # staged P ids[8] rows[10 x 8]: one more period (the feedback still the last
+            # case's, at pose_a), then the measured tick's staged samples.
+            m4.call("bench_pacer_staged", PACER, pose_a, out_a)
+            n_rows = SERVO_PER_TICK * MAX_SIGNALS
+            got = m4.uc.mem_read(out_a, MAX_SIGNALS + 4 * n_rows)
+            check("staged ids", list(got[:MAX_SIGNALS]), vals[1:1 + MAX_SIGNALS], c)
+            check("staged samples", list(struct.unpack(f"<{n_rows}i", got[MAX_SIGNALS:])),
+                  vals[1 + MAX_SIGNALS:], c)
         elif kind == "period":
             if vals[0] == 0:
                 _, n = m4.call("bench_period_init", PERIOD)
@@ -519,9 +578,10 @@ def kinematics_cases(m4, cases):
 # --- whole calls ------------------------------------------------------------------
 
 def read_log(path):
-    """The recorded calls: ("R", bytes) | ("T", input words, output words) | ("X", bytes)."""
+    """The recorded calls: ("R", bytes) | ("T", input words, output words) |
+    ("S", ids, rows bytes, rows) | ("X", bytes)."""
     data = open(path, "rb").read()
-    magic = b"PKMC-M4-CALLS-2"
+    magic = b"PKMC-M4-CALLS-3"
     if not data.startswith(magic):
         sys.exit(f"m4count: {path} is not a call log")
     calls, i = [], len(magic)
@@ -537,6 +597,11 @@ def read_log(path):
             words = struct.unpack_from(f"<{n_in + n_out}q", data, i)
             calls.append(("T", words[:n_in], list(words[n_in:])))
             i += 8 * (n_in + n_out)
+        elif kind == b"S":
+            ids, n = data[i:i + MAX_SIGNALS], data[i + MAX_SIGNALS]
+            i += MAX_SIGNALS + 1
+            calls.append(("S", ids, data[i:i + 4 * MAX_SIGNALS * n], n))
+            i += 4 * MAX_SIGNALS * n
         else:
             sys.exit(f"m4count: {path}: bad record {kind!r} at byte {i - 1}")
     return calls
@@ -555,13 +620,20 @@ class Replay:
 
     def __init__(self, name, machine, blocks):
         self.name, self.machine, self.blocks = name, machine, blocks
-        self.counts = {"tick": [], "receive": [], "frame": [], "transmit": [], "period": []}
+        # tick: the tick call alone; record_servo: each handover of servo-period samples
+        # to the recorder; locked: a tick with its handovers (the firmware makes them
+        # under one lock: the tick's budget).
+        self.counts = {"tick": [], "record_servo": [], "locked": [], "receive": [], "frame": [],
+                       "transmit": [], "period": []}
         self.seconds = 0.0
         self.period = (0, None)  # worst: (instructions, composition)
-        self.lock = (0, None)  # longest single call: (instructions, kind)
+        self.lock = (0, None)  # longest single call (a tick with its record_servo calls)
+        self.period_of_tick = []  # composition of the last tick's 1 ms period
         self.worst = {}  # kind -> (instructions, call index, profile)
         self.worst_mem = {}  # kind -> memcpy/memclr calls (M4COUNT_MEMCPY only)
-        self.executed = {"tick": set(), "receive": set(), "transmit": set()}  # blocks run
+        self.armed = False  # the program arms the data recorder
+        self.executed = {"tick": set(), "record_servo": set(), "receive": set(),
+                         "transmit": set()}  # blocks run
 
 
 def replay(m4, name, machine, path, blocks, servo_period):
@@ -596,6 +668,16 @@ def replay(m4, name, machine, path, blocks, servo_period):
                 since["frames"] += 1
             since["packets"] += 1
             since["receive"] += n
+        elif kind == "S":
+            if not r.counts["locked"]:
+                sys.exit(f"m4count: {name}: record_servo (call {index}) before any tick")
+            _, ids, rows, n_rows = call
+            if n_rows > 16:
+                sys.exit(f"m4count: {name}: record_servo (call {index}) of {n_rows} rows")
+            m4.uc.mem_write(REC_IDS, bytes(ids))
+            m4.uc.mem_write(REC_ROWS, bytes(rows))
+            _, n = m4.call_raw("bench_ctrl_record_servo", CTRL, REC_IDS, REC_ROWS, n_rows)
+            what = "record_servo"
         elif kind == "T":
             m4.write_i64(IN_WORDS_A, call[1])
             m4.call("bench_ctrl_inputs", IN_WORDS_A, INPUTS)
@@ -620,8 +702,18 @@ def replay(m4, name, machine, path, blocks, servo_period):
         if what == "transmit":
             since["transmit"] += n
         r.executed[what].update(m4.trace)
-        if n > r.lock[0]:
-            r.lock = (n, what)
+        if what == "tick":
+            r.counts["locked"].append(n)
+        elif what == "record_servo":
+            # Under the lock of the tick before it, in its 1 ms period.
+            r.counts["locked"][-1] += n
+            r.counts["period"][-1] += n
+            r.period_of_tick[-1]["record_servo"] += n
+            if r.counts["period"][-1] > r.period[0]:
+                r.period = (r.counts["period"][-1], r.period_of_tick[-1])
+        locked = r.counts["locked"][-1] if what in ("tick", "record_servo") else n
+        if locked > r.lock[0]:
+            r.lock = (locked, "tick + record_servo" if what == "record_servo" else what)
         if what != "transmit" and n > r.worst.get(what, (-1,))[0]:
             r.worst[what] = (n, index, m4.profile(m4.trace))
             if m4.mem_watch is not None:
@@ -630,8 +722,9 @@ def replay(m4, name, machine, path, blocks, servo_period):
             servo = servo_period
             total = since["receive"] + since["transmit"] + n + servo
             r.counts["period"].append(total)
+            r.period_of_tick = [dict(since, tick=n, servo=servo, record_servo=0)]
             if total > r.period[0]:
-                r.period = (total, dict(since, tick=n, servo=servo))
+                r.period = (total, r.period_of_tick[-1])
             since = {"receive": 0, "transmit": 0, "frames": 0, "packets": 0}
     r.seconds = time.time() - t0
     return r
@@ -662,26 +755,36 @@ def report_whole_calls(m4, replays, servo_periods):
     print("wrapper; receive = one USB packet; frame = the part of a receive that completes one frame;")
     print(f"period = a tick + the receive and transmit calls since the previous tick + "
           f"the {SERVO_PER_TICK} servo periods of a tick of the machine ("
-          + ", ".join(f"{MACHINES[m]}: {SERVO_OF_MACHINE[m]} sum {servo_periods[m]}" for m in sorted(servo_periods))
-          + "); lock = the longest single call)")
+          + ", ".join(f"{MACHINES[m]}: {SERVO_OF_MACHINE[m]} sum {servo_periods[m]}"
+                      for m in sorted(k for k in servo_periods if isinstance(k, int)))
+          + "".join(f"; {b} sum {servo_periods[b]} for the programs that name it"
+                    for b in sorted(k for k in servo_periods if not isinstance(k, int)))
+          + "); record_servo = one handover of servo-period samples to the recorder, after")
+    print("the tick, under its lock; tick+rec = a tick with its handovers; lock = the longest single call,")
+    print("a tick with its handovers counted as one)")
     print(f"{'program':24} {'blocks':>6} {'call':8} {'calls':>6} {'min':>7} {'median':>7} {'p99':>7} {'max':>7}")
     for r in replays:
         first = True
-        for kind in ("tick", "receive", "frame", "transmit", "period"):
+        for kind in ("tick", "record_servo", "locked", "receive", "frame", "transmit", "period"):
+            if kind in ("record_servo", "locked") and not r.counts["record_servo"]:
+                continue
             v = sorted(r.counts[kind])
             label = f"{r.name:24} {r.blocks:6d}" if first else " " * 31
             first = False
-            print(f"{label} {kind:8} {len(v):6d} {v[0]:7d} {percentile(v, 50):7d} "
+            print(f"{label} {'tick+rec' if kind == 'locked' else kind[:8]:8} {len(v):6d} {v[0]:7d} {percentile(v, 50):7d} "
                   f"{percentile(v, 99):7d} {v[-1]:7d}")
         p, c = r.period
-        print(f"{'':31} worst period: tick {c['tick']} + {c['packets']} receives {c['receive']} "
+        print(f"{'':31} worst period: tick {c['tick']} + record_servo {c['record_servo']} + "
+              f"{c['packets']} receives {c['receive']} "
               f"({c['frames']} frames) + transmits {c['transmit']} + servo {c['servo']}; "
               f"lock held {r.lock[0]} ({r.lock[1]}); replayed in {r.seconds:.1f} s")
     print()
     print("functions of the worst calls (flat: each function's own instructions; Controller::tick and")
     print("Controller::receive are inlined into the bench_ctrl_* wrappers, as into the firmware's callers)")
     for r in replays:
-        for kind in ("tick", "receive"):
+        for kind in ("tick", "record_servo", "receive"):
+            if kind not in r.worst:
+                continue
             n, index, prof = r.worst[kind]
             top = len(prof) if os.environ.get("M4COUNT_FULL") else 6
             parts = [f"{100 * k / n:.0f}% {short(f, 48)}" + (f" ({k})" if top > 6 else "")
@@ -719,16 +822,24 @@ def main():
     programs = record_programs()
     m4 = M4(ELF)
     stats = kinematics_cases(m4, cases)
+    for key, (bank, off, on) in REC8.items():
+        if all(f"{b}_tick" in stats for b in (bank, off, on)):
+            stats[key] = [max(stats[f"{bank}_tick"]) + max(stats[f"{on}_tick"]) - max(stats[f"{off}_tick"])]
 
     failed = False
     print(f"{'function':28} {'cases':>5} {'min':>6} {'mean':>7} {'max':>6} {'budget':>7}")
+    reported_over = []
     for key in sorted(stats):
         v = stats[key]
-        budget = BUDGETS.get(key)
+        budget = BUDGETS.get(key, REPORTED.get(key))
         over = budget is not None and max(v) > budget
-        failed |= over
+        if over and key in REPORTED:
+            reported_over.append(key)
+        else:
+            failed |= over
         b = f"{budget:7d}" if budget else "      -"
-        print(f"{key:28} {len(v):5d} {min(v):6d} {sum(v) / len(v):7.1f} {max(v):6d} {b}{'  OVER' if over else ''}")
+        flag = "" if not over else "  OVER (reported, not enforced)" if key in REPORTED else "  OVER"
+        print(f"{key:28} {len(v):5d} {min(v):6d} {sum(v) / len(v):7.1f} {max(v):6d} {b}{flag}")
     for key in BUDGETS:
         if key not in stats:
             failed = True
@@ -753,10 +864,18 @@ def main():
     # The ten measured periods are one tick's (perf/m4count/src/servo.rs): their sum is
     # the servo work of one 1 ms period.
     servo_periods = {m: max(stats[SERVO_OF_MACHINE[m] + "_tick"]) for m in sorted({p[1] for p in programs})}
+    for bench in {p[4] for p in programs if p[4]}:
+        if bench + "_tick" not in stats:
+            sys.exit(f"m4count: a program names the servo bench {bench}, which was not run")
+        servo_periods[bench] = max(stats[bench + "_tick"])
+    # The servo interrupt's whole work (the pacer) beside the bank alone, per machine.
+    pacer_extra = {m: max(stats[f"pacer_{SERVO_OF_MACHINE[m][len('servo_'):]}_tick"]) - servo_periods[m]
+                   for m in servo_periods if isinstance(m, int)}
     replays = []
     t2 = time.time()
-    for name, machine, path, blocks in programs:
-        replays.append(replay(m4, name, machine, path, blocks, servo_periods[machine]))
+    for name, machine, path, blocks, bench, armed in programs:
+        replays.append(replay(m4, name, machine, path, blocks, servo_periods[bench or machine]))
+        replays[-1].armed = armed
     replayed = sum(sum(r.counts[k]) for r in replays for k in ("tick", "receive", "transmit"))
     t3 = time.time()
     seen = report_whole_calls(m4, replays, servo_periods)
@@ -776,15 +895,23 @@ def main():
                 sys.exit(f"m4count: unknown budget(s) {sorted(unknown)}")
     rt_failed = False
     over_free = []
-    groups = [("", [r for r in replays if r.machine in ENFORCED_MACHINES], True)]
+    groups = [("", [r for r in replays if r.machine in ENFORCED_MACHINES and not r.armed], True)]
     others = sorted({r.machine for r in replays} - ENFORCED_MACHINES)
-    groups += [(f"{MACHINES[m]}: ", [r for r in replays if r.machine == m], False) for m in others]
+    groups += [(f"{MACHINES[m]}: ", [r for r in replays if r.machine == m and not r.armed], False)
+               for m in others]
+    # The programs that arm the data recorder (issue 35): reported against the same
+    # budgets, not enforced (docs/recorder.md, "Real time").
+    if any(r.armed for r in replays):
+        groups.append(("recorder armed: ", [r for r in replays if r.armed], False))
     for prefix, rs, enforceable in groups:
         for key, label, budget in RT_BUDGETS:
             if key == "period":
                 worst = max((r.period[0], r.name) for r in rs)
             elif key == "lock":
                 worst = max((r.lock[0], r.name) for r in rs)
+            elif key == "tick":
+                # A tick with the recorder's handovers after it, under the same lock.
+                worst = max((max(r.counts["locked"]), r.name) for r in rs)
             else:
                 worst = max((max(r.counts[key]), r.name) for r in rs)
             over = worst[0] > budget
@@ -797,6 +924,12 @@ def main():
                                                "OVER (not enforced)" if enforceable else
                                                "OVER (not enforced)")
             print(f"{prefix + label:34} {worst[0]:8d} {budget:8d}  {verdict} ({worst[1]})")
+            if key == "period":
+                # Not enforced: the same with the servo interrupt's whole work (the pacer:
+                # the edge's command, the DAC sums, the snapshot) instead of the bank alone.
+                whole = max((r.period[0] + pacer_extra.get(r.machine, 0), r.name) for r in rs)
+                print(f"{prefix + '  (servo periods as the pacer)':34} {whole[0]:8d} {budget:8d}  "
+                      f"{'within' if whole[0] <= budget else 'over'}, not enforced ({whole[1]})")
     helpers = sorted(f for fs in seen.get("", {}).values() for f in fs)
     helper_verdict = "PASS" if not helpers else ("OVER" if "helpers" in enforced else "OVER (not enforced)")
     print(f"{'forbidden helpers executed':34} {len(helpers):8d} {0:8d}  {helper_verdict}")
@@ -811,7 +944,8 @@ def main():
     print(f"every emulated result equals the host's (Controller: {size} bytes on the M4); "
           f"{t1 - t0:.1f} s to the kinematics, {replayed / 1e6:.0f} million instructions of whole "
           f"calls replayed in {t3 - t2:.0f} s, {time.time() - t0:.1f} s in all"
-          + (f"; over budget but not enforced: {', '.join(over_free)}" if over_free else ""))
+          + (f"; over budget but not enforced: {', '.join(over_free + reported_over)}"
+             if over_free or reported_over else ""))
     sys.exit(1 if failed or rt_failed else 0)
 
 

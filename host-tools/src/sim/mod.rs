@@ -129,6 +129,9 @@ pub struct Simulator {
     last_map: Option<pkmc::kinematics::ContourMap>,
     /// The inputs the last tick passed to the controller.
     last_in: Inputs,
+    /// The servo-period samples the last tick handed to the data recorder
+    /// (`Controller::record_servo`), one entry per call: signals and rows.
+    last_servo_record: Vec<ServoRecordCall>,
     /// First tick at which the controller was in `Alarm` or `EStop` (not the lock
     /// after reset).
     pub alarm_tick: Option<u64>,
@@ -145,6 +148,13 @@ pub struct Simulator {
     /// the tool point.
     probe: Option<(probe::SimProbe, probe::Frame)>,
 }
+
+/// One `Controller::record_servo` call: the signals' servo-side ids and the rows
+/// (one per servo period) handed over.
+pub type ServoRecordCall = (
+    [u8; pkmc::drive::recorder::MAX_SIGNALS],
+    Vec<[i32; pkmc::drive::recorder::MAX_SIGNALS]>,
+);
 
 /// Ticks the simulator goes on running after the controller's work is done, while a
 /// servo joint is still settling (more than one count from its target).
@@ -183,6 +193,7 @@ impl Simulator {
             last_out: pkmc::controller::Outputs::default(),
             last_map: None,
             last_in: Inputs::default(),
+            last_servo_record: Vec::new(),
             alarm_tick: None,
             ticks: 0,
             idle_ticks: 0,
@@ -239,6 +250,13 @@ impl Simulator {
     /// ([`pkmc::controller::Controller::contour_map`]).
     pub fn last_map(&self) -> Option<&pkmc::kinematics::ContourMap> {
         self.last_map.as_ref()
+    }
+
+    /// The servo-period samples the last [`Simulator::tick`] handed to the data
+    /// recorder, one entry per `Controller::record_servo` call, in order (none when
+    /// it records at the tick or not at all).
+    pub fn last_servo_record(&self) -> &[ServoRecordCall] {
+        &self.last_servo_record
     }
 
     /// Simulated time, s.
@@ -538,11 +556,13 @@ impl Simulator {
                 pacer.restart(ServoBank::new(self.ctrl.machine(), &snapshot.counts));
             }
             pacer.post(command);
+            self.last_servo_record.clear();
             if self.ctrl.records_servo() {
                 // As the firmware: the last complete tick's servo-period samples.
                 for half in 0..2 {
                     let (ids, rows) = pacer.staged(half);
                     self.ctrl.record_servo(ids, rows);
+                    self.last_servo_record.push((*ids, rows.to_vec()));
                 }
             }
         }

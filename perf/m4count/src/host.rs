@@ -146,6 +146,7 @@ pub fn print_cases() {
         println!("isqrt {n} {}", isqrt(n));
     }
     servo_cases();
+    pacer_cases();
     period_cases();
 }
 
@@ -212,6 +213,35 @@ fn servo_cases() {
             let e = o.contour_error.map(|e| i64::from(e.to_bits()));
             println!("servo {b} {k} {}", line(&[&f, &d, &e]));
         }
+    }
+}
+
+/// The ten periods of each pacer bench's tick, then the samples it staged.
+fn pacer_cases() {
+    for b in 0..pacer::BENCHES {
+        let mut p = pacer::pacer(b);
+        let bench = pacer::servo_bench(b);
+        let mut f = [0; MAX_SERVOS];
+        for k in 0..10i64 {
+            f = servo::feedback(bench, k);
+            let o = p.period(&f, &[false; MAX_SERVOS]).out;
+            let d = o.dac.map(i64::from);
+            let e = o.contour_error.map(|e| i64::from(e.to_bits()));
+            println!("pacer {b} {k} {}", line(&[&f, &d, &e]));
+        }
+        let staged = pacer::finish(&mut p, &f);
+        let ids = staged.ids.map(i64::from);
+        let rows: Vec<i64> = staged
+            .rows
+            .iter()
+            .flatten()
+            .map(|&v| i64::from(v))
+            .collect();
+        assert!(
+            b % 2 == 0 || rows.iter().any(|&v| v != 0),
+            "pacer bench {b}: nothing staged"
+        );
+        println!("staged {b} {}", line(&[&ids, &rows]));
     }
 }
 

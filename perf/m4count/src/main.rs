@@ -11,11 +11,14 @@
 //! Line formats (integers separated by spaces): first `wire I O S P`, the word counts
 //! of [`wire`] (I inputs, O outputs), `MAX_SERVOS` and `POSE_AXES`; then
 //! `ik M p0..p5 rc q0..q10`, `fk M q0..q10 g0..g5 rc p0..p5`, `sincos a s c`,
-//! `isqrt n r`, `servo B k f0..f(S-1) d0..d(S-1) e0..e(P-1)`, `period k rc q0..q10`.
+//! `isqrt n r`, `servo B k f0..f(S-1) d0..d(S-1) e0..e(P-1)`,
+//! `pacer P k f0..f(S-1) d0..d(S-1) e0..e(P-1)`, `staged P i0..i7 v0..v79`,
+//! `period k rc q0..q10`.
 //! M is the machine ([`machine`]: 0 the H-4 with rolling table, 1 the hexapod, 2 the
 //! hexapod-xy); rc = 0 or the iteration count, negative for an `Unreachable` reason;
 //! servo: bench B ([`servo`]), period k of its tick, encoder feedback f, DAC codes d,
-//! contour error e (`f32` bits).
+//! contour error e (`f32` bits); pacer: bench P ([`pacer`]), as servo, then the
+//! tick's staged samples: the recorder's servo-side ids i and ten periods' values v.
 //!
 //! Whole controller calls: `bench_ctrl_init` builds a real [`Controller`] in emulated
 //! RAM; `bench_ctrl_receive`, `bench_ctrl_tick` and `bench_ctrl_transmit` each make one
@@ -28,9 +31,11 @@
 
 use pkmc::config::MachineConfig;
 use pkmc::controller::{Controller, Inputs, Outputs};
+use pkmc::drive::recorder::MAX_SIGNALS;
 use pkmc::kinematics::fixed::{isqrt, sincos};
 use pkmc::kinematics::{Joints, Kinematics, MachineKinematics, Pose, Unreachable};
 
+pub mod pacer;
 pub mod servo;
 pub mod wire;
 
@@ -315,6 +320,23 @@ pub unsafe extern "C" fn bench_ctrl_tick(
 ) -> *const Outputs {
     // SAFETY: the caller passes valid pointers.
     unsafe { (*c).tick(&*inputs) }
+}
+
+/// One whole `Controller::record_servo` call: the servo side's samples of `n`
+/// periods (`rows`) of the signals `ids`, as the firmware hands them over after a
+/// tick, under the same lock (`src/bin/firmware/main.rs`, `on_tick`).
+///
+/// # Safety
+/// `c` from [`bench_ctrl_init`]; `ids` valid; `rows` valid for `n` rows.
+#[no_mangle]
+pub unsafe extern "C" fn bench_ctrl_record_servo(
+    c: *mut Controller,
+    ids: *const [u8; MAX_SIGNALS],
+    rows: *const [i32; MAX_SIGNALS],
+    n: usize,
+) {
+    // SAFETY: the caller passes valid pointers.
+    unsafe { (*c).record_servo(&*ids, core::slice::from_raw_parts(rows, n)) }
 }
 
 /// One whole `Controller::transmit` call into `out[..len]`; returns the bytes written.

@@ -1,6 +1,8 @@
 //! The whole programs that `record` runs through `nc-send`'s link client: G-code
 //! generated here, and report B's helices read from `examples/` at compile time.
 
+use pkmc::drive::recorder::{Setup, Signal, Trigger, MAX_SIGNALS};
+
 /// One recorded program.
 pub struct Program {
     /// Short name (`h4_seg0.05mm`, …).
@@ -20,6 +22,65 @@ pub struct Program {
     /// touches: the program probes it (G38.2), and runs a stage at a time as
     /// `nc-send` runs such a program.
     pub probe: Option<([f64; 3], f64)>,
+    /// The data recorder armed before the job ([`record_tick`], [`record_servo`]).
+    pub record: Option<Setup>,
+    /// The servo bench whose tick stands for the program's servo periods in its 1 ms
+    /// figure (`.ci/m4count.py`); `None`: the machine's bank.
+    pub servo_bench: Option<&'static str>,
+}
+
+/// 8 signals every tick, streamed (`Trigger::Stream`), on a servo machine: joint 0's
+/// commanded and measured position, following error and DAC code, the path speed, the
+/// contour errors of the path and of the tool's direction, the NC line: every kind
+/// of signal the tick forms.
+pub fn record_tick() -> Setup {
+    use Signal::*;
+    setup(
+        [
+            Commanded(0),
+            Measured(0),
+            FollowingError(0),
+            Output(0),
+            PathSpeed,
+            ContourError,
+            DirectionError,
+            Line,
+        ],
+        false,
+    )
+}
+
+/// 8 signals every servo period, streamed, on the hexapod-xy: leg 0's commanded and
+/// measured position, following error and DAC code, the table X's (joint 6)
+/// following error and DAC code, the contour errors of the path and of the tool's
+/// direction, all staged by the servo side (`crate::pacer::HEXAPOD_XY_SIGNALS`).
+pub fn record_servo() -> Setup {
+    use Signal::*;
+    setup(
+        [
+            Commanded(0),
+            Measured(0),
+            FollowingError(0),
+            Output(0),
+            FollowingError(6),
+            Output(6),
+            ContourError,
+            DirectionError,
+        ],
+        true,
+    )
+}
+
+/// A continuous capture of `signals`, every servo period or every tick, undecimated.
+fn setup(signals: [Signal; MAX_SIGNALS], servo: bool) -> Setup {
+    Setup {
+        signals: signals.map(Signal::id),
+        count: MAX_SIGNALS as u8,
+        servo,
+        decimate: 1,
+        trigger: Trigger::Stream,
+        pre: 0,
+    }
 }
 
 /// Touches of a ball at `centre` of radius `r` (mm) from five directions: a rapid to
@@ -217,6 +278,8 @@ pub fn programs() -> Vec<Program> {
                 events: what.ends_with("events"),
                 lead_ticks: 0,
                 probe: None,
+                record: None,
+                servo_bench: None,
             })
         };
         add("seg0.05mm", sine(0.05, SINE_MM, x0, z, 5.0, 40.0));
@@ -267,6 +330,8 @@ pub fn programs() -> Vec<Program> {
             events: false,
             lead_ticks: 0,
             probe: Some((ball, 6.0)),
+            record: None,
+            servo_bench: None,
         });
     }
     let (m, z, len) = (2, 275.0, HEXAPOD_XY_SINE_MM);
@@ -281,6 +346,8 @@ pub fn programs() -> Vec<Program> {
             events: what.ends_with("events"),
             lead_ticks: (lead_s * 1000.0) as u64,
             probe: None,
+            record: None,
+            servo_bench: None,
         })
     };
     add("seg0.05mm", sine(0.05, len, x0, z, 5.0, 40.0));
@@ -295,7 +362,32 @@ pub fn programs() -> Vec<Program> {
         events: false,
         lead_ticks: 0,
         probe: Some((ball, 6.0)),
+        record: None,
+        servo_bench: None,
     });
+    // The data recorder streaming 8 signals beside the job, every tick and every
+    // servo period (whose 1 ms figure adds the staging to the bank's periods).
+    for base in ["hexapod_xy_seg0.05mm", "hexapod_xy_helix-b-tilt"] {
+        let Some(p) = out.iter().find(|p| p.name == base) else {
+            continue;
+        };
+        let (machine, text, lead_ticks) = (p.machine, p.text.clone(), p.lead_ticks);
+        for (tag, record, servo_bench) in [
+            ("rec1k", record_tick(), None),
+            ("rec10k", record_servo(), Some("servo_hexapod_xy_8ch_rec8")),
+        ] {
+            out.push(Program {
+                name: format!("{base}_{tag}"),
+                machine,
+                text: text.clone(),
+                events: false,
+                lead_ticks,
+                probe: None,
+                record: Some(record),
+                servo_bench,
+            });
+        }
+    }
     out
 }
 

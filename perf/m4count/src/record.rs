@@ -32,13 +32,23 @@
 //! would put all of them into one period, which no link can do in 1 ms (USB full speed
 //! carries about 30 block frames of 36–46 bytes per millisecond).
 //!
-//! Log (little-endian), one file per program: the magic `PKMC-M4-CALLS-2` (2: the
-//! tick's outputs carry the contour map), then records
-//! until the end of the file:
+//! Data recorder. A program may arm the recorder before its job (`Program::record`,
+//! [`Link::record_arm`]); in continuous mode the controller streams pieces of samples
+//! beside the job, which the client keeps ([`Link::record_take`]: the recording checks
+//! that they came). Sampling every servo period, the simulator hands each tick's
+//! servo-period samples to the controller after the tick in two calls, as the firmware
+//! does under the same lock ([`Simulator::last_servo_record`]); they are logged too.
+//!
+//! Log (little-endian), one file per program: the magic `PKMC-M4-CALLS-3` (2: the
+//! tick's outputs carry the contour map; 3: the tick's inputs carry the recorder's DAC
+//! means and contour error, its outputs the servo-side signals, and `S` records), then
+//! records until the end of the file:
 //!
 //! * `R` `len: u16` `bytes[len]`: `receive(bytes)`;
 //! * `T` `inputs: [i64; INPUT_WORDS]` `outputs: [i64; OUTPUT_WORDS]`: `tick`, its
 //!   inputs and outputs flattened by [`crate::wire`];
+//! * `S` `ids: [u8; MAX_SIGNALS]` `n: u8` `rows: [[i32; MAX_SIGNALS]; n]`:
+//!   `record_servo(ids, rows)` after the tick before it;
 //! * `X` `n: u16` `bytes[n]`: `transmit` into a [`USB_PACKET`]-byte buffer returned `n`.
 
 use crate::programs::{programs, Program};
@@ -65,7 +75,7 @@ pub const USB_PACKETS_PER_TICK: usize = 19;
 /// blocks/s that the period budget assumes (issue 9).
 pub const FRAMES_PER_TICK: usize = 10;
 /// Magic at the start of a log.
-pub const MAGIC: &[u8] = b"PKMC-M4-CALLS-2";
+pub const MAGIC: &[u8] = b"PKMC-M4-CALLS-3";
 /// Most ticks one read runs before returning empty-handed (as `InProcess`).
 const TICKS_PER_READ: u32 = 10_000;
 
@@ -80,6 +90,8 @@ pub struct Counts {
     pub frames: u64,
     /// `transmit` calls.
     pub transmits: u64,
+    /// `record_servo` calls.
+    pub record_servo: u64,
 }
 
 /// The recording transport: the link to a simulated controller, logging every call
@@ -160,6 +172,15 @@ impl Recorder {
             self.log.extend_from_slice(&w.to_le_bytes());
         }
         self.counts.ticks += 1;
+        for (ids, rows) in self.sim.last_servo_record() {
+            self.log.push(b'S');
+            self.log.extend_from_slice(ids);
+            self.log.push(rows.len() as u8);
+            for v in rows.iter().flatten() {
+                self.log.extend_from_slice(&v.to_le_bytes());
+            }
+            self.counts.record_servo += 1;
+        }
         self.packets_left = USB_PACKETS_PER_TICK;
         self.frames_left = FRAMES_PER_TICK;
         self.drain();
@@ -357,6 +378,9 @@ pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
     let io = Recorder::new(sim);
     let mut link =
         Link::connect(io, &machine, LinkOptions::default()).map_err(|e| e.to_string())?;
+    if let Some(setup) = &p.record {
+        link.record_arm(setup).map_err(|e| e.to_string())?;
+    }
     let mut hooks = Operator::new(p.events, p.lead_ticks);
     let mut sent = blocks.len();
     let end = match prepare(&mut link, false, true, &mut NoHooks).map_err(|e| e.message)? {
@@ -404,12 +428,47 @@ pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
             p.name, status.state
         ));
     }
+    if let Some(setup) = &p.record {
+        streamed_enough(p, setup, &mut link)?;
+    }
     let io = link.into_transport();
     Ok((io.log, io.counts, sent))
 }
 
+/// Checks that a recording program's stream came: pieces of its signals, at its
+/// rate, holding most of the samples of the job's ticks (the link may lose some).
+fn streamed_enough(
+    p: &Program,
+    setup: &pkmc::drive::recorder::Setup,
+    link: &mut Link<Recorder>,
+) -> Result<(), String> {
+    let pieces = link.record_take();
+    let samples: usize = pieces.iter().map(|piece| piece.samples.len()).sum();
+    let ticks = link.transport().counts.ticks as usize;
+    let per_tick = if setup.servo { 10 } else { 1 };
+    let ok = pieces
+        .iter()
+        .all(|piece| piece.servo == setup.servo && piece.signals.len() == setup.count as usize);
+    eprintln!(
+        "pkmc-m4count: {}: {} streamed pieces, {samples} samples over {ticks} ticks",
+        p.name,
+        pieces.len()
+    );
+    if !ok || samples < ticks * per_tick / 2 {
+        return Err(format!(
+            "{}: the recorder streamed {samples} samples in {} pieces over {ticks} ticks",
+            p.name,
+            pieces.len()
+        ));
+    }
+    Ok(())
+}
+
 /// Records every program into `dir` (one `NAME.calls` file each) and prints one line
-/// per program: `program NAME MACHINE FILE BLOCKS TICKS PACKETS FRAMES TRANSMITS`.
+/// per program: `program NAME MACHINE FILE BLOCKS TICKS PACKETS FRAMES TRANSMITS
+/// SERVO REC`, SERVO the servo bench whose tick stands for the program's servo periods
+/// in its 1 ms figure (`-`: the machine's bank, as `.ci/m4count.py` chooses it), REC
+/// `armed` when the program arms the data recorder (else `-`).
 pub fn record_all(dir: &Path) -> Result<(), String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     for p in programs() {
@@ -419,14 +478,16 @@ pub fn record_all(dir: &Path) -> Result<(), String> {
         std::fs::write(dir.join(format!("{}.ngc", p.name)), &p.text)
             .map_err(|e| format!("{}: {e}", path.display()))?;
         println!(
-            "program {} {} {} {blocks} {} {} {} {}",
+            "program {} {} {} {blocks} {} {} {} {} {} {}",
             p.name,
             p.machine,
             path.display(),
             c.ticks,
             c.packets,
             c.frames,
-            c.transmits
+            c.transmits,
+            p.servo_bench.unwrap_or("-"),
+            if p.record.is_some() { "armed" } else { "-" }
         );
     }
     // The controller's size on the host, for comparison with the target's.

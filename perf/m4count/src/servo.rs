@@ -14,10 +14,10 @@
 //! checks it: the counted periods take the coupled path).
 
 use pkmc::config::{Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS};
-use pkmc::kinematics::{ContourMap, POSE_AXES};
 use pkmc::drive::contour::{PeriodInputs, ServoBank};
-use pkmc::kinematics::{Kinematics, MachineKinematics, Pose};
 use pkmc::drive::servo::target_q16;
+use pkmc::kinematics::{ContourMap, POSE_AXES};
+use pkmc::kinematics::{Kinematics, MachineKinematics, Pose};
 
 /// Bytes the emulator reserves for one [`ServoBank`].
 pub const BANK_BYTES: usize = 4096;
@@ -28,7 +28,7 @@ pub const BENCHES: u32 = 2;
 
 /// Four servo channels: X, Y, Z coupled by CCPM with `seed-b`'s gains (docs/contour.md),
 /// a fourth (rotary A) uncoupled; 1 µm per count. The bank's other channels are unused.
-fn ccpm_4axes_machine() -> MachineConfig {
+pub fn ccpm_4axes_machine() -> MachineConfig {
     use pkmc::config::{ContourConfig, ContourMode, KinematicsConfig, Scale, ServoGains};
     let mut m = MachineConfig::cartesian_xyz();
     let g = ServoGains {
@@ -69,21 +69,26 @@ fn ccpm_4axes_machine() -> MachineConfig {
 }
 
 /// `v` on the first channels, zero on the rest.
-fn channels(v: &[i64]) -> [i64; MAX_SERVOS] {
+pub fn channels(v: &[i64]) -> [i64; MAX_SERVOS] {
     let mut out = [0; MAX_SERVOS];
     out[..v.len()].copy_from_slice(v);
     out
 }
 
-/// The four-channel bank at rest with one tick's targets loaded.
-fn ccpm_4axes_bank() -> ServoBank {
-    let mut bank = ServoBank::new(&ccpm_4axes_machine(), &channels(&[0, 0, 260_000, 0]));
-    bank.load_tick(&channels(&[
+/// The four-channel bench's tick targets, counts × 2^16.
+pub fn ccpm_4axes_targets() -> [i64; MAX_SERVOS] {
+    channels(&[
         (10 << 16) + 123,
         (3 << 16) + 77,
         (260_003 << 16) + 5,
         2 << 16,
-    ]));
+    ])
+}
+
+/// The four-channel bank at rest with one tick's targets loaded.
+fn ccpm_4axes_bank() -> ServoBank {
+    let mut bank = ServoBank::new(&ccpm_4axes_machine(), &channels(&[0, 0, 260_000, 0]));
+    bank.load_tick(&ccpm_4axes_targets());
     bank
 }
 
@@ -93,7 +98,7 @@ fn ccpm_4axes_bank() -> ServoBank {
 /// gives each channel: when [`ServoBank`] runs the LQG law for the legs, switching the
 /// six legs to it is a change of this configuration only (here, or in
 /// `MachineConfig::hexapod_xy()` itself); nothing else in the bench changes.
-fn hexapod_xy_machine() -> MachineConfig {
+pub fn hexapod_xy_machine() -> MachineConfig {
     MachineConfig::hexapod_xy()
 }
 
@@ -101,7 +106,7 @@ fn hexapod_xy_machine() -> MachineConfig {
 /// (`examples/helix-b-tilt.ngc`) at t = 2.500, 2.501 and 2.502 s: X = t cos t,
 /// Y = t sin t, Z = 3t + 260 mm, A = 10 sin(πt/5)°, B = 10 sin(πt/10)° (nm, n°). About
 /// 4 mm/s along the path: the table, every leg and the tool axis move.
-const HELIX: [Pose; 3] = [
+pub const HELIX: [Pose; 3] = [
     [
         -2_002_859,
         1_496_180,
@@ -130,7 +135,7 @@ const HELIX: [Pose; 3] = [
 
 /// Each servo channel's target at each pose of [`HELIX`], counts × 2^16, as the
 /// controller sends them (`Controller::update_servo_targets`; no homing offsets).
-fn helix_targets(m: &MachineConfig, kin: &MachineKinematics) -> [[i64; MAX_SERVOS]; 3] {
+pub fn helix_targets(m: &MachineConfig, kin: &MachineKinematics) -> [[i64; MAX_SERVOS]; 3] {
     HELIX.map(|pose| {
         let mut q = [0; MAX_JOINTS];
         if kin.inverse(&pose, &mut q).is_err() {
@@ -154,7 +159,10 @@ fn hexapod_xy_bank() -> ServoBank {
     let m = hexapod_xy_machine();
     let kin = MachineKinematics::new(&m);
     let t = helix_targets(&m, &kin);
-    let mut bank = ServoBank::new(&m, &t[0].map(|q| q >> pkmc::drive::servo::SETPOINT_FRAC_BITS));
+    let mut bank = ServoBank::new(
+        &m,
+        &t[0].map(|q| q >> pkmc::drive::servo::SETPOINT_FRAC_BITS),
+    );
     bank.load_tick(&t[1]);
     bank.load_tick(&t[2]);
     let MachineKinematics::HexapodXy(k) = &kin else {

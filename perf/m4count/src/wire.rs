@@ -6,21 +6,25 @@
 //! (the `wire` line) and checks them against the image's ([`crate::bench_wire_words`]).
 
 use pkmc::config::{MAX_SERVOS, MAX_STEPPERS};
-use pkmc::kinematics::{ContourMap, POSE_AXES};
 use pkmc::controller::{Inputs, Outputs};
+use pkmc::drive::recorder::MAX_SIGNALS;
 use pkmc::drive::servo::Trip;
 use pkmc::drive::stepper::StepTrain;
+use pkmc::kinematics::{ContourMap, POSE_AXES};
 
 /// Words of one [`Inputs`]: encoder counts, index (flag, count) per servo channel,
 /// e-stop, limit, home and drive-fault bits, trip (code, error, limit) per channel,
-/// then the probe (debounced, raw, edge time or -1).
-pub const INPUT_WORDS: usize = MAX_SERVOS + 2 * MAX_SERVOS + 4 + 3 * MAX_SERVOS + 3;
+/// the probe (debounced, raw, edge time or -1), then each channel's mean DAC code and
+/// the contour error (the data recorder's).
+pub const INPUT_WORDS: usize =
+    MAX_SERVOS + 2 * MAX_SERVOS + 4 + 3 * MAX_SERVOS + 3 + MAX_SERVOS + POSE_AXES;
 /// Words of one [`ContourMap`]: its `f32` entries' bits, `to_pose` row by row, then
 /// `to_joint` row by row.
 pub const MAP_WORDS: usize = 2 * POSE_AXES * MAX_SERVOS;
-/// Words of one [`Outputs`]: five per step train, the servo targets, three flags, and
-/// the contour map (a presence flag, then [`MAP_WORDS`], zero when absent).
-pub const OUTPUT_WORDS: usize = 5 * MAX_STEPPERS + MAX_SERVOS + 3 + 1 + MAP_WORDS;
+/// Words of one [`Outputs`]: five per step train, the servo targets, three flags, the
+/// data recorder's servo-side signals, and the contour map (a presence flag, then
+/// [`MAP_WORDS`], zero when absent).
+pub const OUTPUT_WORDS: usize = 5 * MAX_STEPPERS + MAX_SERVOS + 3 + MAX_SIGNALS + 1 + MAP_WORDS;
 
 /// `inputs` as words.
 pub fn inputs_words(inputs: &Inputs) -> [i64; INPUT_WORDS] {
@@ -35,6 +39,8 @@ pub fn inputs_words(inputs: &Inputs) -> [i64; INPUT_WORDS] {
         probe,
         probe_raw,
         probe_edge_us,
+        servo_dac,
+        contour,
     } = *inputs;
     let mut w = [0; INPUT_WORDS];
     let mut k = 0;
@@ -69,12 +75,22 @@ pub fn inputs_words(inputs: &Inputs) -> [i64; INPUT_WORDS] {
     put(probe as i64);
     put(probe_raw as i64);
     put(probe_edge_us.map_or(-1, i64::from));
+    for d in servo_dac {
+        put(i64::from(d));
+    }
+    for e in contour {
+        put(i64::from(e));
+    }
     w
 }
 
 /// The [`Inputs`] that [`inputs_words`] flattened.
 pub fn inputs_from(w: &[i64; INPUT_WORDS]) -> Inputs {
     let s = MAX_SERVOS;
+    // The probe's three words, then the recorder's.
+    let p = 3 * s + 4 + 3 * s;
+    let dac = p + 3;
+    let contour = dac + s;
     Inputs {
         encoder_counts: core::array::from_fn(|c| w[c]),
         index: core::array::from_fn(|c| (w[s + 2 * c] != 0).then_some(w[s + 2 * c + 1])),
@@ -93,9 +109,11 @@ pub fn inputs_from(w: &[i64; INPUT_WORDS]) -> Inputs {
                 _ => None,
             }
         }),
-        probe: w[INPUT_WORDS - 3] != 0,
-        probe_raw: w[INPUT_WORDS - 2] != 0,
-        probe_edge_us: (w[INPUT_WORDS - 1] >= 0).then_some(w[INPUT_WORDS - 1] as u16),
+        probe: w[p] != 0,
+        probe_raw: w[p + 1] != 0,
+        probe_edge_us: (w[p + 2] >= 0).then_some(w[p + 2] as u16),
+        servo_dac: core::array::from_fn(|c| w[dac + c] as u16),
+        contour: core::array::from_fn(|a| w[contour + a] as i32),
     }
 }
 
@@ -116,6 +134,7 @@ pub fn outputs_words(outputs: &Outputs, contour_map: Option<&ContourMap>) -> [i6
         enable,
         servo_enable,
         servo_reset,
+        servo_record,
     } = *outputs;
     let mut w = [0; OUTPUT_WORDS];
     for (c, t) in steps.iter().enumerate() {
@@ -140,9 +159,13 @@ pub fn outputs_words(outputs: &Outputs, contour_map: Option<&ContourMap>) -> [i6
     w[f] = enable as i64;
     w[f + 1] = servo_enable as i64;
     w[f + 2] = servo_reset as i64;
+    for (o, &id) in w[f + 3..].iter_mut().zip(&servo_record) {
+        *o = i64::from(id);
+    }
+    let m = f + 3 + MAX_SIGNALS;
     if let Some(map) = contour_map {
-        w[f + 3] = 1;
-        map_words(map, &mut w[f + 4..]);
+        w[m] = 1;
+        map_words(map, &mut w[m + 1..]);
     }
     w
 }
