@@ -196,6 +196,8 @@ pub struct Controller {
     record_refused: Option<crate::drive::recorder::RecorderError>,
     /// Ticks since the recorder's last streamed piece.
     stream_wait: u8,
+    /// A streamed piece is due: encoded by the next `transmit`.
+    stream_due: bool,
     /// A test signal running on a servo joint (`drive::excite`).
     excite: Option<crate::drive::excite::Signal>,
 }
@@ -354,6 +356,7 @@ impl Controller {
             crate::drive::recorder::Recorder::init_at(at!((*p).recorder));
             at!((*p).record_refused).write(None);
             at!((*p).stream_wait).write(0);
+            at!((*p).stream_due).write(false);
             at!((*p).excite).write(None);
             (*p).update_servo_targets();
         }

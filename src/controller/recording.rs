@@ -126,8 +126,18 @@ impl Controller {
         }
         self.recorder.sample(&values);
         if self.recorder.capture().phase == Phase::Streaming {
-            self.record_stream();
+            self.stream_tick();
         }
+    }
+
+    /// Streaming, each tick: a piece is due once the waiting samples fill one or have
+    /// waited [`STREAM_WAIT`] ticks. It is encoded when the link asks for bytes
+    /// (`Controller::transmit`), not in the tick.
+    fn stream_tick(&mut self) {
+        self.stream_wait = self.stream_wait.saturating_add(1);
+        let c = self.recorder.capture();
+        let full = c.samples as usize >= RECORD_CHUNK / c.width.max(1) as usize;
+        self.stream_due = c.samples > 0 && (full || self.stream_wait >= STREAM_WAIT);
     }
 
     /// The recorder samples every servo period: after each tick, hand it the servo
@@ -187,24 +197,23 @@ impl Controller {
             self.recorder.sample(&values);
         }
         if self.recorder.capture().phase == Phase::Streaming {
-            self.record_stream();
+            self.stream_tick();
         }
     }
 
-    /// Streaming: sends the samples not sent yet once they fill a piece or have
-    /// waited [`STREAM_WAIT`] ticks, and only while the link's send buffer keeps room
-    /// for [`STREAM_HEADROOM`] bytes besides (the job's acknowledgements and status
-    /// come first). Samples that wait too long are overwritten in the ring: the
-    /// host sees the gap in their numbers.
-    fn record_stream(&mut self) {
+    /// Streaming, when the link asks for bytes and a piece is due
+    /// ([`Controller::stream_tick`]): sends one piece of the samples not sent yet,
+    /// only while the link's send buffer keeps room for [`STREAM_HEADROOM`] bytes
+    /// besides (the job's acknowledgements and status come first). Samples that wait
+    /// too long are overwritten in the ring: the host sees the gap in their numbers.
+    pub(super) fn record_stream(&mut self) {
         let width = self.recorder.capture().width.max(1) as usize;
         let waiting = self.recorder.capture().samples as usize;
-        self.stream_wait = self.stream_wait.saturating_add(1);
-        let full = waiting >= RECORD_CHUNK / width;
-        if waiting == 0
-            || !(full || self.stream_wait >= STREAM_WAIT)
-            || self.tx.free() < STREAM_HEADROOM + MAX_FRAME
-        {
+        if self.recorder.capture().phase != Phase::Streaming || waiting == 0 {
+            self.stream_due = false;
+            return;
+        }
+        if self.tx.free() < STREAM_HEADROOM + MAX_FRAME {
             return;
         }
         let mut body = [0; CHUNK_BYTES];
@@ -233,6 +242,7 @@ impl Controller {
         if self.push_frame(|seq, b, out| encode_frame_with(seq, &msg, b, out).ok()) {
             self.recorder.sent(n);
             self.stream_wait = 0;
+            self.stream_due = waiting - n as usize >= RECORD_CHUNK / width;
         }
     }
 

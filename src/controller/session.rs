@@ -139,9 +139,13 @@ impl Controller {
 
     /// Moves pending outgoing bytes into `out`; returns how many. The `Ack` and the
     /// status owed are encoded first (one of each, however many blocks were accepted,
-    /// slots freed or statuses asked for since the last call).
+    /// slots freed or statuses asked for since the last call), then the data
+    /// recorder's streamed piece if one is due (encoded here rather than in the tick).
     pub fn transmit(&mut self, out: &mut [u8]) -> usize {
         self.send_due();
+        if self.stream_due {
+            self.record_stream();
+        }
         self.tx.pop_into(out)
     }
 
