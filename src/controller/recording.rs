@@ -124,6 +124,16 @@ impl Controller {
         }
     }
 
+    /// Is the recorder armed, filling or streaming, or a test signal running? A
+    /// simulator keeps ticking at real time while it is (its samples come from ticks).
+    pub fn recording(&self) -> bool {
+        self.excite.is_some()
+            || matches!(
+                self.recorder.capture().phase,
+                Phase::Armed | Phase::Triggered | Phase::Streaming
+            )
+    }
+
     /// The recorder samples every servo period: after each tick, hand it the servo
     /// side's samples ([`Controller::record_servo`]).
     pub fn records_servo(&self) -> bool {
@@ -233,7 +243,10 @@ impl Controller {
     /// Checks a test signal's request against the machine and starts it.
     fn excite_start(&mut self, e: Excite) -> Result<(), RecorderError> {
         let joint = e.joint;
-        let idle = self.state == State::Idle && self.homed && !self.job_open;
+        // A machine without home switches cannot home: unlocked, it counts as homed.
+        let switches = self.machine.joints.iter().any(|j| j.homing.enabled());
+        let homed = self.homed || (!switches && !self.locked);
+        let idle = self.state == State::Idle && homed && !self.job_open;
         if !idle || !self.planner.is_empty() || self.moving() {
             return Err(RecorderError::ExciteBusy);
         }

@@ -341,6 +341,7 @@ pub fn serve(
         }
         let paced = busy
             && (clock == ServeClock::RealTime
+                || sim.ctrl.recording()
                 || clock == ServeClock::Paced
                     && status.buffered_ms < PACE_BELOW_MS
                     && now.duration_since(board.fed) < PACE_AFTER_BLOCKS);
