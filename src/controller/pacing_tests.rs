@@ -364,11 +364,7 @@ fn the_recorders_servo_samples_are_each_periods_and_read_a_tick_later() {
     for (k, row) in rows.iter().enumerate() {
         let setpoint = 1000 + 10 * (k as i32 + 1);
         let feedback = 1000 + (10 * k as i32 - 3).max(0);
-        assert_eq!(
-            row[..4],
-            [setpoint, feedback, setpoint - feedback, dacs[k]],
-            "period {k}"
-        );
+        assert_eq!(row[..4], [setpoint, feedback, setpoint - feedback, dacs[k]], "period {k}");
         assert!(row[4..].iter().all(|&v| v == 0));
     }
 }

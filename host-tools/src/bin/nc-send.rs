@@ -575,11 +575,7 @@ fn command(
                 None,
             ),
             Command::Tune(t) => {
-                let m = args.machine.as_deref();
-                (
-                    pkmc_host::scope::tune::run(link, t, m, opts, &mut op)?,
-                    None,
-                )
+                pkmc_host::scope::tune::run(link, t, args.machine.as_deref(), opts, &mut op)?
             }
             Command::Mdi { line } => {
                 let (blocks, end) = job::mdi(link, machine, line, &opts.tools, &mut op)?;

@@ -41,7 +41,7 @@ pub struct TuneArgs {
     #[arg(long, value_name = "MM")]
     pub amplitude: Option<f64>,
     /// How long the PRBS test signal lasts, s.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 2.0)]
     pub seconds: f64,
     /// How long the PRBS holds each value, ms.
     #[arg(long, default_value_t = 10)]
@@ -164,14 +164,15 @@ fn find_joint<'a>(mf: &'a MachineFile, name: &str, path: &Path) -> Result<Joint<
     })
 }
 
-/// Runs `nc-send tune` on `link` with the machine file at `path`.
+/// Runs `nc-send tune` on `link` with the machine file at `path`; how it ended (and
+/// no block count: it sends no program).
 pub fn run<T: Transport>(
     link: &mut Link<T>,
     args: &TuneArgs,
     path: Option<&Path>,
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
-) -> Result<JobEnd, Failure> {
+) -> Result<(JobEnd, Option<usize>), Failure> {
     check(args)?;
     let path = path.ok_or_else(|| bad("tune needs the machine file: --machine FILE"))?;
     let text = std::fs::read_to_string(path)
@@ -182,7 +183,7 @@ pub fn run<T: Transport>(
         // A fresh simulator is locked: home it (a machine with switches) or unlock it.
         let switches = link.machine().joints.iter().any(|j| j.homing.enabled());
         if let Some(end) = crate::job::prepare(link, switches, true, hooks)? {
-            return Ok(end);
+            return Ok((end, None));
         }
     } else {
         crate::job::prepare(link, false, false, hooks)?;
@@ -242,7 +243,7 @@ pub fn run<T: Transport>(
     } else {
         println!("would write (with --write): {}", new.line.trim());
     }
-    Ok(JobEnd::Done)
+    Ok((JobEnd::Done, None))
 }
 
 /// Streams the joint's output, encoder and command every servo period while the
