@@ -34,15 +34,18 @@ impl fmt::Display for crate::drive::recorder::RecorderError {
             E::Malformed { at: 255 } => f.write_str("a recorder request of an unknown kind"),
             E::Malformed { at } => write!(f, "the recorder request is malformed at byte {at}"),
             E::ExciteBusy => f.write_str(
-                "a test signal needs a homed machine standing idle, with no job and                  nothing queued",
+                "a test signal needs a homed machine standing idle, with no job and \
+                 nothing queued (a machine without home switches: unlocked)",
             ),
             E::ExciteJoint { joint } => write!(
                 f,
-                "joint {joint} is not driven by a servo channel: only servo joints take                  a test signal"
+                "joint {joint} is not driven by a servo channel: only servo joints take \
+                 a test signal"
             ),
             E::ExciteAmplitude { joint, limit } => write!(
                 f,
-                "the test signal's amplitude must be below joint {joint}'s standstill                  following-error limit of {limit} counts"
+                "the test signal's amplitude must be below joint {joint}'s standstill \
+                 following-error limit of {limit} counts"
             ),
             E::ExciteTravel { joint } => write!(
                 f,
