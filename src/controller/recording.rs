@@ -124,14 +124,11 @@ impl Controller {
         }
     }
 
-    /// Is the recorder armed, filling or streaming, or a test signal running? A
-    /// simulator keeps ticking at real time while it is (its samples come from ticks).
+    /// Is the recorder streaming, or a test signal running? A simulator keeps ticking
+    /// at real time while it is (its samples come from ticks); an armed capture, as
+    /// before, fills with the ticks the simulator runs anyway.
     pub fn recording(&self) -> bool {
-        self.excite.is_some()
-            || matches!(
-                self.recorder.capture().phase,
-                Phase::Armed | Phase::Triggered | Phase::Streaming
-            )
+        self.excite.is_some() || self.recorder.capture().phase == Phase::Streaming
     }
 
     /// The recorder samples every servo period: after each tick, hand it the servo
