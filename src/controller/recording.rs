@@ -35,10 +35,11 @@ pub const STREAM_WAIT: u8 = 10;
 pub const STREAM_HEADROOM: usize = 768;
 
 impl Controller {
-    /// Is the recorder sampling (armed, filling after its trigger, or streaming)?
-    /// Time passes for it even at rest: a simulator ticks on while it is.
+    /// Is the recorder sampling (armed, filling after its trigger, or streaming), or a
+    /// test signal running? Time passes for them even at rest: a simulator behind a
+    /// port ticks on while they are.
     pub fn recording(&self) -> bool {
-        self.recorder.wants(false) || self.recorder.wants(true)
+        self.excite.is_some() || self.recorder.wants(false) || self.recorder.wants(true)
     }
 
     /// `HostMsg::Record`: a read, answered at once, or a control (arm, disarm),
@@ -260,7 +261,10 @@ impl Controller {
             let limit = limit.min(u16::MAX as u32) as u16;
             return Err(RecorderError::ExciteAmplitude { joint, limit });
         }
-        let idle = self.state == State::Idle && self.homed && !self.job_open;
+        // A machine without home switches cannot home: unlocked, it counts as homed.
+        let switches = self.machine.joints.iter().any(|j| j.homing.enabled());
+        let homed = self.homed || (!switches && !self.locked);
+        let idle = self.state == State::Idle && homed && !self.job_open;
         if !idle || !self.planner.is_empty() || self.moving() {
             return Err(RecorderError::ExciteBusy);
         }

@@ -180,9 +180,10 @@ enum Command {
     /// Calibrate the machine file's geometry from measured tool poses; `plan` the poses
     /// to measure (docs/calibration.md). Runs on this computer, no controller.
     Calibrate(pkmc_host::calibrate::cli::CalibrateArgs),
-    /// Record signals with the controller's data recorder, during a program if given
-    /// one, to CSV and a plot (docs/recorder.md).
+    /// Record signals with the controller's recorder, to CSV and a plot (docs/recorder.md).
     Record(pkmc_host::scope::cli::RecordArgs),
+    /// Identify a servo joint's plant from a test signal and design its gains (docs/tuning.md).
+    Tune(pkmc_host::scope::tune::TuneArgs),
 }
 
 fn main() {
@@ -573,6 +574,9 @@ fn command(
                 pkmc_host::scope::cli::run(link, r, machine, opts, &mut op)?,
                 None,
             ),
+            Command::Tune(t) => {
+                pkmc_host::scope::tune::run(link, t, args.machine.as_deref(), opts, &mut op)?
+            }
             Command::Mdi { line } => {
                 let (blocks, end) = job::mdi(link, machine, line, &opts.tools, &mut op)?;
                 (end, Some(blocks.len()))

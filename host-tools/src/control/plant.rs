@@ -50,6 +50,11 @@ pub struct PlantFile {
     pub den: Vec<f64>,
     /// Command units per DAC count above mid-scale.
     pub input_per_count: f64,
+    /// Simulator only: the standard deviation of a Gaussian noise added to the
+    /// encoder's reading before it is rounded to whole counts, counts (0: none; seeded
+    /// by the channel, so that runs repeat).
+    #[serde(default)]
+    pub encoder_noise: f64,
 }
 
 /// Highest model order accepted.

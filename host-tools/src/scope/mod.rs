@@ -6,6 +6,8 @@
 
 pub mod cli;
 pub mod plot;
+pub mod tune;
+pub mod tune_write;
 
 use pkmc::drive::recorder::{Setup, Signal, Trigger, MAX_SIGNALS};
 

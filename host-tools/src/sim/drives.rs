@@ -136,6 +136,11 @@ pub struct SimServo {
     counts: i64,
     /// Index marks at these counts (from `zero`) plus multiples of `index_pitch`.
     index_at: Option<(i64, i64)>,
+    /// Encoder noise, σ in counts ([`PlantFile::encoder_noise`]), and its generator.
+    noise: f64,
+    rng: u64,
+    /// The noiseless reading's counts from `zero` (index marks are read from it).
+    clean: i64,
 }
 
 /// Default plant of a servo joint whose machine file gives none: the amplifier and
@@ -164,6 +169,10 @@ impl SimServo {
     ) -> Result<Self> {
         let counts_per_user =
             jc.scale.steps as f64 / jc.scale.per_units as f64 * units_per_user(jc.rotary) as f64;
+        let noise = file.map_or(0.0, |f| f.encoder_noise);
+        if !(noise.is_finite() && noise >= 0.0) {
+            return Err(crate::control::plant::PlantError::NotFinite.into());
+        }
         let (tf, input_per_count) = match file {
             Some(f) => (TransferFunction::new(&f.num, &f.den)?, f.input_per_count),
             None => (
@@ -191,6 +200,13 @@ impl SimServo {
             jammed: None,
             counts: reading,
             index_at,
+            noise,
+            rng: 0x5EED_0000
+                + match jc.drive {
+                    pkmc::config::Drive::Servo { channel } => channel as u64,
+                    _ => 0,
+                },
+            clean: reading - zero,
         })
     }
 
@@ -210,12 +226,19 @@ impl SimServo {
         } else {
             0.0
         };
-        let before = self.counts - self.zero;
+        let before = self.clean;
         if self.jammed.is_none() {
             self.plant.step(u);
         }
-        let now = self.true_counts(0.0).round() as i64;
-        self.counts = now + self.zero;
+        let exact = self.true_counts(0.0);
+        let now = exact.round() as i64;
+        self.clean = now;
+        let noisy = if self.noise > 0.0 {
+            (exact + self.noise * self.normal()).round() as i64
+        } else {
+            now
+        };
+        self.counts = noisy + self.zero;
         let (first, pitch) = self.index_at?;
         if pitch <= 0 || now == before {
             return None;
@@ -232,6 +255,19 @@ impl SimServo {
         crossed.then_some(mark + self.zero)
     }
 
+    /// A standard normal deviate (SplitMix64, Box–Muller).
+    fn normal(&mut self) -> f64 {
+        let mut uniform = || {
+            self.rng = self.rng.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = self.rng;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let u1 = uniform().max(1e-300);
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos()
+    }
+
     /// The plant model, with its state.
     pub fn plant(&self) -> &DiscretePlant {
         &self.plant
@@ -242,14 +278,14 @@ impl SimServo {
         self.counts
     }
 
-    /// True position, counts from the joint's zero.
+    /// True position, counts from the joint's zero (without the encoder's noise).
     pub fn position(&self) -> i64 {
-        self.counts - self.zero
+        self.clean
     }
 
     /// Jams the axis where it is (an injected following error).
     pub fn jam(&mut self) {
-        self.jammed = Some((self.counts - self.zero) as f64);
+        self.jammed = Some(self.clean as f64);
     }
 }
 

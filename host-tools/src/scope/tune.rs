@@ -1,0 +1,574 @@
+//! `nc-send tune JOINT`: tunes a servo joint on recorded data (issue 35,
+//! docs/tuning.md). The controller adds a PRBS test signal of small amplitude to the
+//! joint's position command (`pkmc::drive::excite`, its own safety checks) while the
+//! recorder streams the joint's DAC output and encoder every servo period; the host
+//! identifies the plant from them ([`crate::control::ident`]), designs PID and
+//! feed-forward gains for a stated crossover and phase margin
+//! ([`crate::control::tune`]) and, for a joint that runs LQG, the LQG gains of the
+//! file's weights on the model. A second test signal, a step, is recorded under the
+//! present gains and compared with what the model predicts under them, so that the
+//! user sees the model is right. The gains are written into the machine file only
+//! with `--write` ([`super::tune_write`]).
+
+use super::{tune_write, Table};
+use crate::control::ident::{self, IdentOptions, Identified, Record};
+use crate::control::plant::TransferFunction;
+use crate::control::tune::{self, PidSpec, PidTuning};
+use crate::control::tune_plot::{self, BodeCurve, Curve};
+use crate::job::{exit, Failure, RunOptions, Target};
+use crate::link::{JobEnd, JobHooks, Link, Transport};
+use crate::machine_file::lqg::LawKind;
+use crate::machine_file::{read_file, DriveKind, JointFile, MachineFile};
+use pkmc::config::{LqgGains, ServoGains};
+use pkmc::drive::excite::Excite;
+use pkmc::drive::servo::{
+    AmpIo, Coupling, ServoAxis, SetpointInterpolator, DAC_MID, SERVO_HZ, SERVO_PER_TICK,
+};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+/// The servo period, s.
+const H: f64 = 1.0 / SERVO_HZ as f64;
+
+/// `nc-send tune`'s arguments.
+#[derive(Clone, Debug, clap::Args)]
+pub struct TuneArgs {
+    /// The servo joint: its name in the machine file, or its number from 0.
+    pub joint: String,
+    /// The test signal's amplitude, mm or degrees (default: 40 % of the joint's
+    /// standstill following-error limit `min_ferror`; the controller refuses one at or
+    /// above it).
+    #[arg(long, value_name = "MM")]
+    pub amplitude: Option<f64>,
+    /// How long the PRBS test signal lasts, s.
+    #[arg(long, default_value_t = 2.0)]
+    pub seconds: f64,
+    /// How long the PRBS holds each value, ms.
+    #[arg(long, default_value_t = 10)]
+    pub hold_ms: u16,
+    /// The PRBS's seed.
+    #[arg(long, default_value_t = 1)]
+    pub prbs_seed: u16,
+    /// How long the measured step stays up (and then down), s.
+    #[arg(long, default_value_t = 0.3)]
+    pub step_seconds: f64,
+    /// The designed loop's crossover, Hz (default: the present gains' crossover on the
+    /// identified model).
+    #[arg(long, value_name = "HZ")]
+    pub bandwidth: Option<f64>,
+    /// The phase margin the design aims at on the model, degrees (45 to 89).
+    #[arg(long, default_value_t = 60.0, value_name = "DEG")]
+    pub phase_margin: f64,
+    /// Draw the predicted and measured steps and the Bode diagram (.svg or .png).
+    #[arg(long, value_name = "FILE")]
+    pub plot: Option<PathBuf>,
+    /// Write the recorded excitation as CSV.
+    #[arg(long, value_name = "FILE")]
+    pub csv: Option<PathBuf>,
+    /// Write the designed PID and feed-forward gains into the machine file (without
+    /// it, print what would change).
+    #[arg(long)]
+    pub write: bool,
+}
+
+fn bad(message: impl Into<String>) -> Failure {
+    Failure::new(exit::BAD_INPUT, message)
+}
+
+/// The joint being tuned, as the machine file gives it.
+struct Joint<'a> {
+    index: usize,
+    file: &'a JointFile,
+    /// Encoder counts per mm or degree.
+    cpu: f64,
+    gains: ServoGains,
+    lqg: Option<LqgGains>,
+}
+
+/// Checks the arguments before anything is sent.
+fn check(args: &TuneArgs) -> Result<(), Failure> {
+    for (what, v, hi) in [
+        ("--seconds", args.seconds, 60.0),
+        ("--step-seconds", args.step_seconds, 10.0),
+    ] {
+        if !(v >= 0.05 && v <= hi) {
+            return Err(bad(format!("{what} {v}: give 0.05 to {hi} seconds")));
+        }
+    }
+    if args.hold_ms == 0 {
+        return Err(bad("--hold-ms 0: hold each value at least 1 ms"));
+    }
+    if !(args.phase_margin >= 45.0 && args.phase_margin < 90.0) {
+        return Err(bad(format!(
+            "--phase-margin {}: give 45 to 89 degrees (never less than 45)",
+            args.phase_margin
+        )));
+    }
+    if let Some(b) = args.bandwidth {
+        if !(b > 0.0 && b < SERVO_HZ as f64 / 4.0) {
+            return Err(bad(format!(
+                "--bandwidth {b}: give a crossover above 0 and below {} Hz",
+                SERVO_HZ / 4
+            )));
+        }
+    }
+    if let Some(a) = args.amplitude {
+        if !(a > 0.0 && a.is_finite()) {
+            return Err(bad(format!("--amplitude {a}: give a positive distance")));
+        }
+    }
+    if let Some(p) = &args.plot {
+        crate::analysis::plot::format_of(p).map_err(bad)?;
+    }
+    Ok(())
+}
+
+/// The joint named `name` (or numbered) in `mf`, which must be a servo joint.
+fn find_joint<'a>(mf: &'a MachineFile, name: &str, path: &Path) -> Result<Joint<'a>, Failure> {
+    let index = mf
+        .joints
+        .iter()
+        .position(|j| j.name == name)
+        .or_else(|| name.parse::<usize>().ok().filter(|&i| i < mf.joints.len()));
+    let Some(index) = index else {
+        let names: Vec<&str> = mf.joints.iter().map(|j| j.name.as_str()).collect();
+        return Err(bad(format!(
+            "tune {name}: {} has no joint `{name}`; its joints are {} (or their numbers \
+             from 0)",
+            path.display(),
+            names.join(", ")
+        )));
+    };
+    let file = &mf.joints[index];
+    let servo = file
+        .servo
+        .as_ref()
+        .filter(|_| file.drive == DriveKind::Servo);
+    let Some(servo) = servo else {
+        return Err(bad(format!(
+            "tune {name}: joint {index} ({}) of {} is a stepper joint; only a servo joint \
+             (drive = \"servo\") can be tuned",
+            file.name,
+            path.display()
+        )));
+    };
+    let config = mf.to_config().map_err(|e| bad(e.0))?;
+    Ok(Joint {
+        index,
+        file,
+        cpu: file.steps_per_unit,
+        gains: config.servo.gains[file.channel as usize],
+        lqg: (servo.law == LawKind::Lqg)
+            .then_some(file.lqg_gains)
+            .flatten(),
+    })
+}
+
+/// Runs `nc-send tune` on `link` with the machine file at `path`; how it ended (and
+/// no block count: it sends no program).
+pub fn run<T: Transport>(
+    link: &mut Link<T>,
+    args: &TuneArgs,
+    path: Option<&Path>,
+    opts: &RunOptions<'_>,
+    hooks: &mut dyn JobHooks,
+) -> Result<(JobEnd, Option<usize>), Failure> {
+    check(args)?;
+    let path = path.ok_or_else(|| bad("tune needs the machine file: --machine FILE"))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| bad(format!("{}: cannot read it: {e}", path.display())))?;
+    let mf = read_file(&text, &path.display().to_string()).map_err(|e| bad(e.to_string()))?;
+    let j = find_joint(&mf, &args.joint, path)?;
+    if matches!(opts.target, Target::Sim) {
+        // A fresh simulator is locked: home it (a machine with switches) or unlock it.
+        let switches = link.machine().joints.iter().any(|j| j.homing.enabled());
+        if let Some(end) = crate::job::prepare(link, switches, true, hooks)? {
+            return Ok((end, None));
+        }
+    } else {
+        crate::job::prepare(link, false, false, hooks)?;
+    }
+    let amplitude = match args.amplitude {
+        Some(a) => (a * j.cpu).round().max(1.0) as u32,
+        None => ((0.4 * j.gains.min_ferror as f64).floor() as u32).max(1),
+    };
+    let prbs = Excite {
+        joint: j.index as u8,
+        kind: 1,
+        amplitude,
+        hold: args.hold_ms,
+        length: (args.seconds * 1000.0).round() as u32,
+        seed: args.prbs_seed,
+    };
+    let table = excite(link, &prbs)?;
+    if let Some(p) = &args.csv {
+        std::fs::write(p, table.csv())
+            .map_err(|e| bad(format!("{}: cannot write the CSV: {e}", p.display())))?;
+    }
+    let rec = record_of(&table, &j)?.0;
+    let hold = (args.step_seconds * 1000.0).round() as u16;
+    let step = Excite {
+        kind: 0,
+        hold,
+        length: 2 * hold as u32,
+        ..prbs
+    };
+    let step_table = excite(link, &step)?;
+    let o = IdentOptions::default();
+    let id = ident::identify(&rec, &o).map_err(|e| {
+        Failure::new(
+            exit::ALARM,
+            format!("tune {}: no model of the plant: {e}", j.file.name),
+        )
+    })?;
+    let outcome = design(&j, &id, args)?;
+    let measured = measured_step(&step_table, &j, &id.plant, amplitude, hold)?;
+    report(&j, &id, &outcome, &measured, (amplitude, rec.u.len()));
+    if let Some(p) = &args.plot {
+        plot(p, &j, &rec, &o, &id, &outcome, &measured)?;
+        println!("plot: {}", p.display());
+    }
+    let fields = [
+        ("kp", outcome.tuned.kp),
+        ("ki", outcome.tuned.ki),
+        ("kd", outcome.tuned.kd),
+        ("kvff", outcome.tuned.kvff),
+        ("kaff", outcome.tuned.kaff),
+    ];
+    let new = tune_write::rewrite(&text, j.index, &fields).map_err(bad)?;
+    if args.write {
+        std::fs::write(path, &new.text)
+            .map_err(|e| bad(format!("{}: cannot write it: {e}", path.display())))?;
+        println!("written to {}: {}", path.display(), new.line.trim());
+    } else {
+        println!("would write (with --write): {}", new.line.trim());
+    }
+    Ok((JobEnd::Done, None))
+}
+
+/// Streams the joint's output, encoder and command every servo period while the
+/// controller runs the test signal `e`; a table without gaps.
+fn excite<T: Transport>(link: &mut Link<T>, e: &Excite) -> Result<Table, Failure> {
+    let j = e.joint;
+    let setup =
+        super::setup(&format!("out:{j},meas:{j},cmd:{j}"), "stream", 0, 1, true).map_err(bad)?;
+    link.record_take();
+    link.record_arm(&setup)?;
+    link.record_listen(Duration::from_millis(50))?;
+    if let Err(err) = link.record_excite(e) {
+        let _ = link.record_disarm();
+        return Err(Failure::new(
+            exit::ALARM,
+            format!("the controller refused the test signal: {err}"),
+        ));
+    }
+    // The signal's ticks, then time for the loop to settle.
+    let until = Instant::now() + Duration::from_millis(e.length as u64 + 300);
+    while Instant::now() < until {
+        link.record_listen(Duration::from_millis(20))?;
+    }
+    link.record_disarm()?;
+    link.record_listen(Duration::from_millis(50))?;
+    let table = Table::of_stream(&link.record_take())
+        .ok_or_else(|| Failure::new(exit::LINK, "the recorder streamed no sample"))?;
+    if table.missing() > 0 {
+        return Err(Failure::new(
+            exit::LINK,
+            format!(
+                "{} samples of {} were lost on the way (the link fell behind): the record \
+                 cannot be used; try a shorter --seconds",
+                table.missing(),
+                table.missing() + table.rows.len() as i64
+            ),
+        ));
+    }
+    let s = link.request_status()?;
+    if let Some(a) = s.alarm {
+        return Err(Failure::new(
+            exit::ALARM,
+            format!("the test signal ended in an alarm: {a:?}"),
+        ));
+    }
+    Ok(table)
+}
+
+/// The identification's record (u in c.u., y in mm or degrees) from the first change
+/// of the command on, and the command in counts over the same samples.
+fn record_of(table: &Table, j: &Joint) -> Result<(Record, Vec<i64>, usize), Failure> {
+    let cmd0 = table.rows.first().map_or(0, |r| r.1[2]);
+    let first = table
+        .rows
+        .iter()
+        .position(|r| r.1[2] != cmd0)
+        .ok_or_else(|| {
+            Failure::new(
+                exit::ALARM,
+                "the test signal never moved the joint's command (did something else move?)",
+            )
+        })?;
+    let from = first.saturating_sub(100);
+    let g = &j.gains;
+    let rows = &table.rows[from..];
+    let rec = Record {
+        h: H,
+        u: rows
+            .iter()
+            .map(|r| (r.1[0] - DAC_MID - g.dac_offset as i32) as f64 / g.dac_per_unit as f64)
+            .collect(),
+        y: rows.iter().map(|r| r.1[1] as f64 / j.cpu).collect(),
+    };
+    let cmd = rows.iter().map(|r| r.1[2] as i64).collect();
+    Ok((rec, cmd, first - from))
+}
+
+/// What the design found.
+struct Outcome {
+    spec: PidSpec,
+    tuned: PidTuning,
+    present: tune::Margins,
+    lqg: Option<(String, crate::control::lqg::LoopFigures)>,
+}
+
+fn present(g: &ServoGains) -> [f64; 3] {
+    [g.kp as f64, g.ki as f64, g.kd as f64]
+}
+
+/// The PID (and LQG, for a joint that runs it) designed on the identified model.
+fn design(j: &Joint, id: &Identified, args: &TuneArgs) -> Result<Outcome, Failure> {
+    let fail = |e: String| Failure::new(exit::ALARM, format!("tune {}: {e}", j.file.name));
+    let present =
+        tune::margins(&id.plant, j.cpu, H, present(&j.gains)).map_err(|e| fail(e.to_string()))?;
+    let crossover = match args.bandwidth {
+        Some(hz) => hz * std::f64::consts::TAU,
+        None => present.crossover_rad_s,
+    };
+    let spec = PidSpec {
+        phase_margin_deg: args.phase_margin,
+        ..PidSpec::new(crossover)
+    };
+    let tuned = tune::design_pid(&id.plant, j.cpu, H, &spec)
+        .map_err(|e| fail(format!("no PID for {crossover:.1} rad/s: {e}")))?;
+    let lqg = match (&j.lqg, &j.file.lqg) {
+        (Some(_), Some(w)) => {
+            let d = crate::control::lqg::design(&id.plant, j.cpu, H, w)
+                .map_err(|e| fail(format!("no LQG design on the model: {e}")))?;
+            let f = d
+                .loop_figures(&id.plant, j.cpu)
+                .map_err(|e| fail(e.to_string()))?;
+            Some((crate::control::lqg::gains_toml(&d.gains), f))
+        }
+        _ => None,
+    };
+    Ok(Outcome {
+        spec,
+        tuned,
+        present,
+        lqg,
+    })
+}
+
+/// The measured step and the model's prediction of it under the present gains, both
+/// as fractions of the step (0 before, 1 at the target), from the step's first servo
+/// period for as long as it stays up.
+struct Measured {
+    measured: Vec<f64>,
+    predicted: Vec<f64>,
+    error: tune::StepError,
+}
+
+fn measured_step(
+    table: &Table,
+    j: &Joint,
+    model: &TransferFunction,
+    amplitude: u32,
+    hold: u16,
+) -> Result<Measured, Failure> {
+    let (_, cmd, first) = record_of(table, j)?;
+    let rows: Vec<f64> = table.rows.iter().map(|r| r.1[1] as f64).collect();
+    let offset = rows.len() - cmd.len();
+    let meas = &rows[offset..];
+    let base: f64 = meas[..first].iter().sum::<f64>() / first.max(1) as f64;
+    let len = (hold as usize * SERVO_PER_TICK).min(meas.len() - first);
+    let a = amplitude as f64;
+    let measured: Vec<f64> = meas[first..first + len]
+        .iter()
+        .map(|m| (m - base) / a)
+        .collect();
+    let predicted = predict(model, j, &cmd, first)[first..first + len]
+        .iter()
+        .map(|y| y / a)
+        .collect::<Vec<_>>();
+    let error = tune::step_error(&measured, &predicted, H);
+    Ok(Measured {
+        measured,
+        predicted,
+        error,
+    })
+}
+
+/// The joint's position (counts from its start) each servo period, predicted by
+/// `model` under the core's own loop (`ServoAxis`, the present gains and law, its
+/// feed-forwards, clamps and DAC) following the recorded command `cmd`, whose ticks
+/// start at sample `first` (the test signal changes only at tick edges).
+fn predict(model: &TransferFunction, j: &Joint, cmd: &[i64], first: usize) -> Vec<f64> {
+    let mut plant = model.discretize(H);
+    let max_v = (j.file.max_velocity * j.cpu) as f32;
+    let mut axis = ServoAxis::new(&j.gains, max_v);
+    let mut interp = SetpointInterpolator::new(0);
+    let on = AmpIo {
+        enable: true,
+        fault: false,
+    };
+    let g = &j.gains;
+    let mut out = Vec::with_capacity(cmd.len());
+    let phase = first % SERVO_PER_TICK;
+    let mut k = 0;
+    while k < cmd.len() {
+        if k % SERVO_PER_TICK == phase {
+            let end = (k + SERVO_PER_TICK - 1).min(cmd.len() - 1);
+            interp.load((cmd[end] - cmd[0]) << 16);
+        }
+        let y = plant.output(0.0) * j.cpu;
+        out.push(y);
+        let sp = interp.advance();
+        let r = axis.update(&sp, y.round() as i64, on, Coupling::NONE, j.lqg.as_ref());
+        let code = r.dac as i32 - DAC_MID - g.dac_offset as i32;
+        plant.step(code as f64 / g.dac_per_unit as f64);
+        k += 1;
+    }
+    out
+}
+
+fn numbers(v: &[f64]) -> String {
+    let s: Vec<String> = v.iter().map(|x| format!("{x:e}")).collect();
+    format!("[{}]", s.join(", "))
+}
+
+/// Prints the model, the comparison with the measured step, the gains and margins.
+fn report(j: &Joint, id: &Identified, o: &Outcome, m: &Measured, (amplitude, n): (u32, usize)) {
+    let unit = if j.file.rotary { "°" } else { "mm" };
+    println!(
+        "joint {} ({}): test signal ±{} counts (±{} {unit}), {} samples",
+        j.index,
+        j.file.name,
+        amplitude,
+        amplitude as f64 / j.cpu,
+        n
+    );
+    println!(
+        "model: num = {}, den = {} ({unit}/c.u.; na {} nb {} nk {})",
+        numbers(&id.plant.num),
+        numbers(&id.plant.den),
+        id.arx.a.len() - 1,
+        id.arx.b.len(),
+        id.arx.nk
+    );
+    println!("fit: {:.1} % (validation)", id.fit_percent);
+    println!(
+        "step: error {:.2} % of the measured step's rise (t90 {:.4} s), model against \
+         measurement under the present gains",
+        100.0 * m.error.ratio,
+        m.error.rise_s
+    );
+    let g = &j.gains;
+    let t = &o.tuned;
+    println!(
+        "present: kp = {:.5e} ki = {:.5e} kd = {:.5e} kvff = {:.5e} kaff = {:.5e}",
+        g.kp, g.ki, g.kd, g.kvff, g.kaff
+    );
+    println!(
+        "designed: kp = {:e} ki = {:e} kd = {:e} kvff = {:e} kaff = {:e}",
+        t.kp, t.ki, t.kd, t.kvff, t.kaff
+    );
+    let line = |what: &str, m: &tune::Margins| {
+        println!(
+            "{what}: crossover {:.1} rad/s ({:.2} Hz), PM {:.1}° at {:.1} rad/s, GM {:.1} dB, \
+             stable {}",
+            m.crossover_rad_s,
+            m.crossover_rad_s / std::f64::consts::TAU,
+            m.phase_margin_deg,
+            m.phase_margin_at_rad_s,
+            m.gain_margin_db(),
+            m.stable
+        )
+    };
+    line("present gains on the model", &o.present);
+    line("designed gains on the model", &t.margins);
+    println!(
+        "aimed at: crossover {:.1} rad/s, PM {:.0}°",
+        o.spec.crossover_rad_s, o.spec.phase_margin_deg
+    );
+    if let Some((gains, f)) = &o.lqg {
+        println!(
+            "LQG (law = \"lqg\"; the file's weights on the model): |S|max {:.2}, crossover \
+             {:.1} rad/s; lqg_gains = {gains} (not written: the loader checks lqg_gains \
+             against the file's plant)",
+            f.peak_sensitivity, f.crossover_rad_s
+        );
+    }
+}
+
+/// Draws the steps (measured, predicted, designed) and the Bode diagram.
+fn plot(
+    path: &Path,
+    j: &Joint,
+    rec: &Record,
+    o: &IdentOptions,
+    id: &Identified,
+    out: &Outcome,
+    m: &Measured,
+) -> Result<(), Failure> {
+    let every = |v: &[f64]| -> Vec<(f64, f64)> {
+        let step = (v.len() / 500).max(1);
+        v.iter()
+            .enumerate()
+            .step_by(step)
+            .map(|(k, y)| (k as f64 * H, *y))
+            .collect()
+    };
+    let designed = tune::closed_loop_step(&id.plant, j.cpu, H, out.tuned.pid(), m.measured.len());
+    let curve = |label: &str, v: &[f64]| Curve {
+        label: label.into(),
+        points: every(v),
+    };
+    let steps = [
+        curve("measured, present gains", &m.measured),
+        curve("model, present gains", &m.predicted),
+        curve("model, designed gains (no feed-forward)", &designed),
+    ];
+    let ws = tune::log_grid(1.0, 2000.0, 200);
+    let fail = |e: String| Failure::new(exit::ALARM, e);
+    let present =
+        tune::bode(&id.plant, j.cpu, H, present(&j.gains), &ws).map_err(|e| fail(e.to_string()))?;
+    let tuned =
+        tune::bode(&id.plant, j.cpu, H, out.tuned.pid(), &ws).map_err(|e| fail(e.to_string()))?;
+    let measured = ident::empirical_response(rec, o, &ws);
+    let bode = [
+        BodeCurve {
+            label: "identified plant".into(),
+            points: ws.iter().map(|&w| (w, id.plant.at(w))).collect(),
+            marks: false,
+        },
+        BodeCurve {
+            label: "measured plant".into(),
+            points: ws
+                .iter()
+                .zip(measured)
+                .filter_map(|(&w, v)| Some((w, v?)))
+                .collect(),
+            marks: true,
+        },
+        BodeCurve {
+            label: "loop gain, present gains".into(),
+            points: present.iter().map(|b| (b.w, b.loop_gain)).collect(),
+            marks: false,
+        },
+        BodeCurve {
+            label: "loop gain, designed gains".into(),
+            points: tuned.iter().map(|b| (b.w, b.loop_gain)).collect(),
+            marks: false,
+        },
+    ];
+    let title = format!("tune {} ({})", j.index, j.file.name);
+    tune_plot::draw(path, &title, &steps, &bode).map_err(bad)
+}
