@@ -203,7 +203,9 @@ impl Controller {
     }
 
     /// Streaming, when the link asks for bytes and a piece is due
-    /// ([`Controller::stream_tick`]): sends one piece of the samples not sent yet,
+    /// ([`Controller::stream_tick`]): sends one piece of the samples not sent yet (one
+    /// a tick at most: a stream of more than 132 bytes of samples a millisecond loses
+    /// samples, as a gap in their numbers),
     /// only while the link's send buffer keeps room for [`STREAM_HEADROOM`] bytes
     /// besides (the job's acknowledgements and status come first). Samples that wait
     /// too long are overwritten in the ring: the host sees the gap in their numbers.
@@ -243,7 +245,9 @@ impl Controller {
         if self.push_frame(|seq, b, out| encode_frame_with(seq, &msg, b, out).ok()) {
             self.recorder.sent(n);
             self.stream_wait = 0;
-            self.stream_due = waiting - n as usize >= RECORD_CHUNK / width;
+            // One piece a tick at most: the link's work for the stream stays bounded
+            // (132 bytes of samples a millisecond), whatever the tick asked.
+            self.stream_due = false;
         }
     }
 

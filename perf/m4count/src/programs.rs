@@ -50,25 +50,31 @@ pub fn record_tick() -> Setup {
     )
 }
 
-/// 8 signals every servo period, streamed, on the hexapod-xy: leg 0's commanded and
-/// measured position, following error and DAC code, the table X's (joint 6)
-/// following error and DAC code, the contour errors of the path and of the tool's
-/// direction, all staged by the servo side (`crate::pacer::HEXAPOD_XY_SIGNALS`).
+/// 8 signals every servo period on the hexapod-xy, a capture waiting for an alarm
+/// (none comes: the ring is written every period all the job long, the worst case of
+/// a capture; a stream of these 300 kB/s would lose samples, one piece a tick being
+/// its limit): leg 0's commanded and measured position, following error and DAC
+/// code, the table X's (joint 6) following error and DAC code, the contour errors of
+/// the path and of the tool's direction, all staged by the servo side
+/// (`crate::pacer::HEXAPOD_XY_SIGNALS`).
 pub fn record_servo() -> Setup {
     use Signal::*;
-    setup(
-        [
-            Commanded(0),
-            Measured(0),
-            FollowingError(0),
-            Output(0),
-            FollowingError(6),
-            Output(6),
-            ContourError,
-            DirectionError,
-        ],
-        true,
-    )
+    Setup {
+        trigger: Trigger::Alarm,
+        ..setup(
+            [
+                Commanded(0),
+                Measured(0),
+                FollowingError(0),
+                Output(0),
+                FollowingError(6),
+                Output(6),
+                ContourError,
+                DirectionError,
+            ],
+            true,
+        )
+    }
 }
 
 /// A continuous capture of `signals`, every servo period or every tick, undecimated.

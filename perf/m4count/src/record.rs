@@ -428,8 +428,19 @@ pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
             p.name, status.state
         ));
     }
-    if let Some(setup) = &p.record {
-        streamed_enough(p, setup, &mut link)?;
+    match &p.record {
+        Some(setup) if setup.trigger == pkmc::drive::recorder::Trigger::Stream => {
+            streamed_enough(p, setup, &mut link)?
+        }
+        Some(_) => {
+            // A capture waiting for its trigger: still armed, its ring written.
+            let (reply, _) = link.record_query(0).map_err(|e| e.to_string())?;
+            let armed = reply.capture.phase == pkmc::drive::recorder::Phase::Armed;
+            if !armed || reply.capture.samples == 0 {
+                return Err(format!("{}: the recorder is {:?}", p.name, reply.capture));
+            }
+        }
+        None => {}
     }
     let io = link.into_transport();
     Ok((io.log, io.counts, sent))
