@@ -42,6 +42,13 @@ impl Controller {
         self.excite.is_some() || self.recorder.wants(false) || self.recorder.wants(true)
     }
 
+    /// Is the recorder streaming, or a test signal running? Both need time to pass
+    /// to mean anything, even for a simulator that otherwise ticks only while there
+    /// is work (an armed capture fills with the ticks that run anyway).
+    pub fn streams(&self) -> bool {
+        self.excite.is_some() || self.recorder.capture().phase == Phase::Streaming
+    }
+
     /// `HostMsg::Record`: a read, answered at once, or a control (arm, disarm),
     /// acted on once per id and acknowledged; a bad request is answered with
     /// `CtrlMsg::Record` naming what is wrong.

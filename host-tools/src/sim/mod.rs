@@ -393,7 +393,7 @@ impl Simulator {
             || self.ctrl.state() == State::Running
             || self.steps_due()
             || self.ctrl.fresh()
-            || self.ctrl.recording()
+            || self.ctrl.streams()
         {
             // (A controller that has not read its inputs since a machine was loaded
             // does so on its next tick, as a board's would within a period.)
