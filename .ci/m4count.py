@@ -8,6 +8,7 @@ controller calls over whole programs; fails above the budgets.
     M4COUNT_FULL=1 ...                         # every function of the worst calls, with counts
     M4COUNT_WATCH='<regex>' ...                # who calls the matching symbols in the worst calls
     python3 .ci/m4count.py --no-build          # reuse the last builds (harness debugging only)
+    M4COUNT_ONLY='<regex>' ...                 # replay only the matching programs (debugging only)
 
 Builds perf/m4count (its own workspace, with a copy of the workspace's Cargo.lock)
 twice: for thumbv7em-none-eabihf (release, the firmware's profile: opt-level "s", fat
@@ -873,6 +874,9 @@ def main():
                    for m in servo_periods if isinstance(m, int)}
     replays = []
     t2 = time.time()
+    # Harness debugging only (M4COUNT_ONLY=<regex of program names>): replay those.
+    only = os.environ.get("M4COUNT_ONLY")
+    programs = [p for p in programs if not only or re.search(only, p[0])]
     for name, machine, path, blocks, bench, armed in programs:
         replays.append(replay(m4, name, machine, path, blocks, servo_periods[bench or machine]))
         replays[-1].armed = armed

@@ -39,7 +39,7 @@ use crate::controller::{Controller, Inputs, Outputs};
 use crate::drive::contour::{PeriodInputs, PeriodOutputs, ServoBank};
 use crate::drive::debounce::{Debouncer, SwitchFilter, Switches, SWITCH};
 use crate::drive::recorder::MAX_SIGNALS;
-use crate::drive::servo::{following_error, Trip, SERVO_PER_TICK, SETPOINT_FRAC_BITS};
+use crate::drive::servo::{Trip, SERVO_PER_TICK, SETPOINT_FRAC_BITS};
 use crate::kinematics::{ContourMap, POSE_AXES};
 
 /// A signal the servo side does not sample (the tick's own), in
@@ -160,6 +160,8 @@ pub struct ServoPacer {
     dac_sum: [u32; MAX_SERVOS],
     /// The recorder's signals sampled this tick ([`Command::record`]).
     record: [u8; MAX_SIGNALS],
+    /// Some signal of `record` is the servo side's.
+    staging: bool,
     /// The recorder's samples of two ticks, by [`ServoPacer::staged`]'s bank: this
     /// tick's being written, the last one's for the tick to read; and their signals.
     staged: [ServoSamples; 2],
@@ -183,6 +185,7 @@ impl ServoPacer {
             stats: ServoStats::default(),
             dac_sum: [0; MAX_SERVOS],
             record: [NOT_SERVO; MAX_SIGNALS],
+            staging: false,
             staged: [[[0; MAX_SIGNALS]; SERVO_PER_TICK]; 2],
             staged_ids: [[NOT_SERVO; MAX_SIGNALS]; 2],
             bank_w: 0,
@@ -216,6 +219,7 @@ impl ServoPacer {
                     }
                     self.enable = command.enable;
                     self.record = command.record;
+                    self.staging = self.record.iter().any(|&id| id != NOT_SERVO);
                 }
                 None => self.stats.late_ticks = self.stats.late_ticks.wrapping_add(1),
             }
@@ -229,7 +233,7 @@ impl ServoPacer {
         if edge {
             self.staged_ids[self.bank_w] = self.record;
         }
-        if self.record.iter().any(|&id| id != NOT_SERVO) {
+        if self.staging {
             self.stage(feedback, &out);
         }
         for (sum, &code) in self.dac_sum.iter_mut().zip(&out.dac) {
@@ -266,7 +270,10 @@ impl ServoPacer {
             *v = match id >> 4 {
                 0 => (self.bank.setpoint(c) >> SETPOINT_FRAC_BITS) as i32,
                 1 => feedback[c] as i32,
-                2 => following_error(self.bank.setpoint(c), feedback[c]).0,
+                // The setpoint's whole counts less the encoder (`following_error`'s
+                // whole part, in 32 bits: the ring keeps 16 of it, saturated).
+                2 => ((self.bank.setpoint(c) >> SETPOINT_FRAC_BITS) as i32)
+                    .wrapping_sub(feedback[c] as i32),
                 3 => out.dac[c] as i32,
                 9 => norm_f32(&out.contour_error[..3]),
                 10 => norm_f32(&out.contour_error[3..]),

@@ -15,6 +15,7 @@
 //! periods.
 
 use super::pacing::NOT_SERVO;
+use super::session::push_frame_into;
 use super::Controller;
 use crate::config::{Drive, MAX_JOINTS, MAX_SERVOS};
 use crate::drive::excite::{Excite, Signal as ExciteSignal};
@@ -25,7 +26,7 @@ use crate::drive::servo::SETPOINT_FRAC_BITS;
 use crate::units::TICK_HZ;
 use crate::wire::store::CHUNK_BYTES;
 use crate::wire::{
-    encode_frame_with, CtrlMsg, State, MAX_FRAME, RECORD_ARM, RECORD_CHUNK, RECORD_DISARM,
+    encode_record, CtrlMsg, State, MAX_FRAME, RECORD_ARM, RECORD_CHUNK, RECORD_DISARM,
     RECORD_EXCITE, RECORD_READ,
 };
 
@@ -183,27 +184,26 @@ impl Controller {
     /// joint's zero.
     #[inline(never)]
     pub fn record_servo(&mut self, ids: &[u8; MAX_SIGNALS], rows: &[[i32; MAX_SIGNALS]]) {
-        if !self.recorder.wants(true) || *ids != self.servo_ids() {
+        // This tick's `Outputs::servo_record` are the signals as the servo side
+        // samples them (`servo_ids`), formed by the tick just run.
+        if !self.recorder.wants(true) || *ids != self.out.servo_record {
             return;
         }
-        let mut held = [0i32; MAX_SIGNALS];
-        let mut offsets = [0i32; MAX_SIGNALS];
+        // Each value is `row & keep + add`: a servo-side signal's value less the
+        // joint's zero (positions), or the tick's own value held over its periods.
+        let mut keep = [0i32; MAX_SIGNALS];
+        let mut add = [0i32; MAX_SIGNALS];
         for (i, &id) in self.recorder.signals().iter().enumerate() {
             if ids[i] == NOT_SERVO {
-                held[i] = self.signal(id);
-            } else if id >> 4 <= 1 {
-                offsets[i] = self.offset[(id & 0x0f) as usize % MAX_JOINTS] as i32;
-            }
-        }
-        for row in rows {
-            let mut values = held;
-            for i in 0..MAX_SIGNALS {
-                if ids[i] != NOT_SERVO {
-                    values[i] = row[i].wrapping_sub(offsets[i]);
+                add[i] = self.signal(id);
+            } else {
+                keep[i] = -1;
+                if id >> 4 <= 1 {
+                    add[i] = (self.offset[(id & 0x0f) as usize % MAX_JOINTS] as i32).wrapping_neg();
                 }
             }
-            self.recorder.sample(&values);
         }
+        self.recorder.sample_rows(rows, &keep, &add);
         if self.recorder.capture().phase == Phase::Streaming {
             self.stream_tick();
         }
@@ -226,8 +226,7 @@ impl Controller {
         if self.tx.free() < STREAM_HEADROOM + MAX_FRAME {
             return;
         }
-        let mut body = [0; CHUNK_BYTES];
-        let (first, n) = self.recorder.unsent(&mut body[REPLY_HEADER..]);
+        let (first, n) = self.recorder.unsent(CHUNK_BYTES - REPLY_HEADER);
         let setup = self.recorder.setup();
         let reply = Reply {
             capture: Capture {
@@ -244,12 +243,19 @@ impl Controller {
             offset: first,
             streamed: true,
         };
-        if let Some(header) = body.first_chunk_mut::<REPLY_HEADER>() {
-            reply.pack(header);
-        }
-        let bytes = REPLY_HEADER + n as usize * width;
-        let msg = CtrlMsg::Record(heapless::Vec::from_slice(&body[..bytes]).unwrap_or_default());
-        if self.push_frame(|seq, b, out| encode_frame_with(seq, &msg, b, out).ok()) {
+        // The header and the samples are written straight into the frame's body.
+        let recorder = &self.recorder;
+        let fill = |out: &mut [u8]| {
+            let (header, samples) = out.split_at_mut(REPLY_HEADER.min(out.len()));
+            if let Ok(header) = <&mut [u8; REPLY_HEADER]>::try_from(header) {
+                reply.pack(header);
+            }
+            recorder.copy_unsent(samples);
+        };
+        let len = REPLY_HEADER + n as usize * width;
+        let scratch = (&mut self.tx_body, &mut self.tx_frame);
+        let encode = |seq, b: &mut _, out: &mut _| encode_record(seq, len, fill, b, out);
+        if push_frame_into(&mut self.tx, scratch, &mut self.tx_seq, encode) {
             self.recorder.sent(n);
             self.stream_wait = 0;
             // One piece a tick at most: the link's work for the stream stays bounded

@@ -9,11 +9,12 @@
 //! encodes them; `Nak`, `HelloAck`, `ControlAck` and the machine answers go at once.
 
 use super::safety::UNHOMED;
-use super::{Controller, LinkStats, Prepared, LINK_LOSS_TICKS, QUEUE_CAPACITY};
+use super::{Controller, LinkStats, Prepared, LINK_LOSS_TICKS, QUEUE_CAPACITY, TX_CAPACITY};
 use crate::config::MachineConfig;
 use crate::motion::block::PlannedBlock;
 use crate::motion::planner::PushError;
 use crate::units::TICK_HZ;
+use crate::wire::ring::ByteRing;
 use crate::wire::PlannedControl;
 use crate::wire::{
     decode_block_into, decode_planned_control_into, encode_ack, encode_frame_with, encode_status,
@@ -156,17 +157,8 @@ impl Controller {
         &mut self,
         encode: impl FnOnce(u16, &mut [u8; MAX_BODY], &mut [u8; MAX_FRAME]) -> Option<usize>,
     ) -> bool {
-        let seq = self.tx_seq;
-        let added = match self.tx.tail_mut::<MAX_FRAME>() {
-            Some(room) => encode(seq, &mut self.tx_body, room).map(|n| self.tx.commit(n)),
-            None => encode(seq, &mut self.tx_body, &mut self.tx_frame)
-                .filter(|&n| self.tx.push_slice(&self.tx_frame[..n]))
-                .map(drop),
-        };
-        if added.is_some() {
-            self.tx_seq = seq.wrapping_add(1);
-        }
-        added.is_some()
+        let scratch = (&mut self.tx_body, &mut self.tx_frame);
+        push_frame_into(&mut self.tx, scratch, &mut self.tx_seq, encode)
     }
 
     pub(super) fn send(&mut self, msg: &CtrlMsg) {
@@ -571,4 +563,25 @@ impl Controller {
             probes: self.probe.result().map_or(0, |r| r.count),
         }
     }
+}
+
+/// [`Controller::push_frame`] on the transmit side's parts (so that `encode` may borrow
+/// the rest of the controller).
+pub(super) fn push_frame_into(
+    tx: &mut ByteRing<TX_CAPACITY>,
+    (body, frame): (&mut [u8; MAX_BODY], &mut [u8; MAX_FRAME]),
+    tx_seq: &mut u16,
+    encode: impl FnOnce(u16, &mut [u8; MAX_BODY], &mut [u8; MAX_FRAME]) -> Option<usize>,
+) -> bool {
+    let seq = *tx_seq;
+    let added = match tx.tail_mut::<MAX_FRAME>() {
+        Some(room) => encode(seq, body, room).map(|n| tx.commit(n)),
+        None => encode(seq, body, frame)
+            .filter(|&n| tx.push_slice(&frame[..n]))
+            .map(drop),
+    };
+    if added.is_some() {
+        *tx_seq = seq.wrapping_add(1);
+    }
+    added.is_some()
 }

@@ -297,8 +297,8 @@ pub struct Recorder {
     s: Book,
     /// What [`Recorder::observe`] was told last: job open, line, alarm.
     seen: (bool, u32, bool),
-    /// The samples, in halfwords.
-    ring: [u16; RING_BYTES / 2],
+    /// The samples, each the little-endian bytes of its signals' values side by side.
+    ring: [u8; RING_BYTES],
 }
 
 impl Default for Recorder {
@@ -313,7 +313,7 @@ impl Recorder {
         Self {
             s: OFF,
             seen: (false, 0, false),
-            ring: [0; RING_BYTES / 2],
+            ring: [0; RING_BYTES],
         }
     }
 
@@ -454,23 +454,40 @@ impl Recorder {
         }
     }
 
-    fn store(&mut self, values: &[i32; MAX_SIGNALS]) {
-        // Halfwords: a 16-bit signal takes one, a 32-bit signal two, low half first
-        // (so the ring's bytes are the sample's little-endian bytes).
-        let mut at = self.s.head as usize * (self.s.width as usize / 2);
-        for (i, &v) in values.iter().enumerate().take(self.s.setup.count as usize) {
-            if self.s.narrow & (1 << i) != 0 {
-                if let Some(h) = self.ring.get_mut(at) {
-                    *h = v.clamp(i16::MIN as i32, i16::MAX as i32) as u16;
-                }
-                at += 1;
-            } else {
-                if let Some(h) = self.ring.get_mut(at..at + 2) {
-                    h[0] = v as u16;
-                    h[1] = (v >> 16) as u16;
-                }
-                at += 2;
+    /// [`Recorder::sample`] of each row of `rows` in turn, its values
+    /// `row[i] & keep[i]` plus `add[i]` (wrapping): the servo side's samples of a
+    /// tick, with the tick's own values and the joints' zeros folded in
+    /// (`Controller::record_servo`).
+    pub fn sample_rows(
+        &mut self,
+        rows: &[[i32; MAX_SIGNALS]],
+        keep: &[i32; MAX_SIGNALS],
+        add: &[i32; MAX_SIGNALS],
+    ) {
+        for row in rows {
+            if self.s.countdown > 0
+                && matches!(
+                    self.s.phase,
+                    Phase::Armed | Phase::Triggered | Phase::Streaming
+                )
+            {
+                self.s.countdown -= 1;
+                continue;
             }
+            let mut values = [0i32; MAX_SIGNALS];
+            for (v, ((&r, &k), &a)) in values.iter_mut().zip(row.iter().zip(keep).zip(add)) {
+                *v = (r & k).wrapping_add(a);
+            }
+            self.sample(&values);
+        }
+    }
+
+    fn store(&mut self, values: &[i32; MAX_SIGNALS]) {
+        // A 16-bit signal takes two bytes (saturated), a 32-bit one four.
+        let width = self.s.width as usize;
+        let at = self.s.head as usize * width;
+        if let Some(out) = self.ring.get_mut(at..at + width) {
+            pack(values, self.s.narrow, out);
         }
         self.s.head += 1;
         if self.s.head == self.s.capacity {
@@ -504,26 +521,39 @@ impl Recorder {
         }
     }
 
-    /// Streaming: the number of the oldest sample not sent yet, and how many there
-    /// are, copied oldest first into `out` (as many whole samples as fit). `(n, 0)`
-    /// when nothing waits or the recorder is not streaming.
-    pub fn unsent(&self, out: &mut [u8]) -> (u32, u16) {
+    /// Streaming: the number of the oldest sample not sent yet, and how many of the
+    /// samples waiting fit in `room` bytes (whole samples; `(n, 0)` when nothing waits
+    /// or the recorder is not streaming).
+    pub fn unsent(&self, room: usize) -> (u32, u16) {
         if self.s.phase != Phase::Streaming || self.s.width == 0 {
             return (self.s.taken, 0);
         }
-        let width = self.s.width as usize;
-        let n = self.s.stored.min((out.len() / width) as u16);
-        let first = (self.s.head + self.s.capacity - self.s.stored) % self.s.capacity;
-        let total = self.s.capacity as usize * width;
-        let mut at = first as usize * width;
-        for b in &mut out[..n as usize * width] {
-            *b = (self.ring[at / 2] >> (8 * (at & 1))) as u8;
-            at += 1;
-            if at == total {
-                at = 0;
-            }
-        }
+        let n = self.s.stored.min((room / self.s.width as usize) as u16);
         (self.s.taken.wrapping_sub(self.s.stored as u32), n)
+    }
+
+    /// Streaming: the oldest `out.len() / width` unsent samples (at most those
+    /// [`Recorder::unsent`] counted) copied into `out`, oldest first.
+    pub fn copy_unsent(&self, out: &mut [u8]) {
+        let width = self.s.width as usize;
+        let total = self.s.capacity as usize * width;
+        let first = (self.s.head + self.s.capacity - self.s.stored) % self.s.capacity.max(1);
+        let n = out.len().min(self.s.stored as usize * width);
+        self.copy_wrapped(first as usize * width, total, &mut out[..n]);
+    }
+
+    /// Copies `out.len()` bytes of the ring's first `total`, from byte `from`, wrapping
+    /// at `total`: at most two copies.
+    fn copy_wrapped(&self, from: usize, total: usize, out: &mut [u8]) {
+        let (Some(ring), true) = (self.ring.get(..total), from <= total) else {
+            return;
+        };
+        let (wrapped, from_on) = ring.split_at(from);
+        let k = out.len().min(from_on.len());
+        let (a, b) = out.split_at_mut(k);
+        a.copy_from_slice(&from_on[..k]);
+        let m = b.len().min(wrapped.len());
+        b[..m].copy_from_slice(&wrapped[..m]);
     }
 
     /// Streaming: the oldest `n` unsent samples went out.
@@ -560,15 +590,30 @@ impl Recorder {
         // next.
         let start = self.s.head as usize * self.s.width as usize;
         let n = out.len().min(total - offset);
-        let mut at = (start + offset) % total;
-        for b in &mut out[..n] {
-            *b = (self.ring[at / 2] >> (8 * (at & 1))) as u8;
-            at += 1;
-            if at == total {
-                at = 0;
-            }
-        }
+        self.copy_wrapped((start + offset) % total, total, &mut out[..n]);
         n
+    }
+}
+
+/// Writes `values` side by side into `out` until it is full, each as its
+/// little-endian bytes: two (saturated) where bit i of `narrow` is set, else four.
+#[inline(always)]
+fn pack(values: &[i32; MAX_SIGNALS], narrow: u8, out: &mut [u8]) {
+    let mut rest = out;
+    for (i, &v) in values.iter().enumerate() {
+        if narrow & (1 << i) != 0 {
+            let Some((o, r)) = rest.split_first_chunk_mut::<2>() else {
+                break;
+            };
+            *o = (v.clamp(i16::MIN as i32, i16::MAX as i32) as i16).to_le_bytes();
+            rest = r;
+        } else {
+            let Some((o, r)) = rest.split_first_chunk_mut::<4>() else {
+                break;
+            };
+            *o = v.to_le_bytes();
+            rest = r;
+        }
     }
 }
 

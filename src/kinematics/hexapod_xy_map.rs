@@ -198,7 +198,15 @@ impl MapBuilder {
     /// pivot is below 1e-6 of the largest entry (singular).
     fn factor(&mut self) -> bool {
         let a = &mut self.rows;
-        let scale = a.iter().flatten().fold(0.0f32, |s, v| s.max(v.abs()));
+        // A compare, not `f32::max` (a call to `fmaxf` on the M4); entries are finite.
+        let scale = a.iter().flatten().fold(0.0f32, |s, v| {
+            let m = v.abs();
+            if m > s {
+                m
+            } else {
+                s
+            }
+        });
         self.perm = [0, 1, 2, 3, 4, 5];
         for c in 0..6 {
             let mut p = c;

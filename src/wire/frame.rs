@@ -107,6 +107,7 @@ pub(super) fn seal(data: &[u8], out: &mut [u8; MAX_FRAME]) -> usize {
 /// Variant indices of [`CtrlMsg`] in the message encoding.
 const CTRL_MSG_ACK: u8 = 3;
 const CTRL_MSG_STATUS: u8 = 6;
+const CTRL_MSG_RECORD: u8 = 8;
 
 /// Writes a message in postcard's encoding, for the two messages the controller sends
 /// most ([`encode_ack`], [`encode_status`]): what `postcard::to_slice` writes (tested),
@@ -174,6 +175,40 @@ pub fn encode_ack(
     w.u32(buffered_ms);
     let n = w.len;
     seal(&body[..n], out)
+}
+
+/// Encodes `CtrlMsg::Record` of `len` bytes, which `fill` writes into the slice it is
+/// given (exactly `len` bytes, in the frame's scratch body: no copy of them is made),
+/// with sequence number `seq` as a complete frame (as [`encode_frame_with`] does);
+/// returns its length, or `None` when `len` is beyond the message's
+/// [`CHUNK_BYTES`](crate::wire::store::CHUNK_BYTES). For the recorder's streamed
+/// pieces, sent every few ticks beside a job.
+pub fn encode_record(
+    seq: u16,
+    len: usize,
+    fill: impl FnOnce(&mut [u8]),
+    body: &mut [u8; MAX_BODY],
+    out: &mut [u8; MAX_FRAME],
+) -> Option<usize> {
+    const AT: usize = 5;
+    const _: () = assert!(AT + crate::wire::store::CHUNK_BYTES + 4 <= MAX_BODY);
+    if len > crate::wire::store::CHUNK_BYTES {
+        return None;
+    }
+    fill(&mut body[AT..AT + len]);
+    // The prefix ends right before the bytes: sequence number, variant, and the length
+    // as a varint of one byte (below 128) or two.
+    let start = if len < 0x80 {
+        body[AT - 1] = len as u8;
+        1
+    } else {
+        body[AT - 2] = len as u8 | 0x80;
+        body[AT - 1] = (len >> 7) as u8;
+        0
+    };
+    body[start..start + 2].copy_from_slice(&seq.to_le_bytes());
+    body[start + 2] = CTRL_MSG_RECORD;
+    Some(seal(&body[start..AT + len], out))
 }
 
 /// Encodes `CtrlMsg::Status(s)` with sequence number `seq` as a complete frame (as

@@ -31,8 +31,8 @@ pub use decode::{
     decode_block, decode_block_into, decode_planned_control_into, is_block, PlannedControl,
 };
 pub use frame::{
-    decode_body, decode_frame, encode_ack, encode_frame, encode_frame_with, encode_status,
-    FrameError, WHITEN,
+    decode_body, decode_frame, encode_ack, encode_frame, encode_frame_with, encode_record,
+    encode_status, FrameError, WHITEN,
 };
 pub use messages::*;
 pub use reader::{Frame, FrameDecoder, FrameReader, Pushed};

@@ -410,6 +410,23 @@ fn acks_and_statuses_encode_by_hand_exactly_as_postcard_encodes_them() {
 }
 
 #[test]
+fn recorder_pieces_encode_by_hand_exactly_as_postcard_encodes_them() {
+    let (mut want, mut got) = ([0u8; MAX_FRAME], [0u8; MAX_FRAME]);
+    let mut body = [0x5au8; MAX_BODY];
+    for len in 0..=crate::wire::store::CHUNK_BYTES {
+        let bytes: heapless::Vec<u8, { crate::wire::store::CHUNK_BYTES }> =
+            (0..len).map(|i| (i * 37 + len) as u8).collect();
+        let seq = (len * 613) as u16;
+        let n = encode_frame(seq, &CtrlMsg::Record(bytes.clone()), &mut want).unwrap();
+        let fill = |out: &mut [u8]| out.copy_from_slice(&bytes);
+        assert_eq!(Some(n), encode_record(seq, len, fill, &mut body, &mut got));
+        assert_eq!(want[..n], got[..n], "{len} bytes");
+    }
+    let beyond = crate::wire::store::CHUNK_BYTES + 1;
+    assert_eq!(None, encode_record(0, beyond, |_| {}, &mut body, &mut got));
+}
+
+#[test]
 fn a_sealed_frame_is_the_cobs_encoding_of_its_body_and_crc() {
     let mut x = 0x0BAD_F00Du32;
     let mut rnd = move |n: u32| {

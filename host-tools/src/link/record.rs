@@ -124,31 +124,30 @@ impl<T: Transport> Link<T> {
     /// controller refuses (machine busy or not homed, not a servo joint, amplitude,
     /// travel) is an error naming why.
     pub fn record_excite(&mut self, excite: &Excite) -> Result<(), LinkError> {
-        let mut req = heapless::Vec::new();
-        let _ = req.push(RECORD_EXCITE);
-        let _ = req.extend_from_slice(&excite.pack());
-        let id = self.fresh_control_id();
-        self.stats.controls += 1;
-        self.until_acked(id, &HostMsg::Record { id, req }, "starting the test signal")?;
-        let (reply, _) = self.record_query(0)?;
-        match reply.refused {
-            Some(error) => Err(LinkError::Recorder {
-                port: self.port(),
-                error,
-            }),
-            None => Ok(()),
-        }
+        self.record_control(RECORD_EXCITE, &excite.pack(), "starting the test signal")
     }
 
     /// Arms the recorder with `setup`; a request the controller refuses is an error
     /// naming why.
     pub fn record_arm(&mut self, setup: &Setup) -> Result<(), LinkError> {
+        self.record_control(RECORD_ARM, &setup.pack(), "arming the recorder")
+    }
+
+    /// Sends the recorder control `what` with its bytes until acknowledged (`doing`
+    /// names it in a timeout), then asks whether the controller refused it: a refusal
+    /// is an error naming why.
+    fn record_control(
+        &mut self,
+        what: u8,
+        bytes: &[u8],
+        doing: &'static str,
+    ) -> Result<(), LinkError> {
         let mut req = heapless::Vec::new();
-        let _ = req.push(RECORD_ARM);
-        let _ = req.extend_from_slice(&setup.pack());
+        let _ = req.push(what);
+        let _ = req.extend_from_slice(bytes);
         let id = self.fresh_control_id();
         self.stats.controls += 1;
-        self.until_acked(id, &HostMsg::Record { id, req }, "arming the recorder")?;
+        self.until_acked(id, &HostMsg::Record { id, req }, doing)?;
         let (reply, _) = self.record_query(0)?;
         match reply.refused {
             Some(error) => Err(LinkError::Recorder {

@@ -559,12 +559,13 @@ impl Simulator {
             pacer.post(command);
             self.last_servo_record.clear();
             if self.ctrl.records_servo() {
-                // As the firmware: the last complete tick's servo-period samples.
-                for half in 0..2 {
-                    let (ids, rows) = pacer.staged(half);
-                    self.ctrl.record_servo(ids, rows);
-                    self.last_servo_record.push((*ids, rows.to_vec()));
-                }
+                // As the firmware: the last complete tick's servo-period samples,
+                // taken in two halves, handed over in one call.
+                let (ids, first) = pacer.staged(0);
+                let (_, second) = pacer.staged(1);
+                let rows = [first, second].concat();
+                self.ctrl.record_servo(ids, &rows);
+                self.last_servo_record.push((*ids, rows));
             }
         }
         for _ in 1..SERVO_PER_TICK {

@@ -84,6 +84,8 @@ mod firmware {
     use pkmc::controller::Controller;
     use pkmc::drive::contour::ServoBank;
     use pkmc::drive::debounce::Switches as SwitchStates;
+    use pkmc::drive::recorder::MAX_SIGNALS;
+    use pkmc::drive::servo::SERVO_PER_TICK;
     use pkmc::wire::{AlarmCause, State};
     use static_cell::StaticCell;
     use {defmt_rtt as _, panic_probe as _};
@@ -175,8 +177,16 @@ mod firmware {
                     }
                     servo_period::post(command);
                     if c.records_servo() {
-                        for half in 0..2 {
-                            if let Some((ids, rows)) = servo_period::staged(half) {
+                        // Two short critical sections copy the halves; one call hands
+                        // them over (the same tick's unless its signals changed).
+                        let mut rows = [[0; MAX_SIGNALS]; SERVO_PER_TICK];
+                        let (a, b) = rows.split_at_mut(SERVO_PER_TICK / 2);
+                        let first = servo_period::staged(0);
+                        let second = servo_period::staged(1);
+                        if let (Some((ids, r0)), Some((again, r1))) = (first, second) {
+                            if ids == again {
+                                a.copy_from_slice(&r0);
+                                b.copy_from_slice(&r1);
                                 c.record_servo(&ids, &rows);
                             }
                         }
