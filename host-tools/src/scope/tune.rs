@@ -11,6 +11,7 @@
 //! with `--write` ([`super::tune_write`]).
 
 pub use super::tuned::{write, Tuned};
+pub use crate::control::tune::Margins;
 use super::{tune_write, Table};
 use crate::control::ident::{self, IdentOptions, Identified, Record};
 use crate::control::plant::TransferFunction;
@@ -70,6 +71,21 @@ pub struct TuneArgs {
     /// it, print what would change).
     #[arg(long)]
     pub write: bool,
+}
+
+impl TuneArgs {
+    /// `nc-send tune JOINT` with every option at its default (the command line's
+    /// own, parsed).
+    pub fn new(joint: &str) -> Self {
+        #[derive(clap::Parser)]
+        struct Line {
+            #[command(flatten)]
+            args: TuneArgs,
+        }
+        <Line as clap::Parser>::try_parse_from(["tune", "--", joint])
+            .expect("a joint alone is a whole command line")
+            .args
+    }
 }
 
 fn bad(message: impl Into<String>) -> Failure {
