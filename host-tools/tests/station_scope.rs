@@ -382,7 +382,8 @@ async fn live_and_arm_pressed_during_a_running_program_trace_and_capture_it() {
     let line = 7;
     page.click("#scope-stop").await;
     page.type_into("#scope-signals", "line,ferr:0,cmd:0").await;
-    page.type_into("#scope-trigger", &format!("line:{line}")).await;
+    page.type_into("#scope-trigger", &format!("line:{line}"))
+        .await;
     page.type_into("#scope-pre", "20").await;
     page.click("#scope-arm").await;
     let armed = page

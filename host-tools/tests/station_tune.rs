@@ -97,12 +97,10 @@ async fn the_tune_panel_tunes_a_servo_joint_and_writes_its_gains_only_when_asked
         "{e}"
     );
     // The stepper joint (a page that offers it anyway): the tuner names it.
-    page.js(
-        "(() => { const s = document.getElementById('tune-joint'); \
+    page.js("(() => { const s = document.getElementById('tune-joint'); \
          const o = document.createElement('option'); o.value = o.textContent = 'Z'; \
-         s.appendChild(o); s.value = 'Z'; })()",
-    )
-    .await;
+         s.appendChild(o); s.value = 'Z'; })()")
+        .await;
     let e = tune_refused(&page, "Tune is refused on a stepper").await;
     assert!(e.contains("Z") && e.contains("stepper joint"), "{e}");
     page.select("#tune-joint", "X").await;
@@ -221,15 +219,23 @@ async fn the_tune_panel_tunes_a_servo_joint_and_writes_its_gains_only_when_asked
     let expect = pkmc_host::scope::tune_write::rewrite(&original, 0, &fields).unwrap();
     assert_eq!(now, expect.text, "the file nc-send tune --write writes");
     assert!(written.contains(expect.line.trim()), "{written}");
-    let (before, after): (Vec<&str>, Vec<&str>) = (original.lines().collect(), now.lines().collect());
+    let (before, after): (Vec<&str>, Vec<&str>) =
+        (original.lines().collect(), now.lines().collect());
     assert_eq!(after.len(), before.len() + 1, "one comment line added");
     let changed: Vec<&str> = after
         .iter()
         .filter(|l| !before.contains(l))
         .copied()
         .collect();
-    assert_eq!(changed.len(), 2, "the comment and X's servo line: {changed:?}");
-    assert!(changed[0].starts_with("# nc-send tune: was servo ="), "{changed:?}");
+    assert_eq!(
+        changed.len(),
+        2,
+        "the comment and X's servo line: {changed:?}"
+    );
+    assert!(
+        changed[0].starts_with("# nc-send tune: was servo ="),
+        "{changed:?}"
+    );
     assert!(changed[1].starts_with("servo ="), "{changed:?}");
     let mf = read_file(&now, "written").unwrap();
     let g = mf.joints[0].servo.as_ref().unwrap();

@@ -11,10 +11,10 @@
 //! with `--write` ([`super::tune_write`]).
 
 pub use super::tuned::{write, Tuned};
-pub use crate::control::tune::Margins;
 use super::{tune_write, Table};
 use crate::control::ident::{self, IdentOptions, Identified, Record};
 use crate::control::plant::TransferFunction;
+pub use crate::control::tune::Margins;
 use crate::control::tune::{self, PidSpec, PidTuning};
 use crate::control::tune_plot::{BodeCurve, Curve};
 use crate::job::{exit, Failure, RunOptions, Target};

@@ -84,4 +84,3 @@ pub fn write(path: &Path, tuned: &Tuned) -> Result<String, Failure> {
         .map_err(|e| bad(format!("{}: cannot write it: {e}", path.display())))?;
     Ok(new.line.trim().to_string())
 }
-

@@ -159,8 +159,7 @@ impl Hooks<'_, '_> {
         };
         if self.info.kind == "tune" {
             return refuse(
-                "busy: a tune runs and uses the recorder; Arm and Live wait until it ends"
-                    .into(),
+                "busy: a tune runs and uses the recorder; Arm and Live wait until it ends".into(),
             );
         }
         let setup = match check(&signals, &trigger, pre, decimate) {
@@ -207,7 +206,12 @@ impl Hooks<'_, '_> {
             None => {
                 s.armed(&a.signals, &a.trigger, &a.setup);
                 self.info.scope = Reading::default();
-                Ok(if s.mode == Mode::Live { "live" } else { "armed" }.to_string())
+                Ok(if s.mode == Mode::Live {
+                    "live"
+                } else {
+                    "armed"
+                }
+                .to_string())
             }
         };
         drop(s);

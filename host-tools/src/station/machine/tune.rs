@@ -65,9 +65,7 @@ impl Machine<'_> {
         // The tune used the recorder: whatever the scope had armed is off.
         self.scope_off();
         let t = r?;
-        let svg = t
-            .svg()
-            .map_err(|e| Failure::new(job::exit::BAD_INPUT, e))?;
+        let svg = t.svg().map_err(|e| Failure::new(job::exit::BAD_INPUT, e))?;
         let summary = format!(
             "tuned {}: fit {:.1} %, designed kp {:.4e} ki {:.4e} kd {:.4e}",
             t.name, t.fit_percent, t.designed[0], t.designed[1], t.designed[2]
