@@ -5,7 +5,9 @@
 //! when done, while the program still runs, zoomed by a drag across it and read with two cursors; its CSV,
 //! downloaded from the panel, equals byte for byte the one `nc-send record` writes
 //! for the same machine, signals, trigger, pre-trigger and program; the live traces
-//! grow while a job runs and show a following error that is not zero.
+//! grow while a job runs and show a following error that is not zero. A second test
+//! presses Live and Arm (a line trigger) while a program already runs: the traces
+//! grow, and the capture comes while the program still runs.
 //! Screenshot: `docs/ui-scope.png` (docs/ui.md).
 
 mod station;
@@ -318,4 +320,105 @@ async fn the_scope_panel_streams_live_captures_on_a_trigger_and_exports_nc_send_
     page.js("document.getElementById('scope-cursors').scrollIntoView({block: 'end'})")
         .await;
     page.screenshot(&repo("docs/ui-scope.png")).await;
+}
+
+/// Live and Arm pressed while a program already runs: the recorder is armed beside
+/// the job's blocks. Live: the traces grow while the job runs. Arm with a line
+/// trigger: the capture comes while the job still runs, its trigger's sample the
+/// first on that line, its pre-trigger samples on the line before.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[cfg_attr(
+    pkmc_no_browser,
+    ignore = "needs Chromium and chromedriver on PATH (Debian: chromium, chromium-driver)"
+)]
+async fn live_and_arm_pressed_during_a_running_program_trace_and_capture_it() {
+    let mut st = Station::start_sim(SERVO, &[]).await;
+    let page = st.page("op").await;
+    page.wait(
+        "pkmc.lastStatus && pkmc.lock && pkmc.lock.holder === pkmc.you && \
+         pkmc.lastStatus.state === 'Idle'",
+        "the page takes control of the unlocked simulator",
+        Timeout::S(10),
+    )
+    .await;
+    let program = std::fs::read_to_string(repo(PROGRAM)).unwrap();
+    page.type_into("#editor", &program).await;
+    page.click("#load-editor").await;
+    page.wait(
+        &format!(
+            "pkmc.program && pkmc.program.check && pkmc.program.text === {}",
+            serde_json::to_string(&program).unwrap()
+        ),
+        "the program loads, checked",
+        Timeout::S(20),
+    )
+    .await;
+    page.click("#scope-panel summary").await;
+    page.click("#run").await;
+    page.wait_moving("the program runs").await;
+
+    // Live, pressed while the program runs.
+    page.type_into("#scope-signals", LIVE).await;
+    page.click("#scope-live").await;
+    page.wait(
+        "pkmc.scope.state && pkmc.scope.state.mode === 'live' && pkmc.scope.state.samples > 0",
+        "the recorder streams during the job",
+        Timeout::S(5),
+    )
+    .await;
+    let n1 = page.js("pkmc.scope.state.samples").await.as_u64().unwrap();
+    tokio::time::sleep(Duration::from_millis(800)).await;
+    let n2 = page.js("pkmc.scope.state.samples").await.as_u64().unwrap();
+    let running = page.js("!!pkmc.lastStatus.job").await;
+    assert_eq!(running, true, "the job still runs");
+    assert!(n2 > n1 + 300, "samples while the job runs: {n1} then {n2}");
+    let error = page
+        .js("document.getElementById('scope-error').textContent")
+        .await;
+    assert_eq!(error, "", "no refusal");
+
+    // Arm with a line trigger, pressed while the program runs (line 7, the third
+    // side, starts about 6 s after Run).
+    let line = 7;
+    page.click("#scope-stop").await;
+    page.type_into("#scope-signals", "line,ferr:0,cmd:0").await;
+    page.type_into("#scope-trigger", &format!("line:{line}"))
+        .await;
+    page.type_into("#scope-pre", "20").await;
+    page.click("#scope-arm").await;
+    let armed = page
+        .wait(
+            "pkmc.scope.state.mode === 'armed' && [pkmc.lastStatus.line, !!pkmc.lastStatus.job]",
+            "the recorder is armed during the job",
+            Timeout::S(5),
+        )
+        .await;
+    assert!(
+        armed[0].as_u64().unwrap() < line && armed[1] == true,
+        "armed before line {line}, the job running: {armed}"
+    );
+    let during = page
+        .wait(
+            "pkmc.scope.state.mode === 'done' && [!!pkmc.lastStatus.job]",
+            "the capture is read out",
+            Timeout::S(15),
+        )
+        .await;
+    assert_eq!(during[0], true, "the job still runs when the capture shows");
+    drawn(&page, "the capture is drawn").await;
+    let plot = page
+        .js("[pkmc.scope.plot.times, pkmc.scope.plot.values[0], pkmc.scope.plot.columns]")
+        .await;
+    let times: Vec<f64> = serde_json::from_value(plot[0].clone()).unwrap();
+    let lines: Vec<i64> = serde_json::from_value(plot[1].clone()).unwrap();
+    assert_eq!(plot[2][0], "line");
+    let at = times.iter().position(|t| t.abs() < 1e-9).unwrap();
+    assert_eq!(at, 20, "20 samples before the trigger: {times:?}");
+    assert_eq!(lines[at], line as i64, "{lines:?}");
+    assert!(
+        lines[..at].iter().all(|&l| l == line as i64 - 1),
+        "before the trigger, line {}: {lines:?}",
+        line - 1
+    );
+    page.wait_idle(Timeout::S(30)).await;
 }

@@ -431,6 +431,7 @@ fn serve(
                     None => Vec::new(),
                 },
                 host_timeout: Some(host_timeout),
+                machine_file: args.machine.clone(),
             };
             pkmc_host::station::run(machine, opts, &station, &stop)
         }

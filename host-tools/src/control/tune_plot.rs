@@ -70,6 +70,20 @@ pub fn draw(
     }
 }
 
+/// Draws `steps` and `bode` under `title` as SVG text (what [`draw`] writes to an
+/// `.svg` file).
+pub fn svg(title: &str, steps: &[Curve], bode: &[BodeCurve]) -> Result<String, String> {
+    use plotters::prelude::*;
+    register_font();
+    let mut out = String::new();
+    {
+        let root = SVGBackend::with_string(&mut out, SIZE).into_drawing_area();
+        render(&root, title, steps, bode)?;
+        root.present().map_err(|e| e.to_string())?;
+    }
+    Ok(out)
+}
+
 /// Smallest and largest of `values`, padded by 5 % (never an empty range).
 fn span(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);

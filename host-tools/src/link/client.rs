@@ -79,6 +79,15 @@ pub trait JobHooks {
     /// A recorder answer to a read (not a streamed piece) received while a streamed
     /// job runs: its header and its bytes.
     fn record_answer(&mut self, _reply: &pkmc::drive::recorder::Reply, _data: &[u8]) {}
+    /// Asked on every turn of a job's or a move's loop: a recorder request to arm now,
+    /// beside the job (`None`: none). It goes as the control it is, sent again until
+    /// acknowledged; [`JobHooks::record_armed`] then hears how it went.
+    fn record_arm(&mut self) -> Option<pkmc::drive::recorder::Setup> {
+        None
+    }
+    /// The request of [`JobHooks::record_arm`] acknowledged: armed (`None`), or the
+    /// controller's refusal in its words.
+    fn record_armed(&mut self, _refused: Option<String>) {}
     /// Something the operator should know that is not an error (the job was held for
     /// this host's silence and is resumed, ...).
     fn note(&mut self, _text: &str) {}
@@ -159,6 +168,7 @@ impl<T: Transport> Link<T> {
             machine_answer: None,
             probe_result: None,
             streamed: Vec::new(),
+            arming: None,
             status: None,
             stats: super::ClientStats::default(),
             their_machine: 0,
@@ -634,6 +644,16 @@ impl<T: Transport> Link<T> {
                     ended_by = Some(cmd);
                 }
                 continue;
+            }
+            if let Some(setup) = hooks.record_arm() {
+                self.streamed.clear();
+                match self.record_arm(&setup) {
+                    Ok(()) => hooks.record_armed(None),
+                    Err(LinkError::Recorder { error, .. }) => {
+                        hooks.record_armed(Some(error.to_string()))
+                    }
+                    Err(e) => return Err(e),
+                }
             }
             if matches!(s.state, State::Alarm | State::EStop) && s.speed == 0 {
                 if ended_by == Some(Control::Stop) {

@@ -59,6 +59,7 @@
 //! [`rtt`] (the measured round trip and damage), [`error`], [`view`] (the status as
 //! every face shows it: user units, the core's words).
 
+mod arming;
 mod client;
 mod error;
 mod liveness;
@@ -186,6 +187,8 @@ pub struct Link<T: Transport> {
     probe_result: Option<pkmc::drive::probe::ProbeResult>,
     /// The recorder's streamed pieces not taken yet ([`Link::record_take`]).
     streamed: Vec<record::Piece>,
+    /// A recorder request armed beside a running job, on its way ([`arming`]).
+    arming: Option<arming::Arming>,
     /// Last status received.
     pub status: Option<Status>,
     /// Counters.

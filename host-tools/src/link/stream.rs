@@ -280,6 +280,7 @@ impl<T: Transport> Link<T> {
         job: &mut JobState,
     ) -> Result<JobEnd, LinkError> {
         let mut new = Vec::new();
+        self.arming_forget();
         loop {
             let now = Instant::now();
             // Operator commands, and blocks fed while the job runs.
@@ -300,6 +301,7 @@ impl<T: Transport> Link<T> {
             if let Some(offset) = hooks.record_ask() {
                 self.ask_recorder(offset)?;
             }
+            self.service_arming(now, hooks)?;
             if fed.open && job.ending.is_none() {
                 new.clear();
                 fed.open = hooks.feed(&view, &mut new);
@@ -431,6 +433,7 @@ impl<T: Transport> Link<T> {
                 if self.control.is_some_and(|pc| pc.id == id) {
                     self.control = None;
                 }
+                self.arming_acked(id, hooks);
                 if let Some(e) = job.ending.as_mut() {
                     if e.id == id {
                         e.acked = true;
@@ -448,6 +451,7 @@ impl<T: Transport> Link<T> {
                 // A read asked by the hooks beside the job: theirs.
                 if let Some((reply, data)) = pkmc::drive::recorder::Reply::unpack(&bytes) {
                     if !reply.streamed {
+                        self.arming_answer(&reply);
                         hooks.record_answer(&reply, data);
                     }
                 }

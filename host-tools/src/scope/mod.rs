@@ -8,6 +8,7 @@ pub mod cli;
 pub mod plot;
 pub mod tune;
 pub mod tune_write;
+pub mod tuned;
 
 use pkmc::drive::recorder::{Setup, Signal, Trigger, MAX_SIGNALS};
 

@@ -10,13 +10,15 @@
 //! user sees the model is right. The gains are written into the machine file only
 //! with `--write` ([`super::tune_write`]).
 
+pub use super::tuned::{write, Tuned};
 use super::{tune_write, Table};
 use crate::control::ident::{self, IdentOptions, Identified, Record};
 use crate::control::plant::TransferFunction;
+pub use crate::control::tune::Margins;
 use crate::control::tune::{self, PidSpec, PidTuning};
-use crate::control::tune_plot::{self, BodeCurve, Curve};
+use crate::control::tune_plot::{BodeCurve, Curve};
 use crate::job::{exit, Failure, RunOptions, Target};
-use crate::link::{JobEnd, JobHooks, Link, Transport};
+use crate::link::{JobEnd, JobHooks, Link, LinkView, Transport};
 use crate::machine_file::lqg::LawKind;
 use crate::machine_file::{read_file, DriveKind, JointFile, MachineFile};
 use pkmc::config::{LqgGains, ServoGains};
@@ -69,6 +71,21 @@ pub struct TuneArgs {
     /// it, print what would change).
     #[arg(long)]
     pub write: bool,
+}
+
+impl TuneArgs {
+    /// `nc-send tune JOINT` with every option at its default (the command line's
+    /// own, parsed).
+    pub fn new(joint: &str) -> Self {
+        #[derive(clap::Parser)]
+        struct Line {
+            #[command(flatten)]
+            args: TuneArgs,
+        }
+        <Line as clap::Parser>::try_parse_from(["tune", "--", joint])
+            .expect("a joint alone is a whole command line")
+            .args
+    }
 }
 
 fn bad(message: impl Into<String>) -> Failure {
@@ -164,6 +181,35 @@ fn find_joint<'a>(mf: &'a MachineFile, name: &str, path: &Path) -> Result<Joint<
     })
 }
 
+/// The machine file read and the joint to tune found in it (a servo joint): what a
+/// tune checks before it moves anything ([`load`]).
+#[derive(Clone, Debug)]
+pub struct Loaded {
+    /// The machine file.
+    pub path: PathBuf,
+    text: String,
+    mf: MachineFile,
+    /// The joint's number from 0.
+    pub index: usize,
+}
+
+/// Checks `args` and reads the machine file at `path`: refused (by name) without a
+/// file, with an unknown joint or a stepper joint.
+pub fn load(args: &TuneArgs, path: Option<&Path>) -> Result<Loaded, Failure> {
+    check(args)?;
+    let path = path.ok_or_else(|| bad("tune needs the machine file: --machine FILE"))?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| bad(format!("{}: cannot read it: {e}", path.display())))?;
+    let mf = read_file(&text, &path.display().to_string()).map_err(|e| bad(e.to_string()))?;
+    let index = find_joint(&mf, &args.joint, path)?.index;
+    Ok(Loaded {
+        path: path.to_path_buf(),
+        text,
+        mf,
+        index,
+    })
+}
+
 /// Runs `nc-send tune` on `link` with the machine file at `path`; how it ended (and
 /// no block count: it sends no program).
 pub fn run<T: Transport>(
@@ -173,12 +219,7 @@ pub fn run<T: Transport>(
     opts: &RunOptions<'_>,
     hooks: &mut dyn JobHooks,
 ) -> Result<(JobEnd, Option<usize>), Failure> {
-    check(args)?;
-    let path = path.ok_or_else(|| bad("tune needs the machine file: --machine FILE"))?;
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| bad(format!("{}: cannot read it: {e}", path.display())))?;
-    let mf = read_file(&text, &path.display().to_string()).map_err(|e| bad(e.to_string()))?;
-    let j = find_joint(&mf, &args.joint, path)?;
+    let loaded = load(args, path)?;
     if matches!(opts.target, Target::Sim) {
         // A fresh simulator is locked: home it (a machine with switches) or unlock it.
         let switches = link.machine().joints.iter().any(|j| j.homing.enabled());
@@ -188,6 +229,35 @@ pub fn run<T: Transport>(
     } else {
         crate::job::prepare(link, false, false, hooks)?;
     }
+    let t = tune(link, args, &loaded, hooks)?;
+    for line in &t.lines {
+        println!("{line}");
+    }
+    if let Some(p) = &args.plot {
+        t.draw(p)?;
+        println!("plot: {}", p.display());
+    }
+    if args.write {
+        let line = write(&loaded.path, &t)?;
+        println!("written to {}: {line}", loaded.path.display());
+    } else {
+        println!("would write (with --write): {}", t.line.trim());
+    }
+    Ok((JobEnd::Done, None))
+}
+
+/// The tune itself, on a machine ready for the test signal (`nc-send tune` and the
+/// station's Tune): the PRBS and the step recorded, the plant identified, the gains
+/// designed, the report and the plot's curves made. Nothing is written but
+/// `--csv`. A control that `hooks` asks for while a test signal runs (a stop, a
+/// hold) stops the signal and ends the tune.
+pub fn tune<T: Transport>(
+    link: &mut Link<T>,
+    args: &TuneArgs,
+    loaded: &Loaded,
+    hooks: &mut dyn JobHooks,
+) -> Result<Tuned, Failure> {
+    let j = find_joint(&loaded.mf, &args.joint, &loaded.path)?;
     let amplitude = match args.amplitude {
         Some(a) => (a * j.cpu).round().max(1.0) as u32,
         None => ((0.4 * j.gains.min_ferror as f64).floor() as u32).max(1),
@@ -200,7 +270,7 @@ pub fn run<T: Transport>(
         length: (args.seconds * 1000.0).round() as u32,
         seed: args.prbs_seed,
     };
-    let table = excite(link, &prbs)?;
+    let table = excite(link, &prbs, hooks)?;
     if let Some(p) = &args.csv {
         std::fs::write(p, table.csv())
             .map_err(|e| bad(format!("{}: cannot write the CSV: {e}", p.display())))?;
@@ -213,7 +283,7 @@ pub fn run<T: Transport>(
         length: 2 * hold as u32,
         ..prbs
     };
-    let step_table = excite(link, &step)?;
+    let step_table = excite(link, &step, hooks)?;
     let o = IdentOptions::default();
     let id = ident::identify(&rec, &o).map_err(|e| {
         Failure::new(
@@ -223,32 +293,52 @@ pub fn run<T: Transport>(
     })?;
     let outcome = design(&j, &id, args)?;
     let measured = measured_step(&step_table, &j, &id.plant, amplitude, hold)?;
-    report(&j, &id, &outcome, &measured, (amplitude, rec.u.len()));
-    if let Some(p) = &args.plot {
-        plot(p, &j, &rec, &o, &id, &outcome, &measured)?;
-        println!("plot: {}", p.display());
-    }
+    let lines = report(&j, &id, &outcome, &measured, (amplitude, rec.u.len()));
+    let (steps, bode) = curves(&j, &rec, &o, &id, &outcome, &measured)?;
+    let t = &outcome.tuned;
+    let designed = [t.kp, t.ki, t.kd, t.kvff, t.kaff];
     let fields = [
-        ("kp", outcome.tuned.kp),
-        ("ki", outcome.tuned.ki),
-        ("kd", outcome.tuned.kd),
-        ("kvff", outcome.tuned.kvff),
-        ("kaff", outcome.tuned.kaff),
+        ("kp", t.kp),
+        ("ki", t.ki),
+        ("kd", t.kd),
+        ("kvff", t.kvff),
+        ("kaff", t.kaff),
     ];
-    let new = tune_write::rewrite(&text, j.index, &fields).map_err(bad)?;
-    if args.write {
-        std::fs::write(path, &new.text)
-            .map_err(|e| bad(format!("{}: cannot write it: {e}", path.display())))?;
-        println!("written to {}: {}", path.display(), new.line.trim());
-    } else {
-        println!("would write (with --write): {}", new.line.trim());
-    }
-    Ok((JobEnd::Done, None))
+    let new = tune_write::rewrite(&loaded.text, j.index, &fields).map_err(bad)?;
+    let g = &j.gains;
+    Ok(Tuned {
+        joint: j.index,
+        name: j.file.name.clone(),
+        unit: if j.file.rotary { "°" } else { "mm" },
+        amplitude: (amplitude, amplitude as f64 / j.cpu),
+        lines,
+        fit_percent: id.fit_percent,
+        step_error: measured.error.ratio,
+        present: [g.kp, g.ki, g.kd, g.kvff, g.kaff].map(|v| v as f64),
+        designed,
+        present_margins: outcome.present,
+        designed_margins: t.margins,
+        aimed: (outcome.spec.crossover_rad_s, outcome.spec.phase_margin_deg),
+        lqg: outcome.lqg.as_ref().map(|(gains, f)| {
+            format!(
+                "|S|max {:.2}, crossover {:.1} rad/s; lqg_gains = {gains}",
+                f.peak_sensitivity, f.crossover_rad_s
+            )
+        }),
+        line: new.line.trim().to_string(),
+        title: format!("tune {} ({})", j.index, j.file.name),
+        steps,
+        bode,
+    })
 }
 
 /// Streams the joint's output, encoder and command every servo period while the
 /// controller runs the test signal `e`; a table without gaps.
-fn excite<T: Transport>(link: &mut Link<T>, e: &Excite) -> Result<Table, Failure> {
+fn excite<T: Transport>(
+    link: &mut Link<T>,
+    e: &Excite,
+    hooks: &mut dyn JobHooks,
+) -> Result<Table, Failure> {
     let j = e.joint;
     let setup =
         super::setup(&format!("out:{j},meas:{j},cmd:{j}"), "stream", 0, 1, true).map_err(bad)?;
@@ -266,6 +356,15 @@ fn excite<T: Transport>(link: &mut Link<T>, e: &Excite) -> Result<Table, Failure
     let until = Instant::now() + Duration::from_millis(e.length as u64 + 300);
     while Instant::now() < until {
         link.record_listen(Duration::from_millis(20))?;
+        if let Some(c) = hooks.control(&LinkView::default()) {
+            // The operator asks for something else: the signal stops first.
+            link.record_disarm()?;
+            link.control(c)?;
+            return Err(Failure::new(
+                exit::ALARM,
+                format!("tune stopped: {c:?} asked while the test signal ran"),
+            ));
+        }
     }
     link.record_disarm()?;
     link.record_listen(Duration::from_millis(50))?;
@@ -444,44 +543,52 @@ fn numbers(v: &[f64]) -> String {
     format!("[{}]", s.join(", "))
 }
 
-/// Prints the model, the comparison with the measured step, the gains and margins.
-fn report(j: &Joint, id: &Identified, o: &Outcome, m: &Measured, (amplitude, n): (u32, usize)) {
+/// The report's lines: the model, the comparison with the measured step, the gains
+/// and margins.
+fn report(
+    j: &Joint,
+    id: &Identified,
+    o: &Outcome,
+    m: &Measured,
+    (amplitude, n): (u32, usize),
+) -> Vec<String> {
+    let mut out = Vec::new();
     let unit = if j.file.rotary { "°" } else { "mm" };
-    println!(
+    out.push(format!(
         "joint {} ({}): test signal ±{} counts (±{} {unit}), {} samples",
         j.index,
         j.file.name,
         amplitude,
         amplitude as f64 / j.cpu,
         n
-    );
-    println!(
+    ));
+    out.push(format!(
         "model: num = {}, den = {} ({unit}/c.u.; na {} nb {} nk {})",
         numbers(&id.plant.num),
         numbers(&id.plant.den),
         id.arx.a.len() - 1,
         id.arx.b.len(),
         id.arx.nk
-    );
-    println!("fit: {:.1} % (validation)", id.fit_percent);
-    println!(
+    ));
+    out.push(format!("fit: {:.1} % (validation)", id.fit_percent));
+    out.push(format!(
         "step: error {:.2} % of the measured step's rise (t90 {:.4} s), model against \
          measurement under the present gains",
         100.0 * m.error.ratio,
         m.error.rise_s
-    );
+    ));
     let g = &j.gains;
     let t = &o.tuned;
-    println!(
+    out.push(format!(
         "present: kp = {:.5e} ki = {:.5e} kd = {:.5e} kvff = {:.5e} kaff = {:.5e}",
         g.kp, g.ki, g.kd, g.kvff, g.kaff
-    );
-    println!(
+    ));
+    out.push(format!(
         "designed: kp = {:e} ki = {:e} kd = {:e} kvff = {:e} kaff = {:e}",
         t.kp, t.ki, t.kd, t.kvff, t.kaff
-    );
+    ));
     let line = |what: &str, m: &tune::Margins| {
-        println!(
+        format!(
             "{what}: crossover {:.1} rad/s ({:.2} Hz), PM {:.1}° at {:.1} rad/s, GM {:.1} dB, \
              stable {}",
             m.crossover_rad_s,
@@ -492,32 +599,33 @@ fn report(j: &Joint, id: &Identified, o: &Outcome, m: &Measured, (amplitude, n):
             m.stable
         )
     };
-    line("present gains on the model", &o.present);
-    line("designed gains on the model", &t.margins);
-    println!(
+    out.push(line("present gains on the model", &o.present));
+    out.push(line("designed gains on the model", &t.margins));
+    out.push(format!(
         "aimed at: crossover {:.1} rad/s, PM {:.0}°",
         o.spec.crossover_rad_s, o.spec.phase_margin_deg
-    );
+    ));
     if let Some((gains, f)) = &o.lqg {
-        println!(
+        out.push(format!(
             "LQG (law = \"lqg\"; the file's weights on the model): |S|max {:.2}, crossover \
              {:.1} rad/s; lqg_gains = {gains} (not written: the loader checks lqg_gains \
              against the file's plant)",
             f.peak_sensitivity, f.crossover_rad_s
-        );
+        ));
     }
+    out
 }
 
-/// Draws the steps (measured, predicted, designed) and the Bode diagram.
-fn plot(
-    path: &Path,
+/// The curves of the plot: the steps (measured, predicted, designed) and the Bode
+/// diagram.
+fn curves(
     j: &Joint,
     rec: &Record,
     o: &IdentOptions,
     id: &Identified,
     out: &Outcome,
     m: &Measured,
-) -> Result<(), Failure> {
+) -> Result<(Vec<Curve>, Vec<BodeCurve>), Failure> {
     let every = |v: &[f64]| -> Vec<(f64, f64)> {
         let step = (v.len() / 500).max(1);
         v.iter()
@@ -531,7 +639,7 @@ fn plot(
         label: label.into(),
         points: every(v),
     };
-    let steps = [
+    let steps = vec![
         curve("measured, present gains", &m.measured),
         curve("model, present gains", &m.predicted),
         curve("model, designed gains (no feed-forward)", &designed),
@@ -543,7 +651,7 @@ fn plot(
     let tuned =
         tune::bode(&id.plant, j.cpu, H, out.tuned.pid(), &ws).map_err(|e| fail(e.to_string()))?;
     let measured = ident::empirical_response(rec, o, &ws);
-    let bode = [
+    let bode = vec![
         BodeCurve {
             label: "identified plant".into(),
             points: ws.iter().map(|&w| (w, id.plant.at(w))).collect(),
@@ -569,6 +677,5 @@ fn plot(
             marks: false,
         },
     ];
-    let title = format!("tune {} ({})", j.index, j.file.name);
-    tune_plot::draw(path, &title, &steps, &bode).map_err(bad)
+    Ok((steps, bode))
 }

@@ -87,6 +87,9 @@ pub struct Hub {
     /// The scope panel: the recorder's request and samples.
     pub scope: Mutex<super::scope::Scope>,
     last_scope: Mutex<Option<Arc<str>>>,
+    /// The Tune panel: the tune running, the last result.
+    pub tune: Mutex<super::tune::Tune>,
+    last_tune: Mutex<Option<Arc<str>>>,
     /// The `hello` message's `machine`.
     pub machine: Value,
     /// A page's E-STOP raised the alarm in force (the controller calls it an
@@ -120,6 +123,8 @@ impl Hub {
             last_probes: Mutex::new(None),
             scope: Mutex::new(Default::default()),
             last_scope: Mutex::new(None),
+            tune: Mutex::new(Default::default()),
+            last_tune: Mutex::new(None),
             machine,
         }
     }
@@ -142,6 +147,7 @@ impl Hub {
             &self.last_status,
             &self.last_probes,
             &self.last_scope,
+            &self.last_tune,
         ] {
             if let Some(m) = lock(m).clone() {
                 let _ = tx.send(m);
@@ -294,6 +300,13 @@ impl Hub {
     pub fn publish_scope(&self) {
         let msg = lock(&self.scope).message();
         *lock(&self.last_scope) = Some(msg.to_string().into());
+        self.broadcast(&msg);
+    }
+
+    /// The Tune panel's state to every page (kept for pages that connect later).
+    pub fn publish_tune(&self) {
+        let msg = lock(&self.tune).message();
+        *lock(&self.last_tune) = Some(msg.to_string().into());
         self.broadcast(&msg);
     }
 

@@ -4,9 +4,11 @@
 //! job's hooks take hold, resume, stop, override and the next step, publish every
 //! status, and stop what a page started when that page's heartbeat is lost.
 
+mod joint;
 mod mdi;
 mod scope;
 mod staged;
+mod tune;
 
 use super::hub::{lock, Hub};
 use super::{Cmd, Request};
@@ -14,9 +16,7 @@ use crate::job::{self, Failure};
 use crate::link::view::{AlarmView, StatusView};
 use crate::link::{Derived, JobEnd, JobHooks, Link, LinkView, Transport};
 use pkmc::config::{MachineConfig, AXES};
-use pkmc::kinematics::{Kinematics, MachineKinematics};
-use pkmc::motion::block::{Block, Motion};
-use pkmc::units::{to_user, units_per_user};
+use pkmc::motion::block::Block;
 use pkmc::wire::{Control, Status};
 use serde_json::{json, Value};
 use std::collections::VecDeque;
@@ -81,6 +81,8 @@ pub(super) struct Machine<'a> {
     pub(super) last_job: &'static str,
     /// The host timeout of a program's run (`None`: the short watch).
     pub(super) program_timeout: Option<Duration>,
+    /// The machine file, for Tune and Write gains (`None`: a built-in machine).
+    pub(super) machine_file: Option<std::path::PathBuf>,
 }
 
 /// The MDI's line-by-line front end.
@@ -282,6 +284,7 @@ impl Machine<'_> {
             }
             Cmd::Reset => return self.control(link, Control::AlarmReset),
             Cmd::ScopeArm { .. } | Cmd::ScopeStop => return self.scope_command(link, req.cmd),
+            Cmd::Tune { .. } | Cmd::TuneWrite => return self.tune_command(link, page, req.cmd),
             Cmd::Override { percent } => {
                 return self.control(link, Control::FeedOverride(override_of(percent)?))
             }
@@ -320,7 +323,7 @@ impl Machine<'_> {
                 feed,
             } => {
                 let s = link.request_status()?;
-                let blocks = joint_move(self.machine, &s, joint, distance, feed)?;
+                let blocks = joint::joint_move(self.machine, &s, joint, distance, feed)?;
                 started("joint move");
                 let mut info = JobInfo::new("joint", page, blocks.len());
                 self.run(link, &blocks, &mut info)?
@@ -497,65 +500,6 @@ fn jog<T: Transport>(
     job::jog_command(link, r.axis, r.distance, r.feed)
 }
 
-/// Moves joint `joint` by `distance` (mm or degrees) alone: the straight line in
-/// joint space, cut into pieces of at most half a unit each turned into a pose by the
-/// forward kinematics, so the other joints stay where they are at every piece's end.
-fn joint_move(
-    machine: &MachineConfig,
-    s: &Status,
-    joint: usize,
-    distance: f64,
-    feed: f64,
-) -> Result<Vec<Block>, Failure> {
-    let bad = |m: String| Failure::new(job::exit::BAD_INPUT, m);
-    let jc = machine.joints.get(joint).ok_or_else(|| {
-        bad(format!(
-            "joint {}: the machine has no such joint",
-            joint + 1
-        ))
-    })?;
-    if !distance.is_finite() || !feed.is_finite() || feed <= 0.0 {
-        return Err(bad(format!(
-            "joint move: distance {distance}, feed {feed}: need numbers, feed positive"
-        )));
-    }
-    let scale = units_per_user(jc.rotary) as f64;
-    let from = s.joints[joint];
-    let to = (from + (distance * scale).round() as i64).clamp(jc.min, jc.max);
-    if to == from {
-        return Err(bad(format!(
-            "joint {}: at the end of its travel; nothing to move",
-            joint + 1
-        )));
-    }
-    let pieces = ((to - from).unsigned_abs() as f64 / (scale * 0.5)).ceil() as i64;
-    let pieces = pieces.clamp(1, 400);
-    let kin = MachineKinematics::new(machine);
-    let mut pose = s.pose;
-    let mut blocks = Vec::new();
-    for k in 1..=pieces {
-        let mut q = s.joints;
-        q[joint] = from + (to - from) * k / pieces;
-        let mut next = pose;
-        kin.forward(&q, &pose, &mut next).map_err(|e| {
-            bad(format!(
-                "joint {}: no pose reaches {:.3} ({e:?})",
-                joint + 1,
-                to_user(q[joint], jc.rotary)
-            ))
-        })?;
-        pose = next;
-        blocks.push(Block {
-            line: 0,
-            motion: Motion::Linear,
-            target: pose,
-            feed: (feed / 60.0 * 1e6).round() as i64,
-            tolerance_nm: 0,
-        });
-    }
-    Ok(blocks)
-}
-
 /// The job's hooks: statuses published, the pages' commands while it runs.
 struct Hooks<'m, 'a> {
     m: &'m mut Machine<'a>,
@@ -566,6 +510,7 @@ impl Hooks<'_, '_> {
     /// A page's command while a job runs.
     fn during(&mut self, req: Request) {
         let reply = match req.cmd {
+            Cmd::ScopeArm { .. } => return self.arm_during(req),
             Cmd::Hold => self.queue(Control::Hold),
             Cmd::Resume => self.queue(Control::Resume),
             Cmd::Stop => self.queue(Control::Abort),
@@ -671,6 +616,14 @@ impl JobHooks for Hooks<'_, '_> {
 
     fn record_answer(&mut self, reply: &pkmc::drive::recorder::Reply, data: &[u8]) {
         self.info.scope.answer(self.m.hub, reply, data);
+    }
+
+    fn record_arm(&mut self) -> Option<pkmc::drive::recorder::Setup> {
+        self.arm_now()
+    }
+
+    fn record_armed(&mut self, refused: Option<String>) {
+        self.armed(refused);
     }
 
     fn feed(&mut self, view: &LinkView, out: &mut Vec<Block>) -> bool {

@@ -11,6 +11,7 @@ mod machine;
 mod program;
 mod scene;
 mod scope;
+mod tune;
 mod web;
 
 use crate::job::{exit, Failure, RunOptions, Target};
@@ -34,6 +35,9 @@ pub struct StationOptions {
     /// silent, before it holds it (the machine file's `host_timeout_s`); `None`: the
     /// short link watch, as for MDI and jogs.
     pub host_timeout: Option<Duration>,
+    /// The machine file (Tune reads the joint's gains from it, Write gains writes
+    /// them into it); `None`: a built-in machine, not tuned from the page.
+    pub machine_file: Option<PathBuf>,
 }
 
 impl Default for StationOptions {
@@ -46,6 +50,7 @@ impl Default for StationOptions {
             host_timeout: Some(Duration::from_millis(
                 pkmc::controller::DEFAULT_HOST_TIMEOUT_MS as u64,
             )),
+            machine_file: None,
         }
     }
 }
@@ -127,6 +132,16 @@ pub(crate) enum Cmd {
         window: Option<f64>,
         width: f64,
     },
+    /// Tunes a servo joint as `nc-send tune JOINT` does (an option not given: its
+    /// default).
+    Tune {
+        joint: String,
+        amplitude: Option<f64>,
+        bandwidth: Option<f64>,
+        phase_margin: Option<f64>,
+    },
+    /// Writes the last tune's gains into the machine file (`nc-send tune --write`).
+    TuneWrite,
 }
 
 impl Cmd {
@@ -230,6 +245,7 @@ pub fn run(
             // starves it, and holds it after the host timeout, with its mark); MDI,
             // jogs and teach runs keep the short watch.
             program_timeout: opts.host_timeout,
+            machine_file: opts.machine_file.clone(),
         };
         m.serve(link, stop)
     })?;

@@ -107,6 +107,7 @@ pub fn describe(machine: &MachineConfig, joint_names: &[String]) -> Value {
                 "min": pkmc::units::to_user(jc.min, jc.rotary),
                 "max": pkmc::units::to_user(jc.max, jc.rotary),
                 "home": at_home.then(|| pkmc::units::to_user(q[j], jc.rotary)),
+                "servo": matches!(jc.drive, pkmc::config::Drive::Servo { .. }),
             })
         })
         .collect();

@@ -64,6 +64,23 @@ pub struct Scope {
     /// When the capture's phase was last asked, and the live samples last published.
     pub asked: Option<Instant>,
     published: Option<Instant>,
+    /// Arm or Live pressed while a job runs: sent beside the job, answered once the
+    /// controller acknowledges it ([`super::machine`]).
+    pub pending: Option<PendingArm>,
+}
+
+/// An arm request from a page while a job runs, on its way to the controller.
+#[derive(Clone, Debug)]
+pub struct PendingArm {
+    /// The page and its command's id, answered once it is armed.
+    pub page: u64,
+    pub id: u64,
+    /// The fields as the page wrote them, and the request.
+    pub signals: String,
+    pub trigger: String,
+    pub setup: Setup,
+    /// Handed to the link already.
+    pub sent: bool,
 }
 
 impl Default for Scope {
@@ -82,6 +99,7 @@ impl Default for Scope {
             disarm: false,
             asked: None,
             published: None,
+            pending: None,
         }
     }
 }

@@ -25,6 +25,7 @@ const INDEX: &str = include_str!("page/index.html");
 const APP: &str = include_str!("page/app.js");
 const STYLE: &str = include_str!("page/style.css");
 const SCOPE: &str = include_str!("page/scope.js");
+const TUNE: &str = include_str!("page/tune.js");
 
 /// What every request handler sees.
 struct App {
@@ -108,6 +109,7 @@ pub fn start(
         .route("/app.js", get(app_js))
         .route("/style.css", get(style))
         .route("/scope.js", get(scope_js))
+        .route("/tune.js", get(tune_js))
         .route("/scope.csv", get(scope_csv))
         .route("/ws", get(ws))
         .with_state(app);
@@ -174,6 +176,10 @@ async fn style() -> Response {
 
 async fn scope_js() -> Response {
     asset("text/javascript; charset=utf-8", SCOPE)
+}
+
+async fn tune_js() -> Response {
+    asset("text/javascript; charset=utf-8", TUNE)
 }
 
 /// The scope's samples as CSV, a download: [`crate::scope::Table::csv`], the text

@@ -6,8 +6,9 @@
 //! move's end is waited for).
 
 use super::super::hub::{lock, Hub};
-use super::super::scope::{check, Mode};
-use super::{Cmd, Machine};
+use super::super::scope::{check, Mode, PendingArm};
+use super::super::Request;
+use super::{Cmd, Hooks, Machine};
 use crate::job::{self, Failure};
 use crate::link::{Link, LinkError, Read, Readout, Transport};
 use pkmc::drive::recorder::Reply;
@@ -91,6 +92,22 @@ impl Machine<'_> {
     /// Between commands: a stop asked during a job carried out, the streamed pieces
     /// taken, an armed capture asked for now and then and read out when done.
     pub(super) fn scope_poll<T: Transport>(&mut self, link: &mut Link<T>) -> Result<(), Failure> {
+        // Arm or Live pressed during a job that ended before the controller took it:
+        // armed now.
+        let pending = lock(&self.hub.scope).pending.take();
+        if let Some(a) = pending {
+            let cmd = Cmd::ScopeArm {
+                signals: a.signals,
+                trigger: a.trigger,
+                pre: a.setup.pre as f64,
+                decimate: a.setup.decimate as f64,
+            };
+            match self.scope_command(link, cmd) {
+                Ok(text) => self.hub.reply(a.page, a.id, Ok(text.unwrap_or_default())),
+                Err(f) if f.code == job::exit::LINK => return Err(f),
+                Err(f) => self.hub.reply(a.page, a.id, Err(f.message)),
+            }
+        }
         let (mode, disarm, asked) = {
             let s = lock(&self.hub.scope);
             (s.mode, s.disarm, s.asked)
@@ -118,6 +135,88 @@ impl Machine<'_> {
             _ => {}
         }
         Ok(())
+    }
+}
+
+impl Hooks<'_, '_> {
+    /// Arm or Live pressed while a job runs: checked, then sent beside the job
+    /// ([`crate::link::JobHooks::record_arm`]); the page hears once it is armed.
+    pub(super) fn arm_during(&mut self, req: Request) {
+        let hub = self.m.hub;
+        let Cmd::ScopeArm {
+            signals,
+            trigger,
+            pre,
+            decimate,
+        } = req.cmd
+        else {
+            return;
+        };
+        let refuse = |why: String| {
+            lock(&hub.scope).error = Some(why.clone());
+            hub.publish_scope();
+            hub.reply(req.page, req.id, Err(why));
+        };
+        if self.info.kind == "tune" {
+            return refuse(
+                "busy: a tune runs and uses the recorder; Arm and Live wait until it ends".into(),
+            );
+        }
+        let setup = match check(&signals, &trigger, pre, decimate) {
+            Ok(s) => s,
+            Err(why) => return refuse(why),
+        };
+        let mut s = lock(&hub.scope);
+        if s.pending.as_ref().is_some_and(|a| a.sent) {
+            drop(s);
+            return refuse("the last Arm or Live is still on its way: press again".into());
+        }
+        s.pending = Some(PendingArm {
+            page: req.page,
+            id: req.id,
+            signals,
+            trigger,
+            setup,
+            sent: false,
+        });
+    }
+
+    /// The request to send beside the job now, if one waits.
+    pub(super) fn arm_now(&mut self) -> Option<pkmc::drive::recorder::Setup> {
+        let mut s = lock(&self.m.hub.scope);
+        let a = s.pending.as_mut().filter(|a| !a.sent)?;
+        a.sent = true;
+        Some(a.setup)
+    }
+
+    /// The controller acknowledged the request: the panel armed (live or waiting
+    /// for its trigger, the capture then read out beside the job), or its refusal.
+    pub(super) fn armed(&mut self, refused: Option<String>) {
+        let hub = self.m.hub;
+        let mut s = lock(&hub.scope);
+        let Some(a) = s.pending.take() else {
+            return;
+        };
+        let reply = match refused {
+            Some(e) => {
+                let why = format!("the controller's recorder refused the request: {e}");
+                s.error = Some(why.clone());
+                Err(why)
+            }
+            None => {
+                s.armed(&a.signals, &a.trigger, &a.setup);
+                self.info.scope = Reading::default();
+                Ok(if s.mode == Mode::Live {
+                    "live"
+                } else {
+                    "armed"
+                }
+                .to_string())
+            }
+        };
+        drop(s);
+        hub.publish_scope();
+        hub.reply(a.page, a.id, reply);
     }
 }
 
