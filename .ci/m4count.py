@@ -908,6 +908,8 @@ def main():
     if any(r.armed for r in replays):
         groups.append(("recorder armed: ", [r for r in replays if r.armed], False))
     for prefix, rs, enforceable in groups:
+        if not rs:  # M4COUNT_ONLY left none
+            continue
         for key, label, budget in RT_BUDGETS:
             if key == "period":
                 worst = max((r.period[0], r.name) for r in rs)

@@ -474,10 +474,8 @@ impl Recorder {
                 self.s.countdown -= 1;
                 continue;
             }
-            let mut values = [0i32; MAX_SIGNALS];
-            for (v, ((&r, &k), &a)) in values.iter_mut().zip(row.iter().zip(keep).zip(add)) {
-                *v = (r & k).wrapping_add(a);
-            }
+            // Formed in place (no cleared array first).
+            let values = core::array::from_fn(|i| (row[i] & keep[i]).wrapping_add(add[i]));
             self.sample(&values);
         }
     }
@@ -600,8 +598,9 @@ impl Recorder {
 #[inline(always)]
 fn pack(values: &[i32; MAX_SIGNALS], narrow: u8, out: &mut [u8]) {
     let mut rest = out;
-    for (i, &v) in values.iter().enumerate() {
-        if narrow & (1 << i) != 0 {
+    let mut narrow = narrow;
+    for &v in values {
+        if narrow & 1 != 0 {
             let Some((o, r)) = rest.split_first_chunk_mut::<2>() else {
                 break;
             };
@@ -614,6 +613,7 @@ fn pack(values: &[i32; MAX_SIGNALS], narrow: u8, out: &mut [u8]) {
             *o = v.to_le_bytes();
             rest = r;
         }
+        narrow >>= 1;
     }
 }
 
