@@ -63,6 +63,10 @@ pub struct Outputs {
     /// [`crate::controller::pacing::NOT_SERVO`] for none), read back by
     /// [`Controller::record_servo`].
     pub servo_record: [u8; crate::drive::recorder::MAX_SIGNALS],
+    /// Added to each of them by the servo side: a position's joint zero taken off,
+    /// or the value of a signal the tick samples itself
+    /// ([`crate::controller::pacing::HELD`]).
+    pub servo_record_add: [i32; crate::drive::recorder::MAX_SIGNALS],
 }
 
 impl Default for Outputs {
@@ -75,6 +79,7 @@ impl Default for Outputs {
             servo_reset: false,
             servo_record: [crate::controller::pacing::NOT_SERVO;
                 crate::drive::recorder::MAX_SIGNALS],
+            servo_record_add: [0; crate::drive::recorder::MAX_SIGNALS],
         }
     }
 }

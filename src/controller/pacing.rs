@@ -38,17 +38,22 @@ use crate::config::{Drive, MachineConfig, MAX_SERVOS};
 use crate::controller::{Controller, Inputs, Outputs};
 use crate::drive::contour::{PeriodInputs, PeriodOutputs, ServoBank};
 use crate::drive::debounce::{Debouncer, SwitchFilter, Switches, SWITCH};
-use crate::drive::recorder::MAX_SIGNALS;
+use crate::drive::recorder::{Row, MAX_SIGNALS, ROW_BYTES};
 use crate::drive::servo::{Trip, SERVO_PER_TICK, SETPOINT_FRAC_BITS};
 use crate::kinematics::{ContourMap, POSE_AXES};
 
-/// A signal the servo side does not sample (the tick's own), in
-/// [`Command::record`].
+/// In [`Command::record`]: no signal (past the capture's signals, or none armed).
 pub const NOT_SERVO: u8 = 0xff;
+/// In [`Command::record`]: a 32-bit signal the tick samples itself, its value in
+/// [`Command::record_add`], held over the tick's periods.
+pub const HELD: u8 = 0xfe;
+/// [`HELD`], a 16-bit signal.
+pub const HELD_NARROW: u8 = 0xfd;
 
-/// One tick's servo-period samples for the data recorder: each period's values of
-/// the signals asked for, periods in time order.
-pub type ServoSamples = [[i32; MAX_SIGNALS]; SERVO_PER_TICK];
+/// One tick's servo-period samples for the data recorder: each period's sample of
+/// the signals asked for, packed as the recorder's ring holds it, periods in time
+/// order.
+pub type ServoSamples = [Row; SERVO_PER_TICK];
 
 /// The length of a contour error (mm or degrees) in nm or µ°, rounded.
 fn norm_f32(v: &[f32]) -> i32 {
@@ -97,6 +102,8 @@ pub struct Command {
     /// The data recorder's signals to sample every servo period of the next tick
     /// (`Outputs::servo_record`).
     pub record: [u8; MAX_SIGNALS],
+    /// Added to each of them (`Outputs::servo_record_add`).
+    pub record_add: [i32; MAX_SIGNALS],
 }
 
 impl Command {
@@ -108,6 +115,7 @@ impl Command {
             enable: false,
             map: None,
             record: [NOT_SERVO; MAX_SIGNALS],
+            record_add: [0; MAX_SIGNALS],
         }
     }
 
@@ -120,6 +128,7 @@ impl Command {
             enable: out.servo_enable,
             map: map.copied(),
             record: out.servo_record,
+            record_add: out.servo_record_add,
         }
     }
 }
@@ -158,9 +167,11 @@ pub struct ServoPacer {
     stats: ServoStats,
     /// Each channel's DAC codes summed since the last edge.
     dac_sum: [u32; MAX_SERVOS],
-    /// The recorder's signals sampled this tick ([`Command::record`]).
+    /// The recorder's signals sampled this tick ([`Command::record`]) and what is
+    /// added to each.
     record: [u8; MAX_SIGNALS],
-    /// Some signal of `record` is the servo side's.
+    record_add: [i32; MAX_SIGNALS],
+    /// `record` names a signal.
     staging: bool,
     /// The recorder's samples of two ticks, by [`ServoPacer::staged`]'s bank: this
     /// tick's being written, the last one's for the tick to read; and their signals.
@@ -185,8 +196,9 @@ impl ServoPacer {
             stats: ServoStats::default(),
             dac_sum: [0; MAX_SERVOS],
             record: [NOT_SERVO; MAX_SIGNALS],
+            record_add: [0; MAX_SIGNALS],
             staging: false,
-            staged: [[[0; MAX_SIGNALS]; SERVO_PER_TICK]; 2],
+            staged: [[[0; ROW_BYTES]; SERVO_PER_TICK]; 2],
             staged_ids: [[NOT_SERVO; MAX_SIGNALS]; 2],
             bank_w: 0,
             snapshot: Snapshot {
@@ -219,7 +231,8 @@ impl ServoPacer {
                     }
                     self.enable = command.enable;
                     self.record = command.record;
-                    self.staging = self.record.iter().any(|&id| id != NOT_SERVO);
+                    self.record_add = command.record_add;
+                    self.staging = self.record[0] != NOT_SERVO;
                 }
                 None => self.stats.late_ticks = self.stats.late_ticks.wrapping_add(1),
             }
@@ -261,24 +274,43 @@ impl ServoPacer {
         ServoPeriod { out, tick: edge }
     }
 
-    /// This period's values of the recorder's servo-side signals (their wire ids with
-    /// the channel in place of the joint; [`NOT_SERVO`]: the tick's own).
+    /// This period's sample of the recorder's signals, packed (`drive::recorder::Row`):
+    /// each servo-side signal's value (wire ids with the channel in place of the
+    /// joint) plus its `record_add` (a position's joint zero taken off), a [`HELD`]
+    /// one's `record_add` itself.
     fn stage(&mut self, feedback: &[i64; MAX_SERVOS], out: &PeriodOutputs) {
-        let row = &mut self.staged[self.bank_w][self.phase % SERVO_PER_TICK];
-        for (v, &id) in row.iter_mut().zip(&self.record) {
+        let mut rest = &mut self.staged[self.bank_w][self.phase % SERVO_PER_TICK][..];
+        for (&id, &add) in self.record.iter().zip(&self.record_add) {
             let c = (id & 0x0f) as usize % MAX_SERVOS;
-            *v = match id >> 4 {
-                0 => (self.bank.setpoint(c) >> SETPOINT_FRAC_BITS) as i32,
-                1 => feedback[c] as i32,
+            let (v, wide) = match id >> 4 {
+                0 => ((self.bank.setpoint(c) >> SETPOINT_FRAC_BITS) as i32, true),
+                1 => (feedback[c] as i32, true),
                 // The setpoint's whole counts less the encoder (`following_error`'s
-                // whole part, in 32 bits: the ring keeps 16 of it, saturated).
-                2 => ((self.bank.setpoint(c) >> SETPOINT_FRAC_BITS) as i32)
-                    .wrapping_sub(feedback[c] as i32),
-                3 => out.dac[c] as i32,
-                9 => norm_f32(&out.contour_error[..3]),
-                10 => norm_f32(&out.contour_error[3..]),
-                _ => 0,
+                // whole part, in 32 bits; 16 of it kept, saturated).
+                2 => {
+                    let cmd = (self.bank.setpoint(c) >> SETPOINT_FRAC_BITS) as i32;
+                    (cmd.wrapping_sub(feedback[c] as i32), false)
+                }
+                3 => (out.dac[c] as i32, false),
+                9 => (norm_f32(&out.contour_error[..3]), true),
+                10 => (norm_f32(&out.contour_error[3..]), true),
+                _ if id == NOT_SERVO => break,
+                _ => (0, id == HELD),
             };
+            let v = v.wrapping_add(add);
+            if wide {
+                let Some((o, r)) = rest.split_first_chunk_mut::<4>() else {
+                    break;
+                };
+                *o = v.to_le_bytes();
+                rest = r;
+            } else {
+                let Some((o, r)) = rest.split_first_chunk_mut::<2>() else {
+                    break;
+                };
+                *o = (v.clamp(i16::MIN as i32, i16::MAX as i32) as i16).to_le_bytes();
+                rest = r;
+            }
         }
     }
 
@@ -286,7 +318,7 @@ impl ServoPacer {
     /// periods from period `half · SERVO_PER_TICK / 2` (the firmware copies them in
     /// two short critical sections), and the signals they are of. Valid until the
     /// next tick edge.
-    pub fn staged(&self, half: usize) -> (&[u8; MAX_SIGNALS], &[[i32; MAX_SIGNALS]]) {
+    pub fn staged(&self, half: usize) -> (&[u8; MAX_SIGNALS], &[Row]) {
         let r = self.bank_w ^ 1;
         let n = SERVO_PER_TICK / 2;
         let from = (half % 2) * n;

@@ -71,6 +71,7 @@ fn a_posted_target_is_loaded_at_the_next_edge_and_ramped_over_one_tick() {
                     enable: true,
                     map: None,
                     record: [NOT_SERVO; MAX_SIGNALS],
+                    record_add: [0; MAX_SIGNALS],
                 };
                 p.post(c);
                 posted = c;
@@ -91,6 +92,7 @@ fn a_late_tick_is_counted_and_the_loops_hold_their_last_target() {
         enable: true,
         map: None,
         record: [NOT_SERVO; MAX_SIGNALS],
+        record_add: [0; MAX_SIGNALS],
     };
     let mut p = pacer(&at);
     one_tick(&mut p, &feedback);
@@ -170,6 +172,7 @@ fn an_amplifier_fault_trips_its_loop_and_the_snapshot_carries_the_trip() {
         enable: true,
         map: None,
         record: [NOT_SERVO; MAX_SIGNALS],
+        record_add: [0; MAX_SIGNALS],
     });
     let fault = pad([true, false, false, false]);
     let s = p.period(&counts, &fault);
@@ -191,6 +194,7 @@ fn a_restart_replaces_the_bank_at_once_and_the_reset_command_loads_at_the_edge()
         enable: true,
         map: None,
         record: [NOT_SERVO; MAX_SIGNALS],
+        record_add: [0; MAX_SIGNALS],
     });
     // Trip channel 0, then reset the bank standing at new counts.
     p.period(&counts, &pad([true, false, false, false]));
@@ -335,15 +339,19 @@ fn the_recorders_servo_samples_are_each_periods_and_read_a_tick_later() {
     let mut p = pacer(&counts);
     one_tick(&mut p, &counts);
     // Channel 1's setpoint, feedback, error and DAC code every period of the next
-    // tick, which moves it by 100 counts.
+    // tick, which moves it by 100 counts; the positions counted from 900 (the joint's
+    // zero); then a value the tick sampled itself, held, 16 bits.
     let mut record = [NOT_SERVO; MAX_SIGNALS];
-    record[..4].copy_from_slice(&[0x01, 0x11, 0x21, 0x31]);
+    record[..5].copy_from_slice(&[0x01, 0x11, 0x21, 0x31, HELD_NARROW]);
+    let mut record_add = [0; MAX_SIGNALS];
+    record_add[..5].copy_from_slice(&[-900, -900, 0, 0, 40_000]);
     p.post(Command {
         reset: false,
         targets: counts.map(|c| (c + 100) << SETPOINT_FRAC_BITS),
         enable: true,
         map: None,
         record,
+        record_add,
     });
     // The feedback lags the setpoint by 3 counts from the second period on.
     let mut dacs = Vec::new();
@@ -359,16 +367,29 @@ fn the_recorders_servo_samples_are_each_periods_and_read_a_tick_later() {
     let (ids, first) = p.staged(0);
     assert_eq!(ids, &record);
     let (_, second) = p.staged(1);
-    let rows: Vec<[i32; MAX_SIGNALS]> = first.iter().chain(second).copied().collect();
+    let rows: Vec<_> = first.iter().chain(second).copied().collect();
     assert_eq!(rows.len(), SERVO_PER_TICK);
+    let i32_at = |r: &[u8], at: usize| i32::from_le_bytes([r[at], r[at + 1], r[at + 2], r[at + 3]]);
+    let i16_at = |r: &[u8], at: usize| i16::from_le_bytes([r[at], r[at + 1]]) as i32;
     for (k, row) in rows.iter().enumerate() {
         let setpoint = 1000 + 10 * (k as i32 + 1);
         let feedback = 1000 + (10 * k as i32 - 3).max(0);
-        assert_eq!(
-            row[..4],
-            [setpoint, feedback, setpoint - feedback, dacs[k]],
-            "period {k}"
-        );
-        assert!(row[4..].iter().all(|&v| v == 0));
+        let got = [
+            i32_at(row, 0),
+            i32_at(row, 4),
+            i16_at(row, 8),
+            i16_at(row, 10),
+            i16_at(row, 12),
+        ];
+        // The held value saturates at 16 bits, as the ring keeps it.
+        let want = [
+            setpoint - 900,
+            feedback - 900,
+            setpoint - feedback,
+            dacs[k],
+            32_767,
+        ];
+        assert_eq!(got, want, "period {k}");
+        assert!(row[14..].iter().all(|&b| b == 0));
     }
 }

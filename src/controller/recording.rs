@@ -14,13 +14,13 @@
 //! ([`Controller::record_servo`]); the other signals keep that tick's values over its
 //! periods.
 
-use super::pacing::NOT_SERVO;
+use super::pacing::{HELD, HELD_NARROW, NOT_SERVO};
 use super::session::push_frame_into;
 use super::Controller;
 use crate::config::{Drive, MAX_JOINTS, MAX_SERVOS};
 use crate::drive::excite::{Excite, Signal as ExciteSignal};
 use crate::drive::recorder::{
-    Capture, Phase, RecorderError, Reply, Setup, MAX_SIGNALS, REPLY_HEADER,
+    Capture, Phase, RecorderError, Reply, Row, Setup, Signal, MAX_SIGNALS, REPLY_HEADER,
 };
 use crate::drive::servo::SETPOINT_FRAC_BITS;
 use crate::units::TICK_HZ;
@@ -122,8 +122,9 @@ impl Controller {
         self.recorder
             .observe(job, self.exec.line, self.alarm.is_some());
         self.out.servo_record = [NOT_SERVO; MAX_SIGNALS];
+        self.out.servo_record_add = [0; MAX_SIGNALS];
         if self.recorder.wants(true) {
-            self.out.servo_record = self.servo_ids();
+            self.servo_plan();
             return;
         }
         if !self.recorder.wants(false) {
@@ -155,55 +156,51 @@ impl Controller {
         self.recorder.wants(true)
     }
 
-    /// The recorder's signals as the servo side samples them: a servo joint's
-    /// per-joint signal with its channel in place of the joint, the contour errors as
-    /// they are, the rest [`NOT_SERVO`] (the tick's own, held over its periods).
-    fn servo_ids(&self) -> [u8; MAX_SIGNALS] {
+    /// The recorder's signals as the servo side samples them, into the outputs
+    /// (`Outputs::servo_record`, `servo_record_add`): a servo joint's per-joint
+    /// signal with its channel in place of the joint (a position with the joint's
+    /// zero to take off), the contour errors as they are, the rest [`HELD`] or
+    /// [`HELD_NARROW`] with this tick's value, held over its periods.
+    fn servo_plan(&mut self) {
         let mut ids = [NOT_SERVO; MAX_SIGNALS];
-        for (out, &id) in ids.iter_mut().zip(self.recorder.signals()) {
+        let mut add = [0i32; MAX_SIGNALS];
+        for (i, &id) in self.recorder.signals().iter().enumerate() {
             let kind = id >> 4;
-            let drive = self
-                .machine
-                .joints
-                .get((id & 0x0f) as usize)
-                .map(|j| j.drive);
-            *out = match (kind, drive) {
-                (0..=3, Some(Drive::Servo { channel })) => kind << 4 | (channel & 0x0f),
+            let j = (id & 0x0f) as usize;
+            let drive = self.machine.joints.get(j).map(|jc| jc.drive);
+            ids[i] = match (kind, drive) {
+                (0..=3, Some(Drive::Servo { channel })) => {
+                    if kind <= 1 {
+                        add[i] = (self.offset[j % MAX_JOINTS] as i32).wrapping_neg();
+                    }
+                    kind << 4 | (channel & 0x0f)
+                }
                 (9 | 10, _) => id,
-                _ => NOT_SERVO,
+                _ => {
+                    add[i] = self.signal(id);
+                    match Signal::from_id(id).map(Signal::width) {
+                        Some(2) => HELD_NARROW,
+                        _ => HELD,
+                    }
+                }
             };
         }
-        ids
+        self.out.servo_record = ids;
+        self.out.servo_record_add = add;
     }
 
-    /// The servo side's samples of a tick (or part of one: `rows`, periods in time
-    /// order) of the signals `ids` ([`crate::controller::pacing::ServoPacer::staged`]),
+    /// The servo side's samples of a tick (`rows`, periods in time order, packed),
+    /// staged for the signals `ids` ([`crate::controller::pacing::ServoPacer::staged`]),
     /// stored when the recorder samples every servo period and they are of its
-    /// signals (the two ticks after arming have none). The signals the servo side
-    /// does not sample take this tick's values; positions are counted from the
-    /// joint's zero.
+    /// signals as this tick samples them (the two ticks after arming have none).
     #[inline(never)]
-    pub fn record_servo(&mut self, ids: &[u8; MAX_SIGNALS], rows: &[[i32; MAX_SIGNALS]]) {
-        // This tick's `Outputs::servo_record` are the signals as the servo side
-        // samples them (`servo_ids`), formed by the tick just run.
+    pub fn record_servo(&mut self, ids: &[u8; MAX_SIGNALS], rows: &[Row]) {
         if !self.recorder.wants(true) || *ids != self.out.servo_record {
             return;
         }
-        // Each value is `row & keep + add`: a servo-side signal's value less the
-        // joint's zero (positions), or the tick's own value held over its periods.
-        let mut keep = [0i32; MAX_SIGNALS];
-        let mut add = [0i32; MAX_SIGNALS];
-        for (i, &id) in self.recorder.signals().iter().enumerate() {
-            if ids[i] == NOT_SERVO {
-                add[i] = self.signal(id);
-            } else {
-                keep[i] = -1;
-                if id >> 4 <= 1 {
-                    add[i] = (self.offset[(id & 0x0f) as usize % MAX_JOINTS] as i32).wrapping_neg();
-                }
-            }
+        for row in rows {
+            self.recorder.sample_packed(row);
         }
-        self.recorder.sample_rows(rows, &keep, &add);
         if self.recorder.capture().phase == Phase::Streaming {
             self.stream_tick();
         }

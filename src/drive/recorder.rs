@@ -10,8 +10,8 @@
 //! sample is the signals' values side by side, little-endian, each 2 or 4 bytes
 //! ([`Signal::width`]): the following error, the DAC code or step rate and the state
 //! fit 16 bits (saturated), positions, speed, contour error and line take 32. So the
-//! ring holds `RING_BYTES / sample width` samples: 100 of eight 16-bit signals
-//! (10 ms at 10 kHz, 100 ms at 1 kHz), 50 of eight 32-bit ones.
+//! ring holds `RING_BYTES / sample width` samples: 90 of eight 16-bit signals
+//! (9 ms at 10 kHz, 90 ms at 1 kHz), 45 of eight 32-bit ones.
 //!
 //! **Sampling.** The caller forms the values of the configured signals and hands them
 //! to [`Recorder::sample`] once per servo period or tick (as [`Setup::servo`] says);
@@ -34,9 +34,15 @@ use crate::config::MAX_JOINTS;
 /// Signals a capture can hold.
 pub const MAX_SIGNALS: usize = 8;
 /// Queue slots of 160 bytes (on the MCU) given to the ring.
-pub const RING_SLOTS: usize = 10;
+pub const RING_SLOTS: usize = 9;
 /// The ring's size, bytes.
 pub const RING_BYTES: usize = RING_SLOTS * 160;
+/// Bytes a sample can take at most (eight 32-bit signals).
+pub const ROW_BYTES: usize = MAX_SIGNALS * 4;
+
+/// A sample as the ring keeps it: its signals' values side by side, little-endian,
+/// each 2 or 4 bytes ([`Signal::width`]); the bytes past its width are unused.
+pub type Row = [u8; ROW_BYTES];
 
 /// A signal the recorder can sample. Its wire id is `kind << 4 | joint`
 /// ([`Signal::id`], [`Signal::from_id`]).
@@ -264,6 +270,8 @@ struct Book {
     pending: bool,
     /// The level signal's last stored value.
     last_level: Option<i32>,
+    /// The level signal's first byte in a sample.
+    level_at: u8,
     /// Streaming: samples stored since arming (the next one's number), wrapping.
     taken: u32,
 }
@@ -288,6 +296,7 @@ const OFF: Book = Book {
     pre_kept: 0,
     pending: false,
     last_level: None,
+    level_at: 0,
     taken: 0,
 };
 
@@ -351,9 +360,13 @@ impl Recorder {
                 narrow |= 1 << i;
             }
         }
+        let mut level_at = 0;
         if let Trigger::Level { signal, .. } = setup.trigger {
             if signal >= count {
                 return Err(RecorderError::TriggerSignal { index: signal });
+            }
+            for &id in &setup.signals[..signal as usize] {
+                level_at += Signal::from_id(id).map_or(0, Signal::width);
             }
         }
         let capacity = (RING_BYTES / width as usize) as u16;
@@ -370,6 +383,7 @@ impl Recorder {
             width,
             narrow,
             capacity,
+            level_at,
             phase: if stream {
                 Phase::Streaming
             } else {
@@ -423,6 +437,21 @@ impl Recorder {
     /// One period's or tick's values of the configured signals (in their order; the
     /// values beyond [`Setup::count`] are ignored). Stores every `decimate`th.
     pub fn sample(&mut self, values: &[i32; MAX_SIGNALS]) {
+        let mut row = [0; ROW_BYTES];
+        pack(values, self.s.narrow, &mut row);
+        self.sample_packed(&row);
+    }
+
+    /// The bytes of the configured signals of `values` as a sample holds them.
+    pub fn pack(&self, values: &[i32; MAX_SIGNALS]) -> Row {
+        let mut row = [0; ROW_BYTES];
+        pack(values, self.s.narrow, &mut row);
+        row
+    }
+
+    /// [`Recorder::sample`] of a sample already packed ([`Row`]; the servo side's
+    /// samples are staged so, `pacing::ServoPacer::staged`).
+    pub fn sample_packed(&mut self, row: &Row) {
         if !matches!(
             self.s.phase,
             Phase::Armed | Phase::Triggered | Phase::Streaming
@@ -434,11 +463,11 @@ impl Recorder {
             return;
         }
         self.s.countdown = self.s.setup.decimate - 1;
-        self.store(values);
+        self.store(row);
         if self.s.phase == Phase::Streaming {
             self.s.taken = self.s.taken.wrapping_add(1);
         } else if self.s.phase == Phase::Armed {
-            if self.triggered(values) {
+            if self.triggered(row) {
                 self.s.pre_kept = self.s.setup.pre.min(self.s.stored - 1);
                 self.s.remaining = self.s.capacity - 1 - self.s.pre_kept;
                 self.s.phase = Phase::Triggered;
@@ -454,38 +483,19 @@ impl Recorder {
         }
     }
 
-    /// [`Recorder::sample`] of each row of `rows` in turn, its values
-    /// `row[i] & keep[i]` plus `add[i]` (wrapping): the servo side's samples of a
-    /// tick, with the tick's own values and the joints' zeros folded in
-    /// (`Controller::record_servo`).
-    pub fn sample_rows(
-        &mut self,
-        rows: &[[i32; MAX_SIGNALS]],
-        keep: &[i32; MAX_SIGNALS],
-        add: &[i32; MAX_SIGNALS],
-    ) {
-        for row in rows {
-            if self.s.countdown > 0
-                && matches!(
-                    self.s.phase,
-                    Phase::Armed | Phase::Triggered | Phase::Streaming
-                )
-            {
-                self.s.countdown -= 1;
-                continue;
-            }
-            // Formed in place (no cleared array first).
-            let values = core::array::from_fn(|i| (row[i] & keep[i]).wrapping_add(add[i]));
-            self.sample(&values);
-        }
-    }
-
-    fn store(&mut self, values: &[i32; MAX_SIGNALS]) {
-        // A 16-bit signal takes two bytes (saturated), a 32-bit one four.
+    fn store(&mut self, row: &Row) {
         let width = self.s.width as usize;
         let at = self.s.head as usize * width;
-        if let Some(out) = self.ring.get_mut(at..at + width) {
-            pack(values, self.s.narrow, out);
+        if let (Some(out), Some(bytes)) = (self.ring.get_mut(at..at + width), row.get(..width)) {
+            // Four bytes at a time (one load and one store each on the M4, which
+            // allows them unaligned), then the 16-bit rest: a call to a byte-wise
+            // `memcpy` cost twice as much.
+            let mut words = out.chunks_exact_mut(4);
+            let mut from = bytes.chunks_exact(4);
+            for (o, b) in (&mut words).zip(&mut from) {
+                o.copy_from_slice(b);
+            }
+            words.into_remainder().copy_from_slice(from.remainder());
         }
         self.s.head += 1;
         if self.s.head == self.s.capacity {
@@ -496,7 +506,7 @@ impl Recorder {
         }
     }
 
-    fn triggered(&mut self, values: &[i32; MAX_SIGNALS]) -> bool {
+    fn triggered(&mut self, row: &Row) -> bool {
         match self.s.setup.trigger {
             Trigger::Now => true,
             Trigger::Level {
@@ -504,7 +514,14 @@ impl Recorder {
                 level,
                 rising,
             } => {
-                let v = values[signal as usize];
+                let at = self.s.level_at as usize;
+                let v = if self.s.narrow & (1 << signal) != 0 {
+                    row.get(at..at + 2)
+                        .map_or(0, |b| i16::from_le_bytes([b[0], b[1]]) as i32)
+                } else {
+                    row.get(at..at + 4)
+                        .map_or(0, |b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                };
                 let crossed = self.s.last_level.is_some_and(|last| {
                     if rising {
                         last < level && v >= level

@@ -96,17 +96,17 @@ fn bad_requests_are_refused_naming_what_and_where() {
         r.arm(&setup(&[0x80], 1, level, 0)),
         Err(RecorderError::TriggerSignal { index: 1 })
     );
-    // Eight 16-bit signals: 100 samples in the ring; at most 99 before the trigger.
+    // Eight 16-bit signals: 90 samples in the ring; at most 89 before the trigger.
     let fe = [0x20, 0x21, 0x22, 0x23, 0x30, 0x31, 0x32, 0xc0];
     assert_eq!(
-        r.arm(&setup(&fe, 1, Trigger::Now, 100)),
+        r.arm(&setup(&fe, 1, Trigger::Now, 90)),
         Err(RecorderError::PreTrigger {
-            pre: 100,
-            capacity: 100
+            pre: 90,
+            capacity: 90
         })
     );
     assert_eq!(r.capture().phase, Phase::Off);
-    assert!(r.arm(&setup(&fe, 1, Trigger::Now, 99)).is_ok());
+    assert!(r.arm(&setup(&fe, 1, Trigger::Now, 89)).is_ok());
 }
 
 #[test]
@@ -119,7 +119,7 @@ fn ring_holds_the_stated_samples() {
         0,
     ))
     .unwrap();
-    assert_eq!(RING_BYTES / 16, 100);
+    assert_eq!(RING_BYTES / 16, 90);
     for v in 0..200 {
         r.sample(&[v; MAX_SIGNALS]);
     }
@@ -127,7 +127,7 @@ fn ring_holds_the_stated_samples() {
         r.capture(),
         Capture {
             phase: Phase::Done,
-            samples: 100,
+            samples: 90,
             pre: 0,
             width: 16
         }
@@ -143,26 +143,26 @@ fn ring_holds_the_stated_samples() {
     for v in 0..200 {
         r.sample(&[v; MAX_SIGNALS]);
     }
-    assert_eq!(r.capture().samples, 50);
+    assert_eq!(r.capture().samples, 45);
     let s = samples(&r);
     assert_eq!(s[0], vec![0; 8]);
-    assert_eq!(s[49], vec![49; 8]);
+    assert_eq!(s[44], vec![44; 8]);
 }
 
 #[test]
 fn now_with_decimation_keeps_every_nth() {
     let mut r = recorder();
-    // 4 + 2 + 4 bytes a sample: 160 samples.
+    // 4 + 2 + 4 bytes a sample: 144 samples.
     r.arm(&setup(&[0x00, 0x21, 0x80], 3, Trigger::Now, 0))
         .unwrap();
     assert!(r.wants(false) && !r.wants(true));
-    for v in 0..3 * 160 + 10 {
+    for v in 0..3 * 144 + 10 {
         r.sample(&values(v));
     }
     assert_eq!(r.capture().phase, Phase::Done);
     assert!(!r.wants(false));
     let s = samples(&r);
-    assert_eq!(s.len(), 160);
+    assert_eq!(s.len(), 144);
     for (i, row) in s.iter().enumerate() {
         let v = 3 * i as i32;
         assert_eq!(row, &vec![v, -v, 2 * v], "sample {i}");
@@ -183,12 +183,12 @@ fn a_level_crossing_keeps_the_pre_trigger_samples() {
         r.sample(&values(v));
     }
     let c = r.capture();
-    assert_eq!((c.phase, c.samples, c.pre), (Phase::Done, 160, 50));
+    assert_eq!((c.phase, c.samples, c.pre), (Phase::Done, 144, 50));
     let s = samples(&r);
     assert_eq!(s[50][2], 1000);
     assert_eq!(s[49][2], 998);
     assert_eq!(s[0][0], 450);
-    assert_eq!(s[159][0], 450 + 159);
+    assert_eq!(s[143][0], 450 + 143);
 }
 
 #[test]

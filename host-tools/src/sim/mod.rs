@@ -149,11 +149,11 @@ pub struct Simulator {
     probe: Option<(probe::SimProbe, probe::Frame)>,
 }
 
-/// One `Controller::record_servo` call: the signals' servo-side ids and the rows
-/// (one per servo period) handed over.
+/// One `Controller::record_servo` call: the signals' servo-side ids and the packed
+/// samples (one per servo period) handed over.
 pub type ServoRecordCall = (
     [u8; pkmc::drive::recorder::MAX_SIGNALS],
-    Vec<[i32; pkmc::drive::recorder::MAX_SIGNALS]>,
+    Vec<pkmc::drive::recorder::Row>,
 );
 
 /// Ticks the simulator goes on running after the controller's work is done, while a

@@ -231,11 +231,12 @@ fn pacer_cases() {
         }
         let staged = pacer::finish(&mut p, &f);
         let ids = staged.ids.map(i64::from);
+        // The packed samples as the script reads the emulated memory: words.
         let rows: Vec<i64> = staged
             .rows
             .iter()
-            .flatten()
-            .map(|&v| i64::from(v))
+            .flat_map(|r| r.chunks_exact(4))
+            .map(|w| i64::from(i32::from_le_bytes([w[0], w[1], w[2], w[3]])))
             .collect();
         assert!(
             b % 2 == 0 || rows.iter().any(|&v| v != 0),

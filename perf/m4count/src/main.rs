@@ -332,7 +332,7 @@ pub unsafe extern "C" fn bench_ctrl_tick(
 pub unsafe extern "C" fn bench_ctrl_record_servo(
     c: *mut Controller,
     ids: *const [u8; MAX_SIGNALS],
-    rows: *const [i32; MAX_SIGNALS],
+    rows: *const pkmc::drive::recorder::Row,
     n: usize,
 ) {
     // SAFETY: the caller passes valid pointers.

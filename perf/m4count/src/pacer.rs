@@ -22,7 +22,7 @@ use crate::servo::{ccpm_4axes_machine, channels, helix_targets, hexapod_xy_machi
 use pkmc::config::MAX_SERVOS;
 use pkmc::controller::pacing::{Command, ServoPacer, NOT_SERVO};
 use pkmc::drive::contour::ServoBank;
-use pkmc::drive::recorder::MAX_SIGNALS;
+use pkmc::drive::recorder::{Row, MAX_SIGNALS, ROW_BYTES};
 use pkmc::drive::servo::{SERVO_PER_TICK, SETPOINT_FRAC_BITS};
 use pkmc::kinematics::{ContourMap, MachineKinematics};
 
@@ -45,6 +45,10 @@ pub const CCPM_SIGNALS: [u8; MAX_SIGNALS] = [0x00, 0x10, 0x20, 0x30, 0x21, 0x31,
 /// (what the `hexapod_xy_*_rec10k` programs arm, `programs.rs`).
 pub const HEXAPOD_XY_SIGNALS: [u8; MAX_SIGNALS] = [0x00, 0x10, 0x20, 0x30, 0x26, 0x36, 0x90, 0xa0];
 
+/// Added to the staged signals: the joint's zero taken off the two positions (any
+/// values cost the same).
+const RECORD_ADD: [i32; MAX_SIGNALS] = [-1234, -1234, 0, 0, 0, 0, 0, 0];
+
 /// Bench `bench`'s pacer, its tick's command posted (not timed).
 pub fn pacer(bench: u32) -> ServoPacer {
     let record = |signals: [u8; MAX_SIGNALS]| {
@@ -65,6 +69,7 @@ pub fn pacer(bench: u32) -> ServoPacer {
                 enable: true,
                 map: None,
                 record: record(CCPM_SIGNALS),
+                record_add: RECORD_ADD,
             });
             p
         }
@@ -88,6 +93,7 @@ pub fn pacer(bench: u32) -> ServoPacer {
                 enable: true,
                 map: Some(ContourMap::of_joints(&m, &jm)),
                 record: record(HEXAPOD_XY_SIGNALS),
+                record_add: RECORD_ADD,
             });
             p
         }
@@ -106,8 +112,8 @@ pub fn servo_bench(bench: u32) -> u32 {
 pub struct Staged {
     /// The signals' servo-side ids.
     pub ids: [u8; MAX_SIGNALS],
-    /// Each period's values, in time order.
-    pub rows: [[i32; MAX_SIGNALS]; SERVO_PER_TICK],
+    /// Each period's packed sample, in time order.
+    pub rows: [Row; SERVO_PER_TICK],
 }
 
 /// One period more (the next tick's edge, nothing posted), then the last complete
@@ -116,7 +122,7 @@ pub fn finish(p: &mut ServoPacer, feedback: &[i64; MAX_SERVOS]) -> Staged {
     p.period(feedback, &[false; MAX_SERVOS]);
     let mut out = Staged {
         ids: [NOT_SERVO; MAX_SIGNALS],
-        rows: [[0; MAX_SIGNALS]; SERVO_PER_TICK],
+        rows: [[0; ROW_BYTES]; SERVO_PER_TICK],
     };
     let mut k = 0;
     for half in 0..2 {

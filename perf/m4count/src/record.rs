@@ -47,7 +47,7 @@
 //! * `R` `len: u16` `bytes[len]`: `receive(bytes)`;
 //! * `T` `inputs: [i64; INPUT_WORDS]` `outputs: [i64; OUTPUT_WORDS]`: `tick`, its
 //!   inputs and outputs flattened by [`crate::wire`];
-//! * `S` `ids: [u8; MAX_SIGNALS]` `n: u8` `rows: [[i32; MAX_SIGNALS]; n]`:
+//! * `S` `ids: [u8; MAX_SIGNALS]` `n: u8` `rows: [Row; n]` (packed samples, 32 bytes each):
 //!   `record_servo(ids, rows)` after the tick before it;
 //! * `X` `n: u16` `bytes[n]`: `transmit` into a [`USB_PACKET`]-byte buffer returned `n`.
 
@@ -176,8 +176,8 @@ impl Recorder {
             self.log.push(b'S');
             self.log.extend_from_slice(ids);
             self.log.push(rows.len() as u8);
-            for v in rows.iter().flatten() {
-                self.log.extend_from_slice(&v.to_le_bytes());
+            for row in rows {
+                self.log.extend_from_slice(row);
             }
             self.counts.record_servo += 1;
         }

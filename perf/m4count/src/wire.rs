@@ -24,7 +24,8 @@ pub const MAP_WORDS: usize = 2 * POSE_AXES * MAX_SERVOS;
 /// Words of one [`Outputs`]: five per step train, the servo targets, three flags, the
 /// data recorder's servo-side signals, and the contour map (a presence flag, then
 /// [`MAP_WORDS`], zero when absent).
-pub const OUTPUT_WORDS: usize = 5 * MAX_STEPPERS + MAX_SERVOS + 3 + MAX_SIGNALS + 1 + MAP_WORDS;
+pub const OUTPUT_WORDS: usize =
+    5 * MAX_STEPPERS + MAX_SERVOS + 3 + 2 * MAX_SIGNALS + 1 + MAP_WORDS;
 
 /// `inputs` as words.
 pub fn inputs_words(inputs: &Inputs) -> [i64; INPUT_WORDS] {
@@ -135,6 +136,7 @@ pub fn outputs_words(outputs: &Outputs, contour_map: Option<&ContourMap>) -> [i6
         servo_enable,
         servo_reset,
         servo_record,
+        servo_record_add,
     } = *outputs;
     let mut w = [0; OUTPUT_WORDS];
     for (c, t) in steps.iter().enumerate() {
@@ -162,7 +164,11 @@ pub fn outputs_words(outputs: &Outputs, contour_map: Option<&ContourMap>) -> [i6
     for (o, &id) in w[f + 3..].iter_mut().zip(&servo_record) {
         *o = i64::from(id);
     }
-    let m = f + 3 + MAX_SIGNALS;
+    let a = f + 3 + MAX_SIGNALS;
+    for (o, &v) in w[a..].iter_mut().zip(&servo_record_add) {
+        *o = i64::from(v);
+    }
+    let m = a + MAX_SIGNALS;
     if let Some(map) = contour_map {
         w[m] = 1;
         map_words(map, &mut w[m + 1..]);

@@ -84,7 +84,7 @@ mod firmware {
     use pkmc::controller::Controller;
     use pkmc::drive::contour::ServoBank;
     use pkmc::drive::debounce::Switches as SwitchStates;
-    use pkmc::drive::recorder::MAX_SIGNALS;
+    use pkmc::drive::recorder::ROW_BYTES;
     use pkmc::drive::servo::SERVO_PER_TICK;
     use pkmc::wire::{AlarmCause, State};
     use static_cell::StaticCell;
@@ -179,7 +179,7 @@ mod firmware {
                     if c.records_servo() {
                         // Two short critical sections copy the halves; one call hands
                         // them over (the same tick's unless its signals changed).
-                        let mut rows = [[0; MAX_SIGNALS]; SERVO_PER_TICK];
+                        let mut rows = [[0; ROW_BYTES]; SERVO_PER_TICK];
                         let (a, b) = rows.split_at_mut(SERVO_PER_TICK / 2);
                         let first = servo_period::staged(0);
                         let second = servo_period::staged(1);

@@ -24,7 +24,7 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use critical_section::Mutex;
 use pkmc::controller::pacing::{Command, ServoPacer, ServoStats, Snapshot};
 use pkmc::drive::contour::ServoBank;
-use pkmc::drive::recorder::MAX_SIGNALS;
+use pkmc::drive::recorder::{Row, MAX_SIGNALS, ROW_BYTES};
 use pkmc::drive::servo::SERVO_PER_TICK;
 use static_cell::StaticCell;
 
@@ -73,12 +73,10 @@ pub fn snapshot() -> Snapshot {
 /// Half `half` of the data recorder's servo-period samples of the last complete
 /// tick, and their signals ([`ServoPacer::staged`]), copied in a short critical
 /// section (168 bytes, about half of what a whole tick's would hold it).
-pub fn staged(
-    half: usize,
-) -> Option<([u8; MAX_SIGNALS], [[i32; MAX_SIGNALS]; SERVO_PER_TICK / 2])> {
+pub fn staged(half: usize) -> Option<([u8; MAX_SIGNALS], [Row; SERVO_PER_TICK / 2])> {
     with_pacer(|p| {
         let (ids, rows) = p.staged(half);
-        let mut out = [[0; MAX_SIGNALS]; SERVO_PER_TICK / 2];
+        let mut out = [[0; ROW_BYTES]; SERVO_PER_TICK / 2];
         out.copy_from_slice(rows);
         (*ids, out)
     })
