@@ -36,6 +36,11 @@
 //!   the best fit is kept and refitted on all the data. Models with a pole outside
 //!   the unit circle or on the negative real axis (no continuous counterpart) are
 //!   passed over; if the best fit is below `min_fit` the data are refused.
+//! * **Output-error refinement** (`output_error`, on by default; `ident/refine.rs`): the
+//!   chosen model's poles and numerator fitted again on the record at the servo
+//!   rate, simulated from the recorded input itself, its integrator freed — the
+//!   block model above is its starting point. The test signal's edges put a DAC
+//!   doublet into the input that the block filter lets alias (see that module).
 //! * **Continuous model.** The ARX poles map to s = ln z / (D·h); the numerator is
 //!   the least-squares fit of the block model's frequency response (relative error,
 //!   up to a quarter of the block rate's Nyquist frequency). The result is a
