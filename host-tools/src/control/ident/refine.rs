@@ -293,10 +293,11 @@ fn solve(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
         }
         a.swap(k, p);
         b.swap(k, p);
+        let pivot = a[k].clone();
         for i in k + 1..n {
-            let f = a[i][k] / a[k][k];
-            for j in k..n {
-                a[i][j] -= f * a[k][j];
+            let f = a[i][k] / pivot[k];
+            for (x, p) in a[i][k..].iter_mut().zip(&pivot[k..]) {
+                *x -= f * p;
             }
             b[i] -= f * b[k];
         }
