@@ -226,6 +226,57 @@ pub fn design_pid(
     })
 }
 
+/// Bounds a default design keeps on the model besides its phase margin (see
+/// [`highest_crossover`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Robustness {
+    /// Smallest gain margin, dB.
+    pub min_gain_margin_db: f64,
+    /// Largest peak sensitivity max |1/(1 + L)|.
+    pub max_sensitivity: f64,
+}
+
+impl Default for Robustness {
+    /// 10 dB of gain margin, |S|max ≤ 1.7 (a 36° and 4.6 dB guaranteed margin).
+    fn default() -> Self {
+        Self {
+            min_gain_margin_db: 10.0,
+            max_sensitivity: 1.7,
+        }
+    }
+}
+
+/// The highest crossover from `lo` to `hi` rad/s (40 log-spaced trials) up to which
+/// every trial's design for `spec`'s phase margin and integral ratio meets, on
+/// `model`: a stable loop, that phase margin at every gain crossover (within 1°), and
+/// `bounds`. `None` when the design at `lo` already fails them.
+pub fn highest_crossover(
+    model: &TransferFunction,
+    counts_per_unit: f64,
+    period_s: f64,
+    spec: &PidSpec,
+    (lo, hi): (f64, f64),
+    bounds: &Robustness,
+) -> Option<f64> {
+    let mut best = None;
+    for wc in log_grid(lo, hi.max(lo), 40) {
+        let trial = PidSpec {
+            crossover_rad_s: wc,
+            ..*spec
+        };
+        let ok = design_pid(model, counts_per_unit, period_s, &trial).is_ok_and(|t| {
+            t.margins.phase_margin_deg >= spec.phase_margin_deg - 1.0
+                && t.margins.gain_margin_db() >= bounds.min_gain_margin_db
+                && t.figures.peak_sensitivity <= bounds.max_sensitivity
+        });
+        if !ok {
+            break;
+        }
+        best = Some(wc);
+    }
+    best
+}
+
 /// The closed loop's response to a unit step of the target (1 mm or degree) at time
 /// 0, the loop at rest and running before: the core's PID `gains` (per count) on
 /// `plant`, linear (no output clamp, no DAC or encoder quantisation, no

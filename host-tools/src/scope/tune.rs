@@ -437,13 +437,25 @@ fn design(j: &Joint, id: &Identified, args: &TuneArgs) -> Result<Outcome, Failur
     let fail = |e: String| Failure::new(exit::ALARM, format!("tune {}: {e}", j.file.name));
     let present =
         tune::margins(&id.plant, j.cpu, H, present(&j.gains)).map_err(|e| fail(e.to_string()))?;
-    let crossover = match args.bandwidth {
-        Some(hz) => hz * std::f64::consts::TAU,
-        None => present.crossover_rad_s,
-    };
     let spec = PidSpec {
         phase_margin_deg: args.phase_margin,
-        ..PidSpec::new(crossover)
+        ..PidSpec::new(present.crossover_rad_s)
+    };
+    let crossover = match args.bandwidth {
+        Some(hz) => hz * std::f64::consts::TAU,
+        None => {
+            // The highest crossover the model allows with margins to spare, from the
+            // present one up to a third of the band the PRBS excites (about
+            // 0.44/hold Hz): the model is not trusted beyond what the data held.
+            let band = std::f64::consts::TAU * 0.44 / (args.hold_ms as f64 * 1e-3);
+            let range = (present.crossover_rad_s, band / 3.0);
+            tune::highest_crossover(&id.plant, j.cpu, H, &spec, range, &Default::default())
+                .unwrap_or(present.crossover_rad_s)
+        }
+    };
+    let spec = PidSpec {
+        crossover_rad_s: crossover,
+        ..spec
     };
     let tuned = tune::design_pid(&id.plant, j.cpu, H, &spec)
         .map_err(|e| fail(format!("no PID for {crossover:.1} rad/s: {e}")))?;
