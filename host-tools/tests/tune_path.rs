@@ -12,12 +12,12 @@
 //! the loop's own following error `ferr:J` (commanded − measured in the period, counts)
 //! and the contour errors `contour` (nm) and `direction` (µ°). The maximum and the RMS
 //! of each over the run are printed for both (`--nocapture`). Asserted: the tuned
-//! gains' following error, max and RMS, of every tuned joint and the RMS of the
-//! contour error are at most the present gains'. Printed only: the contour error's
-//! maximum (set by the LQG legs; the two agree within a few nm of 2.5 µm, run to run
-//! the present one varies by 150 nm) and the direction error, which the tuned table
-//! makes worse in the path's last 2 ms (docs/tuning.md, "Tuned against present
-//! gains", "What is left").
+//! gains' following error, max and RMS, of every tuned joint is at most the present
+//! gains'. Printed only: the contour error (set by the LQG legs, which `tune` does not
+//! write: the tuned table lowers its RMS by about 1 nm of 804, less than it varies
+//! from run to run, and its maximum varies by 150 nm from run to run) and the
+//! direction error, which the tuned table makes worse in the path's last 2 ms
+//! (docs/tuning.md, "Tuned against present gains", "What is left").
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -137,7 +137,7 @@ fn compare(machine: &str, program: &str, joints: &[&str], signals: &str) -> Vec<
         if ferr && a.max > b.max {
             worse.push(format!("{machine} {} max {} > {}", b.name, a.max, b.max));
         }
-        if (ferr || b.name.starts_with("contour")) && a.rms > b.rms {
+        if ferr && a.rms > b.rms {
             worse.push(format!(
                 "{machine} {} RMS {:.3} > {:.3}",
                 b.name, a.rms, b.rms
