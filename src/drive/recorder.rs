@@ -495,7 +495,13 @@ impl Recorder {
             for (o, b) in (&mut words).zip(&mut from) {
                 o.copy_from_slice(b);
             }
-            words.into_remainder().copy_from_slice(from.remainder());
+            // Widths are even: the rest is no byte or two.
+            let rest = words.into_remainder();
+            if let (Some(o), Some(b)) =
+                (rest.first_chunk_mut::<2>(), from.remainder().first_chunk())
+            {
+                *o = *b;
+            }
         }
         self.s.head += 1;
         if self.s.head == self.s.capacity {
