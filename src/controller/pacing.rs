@@ -38,7 +38,7 @@ use crate::config::{Drive, MachineConfig, MAX_SERVOS};
 use crate::controller::{Controller, Inputs, Outputs};
 use crate::drive::contour::{PeriodInputs, PeriodOutputs, ServoBank};
 use crate::drive::debounce::{Debouncer, SwitchFilter, Switches, SWITCH};
-use crate::drive::recorder::{Row, MAX_SIGNALS, ROW_BYTES};
+use crate::drive::recorder::{self, Row, MAX_SIGNALS, ROW_BYTES};
 use crate::drive::servo::{Trip, SERVO_PER_TICK, SETPOINT_FRAC_BITS};
 use crate::kinematics::{ContourMap, POSE_AXES};
 
@@ -297,20 +297,10 @@ impl ServoPacer {
                 _ if id == NOT_SERVO => break,
                 _ => (0, id == HELD),
             };
-            let v = v.wrapping_add(add);
-            if wide {
-                let Some((o, r)) = rest.split_first_chunk_mut::<4>() else {
-                    break;
-                };
-                *o = v.to_le_bytes();
-                rest = r;
-            } else {
-                let Some((o, r)) = rest.split_first_chunk_mut::<2>() else {
-                    break;
-                };
-                *o = (v.clamp(i16::MIN as i32, i16::MAX as i32) as i16).to_le_bytes();
-                rest = r;
-            }
+            let Some(r) = recorder::put(rest, v.wrapping_add(add), wide) else {
+                break;
+            };
+            rest = r;
         }
     }
 

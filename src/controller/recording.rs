@@ -8,11 +8,12 @@
 //! stepper's are both its steps emitted (no feedback: no following error), its output
 //! its steps this tick (signed). A servo channel's DAC code is the mean of the tick's
 //! servo periods, the contour errors (path and tool direction) the last period's.
-//! Sampling every servo period, the servo side stages each period's values of the
-//! per-joint signals of servo joints and of the contour errors (`Outputs::servo_record`,
-//! `pacing::ServoPacer::staged`), and the caller hands them over after the next tick
-//! ([`Controller::record_servo`]); the other signals keep that tick's values over its
-//! periods.
+//! Sampling every servo period, the servo side stages each period's sample, packed as
+//! the ring keeps it: the per-joint signals of servo joints and the contour errors,
+//! plus what the tick asked to add (`Outputs::servo_record`, `servo_record_add`: the
+//! joints' zeros off the positions, and the values of the other signals, held over
+//! the periods; `pacing::ServoPacer::staged`), and the caller hands the tick's ten
+//! over after the next tick ([`Controller::record_servo`]).
 
 use super::pacing::{HELD, HELD_NARROW, NOT_SERVO};
 use super::session::push_frame_into;

@@ -442,13 +442,6 @@ impl Recorder {
         self.sample_packed(&row);
     }
 
-    /// The bytes of the configured signals of `values` as a sample holds them.
-    pub fn pack(&self, values: &[i32; MAX_SIGNALS]) -> Row {
-        let mut row = [0; ROW_BYTES];
-        pack(values, self.s.narrow, &mut row);
-        row
-    }
-
     /// [`Recorder::sample`] of a sample already packed ([`Row`]; the servo side's
     /// samples are staged so, `pacing::ServoPacer::staged`).
     pub fn sample_packed(&mut self, row: &Row) {
@@ -616,27 +609,34 @@ impl Recorder {
     }
 }
 
-/// Writes `values` side by side into `out` until it is full, each as its
-/// little-endian bytes: two (saturated) where bit i of `narrow` is set, else four.
+/// Writes `values` side by side into `out` until it is full ([`put`]): two bytes
+/// where bit i of `narrow` is set, else four.
 #[inline(always)]
 fn pack(values: &[i32; MAX_SIGNALS], narrow: u8, out: &mut [u8]) {
     let mut rest = out;
     let mut narrow = narrow;
     for &v in values {
-        if narrow & 1 != 0 {
-            let Some((o, r)) = rest.split_first_chunk_mut::<2>() else {
-                break;
-            };
-            *o = (v.clamp(i16::MIN as i32, i16::MAX as i32) as i16).to_le_bytes();
-            rest = r;
-        } else {
-            let Some((o, r)) = rest.split_first_chunk_mut::<4>() else {
-                break;
-            };
-            *o = v.to_le_bytes();
-            rest = r;
-        }
+        let Some(r) = put(rest, v, narrow & 1 == 0) else {
+            break;
+        };
+        rest = r;
         narrow >>= 1;
+    }
+}
+
+/// Writes `v` at the front of `out` as a sample holds it: its four little-endian
+/// bytes when `wide`, else two (saturated to 16 bits). Returns the rest of `out`, or
+/// `None` (nothing written) when `out` has no room.
+#[inline(always)]
+pub fn put(out: &mut [u8], v: i32, wide: bool) -> Option<&mut [u8]> {
+    if wide {
+        let (o, rest) = out.split_first_chunk_mut::<4>()?;
+        *o = v.to_le_bytes();
+        Some(rest)
+    } else {
+        let (o, rest) = out.split_first_chunk_mut::<2>()?;
+        *o = (v.clamp(i16::MIN as i32, i16::MAX as i32) as i16).to_le_bytes();
+        Some(rest)
     }
 }
 
