@@ -56,8 +56,8 @@ pub const HELD_NARROW: u8 = 0xfd;
 pub type ServoSamples = [Row; SERVO_PER_TICK];
 
 /// The length of a contour error (mm or degrees) in nm or µ°, rounded.
-fn norm_f32(v: &[f32]) -> i32 {
-    let sq: f32 = v.iter().map(|&x| x * x).sum();
+#[inline(always)]
+fn norm_f32(sq: f32) -> i32 {
     (crate::math::sqrtf(sq) * 1.0e6 + 0.5) as i32
 }
 
@@ -279,21 +279,25 @@ impl ServoPacer {
     /// joint) plus its `record_add` (a position's joint zero taken off), a [`HELD`]
     /// one's `record_add` itself.
     fn stage(&mut self, feedback: &[i64; MAX_SERVOS], out: &PeriodOutputs) {
-        let mut rest = &mut self.staged[self.bank_w][self.phase % SERVO_PER_TICK][..];
+        let Some(row) = self.staged[self.bank_w & 1].get_mut(self.phase) else {
+            return;
+        };
+        let mut rest = &mut row[..];
+        let e = &out.contour_error;
         for (&id, &add) in self.record.iter().zip(&self.record_add) {
             let c = (id & 0x0f) as usize % MAX_SERVOS;
             let (v, wide) = match id >> 4 {
-                0 => ((self.bank.setpoint(c) >> SETPOINT_FRAC_BITS) as i32, true),
+                0 => (self.bank.setpoint_counts(c), true),
                 1 => (feedback[c] as i32, true),
                 // The setpoint's whole counts less the encoder (`following_error`'s
                 // whole part, in 32 bits; 16 of it kept, saturated).
                 2 => {
-                    let cmd = (self.bank.setpoint(c) >> SETPOINT_FRAC_BITS) as i32;
+                    let cmd = self.bank.setpoint_counts(c);
                     (cmd.wrapping_sub(feedback[c] as i32), false)
                 }
                 3 => (out.dac[c] as i32, false),
-                9 => (norm_f32(&out.contour_error[..3]), true),
-                10 => (norm_f32(&out.contour_error[3..]), true),
+                9 => (norm_f32(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]), true),
+                10 => (norm_f32(e[3] * e[3] + e[4] * e[4]), true),
                 _ if id == NOT_SERVO => break,
                 _ => (0, id == HELD),
             };
