@@ -158,6 +158,9 @@ pub struct ServoPeriod {
 #[derive(Clone, Debug, PartialEq)]
 pub struct ServoPacer {
     bank: ServoBank,
+    /// The bank's outputs, kept from one period to the next
+    /// ([`ServoBank::period_into`]).
+    out: PeriodOutputs,
     /// `PeriodInputs::enable` in force (from the last command taken).
     enable: bool,
     /// Periods since the last tick edge: 0 at an edge.
@@ -190,6 +193,7 @@ impl ServoPacer {
     pub fn new(bank: ServoBank, counts: &[i64; MAX_SERVOS]) -> Self {
         Self {
             bank,
+            out: PeriodOutputs::IDLE,
             enable: false,
             phase: 0,
             fault_seen: [false; MAX_SERVOS],
@@ -237,11 +241,15 @@ impl ServoPacer {
                 None => self.stats.late_ticks = self.stats.late_ticks.wrapping_add(1),
             }
         }
-        let out = self.bank.period(&PeriodInputs {
-            feedback: *feedback,
-            fault: *fault,
-            enable: self.enable,
-        });
+        self.bank.period_into(
+            &PeriodInputs {
+                feedback: *feedback,
+                fault: *fault,
+                enable: self.enable,
+            },
+            &mut self.out,
+        );
+        let out = self.out;
         self.stats.periods = self.stats.periods.wrapping_add(1);
         if edge {
             self.staged_ids[self.bank_w] = self.record;
@@ -326,6 +334,7 @@ impl ServoPacer {
     /// in the [`Command`], which keeps the servo side's state to one bank.
     pub fn restart(&mut self, bank: ServoBank) {
         self.bank = bank;
+        self.out = PeriodOutputs::IDLE;
     }
 
     /// Posts a tick's command, to be taken at the next tick edge (replacing one not

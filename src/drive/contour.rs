@@ -264,10 +264,7 @@ pub struct PeriodOutputs {
 }
 
 impl PeriodOutputs {
-    /// Every channel idle: DAC at mid-scale, disabled, no contour error. A period
-    /// starts from a copy of it in flash (`IDLE_OUTPUTS`): built field by field, two
-    /// `memclr` calls and a loop of halfword stores, it cost about 11 instructions a
-    /// period more on the M4.
+    /// Every channel idle: DAC at mid-scale, disabled, no contour error.
     pub const IDLE: Self = Self {
         dac: [DAC_MID as u16; MAX_SERVOS],
         enable: [false; MAX_SERVOS],
@@ -275,8 +272,6 @@ impl PeriodOutputs {
         command: [0.0; MAX_SERVOS],
     };
 }
-
-static IDLE_OUTPUTS: PeriodOutputs = PeriodOutputs::IDLE;
 
 impl Default for PeriodOutputs {
     fn default() -> Self {
@@ -424,12 +419,22 @@ impl ServoBank {
     /// errors (a delay of one period, 100 µs, against the contour loop's bandwidth of
     /// tens of hertz), and its tracking error joins this period's estimate.
     pub fn period(&mut self, inputs: &PeriodInputs) -> PeriodOutputs {
+        let mut out = PeriodOutputs::IDLE;
+        self.period_into(inputs, &mut out);
+        out
+    }
+
+    /// [`ServoBank::period`] into the caller's `out`, which it writes in part: every
+    /// channel in use, and the contour error of a coupled bank; the rest keeps what
+    /// `out` held, which must be [`PeriodOutputs::IDLE`] (or the outputs of this
+    /// bank's earlier periods). For the servo interrupt, which keeps its outputs from
+    /// one period to the next: no outputs are built and copied each period.
+    pub fn period_into(&mut self, inputs: &PeriodInputs, out: &mut PeriodOutputs) {
         let active = self.active;
         let active = &active[..self.n_active.min(MAX_SERVOS)];
         // The tracking error in pose coordinates, to_pose · e.
         let mut pe = [0.0f32; POSE_AXES];
         let corr = &self.correction;
-        let mut out = IDLE_OUTPUTS;
         for &c in active {
             // (`% MAX_SERVOS`: a channel is below it; this spares the bounds checks.)
             let c = c as usize % MAX_SERVOS;
@@ -480,7 +485,6 @@ impl ServoBank {
             out.contour_error = eps;
         }
         self.since_load = self.since_load.saturating_add(1);
-        out
     }
 }
 

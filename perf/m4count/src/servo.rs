@@ -1,4 +1,4 @@
-//! Servo-period benchmarks: one 10 kHz [`ServoBank::period`] of a whole bank (every
+//! Servo-period benchmarks: one 10 kHz [`ServoBank::period_into`] of a whole bank (every
 //! channel's setpoint interpolator and loop and their contour coupling), with a tick's
 //! targets loaded and the contour controller active. The benches, by index
 //! ([`bench_servo_init`]'s `bench`, the `servo B …` lines of the host run):
@@ -14,14 +14,22 @@
 //! checks it: the counted periods take the coupled path).
 
 use pkmc::config::{Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS};
-use pkmc::drive::contour::{PeriodInputs, ServoBank};
+use pkmc::drive::contour::{PeriodInputs, PeriodOutputs, ServoBank};
 use pkmc::drive::servo::target_q16;
 use pkmc::kinematics::{ContourMap, POSE_AXES};
 use pkmc::kinematics::{Kinematics, MachineKinematics, Pose};
 
-/// Bytes the emulator reserves for one [`ServoBank`].
+/// A bank and the outputs it keeps from one period to the next, as the servo
+/// interrupt keeps them ([`ServoBank::period_into`], `ServoPacer`).
+#[repr(C)]
+pub struct BenchBank {
+    bank: ServoBank,
+    out: PeriodOutputs,
+}
+
+/// Bytes the emulator reserves for one [`BenchBank`].
 pub const BANK_BYTES: usize = 4096;
-const _: () = assert!(core::mem::size_of::<ServoBank>() <= BANK_BYTES);
+const _: () = assert!(core::mem::size_of::<BenchBank>() <= BANK_BYTES);
 
 /// The benches (see the module documentation).
 pub const BENCHES: u32 = 2;
@@ -209,14 +217,19 @@ pub struct PeriodResult {
     pub contour_error: [u32; POSE_AXES],
 }
 
-/// Builds bench `bench`'s bank into `out` (not timed).
+/// Builds bench `bench`'s bank, its outputs idle, into `out` (not timed).
 ///
 /// # Safety
 /// `out` must be valid for writing [`BANK_BYTES`] bytes, 8-aligned.
 #[no_mangle]
-pub unsafe extern "C" fn bench_servo_init(bench: u32, out: *mut ServoBank) {
+pub unsafe extern "C" fn bench_servo_init(bench: u32, out: *mut BenchBank) {
     // SAFETY: the caller provides room and alignment.
-    unsafe { out.write(bank(bench)) }
+    unsafe {
+        out.write(BenchBank {
+            bank: bank(bench),
+            out: PeriodOutputs::IDLE,
+        })
+    }
 }
 
 /// One 10 kHz servo period of the bank, given the encoder feedback, drives enabled,
@@ -226,7 +239,7 @@ pub unsafe extern "C" fn bench_servo_init(bench: u32, out: *mut ServoBank) {
 /// Valid, aligned pointers.
 #[no_mangle]
 pub unsafe extern "C" fn bench_servo_period(
-    bank: *mut ServoBank,
+    bank: *mut BenchBank,
     feedback: *const [i64; MAX_SERVOS],
     out: *mut PeriodResult,
 ) {
@@ -237,7 +250,9 @@ pub unsafe extern "C" fn bench_servo_period(
             fault: [false; MAX_SERVOS],
             enable: true,
         };
-        let o = (*bank).period(&inputs);
+        let b = &mut *bank;
+        b.bank.period_into(&inputs, &mut b.out);
+        let o = &b.out;
         *out = PeriodResult {
             dac: o.dac,
             contour_error: o.contour_error.map(f32::to_bits),
