@@ -453,8 +453,9 @@ fn a_sealed_frame_is_the_cobs_encoding_of_its_body_and_crc() {
             framed.iter_mut().for_each(|b| *b ^= WHITEN);
             let mut want = vec![0u8; crate::wire::cobs::max_encoded_len(framed.len())];
             let m = crate::wire::cobs::encode(&framed, &mut want).unwrap();
-            let mut out = [0u8; MAX_FRAME];
-            let n = seal(&data, &mut out);
+            let (mut body, mut out) = ([0u8; MAX_BODY], [0u8; MAX_FRAME]);
+            body[..len].copy_from_slice(&data);
+            let n = seal(&mut body, 0, len, &mut out);
             assert_eq!(out[..n - 1], want[..m], "{len} bytes");
             assert_eq!(out[n - 1], 0);
         }
