@@ -32,9 +32,9 @@ use pkmc_host::control::lqg::{self, LqgWeights};
 use pkmc_host::control::plant::Complex;
 use pkmc_host::control::plant::TransferFunction;
 use pkmc_host::control::tune::{self, PidSpec};
-use pkmc_host::control::tune_plot::{self, BodeCurve, Curve};
 use pkmc_host::machine_file::lqg::LawKind;
 use pkmc_host::machine_file::{read_file, DriveKind};
+use pkmc_host::scope::tune_plot::{self, BodeCurve, Curve};
 
 const H: f64 = 1e-4;
 const SAMPLES: usize = 10_000;

@@ -190,6 +190,9 @@ pub fn format_of(path: &std::path::Path) -> Result<Format, String> {
 /// Plot size, pixels.
 pub const SIZE: (u32, u32) = (1500, 1000);
 
+/// Registers DejaVu Sans, embedded, as `sans-serif` (once): every plot of the crate
+/// draws with it (the simulator's, the scope's and tuning's, calibration's), and no
+/// system font is needed.
 pub(crate) fn register_font() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {

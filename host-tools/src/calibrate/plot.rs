@@ -120,14 +120,7 @@ pub fn draw(
     truth: &[f64],
     fitted: &[f64],
 ) -> Result<[f64; 2], String> {
-    static FONT: std::sync::Once = std::sync::Once::new();
-    FONT.call_once(|| {
-        let _ = plotters::style::register_font(
-            "sans-serif",
-            FontStyle::Normal,
-            dejavu::sans::regular(),
-        );
-    });
+    crate::analysis::plot::register_font();
     let g = grid(config, model, truth, fitted);
     let name = path.display().to_string();
     let size = (1600, 760);

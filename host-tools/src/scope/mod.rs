@@ -7,6 +7,7 @@
 pub mod cli;
 pub mod plot;
 pub mod tune;
+pub mod tune_plot;
 pub mod tune_write;
 pub mod tuned;
 

@@ -16,11 +16,11 @@ use crate::control::ident::{self, IdentOptions, Identified, Record};
 use crate::control::plant::TransferFunction;
 pub use crate::control::tune::Margins;
 use crate::control::tune::{self, PidSpec, PidTuning};
-use crate::control::tune_plot::{BodeCurve, Curve};
 use crate::job::{exit, Failure, RunOptions, Target};
 use crate::link::{JobEnd, JobHooks, Link, LinkView, Transport};
 use crate::machine_file::lqg::LawKind;
 use crate::machine_file::{read_file, DriveKind, JointFile, MachineFile};
+use crate::scope::tune_plot::{BodeCurve, Curve};
 use pkmc::config::{LqgGains, ServoGains};
 use pkmc::drive::excite::Excite;
 use pkmc::drive::servo::{

@@ -4,8 +4,8 @@
 
 use super::tune_write;
 use crate::control::tune;
-use crate::control::tune_plot::{self, BodeCurve, Curve};
 use crate::job::{exit, Failure};
+use crate::scope::tune_plot::{self, BodeCurve, Curve};
 use std::path::Path;
 
 fn bad(message: impl Into<String>) -> Failure {

@@ -28,18 +28,6 @@ pub struct BodeCurve {
 /// Plot size, pixels.
 pub const SIZE: (u32, u32) = (1500, 1000);
 
-fn register_font() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        // DejaVu Sans, embedded: no system fonts are needed.
-        let _ = plotters::style::register_font(
-            "sans-serif",
-            plotters::style::FontStyle::Normal,
-            dejavu::sans::regular(),
-        );
-    });
-}
-
 /// Draws `steps` and `bode` under `title` into `path` (.svg or .png).
 pub fn draw(
     path: &std::path::Path,
@@ -48,7 +36,7 @@ pub fn draw(
     bode: &[BodeCurve],
 ) -> Result<(), String> {
     use plotters::prelude::*;
-    register_font();
+    crate::analysis::plot::register_font();
     let name = path.display().to_string();
     let fail = |e: String| format!("{name}: cannot draw the plot: {e}");
     let ext = path
@@ -74,7 +62,7 @@ pub fn draw(
 /// `.svg` file).
 pub fn svg(title: &str, steps: &[Curve], bode: &[BodeCurve]) -> Result<String, String> {
     use plotters::prelude::*;
-    register_font();
+    crate::analysis::plot::register_font();
     let mut out = String::new();
     {
         let root = SVGBackend::with_string(&mut out, SIZE).into_drawing_area();
