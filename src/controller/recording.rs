@@ -89,10 +89,11 @@ impl Controller {
     /// from `offset` once it is done.
     #[inline(never)]
     pub(super) fn record_reply(&mut self, offset: u32) {
-        let mut body = [0; CHUNK_BYTES];
+        let offset = offset as usize;
         let n = self
             .recorder
-            .read(offset as usize, &mut body[REPLY_HEADER..]);
+            .readable(offset)
+            .min(CHUNK_BYTES - REPLY_HEADER);
         let setup = self.recorder.setup();
         let reply = Reply {
             capture: self.recorder.capture(),
@@ -101,16 +102,38 @@ impl Controller {
             servo: setup.servo,
             decimate: setup.decimate,
             refused: self.record_refused,
-            offset,
+            offset: offset as u32,
             streamed: false,
         };
-        if let Some(header) = body.first_chunk_mut::<REPLY_HEADER>() {
-            reply.pack(header);
+        let sent = self.push_record(&reply, n, |recorder, out| {
+            recorder.read(offset, out);
+        });
+        if !sent {
+            self.stats.tx_dropped += 1;
         }
-        let msg = CtrlMsg::Record(
-            heapless::Vec::from_slice(&body[..REPLY_HEADER + n]).unwrap_or_default(),
-        );
-        self.send(&msg);
+    }
+
+    /// Adds a `CtrlMsg::Record` frame to the transmit buffer: `reply`'s header, then
+    /// `n` bytes that `copy` writes (from the recorder) straight into the frame's body
+    /// ([`encode_record`]); false when it does not fit (nothing added).
+    fn push_record(
+        &mut self,
+        reply: &Reply,
+        n: usize,
+        copy: impl FnOnce(&crate::drive::recorder::Recorder, &mut [u8]),
+    ) -> bool {
+        let recorder = &self.recorder;
+        let fill = |out: &mut [u8]| {
+            let (header, samples) = out.split_at_mut(REPLY_HEADER.min(out.len()));
+            if let Ok(header) = <&mut [u8; REPLY_HEADER]>::try_from(header) {
+                reply.pack(header);
+            }
+            copy(recorder, samples);
+        };
+        let len = REPLY_HEADER + n;
+        let scratch = (&mut self.tx_body, &mut self.tx_frame);
+        let encode = |seq, b: &mut _, out: &mut _| encode_record(seq, len, fill, b, out);
+        push_frame_into(&mut self.tx, scratch, &mut self.tx_seq, encode)
     }
 
     /// The tick's part: events, then a sample when one is wanted (last in the tick),
@@ -242,18 +265,8 @@ impl Controller {
             streamed: true,
         };
         // The header and the samples are written straight into the frame's body.
-        let recorder = &self.recorder;
-        let fill = |out: &mut [u8]| {
-            let (header, samples) = out.split_at_mut(REPLY_HEADER.min(out.len()));
-            if let Ok(header) = <&mut [u8; REPLY_HEADER]>::try_from(header) {
-                reply.pack(header);
-            }
-            recorder.copy_unsent(samples);
-        };
-        let len = REPLY_HEADER + n as usize * width;
-        let scratch = (&mut self.tx_body, &mut self.tx_frame);
-        let encode = |seq, b: &mut _, out: &mut _| encode_record(seq, len, fill, b, out);
-        if push_frame_into(&mut self.tx, scratch, &mut self.tx_seq, encode) {
+        let bytes = n as usize * width;
+        if self.push_record(&reply, bytes, |recorder, out| recorder.copy_unsent(out)) {
             self.recorder.sent(n);
             self.stream_wait = 0;
             // One piece a tick at most: the link's work for the stream stays bounded

@@ -589,6 +589,16 @@ impl Recorder {
         }
     }
 
+    /// How many of the finished capture's bytes there are from byte `offset` (0 past
+    /// the end, or when no capture is finished): what [`Recorder::read`] copies into a
+    /// buffer that long.
+    pub fn readable(&self, offset: usize) -> usize {
+        if self.s.phase != Phase::Done {
+            return 0;
+        }
+        (self.s.capacity as usize * self.s.width as usize).saturating_sub(offset)
+    }
+
     /// Copies the finished capture's bytes from byte `offset` (samples in time order,
     /// oldest first) into `out`; returns the bytes copied (0 past the end, or when no
     /// capture is finished).
