@@ -24,6 +24,16 @@
 //! curvature is bounded by [`MAX_CURVATURE`]: from one tick's velocity change it is
 //! not the path's where the path leaves rest or turns a corner between pieces.
 //!
+//! **Resolution.** The joints' targets are whole nanometres (or n°), so each channel's
+//! tick velocity is uncertain by 1e-3 mm/s and its acceleration by 2 mm/s². The
+//! frame divides by |v| (tangent, tool turn) and |v|² (curvature), so as a stop's
+//! last ticks shrink to a few nanometres of motion it reads that rounding, times the
+//! tangential lag, as contour error. Hence: the curvature comes only from a normal
+//! acceleration above what the ticks resolve ([`RESOLVED_ACCEL`]), and below
+//! [`RESOLVED_SPEED`] a tick slower than the one before keeps the frame it has
+//! ([`PathFrame::next`]): a path slowing to a stop does so along its last piece, whose
+//! frame the faster ticks resolved.
+//!
 //! **Uncoupled.** Each axis runs its own PID with its velocity and acceleration
 //! feed-forward ([`crate::drive::servo`]).
 //!
@@ -71,6 +81,25 @@ pub const MIN_CONTOUR_SPEED: f32 = 0.01;
 /// ½(e·t)²·κ would turn it into a contour error of millimetres.
 pub const MAX_CURVATURE: f32 = 2.0;
 
+/// Path speed from which one tick's motion resolves the frame, mm/s: 1 µm a tick, a
+/// thousand times the quantum of the joints' targets (1 nm or 1 n°, whose rounding
+/// makes each channel's velocity uncertain by 1e-3 mm/s). Below it the tangent and
+/// the tool's turn per mm carry that rounding over |v|: in a stop's last tick (13 nm
+/// of motion on report B's helix) a few degrees of the tangent and, on the
+/// hexapod-xy, 0.02 °/mm of turn where the tool axis is held, which the tangential
+/// lag e·t (µm) turned into 140–200 µ° of tool-direction error.
+pub const RESOLVED_SPEED: f32 = 1.0;
+
+/// Normal acceleration the ticks resolve, mm/s². The rounding of the joints' targets
+/// makes each channel's tick acceleration uncertain by up to two quanta a tick squared
+/// (2 mm/s²), 3 mm/s² seen in the pose's normal part on report B's helix. The
+/// curvature is taken from the normal acceleration in full from twice this, not at all
+/// below it, in proportion between; below it, it would be that rounding over |v|², at
+/// the bound [`MAX_CURVATURE`] in a random direction below a few mm/s, where the
+/// circular correction ½(e·t)²·κ turned a stop's tens of µm of lag into a µm of
+/// contour error.
+pub const RESOLVED_ACCEL: f32 = 4.0;
+
 /// A vector over the servo channels (uncoupled channels hold zero).
 pub type ChannelVec = [f32; MAX_SERVOS];
 
@@ -100,8 +129,9 @@ pub struct PathFrame {
     pub curvature: PoseVec,
     /// The tool direction's rate per mm of path, degrees/mm (X Y Z zero).
     pub turn: PoseVec,
-    /// The path is moving (faster than [`MIN_CONTOUR_SPEED`]): the frame is defined.
-    pub moving: bool,
+    /// |v|² of the last tick, (mm/s)² ([`PathFrame::next`]); zero while the path
+    /// stands (slower than [`MIN_CONTOUR_SPEED`]), when the frame is undefined.
+    pub speed2: f32,
 }
 
 impl PathFrame {
@@ -120,17 +150,25 @@ impl PathFrame {
             tangent[i] = v[i] * inv;
         }
         let at = dot3(a, &tangent);
-        let inv2 = inv * inv;
         let mut curvature = [0.0; POSE_AXES];
         for i in 0..3 {
-            curvature[i] = (a[i] - at * tangent[i]) * inv2;
+            curvature[i] = a[i] - at * tangent[i];
         }
-        let k2 = dot3(&curvature, &curvature);
-        if k2 > MAX_CURVATURE * MAX_CURVATURE {
-            let scale = MAX_CURVATURE * rsqrt(k2);
-            for k in &mut curvature[..3] {
-                *k *= scale;
+        // The normal acceleration a_n, weighted by how far the ticks resolve it: 0 up to
+        // RESOLVED_ACCEL, 1 from twice that; then κ = w·a_n/|v|², at most MAX_CURVATURE.
+        let an2 = dot3(&curvature, &curvature);
+        let mut scale = 0.0;
+        if an2 > RESOLVED_ACCEL * RESOLVED_ACCEL {
+            let w = an2 * rsqrt(an2) * (1.0 / RESOLVED_ACCEL) - 1.0;
+            // (A compare, not `f32::min`: that may be a library call on the M4.)
+            scale = if w < 1.0 { w } else { 1.0 } * inv * inv;
+            let k2 = scale * scale * an2;
+            if k2 > MAX_CURVATURE * MAX_CURVATURE {
+                scale *= MAX_CURVATURE * rsqrt(k2);
             }
+        }
+        for k in &mut curvature[..3] {
+            *k *= scale;
         }
         let mut turn = [0.0; POSE_AXES];
         for i in 3..POSE_AXES {
@@ -140,8 +178,34 @@ impl PathFrame {
             tangent,
             curvature,
             turn,
-            moving: true,
+            speed2: v2,
         }
+    }
+
+    /// The frame of the tick after this one's, with velocity `v` and acceleration `a`:
+    /// its own ([`PathFrame::new`]), except that a tick below [`RESOLVED_SPEED`] slower
+    /// than the one before, on a moving path, keeps this frame (taken from a tick that
+    /// resolved the path better: the path slowing to a stop does so along its last
+    /// piece). A path starting from rest, or keeping a speed below [`RESOLVED_SPEED`],
+    /// takes each tick's own frame.
+    pub fn next(&self, v: &PoseVec, a: &PoseVec) -> Self {
+        let v2 = dot3(v, v);
+        if self.moving()
+            && v2 < self.speed2
+            && v2 < RESOLVED_SPEED * RESOLVED_SPEED
+            && v2 > MIN_CONTOUR_SPEED * MIN_CONTOUR_SPEED
+        {
+            return Self {
+                speed2: v2,
+                ..*self
+            };
+        }
+        Self::new(v, a)
+    }
+
+    /// The path is moving (faster than [`MIN_CONTOUR_SPEED`]): the frame is defined.
+    pub fn moving(&self) -> bool {
+        self.speed2 > 0.0
     }
 
     /// Removes the tangential part of `x`'s X Y Z in place.
@@ -157,7 +221,7 @@ impl PathFrame {
     /// its error less what the tangential lag e·t explains (the reference direction
     /// where the tool actually is on the path), `e_o − (e·t)·turn`.
     pub fn contour_error(&self, e: &PoseVec) -> PoseVec {
-        if !self.moving {
+        if !self.moving() {
             return [0.0; POSE_AXES];
         }
         let et = dot3(e, &self.tangent);
@@ -215,7 +279,7 @@ impl ContourLoop {
     pub fn update(&mut self, frame: &PathFrame, eps: &PoseVec) -> ContourCorrection {
         let mut out = ContourCorrection::default();
         let c = &self.config;
-        if c.mode == ContourMode::Uncoupled || !frame.moving {
+        if c.mode == ContourMode::Uncoupled || !frame.moving() {
             out.reference = self.offset;
             return out;
         }
@@ -478,7 +542,7 @@ impl ServoBank {
                     axpy5(&mut pv, col, v * u);
                     axpy5(&mut pa, col, a * u);
                 }
-                self.frame = PathFrame::new(&pv, &pa);
+                self.frame = self.frame.next(&pv, &pa);
             }
             let eps = self.frame.contour_error(&pe);
             self.correction = self.contour.update(&self.frame, &eps);
@@ -505,124 +569,5 @@ fn dot5(a: &PoseVec, b: &PoseVec) -> f32 {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn v3(x: f32, y: f32, z: f32) -> PoseVec {
-        [x, y, z, 0.0, 0.0]
-    }
-
-    #[test]
-    fn the_reciprocal_square_root_is_within_a_ten_millionth() {
-        for &x in &[1e-6f32, 0.01, 0.5, 1.0, 2.0, 3.0, 100.0, 12_345.0, 1e8] {
-            let want = 1.0 / (x as f64).sqrt();
-            let got = rsqrt(x) as f64;
-            assert!(
-                (got / want - 1.0).abs() < 1e-7 * 2.0,
-                "{x}: {got} vs {want}"
-            );
-        }
-    }
-
-    #[test]
-    fn a_lag_along_a_straight_path_is_no_contour_error() {
-        let f = PathFrame::new(&v3(3.0, 4.0, 0.0), &[0.0; POSE_AXES]);
-        let eps = f.contour_error(&v3(0.3, 0.4, 0.0));
-        assert!(eps.iter().all(|c| c.abs() < 1e-6), "{eps:?}");
-        // A sideways error is all contour error, along the normal.
-        let eps = f.contour_error(&v3(-0.4, 0.3, 0.2));
-        assert!((eps[0] + 0.4).abs() < 1e-6 && (eps[1] - 0.3).abs() < 1e-6);
-        assert!((eps[2] - 0.2).abs() < 1e-6);
-    }
-
-    #[test]
-    fn a_lag_along_a_circle_is_no_contour_error_to_second_order() {
-        // Circle of radius 10 mm at 10 mm/s, setpoint at (10, 0) moving +Y; the actual
-        // position lags 0.1 rad on the circle.
-        let f = PathFrame::new(&v3(0.0, 10.0, 0.0), &v3(-10.0, 0.0, 0.0));
-        assert!((f.curvature[0] + 0.1).abs() < 1e-6, "{:?}", f.curvature);
-        let y = (10.0 * 0.1f32.cos(), -10.0 * 0.1f32.sin());
-        let e = v3(10.0 - y.0, -y.1, 0.0);
-        let eps = f.contour_error(&e);
-        let plain = e[0]; // the normal part alone: 0.05 mm
-        assert!(plain > 0.04);
-        assert!(eps[0].abs() < 1e-3 * plain * 10.0, "{eps:?}");
-    }
-
-    #[test]
-    fn the_curvature_of_a_path_leaving_rest_is_bounded() {
-        // 0.02 mm/s after the first tick from rest, the velocity's turn from the
-        // previous move read as 20 mm/s² across it: 5·10⁴ /mm, taken as MAX_CURVATURE
-        // in the same direction; a 0.1 mm lag then bends by at most ½·0.1²·2 mm.
-        let f = PathFrame::new(&v3(0.02, 0.0, 0.0), &v3(0.0, 20.0, 0.0));
-        assert!(
-            (f.curvature[1] - MAX_CURVATURE).abs() < 1e-5,
-            "{:?}",
-            f.curvature
-        );
-        assert!(f.curvature[0].abs() < 1e-6 && f.curvature[2].abs() < 1e-6);
-        let eps = f.contour_error(&v3(0.1, 0.0, 0.0));
-        assert!((eps[1] - 0.01).abs() < 1e-6, "{eps:?}");
-    }
-
-    #[test]
-    fn standing_still_there_is_no_contour_error_and_no_coupling() {
-        let f = PathFrame::new(&[0.0; POSE_AXES], &[0.0; POSE_AXES]);
-        assert!(!f.moving);
-        assert_eq!(f.contour_error(&v3(1.0, 1.0, 1.0)), [0.0; POSE_AXES]);
-    }
-
-    fn config(mode: ContourMode) -> ContourConfig {
-        ContourConfig {
-            mode,
-            kp: 10.0,
-            ki: 100.0,
-            max_integral: 5.0,
-            kr: 20.0,
-            max_offset: 0.5,
-        }
-    }
-
-    #[test]
-    fn cross_coupling_pushes_each_axis_by_its_direction_cosine() {
-        let f = PathFrame::new(&v3(10.0, 0.0, 0.0), &[0.0; POSE_AXES]);
-        let mut l = ContourLoop::new(&config(ContourMode::CrossCoupled));
-        let c = l.update(&f, &v3(0.0, 0.01, 0.0));
-        assert!(c.command[0].abs() < 1e-9 && c.command[2].abs() < 1e-9);
-        assert!(
-            (c.command[1] - (0.1 + 100.0 * 0.01 * 1e-4)).abs() < 1e-6,
-            "{c:?}"
-        );
-        assert_eq!(c.reference, [0.0; POSE_AXES]);
-    }
-
-    #[test]
-    fn ccpm_shifts_the_reference_along_the_normal_and_integrates_it() {
-        let f = PathFrame::new(&v3(10.0, 0.0, 0.0), &[0.0; POSE_AXES]);
-        let mut l = ContourLoop::new(&config(ContourMode::Ccpm));
-        let mut c = ContourCorrection::default();
-        for _ in 0..100 {
-            c = l.update(&f, &v3(0.0, 0.01, 0.0));
-        }
-        assert!(
-            (c.reference[1] - 100.0 * 20.0 * 0.01 * 1e-4).abs() < 1e-6,
-            "{c:?}"
-        );
-        assert_eq!(c.reference[0], 0.0);
-        // The offset is clamped.
-        for _ in 0..1_000_000 {
-            c = l.update(&f, &v3(0.0, 1.0, 0.0));
-        }
-        assert_eq!(c.reference[1], 0.5);
-    }
-
-    #[test]
-    fn uncoupled_asks_for_nothing() {
-        let f = PathFrame::new(&v3(10.0, 0.0, 0.0), &[0.0; POSE_AXES]);
-        let mut l = ContourLoop::new(&config(ContourMode::Uncoupled));
-        assert_eq!(
-            l.update(&f, &v3(0.0, 1.0, 0.0)),
-            ContourCorrection::default()
-        );
-    }
-}
+#[path = "contour_tests.rs"]
+mod tests;
