@@ -11,13 +11,23 @@
 //! streaming every servo period (`record --servo --trigger stream --during PROGRAM`):
 //! the loop's own following error `ferr:J` (commanded − measured in the period, counts)
 //! and the contour errors `contour` (nm) and `direction` (µ°). The maximum and the RMS
-//! of each over the run are printed for both (`--nocapture`). Asserted: the tuned
-//! gains' following error, max and RMS, of every tuned joint is at most the present
-//! gains'. Printed only: the contour error (set by the LQG legs, which `tune` does not
-//! write: the tuned table lowers its RMS by about 1 nm of 804, less than it varies
-//! from run to run, and its maximum varies by 150 nm from run to run) and the
-//! direction error, which the tuned table makes worse in the path's last 2 ms
-//! (docs/tuning.md, "Tuned against present gains", "What is left").
+//! of each over the recording are printed for both (`--nocapture`), and for the contour
+//! errors their RMS while the path moves too: from the first to the last period with a
+//! contour estimate (the controller estimates none while the path stands, and records
+//! zero; how many such periods the recording holds before the job and after its end
+//! depends on the link's timing and moved the RMS over the recording by up to 1 nm of
+//! 805 from run to run).
+//!
+//! Asserted: the tuned gains' following error, max and RMS over the recording, of every
+//! tuned joint is at most the present gains'; on the helix the tuned gains' contour
+//! error RMS while the path moves is at most the present gains' (804.0–804.4 against
+//! 805.4–805.7 nm over 45 runs covering the seven phases the contour map can have at
+//! the job's start); and the tool-direction error's maximum stays below 20 µ° with
+//! both (the path's last tick made 140–200 µ° before the path frame kept the frame of
+//! the ticks that resolve it, `pkmc::drive::contour::PathFrame::next`). Printed only: the contour
+//! error's maximum and the direction error's maximum and RMS, which the tuned table
+//! does not change beyond the run-to-run spread that the contour map's phase gives
+//! them (docs/tuning.md, "Tuned against present gains", "What is left").
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -52,6 +62,13 @@ struct Figure {
     name: String,
     max: f64,
     rms: f64,
+    /// The RMS from the first to the last sample with a contour estimate (all of the
+    /// recording on a machine without one).
+    rms_moving: f64,
+}
+
+fn rms(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
 }
 
 /// Max and RMS of every signal of a recorder CSV (its first two columns are the
@@ -70,6 +87,17 @@ fn figures(csv: &Path) -> Vec<Figure> {
         csv.display(),
         rows.len()
     );
+    let contour: Vec<usize> = (0..names.len())
+        .filter(|&i| names[i].starts_with("contour") || names[i].starts_with("direction"))
+        .collect();
+    let estimated = |r: &Vec<f64>| contour.iter().any(|&i| r[i] != 0.0);
+    let moving = match (
+        rows.iter().position(estimated),
+        rows.iter().rposition(estimated),
+    ) {
+        (Some(first), Some(last)) if !contour.is_empty() => first..last + 1,
+        _ => 0..rows.len(),
+    };
     names
         .iter()
         .enumerate()
@@ -78,7 +106,8 @@ fn figures(csv: &Path) -> Vec<Figure> {
             Figure {
                 name: n.to_string(),
                 max: v.iter().copied().fold(0.0, f64::max),
-                rms: (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt(),
+                rms: rms(&v),
+                rms_moving: rms(&v[moving.clone()]),
             }
         })
         .collect()
@@ -107,6 +136,9 @@ fn run(machine: &Path, program: &str, signals: &str, tag: &str) -> Vec<Figure> {
     figures(&csv)
 }
 
+/// Largest tool-direction error either gains may leave on report B's helix, µ°.
+const DIRECTION_BOUND: f64 = 20.0;
+
 /// Tunes `joints` of `machine` on a copy, runs `program` on the file and the copy;
 /// prints both tables and returns the signals where the tuned gains do worse.
 fn compare(machine: &str, program: &str, joints: &[&str], signals: &str) -> Vec<String> {
@@ -125,23 +157,54 @@ fn compare(machine: &str, program: &str, joints: &[&str], signals: &str) -> Vec<
     }
     let before = run(&present, program, signals, &format!("{machine}-present"));
     let after = run(&tuned, program, signals, &format!("{machine}-tuned"));
-    println!("{machine}, {program} (every servo period; |x| max / RMS):");
+    println!("{machine}, {program} (every servo period; |x| max / RMS over the recording; the contour errors' RMS while the path moves in brackets):");
     println!("| signal | present gains | tuned gains |");
     let mut worse = Vec::new();
     for (b, a) in before.iter().zip(&after) {
+        let contour = b.name.starts_with("contour") || b.name.starts_with("direction");
+        let moving = |f: &Figure| {
+            if contour {
+                format!(" ({:.2})", f.rms_moving)
+            } else {
+                String::new()
+            }
+        };
         println!(
-            "| {} | {:.0} / {:.2} | {:.0} / {:.2} |",
-            b.name, b.max, b.rms, a.max, a.rms
+            "| {} | {:.0} / {:.2}{} | {:.0} / {:.2}{} |",
+            b.name,
+            b.max,
+            b.rms,
+            moving(b),
+            a.max,
+            a.rms,
+            moving(a)
         );
-        let ferr = b.name.starts_with("ferr");
-        if ferr && a.max > b.max {
-            worse.push(format!("{machine} {} max {} > {}", b.name, a.max, b.max));
+        if b.name.starts_with("ferr") {
+            if a.max > b.max {
+                worse.push(format!("{machine} {} max {} > {}", b.name, a.max, b.max));
+            }
+            if a.rms > b.rms {
+                worse.push(format!(
+                    "{machine} {} RMS {:.3} > {:.3}",
+                    b.name, a.rms, b.rms
+                ));
+            }
         }
-        if ferr && a.rms > b.rms {
+        if b.name.starts_with("contour") && a.rms_moving > b.rms_moving {
             worse.push(format!(
-                "{machine} {} RMS {:.3} > {:.3}",
-                b.name, a.rms, b.rms
+                "{machine} {} RMS while moving {:.3} > {:.3}",
+                b.name, a.rms_moving, b.rms_moving
             ));
+        }
+        if b.name.starts_with("direction") {
+            for (gains, f) in [("present", b), ("tuned", a)] {
+                if f.max > DIRECTION_BOUND {
+                    worse.push(format!(
+                        "{machine} {} max with the {gains} gains {} µ° > {DIRECTION_BOUND}",
+                        f.name, f.max
+                    ));
+                }
+            }
         }
     }
     worse
@@ -161,5 +224,8 @@ fn tuned_gains_follow_both_programs_at_least_as_well_as_the_present_ones() {
         &["table X", "table Y"],
         "ferr:6,ferr:7,contour,direction",
     ));
-    assert!(worse.is_empty(), "tuned worse than present: {worse:#?}");
+    assert!(
+        worse.is_empty(),
+        "tuned worse than present, or a direction error over {DIRECTION_BOUND} µ°: {worse:#?}"
+    );
 }
