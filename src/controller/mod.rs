@@ -500,6 +500,7 @@ impl Controller {
                 self.state = State::Running;
             }
         }
+        let was_stopped = self.exec.stopped();
         self.exec.retarget(&mut self.planner);
         match self.exec.tick(&mut self.planner) {
             Some(Event::Unreachable { line, why }) => self.raise(alarm_of(why, line)),
@@ -509,6 +510,12 @@ impl Controller {
                 _ => {}
             },
             None => {}
+        }
+        if was_stopped && !self.exec.stopped() {
+            // Motion starts: the contour map's phases start with it, so that its maps
+            // are taken at the same poses whatever the ticks before (a job's first
+            // block comes when the link brings it).
+            self.map.restart();
         }
         let mut joints = self.joints;
         match self

@@ -6,7 +6,8 @@
 //!
 //! **Servo side** ([`ServoPacer`], one call per servo period). Every
 //! [`SERVO_PER_TICK`]th period is a tick edge. There the pacer first takes the
-//! [`Command`] the previous tick posted ([`ServoPacer::post`]): the tick's targets
+//! [`Command`] the previous tick posted (read in place from the caller's slot,
+//! [`CommandSlot`] or the firmware's mailbox): the tick's targets
 //! ([`ServoBank::load_tick`]), the channel map if it changes along the path, and the
 //! enable; then it runs the period; then it leaves
 //! a [`Snapshot`] of that period (encoder counts, trips, whether each channel's fault
@@ -30,13 +31,14 @@
 //! that reads it.
 //!
 //! Invariants: no time source, no hardware: a call is a period or a tick. The servo
-//! side's state is touched only by the servo interrupt, except [`ServoPacer::post`],
+//! side's state is touched only by the servo interrupt, except
 //! [`ServoPacer::snapshot`] and [`ServoPacer::stats`], which the tick calls (the
-//! firmware under a short critical section: copies only).
+//! firmware under a short critical section: copies only), and the command slot, which
+//! the tick writes while the servo side does not read it.
 
 use crate::config::{Drive, MachineConfig, MAX_SERVOS};
 use crate::controller::{Controller, Inputs, Outputs};
-use crate::drive::contour::{PeriodInputs, PeriodOutputs, ServoBank};
+use crate::drive::contour::{PeriodOutputs, ServoBank};
 use crate::drive::debounce::{Debouncer, SwitchFilter, Switches, SWITCH};
 use crate::drive::recorder::{self, Row, MAX_SIGNALS, ROW_BYTES};
 use crate::drive::servo::{Trip, SERVO_PER_TICK, SETPOINT_FRAC_BITS};
@@ -62,9 +64,11 @@ fn norm_f32(sq: f32) -> i32 {
 }
 
 /// A contour error in the loops' units (mm, degrees) as whole nm and µ° (both a
-/// millionth).
-fn contour_units(e: &[f32; POSE_AXES]) -> [i32; POSE_AXES] {
-    e.map(|x| (x * 1.0e6) as i32)
+/// millionth), into `out`.
+fn contour_units(e: &[f32; POSE_AXES], out: &mut [i32; POSE_AXES]) {
+    for (o, &x) in out.iter_mut().zip(e) {
+        *o = (x * 1.0e6) as i32;
+    }
 }
 
 /// What the servo side saw at the last tick edge, for the tick.
@@ -146,15 +150,18 @@ pub struct ServoStats {
 
 /// What one servo period drives.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ServoPeriod {
-    /// The loops' outputs: DAC codes, amplifier enables, trips.
-    pub out: PeriodOutputs,
+pub struct ServoPeriod<'a> {
+    /// The loops' outputs: DAC codes, amplifier enables, trips (the pacer's own, kept
+    /// from one period to the next: nothing is copied).
+    pub out: &'a PeriodOutputs,
     /// This period was a tick edge: its snapshot is ready and the tick runs now.
     pub tick: bool,
 }
 
 /// The servo loops and their side of the exchange with the tick. See the module
-/// documentation.
+/// documentation. The command a tick posts waits in the caller's slot until the next
+/// edge, which reads it in place ([`ServoPacer::period`]): the firmware's mailbox, or
+/// a [`CommandSlot`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct ServoPacer {
     bank: ServoBank,
@@ -165,6 +172,9 @@ pub struct ServoPacer {
     enable: bool,
     /// Periods since the last tick edge: 0 at an edge.
     phase: usize,
+    /// The next edge's targets are loaded already (the loops' standing ones, at
+    /// start-up): an edge without a command is then not a late tick.
+    preloaded: bool,
     /// Fault input of each channel seen active since the last edge.
     fault_seen: [bool; MAX_SERVOS],
     stats: ServoStats,
@@ -183,19 +193,22 @@ pub struct ServoPacer {
     /// The bank written this tick.
     bank_w: usize,
     snapshot: Snapshot,
-    /// Posted by the last tick, not yet taken.
-    command: Option<Command>,
 }
 
 impl ServoPacer {
     /// The loops of `bank`, whose encoders read `counts`: the next period is a tick
-    /// edge, and it loads the loops' own standing targets, disabled.
-    pub fn new(bank: ServoBank, counts: &[i64; MAX_SERVOS]) -> Self {
+    /// edge, at which the loops hold their own standing targets, disabled, unless a
+    /// command comes.
+    pub fn new(mut bank: ServoBank, counts: &[i64; MAX_SERVOS]) -> Self {
+        // What taking `Command::standing(counts)` does, built in place (the firmware
+        // builds the pacer on its stack).
+        bank.load_tick(&counts.map(|c| c << SETPOINT_FRAC_BITS));
         Self {
             bank,
             out: PeriodOutputs::IDLE,
             enable: false,
             phase: 0,
+            preloaded: true,
             fault_seen: [false; MAX_SERVOS],
             stats: ServoStats::default(),
             dac_sum: [0; MAX_SERVOS],
@@ -209,17 +222,36 @@ impl ServoPacer {
                 counts: *counts,
                 ..Snapshot::default()
             },
-            command: Some(Command::standing(counts)),
         }
+    }
+
+    /// The next period is a tick edge: the one that takes a posted command.
+    pub fn at_edge(&self) -> bool {
+        self.phase == 0
+    }
+
+    /// A tick's command, taken at an edge.
+    fn take(&mut self, command: &Command) {
+        self.bank.load_tick(&command.targets);
+        if let Some(map) = &command.map {
+            self.bank.load_map(map);
+        }
+        self.enable = command.enable;
+        self.record = command.record;
+        self.record_add = command.record_add;
+        self.staging = self.record[0] != NOT_SERVO;
     }
 
     /// One servo period, on the encoder positions `feedback` (counts) and each
     /// channel's amplifier fault input `fault`, both read at the start of the period.
+    /// At a tick edge ([`ServoPacer::at_edge`]) `posted` is the command the last tick
+    /// posted, if it did (read in place, not kept); elsewhere it is not read.
     pub fn period(
         &mut self,
         feedback: &[i64; MAX_SERVOS],
         fault: &[bool; MAX_SERVOS],
-    ) -> ServoPeriod {
+        posted: Option<&Command>,
+    ) -> ServoPeriod<'_> {
         for (seen, &f) in self.fault_seen.iter_mut().zip(fault) {
             *seen |= f;
         }
@@ -227,37 +259,32 @@ impl ServoPacer {
         if edge {
             // The last tick's samples are complete: the tick reads them from now on.
             self.bank_w ^= 1;
-            match self.command.take() {
-                Some(command) => {
-                    self.bank.load_tick(&command.targets);
-                    if let Some(map) = &command.map {
-                        self.bank.load_map(map);
-                    }
-                    self.enable = command.enable;
-                    self.record = command.record;
-                    self.record_add = command.record_add;
-                    self.staging = self.record[0] != NOT_SERVO;
-                }
+            match posted {
+                Some(command) => self.take(command),
+                None if self.preloaded => {}
                 None => self.stats.late_ticks = self.stats.late_ticks.wrapping_add(1),
             }
+            self.preloaded = false;
         }
-        self.bank.period_into(
-            &PeriodInputs {
-                feedback: *feedback,
-                fault: *fault,
-                enable: self.enable,
-            },
-            &mut self.out,
-        );
-        let out = self.out;
+        self.bank
+            .period_into(feedback, fault, self.enable, &mut self.out);
         self.stats.periods = self.stats.periods.wrapping_add(1);
         if edge {
             self.staged_ids[self.bank_w] = self.record;
         }
         if self.staging {
-            self.stage(feedback, &out);
+            if let Some(row) = self.staged[self.bank_w & 1].get_mut(self.phase) {
+                stage(
+                    row,
+                    &self.record,
+                    &self.record_add,
+                    &self.bank,
+                    feedback,
+                    &self.out,
+                );
+            }
         }
-        for (sum, &code) in self.dac_sum.iter_mut().zip(&out.dac) {
+        for (sum, &code) in self.dac_sum.iter_mut().zip(&self.out.dac) {
             *sum += code as u32;
         }
         self.phase += 1;
@@ -265,54 +292,23 @@ impl ServoPacer {
             self.phase = 0;
         }
         if edge {
+            // The snapshot written in place, field by field (no copy of a whole one).
             self.stats.fault = self.fault_seen.iter().any(|&f| f);
-            self.snapshot = Snapshot {
-                counts: *feedback,
-                trips: self.bank.trips(),
-                fault: self.fault_seen,
-                periods: self.stats.periods,
-                dac: self
-                    .dac_sum
-                    .map(|sum| ((sum + SERVO_PER_TICK as u32 / 2) / SERVO_PER_TICK as u32) as u16),
-                contour: contour_units(&out.contour_error),
-            };
+            let snap = &mut self.snapshot;
+            snap.counts = *feedback;
+            self.bank.trips_into(&mut snap.trips);
+            snap.fault = self.fault_seen;
+            snap.periods = self.stats.periods;
+            for (dac, sum) in snap.dac.iter_mut().zip(&mut self.dac_sum) {
+                *dac = ((*sum + SERVO_PER_TICK as u32 / 2) / SERVO_PER_TICK as u32) as u16;
+                *sum = 0;
+            }
+            contour_units(&self.out.contour_error, &mut snap.contour);
             self.fault_seen = [false; MAX_SERVOS];
-            self.dac_sum = [0; MAX_SERVOS];
         }
-        ServoPeriod { out, tick: edge }
-    }
-
-    /// This period's sample of the recorder's signals, packed (`drive::recorder::Row`):
-    /// each servo-side signal's value (wire ids with the channel in place of the
-    /// joint) plus its `record_add` (a position's joint zero taken off), a [`HELD`]
-    /// one's `record_add` itself.
-    fn stage(&mut self, feedback: &[i64; MAX_SERVOS], out: &PeriodOutputs) {
-        let Some(row) = self.staged[self.bank_w & 1].get_mut(self.phase) else {
-            return;
-        };
-        let mut rest = &mut row[..];
-        let e = &out.contour_error;
-        for (&id, &add) in self.record.iter().zip(&self.record_add) {
-            let c = (id & 0x0f) as usize % MAX_SERVOS;
-            let (v, wide) = match id >> 4 {
-                0 => (self.bank.setpoint_counts(c), true),
-                1 => (feedback[c] as i32, true),
-                // The setpoint's whole counts less the encoder (`following_error`'s
-                // whole part, in 32 bits; 16 of it kept, saturated).
-                2 => {
-                    let cmd = self.bank.setpoint_counts(c);
-                    (cmd.wrapping_sub(feedback[c] as i32), false)
-                }
-                3 => (out.dac[c] as i32, false),
-                9 => (norm_f32(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]), true),
-                10 => (norm_f32(e[3] * e[3] + e[4] * e[4]), true),
-                _ if id == NOT_SERVO => break,
-                _ => (0, id == HELD),
-            };
-            let Some(r) = recorder::put(rest, v.wrapping_add(add), wide) else {
-                break;
-            };
-            rest = r;
+        ServoPeriod {
+            out: &self.out,
+            tick: edge,
         }
     }
 
@@ -337,12 +333,6 @@ impl ServoPacer {
         self.out = PeriodOutputs::IDLE;
     }
 
-    /// Posts a tick's command, to be taken at the next tick edge (replacing one not
-    /// yet taken).
-    pub fn post(&mut self, command: Command) {
-        self.command = Some(command);
-    }
-
     /// The trip latched by each channel's loop, now.
     pub fn trips(&self) -> [Option<Trip>; MAX_SERVOS] {
         self.bank.trips()
@@ -356,6 +346,88 @@ impl ServoPacer {
     /// Diagnostics since start-up.
     pub fn stats(&self) -> ServoStats {
         self.stats
+    }
+}
+
+/// This period's sample of the recorder's signals `record` into `row`, packed
+/// (`drive::recorder::Row`): each servo-side signal's value (wire ids with the channel
+/// in place of the joint) plus its `record_add` (a position's joint zero taken off), a
+/// [`HELD`] one's `record_add` itself.
+fn stage(
+    row: &mut Row,
+    record: &[u8; MAX_SIGNALS],
+    record_add: &[i32; MAX_SIGNALS],
+    bank: &ServoBank,
+    feedback: &[i64; MAX_SERVOS],
+    out: &PeriodOutputs,
+) {
+    let mut rest = &mut row[..];
+    let e = &out.contour_error;
+    for (&id, &add) in record.iter().zip(record_add) {
+        let c = (id & 0x0f) as usize % MAX_SERVOS;
+        let (v, wide) = match id >> 4 {
+            0 => (bank.setpoint_counts(c), true),
+            1 => (feedback[c] as i32, true),
+            // The setpoint's whole counts less the encoder (`following_error`'s whole
+            // part, in 32 bits; 16 of it kept, saturated).
+            2 => {
+                let cmd = bank.setpoint_counts(c);
+                (cmd.wrapping_sub(feedback[c] as i32), false)
+            }
+            3 => (out.dac[c] as i32, false),
+            9 => (norm_f32(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]), true),
+            10 => (norm_f32(e[3] * e[3] + e[4] * e[4]), true),
+            _ if id == NOT_SERVO => break,
+            _ => (0, id == HELD),
+        };
+        let Some(r) = recorder::put(rest, v.wrapping_add(add), wide) else {
+            break;
+        };
+        rest = r;
+    }
+}
+
+/// A tick's command waiting in memory for the next edge, for the simulator and the
+/// tests: what the firmware's mailbox does (`servo_period.rs`). The edge reads it in
+/// place.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CommandSlot {
+    command: Command,
+    posted: bool,
+}
+
+impl Default for CommandSlot {
+    fn default() -> Self {
+        Self {
+            command: Command::standing(&[0; MAX_SERVOS]),
+            posted: false,
+        }
+    }
+}
+
+impl CommandSlot {
+    /// Empty.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Posts a tick's command, to be taken at the next tick edge (replacing one not
+    /// yet taken).
+    pub fn post(&mut self, command: Command) {
+        self.command = command;
+        self.posted = true;
+    }
+
+    /// One period of `pacer` ([`ServoPacer::period`]), taking the posted command at
+    /// an edge.
+    pub fn period<'a>(
+        &mut self,
+        pacer: &'a mut ServoPacer,
+        feedback: &[i64; MAX_SERVOS],
+        fault: &[bool; MAX_SERVOS],
+    ) -> ServoPeriod<'a> {
+        let posted = pacer.at_edge() && core::mem::take(&mut self.posted);
+        pacer.period(feedback, fault, posted.then_some(&self.command))
     }
 }
 

@@ -1,5 +1,6 @@
 //! Tests of the servo and tick pacing (`controller::pacing`).
 use super::*;
+use crate::drive::contour::PeriodInputs;
 
 /// Four channels' values, the others' default.
 fn pad<T: Copy + Default>(a: [T; 4]) -> [T; MAX_SERVOS] {
@@ -12,14 +13,52 @@ fn machine() -> MachineConfig {
     MachineConfig::h4_table()
 }
 
+/// A pacer and the slot its commands wait in (the firmware's mailbox).
+#[derive(Clone)]
+struct Paced {
+    pacer: ServoPacer,
+    slot: CommandSlot,
+}
+
+impl Paced {
+    fn period(
+        &mut self,
+        feedback: &[i64; MAX_SERVOS],
+        fault: &[bool; MAX_SERVOS],
+    ) -> ServoPeriod<'_> {
+        self.slot.period(&mut self.pacer, feedback, fault)
+    }
+    fn post(&mut self, command: Command) {
+        self.slot.post(command);
+    }
+    fn restart(&mut self, bank: ServoBank) {
+        self.pacer.restart(bank);
+    }
+    fn snapshot(&self) -> Snapshot {
+        self.pacer.snapshot()
+    }
+    fn staged(&self, half: usize) -> (&[u8; MAX_SIGNALS], &[Row]) {
+        self.pacer.staged(half)
+    }
+    fn stats(&self) -> ServoStats {
+        self.pacer.stats()
+    }
+    fn trips(&self) -> [Option<Trip>; MAX_SERVOS] {
+        self.pacer.trips()
+    }
+}
+
 /// A pacer standing at `counts`, its bank of the H-4 machine.
-fn pacer(counts: &[i64; MAX_SERVOS]) -> ServoPacer {
-    ServoPacer::new(ServoBank::new(&machine(), counts), counts)
+fn pacer(counts: &[i64; MAX_SERVOS]) -> Paced {
+    Paced {
+        pacer: ServoPacer::new(ServoBank::new(&machine(), counts), counts),
+        slot: CommandSlot::new(),
+    }
 }
 
 /// Runs the `SERVO_PER_TICK` periods of one tick at `feedback`, no fault;
 /// returns whether each was an edge.
-fn one_tick(p: &mut ServoPacer, feedback: &[i64; MAX_SERVOS]) -> [bool; SERVO_PER_TICK] {
+fn one_tick(p: &mut Paced, feedback: &[i64; MAX_SERVOS]) -> [bool; SERVO_PER_TICK] {
     core::array::from_fn(|_| p.period(feedback, &[false; MAX_SERVOS]).tick)
 }
 
@@ -32,7 +71,7 @@ fn every_tenth_period_is_a_tick_edge_starting_with_the_first() {
         assert!(edges[1..].iter().all(|&e| !e));
     }
     assert_eq!(p.stats().periods, 3 * SERVO_PER_TICK as u32);
-    // The first edge takes the standing command; nothing was posted for the others.
+    // The first edge holds the standing targets; nothing was posted for the others.
     assert_eq!(p.stats().late_ticks, 2);
 }
 
@@ -62,7 +101,7 @@ fn a_posted_target_is_loaded_at_the_next_edge_and_ramped_over_one_tick() {
                 enable: loaded.enable,
                 ..enabled
             });
-            assert_eq!(got.out, want, "tick {tick}, period {k}");
+            assert_eq!(*got.out, want, "tick {tick}, period {k}");
             if k == 0 {
                 // The tick runs here and posts its command for the next edge.
                 let c = Command {
@@ -213,9 +252,9 @@ fn a_restart_replaces_the_bank_at_once_and_the_reset_command_loads_at_the_edge()
     p.restart(ServoBank::new(&m, &at));
     assert_eq!(p.snapshot().trips[0], Some(Trip::AmplifierFault));
     p.post(command);
-    let s = p.period(&at, &[false; MAX_SERVOS]);
+    let enable = p.period(&at, &[false; MAX_SERVOS]).out.enable;
     assert_eq!(p.trips(), [None; MAX_SERVOS]);
-    assert_eq!(s.out.enable, pad([true; 4]));
+    assert_eq!(enable, pad([true; 4]));
 }
 
 fn control(ctrl: &mut Controller, id: u16, cmd: Control) {

@@ -145,15 +145,17 @@ impl PathFrame {
             return Self::default();
         }
         let inv = rsqrt(v2);
-        let mut tangent = [0.0; POSE_AXES];
-        for i in 0..3 {
-            tangent[i] = v[i] * inv;
-        }
+        // (Arrays written element by element: an all-zero one first would be a
+        // `memclr` call on the M4.)
+        let tangent = [v[0] * inv, v[1] * inv, v[2] * inv, 0.0, 0.0];
         let at = dot3(a, &tangent);
-        let mut curvature = [0.0; POSE_AXES];
-        for i in 0..3 {
-            curvature[i] = a[i] - at * tangent[i];
-        }
+        let mut curvature = [
+            a[0] - at * tangent[0],
+            a[1] - at * tangent[1],
+            a[2] - at * tangent[2],
+            0.0,
+            0.0,
+        ];
         // The normal acceleration a_n, weighted by how far the ticks resolve it: 0 up to
         // RESOLVED_ACCEL, 1 from twice that; then κ = w·a_n/|v|², at most MAX_CURVATURE.
         let an2 = dot3(&curvature, &curvature);
@@ -170,10 +172,7 @@ impl PathFrame {
         for k in &mut curvature[..3] {
             *k *= scale;
         }
-        let mut turn = [0.0; POSE_AXES];
-        for i in 3..POSE_AXES {
-            turn[i] = v[i] * inv;
-        }
+        let turn = [0.0, 0.0, 0.0, v[3] * inv, v[4] * inv];
         Self {
             tangent,
             curvature,
@@ -221,19 +220,25 @@ impl PathFrame {
     /// its error less what the tangential lag e·t explains (the reference direction
     /// where the tool actually is on the path), `e_o − (e·t)·turn`.
     pub fn contour_error(&self, e: &PoseVec) -> PoseVec {
+        let mut eps = [0.0; POSE_AXES];
+        self.contour_error_into(e, &mut eps);
+        eps
+    }
+
+    /// [`PathFrame::contour_error`] into `eps`, every element written.
+    pub fn contour_error_into(&self, e: &PoseVec, eps: &mut PoseVec) {
         if !self.moving() {
-            return [0.0; POSE_AXES];
+            *eps = [0.0; POSE_AXES];
+            return;
         }
         let et = dot3(e, &self.tangent);
         let bend = 0.5 * et * et;
-        let mut eps = [0.0; POSE_AXES];
         for i in 0..3 {
             eps[i] = e[i] - et * self.tangent[i] + bend * self.curvature[i];
         }
         for i in 3..POSE_AXES {
             eps[i] = e[i] - et * self.turn[i];
         }
-        eps
     }
 }
 
@@ -278,10 +283,17 @@ impl ContourLoop {
     /// One period given the frame and the contour error `eps` (mm).
     pub fn update(&mut self, frame: &PathFrame, eps: &PoseVec) -> ContourCorrection {
         let mut out = ContourCorrection::default();
+        self.update_into(frame, eps, &mut out);
+        out
+    }
+
+    /// [`ContourLoop::update`] into `out`, every field written.
+    pub fn update_into(&mut self, frame: &PathFrame, eps: &PoseVec, out: &mut ContourCorrection) {
+        out.reference = self.offset;
         let c = &self.config;
         if c.mode == ContourMode::Uncoupled || !frame.moving() {
-            out.reference = self.offset;
-            return out;
+            out.command = [0.0; POSE_AXES];
+            return;
         }
         for i in 0..POSE_AXES {
             self.integral[i] = clamp_sym(self.integral[i] + self.ki_t * eps[i], c.max_integral);
@@ -297,7 +309,6 @@ impl ContourLoop {
             frame.project(&mut self.offset);
             out.reference = self.offset;
         }
-        out
     }
 }
 
@@ -442,8 +453,10 @@ impl ServoBank {
     /// At each interpolation tick: the channels' next targets, counts × 2^16
     /// ([`crate::drive::servo::target_q16`]).
     pub fn load_tick(&mut self, targets: &[i64; MAX_SERVOS]) {
-        for (s, t) in self.setpoints.iter_mut().zip(targets) {
-            s.load(*t);
+        // The channels in use only: no other one's setpoint is ever read.
+        for &c in &self.active[..self.n_active.min(MAX_SERVOS)] {
+            let c = c as usize % MAX_SERVOS;
+            self.setpoints[c].load(targets[c]);
         }
         self.since_load = 0;
     }
@@ -461,7 +474,16 @@ impl ServoBank {
 
     /// The trip latched by each channel's loop.
     pub fn trips(&self) -> [Option<Trip>; MAX_SERVOS] {
-        self.axes.each_ref().map(ServoAxis::trip)
+        let mut trips = [None; MAX_SERVOS];
+        self.trips_into(&mut trips);
+        trips
+    }
+
+    /// [`ServoBank::trips`] into `out`.
+    pub fn trips_into(&self, out: &mut [Option<Trip>; MAX_SERVOS]) {
+        for (t, axis) in out.iter_mut().zip(&self.axes) {
+            *t = axis.trip();
+        }
     }
 
     /// Clears every latched trip and the contour state.
@@ -473,7 +495,8 @@ impl ServoBank {
         self.correction = ContourCorrection::default();
     }
 
-    /// Channel `c`'s setpoint of the last period, whole counts (for the data recorder).
+    /// Channel `c`'s setpoint of the last period, whole counts (for the data recorder);
+    /// a channel not in use keeps the position the bank was built at.
     pub fn setpoint_counts(&self, c: usize) -> i32 {
         (self.setpoints[c % MAX_SERVOS].position() >> SETPOINT_FRAC_BITS) as i32
     }
@@ -484,7 +507,7 @@ impl ServoBank {
     /// tens of hertz), and its tracking error joins this period's estimate.
     pub fn period(&mut self, inputs: &PeriodInputs) -> PeriodOutputs {
         let mut out = PeriodOutputs::IDLE;
-        self.period_into(inputs, &mut out);
+        self.period_into(&inputs.feedback, &inputs.fault, inputs.enable, &mut out);
         out
     }
 
@@ -492,18 +515,27 @@ impl ServoBank {
     /// channel in use, and the contour error of a coupled bank; the rest keeps what
     /// `out` held, which must be [`PeriodOutputs::IDLE`] (or the outputs of this
     /// bank's earlier periods). For the servo interrupt, which keeps its outputs from
-    /// one period to the next: no outputs are built and copied each period.
-    pub fn period_into(&mut self, inputs: &PeriodInputs, out: &mut PeriodOutputs) {
+    /// one period to the next: no outputs are built and copied each period, nor its
+    /// inputs ([`PeriodInputs`]'s fields, by reference).
+    pub fn period_into(
+        &mut self,
+        feedback: &[i64; MAX_SERVOS],
+        fault: &[bool; MAX_SERVOS],
+        enable: bool,
+        out: &mut PeriodOutputs,
+    ) {
         let active = self.active;
         let active = &active[..self.n_active.min(MAX_SERVOS)];
-        // The tracking error in pose coordinates, to_pose · e.
-        let mut pe = [0.0f32; POSE_AXES];
+        // The tracking error in pose coordinates, to_pose · e. (Sums start from −0,
+        // the additive identity: an all-zero array costs a `memclr` call on the M4 at
+        // opt-level "s".)
+        let mut pe = [-0.0f32; POSE_AXES];
         let corr = &self.correction;
         for &c in active {
             // (`% MAX_SERVOS`: a channel is below it; this spares the bounds checks.)
             let c = c as usize % MAX_SERVOS;
             let s = self.setpoints[c].advance();
-            let f = following_error(s.position_q16, inputs.feedback[c]);
+            let f = following_error(s.position_q16, feedback[c]);
             let coupling = if self.coupled {
                 let (col, u) = (&self.to_pose[c], self.unit_per_count[c]);
                 axpy5(&mut pe, col, f.1 * u);
@@ -516,8 +548,8 @@ impl ServoBank {
                 Coupling::NONE
             };
             let amp = AmpIo {
-                enable: inputs.enable,
-                fault: inputs.fault[c],
+                enable,
+                fault: fault[c],
             };
             let law = self.law[c] as usize;
             let lqg = if law == 0 {
@@ -534,7 +566,7 @@ impl ServoBank {
             if self.since_load == 0 || self.since_load == SERVO_PER_TICK {
                 // A new tick, or the setpoints just ran out (a late tick): the
                 // channels' velocity and acceleration, hence the frame, changed.
-                let (mut pv, mut pa) = ([0.0f32; POSE_AXES], [0.0; POSE_AXES]);
+                let (mut pv, mut pa) = ([-0.0f32; POSE_AXES], [-0.0; POSE_AXES]);
                 for &c in active {
                     let c = c as usize % MAX_SERVOS;
                     let (col, u) = (&self.to_pose[c], self.unit_per_count[c]);
@@ -544,9 +576,9 @@ impl ServoBank {
                 }
                 self.frame = self.frame.next(&pv, &pa);
             }
-            let eps = self.frame.contour_error(&pe);
-            self.correction = self.contour.update(&self.frame, &eps);
-            out.contour_error = eps;
+            self.frame.contour_error_into(&pe, &mut out.contour_error);
+            self.contour
+                .update_into(&self.frame, &out.contour_error, &mut self.correction);
         }
         self.since_load = self.since_load.saturating_add(1);
     }

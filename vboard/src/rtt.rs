@@ -2,7 +2,7 @@
 //! `_SEGGER_RTT` in the target's RAM (up-buffer 0: its buffer, size and write offset;
 //! the reader advances the read offset), decoded with the ELF's defmt table.
 //!
-//! Layout (SEGGER RTT, as defmt-rtt lays it out): 16 bytes of ID, the numbers of up
+//! Layout (SEGGER RTT, as the firmware's logger lays it out, `src/bin/firmware/log.rs`): 16 bytes of ID, the numbers of up
 //! and down buffers (two i32), then each up-buffer descriptor: name, buffer pointer,
 //! size, write offset, read offset, flags (six u32).
 

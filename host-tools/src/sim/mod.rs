@@ -46,7 +46,7 @@ pub use trace::TraceRow;
 
 use crate::control::plant::{PlantError, PlantFile};
 use pkmc::config::{Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS, MAX_STEPPERS};
-use pkmc::controller::pacing::{RawInputs, ServoPacer, Snapshot, TickPacer};
+use pkmc::controller::pacing::{CommandSlot, RawInputs, ServoPacer, Snapshot, TickPacer};
 use pkmc::controller::{Controller, Inputs};
 use pkmc::drive::contour::{PeriodOutputs, ServoBank};
 use pkmc::drive::debounce::Switches;
@@ -110,6 +110,8 @@ pub struct Simulator {
     /// The servo interrupt's loops and pacing; `None` for a machine without servo
     /// joints (the loops would have nothing to drive).
     servo: Option<ServoPacer>,
+    /// The tick's command for the next tick edge (the firmware's mailbox).
+    posted: CommandSlot,
     /// Outputs of the last servo period.
     bank_out: PeriodOutputs,
     /// The tick's side of the pacing: switch filters, the step trains due next.
@@ -183,6 +185,7 @@ impl Simulator {
             tick_lines: heapless::Vec::new(),
             servos: Default::default(),
             servo: None,
+            posted: CommandSlot::new(),
             bank_out: PeriodOutputs::default(),
             pacer: TickPacer::new(),
             plants,
@@ -335,6 +338,7 @@ impl Simulator {
             .iter()
             .any(Option::is_some)
             .then(|| ServoPacer::new(ServoBank::new(&machine, &counts), &counts));
+        self.posted = CommandSlot::new();
         self.bank_out = PeriodOutputs::default();
         // New drives, standing where the controller's joints are: no train of the old
         // ones is due on them.
@@ -465,8 +469,8 @@ impl Simulator {
         let Some(pacer) = self.servo.as_mut() else {
             return false;
         };
-        let period = pacer.period(&counts_of(&self.servos), fault);
-        self.bank_out = period.out;
+        let period = self.posted.period(pacer, &counts_of(&self.servos), fault);
+        self.bank_out = *period.out;
         for (c, s) in self.servos.iter_mut().enumerate() {
             if let Some(s) = s {
                 let mark = s.period(period.out.dac[c], period.out.enable[c]);
@@ -556,7 +560,7 @@ impl Simulator {
             if command.reset {
                 pacer.restart(ServoBank::new(self.ctrl.machine(), &snapshot.counts));
             }
-            pacer.post(command);
+            self.posted.post(command);
             self.last_servo_record.clear();
             if self.ctrl.records_servo() {
                 // As the firmware: the last complete tick's servo-period samples,

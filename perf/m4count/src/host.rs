@@ -224,7 +224,7 @@ fn pacer_cases() {
         let mut f = [0; MAX_SERVOS];
         for k in 0..10i64 {
             f = servo::feedback(bench, k);
-            let o = p.period(&f, &[false; MAX_SERVOS]).out;
+            let o = p.period(&f);
             let d = o.dac.map(i64::from);
             let e = o.contour_error.map(|e| i64::from(e.to_bits()));
             println!("pacer {b} {k} {}", line(&[&f, &d, &e]));

@@ -20,15 +20,32 @@
 
 use crate::servo::{ccpm_4axes_machine, channels, helix_targets, hexapod_xy_machine, HELIX};
 use pkmc::config::MAX_SERVOS;
-use pkmc::controller::pacing::{Command, ServoPacer, NOT_SERVO};
-use pkmc::drive::contour::ServoBank;
+use pkmc::controller::pacing::{Command, CommandSlot, ServoPacer, NOT_SERVO};
+use pkmc::drive::contour::{PeriodOutputs, ServoBank};
 use pkmc::drive::recorder::{Row, MAX_SIGNALS, ROW_BYTES};
 use pkmc::drive::servo::{SERVO_PER_TICK, SETPOINT_FRAC_BITS};
 use pkmc::kinematics::{ContourMap, MachineKinematics};
 
-/// Bytes the emulator reserves for one [`ServoPacer`].
+/// A pacer bench: the servo interrupt's pacer and the slot its tick's command waits
+/// in (the firmware's mailbox: read in place at the edge).
+#[derive(Clone, Debug)]
+pub struct BenchPacer {
+    pub pacer: ServoPacer,
+    pub slot: CommandSlot,
+}
+
+impl BenchPacer {
+    /// One servo period, no fault.
+    pub fn period(&mut self, feedback: &[i64; MAX_SERVOS]) -> &PeriodOutputs {
+        self.slot
+            .period(&mut self.pacer, feedback, &[false; MAX_SERVOS])
+            .out
+    }
+}
+
+/// Bytes the emulator reserves for one [`BenchPacer`].
 pub const PACER_BYTES: usize = 8192;
-const _: () = assert!(core::mem::size_of::<ServoPacer>() <= PACER_BYTES);
+const _: () = assert!(core::mem::size_of::<BenchPacer>() <= PACER_BYTES);
 
 /// The benches (see the module documentation).
 pub const BENCHES: u32 = 4;
@@ -50,7 +67,7 @@ pub const HEXAPOD_XY_SIGNALS: [u8; MAX_SIGNALS] = [0x00, 0x10, 0x20, 0x30, 0x26,
 const RECORD_ADD: [i32; MAX_SIGNALS] = [-1234, -1234, 0, 0, 0, 0, 0, 0];
 
 /// Bench `bench`'s pacer, its tick's command posted (not timed).
-pub fn pacer(bench: u32) -> ServoPacer {
+pub fn pacer(bench: u32) -> BenchPacer {
     let record = |signals: [u8; MAX_SIGNALS]| {
         if bench % 2 == 1 {
             signals
@@ -62,8 +79,8 @@ pub fn pacer(bench: u32) -> ServoPacer {
         0 => {
             let counts = channels(&[0, 0, 260_000, 0]);
             let bank = ServoBank::new(&ccpm_4axes_machine(), &counts);
-            let mut p = ServoPacer::new(bank, &counts);
-            p.post(Command {
+            let mut slot = CommandSlot::new();
+            slot.post(Command {
                 reset: false,
                 targets: crate::servo::ccpm_4axes_targets(),
                 enable: true,
@@ -71,7 +88,10 @@ pub fn pacer(bench: u32) -> ServoPacer {
                 record: record(CCPM_SIGNALS),
                 record_add: RECORD_ADD,
             });
-            p
+            BenchPacer {
+                pacer: ServoPacer::new(bank, &counts),
+                slot,
+            }
         }
         1 => {
             let m = hexapod_xy_machine();
@@ -86,8 +106,8 @@ pub fn pacer(bench: u32) -> ServoPacer {
             let Ok(jm) = k.contour_map(&HELIX[2]) else {
                 panic!("the helix is not singular");
             };
-            let mut p = ServoPacer::new(bank, &counts);
-            p.post(Command {
+            let mut slot = CommandSlot::new();
+            slot.post(Command {
                 reset: false,
                 targets: t[2],
                 enable: true,
@@ -95,7 +115,10 @@ pub fn pacer(bench: u32) -> ServoPacer {
                 record: record(HEXAPOD_XY_SIGNALS),
                 record_add: RECORD_ADD,
             });
-            p
+            BenchPacer {
+                pacer: ServoPacer::new(bank, &counts),
+                slot,
+            }
         }
         _ => panic!("no such pacer bench"),
     }
@@ -118,15 +141,15 @@ pub struct Staged {
 
 /// One period more (the next tick's edge, nothing posted), then the last complete
 /// tick's staged samples (not timed).
-pub fn finish(p: &mut ServoPacer, feedback: &[i64; MAX_SERVOS]) -> Staged {
-    p.period(feedback, &[false; MAX_SERVOS]);
+pub fn finish(p: &mut BenchPacer, feedback: &[i64; MAX_SERVOS]) -> Staged {
+    p.period(feedback);
     let mut out = Staged {
         ids: [NOT_SERVO; MAX_SIGNALS],
         rows: [[0; ROW_BYTES]; SERVO_PER_TICK],
     };
     let mut k = 0;
     for half in 0..2 {
-        let (ids, rows) = p.staged(half);
+        let (ids, rows) = p.pacer.staged(half);
         out.ids = *ids;
         for r in rows {
             out.rows[k] = *r;
@@ -141,7 +164,7 @@ pub fn finish(p: &mut ServoPacer, feedback: &[i64; MAX_SERVOS]) -> Staged {
 /// # Safety
 /// `out` must be valid for writing [`PACER_BYTES`] bytes, 8-aligned.
 #[no_mangle]
-pub unsafe extern "C" fn bench_pacer_init(bench: u32, out: *mut ServoPacer) {
+pub unsafe extern "C" fn bench_pacer_init(bench: u32, out: *mut BenchPacer) {
     // SAFETY: the caller provides room and alignment.
     unsafe { out.write(pacer(bench)) }
 }
@@ -153,13 +176,13 @@ pub unsafe extern "C" fn bench_pacer_init(bench: u32, out: *mut ServoPacer) {
 /// Valid, aligned pointers.
 #[no_mangle]
 pub unsafe extern "C" fn bench_pacer_period(
-    p: *mut ServoPacer,
+    p: *mut BenchPacer,
     feedback: *const [i64; MAX_SERVOS],
     out: *mut crate::servo::PeriodResult,
 ) {
     // SAFETY: the caller passes valid pointers.
     unsafe {
-        let o = (*p).period(&*feedback, &[false; MAX_SERVOS]).out;
+        let o = (*p).period(&*feedback);
         *out = crate::servo::PeriodResult {
             dac: o.dac,
             contour_error: o.contour_error.map(f32::to_bits),
@@ -173,7 +196,7 @@ pub unsafe extern "C" fn bench_pacer_period(
 /// Valid, aligned pointers.
 #[no_mangle]
 pub unsafe extern "C" fn bench_pacer_staged(
-    p: *mut ServoPacer,
+    p: *mut BenchPacer,
     feedback: *const [i64; MAX_SERVOS],
     out: *mut Staged,
 ) {

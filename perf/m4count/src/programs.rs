@@ -25,7 +25,7 @@ pub struct Program {
     /// The data recorder armed before the job ([`record_tick`], [`record_servo`]).
     pub record: Option<Setup>,
     /// The servo bench whose tick stands for the program's servo periods in its 1 ms
-    /// figure (`.ci/m4count.py`); `None`: the machine's bank.
+    /// figure (`.ci/m4count.py`); `None`: the servo interrupt of the machine's bank.
     pub servo_bench: Option<&'static str>,
 }
 
@@ -372,7 +372,7 @@ pub fn programs() -> Vec<Program> {
         servo_bench: None,
     });
     // The data recorder streaming 8 signals beside the job, every tick and every
-    // servo period (whose 1 ms figure adds the staging to the bank's periods).
+    // servo period (whose 1 ms figure counts the servo interrupt staging 8 signals).
     for base in ["hexapod_xy_seg0.05mm", "hexapod_xy_helix-b-tilt"] {
         let Some(p) = out.iter().find(|p| p.name == base) else {
             continue;
@@ -380,7 +380,7 @@ pub fn programs() -> Vec<Program> {
         let (machine, text, lead_ticks) = (p.machine, p.text.clone(), p.lead_ticks);
         for (tag, record, servo_bench) in [
             ("rec1k", record_tick(), None),
-            ("rec10k", record_servo(), Some("servo_hexapod_xy_8ch_rec8")),
+            ("rec10k", record_servo(), Some("pacer_hexapod_xy_8ch_rec8")),
         ] {
             out.push(Program {
                 name: format!("{base}_{tag}"),

@@ -14,7 +14,7 @@
 //! checks it: the counted periods take the coupled path).
 
 use pkmc::config::{Drive, MachineConfig, MAX_JOINTS, MAX_SERVOS};
-use pkmc::drive::contour::{PeriodInputs, PeriodOutputs, ServoBank};
+use pkmc::drive::contour::{PeriodOutputs, ServoBank};
 use pkmc::drive::servo::target_q16;
 use pkmc::kinematics::{ContourMap, POSE_AXES};
 use pkmc::kinematics::{Kinematics, MachineKinematics, Pose};
@@ -245,13 +245,9 @@ pub unsafe extern "C" fn bench_servo_period(
 ) {
     // SAFETY: the caller passes valid pointers.
     unsafe {
-        let inputs = PeriodInputs {
-            feedback: *feedback,
-            fault: [false; MAX_SERVOS],
-            enable: true,
-        };
         let b = &mut *bank;
-        b.bank.period_into(&inputs, &mut b.out);
+        b.bank
+            .period_into(&*feedback, &[false; MAX_SERVOS], true, &mut b.out);
         let o = &b.out;
         *out = PeriodResult {
             dac: o.dac,

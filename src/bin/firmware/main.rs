@@ -51,6 +51,8 @@ mod board;
 #[cfg(target_os = "none")]
 mod encoders;
 #[cfg(target_os = "none")]
+mod log;
+#[cfg(target_os = "none")]
 mod probe;
 #[cfg(target_os = "none")]
 mod servo_period;
@@ -80,6 +82,7 @@ mod firmware {
     use embassy_usb::class::cdc_acm::{self, CdcAcmClass, Sender};
     use embassy_usb::driver::EndpointError;
     use embassy_usb::{Builder, UsbDevice};
+    use panic_probe as _;
     use pkmc::controller::pacing::{RawInputs, TickPacer};
     use pkmc::controller::Controller;
     use pkmc::drive::contour::ServoBank;
@@ -88,11 +91,10 @@ mod firmware {
     use pkmc::drive::servo::SERVO_PER_TICK;
     use pkmc::wire::{AlarmCause, State};
     use static_cell::StaticCell;
-    use {defmt_rtt as _, panic_probe as _};
 
     use crate::board::{self, StepStats, Steppers, Switches, UsbDriver};
-    use crate::servo_period;
     use crate::shared::TickShared;
+    use crate::{log, servo_period};
 
     /// USB full-speed bulk packet size, bytes.
     const USB_PACKET: usize = 64;
@@ -507,7 +509,7 @@ mod firmware {
         let link = with_controller(|c| c.link_stats()).unwrap_or_default();
         let servo = servo_period::stats();
         info!(
-            "state {} ticks {} link corrupt {} tx_dropped {} steps {} servo periods {} late_ticks {} fault {}",
+            "state {} ticks {} link corrupt {} tx_dropped {} steps {} servo periods {} late_ticks {} fault {} log dropped {}",
             state,
             ticks,
             link.corrupt,
@@ -515,7 +517,8 @@ mod firmware {
             stats,
             servo.periods,
             servo.late_ticks,
-            servo.fault
+            servo.fault,
+            log::dropped()
         );
         if inputs.estop || inputs.limit != 0 {
             warn!(

@@ -84,13 +84,13 @@ pub fn staged(half: usize) -> Option<([u8; MAX_SIGNALS], [Row; SERVO_PER_TICK / 
 
 /// The tick's command on its way to the servo interrupt, handed over without a
 /// critical section: the tick writes the slot while it is not published and then
-/// publishes it; the servo interrupt, which the tick can never preempt, takes it at
-/// its next period. Copying the command (with the hexapod-xy's channel map, some 460
-/// bytes) inside a critical section held the servo interrupt off for up to 1.9 µs
-/// (the virtual board, docs/vboard.md); the copy now happens in the servo interrupt
-/// itself. Should a command still be published when the next one comes (the servo
-/// interrupt not run for a whole tick), the slot is rewritten inside a critical
-/// section.
+/// publishes it; the servo interrupt, which the tick can never preempt, reads it in
+/// place at the next tick edge, copying only the channel map into the bank. (Copying
+/// the command, with the hexapod-xy's channel map some 460 bytes, inside a critical
+/// section held the servo interrupt off for up to 1.9 µs: the virtual board,
+/// docs/vboard.md.) Should a
+/// command still be published when the next one comes (a tick edge missed), the slot
+/// is rewritten inside a critical section.
 struct Mailbox {
     slot: UnsafeCell<MaybeUninit<Command>>,
     ready: AtomicBool,
@@ -122,14 +122,17 @@ pub fn post(command: Command) {
     MAILBOX.ready.store(true, Ordering::Release);
 }
 
-/// The command the tick published since the last period, if any. Servo interrupt only.
-fn take_posted() -> Option<Command> {
+/// The command the tick published since the last tick edge, if any, read in place and
+/// unpublished. Servo interrupt only, at a tick edge; the reference must not outlive
+/// the interrupt's run.
+fn take_posted() -> Option<&'static Command> {
     if !MAILBOX.ready.swap(false, Ordering::AcqRel) {
         return None;
     }
-    // SAFETY: published, so written in full; the tick does not write it outside a
-    // critical section while published and cannot run until this returns.
-    Some(unsafe { (*MAILBOX.slot.get()).assume_init_read() })
+    // SAFETY: published, so written in full. The tick writes the slot outside a
+    // critical section only while it is not published, and it cannot run before this
+    // interrupt, which holds the reference, returns.
+    Some(unsafe { (*MAILBOX.slot.get()).assume_init_ref() })
 }
 
 /// Replaces the loops' bank at once (a servo reset; see [`ServoPacer::restart`]).
@@ -151,12 +154,15 @@ pub fn on_servo_period() {
         let Some(s) = servo.as_deref_mut() else {
             return;
         };
-        if let Some(command) = take_posted() {
-            s.pacer.post(command);
-        }
+        // The command stays in the mailbox until the edge, which reads it in place.
+        let posted = if s.pacer.at_edge() {
+            take_posted()
+        } else {
+            None
+        };
         let feedback = s.io.encoders.read();
         let faults = s.io.faults();
-        let period = s.pacer.period(&feedback, &faults);
+        let period = s.pacer.period(&feedback, &faults, posted);
         s.io.write(&period.out.dac, &period.out.enable);
         if period.tick {
             crate::probe::tick_edge();
