@@ -234,12 +234,26 @@ class Job:
             self.version = None
         job = self
 
+        stream_lock = threading.Lock()
+
         class RecordingStreamer(GrblStreamer):
             # grbl-streamer calls back on a state *change* only; to know that a
             # report is fresh we also note every report it parses.
             def _update_state(self, line):
                 super()._update_state(line)
                 job.on_status(line, self.cmode)
+
+            # grbl-streamer 2.0.2 fills Grbl's receive buffer from two threads with no
+            # lock: `job_run()` calls `_stream()` in the caller's thread, and its reader
+            # thread calls it on every `ok`. Both can find the current line unsent and
+            # write it, or move past one unwritten: under CPU load a line went out
+            # twice (a probing program's `G00Z2` after the G38.2 written twice, the
+            # machine rightly ending 2 mm higher; a `G90` twice and a G1 skipped on a
+            # 1 000-line job). One lock around `_stream()` makes each fill whole;
+            # nothing else of the sender changes.
+            def _stream(self):
+                with stream_lock:
+                    super()._stream()
 
         if "://" in self.a.port:
             use_serial_for_url()
