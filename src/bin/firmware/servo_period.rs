@@ -88,9 +88,8 @@ pub fn staged(half: usize) -> Option<([u8; MAX_SIGNALS], [Row; SERVO_PER_TICK / 
 /// place at the next tick edge, copying only the channel map into the bank. (Copying
 /// the command, with the hexapod-xy's channel map some 460 bytes, inside a critical
 /// section held the servo interrupt off for up to 1.9 µs: the virtual board,
-/// docs/vboard.md.) Should a
-/// command still be published when the next one comes (a tick edge missed), the slot
-/// is rewritten inside a critical section.
+/// docs/vboard.md.) Should a command still be published when the next one comes (a
+/// tick edge missed), the slot is rewritten inside a critical section.
 struct Mailbox {
     slot: UnsafeCell<MaybeUninit<Command>>,
     ready: AtomicBool,
