@@ -2,7 +2,7 @@
 //! critical section.
 //!
 //! A logger that masks every interrupt while it encodes a line holds the 10 kHz servo
-//! interrupt off for the whole line: the diagnostics line took about 75 µs on the
+//! interrupt off for the whole line: the diagnostics line took over 70 µs on the
 //! virtual board, most of a servo period (`docs/vboard.md`). This one raises BASEPRI
 //! to the tick's priority instead, as [`crate::shared`]'s lock does: the tick, USB,
 //! the time base and thread mode cannot log while a line is being written, and the
