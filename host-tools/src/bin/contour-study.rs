@@ -411,10 +411,16 @@ fn design_lqg(args: &Args) -> Result<()> {
         resonance: 0.9,
     };
     for (j, jf) in file.joints.iter().enumerate() {
-        let (Some(w), Some(p)) = (&jf.lqg, &jf.plant) else {
+        // The design is of `lqg_model` where the file has one (`nc-send tune`'s).
+        let model = match (&jf.lqg_model, &jf.plant) {
+            (Some(m), _) => (&m.num, &m.den),
+            (None, Some(p)) => (&p.num, &p.den),
+            (None, None) => continue,
+        };
+        let Some(w) = &jf.lqg else {
             continue;
         };
-        let tf = TransferFunction::new(&p.num, &p.den)?;
+        let tf = TransferFunction::new(model.0, model.1)?;
         let d = design(
             &tf,
             jf.steps_per_unit,

@@ -418,6 +418,84 @@ fn to_gains(md: &Model, m: &[f64], k: &[f64], ki_t: f64) -> Result<LqgGains, Lqg
     }
 }
 
+/// The largest peak sensitivity max |1/(1 + L)| a tuned LQG design may have on its
+/// model: |S|max ≤ 1.30 keeps the phase margin at least 2·asin(1/(2·1.30)) = 45.2° and
+/// the gain margin at least 20·log10(1.30/0.30) = 12.7 dB.
+pub const TUNED_MAX_SENSITIVITY: f64 = 1.30;
+
+/// What [`raise_weights`] found: the weights, the design of them on the model and its
+/// figures there.
+#[derive(Clone, Debug)]
+pub struct RaisedWeights {
+    /// The weights: the given ones with `position_weight` and `integral_weight` both
+    /// multiplied by `scale`.
+    pub weights: LqgWeights,
+    /// The factor, 1 when no raise kept the bounds.
+    pub scale: f64,
+    /// The design of `weights` on the model.
+    pub design: LqgDesign,
+    /// Its figures on the model.
+    pub figures: LoopFigures,
+}
+
+/// The weights `w` with the regulator's position and integral weights raised together
+/// by the largest factor, from 1 up to 10⁴ in steps of 10^0.1, whose design on `tf`
+/// keeps its crossover at most `max_crossover_rad_s`, its peak sensitivity at most
+/// [`TUNED_MAX_SENSITIVITY`] and its closed loop stable: a faster loop of the same
+/// shape (the ratio of the two weights, the command's weight and the estimator's
+/// noise levels kept). The search stops at the first factor that breaks a bound; when
+/// factor 1 breaks one, `w` is returned as it is, designed on `tf`.
+pub fn raise_weights(
+    tf: &TransferFunction,
+    counts_per_unit: f64,
+    period_s: f64,
+    w: &LqgWeights,
+    max_crossover_rad_s: f64,
+) -> Result<RaisedWeights, LqgError> {
+    let trial = |scale: f64| -> Result<RaisedWeights, LqgError> {
+        // Five significant digits, as the machine file will hold them.
+        let round = |x: f64| format!("{x:.4e}").parse::<f64>().unwrap_or(x);
+        let weights = LqgWeights {
+            position_weight: round(w.position_weight * scale),
+            integral_weight: round(w.integral_weight * scale),
+            ..*w
+        };
+        let design = design(tf, counts_per_unit, period_s, &weights)?;
+        let figures = design.loop_figures(tf, counts_per_unit)?;
+        Ok(RaisedWeights {
+            weights,
+            scale,
+            design,
+            figures,
+        })
+    };
+    let within = |r: &RaisedWeights| {
+        r.figures.crossover_rad_s <= max_crossover_rad_s
+            && r.figures.peak_sensitivity <= TUNED_MAX_SENSITIVITY
+            && r.figures.max_pole < 1.0
+    };
+    let mut best = trial(1.0)?;
+    if !within(&best) {
+        return Ok(best);
+    }
+    for k in 1..=40 {
+        match trial(10f64.powf(k as f64 / 10.0)) {
+            Ok(r) if within(&r) => best = r,
+            _ => break,
+        }
+    }
+    Ok(best)
+}
+
+/// The weights as a TOML inline table for a machine file.
+pub fn weights_toml(w: &LqgWeights) -> String {
+    format!(
+        "{{ position_weight = {:e}, integral_weight = {:e}, command_weight = {:e}, \
+         load_noise = {:e}, encoder_noise = {:e} }}",
+        w.position_weight, w.integral_weight, w.command_weight, w.load_noise, w.encoder_noise
+    )
+}
+
 /// The gains as a TOML inline table for a machine file: every value printed with
 /// the shortest digits that read back to the same `f32` (`{:e}`), all arrays at
 /// their full size of [`LQG_STATES`].

@@ -7,6 +7,11 @@
 //! differently between builds): a file whose plant or weights were edited without
 //! designing again is refused.
 //!
+//! The design is checked on `lqg_model = { num = [..], den = [..] }` instead of the
+//! plant when the file has one: the model the gains were designed on, as `nc-send
+//! tune --write` writes it (the model it identified from the joint's response), where
+//! `plant` stays what it was (in the simulator, the true plant the tune did not know).
+//!
 //! The controller keeps at most [`MAX_LQG`] distinct designs; joints with the same
 //! gains (the legs of a hexapod) share one.
 
@@ -26,6 +31,29 @@ pub enum LawKind {
     Pid,
     /// The LQG design of `lqg_gains`.
     Lqg,
+}
+
+/// `lqg_model = { .. }`: the transfer function an LQG design was made on, mm or
+/// degrees per command unit, coefficients highest power of s first.
+#[derive(Clone, Debug, serde::Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LqgModel {
+    /// Numerator.
+    pub num: Vec<f64>,
+    /// Denominator.
+    pub den: Vec<f64>,
+}
+
+impl LqgModel {
+    /// `tf` as an `lqg_model = { .. }` inline table (every coefficient in the shortest
+    /// digits that read back to it).
+    pub fn toml(tf: &TransferFunction) -> String {
+        let list = |xs: &[f64]| {
+            let items: Vec<String> = xs.iter().map(|x| format!("{x:e}")).collect();
+            format!("[{}]", items.join(", "))
+        };
+        format!("{{ num = {}, den = {} }}", list(&tf.num), list(&tf.den))
+    }
 }
 
 /// Are `a` and `b` the same design, to 1e-5 of each array's largest value?
@@ -59,14 +87,24 @@ impl MachineFile {
                 f("lqg_gains")
             ));
         }
-        if let (Some(w), Some(p)) = (&jf.lqg, &jf.plant) {
-            let tf = TransferFunction::new(&p.num, &p.den)
-                .map_err(|e| refused!("{}: {e}", f("plant")))?;
+        let model = match (&jf.lqg_model, &jf.plant) {
+            (Some(m), _) => Some((&m.num, &m.den, "lqg_model", "lqg_model")),
+            (None, Some(p)) => Some((&p.num, &p.den, "plant", "plant")),
+            (None, None) => None,
+        };
+        if jf.lqg_model.is_some() && jf.lqg.is_none() {
+            return Err(refused!(
+                "{}: a model to check the LQG design on needs the design's weights (lqg)",
+                f("lqg_model")
+            ));
+        }
+        if let (Some(w), Some((num, den, field, name))) = (&jf.lqg, model) {
+            let tf = TransferFunction::new(num, den).map_err(|e| refused!("{}: {e}", f(field)))?;
             let d = design(&tf, jf.steps_per_unit, SERVO_PERIOD_S as f64, w)
                 .map_err(|e| refused!("{}: {e}", f("lqg")))?;
             if !close(&d.gains, &g) {
                 return Err(refused!(
-                    "{}: not the design of this joint's plant and lqg weights (run \
+                    "{}: not the design of this joint's {name} and lqg weights (run \
                      `contour-study --design-lqg --machine FILE`); the design is {}",
                     f("lqg_gains"),
                     gains_toml(&d.gains)
@@ -139,6 +177,68 @@ mod tests {
         let e = parse(&text, "m.toml").unwrap_err().to_string();
         assert!(
             e.contains("joints[0] (leg1).lqg_gains: not the design of this joint's plant"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn gains_designed_on_an_lqg_model_are_checked_on_it_and_not_on_the_plant() {
+        use crate::control::lqg::{design, gains_toml, LqgWeights};
+        use crate::control::plant::TransferFunction;
+        // leg1 with a model 5 % off its plant, as a tune might identify it.
+        let model =
+            TransferFunction::new(&[0.1479, 3.161, 312.7], &[1.0, 18.79, 1142.0, 651.2]).unwrap();
+        let w = LqgWeights {
+            position_weight: 1.0e-6,
+            integral_weight: 0.004,
+            command_weight: 1.0,
+            load_noise: 2.0,
+            encoder_noise: 29.0,
+        };
+        let g = design(&model, 100_000.0, 1e-4, &w).unwrap().gains;
+        let leg1 = HEXAPOD_XY_MACHINE.find("name = \"leg1\"").unwrap();
+        let (head, tail) = HEXAPOD_XY_MACHINE.split_at(leg1);
+        let at = tail.find("\nlqg_gains = ").unwrap();
+        let end = at + 1 + tail[at + 1..].find('\n').unwrap();
+        let with = |extra: &str| {
+            format!(
+                "{head}{}\nlqg_gains = {}{extra}{}",
+                &tail[..at],
+                gains_toml(&g),
+                &tail[end..]
+            )
+        };
+        // On the plant those gains are not the design.
+        let e = parse(&with(""), "m.toml").unwrap_err().to_string();
+        assert!(
+            e.contains("joints[0] (leg1).lqg_gains: not the design of this joint's plant"),
+            "{e}"
+        );
+        // With the model they are (and leg1 now has a design of its own).
+        let m = parse(
+            &with("\nlqg_model = { num = [0.1479, 3.161, 312.7], den = [1, 18.79, 1142, 651.2] }"),
+            "m.toml",
+        )
+        .unwrap();
+        assert_eq!(m.servo.lqg.len(), 2);
+        assert_eq!(m.servo.lqg[m.servo.law[0] as usize - 1], g);
+        // Another model is refused by its name.
+        let e = parse(
+            &with("\nlqg_model = { num = [0.1479, 3.161, 297.8], den = [1, 18.79, 1142, 651.2] }"),
+            "m.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("not the design of this joint's lqg_model"),
+            "{e}"
+        );
+        // A model without the weights it was designed with says nothing.
+        let text = with("\nlqg_model = { num = [1], den = [1, 1] }");
+        let text = text.replacen("\nlqg = {", "\n# lqg = {", 1);
+        let e = parse(&text, "m.toml").unwrap_err().to_string();
+        assert!(
+            e.contains("joints[0] (leg1).lqg_model: a model to check"),
             "{e}"
         );
     }

@@ -141,6 +141,9 @@ pub struct JointFile {
     pub lqg: Option<crate::control::lqg::LqgWeights>,
     /// Servo: the LQG design's gains, as `contour-study --design-lqg` prints them.
     pub lqg_gains: Option<pkmc::config::LqgGains>,
+    /// Servo: the model the LQG design was made on, when it is not `plant` (the model
+    /// `nc-send tune` identified, [`super::lqg`]).
+    pub lqg_model: Option<super::lqg::LqgModel>,
 }
 
 /// A servo joint's `servo = { ... }` table: [`pkmc::config::ServoGains`] in file units

@@ -13,12 +13,13 @@
 pub use super::tuned::{write, Tuned};
 use super::{tune_write, Table};
 use crate::control::ident::{self, IdentOptions, Identified, Record};
+use crate::control::lqg;
 use crate::control::plant::TransferFunction;
 pub use crate::control::tune::Margins;
 use crate::control::tune::{self, PidSpec, PidTuning};
 use crate::job::{exit, Failure, RunOptions, Target};
 use crate::link::{JobEnd, JobHooks, Link, LinkView, Transport};
-use crate::machine_file::lqg::LawKind;
+use crate::machine_file::lqg::{LawKind, LqgModel};
 use crate::machine_file::{read_file, DriveKind, JointFile, MachineFile};
 use crate::scope::tune_plot::{BodeCurve, Curve};
 use pkmc::config::{LqgGains, ServoGains};
@@ -241,7 +242,13 @@ pub fn run<T: Transport>(
         let line = write(&loaded.path, &t)?;
         println!("written to {}: {line}", loaded.path.display());
     } else {
-        println!("would write (with --write): {}", t.line.trim());
+        println!(
+            "would write (with --write): {}",
+            super::tuned::written(&t, &t.line)
+        );
+        for (key, value) in &t.lqg_lines {
+            println!("  {key} = {value}");
+        }
     }
     Ok((JobEnd::Done, None))
 }
@@ -305,6 +312,30 @@ pub fn tune<T: Transport>(
         ("kaff", t.kaff),
     ];
     let new = tune_write::rewrite(&loaded.text, j.index, &fields).map_err(bad)?;
+    let lqg_lines = outcome.lqg.as_ref().map_or(Vec::new(), |l| {
+        vec![
+            ("lqg", lqg::weights_toml(&l.raised.weights)),
+            ("lqg_gains", lqg::gains_toml(&l.raised.design.gains)),
+            ("lqg_model", LqgModel::toml(&id.plant)),
+        ]
+    });
+    // The joints that share this joint's LQG design (a hexapod's legs) get the
+    // same, so that they go on sharing one (the controller holds few).
+    let alike = match (&outcome.lqg, &j.lqg) {
+        (Some(_), Some(g)) => loaded
+            .mf
+            .joints
+            .iter()
+            .enumerate()
+            .filter(|(i, f)| {
+                *i != j.index
+                    && f.lqg_gains.as_ref() == Some(g)
+                    && f.servo.as_ref().is_some_and(|s| s.law == LawKind::Lqg)
+            })
+            .map(|(i, _)| i)
+            .collect(),
+        _ => Vec::new(),
+    };
     let g = &j.gains;
     Ok(Tuned {
         joint: j.index,
@@ -319,12 +350,19 @@ pub fn tune<T: Transport>(
         present_margins: outcome.present,
         designed_margins: t.margins,
         aimed: (outcome.spec.crossover_rad_s, outcome.spec.phase_margin_deg),
-        lqg: outcome.lqg.as_ref().map(|(gains, f)| {
+        lqg: outcome.lqg.as_ref().map(|l| {
             format!(
-                "|S|max {:.2}, crossover {:.1} rad/s; lqg_gains = {gains}",
-                f.peak_sensitivity, f.crossover_rad_s
+                "present |S|max {:.2}, crossover {:.1} rad/s; designed |S|max {:.2}, \
+                 crossover {:.1} rad/s; lqg = {}",
+                l.present.peak_sensitivity,
+                l.present.crossover_rad_s,
+                l.raised.figures.peak_sensitivity,
+                l.raised.figures.crossover_rad_s,
+                lqg::weights_toml(&l.raised.weights)
             )
         }),
+        lqg_lines,
+        alike,
         line: new.line.trim().to_string(),
         title: format!("tune {} ({})", j.index, j.file.name),
         steps,
@@ -425,7 +463,16 @@ struct Outcome {
     spec: PidSpec,
     tuned: PidTuning,
     present: tune::Margins,
-    lqg: Option<(String, crate::control::lqg::LoopFigures)>,
+    lqg: Option<LqgOutcome>,
+}
+
+/// For a joint that runs LQG: the file's weights designed on the model, and the
+/// raised weights' design ([`lqg::raise_weights`]).
+struct LqgOutcome {
+    present: lqg::LoopFigures,
+    raised: lqg::RaisedWeights,
+    /// The crossover the raise stopped under, rad/s.
+    cap: f64,
 }
 
 fn present(g: &ServoGains) -> [f64; 3] {
@@ -441,14 +488,15 @@ fn design(j: &Joint, id: &Identified, args: &TuneArgs) -> Result<Outcome, Failur
         phase_margin_deg: args.phase_margin,
         ..PidSpec::new(present.crossover_rad_s)
     };
+    // A third of the band the PRBS excites (about 0.44/hold Hz): the model is not
+    // trusted beyond what the data held.
+    let trusted = std::f64::consts::TAU * 0.44 / (args.hold_ms as f64 * 1e-3) / 3.0;
     let crossover = match args.bandwidth {
         Some(hz) => hz * std::f64::consts::TAU,
         None => {
             // The highest crossover the model allows with margins to spare, from the
-            // present one up to a third of the band the PRBS excites (about
-            // 0.44/hold Hz): the model is not trusted beyond what the data held.
-            let band = std::f64::consts::TAU * 0.44 / (args.hold_ms as f64 * 1e-3);
-            let range = (present.crossover_rad_s, band / 3.0);
+            // present one up to the trusted band.
+            let range = (present.crossover_rad_s, trusted);
             tune::highest_crossover(&id.plant, j.cpu, H, &spec, range, &Default::default())
                 .unwrap_or(present.crossover_rad_s)
         }
@@ -461,12 +509,21 @@ fn design(j: &Joint, id: &Identified, args: &TuneArgs) -> Result<Outcome, Failur
         .map_err(|e| fail(format!("no PID for {crossover:.1} rad/s: {e}")))?;
     let lqg = match (&j.lqg, &j.file.lqg) {
         (Some(_), Some(w)) => {
-            let d = crate::control::lqg::design(&id.plant, j.cpu, H, w)
-                .map_err(|e| fail(format!("no LQG design on the model: {e}")))?;
-            let f = d
-                .loop_figures(&id.plant, j.cpu)
-                .map_err(|e| fail(e.to_string()))?;
-            Some((crate::control::lqg::gains_toml(&d.gains), f))
+            let no = |e: lqg::LqgError| fail(format!("no LQG design on the model: {e}"));
+            let present = lqg::design(&id.plant, j.cpu, H, w)
+                .and_then(|d| d.loop_figures(&id.plant, j.cpu))
+                .map_err(no)?;
+            // The LQG loop as fast as the PID may be: up to --bandwidth, or the
+            // trusted band.
+            let cap = args
+                .bandwidth
+                .map_or(trusted, |hz| hz * std::f64::consts::TAU);
+            let raised = lqg::raise_weights(&id.plant, j.cpu, H, w, cap).map_err(no)?;
+            Some(LqgOutcome {
+                present,
+                raised,
+                cap,
+            })
         }
         _ => None,
     };
@@ -617,12 +674,23 @@ fn report(
         "aimed at: crossover {:.1} rad/s, PM {:.0}°",
         o.spec.crossover_rad_s, o.spec.phase_margin_deg
     ));
-    if let Some((gains, f)) = &o.lqg {
+    if let Some(l) = &o.lqg {
+        let r = &l.raised;
         out.push(format!(
-            "LQG (law = \"lqg\"; the file's weights on the model): |S|max {:.2}, crossover \
-             {:.1} rad/s; lqg_gains = {gains} (not written: the loader checks lqg_gains \
-             against the file's plant)",
-            f.peak_sensitivity, f.crossover_rad_s
+            "LQG (law = \"lqg\"): the file's weights on the model: |S|max {:.2}, crossover \
+             {:.1} rad/s",
+            l.present.peak_sensitivity, l.present.crossover_rad_s
+        ));
+        out.push(format!(
+            "LQG designed: position and integral weights ×{:.3} (the most that keeps the \
+             crossover ≤ {:.1} rad/s and |S|max ≤ {:.2}, so PM ≥ 45.2° and GM ≥ 12.7 dB): \
+             |S|max {:.2}, crossover {:.1} rad/s; lqg = {}",
+            r.scale,
+            l.cap,
+            lqg::TUNED_MAX_SENSITIVITY,
+            r.figures.peak_sensitivity,
+            r.figures.crossover_rad_s,
+            lqg::weights_toml(&r.weights)
         ));
     }
     out

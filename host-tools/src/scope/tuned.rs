@@ -40,8 +40,14 @@ pub struct Tuned {
     pub designed_margins: tune::Margins,
     /// The crossover (rad/s) and phase margin (degrees) aimed at.
     pub aimed: (f64, f64),
-    /// For a joint that runs LQG: the LQG design of the file's weights on the model.
+    /// For a joint that runs LQG: the figures of its present and designed LQG loops on
+    /// the model, and the designed weights.
     pub lqg: Option<String>,
+    /// For a joint that runs LQG: its `lqg`, `lqg_gains` and `lqg_model` lines as
+    /// they would be written (key, value).
+    pub lqg_lines: Vec<(&'static str, String)>,
+    /// The other joints that share its LQG design, which are written the same.
+    pub alike: Vec<usize>,
     /// The joint's `servo = { … }` line as it would be written.
     pub line: String,
     pub(super) title: String,
@@ -74,13 +80,42 @@ impl Tuned {
 }
 
 /// Writes the designed gains of `tuned` into the joint's `servo` line of the machine
-/// file at `path`, read again now (`--write`; the station's Write gains): the line
-/// written.
+/// file at `path`, read again now (`--write`; the station's Write gains), and for a
+/// joint that runs LQG its `lqg`, `lqg_gains` and `lqg_model` lines, into the joint
+/// and every joint that shares its design: what was written, in a line.
 pub fn write(path: &Path, tuned: &Tuned) -> Result<String, Failure> {
-    let text = std::fs::read_to_string(path)
+    let mut text = std::fs::read_to_string(path)
         .map_err(|e| bad(format!("{}: cannot read it: {e}", path.display())))?;
-    let new = tune_write::rewrite(&text, tuned.joint, &tuned.fields()).map_err(bad)?;
-    std::fs::write(path, &new.text)
+    let mut line = String::new();
+    for &j in std::iter::once(&tuned.joint).chain(&tuned.alike) {
+        let new = tune_write::rewrite(&text, j, &tuned.fields()).map_err(bad)?;
+        text = new.text;
+        if j == tuned.joint {
+            line = new.line.trim().to_string();
+        }
+        for (key, value) in &tuned.lqg_lines {
+            text = tune_write::set_line(&text, j, key, value).map_err(bad)?;
+        }
+    }
+    std::fs::write(path, &text)
         .map_err(|e| bad(format!("{}: cannot write it: {e}", path.display())))?;
-    Ok(new.line.trim().to_string())
+    Ok(written(tuned, &line))
+}
+
+/// What [`write`] writes, in a line: the `servo` line, the LQG lines' keys and the
+/// joints that share them.
+pub fn written(tuned: &Tuned, servo_line: &str) -> String {
+    let mut s = servo_line.trim().to_string();
+    if !tuned.lqg_lines.is_empty() {
+        let keys: Vec<&str> = tuned.lqg_lines.iter().map(|(k, _)| *k).collect();
+        s.push_str(&format!("; and {}", keys.join(", ")));
+    }
+    if !tuned.alike.is_empty() {
+        let js: Vec<String> = tuned.alike.iter().map(|j| format!("joints[{j}]")).collect();
+        s.push_str(&format!(
+            "; the same for {}, which share its LQG design",
+            js.join(", ")
+        ));
+    }
+    s
 }

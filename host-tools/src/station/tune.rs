@@ -69,7 +69,7 @@ impl Tune {
                             "designed": margins(&t.designed_margins)},
                 "aimed": {"crossover_rad_s": t.aimed.0, "phase_margin_deg": t.aimed.1},
                 "lqg": t.lqg,
-                "line": t.line,
+                "line": crate::scope::tuned::written(t, &t.line),
                 "report": t.lines,
                 "svg": svg,
             })

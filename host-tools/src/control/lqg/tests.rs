@@ -557,3 +557,53 @@ fn refused_inputs_name_their_field() {
     assert_eq!(ok, weights(0.001, 16.0, 0.5));
     assert!(toml::from_str::<LqgWeights>("position_weight = 1\nkp = 2").is_err());
 }
+
+#[test]
+fn raised_weights_reach_the_crossover_asked_for_within_the_sensitivity_bound() {
+    // The hexapod-xy's legs (examples/machines/hexapod-xy.toml): 58.7 rad/s with
+    // the file's weights.
+    let leg = tf(&[0.1479, 3.161, 297.8], &[1.0, 18.79, 1142.0, 651.2]);
+    let w = LqgWeights {
+        position_weight: 1.0e-6,
+        integral_weight: 0.004,
+        command_weight: 1.0,
+        load_noise: 2.0,
+        encoder_noise: 29.0,
+    };
+    let cpu = 100_000.0;
+    let present = design(&leg, cpu, H, &w)
+        .unwrap()
+        .loop_figures(&leg, cpu)
+        .unwrap();
+    let r = raise_weights(&leg, cpu, H, &w, 92.0).unwrap();
+    assert!(r.scale > 1.0, "{}", r.scale);
+    assert!(r.figures.crossover_rad_s <= 92.0, "{:?}", r.figures);
+    assert!(
+        r.figures.crossover_rad_s > present.crossover_rad_s,
+        "{:?}",
+        r.figures
+    );
+    assert!(r.figures.peak_sensitivity <= TUNED_MAX_SENSITIVITY);
+    // The next step up would have crossed the bound.
+    let up = LqgWeights {
+        position_weight: w.position_weight * r.scale * 10f64.powf(0.1),
+        integral_weight: w.integral_weight * r.scale * 10f64.powf(0.1),
+        ..w
+    };
+    let next = design(&leg, cpu, H, &up)
+        .unwrap()
+        .loop_figures(&leg, cpu)
+        .unwrap();
+    assert!(next.crossover_rad_s > 92.0, "{next:?}");
+    // The weights are written as they were designed: the text reads back to them and
+    // to the same design.
+    let text = weights_toml(&r.weights);
+    let back: LqgWeights = toml::from_str(&format!("w = {text}"))
+        .map(|t: std::collections::BTreeMap<String, LqgWeights>| t["w"])
+        .unwrap();
+    assert_eq!(back, r.weights);
+    assert_eq!(design(&leg, cpu, H, &back).unwrap().gains, r.design.gains);
+    // A cap below the present crossover keeps the weights as they are.
+    let kept = raise_weights(&leg, cpu, H, &w, 30.0).unwrap();
+    assert_eq!((kept.scale, kept.weights), (1.0, w));
+}

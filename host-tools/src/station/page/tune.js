@@ -73,7 +73,7 @@ function renderResult(r) {
   box.appendChild(aimed);
   if (r.lqg) {
     const l = document.createElement('p');
-    l.textContent = `LQG of the file's weights on the model (not written): ${r.lqg}`;
+    l.textContent = `LQG on the model (Write gains writes the designed weights, their gains and the model): ${r.lqg}`;
     box.appendChild(l);
   }
   const line = document.createElement('p');
