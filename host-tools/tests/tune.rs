@@ -11,13 +11,20 @@
 //! * (b) the designed gains keep ≥ 45° of phase margin and a stable loop on the TRUE
 //!   plant;
 //! * (c) `--write` changes only that joint's servo gains (one comment line giving the
-//!   old line, the `servo` line), and the written file loads and runs a job;
+//!   old line, the `servo` line), and for a joint that runs LQG (the hexapod-xy's
+//!   legs) its `lqg` and `lqg_gains` lines the same way and an added `lqg_model`
+//!   line, in every joint that shares its design; the written file loads (its
+//!   `lqg_gains` checked against the design on `lqg_model`) and runs a job; the written
+//!   LQG design keeps a stable loop and |S|max ≤ 1.307 (so ≥ 45° of phase margin) on
+//!   the TRUE plant;
 //! * refusals name the problem: a stepper joint, a joint that does not exist.
 //!
 //! Run with `--nocapture` for the figures (docs/tuning.md).
 
+use pkmc_host::control::lqg;
 use pkmc_host::control::plant::TransferFunction;
 use pkmc_host::control::tune;
+use pkmc_host::machine_file::lqg::LawKind;
 use pkmc_host::machine_file::{read_file, DriveKind};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -70,6 +77,19 @@ fn with_noise(text: &str) -> String {
                 ));
             }
         }
+    }
+    out
+}
+
+/// `text` cut into its tables: each header line with the lines after it up to the next
+/// header (the lines before the first header as the first).
+fn sections(text: &str) -> Vec<Vec<&str>> {
+    let mut out: Vec<Vec<&str>> = vec![Vec::new()];
+    for line in text.lines() {
+        if line.trim_start().starts_with('[') {
+            out.push(Vec::new());
+        }
+        out.last_mut().unwrap().push(line);
     }
     out
 }
@@ -177,31 +197,100 @@ fn tune_one(file: &str, joint: &str) {
         m.stable && m.phase_margin_deg >= 45.0,
         "{file} {joint}: {m:?}"
     );
-    // (c) Only the joint's servo line changed, under a comment giving the old one.
+    // (c) What changed: the joint's servo line, and for an LQG joint its `lqg` and
+    // `lqg_gains` lines, each under a comment giving the old one, and an added
+    // `lqg_model` line; the same in the joints that share its LQG design; nothing else.
+    let lqg = jf.servo.as_ref().unwrap().law == LawKind::Lqg;
+    let set: Vec<usize> = if lqg {
+        (0..mf.joints.len())
+            .filter(|&k| {
+                let o = &mf.joints[k];
+                o.lqg_gains == jf.lqg_gains
+                    && o.servo.as_ref().is_some_and(|s| s.law == LawKind::Lqg)
+            })
+            .collect()
+    } else {
+        vec![j]
+    };
+    let keys: &[&str] = if lqg {
+        &["servo", "lqg", "lqg_gains"]
+    } else {
+        &["servo"]
+    };
     let written = std::fs::read_to_string(&path).unwrap();
-    let (old, new): (Vec<&str>, Vec<&str>) =
-        (original.lines().collect(), written.lines().collect());
-    assert_eq!(new.len(), old.len() + 1);
-    let at = old.iter().zip(&new).position(|(a, b)| a != b).unwrap();
-    assert_eq!(
-        new[at],
-        format!("# nc-send tune: was {}", old[at].trim_start())
-    );
-    assert!(new[at + 1].trim_start().starts_with("servo"));
-    assert_eq!(&new[at + 2..], &old[at + 1..]);
+    let (old, new) = (sections(&original), sections(&written));
+    assert_eq!(old.len(), new.len());
+    let mut joint_no = None::<usize>;
+    let mut count = 0;
+    for (o, n) in old.iter().zip(&new) {
+        if o[0].trim_start().starts_with("[[joints]]") {
+            joint_no = Some(count);
+            count += 1;
+        } else if o[0].trim_start().starts_with('[') {
+            joint_no = None;
+        }
+        if !joint_no.is_some_and(|k| set.contains(&k)) {
+            assert_eq!(o, n, "{file} {joint}: a table that was not tuned changed");
+            continue;
+        }
+        let key_of = |l: &str| l.split('=').next().unwrap().trim().to_string();
+        let mut expect = Vec::new();
+        for l in o {
+            let k = key_of(l);
+            if !l.trim_start().starts_with('#') && keys.contains(&k.as_str()) {
+                expect.push(format!("# nc-send tune: was {}", l.trim_start()));
+                let line = n.iter().find(|m| key_of(m) == k).unwrap();
+                expect.push(line.to_string());
+            } else {
+                expect.push(l.to_string());
+            }
+        }
+        let models: Vec<&&str> = n.iter().filter(|m| key_of(m) == "lqg_model").collect();
+        assert_eq!(models.len(), usize::from(lqg), "{file} {joint}: {n:?}");
+        let rest: Vec<String> = n
+            .iter()
+            .filter(|m| key_of(m) != "lqg_model")
+            .map(|m| m.to_string())
+            .collect();
+        assert_eq!(rest, expect, "{file} {joint}");
+    }
     let wf = read_file(&written, p).unwrap();
-    let s = wf.joints[j].servo.as_ref().unwrap();
-    for (k, v) in [
-        ("kp", s.kp),
-        ("ki", s.ki),
-        ("kd", s.kd),
-        ("kvff", s.kvff),
-        ("kaff", s.kaff),
-    ] {
-        let want = scalar(&stdout, "designed:", k);
+    for &k in &set {
+        let s = wf.joints[k].servo.as_ref().unwrap();
+        for (key, v) in [
+            ("kp", s.kp),
+            ("ki", s.ki),
+            ("kd", s.kd),
+            ("kvff", s.kvff),
+            ("kaff", s.kaff),
+        ] {
+            let want = scalar(&stdout, "designed:", key);
+            assert!(
+                (v as f64 - want).abs() <= 1e-4 * want.abs() + 1e-12,
+                "{key}: {v} {want}"
+            );
+        }
+    }
+    if lqg {
+        // (b) for the LQG law: the written design (the loader has checked it is that
+        // of the written weights on the written model) on the TRUE plant: stable,
+        // and |S|max at most 1/(2·sin 22.5°), which keeps 45° of phase margin.
+        let w = wf.joints[j].lqg.unwrap();
+        let m = wf.joints[j].lqg_model.as_ref().unwrap();
+        let model = TransferFunction::new(&m.num, &m.den).unwrap();
+        let f = lqg::design(&model, cpu, H, &w)
+            .unwrap()
+            .loop_figures(&truth, cpu)
+            .unwrap();
+        let bound = 1.0 / (2.0 * (22.5f64).to_radians().sin());
+        println!(
+            "  (b) the written LQG design on the true plant: |S|max {:.3} (≤ {bound:.3} keeps PM ≥ 45°), crossover {:.1} rad/s, largest pole {:.6}",
+            f.peak_sensitivity, f.crossover_rad_s, f.max_pole
+        );
+        assert!(f.max_pole < 1.0 && f.peak_sensitivity <= bound, "{f:?}");
         assert!(
-            (v as f64 - want).abs() <= 1e-4 * want.abs() + 1e-12,
-            "{k}: {v} {want}"
+            set.len() == 6,
+            "{file} {joint}: the six legs share the design: {set:?}"
         );
     }
     let prog = temp(&format!("{file}-{joint}.ngc"));
