@@ -660,9 +660,7 @@ impl JobHooks for Bridge<'_> {
             return false;
         }
         let queued = view.total.saturating_sub(view.executed) + out.len();
-        if self.merge.due(queued, !self.lines.is_empty()) {
-            self.merge.flush(out);
-        }
+        self.merge.send_due(queued, !self.lines.is_empty(), out);
         if !out.is_empty() || !self.lines.is_empty() {
             self.last_busy = Instant::now();
             return true;

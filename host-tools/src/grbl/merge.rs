@@ -13,12 +13,17 @@
 //!   for [`QUIET`] with nothing more waiting.
 //!
 //! A run cut by the last three ends at a vertex of the programmed polyline, as any run
-//! does at a corner: the curves on either side meet there. Corners within what is
-//! merged at once are blended as `nc-send` blends them ([`compress::blend`]); the
-//! corner between two merges is not (the first goes out before the second comes). A reset (0x18) or an alarm
-//! drops what is held, as Grbl drops its planner buffer.
+//! does at a corner: the curves on either side meet there. Corners are blended as
+//! `nc-send` blends them ([`compress::blend`]), those between two merges too: as
+//! `nc-send` does between the pieces of a streamed program, the last blendable block of
+//! a merge is kept back (the [`Blender`] holds it) until the next merge brings the
+//! block after its corner. It goes alone, its end unblended, when the controller is
+//! about to run out or the sender has been quiet, or before a block that cannot be
+//! blended. A reset (0x18) or an alarm drops what is held, as Grbl drops its planner
+//! buffer.
 
-use crate::gcode::compress::{self, Settings};
+use crate::gcode::compress::blend::Blender;
+use crate::gcode::compress::{self, Compressed, Settings};
 use pkmc::config::AXES;
 use pkmc::motion::block::{Block, Motion};
 use std::time::{Duration, Instant};
@@ -37,9 +42,11 @@ pub(super) struct Merger {
     /// The compressor's settings for the machine; `None`: every block goes as it is.
     settings: Option<Settings>,
     held: Vec<Block>,
-    /// Where the held run starts: the end of what was sent before it.
+    /// Where the held run starts: the end of the programmed moves before it.
     start: [i64; AXES],
-    /// When the oldest held move came.
+    /// The corners' blender, across merges (with `settings`).
+    blender: Option<Blender>,
+    /// When the oldest move held (in `held` or by the blender) came.
     since: Option<Instant>,
     /// When the last line's blocks came.
     last_line: Instant,
@@ -57,6 +64,7 @@ impl Merger {
     /// A merger with `settings` (already set for the machine), starting at `start`.
     pub(super) fn new(settings: Option<Settings>, start: [i64; AXES]) -> Self {
         Self {
+            blender: settings.map(|s| Blender::new(&s, start)),
             settings,
             held: Vec::new(),
             start,
@@ -72,11 +80,12 @@ impl Merger {
         self.held.clear();
         self.since = None;
         self.start = pose;
+        self.blender = self.settings.map(|s| Blender::new(&s, pose));
     }
 
     /// Nothing is held.
     pub(super) fn is_empty(&self) -> bool {
-        self.held.is_empty()
+        self.held.is_empty() && !self.blender.as_ref().is_some_and(Blender::holds)
     }
 
     /// Takes a line's blocks: mergeable moves are held, anything else sends what is
@@ -88,7 +97,7 @@ impl Merger {
                 self.since.get_or_insert_with(Instant::now);
                 self.held.push(b);
                 if self.held.len() >= MOST_HELD {
-                    self.flush(out);
+                    self.merge(out);
                 }
             } else {
                 self.flush(out);
@@ -96,34 +105,63 @@ impl Merger {
                     self.start = b.target;
                 }
                 out.push(b);
+                // The next blend starts after this block.
+                self.blender = self.settings.map(|s| Blender::new(&s, self.start));
             }
         }
     }
 
-    /// Merges what is held and appends it to `out`.
-    pub(super) fn flush(&mut self, out: &mut Vec<Block>) {
-        let (Some(s), Some(last)) = (&self.settings, self.held.last()) else {
+    /// Merges what is held and appends it to `out`, but for the last blendable block,
+    /// which the blender keeps for the corner after it.
+    fn merge(&mut self, out: &mut Vec<Block>) {
+        let (Some(s), Some(last), Some(blender)) =
+            (&self.settings, self.held.last(), &mut self.blender)
+        else {
             return;
         };
         let end = last.target;
-        let c = compress::compress(&self.held, self.start, s);
+        let runs = compress::compress_runs(&self.held, self.start, s);
+        let mut c = Compressed::default();
+        blender.push(&self.held, &runs, 0, &mut c);
         self.merged.0 += self.held.len() as u64;
         self.merged.1 += c.blocks.len() as u64;
         out.extend(c.blocks);
         self.held.clear();
-        self.since = None;
         self.start = end;
+        // What the blender keeps goes within the longest hold from now.
+        self.since = blender.holds().then(Instant::now);
     }
 
-    /// Should what is held go now? `queued`: blocks the controller has yet to run
-    /// (or is about to get); `lines_waiting`: the sender's lines not yet taken.
-    pub(super) fn due(&self, queued: usize, lines_waiting: bool) -> bool {
+    /// Merges what is held and appends it to `out`, the blender's block too: nothing
+    /// is held after it.
+    pub(super) fn flush(&mut self, out: &mut Vec<Block>) {
+        self.merge(out);
+        if let Some(blender) = &mut self.blender {
+            let mut c = Compressed::default();
+            blender.finish(&mut c);
+            self.merged.1 += c.blocks.len() as u64;
+            out.extend(c.blocks);
+        }
+        self.since = None;
+    }
+
+    /// Sends what should go now: everything when the controller is about to run out
+    /// (`queued`: blocks it has yet to run, or is about to get) or the sender has been
+    /// quiet (`lines_waiting`: the sender's lines not yet taken); what is held, but the
+    /// blender's block, once the oldest has waited [`LONGEST_HOLD`].
+    pub(super) fn send_due(&mut self, queued: usize, lines_waiting: bool, out: &mut Vec<Block>) {
         let Some(since) = self.since else {
-            return false;
+            return;
         };
-        queued <= LOW_QUEUE
-            || since.elapsed() >= LONGEST_HOLD
-            || (!lines_waiting && self.last_line.elapsed() >= QUIET)
+        if queued <= LOW_QUEUE || (!lines_waiting && self.last_line.elapsed() >= QUIET) {
+            self.flush(out);
+        } else if since.elapsed() >= LONGEST_HOLD {
+            if self.held.is_empty() {
+                self.flush(out);
+            } else {
+                self.merge(out);
+            }
+        }
     }
 }
 
@@ -175,7 +213,10 @@ mod tests {
         assert_eq!(out.last(), Some(&rapid));
         assert!(whole.blocks.len() < 20, "{} curves", whole.blocks.len());
         assert_eq!(m.merged, (200, whole.blocks.len() as u64));
-        assert!(m.is_empty() && !m.due(0, false));
+        assert!(m.is_empty());
+        let n = out.len();
+        m.send_due(0, false, &mut out);
+        assert_eq!(out.len(), n, "nothing more to send");
     }
 
     #[test]
@@ -191,19 +232,53 @@ mod tests {
         let mut m = Merger::new(Some(Settings::default()), [0; AXES]);
         let mut out = Vec::new();
         m.take(chords(10), &mut out);
-        assert!(!m.due(10, true));
-        assert!(m.due(LOW_QUEUE, true));
-        m.flush(&mut out);
+        m.send_due(10, true, &mut out);
+        assert!(out.is_empty() && !m.is_empty());
+        m.send_due(LOW_QUEUE, true, &mut out);
         assert!(!out.is_empty() && m.is_empty());
-        // A long run is cut at MOST_HELD moves, ending on a programmed vertex.
+        assert_eq!(out.last().map(|b| b.target), Some(chords(10)[9].target));
+        // A long run is merged at MOST_HELD moves; its last curve, which ends on a
+        // programmed vertex, stays with the blender for the corner after it.
         let mut m = Merger::new(Some(Settings::default()), [0; AXES]);
         let mut out = Vec::new();
         let blocks = chords(MOST_HELD + 5);
         m.take(blocks.clone(), &mut out);
+        assert_eq!(m.held.len(), 5);
+        assert!(m.blender.as_ref().unwrap().holds() && !m.is_empty());
+        m.flush(&mut out);
+        assert!(m.is_empty());
         assert_eq!(
             out.last().map(|b| b.target),
-            Some(blocks[MOST_HELD - 1].target)
+            blocks.last().map(|b| b.target)
         );
-        assert_eq!(m.held.len(), 5);
+    }
+
+    #[test]
+    fn a_corner_between_two_merges_is_blended_as_in_the_whole_program() {
+        // A zigzag of 5 mm lines at right angles, P0.01: no run to merge, a blend at
+        // every corner. MOST_HELD cuts it into merges; every corner, those between
+        // merges too, is blended as nc-send blends the whole program.
+        let n = MOST_HELD * 2 + 40;
+        let blocks: Vec<Block> = (1..=n)
+            .map(|i| {
+                let (x, y) = (i as i64 * 5_000_000, if i % 2 == 1 { 5_000_000 } else { 0 });
+                g1(x, y, i as u32)
+            })
+            .collect();
+        let s = Settings::default();
+        let whole = compress::compress(&blocks, [0; AXES], &s);
+        let mut m = Merger::new(Some(s), [0; AXES]);
+        let mut out = Vec::new();
+        for b in &blocks {
+            m.take(vec![*b], &mut out);
+        }
+        m.flush(&mut out);
+        let cubics = |v: &[Block]| {
+            v.iter()
+                .filter(|b| matches!(b.motion, Motion::Cubic { .. }))
+                .count()
+        };
+        assert_eq!(cubics(&whole.blocks), n - 1, "a blend at every corner");
+        assert_eq!(out, whole.blocks);
     }
 }

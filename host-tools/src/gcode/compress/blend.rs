@@ -246,6 +246,11 @@ impl Blender {
         self.emitted
     }
 
+    /// Is a block held for the corner after it?
+    pub fn holds(&self) -> bool {
+        self.held.is_some()
+    }
+
     /// Takes the blocks of `c`, compressed from `programmed` (whose first block is
     /// programmed block `first` of the whole program), and hands out what is done.
     pub fn push(
