@@ -18,11 +18,7 @@
 //! flags). The probe advances the read offset.
 
 use core::cell::UnsafeCell;
-use core::sync::atomic::{compiler_fence, AtomicU32, AtomicU8, AtomicUsize, Ordering};
-
-use cortex_m::register::{basepri, basepri_max};
-
-use crate::board;
+use core::sync::atomic::{AtomicU32, AtomicU8, AtomicUsize, Ordering};
 
 /// Bytes of the up-channel's buffer: a few dozen of the firmware's lines, which a probe
 /// drains far faster than they come.
@@ -143,9 +139,7 @@ struct Logger;
 // are dropped (module documentation).
 unsafe impl defmt::Logger for Logger {
     fn acquire() {
-        let previous = basepri::read();
-        basepri_max::write(board::TICK_PRIORITY as u8);
-        compiler_fence(Ordering::SeqCst);
+        let previous = crate::shared::mask_to_tick();
         if DEPTH.fetch_add(1, Ordering::Acquire) == 0 {
             // SAFETY: the outermost holder (see `Frame`).
             unsafe {
@@ -165,9 +159,8 @@ unsafe impl defmt::Logger for Logger {
                 *FRAME.basepri.get()
             };
             DEPTH.store(0, Ordering::Release);
-            compiler_fence(Ordering::SeqCst);
-            // SAFETY: restores the holder's own mask, as `shared` does.
-            unsafe { basepri::write(previous) };
+            // SAFETY: the outermost holder's own mask, from its `acquire`.
+            unsafe { crate::shared::unmask(previous) };
         } else {
             // A nested holder (the servo interrupt): its BASEPRI write changed
             // nothing, the outer holder's being at least as high.

@@ -46,13 +46,31 @@ impl<T> TickShared<T> {
     /// if the data is already borrowed (a nested call). Never call from the servo
     /// interrupt.
     pub fn lock<R>(&self, f: impl FnOnce(&mut T) -> R) -> Option<R> {
-        let previous = basepri::read();
-        basepri_max::write(board::TICK_PRIORITY as u8);
-        compiler_fence(Ordering::SeqCst);
+        let previous = mask_to_tick();
         let result = self.data.try_borrow_mut().ok().map(|mut data| f(&mut data));
-        compiler_fence(Ordering::SeqCst);
-        // SAFETY: restores the caller's own mask; no lock relies on a lower one.
-        unsafe { basepri::write(previous) };
+        // SAFETY: the mask `mask_to_tick` found, in the same context.
+        unsafe { unmask(previous) };
         result
     }
+}
+
+/// Masks the tick and every less urgent interrupt (BASEPRI raised to
+/// [`board::TICK_PRIORITY`], never lowered); the servo interrupt stays unmasked. Returns
+/// the BASEPRI found, for [`unmask`].
+pub fn mask_to_tick() -> u8 {
+    let previous = basepri::read();
+    basepri_max::write(board::TICK_PRIORITY as u8);
+    compiler_fence(Ordering::SeqCst);
+    previous
+}
+
+/// Puts back the BASEPRI that [`mask_to_tick`] returned.
+///
+/// # Safety
+/// `previous` must be what `mask_to_tick` returned in this context, and nothing that
+/// relies on the mask may run after it: no lock relies on a lower one.
+pub unsafe fn unmask(previous: u8) {
+    compiler_fence(Ordering::SeqCst);
+    // SAFETY: the caller's own mask (above).
+    unsafe { basepri::write(previous) };
 }
