@@ -7,8 +7,8 @@ feed in the steady middle of each curve (issue 34, "Dense curves at F6000").
 For each machine (the built-in cartesian-xyz, and the H-4 with its table,
 examples/machines/h4-table.toml), each curve (a sine y = 10 sin(x/15) over 120 mm of
 X, a circle of radius 20 mm, an Archimedean spiral from radius 5 to 25 mm over four
-turns), each chord (0.01, 0.05 and 0.1 mm) and each path mode (G64, and G64 P0.01),
-it streams the program to the built-in simulated controller (`nc-send --sim --trace`,
+turns), each chord (0.01, 0.05 and 0.1 mm) and each path mode (G64; G64 with
+`--g64-tolerance 0.001`, which merges its chords within 1 µm; and G64 P0.01), it streams the program to the built-in simulated controller (`nc-send --sim --trace`,
 the real serial link) and reads the commanded tool position every 1 ms tick. The
 steady middle is the feed moves less the first and last 10 % of their ticks (the
 acceleration from rest and the stop). It prints, per run: the motion time, the path
@@ -108,8 +108,11 @@ def main():
         for mname, margs, z, accel in MACHINES:
             for kind in ("sine", "circle", "spiral"):
                 for step in (0.01, 0.05, 0.1):
-                    for mode in ("G64", "G64 P0.01"):
-                        name = f"{mname} {kind} {step} {mode}"
+                    for label, mode, extra in (("G64", "G64", []),
+                                               ("G64, --g64-tolerance 0.001", "G64",
+                                                ["--g64-tolerance", "0.001"]),
+                                               ("G64 P0.01", "G64 P0.01", [])):
+                        name = f"{mname} {kind} {step} {label}"
                         if args.only and not any(o in name for o in args.only):
                             continue
                         pts, rmin = points(kind, step)
@@ -117,11 +120,11 @@ def main():
                         with open(path, "w") as f:
                             f.write(program(pts, z, mode))
                         trace = os.path.join(tmp, "trace.csv")
-                        run = subprocess.run([args.nc_send, "--sim", *margs, "--trace", trace, path],
+                        run = subprocess.run([args.nc_send, "--sim", *margs, *extra, "--trace", trace, path],
                                              capture_output=True, text=True)
                         if run.returncode != 0:
                             last = (run.stderr.strip().splitlines() or ["?"])[-1]
-                            print(f"| {mname} | {kind} | {step} | {mode} | failed: {last} | | | |")
+                            print(f"| {mname} | {kind} | {step} | {label} | failed: {last} | | | |")
                             continue
                         v, t = steady(trace, 4)
                         ratios = [x / feed for x in v]
@@ -130,7 +133,7 @@ def main():
                         allows = ("feed" if full else f"{math.sqrt(accel * rmin):.0f} mm/s") + ", " + \
                                  ("feed" if half else f"{math.sqrt(accel / 2 * rmin):.0f} mm/s")
                         share = sum(r >= 0.95 for r in ratios) / max(len(ratios), 1)
-                        print(f"| {mname} | {kind} | {step} | {mode} | {t:.3f} | "
+                        print(f"| {mname} | {kind} | {step} | {label} | {t:.3f} | "
                               f"{min(ratios):.3f} / {statistics.median(ratios):.3f} / {statistics.mean(ratios):.3f} | "
                               f"{100 * share:.0f} % | {allows} |", flush=True)
 

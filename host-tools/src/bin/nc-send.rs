@@ -100,6 +100,10 @@ struct Args {
     /// rounded by blends within G64 P).
     #[arg(long)]
     no_blend: bool,
+    /// Merging: in G64 without P, merge runs of short G1 moves within this many mm
+    /// (e.g. 0.001; 0, the default: stream them as programmed).
+    #[arg(long, value_name = "MM", default_value_t = 0.0)]
+    g64_tolerance: f64,
     /// Restart the program from this NC line, its modal state rebuilt (docs/nc-send.md).
     #[arg(long, value_name = "LINE")]
     from: Option<u32>,
@@ -228,9 +232,16 @@ fn compress_settings(args: &Args) -> Result<Option<pkmc_host::gcode::compress::S
             args.corner_deg
         )));
     }
+    if !(args.g64_tolerance >= 0.0 && args.g64_tolerance <= 1.0) {
+        return Err(bad(format!(
+            "--g64-tolerance {}: give 0 to 1 mm",
+            args.g64_tolerance
+        )));
+    }
     Ok(Some(pkmc_host::gcode::compress::Settings {
         corner_deg: args.corner_deg,
         blend: !args.no_blend,
+        g64_tolerance_nm: (args.g64_tolerance * 1e6).round(),
         ..Default::default()
     }))
 }

@@ -54,10 +54,10 @@ pub(super) struct Merger {
     pub(super) merged: (u64, u64),
 }
 
-/// May `b` be part of a run? A feed move with a finite, non-zero blending tolerance
-/// (the compressor decides the rest: length, feed, corners).
-fn candidate(b: &Block) -> bool {
-    b.motion == Motion::Linear && b.tolerance_nm != 0 && b.tolerance_nm != u32::MAX
+/// May `b` be part of a run? A feed move the compressor merges within a tolerance
+/// (`compress::merge_tolerance`; it decides the rest: length, feed, corners).
+fn candidate(b: &Block, s: &Settings) -> bool {
+    b.motion == Motion::Linear && compress::merge_tolerance(b, s).is_some()
 }
 
 impl Merger {
@@ -93,7 +93,7 @@ impl Merger {
     pub(super) fn take(&mut self, blocks: Vec<Block>, out: &mut Vec<Block>) {
         self.last_line = Instant::now();
         for b in blocks {
-            if self.settings.is_some() && candidate(&b) {
+            if self.settings.is_some_and(|s| candidate(&b, &s)) {
                 self.since.get_or_insert_with(Instant::now);
                 self.held.push(b);
                 if self.held.len() >= MOST_HELD {

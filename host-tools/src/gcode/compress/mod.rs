@@ -4,8 +4,11 @@
 //! programmed polyline; its real corners are rounded within the tolerance too.
 //!
 //! **Which moves.** Consecutive feed moves (`G1`) with the same feed and the same
-//! finite blending tolerance (`G64 P`; never in `G61`, nor in `G64` without P, which
-//! has no tolerance to keep) that move X Y Z form a run. A run ends where the path
+//! blending tolerance that move X Y Z form a run: in `G64 P` within P, in `G64`
+//! without P within [`Settings::g64_tolerance_nm`] when it is set (`nc-send
+//! --g64-tolerance`; 0 by default, which merges nothing there: `G64` alone asks for the
+//! best speed and bounds no deviation, as in LinuxCNC, but the default keeps every
+//! programmed point), never in `G61`. A run ends where the path
 //! turns by more than [`Settings::corner_deg`] between two moves — a real corner stays
 //! a corner: a curve ends exactly on it and the planner blends or stops there as it
 //! does for lines — and at anything else (a rapid, an arc, an auxiliary function, a
@@ -89,6 +92,10 @@ pub struct Settings {
     pub blend_min_deg: f64,
     /// A blend trims at most this share of either block's length.
     pub blend_share: f64,
+    /// The tolerance runs are merged within in `G64` without P, nm (0, the default:
+    /// not merged).
+    /// Corners there are not blended: the controller passes them as it passes `G64`'s.
+    pub g64_tolerance_nm: f64,
 }
 
 impl Default for Settings {
@@ -108,6 +115,7 @@ impl Default for Settings {
             blend: true,
             blend_min_deg: 0.5,
             blend_share: 0.45,
+            g64_tolerance_nm: 0.0,
         }
     }
 }
@@ -158,8 +166,19 @@ fn unit(a: &V) -> V {
 }
 
 /// May `b`, starting at `from`, be part of a run?
+/// The tolerance a run of blocks like `b` is merged within, nm: its `G64 P`, or in
+/// `G64` without P [`Settings::g64_tolerance_nm`]; `None` where none is merged (`G61`,
+/// or `G64` with a zero `g64_tolerance_nm`).
+pub fn merge_tolerance(b: &Block, s: &Settings) -> Option<f64> {
+    match b.tolerance_nm {
+        0 => None,
+        u32::MAX => (s.g64_tolerance_nm > 0.0).then_some(s.g64_tolerance_nm),
+        t => Some(t as f64),
+    }
+}
+
 fn mergeable(b: &Block, from: &[i64; AXES], s: &Settings) -> bool {
-    if b.motion != Motion::Linear || b.tolerance_nm == 0 || b.tolerance_nm == u32::MAX {
+    if b.motion != Motion::Linear || merge_tolerance(b, s).is_none() {
         return false;
     }
     let d = sub(&to_fit(&b.target), &to_fit(from));
@@ -204,7 +223,7 @@ pub fn compress_runs(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Comp
             b.feed as f64
         };
         let goal = Goal {
-            tol: b.tolerance_nm as f64 * s.fit_share,
+            tol: merge_tolerance(b, s).unwrap_or(0.0) * s.fit_share,
             speed,
         };
         fit_run(&blocks[i..j], i, &pts, &goal, s, &mut out);
