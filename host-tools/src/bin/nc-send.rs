@@ -226,24 +226,13 @@ fn compress_settings(args: &Args) -> Result<Option<pkmc_host::gcode::compress::S
     if args.no_compress {
         return Ok(None);
     }
-    if !(args.corner_deg > 0.0 && args.corner_deg < 180.0) {
-        return Err(bad(format!(
-            "--corner-deg {}: give an angle between 0 and 180 degrees",
-            args.corner_deg
-        )));
-    }
-    if !(args.g64_tolerance >= 0.0 && args.g64_tolerance <= 1.0) {
-        return Err(bad(format!(
-            "--g64-tolerance {}: give 0 to 1 mm",
-            args.g64_tolerance
-        )));
-    }
-    Ok(Some(pkmc_host::gcode::compress::Settings {
-        corner_deg: args.corner_deg,
-        blend: !args.no_blend,
-        g64_tolerance_nm: (args.g64_tolerance * 1e6).round(),
-        ..Default::default()
-    }))
+    pkmc_host::gcode::compress::Settings::of_options(
+        args.corner_deg,
+        !args.no_blend,
+        args.g64_tolerance,
+    )
+    .map(Some)
+    .map_err(bad)
 }
 
 fn load_machine(args: &Args) -> Result<MachineConfig, Failure> {

@@ -121,6 +121,28 @@ impl Default for Settings {
 }
 
 impl Settings {
+    /// The defaults with the command line's choices: `--corner-deg`, blends (not
+    /// `--no-blend`) and `--g64-tolerance` (mm); a value out of range is refused by the
+    /// option's name.
+    pub fn of_options(corner_deg: f64, blend: bool, g64_tolerance_mm: f64) -> Result<Self, String> {
+        if !(corner_deg > 0.0 && corner_deg < 180.0) {
+            return Err(format!(
+                "--corner-deg {corner_deg}: give an angle between 0 and 180 degrees"
+            ));
+        }
+        if !(0.0..=1.0).contains(&g64_tolerance_mm) {
+            return Err(format!(
+                "--g64-tolerance {g64_tolerance_mm}: give 0 to 1 mm"
+            ));
+        }
+        Ok(Self {
+            corner_deg,
+            blend,
+            g64_tolerance_nm: (g64_tolerance_mm * 1e6).round(),
+            ..Self::default()
+        })
+    }
+
     /// Unknown (infinite) machine figures as 0.
     pub fn finite(self) -> Self {
         let f = |x: f64| if x.is_finite() { x } else { 0.0 };
