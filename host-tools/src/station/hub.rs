@@ -93,8 +93,13 @@ pub struct Hub {
     /// The `hello` message's `machine`.
     pub machine: Value,
     /// A page's E-STOP raised the alarm in force (the controller calls it an
-    /// immediate stop, `Aborted`; the pages say e-stop). Cleared with the alarm.
-    pub estop: AtomicBool,
+    /// immediate stop, `Aborted`; the pages say e-stop). Cleared with the alarm
+    /// ([`Hub::estop_shown`]).
+    estop: AtomicBool,
+    /// A status with an alarm has come since the E-STOP: the next one without an
+    /// alarm clears `estop` (a status already on its way when the E-STOP was asked
+    /// for, with no alarm yet, must not).
+    estop_alarm_seen: AtomicBool,
 }
 
 /// Locks a mutex, whatever a panicking holder left.
@@ -103,6 +108,26 @@ pub fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 impl Hub {
+    /// A page asked for an E-STOP: the alarm it raises is shown as an e-stop.
+    pub fn request_estop(&self) {
+        self.estop_alarm_seen.store(false, Ordering::Relaxed);
+        self.estop.store(true, Ordering::Relaxed);
+    }
+
+    /// Is the alarm of a status (`alarm`: it has one) an e-stop's? Kept from the
+    /// E-STOP until a status shows an alarm and a later one shows none.
+    pub fn estop_shown(&self, alarm: bool) -> bool {
+        let asked = self.estop.load(Ordering::Relaxed);
+        if alarm {
+            if asked {
+                self.estop_alarm_seen.store(true, Ordering::Relaxed);
+            }
+        } else if self.estop_alarm_seen.swap(false, Ordering::Relaxed) {
+            self.estop.store(false, Ordering::Relaxed);
+        }
+        asked && alarm
+    }
+
     pub fn new(machine: Value) -> Self {
         Self {
             all: broadcast::channel(256).0,
@@ -110,6 +135,7 @@ impl Hub {
             lock: Mutex::new(None),
             next_id: AtomicU64::new(1),
             estop: AtomicBool::new(false),
+            estop_alarm_seen: AtomicBool::new(false),
             program: Mutex::new(Program::default()),
             teach: Mutex::new(Teach {
                 points: Vec::new(),
@@ -331,6 +357,20 @@ impl Hub {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_e_stops_alarm_is_shown_as_one_until_it_clears_whatever_status_came_between() {
+        let hub = Hub::new(json!({}));
+        assert!(!hub.estop_shown(true), "an alarm no page asked for");
+        hub.request_estop();
+        // A status sent before the controller took the stop: no alarm yet.
+        assert!(!hub.estop_shown(false));
+        assert!(hub.estop_shown(true), "the stop's alarm is the e-stop's");
+        assert!(hub.estop_shown(true));
+        // Reset: the alarm clears, and a later alarm is not an e-stop's.
+        assert!(!hub.estop_shown(false));
+        assert!(!hub.estop_shown(true));
+    }
 
     impl Hub {
         /// Makes page `id` look silent for `by`.

@@ -133,6 +133,7 @@ fn alarm_words(a: &pkmc::wire::Alarm, view: &AlarmView, estop: bool) -> (String,
 /// the mechanism.
 fn status_message(machine: &MachineConfig, hub: &Hub, s: &Status, job: Option<&JobInfo>) -> Value {
     let view = StatusView::with_joints(s, machine);
+    let by_page = hub.estop_shown(s.alarm.is_some());
     let alarm = s.alarm.map(|a| {
         let joint = (a.joint != pkmc::wire::NO_JOINT).then(|| {
             hub.machine["joints"][a.joint as usize]["name"]
@@ -142,17 +143,13 @@ fn status_message(machine: &MachineConfig, hub: &Hub, s: &Status, job: Option<&J
         });
         let estop = s.state == pkmc::wire::State::EStop
             || a.cause == pkmc::wire::AlarmCause::EStop
-            || (a.cause == pkmc::wire::AlarmCause::Aborted
-                && hub.estop.load(std::sync::atomic::Ordering::Relaxed));
+            || (a.cause == pkmc::wire::AlarmCause::Aborted && by_page);
         let v = AlarmView::new(&a);
         let (title, next) = alarm_words(&a, &v, estop);
         json!({"cause": v.cause, "cause_words": v.cause_words, "joint": joint,
                "line": v.line, "words": v.words, "estop": estop, "title": title,
                "next": next})
     });
-    if s.alarm.is_none() {
-        hub.estop.store(false, std::sync::atomic::Ordering::Relaxed);
-    }
     let job = job.map(|j| {
         let eta = match j.kind {
             "program" => lock(&hub.program).eta_s(j.executed, s.feed_override),
@@ -277,9 +274,7 @@ impl Machine<'_> {
             Cmd::Resume => return self.control(link, Control::Resume),
             Cmd::Stop => return self.control(link, Control::Abort),
             Cmd::Estop => {
-                self.hub
-                    .estop
-                    .store(true, std::sync::atomic::Ordering::Relaxed);
+                self.hub.request_estop();
                 return self.control(link, Control::Stop);
             }
             Cmd::Reset => return self.control(link, Control::AlarmReset),
@@ -515,10 +510,7 @@ impl Hooks<'_, '_> {
             Cmd::Resume => self.queue(Control::Resume),
             Cmd::Stop => self.queue(Control::Abort),
             Cmd::Estop => {
-                self.m
-                    .hub
-                    .estop
-                    .store(true, std::sync::atomic::Ordering::Relaxed);
+                self.m.hub.request_estop();
                 self.queue(Control::Stop)
             }
             Cmd::JogStop if self.info.kind == "jog_hold" => self.queue(Control::Abort),
