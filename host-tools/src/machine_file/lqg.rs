@@ -183,18 +183,14 @@ mod tests {
 
     #[test]
     fn gains_designed_on_an_lqg_model_are_checked_on_it_and_not_on_the_plant() {
-        use crate::control::lqg::{design, gains_toml, LqgWeights};
+        use crate::control::lqg::{design, gains_toml};
         use crate::control::plant::TransferFunction;
-        // leg1 with a model 5 % off its plant, as a tune might identify it.
+        // leg1 with a model 5 % off its plant, as a tune might identify it, and the
+        // file's own weights.
         let model =
             TransferFunction::new(&[0.1479, 3.161, 312.7], &[1.0, 18.79, 1142.0, 651.2]).unwrap();
-        let w = LqgWeights {
-            position_weight: 1.0e-6,
-            integral_weight: 0.004,
-            command_weight: 1.0,
-            load_noise: 2.0,
-            encoder_noise: 29.0,
-        };
+        let file = super::super::read_file(HEXAPOD_XY_MACHINE, "hexapod-xy.toml").unwrap();
+        let w = file.joints[0].lqg.unwrap();
         let g = design(&model, 100_000.0, 1e-4, &w).unwrap().gains;
         let leg1 = HEXAPOD_XY_MACHINE.find("name = \"leg1\"").unwrap();
         let (head, tail) = HEXAPOD_XY_MACHINE.split_at(leg1);
