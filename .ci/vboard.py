@@ -156,7 +156,7 @@ def aligned_servo_check(kinds, sim, sim_trace, board_trace):
     steps = sim.get("final_joint_steps") or []
     srows = read_trace(sim_trace)
     n = len(kinds)
-    fb0 = len(srows[0]) - n  # fb1..fbN are the last N columns
+    fb0 = 8 + n  # t_s, line, x..c, q1..qN, then fb1..fbN (tq1..tqN after them)
     scale = []
     for j in range(n):
         last = srows[-1][fb0 + j]

@@ -124,7 +124,7 @@ fn check_plans_the_job_without_a_port_and_agrees_with_the_simulator() {
     ]));
     assert_eq!(again["run_time_s"], check["run_time_s"]);
     let csv = std::fs::read_to_string(&trace).unwrap();
-    assert!(csv.starts_with("t_s,line,x,y,z,a,b,c,q1,q2,q3,fb1,fb2,fb3\n"));
+    assert!(csv.starts_with("t_s,line,x,y,z,a,b,c,q1,q2,q3,fb1,fb2,fb3,tq1,tq2,tq3\n"));
     let rows = csv.lines().count() - 1;
     assert!((rows as f64 - planned * 1000.0).abs() < 2.0, "{rows} rows");
     // Without --report, a readable summary says it was only checked.

@@ -166,7 +166,8 @@ fn rows(trace: &str) -> Vec<Vec<f64>> {
 fn motion(trace: &str) -> (f64, f64, Vec<f64>) {
     let r = rows(trace);
     // Commanded pose and joints (not the drives' feedback, which settles on).
-    let cmd = 2..8 + (r[0].len() - 8) / 2;
+    // (Per joint: commanded, feedback and true position, in three groups.)
+    let cmd = 2..8 + (r[0].len() - 8) / 3;
     let moved = |i: usize| r[i][cmd.clone()] != r[i - 1][cmd.clone()];
     let moving: Vec<usize> = (1..r.len()).filter(|&i| moved(i)).collect();
     let (first, last) = (moving[0], *moving.last().unwrap());
@@ -175,8 +176,7 @@ fn motion(trace: &str) -> (f64, f64, Vec<f64>) {
         .map(|w| r[w[1]][0] - r[w[0]][0])
         .fold(0.0, f64::max);
     let t = 1e-3;
-    let joints = r[0].len() - 8;
-    let n = joints / 2;
+    let n = (r[0].len() - 8) / 3;
     let mut acc = vec![0.0f64; n];
     for i in first.max(3)..(last + 3).min(r.len() - 3) {
         for (j, a) in acc.iter_mut().enumerate() {
@@ -199,8 +199,8 @@ fn steps(r: &serde_json::Value, trace: &str) -> (Vec<String>, Vec<i64>) {
         .map(|v| v.to_string())
         .collect();
     let last = rows(trace).pop().unwrap();
-    let n = (last.len() - 8) / 2;
-    let counts = last[8 + n..]
+    let n = (last.len() - 8) / 3;
+    let counts = last[8 + n..8 + 2 * n]
         .iter()
         .map(|v| (v * 1000.0).round() as i64)
         .collect();

@@ -18,6 +18,8 @@
 //!   simulated-truth study of it.
 //! - [`plot`]: maps of the tool position error over the workspace, before and after.
 //! - [`truth`]: a simulated "true" machine for tests and worked examples.
+//! - [`true_path`]: how far a simulated run's tool truly strays from its commanded
+//!   path, by [`forward`] at the joints' true positions (`nc-send --sim --trace`).
 //! - [`cli`]: the `nc-send calibrate` command.
 
 pub mod cli;
@@ -33,5 +35,6 @@ pub mod sphere_cli;
 pub mod sphere_plan;
 pub mod sphere_study;
 pub mod study;
+pub mod true_path;
 pub mod truth;
 pub mod write;

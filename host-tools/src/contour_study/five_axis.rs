@@ -25,6 +25,7 @@
 //! c_F = K_ce/A² and τ_F = V_t/(4β_e K_ce) from [`LegLoad`].
 
 use super::{helix, nearest_on_helix, Scheme, StudyError};
+use crate::analysis::direction::{angle_deg, tool_axis};
 use crate::analysis::statics::joint_forces;
 use crate::control::plant::{DiscretePlant, Mismatch, TransferFunction};
 use crate::machine_file::MachineFile;
@@ -139,25 +140,6 @@ impl Conditions {
         let b = self.tilt_deg * (std::f64::consts::PI * t / 10.0).sin();
         [p[0], p[1], p[2], a, b]
     }
-}
-
-/// The tool axis in workpiece coordinates for A, B (degrees): Rx(A)·Ry(B)·ẑ.
-pub fn tool_axis(a_deg: f64, b_deg: f64) -> [f64; 3] {
-    let (sa, ca) = a_deg.to_radians().sin_cos();
-    let (sb, cb) = b_deg.to_radians().sin_cos();
-    [sb, -sa * cb, ca * cb]
-}
-
-/// Angle between two unit vectors, degrees.
-fn angle_deg(u: [f64; 3], v: [f64; 3]) -> f64 {
-    let c = [
-        u[1] * v[2] - u[2] * v[1],
-        u[2] * v[0] - u[0] * v[2],
-        u[0] * v[1] - u[1] * v[0],
-    ];
-    let s = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-    s.atan2(u[0] * v[0] + u[1] * v[1] + u[2] * v[2])
-        .to_degrees()
 }
 
 /// The axis loops.

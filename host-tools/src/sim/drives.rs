@@ -283,6 +283,12 @@ impl SimServo {
         self.clean
     }
 
+    /// True position, counts from the joint's zero, as the plant has it: not rounded to
+    /// whole counts (a strictly proper plant's output does not depend on the input).
+    pub fn exact_position(&self) -> f64 {
+        self.true_counts(0.0)
+    }
+
     /// Jams the axis where it is (an injected following error).
     pub fn jam(&mut self) {
         self.jammed = Some(self.clean as f64);

@@ -357,6 +357,19 @@ impl Simulator {
             .unwrap_or(0)
     }
 
+    /// True position of joint `j`, its units (nm or n°), as the plant has it: a servo
+    /// joint's position not rounded to encoder counts (a stepper's is its steps).
+    pub fn true_position(&self, j: usize) -> Option<f64> {
+        let jc = self.ctrl.machine().joints.get(j)?;
+        let steps = match jc.drive {
+            pkmc::config::Drive::Servo { channel } => {
+                self.servos[channel as usize].as_ref()?.exact_position()
+            }
+            _ => self.feedback_steps(j)? as f64,
+        };
+        Some(steps * jc.scale.per_units as f64 / jc.scale.steps as f64)
+    }
+
     /// True position of joint `j` in drive steps or encoder counts (from the joint's
     /// zero).
     pub fn feedback_steps(&self, j: usize) -> Option<i64> {

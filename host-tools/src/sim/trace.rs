@@ -1,5 +1,6 @@
 //! The trace of a simulated run (`--trace FILE.csv`): one row per interpolation
-//! period, commanded pose and joints and the drives' feedback, in user units.
+//! period, commanded pose and joints, the drives' feedback and where the joints truly
+//! are, in user units.
 
 use super::Result;
 use super::Simulator;
@@ -20,6 +21,9 @@ pub struct TraceRow {
     pub joints: Vec<f64>,
     /// Joint positions the drives report (steps or encoder counts scaled back).
     pub feedback: Vec<f64>,
+    /// Where the joints truly are: a servo plant's position not rounded to encoder
+    /// counts (a stepper's steps, as `feedback`).
+    pub truth: Vec<f64>,
 }
 
 impl Simulator {
@@ -32,6 +36,9 @@ impl Simulator {
         }
         for j in 1..=n {
             header += &format!(",fb{j}");
+        }
+        for j in 1..=n {
+            header += &format!(",tq{j}");
         }
         writeln!(out, "{header}")?;
         self.trace = Some(out);
@@ -64,13 +71,25 @@ impl Simulator {
             feedback: (0..n)
                 .map(|j| to_user(self.feedback(j), m.joints[j].rotary))
                 .collect(),
+            truth: (0..n)
+                .map(|j| {
+                    let per_user = pkmc::units::units_per_user(m.joints[j].rotary) as f64;
+                    self.true_position(j).unwrap_or(0.0) / per_user
+                })
+                .collect(),
         }
     }
 }
 
 pub(super) fn write_row(out: &mut dyn Write, r: &TraceRow) -> std::io::Result<()> {
     write!(out, "{:.6},{}", r.t_s, r.line)?;
-    for v in r.pose.iter().chain(&r.joints).chain(&r.feedback) {
+    for v in r
+        .pose
+        .iter()
+        .chain(&r.joints)
+        .chain(&r.feedback)
+        .chain(&r.truth)
+    {
         write!(out, ",{v:.9}")?;
     }
     writeln!(out)
