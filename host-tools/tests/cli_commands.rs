@@ -155,16 +155,30 @@ fn a_stretch_out_of_travel_is_reported_once_with_its_first_and_last_line() {
     }
     text.push_str("G1 X20\n");
     std::fs::write(&prog, text).unwrap();
-    let out = nc_send(&["--check", prog.to_str().unwrap()]);
-    assert_eq!(out.status.code(), Some(3));
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("stretch.ngc:2: joint q1 would leave its travel"),
-        "{err}"
-    );
-    assert!(err.contains("stretch.ngc:52 (51 lines)"), "{err}");
-    assert!(err.contains("51 pre-flight problem(s)"), "{err}");
-    assert!(err.lines().count() < 6, "one line for the stretch: {err}");
+    // The same merged into one curve (`--g64-tolerance`): named at the moves, not at
+    // the curve's first line; and from a restart.
+    for extra in [
+        &[][..],
+        &["--g64-tolerance", "0.001"],
+        &["--g64-tolerance", "0.001", "--from", "1"],
+    ] {
+        let mut args = vec!["--check"];
+        args.extend_from_slice(extra);
+        args.push(prog.to_str().unwrap());
+        let out = nc_send(&args);
+        assert_eq!(out.status.code(), Some(3), "{extra:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("stretch.ngc:2: joint q1 would leave its travel"),
+            "{extra:?}: {err}"
+        );
+        assert!(
+            err.contains("stretch.ngc:52 (51 lines)"),
+            "{extra:?}: {err}"
+        );
+        assert!(err.contains("51 pre-flight problem(s)"), "{extra:?}: {err}");
+        assert!(err.lines().count() < 6, "one line for the stretch: {err}");
+    }
 }
 
 #[test]

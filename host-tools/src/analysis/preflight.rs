@@ -11,13 +11,18 @@
 //! ([`Kinematics::jacobian`], the one the planner uses), and the Jacobi eigenvalue
 //! method on JᵀJ: min(σ_min, 1/σ_max), which is 1 for a Cartesian machine and falls to zero at either kind of singularity. The
 //! smallest margin met, and where, is reported.
+//!
+//! A curve the compressor merged from many programmed moves is named at the programmed
+//! move nearest to where the problem was met ([`Chords`]), not at the curve's first
+//! line: the line a machinist has to change.
 
-use crate::gcode::compress::space::units_per_nm;
+use crate::gcode::compress::space::{to_fit, units_per_nm, Point};
 use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
 use pkmc::kinematics::{Jacobian, Kinematics, MachineKinematics, Unreachable};
 use pkmc::motion::block::Block;
 use pkmc::motion::geometry::{GeometryError, Path};
 use std::collections::BTreeSet;
+use std::ops::Range;
 
 /// Largest distance between two samples of a path, nm.
 pub const SAMPLE_NM: i64 = 1_000_000;
@@ -178,7 +183,7 @@ pub fn paths(blocks: &[Block], start: [i64; AXES]) -> Vec<Result<Path, GeometryE
 
 /// Checks `blocks`, starting at `start`, against `machine`.
 pub fn check(blocks: &[Block], machine: &MachineConfig, start: [i64; AXES]) -> Preflight {
-    check_paths(blocks, &paths(blocks, start), machine, start)
+    check_paths(blocks, &paths(blocks, start), machine, start, None)
 }
 
 /// [`check`] of `blocks` whose paths are derived already ([`paths`]).
@@ -187,11 +192,70 @@ pub fn check_paths(
     paths: &[Result<Path, GeometryError>],
     machine: &MachineConfig,
     start: [i64; AXES],
+    chords: Option<&Chords>,
 ) -> Preflight {
     let mut out = Preflight::default();
     let mut acc = Accumulator::new(machine);
-    acc.add(blocks, paths, start, &mut out);
+    acc.add(blocks, paths, start, chords, &mut out);
     out
+}
+
+/// The programmed moves that blocks stand for ([`crate::gcode::compress::Compressed`]'s
+/// `source`), to name a finding on a merged curve at its programmed move.
+#[derive(Clone, Copy, Debug)]
+pub struct Chords<'a> {
+    /// Programmed blocks; the first is the program's `first`-th.
+    pub programmed: &'a [Block],
+    /// The program index of `programmed[0]`.
+    pub first: usize,
+    /// Where `programmed[0]` starts.
+    pub start: [i64; AXES],
+    /// For each block checked, the programmed blocks it stands for (program indices).
+    pub source: &'a [Range<usize>],
+}
+
+impl Chords<'_> {
+    /// The line of the programmed move nearest `pose` among those block `k` stands
+    /// for (the earlier of two as near); `None` for a block that stands for one move,
+    /// or whose moves are not all in `programmed`.
+    pub fn line_at(&self, k: usize, pose: &[i64; AXES]) -> Option<u32> {
+        let r = self.source.get(k)?;
+        if r.len() < 2 {
+            return None;
+        }
+        let y = to_fit(pose);
+        let mut best: Option<(f64, u32)> = None;
+        for g in r.clone() {
+            let i = g.checked_sub(self.first)?;
+            let b = self.programmed.get(i)?;
+            let from = match i {
+                0 => self.start,
+                _ => self.programmed[i - 1].target,
+            };
+            let d = to_segment(&to_fit(&from), &to_fit(&b.target), &y);
+            if best.is_none_or(|(near, _)| d < near) {
+                best = Some((d, b.line));
+            }
+        }
+        best.map(|(_, line)| line)
+    }
+}
+
+/// Distance from `y` to the segment `a`–`b`, fit space.
+fn to_segment(a: &Point, b: &Point, y: &Point) -> f64 {
+    let ab: Vec<f64> = a.iter().zip(b).map(|(a, b)| b - a).collect();
+    let ay: Vec<f64> = a.iter().zip(y).map(|(a, y)| y - a).collect();
+    let len2: f64 = ab.iter().map(|v| v * v).sum();
+    let s = if len2 > 0.0 {
+        (ab.iter().zip(&ay).map(|(u, v)| u * v).sum::<f64>() / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    ay.iter()
+        .zip(&ab)
+        .map(|(v, u)| (v - s * u).powi(2))
+        .sum::<f64>()
+        .sqrt()
 }
 
 /// The pre-flight's working state carried from one run of blocks to the next (the
@@ -212,12 +276,14 @@ impl<'m> Accumulator<'m> {
         }
     }
 
-    /// Checks `blocks` (with their `paths`), the first starting at `start`, into `out`.
+    /// Checks `blocks` (with their `paths`), the first starting at `start`, into `out`;
+    /// with `chords`, a finding on a merged curve is named at its programmed move.
     pub fn add(
         &mut self,
         blocks: &[Block],
         paths: &[Result<Path, GeometryError>],
         start: [i64; AXES],
+        chords: Option<&Chords>,
         out: &mut Preflight,
     ) {
         let (machine, kin) = (self.machine, &self.kin);
@@ -225,7 +291,7 @@ impl<'m> Accumulator<'m> {
         out.blocks += blocks.len();
         let mut from = start;
         let mut q = [0i64; MAX_JOINTS];
-        for (b, path) in blocks.iter().zip(paths) {
+        for (index, (b, path)) in blocks.iter().zip(paths).enumerate() {
             let path = match path {
                 Ok(p) => p,
                 Err(e) => {
@@ -247,9 +313,12 @@ impl<'m> Accumulator<'m> {
                 match kin.inverse_checked(&pose, &machine.joints, &mut q) {
                     Err(why) => {
                         let what = describe(why, machine);
-                        if seen.insert((b.line, what.clone())) {
+                        let line = chords
+                            .and_then(|c| c.line_at(index, &pose))
+                            .unwrap_or(b.line);
+                        if seen.insert((line, what.clone())) {
                             out.findings.push(Finding {
-                                line: b.line,
+                                line,
                                 what,
                                 at: user_pose(&pose),
                             });

@@ -42,6 +42,17 @@ pub struct Compiled {
 }
 
 impl Compiled {
+    /// The programmed moves its blocks stand for, for the pre-flight to name a
+    /// finding on a merged curve at its programmed move.
+    pub fn chords(&self) -> crate::analysis::preflight::Chords<'_> {
+        crate::analysis::preflight::Chords {
+            programmed: &self.programmed,
+            first: 0,
+            start: self.start,
+            source: &self.source,
+        }
+    }
+
     /// A meter of how far the merged curves stray from their chords.
     pub fn deviation_meter(&self) -> crate::analysis::deviation::Meter {
         crate::analysis::deviation::Meter::new(
@@ -200,7 +211,10 @@ pub(super) fn refused(errs: &[gcode::Diagnostic]) -> Failure {
 /// The pre-flight findings as lines of text: a run of the same problem on consecutive
 /// NC lines (a stretch of a program out of travel, thousands of lines of CAM output)
 /// is one line naming its first and last line and how many, at its first pose.
-fn findings_text(name: &str, findings: &[crate::analysis::preflight::Finding]) -> Vec<String> {
+pub(super) fn findings_text(
+    name: &str,
+    findings: &[crate::analysis::preflight::Finding],
+) -> Vec<String> {
     let mut out = Vec::new();
     let mut i = 0;
     while i < findings.len() {

@@ -237,19 +237,30 @@ pub fn compile_from(
             .map_err(|errs| super::compile::refused(&errs))?;
     let restart = restart_at(&compiled, line, &name)?;
     let run = restart.blocks_from(compiled.start, &compiled.blocks);
-    let pre = crate::analysis::preflight::check(&run, machine, compiled.start);
+    // The approach stands for no programmed move; the rest for what they stood for.
+    let mut source = vec![0..0; restart.approach_len()];
+    source.extend_from_slice(&compiled.source[restart.index..]);
+    let chords = crate::analysis::preflight::Chords {
+        source: &source,
+        ..compiled.chords()
+    };
+    let paths = crate::analysis::preflight::paths(&run, compiled.start);
+    let pre = crate::analysis::preflight::check_paths(
+        &run,
+        &paths,
+        machine,
+        compiled.start,
+        Some(&chords),
+    );
     if !pre.findings.is_empty() {
-        let lines: Vec<String> = pre
-            .findings
-            .iter()
-            .map(|f| format!("{name}:{}: {} (at {:?})", f.line, f.what, f.at))
-            .collect();
+        // As the whole program's refusal words them: a stretch of lines in one.
+        let lines = super::compile::findings_text(&name, &pre.findings);
         return Err(Failure::new(
             exit::PREFLIGHT,
             format!(
                 "{}\n{} pre-flight problem(s) from line {line} on; nothing was sent",
                 lines.join("\n"),
-                lines.len()
+                pre.findings.len()
             ),
         ));
     }

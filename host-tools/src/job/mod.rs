@@ -420,11 +420,16 @@ pub fn check_compiled(
     // The compile's pre-flight when it ran from the machine's home, as this does.
     let pre = match &compiled.preflight {
         Some(p) if compiled.start == machine.home => std::borrow::Cow::Borrowed(p),
-        _ => std::borrow::Cow::Owned(crate::analysis::preflight::check(
-            blocks,
-            machine,
-            machine.home,
-        )),
+        _ => {
+            let paths = crate::analysis::preflight::paths(blocks, machine.home);
+            std::borrow::Cow::Owned(crate::analysis::preflight::check_paths(
+                blocks,
+                &paths,
+                machine,
+                machine.home,
+                Some(&compiled.chords()),
+            ))
+        }
     };
     let deviation = Some(compiled.deviation_meter());
     let derived = compiled.derived();

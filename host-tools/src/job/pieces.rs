@@ -14,7 +14,7 @@
 //! compiled as before ([`Stop::NeedsWhole`]).
 
 use super::{exit, Failure};
-use crate::analysis::preflight::{Accumulator, Preflight};
+use crate::analysis::preflight::{Accumulator, Chords, Preflight};
 use crate::gcode::{self, blocks::Converter, canon::Canon, flow::chunked::Chunked};
 use pkmc::config::{MachineConfig, AXES};
 use pkmc::motion::block::{Block, Motion};
@@ -159,6 +159,10 @@ pub struct Piece {
     pub source: Vec<Range<usize>>,
     /// Where the first block starts.
     pub start: [i64; AXES],
+    /// The program index of `programmed[0]`.
+    pub programmed_first: usize,
+    /// Where `programmed[0]` starts.
+    pub programmed_start: [i64; AXES],
 }
 
 /// A program file compiled a piece at a time.
@@ -254,6 +258,7 @@ impl<'o> Pieces<'o> {
         let rest = self.held.split_off(cut);
         let programmed = std::mem::replace(&mut self.held, rest);
         let mut start = self.held_start;
+        let programmed_start = start;
         let first = self.held_index;
         self.held_start = pose;
         self.held_index += programmed.len();
@@ -282,6 +287,8 @@ impl<'o> Pieces<'o> {
             programmed,
             source,
             start,
+            programmed_first: first,
+            programmed_start,
         }
     }
 }
@@ -336,8 +343,9 @@ pub fn check_file_from(
     if let Some(r) = restart {
         let approach = r.approach(machine.home);
         let paths = crate::analysis::preflight::paths(&approach, machine.home);
-        acc.add(&approach, &paths, machine.home, &mut out.preflight);
+        acc.add(&approach, &paths, machine.home, None, &mut out.preflight);
     }
+    let mut before: Option<Piece> = None;
     loop {
         let piece = match pieces.next_piece() {
             Ok(Some(p)) => p,
@@ -349,7 +357,21 @@ pub fn check_file_from(
         let start = super::pose_after(&piece.blocks[..k], piece.start);
         let checked = &piece.blocks[k..];
         let paths = crate::analysis::preflight::paths(checked, start);
-        acc.add(checked, &paths, start, &mut out.preflight);
+        // The programmed moves of this piece and the one before (a corner's blend
+        // holds a piece's last block over to the next).
+        let (first, chords_start) = match &before {
+            Some(p) => (p.programmed_first, p.programmed_start),
+            None => (piece.programmed_first, piece.programmed_start),
+        };
+        let mut programmed = before.take().map_or_else(Vec::new, |p| p.programmed);
+        programmed.extend_from_slice(&piece.programmed);
+        let chords = Chords {
+            programmed: &programmed,
+            first,
+            start: chords_start,
+            source: &piece.source[k..],
+        };
+        acc.add(checked, &paths, start, Some(&chords), &mut out.preflight);
         mark.add(&piece.blocks);
         out.blocks += piece.blocks.len();
         out.programmed += piece.programmed.len();
@@ -358,6 +380,7 @@ pub fn check_file_from(
             .iter()
             .filter(|b| matches!(b.motion, Motion::Cubic { .. }))
             .count();
+        before = Some(piece);
     }
     if !pieces.errors().is_empty() {
         return Err(super::compile::refused(pieces.errors()));
@@ -435,6 +458,56 @@ mod tests {
         let tilt = std::fs::read_to_string(examples.join("h4-table-tilt.ngc")).unwrap();
         compare("tilt", &tilt, &MachineConfig::h4_table());
         compare("wavy", &wavy(), &MachineConfig::cartesian_xyz());
+    }
+
+    #[test]
+    fn a_merged_run_that_leaves_the_travel_is_named_at_the_move_that_leaves_it() {
+        // 0.05 mm moves along a gentle wave from X95 on; X's travel ends at 100.
+        let mut text = String::from("G21 G90 G64 P0.01\nG0 X95 Y0 Z0\n");
+        let mut leaving = None;
+        for k in 1..=200 {
+            let x = 95.0 + k as f64 * 0.05;
+            let y = 2.0 * (x / 3.0).sin();
+            text.push_str(&format!("G1 X{x:.2} Y{y:.4} F1200\n"));
+            if x > 100.0 && leaving.is_none() {
+                leaving = Some(k as u32 + 2);
+            }
+        }
+        let leaving = leaving.unwrap();
+        let m = MachineConfig::cartesian_xyz();
+        let tools = gcode::ToolTable::new();
+        let settings = gcode::compress::Settings::default();
+        let path = std::env::temp_dir().join(format!("pkmc-pieces-{}-out", std::process::id()));
+        std::fs::write(&path, &text).unwrap();
+        for compress in [None, Some(&settings)] {
+            let (whole, pre) =
+                super::super::compile_located(&text, "p", &m, m.home, &tools, compress).unwrap();
+            let at = format!("compress {}", compress.is_some());
+            if compress.is_some() {
+                assert!(
+                    whole.blocks.len() * 10 < whole.programmed.len(),
+                    "{at}: merged"
+                );
+            }
+            let lines: Vec<u32> = pre.findings.iter().map(|f| f.line).collect();
+            assert_eq!(lines.first(), Some(&leaving), "{at}: {:?}", pre.findings);
+            assert!(lines.iter().all(|l| *l >= leaving), "{at}: {lines:?}");
+            // Compiled in pieces, the same refusal (a corner's blend held over).
+            let whole = super::super::compile_job(&path, &m, &tools, compress).unwrap_err();
+            assert!(
+                whole.message.contains(&format!(":{leaving}: joint q1")),
+                "{at}: {}",
+                whole.message
+            );
+            for piece_bytes in [300, 4096] {
+                let first = check_file(&path, &m, &tools, compress, piece_bytes).unwrap_err();
+                assert_eq!(
+                    first.message, whole.message,
+                    "{at}, pieces of {piece_bytes}"
+                );
+            }
+        }
+        std::fs::remove_file(&path).unwrap();
     }
 
     #[test]

@@ -84,7 +84,13 @@ pub fn checked_with(
     };
     let mut compiled = compiled;
     let paths = preflight::paths(&compiled.blocks, start);
-    let preflight = preflight::check_paths(&compiled.blocks, &paths, machine, start);
+    let chords = preflight::Chords {
+        programmed: &compiled.programmed,
+        first: 0,
+        start,
+        source: &compiled.source,
+    };
+    let preflight = preflight::check_paths(&compiled.blocks, &paths, machine, start, Some(&chords));
     compiled.statics = statics.map(|spec| {
         let b = &compiled.blocks;
         crate::analysis::statics::check_paths(b, &paths, machine, start, &spec.loads, &spec.limits)
