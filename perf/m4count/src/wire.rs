@@ -24,8 +24,7 @@ pub const MAP_WORDS: usize = 2 * POSE_AXES * MAX_SERVOS;
 /// Words of one [`Outputs`]: five per step train, the servo targets, three flags, the
 /// data recorder's servo-side signals, and the contour map (a presence flag, then
 /// [`MAP_WORDS`], zero when absent).
-pub const OUTPUT_WORDS: usize =
-    5 * MAX_STEPPERS + MAX_SERVOS + 3 + 2 * MAX_SIGNALS + 1 + MAP_WORDS;
+pub const OUTPUT_WORDS: usize = 5 * MAX_STEPPERS + MAX_SERVOS + 3 + 2 * MAX_SIGNALS + 1 + MAP_WORDS;
 
 /// `inputs` as words.
 pub fn inputs_words(inputs: &Inputs) -> [i64; INPUT_WORDS] {
