@@ -32,7 +32,7 @@ ALLOWED = {
     "job": {"gcode", "link", "sim", "control", "analysis", "machine_file", "input"},
     "grbl": {"gcode", "link", "analysis", "job"},
     "station": {"gcode", "link", "job", "input", "analysis", "scope"},
-    "calibrate": {"machine_file", "analysis", "input", "control"},
+    "calibrate": {"machine_file", "analysis", "input", "control", "gcode"},
     "scope": {"link", "job", "analysis", "control", "machine_file", "input", "gcode"},
 }
 # The core's rooms, from the bottom: each may import only the rooms before it.

@@ -11,7 +11,7 @@
 //! compressor's space ([`crate::gcode::compress::space`]): nm over X Y Z, 1° counted
 //! as 1 mm.
 
-use crate::gcode::compress::space::{to_fit, Point as V};
+use crate::gcode::compress::space::{on_segment, to_fit, Point as V};
 use pkmc::config::AXES;
 use pkmc::motion::block::{Block, Motion};
 use serde::Serialize;
@@ -117,7 +117,7 @@ impl Meter {
         }
         let mut best = (f64::INFINITY, 0);
         for e in lo..hi {
-            let d = to_segment(q, &self.points[e - 1], &self.points[e]);
+            let d = on_segment(q, &self.points[e - 1], &self.points[e]).1;
             if d < best.0 {
                 best = (d, e);
             }
@@ -137,18 +137,3 @@ impl Meter {
 
 /// Chords searched either side of the last nearest one.
 const WINDOW: usize = 64;
-
-fn to_segment(q: &V, a: &V, b: &V) -> f64 {
-    let ab: V = core::array::from_fn(|i| b[i] - a[i]);
-    let aq: V = core::array::from_fn(|i| q[i] - a[i]);
-    let l2: f64 = ab.iter().map(|x| x * x).sum();
-    let t = if l2 > 0.0 {
-        (ab.iter().zip(&aq).map(|(x, y)| x * y).sum::<f64>() / l2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (0..AXES)
-        .map(|i| (aq[i] - t * ab[i]).powi(2))
-        .sum::<f64>()
-        .sqrt()
-}

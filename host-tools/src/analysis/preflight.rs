@@ -16,7 +16,7 @@
 //! move nearest to where the problem was met ([`Chords`]), not at the curve's first
 //! line: the line a machinist has to change.
 
-use crate::gcode::compress::space::{to_fit, units_per_nm, Point};
+use crate::gcode::compress::space::{on_segment, to_fit, units_per_nm};
 use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
 use pkmc::kinematics::{Jacobian, Kinematics, MachineKinematics, Unreachable};
 use pkmc::motion::block::Block;
@@ -232,30 +232,13 @@ impl Chords<'_> {
                 0 => self.start,
                 _ => self.programmed[i - 1].target,
             };
-            let d = to_segment(&to_fit(&from), &to_fit(&b.target), &y);
+            let d = on_segment(&y, &to_fit(&from), &to_fit(&b.target)).1;
             if best.is_none_or(|(near, _)| d < near) {
                 best = Some((d, b.line));
             }
         }
         best.map(|(_, line)| line)
     }
-}
-
-/// Distance from `y` to the segment `a`–`b`, fit space.
-fn to_segment(a: &Point, b: &Point, y: &Point) -> f64 {
-    let ab: Vec<f64> = a.iter().zip(b).map(|(a, b)| b - a).collect();
-    let ay: Vec<f64> = a.iter().zip(y).map(|(a, y)| y - a).collect();
-    let len2: f64 = ab.iter().map(|v| v * v).sum();
-    let s = if len2 > 0.0 {
-        (ab.iter().zip(&ay).map(|(u, v)| u * v).sum::<f64>() / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    ay.iter()
-        .zip(&ab)
-        .map(|(v, u)| (v - s * u).powi(2))
-        .sum::<f64>()
-        .sqrt()
 }
 
 /// The pre-flight's working state carried from one run of blocks to the next (the

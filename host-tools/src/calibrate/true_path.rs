@@ -15,6 +15,7 @@
 use super::forward::forward;
 use super::model::Model;
 use crate::analysis::direction::{angle_deg, tool_axis};
+use crate::gcode::compress::space::on_segment;
 use pkmc::config::{MachineConfig, AXES, MAX_JOINTS};
 use pkmc::kinematics::MachineKinematics;
 use pkmc::units::units_per_user;
@@ -160,18 +161,8 @@ fn nearest(path: &[[f64; 5]], i: usize, y: [f64; 3]) -> (usize, f64, f64) {
     let hi = (i + WINDOW).min(path.len() - 1);
     let mut best = (i, 0.0, f64::INFINITY);
     for k in lo..=hi {
-        let a = &path[k];
-        let b = &path[(k + 1).min(hi)];
-        let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-        let ay = [y[0] - a[0], y[1] - a[1], y[2] - a[2]];
-        let len2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
-        let s = if len2 > 0.0 {
-            ((ay[0] * ab[0] + ay[1] * ab[1] + ay[2] * ab[2]) / len2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let e = [ay[0] - s * ab[0], ay[1] - s * ab[1], ay[2] - s * ab[2]];
-        let d = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+        let (a, b) = (&path[k], &path[(k + 1).min(hi)]);
+        let (s, d) = on_segment(&y, &[a[0], a[1], a[2]], &[b[0], b[1], b[2]]);
         // Where the path stands in X Y Z (a turn in place), the row nearest in time.
         let tie = (d - best.2).abs() <= 1e-9 && k.abs_diff(i) < best.0.abs_diff(i);
         if d < best.2 - 1e-9 || tie {
@@ -204,13 +195,11 @@ mod tests {
                 p[3],
                 p[4]
             );
-            for _ in 0..2 {
+            // Commanded, feedback and true joints alike.
+            for _ in 0..3 {
                 for v in q {
                     t += &format!(",{v:.9}");
                 }
-            }
-            for v in q {
-                t += &format!(",{v:.9}");
             }
             t += "\n";
         }

@@ -364,14 +364,7 @@ fn newton(c: &[V; 4], q: &V, u: f64) -> f64 {
 
 /// Distance from `q` to the segment `a`–`b`.
 fn to_segment(q: &V, a: &V, b: &V) -> f64 {
-    let ab = sub(b, a);
-    let l2 = dot(&ab, &ab);
-    let t = if l2 > 0.0 {
-        (dot(&sub(q, a), &ab) / l2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    norm(&sub(q, &core::array::from_fn(|i| a[i] + t * ab[i])))
+    super::space::on_segment(q, a, b).1
 }
 
 /// Distance from `q` to the polyline through `pts` (the nearest of its segments).

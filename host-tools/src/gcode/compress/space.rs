@@ -22,6 +22,23 @@ pub fn units_per_nm(rotary: bool) -> f64 {
     }
 }
 
+/// The point of the segment `a`–`b` nearest `q`: how far along it (0 to 1) and the
+/// distance, in any space of `N` coordinates. The compressor's tolerance checks, the
+/// deviation meter, the pre-flight's chords and the true path errors all measure by it.
+pub fn on_segment<const N: usize>(q: &[f64; N], a: &[f64; N], b: &[f64; N]) -> (f64, f64) {
+    let ab: [f64; N] = core::array::from_fn(|i| b[i] - a[i]);
+    let aq: [f64; N] = core::array::from_fn(|i| q[i] - a[i]);
+    let dot = |u: &[f64; N], v: &[f64; N]| -> f64 { u.iter().zip(v).map(|(x, y)| x * y).sum() };
+    let l2 = dot(&ab, &ab);
+    let t = if l2 > 0.0 {
+        (dot(&aq, &ab) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let off: [f64; N] = core::array::from_fn(|i| q[i] - (a[i] + t * ab[i]));
+    (t, dot(&off, &off).sqrt())
+}
+
 /// A pose (axis units) in fit space.
 pub fn to_fit(p: &[i64; AXES]) -> Point {
     core::array::from_fn(|i| {
