@@ -232,8 +232,15 @@ def budgets(name, rep):
     return errors
 
 
+# The dense jobs stream their segments as programmed, a block each (nc-send merges
+# G64's short moves within 1 µm by default, and they would be a few curves).
+AS_PROGRAMMED = ["--g64-tolerance", "0"]
+
+
 def run_job(o, name, machine, program, wiring):
     m = ["--machine", machine] if machine else []
+    if os.path.basename(program).startswith("dense"):
+        m += AS_PROGRAMMED
     tmp = tempfile.gettempdir()
     sim_trace = os.path.join(tmp, f"vboard-{name}-sim.csv")
     board_trace = os.path.join(tmp, f"vboard-{name}-board.csv")
@@ -358,7 +365,7 @@ def case_record(o):
     tmp = tempfile.mkdtemp()
     program = os.path.join(tmp, "dense-h4.ngc")
     dense_program(program)
-    m = ["--machine", machine]
+    m = ["--machine", machine] + AS_PROGRAMMED
     b = Board(o.vboard, o.elf, machine, "record")
     if nc_send(o.nc, ["--port", b.port] + m + ["reset"]).returncode != 0:
         b.fail("record: reset failed")

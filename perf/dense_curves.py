@@ -7,9 +7,10 @@ feed in the steady middle of each curve (issue 34, "Dense curves at F6000").
 For each machine (the built-in cartesian-xyz, and the H-4 with its table,
 examples/machines/h4-table.toml), each curve (a sine y = 10 sin(x/15) over 120 mm of
 X, a circle of radius 20 mm, an Archimedean spiral from radius 5 to 25 mm over four
-turns), each chord (0.01, 0.05 and 0.1 mm) and each path mode (G64; G64 with
-`--g64-tolerance 0.001`, which merges its chords within 1 µm; and G64 P0.01), it streams the program to the built-in simulated controller (`nc-send --sim --trace`,
-the real serial link) and reads the commanded tool position every 1 ms tick. The
+turns), each chord (0.01, 0.05 and 0.1 mm) and each path mode (G64 with
+`--g64-tolerance 0`, every chord a block as programmed; G64, its chords merged within
+nc-send's default 1 µm; and G64 P0.01), it streams the program to the built-in
+simulated controller (`nc-send --sim --trace`, the real serial link) and reads the commanded tool position every 1 ms tick. The
 steady middle is the feed moves less the first and last 10 % of their ticks (the
 acceleration from rest and the stop). It prints, per run: the motion time, the path
 speed over the feed in the steady middle (minimum, median, mean) and the share of its
@@ -108,9 +109,9 @@ def main():
         for mname, margs, z, accel in MACHINES:
             for kind in ("sine", "circle", "spiral"):
                 for step in (0.01, 0.05, 0.1):
-                    for label, mode, extra in (("G64", "G64", []),
-                                               ("G64, --g64-tolerance 0.001", "G64",
-                                                ["--g64-tolerance", "0.001"]),
+                    for label, mode, extra in (("G64, --g64-tolerance 0", "G64",
+                                                ["--g64-tolerance", "0"]),
+                                               ("G64", "G64", []),
                                                ("G64 P0.01", "G64 P0.01", [])):
                         name = f"{mname} {kind} {step} {label}"
                         if args.only and not any(o in name for o in args.only):

@@ -35,7 +35,8 @@ use std::path::Path;
 mod common;
 use common::{ok, tmp};
 
-/// The sine of [`common::sine`] in plain G64 (nothing merged).
+/// The sine of [`common::sine`] in plain G64 (nothing merged: [`run`] gives
+/// `--g64-tolerance 0`).
 fn sine(length: f64, segment: f64, feed: u32, x0: f64) -> String {
     common::sine(length, segment, feed, x0, "G64")
 }
@@ -161,7 +162,18 @@ fn run(
     home: [f64; 3],
 ) -> Run {
     let trace = tmp(&format!("{name}{}.csv", mode.trim_start_matches('-')));
-    let mut args = vec![mode, "--report", "json", "--trace", trace.to_str().unwrap()];
+    // `--g64-tolerance 0`: the segments go out as programmed, one block each (merged
+    // within 1 µm by default, they would be a few curves, and the test would measure
+    // curves, not dense blocks through the link).
+    let mut args = vec![
+        mode,
+        "--g64-tolerance",
+        "0",
+        "--report",
+        "json",
+        "--trace",
+        trace.to_str().unwrap(),
+    ];
     args.extend_from_slice(machine_args);
     args.push(program.to_str().unwrap());
     let report = ok(&common::nc_send_within(

@@ -1,7 +1,8 @@
 //! Issue 33: a stall of the host never loses a job. Over the real link — `pkmc-sim
 //! --real-time` in its own process serving a pseudo-terminal, `nc-send --port` a
 //! child process that the test stops (SIGSTOP) and continues (SIGCONT) in wall-clock
-//! time — on the H-4, a coarse program (2 mm moves) and a dense one (0.05 mm chords):
+//! time — on the H-4, a coarse program (2 mm moves) and a dense one (0.05 mm chords),
+//! streamed as programmed (`--g64-tolerance 0`: one block a move):
 //!
 //! * stalls of 0.5, 1.5, 5 and 20 s: each job completes with the final joint steps
 //!   of an unstalled run, takes longer by at most the stall less the motion buffered,
@@ -111,6 +112,10 @@ fn run(machine: &str, program: &str, stall: Option<(Duration, Duration)>, tag: &
             "json",
             "--machine",
             machine,
+            // The moves go out as programmed, one block each (merged within 1 µm by
+            // default, a pass would be one block and the queue would never fill).
+            "--g64-tolerance",
+            "0",
         ])
         .arg(program)
         .current_dir(repo())
@@ -343,6 +348,7 @@ fn a_job_held_for_a_host_that_never_comes_back_is_completed_by_a_new_resume() {
     assert_eq!(sim.send(&["--machine", m, "reset"]).status.code(), Some(0));
     let host = Command::new(env!("CARGO_BIN_EXE_nc-send"))
         .args(["--port", &sim.port, "--report", "json", "--machine", m])
+        .args(["--g64-tolerance", "0"])
         .args(["--max-buffered-ms", "120000", p])
         .current_dir(repo())
         .stdout(Stdio::null())
@@ -400,7 +406,14 @@ fn a_foreign_hello_mid_job_ends_the_session_with_a_clear_error_and_a_report() {
     }
     std::fs::write(&p, text + "M2\n").unwrap();
     let host = Command::new(env!("CARGO_BIN_EXE_nc-send"))
-        .args(["--port", &sim.port, "--report", "json"])
+        .args([
+            "--port",
+            &sim.port,
+            "--report",
+            "json",
+            "--g64-tolerance",
+            "0",
+        ])
         .arg(&p)
         .current_dir(repo())
         .stdout(Stdio::piped())

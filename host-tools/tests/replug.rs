@@ -78,7 +78,7 @@ fn replugged_mid_job(name: &str, env: &[(&str, &str)]) {
     let _ = sim.wait();
     assert_eq!(
         (s["state"].clone(), s["line"].clone()),
-        ("Idle".into(), 82.into()),
+        ("Idle".into(), reference["final_line"].clone()),
         "{s}"
     );
     assert!(s["alarm"].is_null() && s["held_job"].is_null(), "{s}");

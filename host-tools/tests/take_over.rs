@@ -315,7 +315,9 @@ fn a_host_killed_while_streaming_short_blocks_leaves_a_link_loss_not_a_finished_
         text += &format!("G1 X{:.2} F600\n", (i % 2000) as f64 * 0.01);
     }
     std::fs::write(&p, text + "M2\n").unwrap();
-    let host = spawn(&sim, &[p.to_str().unwrap()]);
+    // As programmed, a block a move (merged within 1 µm by default, each 20 mm pass
+    // would be one block).
+    let host = spawn(&sim, &["--g64-tolerance", "0", p.to_str().unwrap()]);
     std::thread::sleep(Duration::from_millis(1500));
     kill(host);
     std::thread::sleep(Duration::from_millis(1500));

@@ -90,7 +90,7 @@ struct Args {
     #[arg(long, value_name = "FILE.csv")]
     trace: Option<PathBuf>,
     /// Stream every move as programmed: do not merge runs of short G1 moves into
-    /// curves (merging is on wherever the program blends within G64 P).
+    /// curves (on by default: within G64 P, and within --g64-tolerance in G64).
     #[arg(long)]
     no_compress: bool,
     /// Merging: a turn sharper than this between two moves stays a corner, degrees.
@@ -101,8 +101,8 @@ struct Args {
     #[arg(long)]
     no_blend: bool,
     /// Merging: in G64 without P, merge runs of short G1 moves within this many mm
-    /// (e.g. 0.001; 0, the default: stream them as programmed).
-    #[arg(long, value_name = "MM", default_value_t = 0.0)]
+    /// (the default 0.001; 0: stream them as programmed).
+    #[arg(long, value_name = "MM", default_value_t = 0.001)]
     g64_tolerance: f64,
     /// Restart the program from this NC line, its modal state rebuilt (docs/nc-send.md).
     #[arg(long, value_name = "LINE")]

@@ -248,7 +248,7 @@ pub(super) fn findings_text(
 }
 
 /// The compressor's settings with `machine`'s smallest X Y Z acceleration and speed
-/// (what a curve's time is weighed with).
+/// (what a curve's time is weighed with), and the most its bends can take.
 pub fn for_machine(
     settings: &gcode::compress::Settings,
     machine: &MachineConfig,
@@ -261,6 +261,11 @@ pub fn for_machine(
         max_speed: xyz()
             .map(|a| a.max_velocity as f64)
             .fold(f64::INFINITY, f64::min),
+        bend_accel: xyz()
+            .map(|a| (a.max_accel as f64).powi(2))
+            .sum::<f64>()
+            .sqrt()
+            * pkmc::motion::planner::SPLINE_BEND_SHARE as f64,
         ..*settings
     }
     .finite()

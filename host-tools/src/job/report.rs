@@ -30,6 +30,9 @@ pub struct Report {
     pub result: String,
     /// Controller state at the end, by its stable name (`Idle`, `Alarm`).
     pub final_state: String,
+    /// NC line of the last block executed, as the controller reports it (a block merged
+    /// from several moves carries the line of its first).
+    pub final_line: u32,
     /// Final commanded pose: X Y Z in mm, A B C in degrees.
     pub final_pose: std::collections::BTreeMap<String, f64>,
     /// Final commanded joints, mm or degrees.
@@ -166,6 +169,7 @@ impl Report {
             }
             .into(),
             final_state: view.state,
+            final_line: status.line,
             final_pose,
             final_joints: view.joints,
             final_joint_steps: sim.map(|s| s.joint_steps.clone()),

@@ -333,8 +333,14 @@ pub fn record(p: &Program) -> Result<(Vec<u8>, Counts, usize), String> {
             file.display()
         ));
     }
-    // As `nc-send` compiles a file: runs of short moves in G64 P merged into curves.
-    let settings = pkmc_host::gcode::compress::Settings::default();
+    // As `nc-send --g64-tolerance 0` compiles a file: runs of short moves in G64 P
+    // merged into curves, and those in G64 without P streamed as programmed (merged
+    // within 1 µm by default, the dense G64 sines would be curves; they stand for the
+    // dense blocks a sender can still stream, the P0.01 sines for curves).
+    let settings = pkmc_host::gcode::compress::Settings {
+        g64_tolerance_nm: 0.0,
+        ..Default::default()
+    };
     let blocks = if p.probe.is_some() {
         Vec::new()
     } else {

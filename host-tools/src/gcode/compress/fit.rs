@@ -9,6 +9,9 @@ use pkmc::config::AXES;
 /// much as the path's).
 const WEIGH_FROM: usize = 4;
 
+/// The controller's interpolation period, s.
+const TICK_S: f64 = 1.0 / pkmc::units::TICK_HZ as f64;
+
 /// What one run's curves must meet: its tolerance (fit space) and the speed asked for
 /// (nm/s; 0: unknown).
 #[derive(Clone, Copy, Debug)]
@@ -229,6 +232,7 @@ fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64>
     let samples = 8 * n;
     let mut seg = 0;
     let mut along = Vec::with_capacity(samples + 1);
+    let mut farthest = 0.0f64;
     for j in 0..=samples {
         let x = j as f64 / samples as f64;
         while seg + 1 < n && u[seg + 1] < x {
@@ -243,6 +247,7 @@ fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64>
         if d > tol {
             return None;
         }
+        farthest = farthest.max(d);
         let (d1, d2) = (deriv(c, x), deriv2(c, x));
         let v = (d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]).sqrt();
         let cross = [
@@ -253,6 +258,19 @@ fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64>
         let bend = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt()
             / v.powi(3).max(1e-300);
         along.push((v, bend));
+    }
+    // The drives move straight from one tick's pose to the next: each tick's chord of
+    // the curve cuts inside it by (v·T)²·κ/8, which the tolerance must hold as well;
+    // v²κ is at most the feed's, and at most what the bend may take (at 100 mm/s on
+    // a 5 mm radius, 0.25 µm; on cartesian-xyz, whose bends take up to 1155 mm/s²,
+    // 0.14 µm).
+    let tightest = along.iter().map(|a| a.1).fold(0.0, f64::max);
+    let mut v2k = g.speed * g.speed * tightest;
+    if s.bend_accel > 0.0 {
+        v2k = v2k.min(s.bend_accel);
+    }
+    if farthest + v2k * TICK_S * TICK_S / 8.0 > tol {
+        return None;
     }
     let vmax = along.iter().map(|a| a.0).fold(0.0, f64::max);
     let even = along.iter().map(|a| a.0).fold(f64::INFINITY, f64::min) / vmax;
@@ -275,7 +293,6 @@ fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64>
             g.speed
         }
     };
-    let tightest = along.iter().map(|a| a.1).fold(0.0, f64::max);
     // The curve's time: ∫ |dP/du| du / (limit · |dP/du| / max) over u in [0, 1].
     let own = vmax / limit(tightest);
     (chords_time(p, g, s) >= own).then_some(even)
@@ -286,7 +303,6 @@ fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64>
 /// bend allows (v²·κ ≤ a/2, κ = Δθ over the mean of the chords beside it), each chord
 /// at the mean of its vertices' speeds, nothing faster than the feed.
 fn chords_time(p: &[V], g: &Goal, s: &Settings) -> f64 {
-    const TICK_S: f64 = 1e-3;
     let n = p.len() - 1;
     let xyz = |v: &V| [v[0], v[1], v[2]];
     let d: Vec<[f64; 3]> = (0..n).map(|k| xyz(&sub(&p[k + 1], &p[k]))).collect();

@@ -5,10 +5,10 @@
 //!
 //! **Which moves.** Consecutive feed moves (`G1`) with the same feed and the same
 //! blending tolerance that move X Y Z form a run: in `G64 P` within P, in `G64`
-//! without P within [`Settings::g64_tolerance_nm`] when it is set (`nc-send
-//! --g64-tolerance`; 0 by default, which merges nothing there: `G64` alone asks for the
-//! best speed and bounds no deviation, as in LinuxCNC, but the default keeps every
-//! programmed point), never in `G61`. A run ends where the path
+//! without P within [`Settings::g64_tolerance_nm`] (`nc-send
+//! --g64-tolerance`; 1 µm by default: `G64` alone asks for the best speed and bounds no
+//! deviation, as in LinuxCNC, and 1 µm keeps every programmed point within a count of
+//! the scales; 0 merges nothing there), never in `G61`. A run ends where the path
 //! turns by more than [`Settings::corner_deg`] between two moves — a real corner stays
 //! a corner: a curve ends exactly on it and the planner blends or stops there as it
 //! does for lines — and at anything else (a rapid, an arc, an auxiliary function, a
@@ -86,14 +86,17 @@ pub struct Settings {
     pub accel: f64,
     /// The machine's smallest X Y Z speed, nm/s (0: unknown).
     pub max_speed: f64,
+    /// The most acceleration a curve's bend can take at the tool, nm/s² (0: unknown,
+    /// then the feed bounds it): the planner's share of the X Y Z accelerations.
+    pub bend_accel: f64,
     /// Corners between feed moves within `G64 P` are rounded by blends ([`blend`]).
     pub blend: bool,
     /// Turns of less than this, degrees, are not blended.
     pub blend_min_deg: f64,
     /// A blend trims at most this share of either block's length.
     pub blend_share: f64,
-    /// The tolerance runs are merged within in `G64` without P, nm (0, the default:
-    /// not merged).
+    /// The tolerance runs are merged within in `G64` without P, nm (the default 1 µm;
+    /// 0: not merged).
     /// Corners there are not blended: the controller passes them as it passes `G64`'s.
     pub g64_tolerance_nm: f64,
 }
@@ -112,10 +115,11 @@ impl Default for Settings {
             free_gain: 1.2,
             accel: 0.0,
             max_speed: 0.0,
+            bend_accel: 0.0,
             blend: true,
             blend_min_deg: 0.5,
             blend_share: 0.45,
-            g64_tolerance_nm: 0.0,
+            g64_tolerance_nm: 1000.0,
         }
     }
 }
@@ -149,6 +153,7 @@ impl Settings {
         Self {
             accel: f(self.accel),
             max_speed: f(self.max_speed),
+            bend_accel: f(self.bend_accel),
             ..self
         }
     }

@@ -125,13 +125,11 @@ fn a_run_that_turns_a_rotary_axis_is_merged_with_it_within_the_tolerance() {
 
 #[test]
 fn g64_without_p_merges_within_its_own_tolerance_and_g61_never() {
-    // The same sine in G64 without P (tolerance u32::MAX): merged within 1 µm when
-    // asked, corners not blended (nothing turns over 30° here anyway).
+    // The same sine in G64 without P (tolerance u32::MAX): merged within 1 µm by
+    // default, corners not blended (nothing turns over 30° here anyway).
     let input = sine(0.05, 100.0, u32::MAX);
-    let s = Settings {
-        g64_tolerance_nm: 1000.0,
-        ..Settings::default()
-    };
+    let s = Settings::default();
+    assert_eq!(s.g64_tolerance_nm, 1000.0);
     let c = compress(&input, [0; AXES], &s);
     assert!(
         c.blocks.len() * 10 <= input.len(),
@@ -142,9 +140,12 @@ fn g64_without_p_merges_within_its_own_tolerance_and_g61_never() {
     assert!(c.blocks.iter().all(|b| b.tolerance_nm == u32::MAX));
     let d = deviation(&input, &c);
     assert!(d <= 0.95 * s.g64_tolerance_nm * 1e-6, "{d} mm");
-    // A zero tolerance (the default) leaves G64 without P as written; G61 is never
-    // merged.
-    let off = Settings::default();
+    // A zero tolerance (`--g64-tolerance 0`) leaves G64 without P as written; G61 is
+    // never merged.
+    let off = Settings {
+        g64_tolerance_nm: 0.0,
+        ..Settings::default()
+    };
     assert_eq!(compress(&input, [0; AXES], &off).blocks, input);
     let exact = sine(0.05, 10.0, 0);
     assert_eq!(compress(&exact, [0; AXES], &s).blocks, exact);
