@@ -8,10 +8,13 @@
 //! under 1 mm/s at 90° on a machine of 1000 mm/s²): every corner is nearly a stop. A
 //! blend of smallest radius r is passed at about √(a·r).
 //!
-//! **Which corners.** Both blocks are `G1` lines or cubics with a finite, non-zero
-//! tolerance (`G64 P`; never `G61`, nor `G64` without P), neither moves A B C (the
+//! **Which corners.** Both blocks are `G1` lines or cubics that may be merged
+//! ([`super::merge_tolerance`]: within `G64 P`, or in `G64` without P within
+//! [`Settings::g64_tolerance_nm`]; never in `G61`), neither moves A B C (the
 //! blend is X Y Z only), and the path turns there by more than
-//! [`Settings::blend_min_deg`]. A dwell, an auxiliary function or any other block
+//! [`Settings::blend_min_deg`]. The tolerance is the smaller of the two blocks', and
+//! the blend's samples, with the cut of the ticks' chords of it at its tightest bend
+//! on top ([`super::fit`]'s `tick_sag`), must lie within it. A dwell, an auxiliary function or any other block
 //! between them leaves the corner as it is.
 //!
 //! **How far.** d is at most [`Settings::blend_share`] of either block's length (so the
@@ -106,6 +109,26 @@ impl Geo {
                 lerp(&a, &b, u).map(|x| 3.0 * x)
             }
         }
+    }
+
+    /// Its bend (curvature over X Y Z) at u, per nm.
+    fn bend(&self, u: f64) -> f64 {
+        let Geo::Cubic(p) = self else {
+            return 0.0;
+        };
+        let d1 = self.deriv(u);
+        let d2: V = core::array::from_fn(|i| {
+            6.0 * ((1.0 - u) * (p[2][i] - 2.0 * p[1][i] + p[0][i])
+                + u * (p[3][i] - 2.0 * p[2][i] + p[1][i]))
+        });
+        let cross = [
+            d1[1] * d2[2] - d1[2] * d2[1],
+            d1[2] * d2[0] - d1[0] * d2[2],
+            d1[0] * d2[1] - d1[1] * d2[0],
+        ];
+        let v = (d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]).sqrt();
+        (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt()
+            / v.powi(3).max(1e-300)
     }
 
     /// Cumulative arc length at u = k/STEPS.
@@ -216,15 +239,14 @@ pub struct Blender {
     emitted: [i64; AXES],
 }
 
-/// Can `b`, from `from`, take part in a blend?
-fn blendable(b: &Block, from: &[i64; AXES]) -> bool {
+/// Can `b`, from `from`, take part in a blend (with settings `s`)?
+fn blendable(b: &Block, from: &[i64; AXES], s: &Settings) -> bool {
     let rotary_still = match b.motion {
         Motion::Linear => true,
         Motion::Cubic { c1, c2 } => c1[3..].iter().chain(&c2[3..]).all(|&x| x == 0),
         _ => return false,
     };
-    b.tolerance_nm != 0
-        && b.tolerance_nm != u32::MAX
+    super::merge_tolerance(b, s).is_some()
         && rotary_still
         && b.target[3..] == from[3..]
         && b.target[..3] != from[..3]
@@ -287,7 +309,7 @@ impl Blender {
         }
         let from = self.pose;
         self.pose = b.target;
-        if !self.s.blend || !blendable(b, &from) {
+        if !self.s.blend || !blendable(b, &from, &self.s) {
             self.finish(out);
             self.put(*b, source, out);
             return;
@@ -427,7 +449,8 @@ fn blend_curve(pa: &V, pb: &V, da: &V, db: &V, ra: f64, rb: f64, chord: f64) -> 
 
 /// The blend of the corner between `a` and `b`, if one fits (module doc).
 fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
-    let tol = a.block.tolerance_nm.min(b.block.tolerance_nm) as f64 * s.fit_share - ROUNDING_NM;
+    let within = |h: &Held| super::merge_tolerance(&h.block, s).unwrap_or(0.0);
+    let tol = within(a).min(within(b)) * s.fit_share - ROUNDING_NM;
     let (ea, eb) = (a.geo.deriv(1.0), b.geo.deriv(0.0));
     if norm(&ea) < 1.0 || norm(&eb) < 1.0 {
         return None;
@@ -470,10 +493,15 @@ fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
         let block = block_of(&g, &line, &keep);
         // The blend as it is sent.
         let sent = Geo::of(&block, &round(&pa, &keep)).expect("a cubic");
-        let fits = (0..=SAMPLES).all(|k| {
-            let q = sent.at(k as f64 / SAMPLES as f64);
-            to_polyline(&q, &pts).0 <= tol
-        });
+        // Every sample within the tolerance, with the cut of the ticks' chords of the
+        // blend at its tightest bend (`fit::tick_sag`) on top of the farthest.
+        let (mut farthest, mut kappa) = (0.0f64, 0.0f64);
+        for k in 0..=SAMPLES {
+            let u = k as f64 / SAMPLES as f64;
+            farthest = farthest.max(to_polyline(&sent.at(u), &pts).0);
+            kappa = kappa.max(sent.bend(u));
+        }
+        let fits = farthest + super::fit::tick_sag(line.feed as f64, kappa, s) <= tol;
         if fits && chord >= 1.0 {
             let first = to_polyline(&pa, &pts).1 - 1;
             let last = to_polyline(&pb, &pts).1 - 1;

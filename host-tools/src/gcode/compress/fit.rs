@@ -260,16 +260,11 @@ fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64>
         along.push((v, bend));
     }
     // The drives move straight from one tick's pose to the next: each tick's chord of
-    // the curve cuts inside it by (v·T)²·κ/8, which the tolerance must hold as well;
-    // v²κ is at most the feed's, and at most what the bend may take (at 100 mm/s on
-    // a 5 mm radius, 0.25 µm; on cartesian-xyz, whose bends take up to 1155 mm/s²,
-    // 0.14 µm).
+    // the curve cuts inside it ([`tick_sag`]), which the tolerance must hold as well
+    // (at 100 mm/s on a 5 mm radius, 0.25 µm; on cartesian-xyz, whose bends take up to
+    // 1155 mm/s², at most 0.14 µm).
     let tightest = along.iter().map(|a| a.1).fold(0.0, f64::max);
-    let mut v2k = g.speed * g.speed * tightest;
-    if s.bend_accel > 0.0 {
-        v2k = v2k.min(s.bend_accel);
-    }
-    if farthest + v2k * TICK_S * TICK_S / 8.0 > tol {
+    if farthest + tick_sag(g.speed, tightest, s) > tol {
         return None;
     }
     let vmax = along.iter().map(|a| a.0).fold(0.0, f64::max);
@@ -296,6 +291,17 @@ fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64>
     // The curve's time: ∫ |dP/du| du / (limit · |dP/du| / max) over u in [0, 1].
     let own = vmax / limit(tightest);
     (chords_time(p, g, s) >= own).then_some(even)
+}
+
+/// How far a tick's straight chord of a curve of bend `kappa` (per nm) cuts inside it,
+/// nm: (v·T)²·κ/8, with v²κ at most the feed's (`speed`, nm/s) and at most what the
+/// bend may take ([`Settings::bend_accel`]); 0 when that is not known (the machine's
+/// settings, [`crate::job::compress_for_machine`], always give it).
+pub(super) fn tick_sag(speed: f64, kappa: f64, s: &Settings) -> f64 {
+    if s.bend_accel <= 0.0 {
+        return 0.0;
+    }
+    (speed * speed * kappa).min(s.bend_accel) * TICK_S * TICK_S / 8.0
 }
 
 /// The chords' own time, s, estimated as the planner takes them: each vertex at the

@@ -86,8 +86,9 @@ pub struct Settings {
     pub accel: f64,
     /// The machine's smallest X Y Z speed, nm/s (0: unknown).
     pub max_speed: f64,
-    /// The most acceleration a curve's bend can take at the tool, nm/s² (0: unknown,
-    /// then the feed bounds it): the planner's share of the X Y Z accelerations.
+    /// The most acceleration a curve's bend can take at the tool, nm/s²: the planner's
+    /// share of the X Y Z accelerations (0: unknown; the tolerance then makes no
+    /// allowance for the ticks' chords, `fit::tick_sag`).
     pub bend_accel: f64,
     /// Corners between feed moves within `G64 P` are rounded by blends ([`blend`]).
     pub blend: bool,
@@ -95,9 +96,9 @@ pub struct Settings {
     pub blend_min_deg: f64,
     /// A blend trims at most this share of either block's length.
     pub blend_share: f64,
-    /// The tolerance runs are merged within in `G64` without P, nm (the default 1 µm;
-    /// 0: not merged).
-    /// Corners there are not blended: the controller passes them as it passes `G64`'s.
+    /// The tolerance runs are merged and corners blended within in `G64` without P, nm
+    /// (the default 1 µm; 0: neither, the controller passes a corner as it passes
+    /// any).
     pub g64_tolerance_nm: f64,
 }
 
