@@ -202,7 +202,18 @@ fn grbl_streamer_streams_a_thousand_lines_over_tcp_through_a_faulty_line_losing_
     }
     std::fs::write(&program, text).unwrap();
     let program = program.to_str().unwrap();
-    let bridge = Bridge::start(&["--link-faults", "0.001", "--seed", "5"]);
+    // grbl-streamer comments out a line with a command Grbl lacks (its `tidy`), so the
+    // first line, `G64 P0.01` with it, never reaches the bridge, which then runs in
+    // the default `G64`. With `--g64-tolerance 0` nothing is merged or blended there,
+    // and every line written is one block, as this test counts them.
+    let bridge = Bridge::start(&[
+        "--link-faults",
+        "0.001",
+        "--seed",
+        "5",
+        "--g64-tolerance",
+        "0",
+    ]);
     let job = streamer(&bridge, program, &["--timeout", "150"]);
     let summary = bridge.stop();
     assert_eq!(job["result"], "completed", "{job}");
