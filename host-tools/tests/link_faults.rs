@@ -9,7 +9,9 @@ mod common;
 use common::{json, nc_send, tmp};
 
 /// A spiral of `n` short feed moves, each on its own numbered line, long enough (a few
-/// ms each) that every line shows in the simulator's per-tick record.
+/// ms each) that every line shows in the simulator's per-tick record. [`run`] streams
+/// them as programmed (`--g64-tolerance 0`), a block a line: the tests count lines as
+/// blocks (by default their corners would be blended within 1 µm, a block more each).
 fn spiral(n: usize) -> String {
     let mut p = String::from("G21 G90\nG0 X20 Y10 Z2\nG1 F1200\n");
     for i in 0..n {
@@ -26,7 +28,7 @@ fn spiral(n: usize) -> String {
 }
 
 fn run(program: &Path, extra: &[&str]) -> serde_json::Value {
-    let mut args = vec!["--sim", "--report", "json"];
+    let mut args = vec!["--sim", "--report", "json", "--g64-tolerance", "0"];
     args.extend_from_slice(extra);
     args.push(program.to_str().unwrap());
     let out = nc_send(&args);

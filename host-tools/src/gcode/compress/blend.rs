@@ -8,12 +8,11 @@
 //! under 1 mm/s at 90° on a machine of 1000 mm/s²): every corner is nearly a stop. A
 //! blend of smallest radius r is passed at about √(a·r).
 //!
-//! **Which corners.** Both blocks are `G1` lines or cubics that may be merged
-//! ([`super::merge_tolerance`]: within `G64 P`, or in `G64` without P within
-//! [`Settings::g64_tolerance_nm`]; never in `G61`), neither moves A B C (the
+//! **Which corners.** Both blocks are `G1` lines or cubics with a finite, non-zero
+//! tolerance (`G64 P`; never `G61`, nor `G64` without P), neither moves A B C (the
 //! blend is X Y Z only), and the path turns there by more than
-//! [`Settings::blend_min_deg`]. The tolerance is the smaller of the two blocks', and
-//! the blend's samples, with the cut of the ticks' chords of it at its tightest bend
+//! [`Settings::blend_min_deg`]. The tolerance is the smaller P of the two, and the
+//! blend's samples, with the cut of the ticks' chords of it at its tightest bend
 //! on top ([`super::fit`]'s `tick_sag`), must lie within it. A dwell, an auxiliary function or any other block
 //! between them leaves the corner as it is.
 //!
@@ -239,14 +238,15 @@ pub struct Blender {
     emitted: [i64; AXES],
 }
 
-/// Can `b`, from `from`, take part in a blend (with settings `s`)?
-fn blendable(b: &Block, from: &[i64; AXES], s: &Settings) -> bool {
+/// Can `b`, from `from`, take part in a blend?
+fn blendable(b: &Block, from: &[i64; AXES]) -> bool {
     let rotary_still = match b.motion {
         Motion::Linear => true,
         Motion::Cubic { c1, c2 } => c1[3..].iter().chain(&c2[3..]).all(|&x| x == 0),
         _ => return false,
     };
-    super::merge_tolerance(b, s).is_some()
+    b.tolerance_nm != 0
+        && b.tolerance_nm != u32::MAX
         && rotary_still
         && b.target[3..] == from[3..]
         && b.target[..3] != from[..3]
@@ -309,7 +309,7 @@ impl Blender {
         }
         let from = self.pose;
         self.pose = b.target;
-        if !self.s.blend || !blendable(b, &from, &self.s) {
+        if !self.s.blend || !blendable(b, &from) {
             self.finish(out);
             self.put(*b, source, out);
             return;
@@ -449,8 +449,7 @@ fn blend_curve(pa: &V, pb: &V, da: &V, db: &V, ra: f64, rb: f64, chord: f64) -> 
 
 /// The blend of the corner between `a` and `b`, if one fits (module doc).
 fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
-    let within = |h: &Held| super::merge_tolerance(&h.block, s).unwrap_or(0.0);
-    let tol = within(a).min(within(b)) * s.fit_share - ROUNDING_NM;
+    let tol = a.block.tolerance_nm.min(b.block.tolerance_nm) as f64 * s.fit_share - ROUNDING_NM;
     let (ea, eb) = (a.geo.deriv(1.0), b.geo.deriv(0.0));
     if norm(&ea) < 1.0 || norm(&eb) < 1.0 {
         return None;

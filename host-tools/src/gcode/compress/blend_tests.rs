@@ -144,22 +144,12 @@ fn a_corner_between_curves_is_blended_tangentially_within_p() {
 }
 
 #[test]
-fn no_blend_in_g61_nor_where_a_b_c_move_and_in_g64_without_p_within_its_own_tolerance() {
+fn no_blend_in_g61_in_g64_without_p_nor_where_a_b_c_move() {
     let s = Settings::default();
-    let p = corner(90.0, 0);
-    assert_eq!(compress(&p, [0; AXES], &s).blocks, p, "G61");
-    // G64 without P (u32::MAX): blended within `g64_tolerance_nm` (1 µm by default),
-    // and not at all when that is 0.
-    let p = corner(90.0, u32::MAX);
-    let c = compress(&p, [0; AXES], &s);
-    assert_eq!(c.blocks.len(), 3, "G64: a blend");
-    let dev = deviation(&p, &c, [0; AXES]);
-    assert!(dev <= s.g64_tolerance_nm * s.fit_share, "{dev} nm");
-    let none = Settings {
-        g64_tolerance_nm: 0.0,
-        ..s
-    };
-    assert_eq!(compress(&p, [0; AXES], &none).blocks, p, "G64, 0");
+    for tol in [0, u32::MAX] {
+        let p = corner(90.0, tol);
+        assert_eq!(compress(&p, [0; AXES], &s).blocks, p, "tolerance {tol}");
+    }
     let mut p = corner(90.0, P);
     p[1].target[3] = 5_000_000; // A moves in the second
     assert_eq!(compress(&p, [0; AXES], &s).blocks, p);
