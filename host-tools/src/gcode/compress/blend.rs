@@ -12,9 +12,9 @@
 //! tolerance (`G64 P`; never `G61`, nor `G64` without P), neither moves A B C (the
 //! blend is X Y Z only), and the path turns there by more than
 //! [`Settings::blend_min_deg`]. The tolerance is the smaller P of the two, and the
-//! blend's samples, with the cut of the ticks' chords of it at its tightest bend
-//! on top ([`super::fit`]'s `tick_sag`), must lie within it. A dwell, an auxiliary function or any other block
-//! between them leaves the corner as it is.
+//! blend's samples, with the cut of the ticks' chords of it at its tightest bend on
+//! top (`fit::tick_sag`), must lie within it. A dwell, an auxiliary function or any
+//! other block between them leaves the corner as it is.
 //!
 //! **How far.** d is at most [`Settings::blend_share`] of either block's length (so the
 //! trims at both ends of a block never meet); it starts at the length where a
@@ -115,19 +115,11 @@ impl Geo {
         let Geo::Cubic(p) = self else {
             return 0.0;
         };
-        let d1 = self.deriv(u);
         let d2: V = core::array::from_fn(|i| {
             6.0 * ((1.0 - u) * (p[2][i] - 2.0 * p[1][i] + p[0][i])
                 + u * (p[3][i] - 2.0 * p[2][i] + p[1][i]))
         });
-        let cross = [
-            d1[1] * d2[2] - d1[2] * d2[1],
-            d1[2] * d2[0] - d1[0] * d2[2],
-            d1[0] * d2[1] - d1[1] * d2[0],
-        ];
-        let v = (d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]).sqrt();
-        (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt()
-            / v.powi(3).max(1e-300)
+        super::fit::curvature(&self.deriv(u), &d2).1
     }
 
     /// Cumulative arc length at u = k/STEPS.

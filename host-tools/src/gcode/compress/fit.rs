@@ -248,16 +248,7 @@ fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64>
             return None;
         }
         farthest = farthest.max(d);
-        let (d1, d2) = (deriv(c, x), deriv2(c, x));
-        let v = (d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]).sqrt();
-        let cross = [
-            d1[1] * d2[2] - d1[2] * d2[1],
-            d1[2] * d2[0] - d1[0] * d2[2],
-            d1[0] * d2[1] - d1[1] * d2[0],
-        ];
-        let bend = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt()
-            / v.powi(3).max(1e-300);
-        along.push((v, bend));
+        along.push(curvature(&deriv(c, x), &deriv2(c, x)));
     }
     // The drives move straight from one tick's pose to the next: each tick's chord of
     // the curve cuts inside it ([`tick_sag`]), which the tolerance must hold as well
@@ -291,6 +282,20 @@ fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64>
     // The curve's time: ∫ |dP/du| du / (limit · |dP/du| / max) over u in [0, 1].
     let own = vmax / limit(tightest);
     (chords_time(p, g, s) >= own).then_some(even)
+}
+
+/// |dP/du| and the bend |dP/du × d²P/du²| / |dP/du|³ (per nm) over X Y Z, from the
+/// first and second derivatives.
+pub(super) fn curvature(d1: &V, d2: &V) -> (f64, f64) {
+    let v = (d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]).sqrt();
+    let cross = [
+        d1[1] * d2[2] - d1[2] * d2[1],
+        d1[2] * d2[0] - d1[0] * d2[2],
+        d1[0] * d2[1] - d1[1] * d2[0],
+    ];
+    let bend = (cross[0] * cross[0] + cross[1] * cross[1] + cross[2] * cross[2]).sqrt()
+        / v.powi(3).max(1e-300);
+    (v, bend)
 }
 
 /// How far a tick's straight chord of a curve of bend `kappa` (per nm) cuts inside it,
