@@ -69,8 +69,8 @@ fn points(kind: &str, step: f64) -> Vec<(f64, f64)> {
     pts
 }
 
-/// The programmed curve's radius near (x, y), mm.
-fn radius(kind: &str, x: f64, _y: f64, xy: f64) -> f64 {
+/// The programmed curve's radius at X `x`, `xy` mm from the origin, mm.
+fn radius(kind: &str, x: f64, xy: f64) -> f64 {
     match kind {
         // y = 10 sin(x/15): κ = |y″| / (1 + y′²)^{3/2}.
         "sine" => {
@@ -127,7 +127,7 @@ fn steady_ratios(trace: &std::path::Path, kind: &str, accel: f64) -> Vec<f64> {
         }
         let v = (b.2 - a.2).hypot(b.3 - a.3) / (b.0 - a.0);
         let (mx, my) = ((a.2 + b.2) / 2.0, (a.3 + b.3) / 2.0);
-        let r = radius(kind, mx, my, mx.hypot(my));
+        let r = radius(kind, mx, mx.hypot(my));
         let allowed = FEED_MM_S.min((r * accel / 2.0).sqrt());
         ratios.push((v, v / allowed));
     }

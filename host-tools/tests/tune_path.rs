@@ -27,9 +27,7 @@
 //! Asserted, tuned against present:
 //! - the following error of every tuned joint: its RMS over the recording, and its
 //!   max at most the present one plus one count (the encoder's step: a single
-//!   period's extreme moves with the job's start, which the link's timing sets; over
-//!   runs, the present gains' table Y max has been 35, 57 and 84 counts, the tuned
-//!   ones' 36–37, with RMS 5.35–5.94 against 4.96–5.02);
+//!   period's extreme moves with the job's start, which the link's timing sets);
 //! - on both programs, the true contour and direction errors: max over the run and
 //!   RMS while the path moves;
 //! - on the helix, from the controller's own estimates: the contour error's RMS and
