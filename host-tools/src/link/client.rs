@@ -4,7 +4,7 @@
 use super::stall::StallGuard;
 use super::{
     Link, LinkError, LinkOptions, Transport, CONTROL_RESEND_AFTER, HELLO_RESEND_AFTER, READ_WAIT,
-    STALL_TICKS,
+    REASK_AFTER_DAMAGE, STALL_TICKS,
 };
 use pkmc::config::MachineConfig;
 use pkmc::motion::block::Block;
@@ -514,14 +514,20 @@ impl<T: Transport> Link<T> {
         start.max(self.last_gap_end)
     }
 
-    /// Asks for and waits for a fresh status.
+    /// Asks for and waits for a fresh status. The request is repeated every
+    /// keepalive; sooner (but not within [`REASK_AFTER_DAMAGE`]) once a damaged frame
+    /// has arrived since it was sent, since that frame may have been its answer: on a
+    /// noisy line a long status frame often arrives damaged, and waiting out the
+    /// keepalive after each made a finished job's last status take seconds.
     pub fn request_status(&mut self) -> Result<Status, LinkError> {
         let start = Instant::now();
         loop {
             self.queue(0, &HostMsg::StatusRequest)?;
             self.stats.status_requests += 1;
             self.flush()?;
-            let until = Instant::now() + self.opts.keepalive.max(Duration::from_millis(50));
+            let asked = Instant::now();
+            let damaged_before = self.stats.corrupt_received;
+            let until = asked + self.opts.keepalive.max(Duration::from_millis(50));
             while Instant::now() < until {
                 let msgs = self.pump(READ_WAIT)?;
                 self.absorb(&msgs);
@@ -529,6 +535,11 @@ impl<T: Transport> Link<T> {
                     if let CtrlMsg::Status(s) = m {
                         return Ok(s);
                     }
+                }
+                if self.stats.corrupt_received > damaged_before
+                    && asked.elapsed() >= REASK_AFTER_DAMAGE
+                {
+                    break;
                 }
             }
             if self.given_up(start) {

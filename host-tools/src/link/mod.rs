@@ -108,6 +108,9 @@ pub const KEEPALIVE: Duration = Duration::from_millis(100);
 pub const OWN_GAP: Duration = Duration::from_millis(500);
 /// Time after which an unacknowledged control command is sent again (same id).
 pub const CONTROL_RESEND_AFTER: Duration = Duration::from_millis(100);
+/// Shortest time after a status request before it is repeated because a damaged
+/// frame arrived (perhaps its answer); otherwise it is repeated every keepalive.
+pub const REASK_AFTER_DAMAGE: Duration = Duration::from_millis(20);
 /// Time the handshake waits for `HelloAck` before sending `Hello` again.
 pub const HELLO_RESEND_AFTER: Duration = Duration::from_millis(300);
 /// Smallest congestion window, blocks.

@@ -344,7 +344,9 @@ impl<T: Transport> Link<T> {
             fed.drop_done(job, self.status.as_ref());
             self.judge_line(job, hooks);
             self.resend_if_late(job);
-            if self.last_heard.elapsed() > self.opts.link_timeout {
+            // Lost by the same rule as a request: silent for the link timeout, or,
+            // while damaged frames keep arriving, ten times it.
+            if self.given_up(self.last_heard) {
                 return Err(self.lost(
                     if job.acked < total {
                         "streaming blocks"
