@@ -18,6 +18,10 @@ const TICK_S: f64 = 1.0 / pkmc::units::TICK_HZ as f64;
 pub(super) struct Goal {
     pub(super) tol: f64,
     pub(super) speed: f64,
+    /// The tool's speed over the path speed where the curve starts: the end of the
+    /// curve before it (|dP/du| there over its largest), 1 after a line or at a run's
+    /// start.
+    pub(super) lead_ratio: f64,
 }
 
 fn bernstein(u: f64) -> [f64; 4] {
@@ -64,9 +68,12 @@ fn chord_params(p: &[V]) -> Option<(Vec<f64>, f64)> {
 
 /// The cubic through `p[0]` and `p[last]` along `t0` and `t1` that fits the points
 /// between, or `None` when no such cubic stays within `tol` (see the module doc).
-/// Two are tried: the least-squares fit, and the one whose end speeds are the
-/// polyline's length (a near-uniform parameter, which a least-squares fit over few
-/// points may miss). Returns the two inner control points.
+/// Tried: the least-squares fit, the one whose end speeds are the polyline's length
+/// (a near-uniform parameter, which a least-squares fit over few points may miss),
+/// blends of the two, and, where one of those fits, the least-squares fit with its
+/// handles evened or lengthened ([`handle_variants`]); of those within the tolerance,
+/// the one that runs most evenly ([`accept`]'s score, junctions included). Returns
+/// the two inner control points.
 pub(super) fn fit(p: &[V], t0: &V, t1: &V, g: &Goal, s: &Settings) -> Option<(V, V)> {
     let n = p.len() - 1;
     let (u, total) = chord_params(p)?;
@@ -84,15 +91,27 @@ pub(super) fn fit(p: &[V], t0: &V, t1: &V, g: &Goal, s: &Settings) -> Option<(V,
     let (p0, p3) = (p[0], p[n]);
     let (al, be) = (norm(&sub(&c[1], &p0)), norm(&sub(&p3, &c[2])));
     let mut best: Option<(f64, V, V)> = None;
-    for w in [0.0, 0.25, 0.5, 0.75, 1.0] {
-        let (a, b) = (al + w * (total / 3.0 - al), be + w * (total / 3.0 - be));
+    let blends = [0.0, 0.25, 0.5, 0.75, 1.0]
+        .map(|w| (al + w * (total / 3.0 - al), be + w * (total / 3.0 - be)));
+    for (k, (a, b)) in blends
+        .into_iter()
+        .chain(handle_variants(al, be))
+        .enumerate()
+    {
+        // The variants only improve a curve the blends found: where none fits, the
+        // curve ends sooner, as before (a variant reaching further than any blend
+        // would run slower, and merge fewer moves per curve elsewhere).
+        if k == blends.len() && best.is_none() {
+            break;
+        }
         let c = [
             p0,
             core::array::from_fn(|i| p0[i] + a * t0[i]),
             core::array::from_fn(|i| p3[i] - b * t1[i]),
             p3,
         ];
-        let mut v = if w == 0.0 { uu.clone() } else { u.clone() };
+        // The least-squares fit starts from its own refined parameters.
+        let mut v = if k == 0 { uu.clone() } else { u.clone() };
         for _ in 0..2 {
             for k in 1..n {
                 v[k] = newton(&c, &p[k], v[k]);
@@ -209,16 +228,59 @@ pub(super) fn fit_free(p: &[V], t0: Option<&V>, g: &Goal, s: &Settings) -> Optio
     if dot(&sub(&p3, &c[2]), &chord) <= 0.0 || dot(&sub(&c[1], &p0), &chord) <= 0.0 {
         return None;
     }
-    accept(&c, p, &u, g, s).map(|_| (c[1], c[2]))
+    // The least-squares fit; where it fits, the same with its handles evened or
+    // lengthened too: of those within the tolerance, the one that runs most evenly.
+    let mut best = accept(&c, p, &u, g, s).map(|e| (e, c[1], c[2]));
+    let (d0, d1) = (sub(&c[1], &p0), sub(&p3, &c[2]));
+    let (al, be) = (norm(&d0), norm(&d1));
+    if al > 0.0 && be > 0.0 && best.is_some() {
+        let (t0, t1) = (unit(&d0), unit(&d1));
+        for (a, b) in handle_variants(al, be) {
+            let c = [
+                p0,
+                core::array::from_fn(|i| p0[i] + a * t0[i]),
+                core::array::from_fn(|i| p3[i] - b * t1[i]),
+                p3,
+            ];
+            let mut v = u.clone();
+            for _ in 0..2 {
+                for k in 1..n {
+                    v[k] = newton(&c, &p[k], v[k]);
+                }
+            }
+            if let Some(e) = accept(&c, p, &v, g, s) {
+                if best.as_ref().is_none_or(|b| e > b.0) {
+                    best = Some((e, c[1], c[2]));
+                }
+            }
+        }
+    }
+    best.map(|(_, c1, c2)| (c1, c2))
+}
+
+/// Handle lengths to try beside a fit's own `al` and `be` (along its end tangents):
+/// both the longer one, both their mean, and those lengthened by 5 and 10 %. Longer
+/// and equal handles bring a curve's speed at its ends up to its largest, which is
+/// what a neighbour's end meets ([`accept`]).
+fn handle_variants(al: f64, be: f64) -> [(f64, f64); 6] {
+    let (m, h) = (al.max(be), (al + be) / 2.0);
+    [
+        (m, m),
+        (h, h),
+        (al * 1.05, be * 1.05),
+        (al * 1.1, be * 1.1),
+        (h * 1.05, h * 1.05),
+        (h * 1.1, h * 1.1),
+    ]
 }
 
 /// Does the cubic `c` follow the points `p` (parameters `u`) within the tolerance,
 /// and run about as fast as the chords would? The controller runs a block at one speed
 /// limit, from its tightest bend, and the parameter at a uniform rate (the tool is
 /// slower where |dP/du| is below its largest): the curve's time at that speed is
-/// compared with the time at each point's own limit, min(feed, √(a/(2κ))) (the
-/// planner gives a bend at most half the acceleration), and must be within
-/// [`Settings::efficiency`] of it.
+/// compared with the chords' own ([`chords_time`]), and must be no longer, for a
+/// curve that turns more than [`Settings::max_turn_deg`]. Its score, when it passes: the slowest |dP/du| over
+/// the largest, times what its ends let the junctions keep ([`junction_share`]).
 fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64> {
     let n = p.len() - 1;
     let tol = g.tol;
@@ -263,6 +325,12 @@ fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64>
     if vmax <= 0.0 || even < s.min_speed_ratio {
         return None;
     }
+    // The score: how evenly the curve runs, times what its ends let the junctions
+    // keep ([`junction_share`]): it starts at the end of the curve before it, and ends
+    // at its largest speed (what a line, or the next curve's best start, has).
+    let even = even
+        * junction_share(along[0].0 / vmax - g.lead_ratio, g, s)
+        * junction_share(1.0 - along[samples].0 / vmax, g, s);
     if g.speed <= 0.0 || s.accel <= 0.0 || n < WEIGH_FROM {
         return Some(even);
     }
@@ -282,6 +350,34 @@ fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64>
     // The curve's time: ∫ |dP/du| du / (limit · |dP/du| / max) over u in [0, 1].
     let own = vmax / limit(tightest);
     (chords_time(p, g, s) >= own).then_some(even)
+}
+
+/// The share of the speed asked for that a junction where the tool's speed over the
+/// path speed jumps by `jump` allows. The controller runs a curve's parameter at one
+/// rate, the tool at |dP/du| over its largest times the path speed, so where two
+/// curves meet along one direction the tool's speed jumps by the difference of their
+/// ends' ratios, which the planner limits as a turn, with at most half the
+/// acceleration in one tick: v·|jump| ≤ a·T/2. A jump of 1 % holds a junction to
+/// 50 mm/s at 1000 mm/s² (the dense spiral of `G64 P0.01` had 1–4 % at each). 1 when
+/// the machine's figures are not known.
+fn junction_share(jump: f64, g: &Goal, s: &Settings) -> f64 {
+    let jump = jump.abs();
+    if g.speed <= 0.0 || s.accel <= 0.0 || jump <= 0.0 {
+        return 1.0;
+    }
+    (s.accel * TICK_S / 2.0 / (g.speed * jump)).min(1.0)
+}
+
+/// The ratio of |dP/du| at the end of `c` to its largest, over X Y Z (sampled as the
+/// host's length is, [`pkmc::motion::geometry::spline::host_length`]'s grid).
+pub(super) fn end_ratio(c: &[V; 4]) -> f64 {
+    let speed = |u: f64| curvature(&deriv(c, u), &[0.0; AXES]).0;
+    let top = (0..=64).map(|k| speed(k as f64 / 64.0)).fold(0.0, f64::max);
+    if top > 0.0 {
+        speed(1.0) / top
+    } else {
+        1.0
+    }
 }
 
 /// |dP/du| and the bend |dP/du × d²P/du²| / |dP/du|³ (per nm) over X Y Z, from the

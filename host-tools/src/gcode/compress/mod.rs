@@ -31,7 +31,11 @@
 //! its turn allows in one tick and its bend allows, from the machine's smallest X Y Z
 //! acceleration, [`Settings::accel`]): dense chords of a gentle curve, which already
 //! run fast, are merged into curves of a few degrees each; coarse chords, which stop
-//! at every vertex, into long ones.
+//! at every vertex, into long ones. Of the fits within the tolerance that reach as far,
+//! the one kept runs most evenly, and starts at the speed the curve before it ends at
+//! and ends at its own largest |dP/du|: where two curves meet along one direction,
+//! the tool's speed jumps by the difference of their ends' shares of the path speed,
+//! which the planner limits as it limits a turn.
 //!
 //! **Corners.** Once the runs are curves, each corner between two feed moves (lines or
 //! curves) within `G64 P` that move X Y Z only is rounded by a cubic blend, tangent
@@ -254,6 +258,7 @@ pub fn compress_runs(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Comp
         let goal = Goal {
             tol: merge_tolerance(b, s).unwrap_or(0.0) * s.fit_share,
             speed,
+            lead_ratio: 1.0,
         };
         fit_run(&blocks[i..j], i, &pts, &goal, s, &mut out);
         pose = blocks[j - 1].target;
@@ -366,6 +371,9 @@ fn fit_run(run: &[Block], first: usize, pts: &[V], g: &Goal, s: &Settings, out: 
     let m = pts.len() - 1;
     let t = tangents(pts, g.tol * s.tangent_reach);
     let mut lead: Option<V> = None;
+    let mut g = *g;
+    g.lead_ratio = 1.0;
+    let g = &mut g;
     let mut a = 0;
     while a < m {
         let mut found = farthest(pts, &t, a, lead.as_ref(), g, s);
@@ -398,12 +406,14 @@ fn fit_run(run: &[Block], first: usize, pts: &[V], g: &Goal, s: &Settings, out: 
                 });
                 out.source.push(first + a..first + b);
                 lead = Some(unit(&sub(&target, &c2)));
+                g.lead_ratio = fit::end_ratio(&[*start, c1, c2, target]);
                 a = b;
             }
             None => {
                 out.blocks.push(run[a]);
                 out.source.push(first + a..first + a + 1);
                 lead = Some(unit(&sub(&pts[a + 1], &pts[a])));
+                g.lead_ratio = 1.0;
                 a += 1;
             }
         }

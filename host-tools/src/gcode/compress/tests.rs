@@ -38,7 +38,12 @@ fn sine(chord: f64, len: f64, tol: u32) -> Vec<Block> {
 /// Largest distance of the curves (sampled finely, exactly as the core evaluates
 /// them) from the input polyline, mm.
 fn deviation(input: &[Block], c: &Compressed) -> f64 {
-    let mut pose = [0i64; AXES];
+    deviation_from(input, [0; AXES], c)
+}
+
+/// [`deviation`] of curves that start at `start`.
+fn deviation_from(input: &[Block], start: [i64; AXES], c: &Compressed) -> f64 {
+    let mut pose = start;
     let mut worst = 0.0f64;
     for (b, src) in c.blocks.iter().zip(&c.source) {
         let mut poly = vec![to_fit(&pose)];
@@ -149,4 +154,58 @@ fn g64_without_p_merges_within_its_own_tolerance_and_g61_never() {
     assert_eq!(compress(&input, [0; AXES], &off).blocks, input);
     let exact = sine(0.05, 10.0, 0);
     assert_eq!(compress(&exact, [0; AXES], &s).blocks, exact);
+}
+
+/// The dense curve of issue 34 that found it: an Archimedean spiral (radius 5 to
+/// 25 mm over four turns) of 0.1 mm chords at F6000 in `G64 P0.01`, merged with
+/// cartesian-xyz's figures. Where two of its curves meet, the planner's corner limit
+/// is the slower block's own limit: the tool's speed does not jump there. When each
+/// curve was the most even fit alone, its end ran at 0.96–0.99 of its largest |dP/du|
+/// while the next began at 1, and the corners held the inner turns to 13–60 mm/s
+/// against limits of 47–100 mm/s.
+#[test]
+fn where_two_curves_of_a_spiral_meet_the_tool_speed_does_not_jump() {
+    use pkmc::motion::planner::{plan_into, PlanBlock};
+    let machine = pkmc::config::MachineConfig::cartesian_xyz();
+    let kin = pkmc::kinematics::MachineKinematics::new(&machine);
+    let pitch = 20.0 / (8.0 * std::f64::consts::PI);
+    let mut input = Vec::new();
+    let mut th = 0.0f64;
+    while 5.0 + pitch * th <= 25.0 {
+        let r = 5.0 + pitch * th;
+        let mut b = line(r * th.cos(), r * th.sin(), input.len() as u32 + 1, 10_000);
+        b.feed = 100_000_000;
+        input.push(b);
+        th += 0.1 / r.hypot(pitch);
+    }
+    let start = input[0].target;
+    let s = crate::job::compress_for_machine(&Settings::default(), &machine);
+    let c = compress(&input[1..], start, &s);
+    assert!(
+        c.blocks.len() * 50 <= input.len(),
+        "{} blocks",
+        c.blocks.len()
+    );
+    assert!(deviation_from(&input[1..], start, &c) <= 0.010);
+    let smoothing = pkmc::motion::interp::window_of(machine.motion.smoothing_ticks as u32);
+    let mut plan = vec![PlanBlock::default(); c.blocks.len()];
+    plan_into(&c.blocks, start, &machine, &kin, smoothing, &mut plan).unwrap();
+    let curve = |b: &PlanBlock| matches!(b.path.bend, pkmc::motion::geometry::Bend::Spline(_));
+    let mut junctions = 0;
+    for w in plan.windows(2) {
+        if !(curve(&w[0]) && curve(&w[1])) {
+            continue;
+        }
+        junctions += 1;
+        let slower = w[0].v_limit.min(w[1].v_limit);
+        assert!(
+            w[1].corner >= 0.99 * slower,
+            "line {}: corner {} mm/s, limits {} and {} mm/s",
+            w[1].line,
+            w[1].corner * 1e-3,
+            w[0].v_limit * 1e-3,
+            w[1].v_limit * 1e-3
+        );
+    }
+    assert!(junctions >= 10, "{junctions} junctions");
 }
