@@ -230,32 +230,51 @@ pub(super) fn fit_free(p: &[V], t0: Option<&V>, g: &Goal, s: &Settings) -> Optio
     }
     // The least-squares fit; where it fits, the same with its handles evened or
     // lengthened too: of those within the tolerance, the one that runs most evenly.
-    let mut best = accept(&c, p, &u, g, s).map(|e| (e, c[1], c[2]));
+    let best = accept(&c, p, &u, g, s).map(|e| (e, c[1], c[2]));
+    improve(&c, p, &u, g, s, best).map(|(_, c1, c2)| (c1, c2))
+}
+
+/// `best` (the score and inner control points of the fit kept so far) or a better one
+/// among `c`'s [`handle_variants`] along its own end tangents, its points' parameters
+/// starting from `u`. Only a fit already found is improved: a variant that reached
+/// further than any other fit would run slower, and merge fewer moves per curve
+/// elsewhere.
+fn improve(
+    c: &[V; 4],
+    p: &[V],
+    u: &[f64],
+    g: &Goal,
+    s: &Settings,
+    mut best: Option<(f64, V, V)>,
+) -> Option<(f64, V, V)> {
+    let n = p.len() - 1;
+    let (p0, p3) = (c[0], c[3]);
     let (d0, d1) = (sub(&c[1], &p0), sub(&p3, &c[2]));
     let (al, be) = (norm(&d0), norm(&d1));
-    if al > 0.0 && be > 0.0 && best.is_some() {
-        let (t0, t1) = (unit(&d0), unit(&d1));
-        for (a, b) in handle_variants(al, be) {
-            let c = [
-                p0,
-                core::array::from_fn(|i| p0[i] + a * t0[i]),
-                core::array::from_fn(|i| p3[i] - b * t1[i]),
-                p3,
-            ];
-            let mut v = u.clone();
-            for _ in 0..2 {
-                for k in 1..n {
-                    v[k] = newton(&c, &p[k], v[k]);
-                }
+    if best.is_none() || al <= 0.0 || be <= 0.0 {
+        return best;
+    }
+    let (t0, t1) = (unit(&d0), unit(&d1));
+    for (a, b) in handle_variants(al, be) {
+        let c = [
+            p0,
+            core::array::from_fn(|i| p0[i] + a * t0[i]),
+            core::array::from_fn(|i| p3[i] - b * t1[i]),
+            p3,
+        ];
+        let mut v = u.to_vec();
+        for _ in 0..2 {
+            for k in 1..n {
+                v[k] = newton(&c, &p[k], v[k]);
             }
-            if let Some(e) = accept(&c, p, &v, g, s) {
-                if best.as_ref().is_none_or(|b| e > b.0) {
-                    best = Some((e, c[1], c[2]));
-                }
+        }
+        if let Some(e) = accept(&c, p, &v, g, s) {
+            if best.as_ref().is_none_or(|b| e > b.0) {
+                best = Some((e, c[1], c[2]));
             }
         }
     }
-    best.map(|(_, c1, c2)| (c1, c2))
+    best
 }
 
 /// Handle lengths to try beside a fit's own `al` and `be` (along its end tangents):

@@ -179,7 +179,14 @@ fn where_two_curves_of_a_spiral_meet_the_tool_speed_does_not_jump() {
         th += 0.1 / r.hypot(pitch);
     }
     let start = input[0].target;
-    let s = crate::job::compress_for_machine(&Settings::default(), &machine);
+    // cartesian-xyz's figures, as `job::compress_for_machine` gives them: 1000 mm/s²
+    // and 100 mm/s on each axis, bends up to ⅔ of the X Y Z accelerations' norm.
+    let s = Settings {
+        accel: 1e9,
+        max_speed: 1e8,
+        bend_accel: 1e9 * 3f64.sqrt() * 2.0 / 3.0,
+        ..Settings::default()
+    };
     let c = compress(&input[1..], start, &s);
     assert!(
         c.blocks.len() * 50 <= input.len(),
