@@ -93,36 +93,12 @@ pub(super) fn fit(p: &[V], t0: &V, t1: &V, g: &Goal, s: &Settings) -> Option<(V,
     let mut best: Option<(f64, V, V)> = None;
     let blends = [0.0, 0.25, 0.5, 0.75, 1.0]
         .map(|w| (al + w * (total / 3.0 - al), be + w * (total / 3.0 - be)));
-    for (k, (a, b)) in blends
-        .into_iter()
-        .chain(handle_variants(al, be))
-        .enumerate()
-    {
-        // The variants only improve a curve the blends found: where none fits, the
-        // curve ends sooner, as before (a variant reaching further than any blend
-        // would run slower, and merge fewer moves per curve elsewhere).
-        if k == blends.len() && best.is_none() {
-            break;
-        }
-        let c = [
-            p0,
-            core::array::from_fn(|i| p0[i] + a * t0[i]),
-            core::array::from_fn(|i| p3[i] - b * t1[i]),
-            p3,
-        ];
+    for (k, (a, b)) in blends.into_iter().enumerate() {
         // The least-squares fit starts from its own refined parameters.
-        let mut v = if k == 0 { uu.clone() } else { u.clone() };
-        for _ in 0..2 {
-            for k in 1..n {
-                v[k] = newton(&c, &p[k], v[k]);
-            }
-        }
-        if let Some(even) = accept(&c, p, &v, g, s) {
-            if best.as_ref().is_none_or(|b| even > b.0) {
-                best = Some((even, c[1], c[2]));
-            }
-        }
+        let start = if k == 0 { &uu } else { &u };
+        consider(&along(p0, p3, t0, t1, a, b), p, start, g, s, &mut best);
     }
+    let best = improve((p0, p3), (t0, t1), (al, be), p, &u, g, s, best);
     best.map(|(_, c1, c2)| (c1, c2))
 }
 
@@ -230,51 +206,73 @@ pub(super) fn fit_free(p: &[V], t0: Option<&V>, g: &Goal, s: &Settings) -> Optio
     }
     // The least-squares fit; where it fits, the same with its handles evened or
     // lengthened too: of those within the tolerance, the one that runs most evenly.
-    let best = accept(&c, p, &u, g, s).map(|e| (e, c[1], c[2]));
-    improve(&c, p, &u, g, s, best).map(|(_, c1, c2)| (c1, c2))
+    let mut best = accept(&c, p, &u, g, s).map(|e| (e, c[1], c[2]));
+    let (d0, d1) = (sub(&c[1], &p0), sub(&p3, &c[2]));
+    let (al, be) = (norm(&d0), norm(&d1));
+    if al > 0.0 && be > 0.0 {
+        let tangents = (&unit(&d0), &unit(&d1));
+        best = improve((p0, p3), tangents, (al, be), p, &u, g, s, best);
+    }
+    best.map(|(_, c1, c2)| (c1, c2))
 }
 
 /// `best` (the score and inner control points of the fit kept so far) or a better one
-/// among `c`'s [`handle_variants`] along its own end tangents, its points' parameters
-/// starting from `u`. Only a fit already found is improved: a variant that reached
-/// further than any other fit would run slower, and merge fewer moves per curve
-/// elsewhere.
+/// among the [`handle_variants`] of handles `al` and `be` along the end tangents
+/// `t0` and `t1` from `p0` to `p3`, the points' parameters starting from `u`. Only a
+/// fit already found is improved: where none fits, the curve ends sooner, as it would
+/// without the variants (one that reached further than any other fit would run
+/// slower, and merge fewer moves per curve elsewhere).
+#[allow(clippy::too_many_arguments)]
 fn improve(
-    c: &[V; 4],
+    (p0, p3): (V, V),
+    (t0, t1): (&V, &V),
+    (al, be): (f64, f64),
     p: &[V],
     u: &[f64],
     g: &Goal,
     s: &Settings,
     mut best: Option<(f64, V, V)>,
 ) -> Option<(f64, V, V)> {
-    let n = p.len() - 1;
-    let (p0, p3) = (c[0], c[3]);
-    let (d0, d1) = (sub(&c[1], &p0), sub(&p3, &c[2]));
-    let (al, be) = (norm(&d0), norm(&d1));
-    if best.is_none() || al <= 0.0 || be <= 0.0 {
-        return best;
-    }
-    let (t0, t1) = (unit(&d0), unit(&d1));
-    for (a, b) in handle_variants(al, be) {
-        let c = [
-            p0,
-            core::array::from_fn(|i| p0[i] + a * t0[i]),
-            core::array::from_fn(|i| p3[i] - b * t1[i]),
-            p3,
-        ];
-        let mut v = u.to_vec();
-        for _ in 0..2 {
-            for k in 1..n {
-                v[k] = newton(&c, &p[k], v[k]);
-            }
-        }
-        if let Some(e) = accept(&c, p, &v, g, s) {
-            if best.as_ref().is_none_or(|b| e > b.0) {
-                best = Some((e, c[1], c[2]));
-            }
+    if best.is_some() {
+        for (a, b) in handle_variants(al, be) {
+            consider(&along(p0, p3, t0, t1, a, b), p, u, g, s, &mut best);
         }
     }
     best
+}
+
+/// The cubic from `p0` to `p3` leaving along `t0` with handle `a` and arriving along
+/// `t1` with handle `b`.
+fn along(p0: V, p3: V, t0: &V, t1: &V, a: f64, b: f64) -> [V; 4] {
+    [
+        p0,
+        core::array::from_fn(|i| p0[i] + a * t0[i]),
+        core::array::from_fn(|i| p3[i] - b * t1[i]),
+        p3,
+    ]
+}
+
+/// Keeps `c` in `best` when it passes [`accept`] with a higher score, its points'
+/// parameters refined by two Newton steps from `start`.
+fn consider(
+    c: &[V; 4],
+    p: &[V],
+    start: &[f64],
+    g: &Goal,
+    s: &Settings,
+    best: &mut Option<(f64, V, V)>,
+) {
+    let mut v = start.to_vec();
+    for _ in 0..2 {
+        for k in 1..p.len() - 1 {
+            v[k] = newton(c, &p[k], v[k]);
+        }
+    }
+    if let Some(e) = accept(c, p, &v, g, s) {
+        if best.as_ref().is_none_or(|b| e > b.0) {
+            *best = Some((e, c[1], c[2]));
+        }
+    }
 }
 
 /// Handle lengths to try beside a fit's own `al` and `be` (along its end tangents):
@@ -485,12 +483,7 @@ fn lengths(p: &[V], u: &[f64], t0: &V, t1: &V, chord: f64) -> [V; 4] {
         al = chord / 3.0;
         be = chord / 3.0;
     }
-    [
-        p0,
-        core::array::from_fn(|i| p0[i] + al * t0[i]),
-        core::array::from_fn(|i| p3[i] - be * t1[i]),
-        p3,
-    ]
+    along(p0, p3, t0, t1, al, be)
 }
 
 /// One Newton step for the parameter of the curve point nearest `q`, kept in [0, 1].

@@ -371,9 +371,8 @@ fn fit_run(run: &[Block], first: usize, pts: &[V], g: &Goal, s: &Settings, out: 
     let m = pts.len() - 1;
     let t = tangents(pts, g.tol * s.tangent_reach);
     let mut lead: Option<V> = None;
-    let mut g = *g;
-    g.lead_ratio = 1.0;
-    let g = &mut g;
+    // Each curve's lead ratio is the end of the one before it.
+    let g = &mut { *g };
     let mut a = 0;
     while a < m {
         let mut found = farthest(pts, &t, a, lead.as_ref(), g, s);
