@@ -17,8 +17,8 @@
 //!
 //! Until session 25 the `G64 P0.01` rows on cartesian-xyz were printed, not asserted:
 //! within 10 µm the chords merge into long curves, and where two of them met the
-//! tool's speed jumped by 1–4 % (each curve's end at 0.96–0.99 of its largest |dP/du|,
-//! the next one's start at 1), which the planner limits as a turn. The spiral of
+//! tool's speed jumped (a curve's end below its largest |dP/du|, the next one's start
+//! at it), which the planner limits as a turn. The spiral of
 //! 0.1 mm chords kept 0.86 of what the limits allow (0.73 of the feed). The compressor
 //! now matches the curves' ends (`gcode::compress`), and every row is asserted; the
 //! closest is the circle of 0.1 mm chords in `G64 P0.01` on cartesian-xyz, at a

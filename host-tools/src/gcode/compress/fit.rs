@@ -375,7 +375,7 @@ fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64>
 /// curves meet along one direction the tool's speed jumps by the difference of their
 /// ends' ratios, which the planner limits as a turn, with at most half the
 /// acceleration in one tick: v·|jump| ≤ a·T/2. A jump of 1 % holds a junction to
-/// 50 mm/s at 1000 mm/s² (the dense spiral of `G64 P0.01` had 1–4 % at each). 1 when
+/// 50 mm/s at 1000 mm/s². 1 when
 /// the machine's figures are not known.
 fn junction_share(jump: f64, g: &Goal, s: &Settings) -> f64 {
     let jump = jump.abs();
