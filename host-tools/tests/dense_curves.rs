@@ -24,6 +24,13 @@
 //! closest is the circle of 0.1 mm chords in `G64 P0.01` on cartesian-xyz, at a
 //! median of 0.954 in session 25.
 //!
+//! On cartesian-xyz, whose axes are its joints, no axis may accelerate by more than
+//! its 1000 mm/s² from one tick to the next (the second difference of the commanded
+//! pose, with 1 % and a nanometre's rounding): since session 26 a curve runs faster
+//! away from its tightest bend, under each stretch's own limit. The same check finds
+//! that before session 26 the sine of 0.1 mm chords in `G64` ended its last block at
+//! 81 mm/s and stopped within two ticks (39 000 mm/s²).
+//!
 //! The runs stream in real time, one after another (side by side they would starve
 //! each other's queues). `perf/dense_curves.py` prints the same figures as a table.
 
@@ -98,6 +105,32 @@ fn program(pts: &[(f64, f64)], z: f64, mode: &str) -> String {
         p += &format!("G1 X{x:.4} Y{y:.4}\n");
     }
     p + "M2\n"
+}
+
+/// The largest acceleration of the X and Y axes from one tick to the next over a
+/// trace, mm/s², and the tick where it is.
+fn largest_axis_accel(trace: &std::path::Path) -> (f64, usize) {
+    let text = std::fs::read_to_string(trace).unwrap();
+    let mut lines = text.lines();
+    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| head.iter().position(|h| *h == name).unwrap();
+    let (x, y) = (col("x"), col("y"));
+    let poses: Vec<[f64; 2]> = lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            [f[x].parse().unwrap(), f[y].parse().unwrap()]
+        })
+        .collect();
+    let mut worst = (0.0, 0);
+    for (k, w) in poses.windows(3).enumerate() {
+        for ((p0, p1), p2) in w[0].iter().zip(&w[1]).zip(&w[2]) {
+            let a = (p2 - 2.0 * p1 + p0).abs() / 1e-6;
+            if a > worst.0 {
+                worst = (a, k + 1);
+            }
+        }
+    }
+    worst
 }
 
 /// Per tick of the steady middle: the path speed over what the limits allow there.
@@ -189,6 +222,15 @@ fn dense_curves_keep_the_feed_where_the_limits_allow_it_through_the_real_link() 
                     );
                     if r["result"] != "done" || r["drive_violations"] != 0 {
                         failures.push(format!("{name}: {r}"));
+                    }
+                    if *mname == "cartesian-xyz" {
+                        let (a, tick) = largest_axis_accel(&trace);
+                        // 1 %, and 1 nm of rounding over a tick² (1000 mm/s²).
+                        if a > accel * 1.01 + 1000.0 {
+                            failures.push(format!(
+                                "{name}: an axis accelerates at {a:.0} mm/s² at tick {tick}"
+                            ));
+                        }
                     }
                     if dev > tol {
                         failures.push(format!("{name}: deviation {dev} mm > {tol} mm"));

@@ -117,7 +117,15 @@ impl Plans {
         let frozen = frozen.min(self.work.len()).max(self.work.base());
         let base = self.work.base();
         let work = self.work.kept_mut();
-        replan_from(work, frozen - base, self.base_start, machine, kin, alive);
+        replan_from(
+            work,
+            frozen - base,
+            self.base_start,
+            self.la.smoothing,
+            machine,
+            kin,
+            alive,
+        );
         for (k, p) in self.work.kept().iter().enumerate().skip(frozen - base) {
             self.planned[base + k].plan = p.plan();
         }

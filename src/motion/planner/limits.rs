@@ -69,8 +69,14 @@ pub(super) fn limits_along(
     bend_speed: Option<f32>,
     machine: &MachineConfig,
     kin: &MachineKinematics,
-) -> Result<(f32, f32), Unreachable> {
+) -> Result<Limits, Unreachable> {
     let (mut v, mut a) = (f32::INFINITY, f32::INFINITY);
+    // On a spline, the bend's limits stay where they are along it: each joint's
+    // terms per sample, each axis's per stretch, combined into `bend` below once the
+    // acceleration is known.
+    let spline = path.form == Form::Spline;
+    let mut at_sample = [[Term::NONE; MAX_JOINTS]; SPLINE_SAMPLES];
+    let mut per_stretch = [[Term::NONE; AXES]; STRETCHES];
     let n = machine.joints.len();
     let len = path.length << 16;
     // The speed a bend's share of the acceleration is sized for: the requested one,
@@ -131,7 +137,20 @@ pub(super) fn limits_along(
             if d1 > 1e-12 {
                 v = v.min(vmax / d1);
             }
-            split(&mut v, &mut a, bend_feed, d1, d2, amax, bend_most);
+            if let Some(terms) = at_sample.get_mut(k).filter(|_| spline) {
+                // The share is chosen as on other blocks; the speed it allows is
+                // found below, where the bend is.
+                let mut speed = v;
+                let share = split(&mut speed, &mut a, bend_feed, d1, d2, amax, bend_most);
+                terms[j] = Term {
+                    d1,
+                    d2,
+                    amax,
+                    share,
+                };
+            } else {
+                split(&mut v, &mut a, bend_feed, d1, d2, amax, bend_most);
+            }
         }
     }
     if let Some(r) = path.radius() {
@@ -141,30 +160,251 @@ pub(super) fn limits_along(
         v = v.min(crate::math::sqrtf(a * r as f32));
     }
     if let crate::motion::geometry::Bend::Spline(c) = &path.bend {
-        // An axis moves at x′·v and accelerates at x′·a + x″·v², with x′ and x″ its
-        // exact largest first and second derivatives along the curve: half of its
-        // acceleration for each term, as for joints.
-        let (d1, d2) = path.course.spline_bounds(c);
-        for i in 0..AXES {
-            let l = &machine.axes[i];
-            if d1[i] > 1e-12 && l.max_velocity > 0 {
-                v = v.min(per_tick(l.max_velocity) / d1[i]);
-            }
-            if l.max_accel > 0 {
-                split(
-                    &mut v,
-                    &mut a,
-                    bend_feed,
-                    d1[i],
-                    d2[i],
-                    per_tick2(l.max_accel),
-                    bend_most,
-                );
-            }
+        (v, a) = spline_axes(path, c, bend_feed, machine, (v, a), &mut per_stretch);
+    }
+    let bend = if spline {
+        bend_limits(a, &at_sample[..], n, &per_stretch)
+    } else {
+        [f32::INFINITY; STRETCHES]
+    };
+    // Single-precision planning rounds to about 10⁻⁷: stay that far inside.
+    Ok(Limits {
+        v: v * LIMIT_MARGIN,
+        a: a * LIMIT_MARGIN,
+        bend: bend.map(|b| b * LIMIT_MARGIN),
+    })
+}
+
+/// A spline's limits `(v, a)` lowered for its pose axes, and their [`Term`]s over each
+/// stretch into `per_stretch`. An axis moves at x′·v and accelerates at x′·a + x″·v²,
+/// with x′ and x″ its exact largest first and second derivatives along the curve: the
+/// share of its acceleration its bend needs at `bend_feed`, at most
+/// [`SPLINE_BEND_SHARE`], is taken from the profile's, as for joints.
+fn spline_axes(
+    path: &Path,
+    curve: &crate::motion::geometry::Curve,
+    bend_feed: f32,
+    machine: &MachineConfig,
+    (mut v, mut a): (f32, f32),
+    per_stretch: &mut [[Term; AXES]; STRETCHES],
+) -> (f32, f32) {
+    let (d1, d2) = path.course.spline_bounds(curve);
+    let mut shares = [0f32; AXES];
+    for (i, l) in machine.axes.iter().enumerate() {
+        if d1[i] > 1e-12 && l.max_velocity > 0 {
+            v = v.min(per_tick(l.max_velocity) / d1[i]);
+        }
+        if l.max_accel > 0 {
+            let mut speed = v;
+            let amax = per_tick2(l.max_accel);
+            shares[i] = split(
+                &mut speed,
+                &mut a,
+                bend_feed,
+                d1[i],
+                d2[i],
+                amax,
+                SPLINE_BEND_SHARE,
+            );
         }
     }
-    // Single-precision planning rounds to about 10⁻⁷: stay that far inside.
-    Ok((v * LIMIT_MARGIN, a * LIMIT_MARGIN))
+    axis_terms(path, &d1, &shares, machine, per_stretch);
+    (v, a)
+}
+
+/// A bend's part in an axis's or a joint's acceleration over a stretch of a spline:
+/// |x′| ≤ `d1` and |x″| ≤ `d2` there, of a budget `amax` (nm/tick²), of which the
+/// share `share` was set aside for the bend ([`split`]).
+#[derive(Clone, Copy, Debug)]
+struct Term {
+    d1: f32,
+    d2: f32,
+    amax: f32,
+    share: f32,
+}
+
+impl Term {
+    const NONE: Term = Term {
+        d1: 0.0,
+        d2: 0.0,
+        amax: 0.0,
+        share: 0.0,
+    };
+}
+
+/// Each pose axis's [`Term`] over each stretch of a spline. Along a cubic x″ is linear
+/// in the parameter, so its largest over a stretch is at one of the stretch's ends;
+/// x′ is a quadratic, within the larger of its ends' values and the gap between its
+/// middle and their mean (q = line + 4·δ·t(1 − t), 4t(1 − t) ≤ 1), and within its
+/// largest along the whole curve, `d1`.
+fn axis_terms(
+    path: &Path,
+    d1: &[f32; AXES],
+    shares: &[f32; AXES],
+    machine: &MachineConfig,
+    out: &mut [[Term; AXES]; STRETCHES],
+) {
+    let len = path.length << 16;
+    let at = |k2: usize| (len as i128 * k2 as i128 / (2 * STRETCHES) as i128) as i64;
+    for (k, terms) in out.iter_mut().enumerate() {
+        let (s0, sm, s1) = (at(2 * k), at(2 * k + 1), at(2 * k + 2));
+        let (b0, b1) = (path.bend_at(s0), path.bend_at(s1));
+        let (t0, tm, t1) = (
+            path.tangent_at(s0),
+            path.tangent_at(sm),
+            path.tangent_at(s1),
+        );
+        for i in 0..AXES {
+            let l = &machine.axes[i];
+            if l.max_accel <= 0 {
+                continue;
+            }
+            let gap = (tm[i] - (t0[i] + t1[i]) / 2.0).abs();
+            terms[i] = Term {
+                d1: (t0[i].abs().max(t1[i].abs()) + gap).min(d1[i]),
+                d2: b0[i].abs().max(b1[i].abs()),
+                amax: per_tick2(l.max_accel),
+                share: shares[i],
+            };
+        }
+    }
+}
+
+/// The speed (nm/tick) each stretch of a spline's bend allows when its profile
+/// accelerates at `a`: every axis and joint keeps |x′|·a + |x″|·v² within its budget
+/// there (the joints' terms at the stretch's two samples, `at_sample[k]` and
+/// `at_sample[k + 1]`, of `joints` joints; the axes' over the stretch). Where a term's
+/// x′ is smaller than the block's largest, which set `a`, the bend gets more than the
+/// share it was given (never less, which `a` leaves it whatever the rounding): most of
+/// all where the curve turns an axis around.
+fn bend_limits(
+    a: f32,
+    at_sample: &[[Term; MAX_JOINTS]],
+    joints: usize,
+    per_stretch: &[[Term; AXES]; STRETCHES],
+) -> [f32; STRETCHES] {
+    core::array::from_fn(|k| {
+        let joint_terms = at_sample[k][..joints]
+            .iter()
+            .chain(&at_sample[k + 1][..joints]);
+        let v2 = joint_terms
+            .chain(&per_stretch[k])
+            .filter(|t| t.d2 > 0.0)
+            .map(|t| (t.amax - t.d1 * a).max(t.share * t.amax) / t.d2)
+            .fold(f32::INFINITY, f32::min);
+        sqrtf(v2)
+    })
+}
+
+/// Stretches a spline is cut into for its bend's speed limits ([`Limits::bend`]).
+pub const STRETCHES: usize = SPLINE_SAMPLES - 1;
+
+/// An end speed just under the one whose ramp meets a stretch's limit, so that
+/// [`Limits::top`] finds it under whatever the rounding.
+const JUST_UNDER: f32 = 1.0 - 4e-6;
+
+/// A block's limits ([`limits_along`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Limits {
+    /// Speed limit from everything but a spline's bend, nm/tick.
+    pub v: f32,
+    /// Acceleration limit along the block, nm/tick².
+    pub a: f32,
+    /// On a spline, the speed its bend allows over each of [`STRETCHES`] equal
+    /// stretches of its length, nm/tick (∞ on other blocks, whose bend is in `v`).
+    pub bend: [f32; STRETCHES],
+}
+
+impl Limits {
+    /// The smallest speed limit anywhere along the block, nm/tick.
+    pub fn lowest(&self) -> f32 {
+        self.bend.iter().fold(self.v, |m, &b| m.min(b))
+    }
+
+    /// The speed limit (nm/tick) of a spline entered at no more than `entry` and left
+    /// at no more than `exit` (nm/tick) at acceleration `a` over `length` nm: over a
+    /// stretch that the ramp from either end stays below its bend's limit, the bend
+    /// does not bind; elsewhere it does. A profile so limited stays under every
+    /// stretch's limit whatever speeds at or below `entry` and `exit` it runs between.
+    pub fn top(&self, entry: f32, exit: f32, a: f32, length: f32) -> f32 {
+        let (e2, x2) = (entry * entry, exit * exit);
+        let mut top = self.v;
+        for (k, &b) in self.bend.iter().enumerate() {
+            let (s0, s1) = (
+                length * k as f32 / STRETCHES as f32,
+                length * (k + 1) as f32 / STRETCHES as f32,
+            );
+            let b2 = b * b;
+            if e2 + 2.0 * a * s1 > b2 && x2 + 2.0 * a * (length - s0) > b2 {
+                top = top.min(b);
+            }
+        }
+        top
+    }
+
+    /// The entry and exit limits (nm/tick) to give a spline whose entry is at most
+    /// `entry_most`, and the speed limit that goes with them ([`Limits::top`]), for
+    /// acceleration `a` over `length` nm: of the ends at which a ramp just stays
+    /// under a stretch's limit (lower ends let the block run faster between them),
+    /// the pair whose profile at up to `near` (the programmed speed) takes least time,
+    /// counting for each end the time a neighbour at that speed loses slowing down to
+    /// it. Returns (entry, exit, top).
+    pub fn ends(&self, entry_most: f32, a: f32, length: f32, near: f32) -> (f32, f32, f32) {
+        let first = self.bend[0].min(self.v).min(entry_most);
+        let last = self.bend[STRETCHES - 1].min(self.v);
+        // The end speeds at which the ramp from the start (the end) just meets stretch
+        // k's limit at its far side.
+        let from_start = |k: usize| -> f32 {
+            let s1 = length * (k + 1) as f32 / STRETCHES as f32;
+            (sqrtf((self.bend[k] * self.bend[k] - 2.0 * a * s1).max(0.0)) * JUST_UNDER).min(first)
+        };
+        let from_end = |k: usize| -> f32 {
+            let s0 = length * k as f32 / STRETCHES as f32;
+            let v2 = self.bend[k] * self.bend[k] - 2.0 * a * (length - s0);
+            (sqrtf(v2.max(0.0)) * JUST_UNDER).min(last)
+        };
+        let lost = |v: f32| -> f32 {
+            if v >= near {
+                0.0
+            } else {
+                (near - v) * (near - v) / (2.0 * a * near)
+            }
+        };
+        let mut best = (first, last, self.top(first, last, a, length));
+        let mut best_time = f32::INFINITY;
+        for i in 0..=STRETCHES {
+            let e = if i == STRETCHES { first } else { from_start(i) };
+            for j in 0..=STRETCHES {
+                let x = if j == STRETCHES { last } else { from_end(j) };
+                let top = self.top(e, x, a, length);
+                // The ends the passes could give it: within its cap, and each within
+                // reach of the other over its length.
+                let e_at = e.min(top).min(sqrtf(x * x + 2.0 * a * length));
+                let x_at = x.min(top).min(sqrtf(e_at * e_at + 2.0 * a * length));
+                let t = ramp_time(e_at, top.min(near), x_at, a, length) + lost(e_at) + lost(x_at);
+                if t < best_time {
+                    best_time = t;
+                    best = (e, x, top);
+                }
+            }
+        }
+        best
+    }
+}
+
+/// The time (ticks) of a trapezoidal profile from `entry` to `exit` (nm/tick) capped
+/// at `top` over `length` nm at acceleration `a` (entry and exit taken at most `top`).
+pub(super) fn ramp_time(entry: f32, top: f32, exit: f32, a: f32, length: f32) -> f32 {
+    let (e, x) = (entry.min(top), exit.min(top));
+    if top <= 0.0 {
+        return f32::INFINITY;
+    }
+    // The peak the two ramps meet at, if below the cap.
+    let peak = sqrtf((e * e + x * x) / 2.0 + a * length).min(top);
+    let up = (peak * peak - e * e).max(0.0) / (2.0 * a);
+    let down = (peak * peak - x * x).max(0.0) / (2.0 * a);
+    let cruise = (length - up - down).max(0.0);
+    (peak - e).max(0.0) / a + (peak - x).max(0.0) / a + cruise / peak.max(1e-9)
 }
 
 /// The speed (nm/tick) at which a jump `jump` of d²P/ds² (per nm²) at `pose` changes
@@ -207,7 +447,15 @@ pub(super) fn bend_jump_limit(
 /// (`feed`, or the limit `v` found so far when lower), at most `most`, goes to
 /// x″·v² — which caps `v` there — and the rest to the profile's x′·a. A straight
 /// path keeps its whole budget; together never more than `amax`.
-pub(super) fn split(v: &mut f32, a: &mut f32, feed: f32, d1: f32, d2: f32, amax: f32, most: f32) {
+pub(super) fn split(
+    v: &mut f32,
+    a: &mut f32,
+    feed: f32,
+    d1: f32,
+    d2: f32,
+    amax: f32,
+    most: f32,
+) -> f32 {
     let speed = feed.min(*v);
     let rho = if d2 > 0.0 {
         (d2 * speed * speed / amax).min(most)
@@ -220,6 +468,7 @@ pub(super) fn split(v: &mut f32, a: &mut f32, feed: f32, d1: f32, d2: f32, amax:
     if d2 > 0.0 && rho > 0.0 {
         *v = v.min(crate::math::sqrtf(rho * amax / d2));
     }
+    rho
 }
 
 /// What turning from `u1` to `u2` at `pose` costs: the largest |Δuᵢ| / aᵢ over every

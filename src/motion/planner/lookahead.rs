@@ -1,7 +1,8 @@
 //! The host's look-ahead: each block's limits and corner ([`Lookahead`]), the reverse
 //! and forward passes, and single planned moves (MDI, jogs).
 
-use super::limits::{bend_jump_limit, corner_need, limits_along, per_tick};
+use super::limits::{bend_jump_limit, corner_need, limits_along, per_tick, Limits};
+use super::splines::{refine_splines, restore, smoothed};
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
 use crate::kinematics::{MachineKinematics, Unreachable};
 use crate::math::{fmax, fmin, i64_to_f32, sqrtf};
@@ -49,6 +50,13 @@ pub struct PlanBlock {
     pub corner: f32,
     /// Planned entry speed, nm/tick.
     pub entry: f32,
+    /// The most the block may be left at, nm/tick: a spline's exit limit (its own
+    /// speed limit assumes no faster exit, [`Limits::top`]), ∞ for other blocks.
+    pub exit_most: f32,
+    /// `corner`, `v_limit`, `accel_full` and `exit_most` as the block was planned,
+    /// before the second look at the splines ([`refine_splines`]) set them for the
+    /// speeds the passes found; each pass sequence starts again from them.
+    pub first: [f32; 4],
 }
 
 impl PlanBlock {
@@ -84,6 +92,8 @@ impl Default for PlanBlock {
             rho_in: 0.0,
             corner: 0.0,
             entry: 0.0,
+            exit_most: f32::INFINITY,
+            first: [0.0, 0.0, 1.0, f32::INFINITY],
         }
     }
 }
@@ -100,6 +110,9 @@ pub struct Lookahead {
     end_stops: bool,
     /// Blending tolerance of the last block planned, nm.
     end_tolerance: u32,
+    /// The speed the last block may be left at, nm/tick: a spline's exit limit
+    /// ([`Limits::ends`]), ∞ after other blocks.
+    end_limit: f32,
     /// Jerk-limitation window, ticks (1: none); see [`crate::motion::interp`].
     pub smoothing: u32,
 }
@@ -129,6 +142,7 @@ impl Lookahead {
             end_bend: [0.0; AXES],
             end_stops: true,
             end_tolerance: 0,
+            end_limit: f32::INFINITY,
             smoothing,
         }
     }
@@ -184,6 +198,34 @@ impl Lookahead {
         Ok(self.plan_path(block, path, prev, machine, kin))
     }
 
+    /// A spline's bend limits its speed most at one end or both: its entry and exit
+    /// are limited there, and between them it may run faster
+    /// ([`ends`](super::limits::Limits::ends), for its profile's acceleration `a`).
+    /// Returns its corner (`corner` within the last block's exit limit and its own
+    /// entry limit), its speed limit and its exit limit (which goes into the next
+    /// block's corner); for other blocks, `corner` within the last block's exit limit
+    /// and `v_limit`.
+    fn spline_ends(
+        &mut self,
+        limits: Option<Limits>,
+        path: &Path,
+        corner: f32,
+        v_limit: f32,
+        feed: f32,
+        a: f32,
+    ) -> (f32, f32, f32) {
+        let corner = fmin(corner, self.end_limit);
+        let (corner, v_limit, end_limit) = match limits {
+            Some(l) if path.form == Form::Spline => {
+                let (entry, exit, top) = l.ends(corner, a, path.length as f32, fmin(feed, l.v));
+                (fmin(corner, entry), top, exit)
+            }
+            _ => (corner, v_limit, f32::INFINITY),
+        };
+        self.end_limit = end_limit;
+        (corner, v_limit, end_limit)
+    }
+
     /// [`Lookahead::plan`] of `block` whose path from [`Lookahead::end`] is derived
     /// already (`Path::new(block, &self.end)`: a host that derived it for its
     /// pre-flight carries it here rather than deriving it again).
@@ -199,30 +241,21 @@ impl Lookahead {
         let feed = feed_of(block, &path, kind);
         // The fastest this block may be asked to go (feed override up to 200 %).
         let requested = feed * 2.0;
-        let (v_limit, accel) = match kind {
+        let limits = match kind {
             Kind::Rapid | Kind::Feed => {
                 match limits_along(&self.end, &path, requested, None, machine, kin) {
-                    Ok(l) => l,
+                    Ok(l) => Some(smoothed(l, &path, self.smoothing)),
                     Err(e) => {
                         kind = Kind::Unreachable(e);
-                        (0.0, 1.0)
+                        None
                     }
                 }
             }
-            _ => (0.0, 1.0),
+            _ => None,
         };
-        // With jerk limitation over w ticks the smoothed speed may exceed the
-        // profile's by a·w·T/2 (see below): a curve's or an arc's bend, sized for its
-        // speed limit, would then take more than its share; its limit is lowered by
-        // that.
-        let v_limit = if path.form.bends() && self.smoothing > 1 {
-            fmax(
-                v_limit - accel * self.smoothing as f32 / 2.0,
-                0.25 * v_limit,
-            )
-        } else {
-            v_limit
-        };
+        let (v_limit, accel) = limits.map_or((0.0, 1.0), |l| (l.lowest(), l.a));
+        // The speed the block may start at: on a spline, its first stretch's.
+        let v_start = limits.map_or(v_limit, |l| fmin(l.v, l.bend[0]));
         // Corners compare dP/ds (a spline's tangent is |dP/du|/length ≤ 1 long): where
         // two splines meet with one direction but different |dP/ds| the tool's speed
         // jumps by the difference, which the corner limits as it limits a turn.
@@ -255,8 +288,10 @@ impl Lookahead {
                 } else {
                     f32::INFINITY
                 });
-                let prev_v = prev.as_ref().map_or(0.0, |p| p.feed.min(p.v_limit));
-                let want = prev_v.min(feed.min(v_limit)).min(limit);
+                let prev_v = prev
+                    .as_ref()
+                    .map_or(0.0, |p| p.feed.min(p.v_limit).min(p.exit_most));
+                let want = prev_v.min(feed.min(v_start)).min(limit);
                 // Blocks shorter than a tick's travel put several corners into one
                 // tick, whose turns add up: at v over blocks of length L, v/L of them,
                 // so the share a corner needs is v·n·max(1, v/L), and v ≤ √(ρ·L/n)
@@ -287,6 +322,8 @@ impl Lookahead {
         } else {
             corner
         };
+        let (corner, v_limit, end_limit) =
+            self.spline_ends(limits, &path, corner, v_limit, feed, accel * (1.0 - rho));
         self.end_bend = path.bend_at(path.length << 16);
         self.end = path.end;
         self.end_tangent = path.tangent_at(path.length << 16);
@@ -303,6 +340,8 @@ impl Lookahead {
             rho_in: rho,
             corner,
             entry: corner,
+            exit_most: end_limit,
+            first: [corner, v_limit, accel, end_limit],
         }
     }
 }
@@ -390,7 +429,15 @@ pub fn plan_into(
             .plan(b, done.last_mut(), machine, kin)
             .map_err(|e| (i, e))?;
     }
-    replan_from(&mut out[..blocks.len()], 0, start, machine, kin, &mut || {});
+    replan_from(
+        &mut out[..blocks.len()],
+        0,
+        start,
+        smoothing,
+        machine,
+        kin,
+        &mut || {},
+    );
     Ok(())
 }
 
@@ -405,11 +452,13 @@ pub fn replan_from(
     blocks: &mut [PlanBlock],
     from: usize,
     start: [i64; AXES],
+    smoothing: u32,
     machine: &MachineConfig,
     kin: &MachineKinematics,
     between: &mut dyn FnMut(),
 ) {
     let from = from.min(blocks.len());
+    restore(blocks, from);
     let reach = from.checked_sub(1).map(|last| {
         let sent = &blocks[last];
         sqrtf(sent.entry * sent.entry + 2.0 * sent.accel * sent.length())
@@ -425,70 +474,11 @@ pub fn replan_from(
     between();
     passes(&mut blocks[from..]);
     between();
-    if refine_splines(blocks, from, start, machine, kin) {
+    if refine_splines(blocks, from, start, smoothing, machine, kin) {
         between();
         passes(&mut blocks[from..]);
     }
     between();
-}
-
-/// A second look at the splines once the passes know how fast each one runs
-/// (`blocks[from..]`; `start`: where `blocks[0]` starts): a spline's bend was given
-/// the acceleration share it needs at its feed ([`split`]), but one that runs slower
-/// (a neighbour's corner, a bend further on, the stop at the end) needs less of it;
-/// its limits are found again for the speed it reaches, which gives its profile the
-/// rest, and its hard speed limit becomes that speed. Nothing else changes; true when
-/// any spline changed (the passes are then run again).
-pub fn refine_splines(
-    blocks: &mut [PlanBlock],
-    from: usize,
-    start: [i64; AXES],
-    machine: &MachineConfig,
-    kin: &MachineKinematics,
-) -> bool {
-    let mut changed = false;
-    for i in from..blocks.len() {
-        let b = &blocks[i];
-        if b.path.form != Form::Spline || b.kind != Kind::Feed {
-            continue;
-        }
-        let next = blocks.get(i + 1);
-        let exit = next
-            .filter(|n| matches!(n.kind, Kind::Rapid | Kind::Feed))
-            .map_or(0.0, |n| n.entry);
-        let top = fmin(cap(b, 100, false), b.v_limit);
-        let peak = fmin(
-            sqrtf((b.entry * b.entry + exit * exit) / 2.0 + b.accel * b.length()),
-            top,
-        );
-        if peak >= 0.98 * top || peak <= 0.0 {
-            continue;
-        }
-        let from_pose = if i == 0 {
-            start
-        } else {
-            blocks[i - 1].path.end
-        };
-        let Ok((v, a)) = limits_along(
-            &from_pose,
-            &b.path,
-            b.feed * 2.0,
-            Some(peak * 1.01),
-            machine,
-            kin,
-        ) else {
-            continue;
-        };
-        let rho_out = next.map_or(0.0, |n| n.rho_in);
-        let b = &mut blocks[i];
-        if a > b.accel_full {
-            b.v_limit = fmin(b.v_limit, v);
-            b.accel_full = a;
-            b.accel = a * (1.0 - fmax(b.rho_in, rho_out));
-            changed = true;
-        }
-    }
-    changed
 }
 
 /// Motion time of planned blocks (as [`plan_into`] leaves them) at 100 % feed, ticks:

@@ -49,12 +49,14 @@
 mod limits;
 mod lookahead;
 mod queue;
+mod splines;
 #[cfg(test)]
 mod tests;
 
 pub use limits::{LIMIT_MARGIN, LIMIT_SAMPLES, SPLINE_BEND_SHARE, SPLINE_SAMPLES};
 pub use lookahead::{
-    cap, forward_pass, jog_target, plan_into, plan_jog, plan_move, planned_ticks, refine_splines,
-    replan_from, reverse_pass, Kind, Lookahead, PlanBlock,
+    cap, forward_pass, jog_target, plan_into, plan_jog, plan_move, planned_ticks, replan_from,
+    reverse_pass, Kind, Lookahead, PlanBlock,
 };
 pub use queue::{Planner, PushError, Queued, BEND_CAPACITY, QUEUE_CAPACITY};
+pub use splines::refine_splines;

@@ -245,3 +245,96 @@ fn a_plan_that_does_not_match_its_block_is_refused() {
     assert!(p.push_planned(&nan, &m, &k).is_err());
     assert_eq!(p.push_planned(&plan[0], &m, &k), Ok(()));
 }
+
+/// A curve that bends hardest at its end: it leaves a line along X straight (no bend
+/// at its start) and turns to Y, into a line along Y; its parameter runs as fast at
+/// both ends.
+fn hooked_curve() -> Vec<Block> {
+    let mm = 1_000_000i64;
+    let cubic = Block {
+        line: 2,
+        motion: Motion::Cubic {
+            c1: [10 * mm, 0, 0, 0, 0, 0],
+            c2: [0, -10 * mm, 0, 0, 0, 0],
+        },
+        target: [30 * mm, 10 * mm, 0, 0, 0, 0],
+        feed: 100 * mm,
+        tolerance_nm: 1000,
+    };
+    let mut first = line(10 * mm, 0, 100, 1000);
+    first.line = 1;
+    let mut last = line(30 * mm, 140 * mm, 100, 1000);
+    last.line = 3;
+    vec![line(-90 * mm, 0, 100, 0), first, cubic, last]
+}
+
+#[test]
+fn a_curve_bent_hardest_at_one_end_runs_faster_away_from_it_within_every_axis_limit() {
+    // Cartesian XYZ with 200 mm/s² per axis and joint: the curve's bend binds below
+    // the 100 mm/s the axes allow.
+    let mut m = MachineConfig::cartesian_xyz();
+    let slow = 200_000_000;
+    for l in m.axes.iter_mut().take(3) {
+        l.max_accel = slow;
+    }
+    for j in m.joints.iter_mut() {
+        j.limits.max_accel = slow;
+    }
+    let k = MachineKinematics::new(&m);
+    let blocks = hooked_curve();
+    let mut plan = vec![PlanBlock::default(); blocks.len()];
+    plan_into(&blocks, [0; AXES], &m, &k, 1, &mut plan).unwrap();
+    let b = &plan[2];
+    assert_eq!(b.path.form, Form::Spline);
+    let amax = slow as f32 / 1e6;
+    // The tightest bend: at the whole acceleration it allows no more than this.
+    let n = 64;
+    let tightest = (0..=n)
+        .map(|k| {
+            let x2 = b.path.bend_at((b.path.length << 16) / n * k);
+            x2[0].abs().max(x2[1].abs())
+        })
+        .fold(0.0f32, f32::max);
+    let bend_speed = (amax / tightest).sqrt();
+    assert!(
+        b.v_limit > 1.2 * bend_speed,
+        "limit {} nm/tick, the tightest bend's {bend_speed}",
+        b.v_limit
+    );
+    assert!(b.exit_most <= bend_speed, "exit {} nm/tick", b.exit_most);
+    // Run the curve from its planned entry to the next block's, each tick's pose from
+    // the profile: no axis accelerates by more than its limit (and a few nanometres'
+    // rounding per tick).
+    let exit = plan[3].entry;
+    let (profile, achieved) = crate::motion::profile::Profile::plan(
+        b.path.length << 16,
+        b.entry,
+        cap(b, 100, false),
+        exit,
+        b.accel,
+    );
+    assert!(achieved.exit <= exit * 1.0001 + 1.0);
+    let start = plan[1].path.end;
+    let ticks = (profile.duration() >> 32) + 2;
+    let mut pose = [0i64; AXES];
+    let poses: Vec<[i64; AXES]> = (0..=ticks)
+        .map(|t| {
+            b.path.pose_at(&start, profile.at(t << 32).0, &mut pose);
+            pose
+        })
+        .collect();
+    let mut fastest = 0.0f64;
+    // The first and last ticks join the neighbours' motion: not this block's alone.
+    for w in poses[1..poses.len() - 2].windows(3) {
+        for (i, ((p0, p1), p2)) in w[0].iter().zip(&w[1]).zip(&w[2]).take(2).enumerate() {
+            let a = (p2 - 2 * p1 + p0).abs() as f32;
+            assert!(a <= amax * 1.001 + 3.0, "axis {i}: {a} nm/tick² of {amax}");
+        }
+        let v = ((w[2][0] - w[1][0]) as f64).hypot((w[2][1] - w[1][1]) as f64);
+        fastest = fastest.max(v);
+    }
+    assert!(
+        fastest > 1.2 * bend_speed as f64,
+        "fastest {fastest} nm/tick; bend {bend_speed}; {b:?}; exit {exit}"
+    );
+}

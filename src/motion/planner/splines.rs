@@ -1,0 +1,147 @@
+//! The second look at the splines ([`refine_splines`]): once the passes know how fast
+//! each block runs, a spline's limits are found again for the speeds it is entered and
+//! left at; and each pass sequence starts again from the blocks as they were planned
+//! ([`restore`]).
+
+use super::limits::{limits_along, ramp_time, Limits};
+use super::lookahead::{Kind, PlanBlock};
+use crate::config::{MachineConfig, AXES};
+use crate::kinematics::MachineKinematics;
+use crate::math::{fmax, fmin, sqrtf};
+use crate::motion::geometry::{Form, Path};
+
+/// `blocks[from..]` as they were planned ([`PlanBlock::first`]), before an earlier
+/// pass sequence set their splines for the speeds it found; the first one entered no
+/// faster than the block before it (final) may be left at.
+pub(super) fn restore(blocks: &mut [PlanBlock], from: usize) {
+    for i in from..blocks.len() {
+        let rho_out = blocks.get(i + 1).map_or(0.0, |n| n.rho_in);
+        let b = &mut blocks[i];
+        let [corner, v_limit, accel_full, exit_most] = b.first;
+        b.corner = corner;
+        b.v_limit = v_limit;
+        b.exit_most = exit_most;
+        if accel_full != b.accel_full {
+            b.accel_full = accel_full;
+            b.accel = accel_full * (1.0 - fmax(b.rho_in, rho_out));
+        }
+    }
+    if let Some(last) = from.checked_sub(1) {
+        let most = blocks[last].exit_most;
+        if let Some(b) = blocks.get_mut(from) {
+            b.corner = fmin(b.corner, most);
+        }
+    }
+}
+
+/// A second look at the splines once the passes know how fast each one runs
+/// (`blocks[from..]`; `start`: where `blocks[0]` starts). Each spline's limits are
+/// found again (as it was planned, with [`Lookahead`]'s jerk-limitation window
+/// `smoothing`), for the entry and exit the passes planned:
+/// * its speed limit is raised to what those ends allow ([`Limits::top`]): ramps from
+///   ends slower than its own limits leave more of it under its bend's limits;
+/// * a spline that does not reach its speed limit (a neighbour's corner, a bend
+///   further on, the stop at the end) gives its bend the acceleration share it needs
+///   at the speed it reaches ([`split`]), and its profile the rest, when that is more;
+///   its speed limit is then what the bend allows at that share.
+///
+/// Its entry and exit are then held at most at the planned ones (its corner and the
+/// next block's), for which its limit holds. True when any spline changed (the passes
+/// are then run again).
+pub fn refine_splines(
+    blocks: &mut [PlanBlock],
+    from: usize,
+    start: [i64; AXES],
+    smoothing: u32,
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+) -> bool {
+    let mut changed = false;
+    for i in from..blocks.len() {
+        let b = &blocks[i];
+        if b.path.form != Form::Spline || b.kind != Kind::Feed {
+            continue;
+        }
+        let next = blocks.get(i + 1);
+        let exit = next
+            .filter(|n| matches!(n.kind, Kind::Rapid | Kind::Feed))
+            .map_or(0.0, |n| n.entry);
+        let from_pose = if i == 0 {
+            start
+        } else {
+            blocks[i - 1].path.end
+        };
+        let rho_out = next.map_or(0.0, |n| n.rho_in);
+        let entry = b.entry;
+        let Some((v_limit, accel_full)) =
+            better_spline(b, &from_pose, exit, smoothing, machine, kin)
+        else {
+            continue;
+        };
+        let b = &mut blocks[i];
+        b.v_limit = v_limit;
+        b.accel_full = accel_full;
+        b.accel = accel_full * (1.0 - fmax(b.rho_in, rho_out));
+        b.corner = fmin(b.corner, entry);
+        b.exit_most = fmin(b.exit_most, exit);
+        if let Some(n) = blocks.get_mut(i + 1) {
+            n.corner = fmin(n.corner, exit);
+        }
+        changed = true;
+    }
+    changed
+}
+
+/// [`refine_splines`]'s look at spline `b` (from `from_pose`) entered at its planned
+/// entry and left at `exit`: its new speed limit and acceleration, if better.
+fn better_spline(
+    b: &PlanBlock,
+    from_pose: &[i64; AXES],
+    exit: f32,
+    smoothing: u32,
+    machine: &MachineConfig,
+    kin: &MachineKinematics,
+) -> Option<(f32, f32)> {
+    let (entry, length) = (b.entry, b.length());
+    let limits = |bend_speed| {
+        limits_along(from_pose, &b.path, b.feed * 2.0, bend_speed, machine, kin)
+            .ok()
+            .map(|l| smoothed(l, &b.path, smoothing))
+    };
+    // The share of the acceleration its corners take.
+    let kept = b.accel / b.accel_full;
+    let time = |v: f32, a: f32| ramp_time(entry, fmin(v, b.feed), exit, a, length);
+    let planned = limits(None)?;
+    let mut best = (planned.top(entry, exit, b.accel, length), b.accel_full);
+    let top = fmin(b.feed, best.0);
+    let peak = fmin(
+        sqrtf((entry * entry + exit * exit) / 2.0 + b.accel * length),
+        top,
+    );
+    if peak < 0.98 * top && peak > 0.0 {
+        if let Some(l) = limits(Some(peak * 1.01)) {
+            let v = l.top(entry, exit, l.a * kept, length);
+            if l.a > best.1 && time(v, l.a * kept) < time(best.0, b.accel) {
+                best = (v, l.a);
+            }
+        }
+    }
+    (best.0 > b.v_limit || best.1 != b.accel_full).then_some(best)
+}
+
+/// `limits` with a curve's or an arc's bend limit lowered for jerk limitation over
+/// `smoothing` ticks, by which the smoothed speed may exceed the profile's (a·w·T/2,
+/// see [`Lookahead::plan_path`]): its bend, sized for the limit, would otherwise take
+/// more than its share.
+pub(super) fn smoothed(mut limits: Limits, path: &Path, smoothing: u32) -> Limits {
+    if smoothing <= 1 || !path.form.bends() {
+        return limits;
+    }
+    let lower = |v: f32| fmax(v - limits.a * smoothing as f32 / 2.0, 0.25 * v);
+    if path.form == Form::Spline {
+        limits.bend = limits.bend.map(lower);
+    } else {
+        limits.v = lower(limits.v);
+    }
+    limits
+}
