@@ -53,6 +53,9 @@ pub struct PlanBlock {
     /// The most the block may be left at, nm/tick: a spline's exit limit (its own
     /// speed limit assumes no faster exit, [`Limits::top`]), ∞ for other blocks.
     pub exit_most: f32,
+    /// The most the block may be entered at for its own limits: a spline's first
+    /// stretch's limit ([`super::limits::Limits::bend`]), ∞ for other blocks.
+    pub entry_most: f32,
     /// `corner`, `v_limit`, `accel_full` and `exit_most` as the block was planned,
     /// before the second look at the splines ([`refine_splines`]) set them for the
     /// speeds the passes found; each pass sequence starts again from them.
@@ -93,6 +96,7 @@ impl Default for PlanBlock {
             corner: 0.0,
             entry: 0.0,
             exit_most: f32::INFINITY,
+            entry_most: f32::INFINITY,
             first: [0.0, 0.0, 1.0, f32::INFINITY],
         }
     }
@@ -202,9 +206,9 @@ impl Lookahead {
     /// are limited there, and between them it may run faster
     /// ([`ends`](super::limits::Limits::ends), for its profile's acceleration `a`).
     /// Returns its corner (`corner` within the last block's exit limit and its own
-    /// entry limit), its speed limit and its exit limit (which goes into the next
-    /// block's corner); for other blocks, `corner` within the last block's exit limit
-    /// and `v_limit`.
+    /// entry limit), its speed limit, its exit limit (which goes into the next
+    /// block's corner) and its first stretch's limit; for other blocks, `corner`
+    /// within the last block's exit limit and `v_limit`.
     fn spline_ends(
         &mut self,
         limits: Option<Limits>,
@@ -213,17 +217,17 @@ impl Lookahead {
         v_limit: f32,
         feed: f32,
         a: f32,
-    ) -> (f32, f32, f32) {
+    ) -> (f32, f32, f32, f32) {
         let corner = fmin(corner, self.end_limit);
-        let (corner, v_limit, end_limit) = match limits {
+        let (corner, v_limit, end_limit, first) = match limits {
             Some(l) if path.form == Form::Spline => {
                 let (entry, exit, top) = l.ends(corner, a, path.length as f32, fmin(feed, l.v));
-                (fmin(corner, entry), top, exit)
+                (fmin(corner, entry), top, exit, fmin(l.bend[0], l.v))
             }
-            _ => (corner, v_limit, f32::INFINITY),
+            _ => (corner, v_limit, f32::INFINITY, f32::INFINITY),
         };
         self.end_limit = end_limit;
-        (corner, v_limit, end_limit)
+        (corner, v_limit, end_limit, first)
     }
 
     /// [`Lookahead::plan`] of `block` whose path from [`Lookahead::end`] is derived
@@ -322,7 +326,7 @@ impl Lookahead {
         } else {
             corner
         };
-        let (corner, v_limit, end_limit) =
+        let (corner, v_limit, end_limit, entry_most) =
             self.spline_ends(limits, &path, corner, v_limit, feed, accel * (1.0 - rho));
         self.end_bend = path.bend_at(path.length << 16);
         self.end = path.end;
@@ -341,6 +345,7 @@ impl Lookahead {
             corner,
             entry: corner,
             exit_most: end_limit,
+            entry_most,
             first: [corner, v_limit, accel, end_limit],
         }
     }

@@ -158,8 +158,9 @@ fn g64_without_p_merges_within_its_own_tolerance_and_g61_never() {
 
 /// The dense curve of issue 34 that found it: an Archimedean spiral (radius 5 to
 /// 25 mm over four turns) of 0.1 mm chords at F6000 in `G64 P0.01`, merged with
-/// cartesian-xyz's figures. Where two of its curves meet, the planner's corner limit
-/// is the slower block's own limit: the tool's speed does not jump there. When each
+/// cartesian-xyz's figures. Where two of its curves meet, the tool's speed does not
+/// jump: the turn there allows at least what the two curves' bends allow (the first
+/// one's exit limit, the second one's first stretch's). When each
 /// curve was the most even fit alone, its end often ran below its largest |dP/du|
 /// while the next began at it, and this failed.
 #[test]
@@ -203,14 +204,26 @@ fn where_two_curves_of_a_spiral_meet_the_tool_speed_does_not_jump() {
             continue;
         }
         junctions += 1;
-        let slower = w[0].v_limit.min(w[1].v_limit);
+        // The most a turn there allows: the corner rule's, with the largest share a
+        // turn may take (½), v ≤ ½·a·T/|Δuᵢ| (cartesian-xyz's axes are its joints).
+        let t1 = w[0].path.tangent_at(w[0].path.length << 16);
+        let t2 = w[1].path.tangent_at(0);
+        let jump = (0..3).map(|i| (t2[i] - t1[i]).abs()).fold(0.0f32, f32::max);
+        let amax = machine.axes[0].max_accel as f32 / 1e6;
+        let turn = if jump > 0.0 {
+            0.5 * amax / jump
+        } else {
+            f32::INFINITY
+        };
+        // What the two curves' bends allow there: the first one's exit limit, the
+        // second one's first stretch's.
+        let bends = w[0].first[3].min(w[1].entry_most);
         assert!(
-            w[1].corner >= 0.99 * slower,
-            "line {}: corner {} mm/s, limits {} and {} mm/s",
+            turn >= 0.99 * bends,
+            "line {}: the turn allows {} mm/s, the bends {} mm/s",
             w[1].line,
-            w[1].corner * 1e-3,
-            w[0].v_limit * 1e-3,
-            w[1].v_limit * 1e-3
+            turn * 1e-3,
+            bends * 1e-3
         );
     }
     assert!(junctions >= 10, "{junctions} junctions");
