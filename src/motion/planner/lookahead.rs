@@ -1,7 +1,7 @@
 //! The host's look-ahead: each block's limits and corner ([`Lookahead`]), the reverse
 //! and forward passes, and single planned moves (MDI, jogs).
 
-use super::limits::{bend_jump_limit, corner_need, limits_along, per_tick, Limits};
+use super::limits::{bend_jump_limit, corner_need, limits_along, per_tick, ramp_time, Limits};
 use super::splines::{refine_splines, restore, smoothed};
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
 use crate::kinematics::{MachineKinematics, Unreachable};
@@ -308,9 +308,26 @@ impl Lookahead {
                 // max/min rather than clamp: clamp's panic message formats floats, which
                 // costs the firmware kilobytes of formatting code.
                 #[allow(clippy::manual_clamp)]
-                let rho = (want * n * per_tick * 1.0001).max(0.0).min(0.5);
-                let v = fmin(rho / n, sqrtf(rho * short / n));
-                (v.min(limit), rho)
+                let most = (want * n * per_tick * 1.0001).max(0.0).min(0.5);
+                let speed = |rho: f32| fmin(fmin(rho / n, sqrtf(rho * short / n)), limit);
+                let before = prev.as_ref().map(|p| Side {
+                    far: fmin(p.corner, prev_v),
+                    top: prev_v,
+                    a: p.accel_full,
+                    taken: p.rho_in,
+                    length: p.length(),
+                });
+                let this = Side {
+                    far: f32::NAN,
+                    top: fmin(feed, v_start),
+                    a: accel,
+                    taken: 0.0,
+                    length: path.length as f32,
+                };
+                // A stop waits for the smoothed motion to arrive (about w ticks).
+                let settle = if self.smoothing > 1 { w } else { 0.0 };
+                let rho = corner_share(most, speed, [before, Some(this)], settle);
+                (speed(rho), rho)
             }
         };
         if rho > 0.0 {
@@ -349,6 +366,57 @@ impl Lookahead {
             first: [corner, v_limit, accel, end_limit],
         }
     }
+}
+
+/// One of the two blocks meeting at a corner, for [`corner_share`].
+struct Side {
+    /// Speed at its other end, nm/tick (NaN: as at the corner).
+    far: f32,
+    /// Its speed limit, nm/tick.
+    top: f32,
+    /// Its acceleration before any corner's share, nm/tick².
+    a: f32,
+    /// The share its other corner takes already.
+    taken: f32,
+    /// Its length, nm.
+    length: f32,
+}
+
+/// The share of the acceleration worth giving a corner's turn, at most `most` (what
+/// the turn needs at the speed asked for): of `most`, its halves down to 1/32 and 0,
+/// the one under which the two blocks meeting there take least time, each a
+/// trapezoid through the corner's speed `speed(ρ)` with (1 − ρ) of its acceleration,
+/// and a stop the smoothing's `settle` ticks more. A sharp turn passed within one tick
+/// goes at a fraction of aᵢ·T, which is seldom worth half of either block's
+/// acceleration; a gentle one keeps its share.
+fn corner_share(
+    most: f32,
+    speed: impl Fn(f32) -> f32,
+    sides: [Option<Side>; 2],
+    settle: f32,
+) -> f32 {
+    let mut best = (f32::INFINITY, 0.0);
+    for k in 0..7 {
+        let rho = if k == 6 {
+            0.0
+        } else {
+            most / (1u32 << k) as f32
+        };
+        let a = |s: &Side| s.a * (1.0 - fmax(rho, s.taken));
+        // No faster than a side can reach from its other end.
+        let c = sides.iter().flatten().fold(speed(rho), |c, s| {
+            fmin(c, sqrtf(s.far * s.far + 2.0 * a(s) * s.length))
+        });
+        let mut t = if c > 0.0 { 0.0 } else { settle };
+        for s in sides.iter().flatten() {
+            let far = if s.far.is_nan() { c } else { s.far };
+            t += ramp_time(far, s.top, c, a(s), s.length);
+        }
+        if t < best.0 {
+            best = (t, rho);
+        }
+    }
+    best.1
 }
 
 /// What a block does, given its geometry (a move of length 0 is a dwell of 0 ticks).

@@ -5,6 +5,7 @@ use super::lookahead::*;
 use super::queue::*;
 use crate::config::*;
 use crate::kinematics::*;
+use crate::math::fmax;
 use crate::motion::block::*;
 use crate::motion::geometry::*;
 
@@ -56,51 +57,71 @@ fn exact_stop_mode_stops_at_every_corner() {
     assert_eq!(p.iter().last().unwrap().entry, 0.0);
 }
 
-#[test]
-fn a_right_angle_corner_is_taken_at_half_a_times_t() {
-    let p = planner_with(&[
-        line(50_000_000, 0, 50, u32::MAX),
-        line(50_000_000, 50_000_000, 50, u32::MAX),
-    ]);
-    let e = p.iter().last().unwrap().entry;
-    assert!((e - 500.0).abs() < 1.0, "{e}");
+/// Two lines of `len_mm` at 50 mm/s meeting at a turn of `deg` degrees, with path
+/// tolerance `tol` nm.
+fn turn(deg: f64, len_mm: f64, tol: u32) -> Vec<PlanBlock> {
+    let (c, s) = (deg.to_radians().cos(), deg.to_radians().sin());
+    let l = len_mm * 1e6;
+    planner_with(&[
+        line(l as i64, 0, 50, tol),
+        line((l + l * c) as i64, (l * s) as i64, 50, tol),
+    ])
 }
 
 #[test]
-fn a_ten_degree_corner_is_taken_at_the_axis_acceleration_budget() {
-    let (c, s) = (10f64.to_radians().cos(), 10f64.to_radians().sin());
-    let p = planner_with(&[
-        line(50_000_000, 0, 50, u32::MAX),
-        line(
-            50_000_000 + (50e6 * c) as i64,
-            (50e6 * s) as i64,
-            50,
-            u32::MAX,
-        ),
-    ]);
-    // a = 1000 nm/tick² per axis; |Δu_y| = sin 10°: v = 1000 / (2 sin 10°).
-    let want = 1000.0 / (2.0 * s);
-    let e = p.iter().last().unwrap().entry as f64;
-    assert!((e - want).abs() < want * 0.01, "{e} vs {want}");
+fn a_sharp_turn_between_long_lines_stops_rather_than_take_half_their_acceleration() {
+    // Passing a right angle within one tick allows ½·a·T = 500 nm/tick (0.5 mm/s) with
+    // half of each line's acceleration; a 10° turn 2 880 nm/tick. Either costs the
+    // lines far more time in their ramps to 50 mm/s than the corner's speed gains.
+    for deg in [10.0, 90.0] {
+        let p = turn(deg, 50.0, u32::MAX);
+        assert_eq!(p[1].entry, 0.0, "{deg}°");
+        assert_eq!((p[0].accel, p[1].accel), (p[0].accel_full, p[1].accel_full));
+        let (a, l, v) = (1000.0, 50e6, 50_000.0);
+        let stopping = 2.0 * ramp_time(0.0, v, 0.0, a, l);
+        let r = deg.to_radians() as f32;
+        let c = 500.0 / fmax(r.sin(), 1.0 - r.cos());
+        let sharing = ramp_time(0.0, v, c, a / 2.0, l) + ramp_time(c, v, 0.0, a / 2.0, l);
+        assert!(stopping < sharing, "{deg}°: {stopping} vs {sharing} ticks");
+    }
+}
+
+#[test]
+fn a_gentle_turn_keeps_the_share_of_acceleration_it_needs() {
+    // A 1° turn: |Δu| = 2 sin 0.5°, |Δu_y| ≈ sin 1°; half of a = 1000 nm/tick² per axis
+    // passes it at 500 / sin 1° nm/tick (28.6 mm/s), the lines keep the other half.
+    for len_mm in [1.0, 50.0] {
+        let p = turn(1.0, len_mm, u32::MAX);
+        let want = 500.0 / 1f32.to_radians().sin();
+        assert!(
+            (p[1].entry - want).abs() < want * 0.01,
+            "{} vs {want}",
+            p[1].entry
+        );
+        assert!((p[0].accel - 500.0).abs() < 1.0, "{}", p[0].accel);
+        // The turn and the profile together stay within each axis's acceleration.
+        let turn_y = p[1].entry * 1f32.to_radians().sin();
+        assert!(
+            turn_y + p[1].accel * 1f32.to_radians().sin() <= 1000.5,
+            "{turn_y}"
+        );
+    }
 }
 
 #[test]
 fn a_path_tolerance_bounds_the_corner_speed() {
-    // G64 P0.001 at a right angle allows 4 · 1000 nm / √2 per tick, more than the
-    // acceleration budget (500 nm/tick): the budget decides.
-    let p = planner_with(&[
-        line(50_000_000, 0, 50, 1_000),
-        line(50_000_000, 50_000_000, 50, 1_000),
-    ]);
-    let e = p.iter().last().unwrap().entry;
-    assert!((e - 500.0).abs() < 1.0, "{e}");
-    // G64 P0.0001: 400 nm / √2 per tick.
-    let p = planner_with(&[
-        line(50_000_000, 0, 50, 100),
-        line(50_000_000, 50_000_000, 50, 100),
-    ]);
-    let e = p.iter().last().unwrap().entry;
-    assert!((e - 400.0 / 2f32.sqrt()).abs() < 0.5, "{e}");
+    // G64 P0.001 at 1° allows 4 · 1000 nm / (2 sin 0.5°) per tick, more than the
+    // acceleration budget (500 nm/tick / sin 1°): the budget decides.
+    let budget = 500.0 / 1f32.to_radians().sin();
+    let e = turn(1.0, 10.0, 1_000)[1].entry;
+    assert!((e - budget).abs() < budget * 0.01, "{e} vs {budget}");
+    // G64 P0.0001: 400 nm / (2 sin 0.5°) per tick.
+    let by_tolerance = 400.0 / (2.0 * 0.5f32.to_radians().sin());
+    let e = turn(1.0, 10.0, 100)[1].entry;
+    assert!(
+        (e - by_tolerance).abs() < by_tolerance * 0.01,
+        "{e} vs {by_tolerance}"
+    );
 }
 
 #[test]
