@@ -238,7 +238,44 @@ fn improve(
             consider(&along(p0, p3, t0, t1, a, b), p, u, g, s, &mut best);
         }
     }
+    // Handles whose start runs as fast as the curve before it ends, with the far
+    // handle as fitted and as long: a junction where the tool's speed jumps is nearly
+    // a stop ([`junction_share`]).
+    let third = p.windows(2).map(|w| norm(&sub(&w[1], &w[0]))).sum::<f64>() / 3.0;
+    for b in [be, al.max(be), third] {
+        let a = matched_start((p0, p3), (t0, t1), b, g.lead_ratio);
+        for b in [b, a, b * 1.1] {
+            consider(&along(p0, p3, t0, t1, a, b), p, u, g, s, &mut best);
+        }
+    }
     best
+}
+
+/// The start handle (with the far one `b`) at which the cubic from `p0` to `p3`
+/// along `t0` and `t1` starts at `ratio` of its largest |dP/du| ([`end_ratio`]'s
+/// grid): that ratio grows with the handle, so by bisection.
+fn matched_start((p0, p3): (V, V), (t0, t1): (&V, &V), b: f64, ratio: f64) -> f64 {
+    let chord = norm(&sub(&p3, &p0));
+    let start_ratio = |a: f64| {
+        let c = along(p0, p3, t0, t1, a, b);
+        let speed = |u: f64| norm(&deriv(&c, u));
+        let top = (0..=64).map(|k| speed(k as f64 / 64.0)).fold(0.0, f64::max);
+        if top > 0.0 {
+            speed(0.0) / top
+        } else {
+            1.0
+        }
+    };
+    let (mut lo, mut hi) = (0.0, 2.0 * chord);
+    for _ in 0..16 {
+        let mid = (lo + hi) / 2.0;
+        if start_ratio(mid) < ratio - 1e-4 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    hi
 }
 
 /// The cubic from `p0` to `p3` leaving along `t0` with handle `a` and arriving along
@@ -345,9 +382,12 @@ fn accept(c: &[V; 4], p: &[V], u: &[f64], g: &Goal, s: &Settings) -> Option<f64>
     // The score: how evenly the curve runs, times what its ends let the junctions
     // keep ([`junction_share`]): it starts at the end of the curve before it, and ends
     // at its largest speed (what a line, or the next curve's best start, has).
-    let even = even
-        * junction_share(along[0].0 / vmax - g.lead_ratio, g, s)
-        * junction_share(1.0 - along[samples].0 / vmax, g, s);
+    let start = junction_share(along[0].0 / vmax - g.lead_ratio, g, s);
+    let end = junction_share(1.0 - along[samples].0 / vmax, g, s);
+    if start < s.min_junction_share {
+        return None;
+    }
+    let even = even * start * end;
     if g.speed <= 0.0 || s.accel <= 0.0 || n < WEIGH_FROM {
         return Some(even);
     }

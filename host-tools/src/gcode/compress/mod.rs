@@ -65,6 +65,14 @@ pub use fit::to_polyline;
 pub struct Settings {
     /// A turn sharper than this between two moves is a corner, degrees.
     pub corner_deg: f64,
+    /// Smallest share of the speed asked for that the junction where a curve starts
+    /// may allow (the jump of the tool's speed over the path speed from the block
+    /// before, `fit::junction_share`); a curve that starts slower or faster is not
+    /// taken.
+    pub min_junction_share: f64,
+    /// A curve whose start does not match the block before it is taken only where the
+    /// one that does merges less than this share of its moves.
+    pub matched_reach: f64,
     /// Longer moves are never merged, nm.
     pub max_chord_nm: f64,
     /// Share of the `G64 P` tolerance a curve may use (the rest is margin for the
@@ -111,6 +119,8 @@ impl Default for Settings {
     fn default() -> Self {
         Self {
             corner_deg: 30.0,
+            min_junction_share: 0.5,
+            matched_reach: 0.65,
             max_chord_nm: 100_000_000.0,
             fit_share: 0.95,
             max_chords: 400,
@@ -375,21 +385,26 @@ fn fit_run(run: &[Block], first: usize, pts: &[V], g: &Goal, s: &Settings, out: 
     let g = &mut { *g };
     let mut a = 0;
     while a < m {
-        let mut found = farthest(pts, &t, a, lead.as_ref(), g, s);
-        if let Some(l) = lead {
-            // Leaving along its own direction, turning no more than the program does
-            // at this point.
-            let own = dot(
-                &unit(&sub(&pts[a], &pts[a - 1])),
-                &unit(&sub(&pts[a + 1], &pts[a])),
-            );
-            if let Some(o) = farthest(pts, &t, a, None, g, s) {
-                let turn_ok = dot(&l, &unit(&sub(&o.1, &pts[a]))) >= own.min(1.0);
-                if turn_ok && found.as_ref().is_none_or(|f| o.0 > f.0) {
-                    found = Some(o);
-                }
-            }
-        }
+        // A curve whose start matches the block before it, unless one that does not
+        // reaches much farther.
+        let strict = curve_from(pts, &t, a, lead, g, s);
+        let loose = curve_from(
+            pts,
+            &t,
+            a,
+            lead,
+            g,
+            &Settings {
+                min_junction_share: 0.0,
+                ..*s
+            },
+        );
+        let reach = |f: &Option<(usize, V, V)>| f.as_ref().map_or(0.0, |f| (f.0 - a) as f64);
+        let found = if reach(&strict) >= s.matched_reach * reach(&loose) {
+            strict
+        } else {
+            loose
+        };
         match found {
             Some((b, c1, c2)) => {
                 let end = &run[b - 1];
@@ -417,6 +432,35 @@ fn fit_run(run: &[Block], first: usize, pts: &[V], g: &Goal, s: &Settings, out: 
             }
         }
     }
+}
+
+/// The curve from point `a` ([`farthest`]), leaving along `lead` when there is one,
+/// or along its own direction when that reaches farther and turns no more than the
+/// program does at this point.
+fn curve_from(
+    pts: &[V],
+    t: &[V],
+    a: usize,
+    lead: Option<V>,
+    g: &Goal,
+    s: &Settings,
+) -> Option<(usize, V, V)> {
+    let mut found = farthest(pts, t, a, lead.as_ref(), g, s);
+    if let Some(l) = lead {
+        // Leaving along its own direction, turning no more than the program does
+        // at this point.
+        let own = dot(
+            &unit(&sub(&pts[a], &pts[a - 1])),
+            &unit(&sub(&pts[a + 1], &pts[a])),
+        );
+        if let Some(o) = farthest(pts, t, a, None, g, s) {
+            let turn_ok = dot(&l, &unit(&sub(&o.1, &pts[a]))) >= own.min(1.0);
+            if turn_ok && found.as_ref().is_none_or(|f| o.0 > f.0) {
+                found = Some(o);
+            }
+        }
+    }
+    found
 }
 
 /// The farthest one curve from `a` leaving along `lead` (or the data's tangent)
