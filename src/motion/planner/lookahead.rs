@@ -230,6 +230,69 @@ impl Lookahead {
         (corner, v_limit, end_limit, first)
     }
 
+    /// The speed and the share ρ of the acceleration of a blended corner whose turn
+    /// needs `n` of the acceleration per unit of speed, after `prev`, into `path`
+    /// (asked for at `feed`, whose first stretch allows `v_start`, at acceleration
+    /// `accel`), within the path tolerance's `by_tolerance`.
+    fn turn(
+        &self,
+        n: f32,
+        prev: Option<&PlanBlock>,
+        path: &Path,
+        (feed, v_start, accel): (f32, f32, f32),
+        by_tolerance: f32,
+    ) -> (f32, f32) {
+        // With jerk limitation over w ticks the smoothed motion passes the
+        // corner up to a·w·T/2 faster than the profile does, and its one-tick
+        // turn must stay within aᵢ·T/w per axis (a third of the jerk budget, see
+        // [`crate::motion::interp`]); a corner that cannot is a stop, which the executor
+        // lets the smoothing settle into before turning.
+        let w = self.smoothing.max(1) as f32;
+        let a_near = prev.map_or(0.0, |p| p.accel_full).max(accel);
+        let by_jerk = (1.0 / (w * n) - a_near * w / 2.0).max(0.0);
+        let limit = by_tolerance.min(if self.smoothing > 1 {
+            by_jerk
+        } else {
+            f32::INFINITY
+        });
+        let prev_v = prev
+            .as_ref()
+            .map_or(0.0, |p| p.feed.min(p.v_limit).min(p.exit_most));
+        let want = prev_v.min(feed.min(v_start)).min(limit);
+        // Blocks shorter than a tick's travel put several corners into one
+        // tick, whose turns add up: at v over blocks of length L, v/L of them,
+        // so the share a corner needs is v·n·max(1, v/L), and v ≤ √(ρ·L/n)
+        // as well as ρ/n.
+        let short = prev
+            .as_ref()
+            .map_or(path.length, |p| p.path.length.min(path.length))
+            .max(1) as f32;
+        let per_tick = fmax(1.0, want / short);
+        // max/min rather than clamp: clamp's panic message formats floats, which
+        // costs the firmware kilobytes of formatting code.
+        #[allow(clippy::manual_clamp)]
+        let most = (want * n * per_tick * 1.0001).max(0.0).min(0.5);
+        let speed = |rho: f32| fmin(fmin(rho / n, sqrtf(rho * short / n)), limit);
+        let before = prev.map(|p| Side {
+            far: fmin(p.corner, prev_v),
+            top: prev_v,
+            a: p.accel_full,
+            taken: p.rho_in,
+            length: p.length(),
+        });
+        let this = Side {
+            far: f32::NAN,
+            top: fmin(feed, v_start),
+            a: accel,
+            taken: 0.0,
+            length: path.length as f32,
+        };
+        // A stop waits for the smoothed motion to arrive (about w ticks).
+        let settle = if self.smoothing > 1 { w } else { 0.0 };
+        let rho = corner_share(most, speed, [before, Some(this)], settle);
+        (speed(rho), rho)
+    }
+
     /// [`Lookahead::plan`] of `block` whose path from [`Lookahead::end`] is derived
     /// already (`Path::new(block, &self.end)`: a host that derived it for its
     /// pre-flight carries it here rather than deriving it again).
@@ -272,63 +335,20 @@ impl Lookahead {
             corner_need(&self.end_tangent, &start_tangent, &self.end, machine, kin)
         };
         // Split each axis's acceleration at a blended corner: a share ρ for the turn,
-        // the rest for the two blocks' profiles (see the module doc). ρ is what the
-        // turn needs at the speed both blocks ask for, at most one half.
+        // the rest for the two blocks' profiles (see the module doc): at most what the
+        // turn needs at the speed both blocks ask for, and one half; less where that
+        // is faster ([`corner_share`]).
         let by_tolerance = self.tolerance_limit(&start_tangent);
         let (corner, rho) = match need {
             None => (0.0, 0.0),
             Some(n) if n <= 0.0 => (by_tolerance, 0.0),
-            Some(n) => {
-                // With jerk limitation over w ticks the smoothed motion passes the
-                // corner up to a·w·T/2 faster than the profile does, and its one-tick
-                // turn must stay within aᵢ·T/w per axis (a third of the jerk budget, see
-                // [`crate::motion::interp`]); a corner that cannot is a stop, which the executor
-                // lets the smoothing settle into before turning.
-                let w = self.smoothing.max(1) as f32;
-                let a_near = prev.as_ref().map_or(0.0, |p| p.accel_full).max(accel);
-                let by_jerk = (1.0 / (w * n) - a_near * w / 2.0).max(0.0);
-                let limit = by_tolerance.min(if self.smoothing > 1 {
-                    by_jerk
-                } else {
-                    f32::INFINITY
-                });
-                let prev_v = prev
-                    .as_ref()
-                    .map_or(0.0, |p| p.feed.min(p.v_limit).min(p.exit_most));
-                let want = prev_v.min(feed.min(v_start)).min(limit);
-                // Blocks shorter than a tick's travel put several corners into one
-                // tick, whose turns add up: at v over blocks of length L, v/L of them,
-                // so the share a corner needs is v·n·max(1, v/L), and v ≤ √(ρ·L/n)
-                // as well as ρ/n.
-                let short = prev
-                    .as_ref()
-                    .map_or(path.length, |p| p.path.length.min(path.length))
-                    .max(1) as f32;
-                let per_tick = fmax(1.0, want / short);
-                // max/min rather than clamp: clamp's panic message formats floats, which
-                // costs the firmware kilobytes of formatting code.
-                #[allow(clippy::manual_clamp)]
-                let most = (want * n * per_tick * 1.0001).max(0.0).min(0.5);
-                let speed = |rho: f32| fmin(fmin(rho / n, sqrtf(rho * short / n)), limit);
-                let before = prev.as_ref().map(|p| Side {
-                    far: fmin(p.corner, prev_v),
-                    top: prev_v,
-                    a: p.accel_full,
-                    taken: p.rho_in,
-                    length: p.length(),
-                });
-                let this = Side {
-                    far: f32::NAN,
-                    top: fmin(feed, v_start),
-                    a: accel,
-                    taken: 0.0,
-                    length: path.length as f32,
-                };
-                // A stop waits for the smoothed motion to arrive (about w ticks).
-                let settle = if self.smoothing > 1 { w } else { 0.0 };
-                let rho = corner_share(most, speed, [before, Some(this)], settle);
-                (speed(rho), rho)
-            }
+            Some(n) => self.turn(
+                n,
+                prev.as_deref(),
+                &path,
+                (feed, v_start, accel),
+                by_tolerance,
+            ),
         };
         if rho > 0.0 {
             if let Some(prev) = prev {

@@ -40,9 +40,11 @@
 //! a share ρ ≤ ½ goes to the turn, which may change each axis's or joint's speed by at
 //! most ρ·aᵢ·T (v ≤ ρ·minᵢ aᵢ·T/|Δuᵢ|), and the two blocks meeting there are profiled
 //! with (1 − ρ) of their acceleration. Together never more than aᵢ. ρ is chosen per
-//! corner as the share the turn needs at the programmed speed (so a gentle polyline
-//! keeps almost all of its acceleration), capped at ½. G61 (tolerance 0) stops exactly
-//! at the corner.
+//! corner: at most the share the turn needs at the programmed speed (so a gentle
+//! polyline keeps almost all of its acceleration), capped at ½, and of that share, its
+//! halves and 0, the one under which the two blocks take least time as trapezoids
+//! through the corner's speed (a sharp turn between long blocks is worth less than half
+//! of their acceleration, and stops). G61 (tolerance 0) stops exactly at the corner.
 //!
 //! Speeds are in nm/tick (`f32`), accelerations in nm/tick².
 

@@ -219,9 +219,12 @@ pub(super) fn fit_free(p: &[V], t0: Option<&V>, g: &Goal, s: &Settings) -> Optio
 /// `best` (the score and inner control points of the fit kept so far) or a better one
 /// among the [`handle_variants`] of handles `al` and `be` along the end tangents
 /// `t0` and `t1` from `p0` to `p3`, the points' parameters starting from `u`. Only a
-/// fit already found is improved: where none fits, the curve ends sooner, as it would
-/// without the variants (one that reached further than any other fit would run
-/// slower, and merge fewer moves per curve elsewhere).
+/// fit already found is improved by them: where none fits, the curve ends sooner, as
+/// it would without the variants (one that reached further than any other fit would
+/// run slower, and merge fewer moves per curve elsewhere). The handles whose start
+/// matches the block before ([`matched_start`]) are tried in any case: a fit refused
+/// for its start's jump alone ([`Settings::min_junction_share`]) is not one that
+/// reaches further than the others.
 #[allow(clippy::too_many_arguments)]
 fn improve(
     (p0, p3): (V, V),
