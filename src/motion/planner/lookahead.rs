@@ -289,7 +289,9 @@ impl Lookahead {
         };
         // A stop waits for the smoothed motion to arrive (about w ticks).
         let settle = if self.smoothing > 1 { w } else { 0.0 };
-        let rho = corner_share(most, speed, [before, Some(this)], settle);
+        // The share at which the turn allows a speed c.
+        let share = |c: f32| fmax(c * n, c * c * n / short);
+        let rho = corner_share(most, (speed, share), [before, Some(this)], settle);
         (speed(rho), rho)
     }
 
@@ -411,16 +413,23 @@ struct Side {
 /// acceleration; a gentle one keeps its share.
 fn corner_share(
     most: f32,
-    speed: impl Fn(f32) -> f32,
+    (speed, share): (impl Fn(f32) -> f32, impl Fn(f32) -> f32),
     sides: [Option<Side>; 2],
     settle: f32,
 ) -> f32 {
+    // The share at which the corner's speed is what the sides can reach from their
+    // other ends at full acceleration: more buys nothing there. Along a chain of
+    // short blocks that is where each corner must be for the next to be faster.
+    let reach = sides.iter().flatten().fold(f32::INFINITY, |c, s| {
+        fmin(c, sqrtf(s.far * s.far + 2.0 * s.a * s.length))
+    });
+    let enough = fmin(share(reach), most);
     let mut best = (f32::INFINITY, 0.0);
-    for k in 0..7 {
-        let rho = if k == 6 {
-            0.0
-        } else {
-            most / (1u32 << k) as f32
+    for k in 0..8 {
+        let rho = match k {
+            0 => enough,
+            7 => 0.0,
+            _ => fmin(enough, most / (1u32 << (k - 1)) as f32),
         };
         let a = |s: &Side| s.a * (1.0 - fmax(rho, s.taken));
         // No faster than a side can reach from its other end.
@@ -429,7 +438,12 @@ fn corner_share(
         });
         let mut t = if c > 0.0 { 0.0 } else { settle };
         for s in sides.iter().flatten() {
-            let far = if s.far.is_nan() { c } else { s.far };
+            // Nor faster at its other end than it can slow down to the corner from.
+            let far = if s.far.is_nan() {
+                c
+            } else {
+                fmin(s.far, sqrtf(c * c + 2.0 * a(s) * s.length))
+            };
             t += ramp_time(far, s.top, c, a(s), s.length);
         }
         if t < best.0 {
