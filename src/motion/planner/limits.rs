@@ -3,7 +3,7 @@
 
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
 use crate::kinematics::{Jacobian, Kinematics, MachineKinematics, Unreachable};
-use crate::math::sqrtf;
+use crate::math::{fmax, fmin, sqrtf};
 use crate::motion::geometry::{Form, Path};
 use crate::units::TICK_HZ;
 
@@ -405,6 +405,69 @@ pub(super) fn ramp_time(entry: f32, top: f32, exit: f32, a: f32, length: f32) ->
     let down = (peak * peak - x * x).max(0.0) / (2.0 * a);
     let cruise = (length - up - down).max(0.0);
     (peak - e).max(0.0) / a + (peak - x).max(0.0) / a + cruise / peak.max(1e-9)
+}
+
+/// One of the two blocks meeting at a corner, for [`corner_share`].
+pub(super) struct Side {
+    /// Speed at its other end, nm/tick (NaN: as at the corner).
+    pub(super) far: f32,
+    /// Its speed limit, nm/tick.
+    pub(super) top: f32,
+    /// Its acceleration before any corner's share, nm/tick².
+    pub(super) a: f32,
+    /// The share its other corner takes already.
+    pub(super) taken: f32,
+    /// Its length, nm.
+    pub(super) length: f32,
+}
+
+/// The share of the acceleration worth giving a corner's turn, at most `most` (what
+/// the turn needs at the speed asked for): of `most`, its halves down to 1/32 and 0,
+/// the one under which the two blocks meeting there take least time, each a
+/// trapezoid through the corner's speed `speed(ρ)` with (1 − ρ) of its acceleration,
+/// and a stop the smoothing's `settle` ticks more. A sharp turn passed within one tick
+/// goes at a fraction of aᵢ·T, which is seldom worth half of either block's
+/// acceleration; a gentle one keeps its share.
+pub(super) fn corner_share(
+    most: f32,
+    (speed, share): (impl Fn(f32) -> f32, impl Fn(f32) -> f32),
+    sides: [Option<Side>; 2],
+    settle: f32,
+) -> f32 {
+    // The share at which the corner's speed is what the sides can reach from their
+    // other ends at full acceleration: more buys nothing there. Along a chain of
+    // short blocks that is where each corner must be for the next to be faster.
+    let reach = sides.iter().flatten().fold(f32::INFINITY, |c, s| {
+        fmin(c, sqrtf(s.far * s.far + 2.0 * s.a * s.length))
+    });
+    let enough = fmin(share(reach), most);
+    let mut best = (f32::INFINITY, 0.0);
+    for k in 0..8 {
+        let rho = match k {
+            0 => enough,
+            7 => 0.0,
+            _ => fmin(enough, most / (1u32 << (k - 1)) as f32),
+        };
+        let a = |s: &Side| s.a * (1.0 - fmax(rho, s.taken));
+        // No faster than a side can reach from its other end.
+        let c = sides.iter().flatten().fold(speed(rho), |c, s| {
+            fmin(c, sqrtf(s.far * s.far + 2.0 * a(s) * s.length))
+        });
+        let mut t = if c > 0.0 { 0.0 } else { settle };
+        for s in sides.iter().flatten() {
+            // Nor faster at its other end than it can slow down to the corner from.
+            let far = if s.far.is_nan() {
+                c
+            } else {
+                fmin(s.far, sqrtf(c * c + 2.0 * a(s) * s.length))
+            };
+            t += ramp_time(far, s.top, c, a(s), s.length);
+        }
+        if t < best.0 {
+            best = (t, rho);
+        }
+    }
+    best.1
 }
 
 /// The speed (nm/tick) at which a jump `jump` of d²P/ds² (per nm²) at `pose` changes

@@ -1,7 +1,9 @@
 //! The host's look-ahead: each block's limits and corner ([`Lookahead`]), the reverse
 //! and forward passes, and single planned moves (MDI, jogs).
 
-use super::limits::{bend_jump_limit, corner_need, limits_along, per_tick, ramp_time, Limits};
+use super::limits::{
+    bend_jump_limit, corner_need, corner_share, limits_along, per_tick, Limits, Side,
+};
 use super::splines::{refine_splines, restore, smoothed};
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
 use crate::kinematics::{MachineKinematics, Unreachable};
@@ -289,9 +291,16 @@ impl Lookahead {
         };
         // A stop waits for the smoothed motion to arrive (about w ticks).
         let settle = if self.smoothing > 1 { w } else { 0.0 };
+        // Under jerk limitation the share stays what the turn needs: a curve restarted
+        // from such a stop broke an axis's acceleration on the H-4
+        // (`compression::under_jerk_limitation_…`), a cause not yet found.
         // The share at which the turn allows a speed c.
         let share = |c: f32| fmax(c * n, c * c * n / short);
-        let rho = corner_share(most, (speed, share), [before, Some(this)], settle);
+        let rho = if self.smoothing > 1 {
+            most
+        } else {
+            corner_share(most, (speed, share), [before, Some(this)], settle)
+        };
         (speed(rho), rho)
     }
 
@@ -388,69 +397,6 @@ impl Lookahead {
             first: [corner, v_limit, accel, end_limit],
         }
     }
-}
-
-/// One of the two blocks meeting at a corner, for [`corner_share`].
-struct Side {
-    /// Speed at its other end, nm/tick (NaN: as at the corner).
-    far: f32,
-    /// Its speed limit, nm/tick.
-    top: f32,
-    /// Its acceleration before any corner's share, nm/tick².
-    a: f32,
-    /// The share its other corner takes already.
-    taken: f32,
-    /// Its length, nm.
-    length: f32,
-}
-
-/// The share of the acceleration worth giving a corner's turn, at most `most` (what
-/// the turn needs at the speed asked for): of `most`, its halves down to 1/32 and 0,
-/// the one under which the two blocks meeting there take least time, each a
-/// trapezoid through the corner's speed `speed(ρ)` with (1 − ρ) of its acceleration,
-/// and a stop the smoothing's `settle` ticks more. A sharp turn passed within one tick
-/// goes at a fraction of aᵢ·T, which is seldom worth half of either block's
-/// acceleration; a gentle one keeps its share.
-fn corner_share(
-    most: f32,
-    (speed, share): (impl Fn(f32) -> f32, impl Fn(f32) -> f32),
-    sides: [Option<Side>; 2],
-    settle: f32,
-) -> f32 {
-    // The share at which the corner's speed is what the sides can reach from their
-    // other ends at full acceleration: more buys nothing there. Along a chain of
-    // short blocks that is where each corner must be for the next to be faster.
-    let reach = sides.iter().flatten().fold(f32::INFINITY, |c, s| {
-        fmin(c, sqrtf(s.far * s.far + 2.0 * s.a * s.length))
-    });
-    let enough = fmin(share(reach), most);
-    let mut best = (f32::INFINITY, 0.0);
-    for k in 0..8 {
-        let rho = match k {
-            0 => enough,
-            7 => 0.0,
-            _ => fmin(enough, most / (1u32 << (k - 1)) as f32),
-        };
-        let a = |s: &Side| s.a * (1.0 - fmax(rho, s.taken));
-        // No faster than a side can reach from its other end.
-        let c = sides.iter().flatten().fold(speed(rho), |c, s| {
-            fmin(c, sqrtf(s.far * s.far + 2.0 * a(s) * s.length))
-        });
-        let mut t = if c > 0.0 { 0.0 } else { settle };
-        for s in sides.iter().flatten() {
-            // Nor faster at its other end than it can slow down to the corner from.
-            let far = if s.far.is_nan() {
-                c
-            } else {
-                fmin(s.far, sqrtf(c * c + 2.0 * a(s) * s.length))
-            };
-            t += ramp_time(far, s.top, c, a(s), s.length);
-        }
-        if t < best.0 {
-            best = (t, rho);
-        }
-    }
-    best.1
 }
 
 /// What a block does, given its geometry (a move of length 0 is a dwell of 0 ticks).
