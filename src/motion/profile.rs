@@ -251,14 +251,25 @@ impl Profile {
         // lands just short of the overlap, since s₃(t₃) is concave.
         // With no last phase to shorten, the same on the first phase's time
         // (ds₁/dt₁ = v_c; the exit is then the new cruise speed).
-        let (mut t1, mut vc, mut s1) = (t1, vc, s1);
+        // A last phase that ends at or near rest is at its longest (ds₃/dt₃ = v₁ ≈ 0):
+        // there the step would throw it away and leave the block at its cruise speed,
+        // so it stops instead, a hair harder than `a` over the room the first phase
+        // leaves (the overlap is a rounding's, so the rise is of the order of 10⁻⁶).
+        let (mut t1, mut vc, mut s1, mut a3) = (t1, vc, s1, a_q);
         for _ in 0..3 {
             if rem >= 0 {
                 break;
             }
             let over = i64_to_f32(rem) * (1.0 / Q16F);
-            if v1_q > 0 && t3 > 0 {
-                t3 = (t3 + to_q32(over / from_q32(v1_q))).max(0);
+            let step = if v1_q > 0 {
+                to_q32(over / from_q32(v1_q))
+            } else {
+                i64::MIN / 2
+            };
+            if t3 > 0 && t3 + step > t3 / 2 {
+                t3 += step;
+            } else if let Some((a, t)) = stop_within(length_q16 - s1, vc, a) {
+                (a3, t3) = (a, t);
             } else if vc > 0 && t1 > 0 {
                 t1 = (t1 + to_q32(over / from_q32(vc))).max(0);
                 vc = v0_q + ((a1 as i128 * t1 as i128) >> 40) as i64;
@@ -266,8 +277,8 @@ impl Profile {
             } else {
                 break;
             }
-            v1_q = (vc - ((a_q as i128 * t3 as i128) >> 40) as i64).max(0);
-            s3 = distance(v1_q, t3, a_q);
+            v1_q = (vc - ((a3 as i128 * t3 as i128) >> 40) as i64).max(0);
+            s3 = distance(v1_q, t3, a3);
             rem = length_q16 - s1 - s3;
         }
         // The cruise covers what the ramps leave: t2 = rem / vc, refined once so that
@@ -281,7 +292,7 @@ impl Profile {
             vc,
             t2: t2.min(HELD),
             v1: v1_q,
-            a3: a_q,
+            a3,
             t3,
             s1,
             length: length_q16,
@@ -316,6 +327,19 @@ impl Profile {
         let v = self.v1 + ((self.a3 as i128 * left as i128) >> 40) as i64;
         (s.clamp(0, self.length), v)
     }
+}
+
+/// The deceleration (nm/tick² Q24.40) and time (ticks Q32) that bring `vc` (nm/tick
+/// Q32) to rest within `room` (nm Q16), a hair short of it, when that is at most 10⁻⁴
+/// above `a` (nm/tick²); `None` otherwise.
+#[inline(always)]
+fn stop_within(room: i64, vc: i64, a: f32) -> Option<(i64, i64)> {
+    let (room, v) = (i64_to_f32(room) * (1.0 / Q16F), from_q32(vc));
+    if room <= 0.0 || v <= 0.0 {
+        return None;
+    }
+    let need = v * v / (2.0 * room) * (1.0 + 2e-6);
+    (need <= a * (1.0 + 1e-4)).then(|| (to_q40(need), to_q32(v / need)))
 }
 
 #[cfg(test)]
@@ -385,6 +409,33 @@ mod tests {
         assert_eq!(v, 0);
         assert!((s as f64 / 65_536.0 - 2.5e6).abs() < 1.0, "stopped at {s}");
         assert_eq!(p.at(100_000 * TICK_Q32).0, s);
+    }
+
+    #[test]
+    fn a_block_entered_right_at_its_stopping_reach_stops_at_its_end() {
+        // Session 27's circle: the host planned its last curve's entry at exactly the
+        // speed it can stop from over its length (v₀² = 2·a·S in single precision), and
+        // the fix-up of the ramps' rounding dropped the last phase: it ran out at
+        // 98.65 mm/s and stopped in a tick.
+        let (p, got) = Profile::plan(5_650_540 << 16, 98_653.55, 99_987.586, 0.0, 861.2028);
+        assert!(got.exit < 1.0, "left at {} nm/tick", got.exit);
+        assert_eq!(p.at(p.duration()).0, p.length);
+        let x = samples(&p, 1_000);
+        for w in x.windows(3) {
+            let dv = (w[2] - 2.0 * w[1] + w[0]).abs();
+            assert!(dv <= 861.2028 * (1.0 + 1e-4) + 2e-3, "accel {dv}");
+        }
+        // Across the neighbourhood of that speed, a stop asked for is a stop.
+        for k in -2000..2000 {
+            let v0 = 98_653.55 * (1.0 + k as f32 * 1e-8);
+            let (_, got) = Profile::plan(5_650_540 << 16, v0, 99_987.586, 0.0, 861.2028);
+            let reach = (v0 as f64).powi(2) - 2.0 * 861.2028 * 5_650_540.0;
+            assert!(
+                (got.exit as f64) <= reach.max(0.0).sqrt() * 1.01 + 1.0,
+                "from {v0}: left at {}",
+                got.exit
+            );
+        }
     }
 
     #[test]
