@@ -291,16 +291,9 @@ impl Lookahead {
         };
         // A stop waits for the smoothed motion to arrive (about w ticks).
         let settle = if self.smoothing > 1 { w } else { 0.0 };
-        // Under jerk limitation the share stays what the turn needs: a curve restarted
-        // from such a stop broke an axis's acceleration on the H-4
-        // (`compression::under_jerk_limitation_…`), a cause not yet found.
         // The share at which the turn allows a speed c.
         let share = |c: f32| fmax(c * n, c * c * n / short);
-        let rho = if self.smoothing > 1 {
-            most
-        } else {
-            corner_share(most, (speed, share), [before, Some(this)], settle)
-        };
+        let rho = corner_share(most, (speed, share), [before, Some(this)], settle);
         (speed(rho), rho)
     }
 
