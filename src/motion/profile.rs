@@ -233,6 +233,20 @@ impl Profile {
             let s = fmin((v0 * v0 - v1 * v1) / (2.0 * a), shed / (2.0 * a));
             (0, 0, to_q32(2.0 * fmax(s, 0.0) / fmax(v0 + v1, 1e-30)))
         };
+        Self::assemble(length_q16, v0_q, (a1, t1), t3, a)
+    }
+
+    /// The profile of phases planned in single precision (first phase `a1` for `t1`
+    /// from `v0_q`, last phase `t3` at `a`), made continuous in fixed point.
+    #[inline(always)]
+    fn assemble(
+        length_q16: i64,
+        v0_q: i64,
+        (a1, t1): (i64, i64),
+        t3: i64,
+        a: f32,
+    ) -> (Profile, Achieved) {
+        let a_q = to_q40(a);
         // Continuity in fixed point: the cruise speed is where the first phase ends,
         // the exit where the last phase, run backwards from the cruise, ends.
         let vc = v0_q + ((a1 as i128 * t1 as i128) >> 40) as i64;
