@@ -29,7 +29,11 @@
 //! pose, with 1 % and a nanometre's rounding): since session 26 a curve runs faster
 //! away from its tightest bend, under each stretch's own limit. The same check finds
 //! that before session 26 the sine of 0.1 mm chords in `G64` ended its last block at
-//! 81 mm/s and stopped within two ticks (39 000 mm/s²).
+//! 81 mm/s and stopped within two ticks (39 000 mm/s²), and that with session 27's
+//! corner rule the circle of 0.05 mm chords in `G64 P0.01` ran its last curve out at
+//! 98.65 mm/s (52 485 mm/s²): entered at exactly the speed it could stop from, its
+//! profile lost the last phase to a rounding fix-up (fixed in session 28,
+//! `profile::tests::a_block_entered_right_at_its_stopping_reach_stops_at_its_end`).
 //!
 //! The runs stream in real time, one after another (side by side they would starve
 //! each other's queues). `perf/dense_curves.py` prints the same figures as a table.
