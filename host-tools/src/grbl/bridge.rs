@@ -660,7 +660,12 @@ impl JobHooks for Bridge<'_> {
             return false;
         }
         let queued = view.total.saturating_sub(view.executed) + out.len();
-        self.merge.send_due(queued, !self.lines.is_empty(), out);
+        let (at_rest, buffered_ms) = self
+            .status
+            .as_ref()
+            .map_or((true, 0), |s| (s.speed == 0, s.buffered_ms));
+        self.merge
+            .send_due((queued, at_rest, buffered_ms), !self.lines.is_empty(), out);
         if !out.is_empty() || !self.lines.is_empty() {
             self.last_busy = Instant::now();
             return true;

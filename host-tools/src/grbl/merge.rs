@@ -8,12 +8,17 @@
 //! - a block that cannot join a run (a rapid, an arc, a dwell, an auxiliary function,
 //!   `G61`, `G64` without P): the held moves are merged and sent before it;
 //! - [`MOST_HELD`] moves held;
-//! - the controller is about to run out ([`LOW_QUEUE`] blocks or fewer left to run);
+//! - the controller is about to run out ([`LOW_QUEUE`] blocks or fewer left to run;
+//!   at rest with nothing queued it cannot, and the first merge waits for the others);
 //! - the oldest held move has waited [`LONGEST_HOLD`], or the sender has been quiet
 //!   for [`QUIET`] with nothing more waiting.
 //!
 //! A run cut by the last three ends at a vertex of the programmed polyline, as any run
-//! does at a corner: the curves on either side meet there. Corners are blended as
+//! does at a corner: the curves on either side meet there. The next merge's first
+//! curve leaves that vertex as the last one arrived (its direction, and the ratio of
+//! the tool's speed to the path speed: [`compress::Lead`]), unless the polyline turns
+//! a corner there, so that the junction passes at speed as within one merge. Corners
+//! are blended as
 //! `nc-send` blends them ([`compress::blend`]), those between two merges too: as
 //! `nc-send` does between the pieces of a streamed program, the last blendable block of
 //! a merge is kept back (the [`Blender`] holds it) until the next merge brings the
@@ -23,7 +28,7 @@
 //! buffer.
 
 use crate::gcode::compress::blend::Blender;
-use crate::gcode::compress::{self, Compressed, Settings};
+use crate::gcode::compress::{self, Compressed, Lead, Settings};
 use pkmc::config::AXES;
 use pkmc::motion::block::{Block, Motion};
 use std::time::{Duration, Instant};
@@ -34,8 +39,10 @@ const MOST_HELD: usize = 256;
 const LONGEST_HOLD: Duration = Duration::from_millis(150);
 /// Held moves go once the sender has been quiet this long.
 const QUIET: Duration = Duration::from_millis(40);
-/// Held moves go once the controller has this few blocks or fewer left to run.
+/// Held moves go once the controller has this few blocks or fewer left to run...
 const LOW_QUEUE: usize = 3;
+/// ... and less motion than this, ms, by its last status (short blocks run out fast).
+const LOW_MS: u32 = 120;
 
 /// The moves held back for merging.
 pub(super) struct Merger {
@@ -46,6 +53,8 @@ pub(super) struct Merger {
     start: [i64; AXES],
     /// The corners' blender, across merges (with `settings`).
     blender: Option<Blender>,
+    /// How the last merge's curves ended, for the next merge to continue them.
+    lead: Option<Lead>,
     /// When the oldest move held (in `held` or by the blender) came.
     since: Option<Instant>,
     /// When the last line's blocks came.
@@ -65,6 +74,7 @@ impl Merger {
     pub(super) fn new(settings: Option<Settings>, start: [i64; AXES]) -> Self {
         Self {
             blender: settings.map(|s| Blender::new(&s, start)),
+            lead: None,
             settings,
             held: Vec::new(),
             start,
@@ -80,6 +90,7 @@ impl Merger {
         self.held.clear();
         self.since = None;
         self.start = pose;
+        self.lead = None;
         self.blender = self.settings.map(|s| Blender::new(&s, pose));
     }
 
@@ -105,6 +116,7 @@ impl Merger {
                     self.start = b.target;
                 }
                 out.push(b);
+                self.lead = None;
                 // The next blend starts after this block.
                 self.blender = self.settings.map(|s| Blender::new(&s, self.start));
             }
@@ -120,7 +132,10 @@ impl Merger {
             return;
         };
         let end = last.target;
-        let runs = compress::compress_runs(&self.held, self.start, s);
+        // The merge continues the last one's curves where they ended (held moves
+        // are cut at any vertex of the polyline).
+        let (runs, lead) = compress::compress_runs_after(&self.held, self.start, s, self.lead);
+        self.lead = lead;
         let mut c = Compressed::default();
         blender.push(&self.held, &runs, 0, &mut c);
         self.merged.0 += self.held.len() as u64;
@@ -149,11 +164,22 @@ impl Merger {
     /// (`queued`: blocks it has yet to run, or is about to get) or the sender has been
     /// quiet (`lines_waiting`: the sender's lines not yet taken); what is held, but the
     /// blender's block, once the oldest has waited [`LONGEST_HOLD`].
-    pub(super) fn send_due(&mut self, queued: usize, lines_waiting: bool, out: &mut Vec<Block>) {
+    ///
+    /// "About to run out" is [`LOW_QUEUE`] blocks or fewer, with less than [`LOW_MS`]
+    /// of motion buffered (`buffered_ms`, by the controller's last status). A machine
+    /// at rest (`at_rest`: nothing queued, not moving) cannot run out: there the moves
+    /// are held for a longer first merge, as long as the sender keeps sending.
+    pub(super) fn send_due(
+        &mut self,
+        (queued, at_rest, buffered_ms): (usize, bool, u32),
+        lines_waiting: bool,
+        out: &mut Vec<Block>,
+    ) {
         let Some(since) = self.since else {
             return;
         };
-        if queued <= LOW_QUEUE || (!lines_waiting && self.last_line.elapsed() >= QUIET) {
+        let low = queued <= LOW_QUEUE && buffered_ms < LOW_MS && !at_rest;
+        if low || (!lines_waiting && self.last_line.elapsed() >= QUIET) {
             self.flush(out);
         } else if since.elapsed() >= LONGEST_HOLD {
             if self.held.is_empty() {
@@ -215,7 +241,7 @@ mod tests {
         assert_eq!(m.merged, (200, whole.blocks.len() as u64));
         assert!(m.is_empty());
         let n = out.len();
-        m.send_due(0, false, &mut out);
+        m.send_due((0, false, 0), false, &mut out);
         assert_eq!(out.len(), n, "nothing more to send");
     }
 
@@ -232,9 +258,15 @@ mod tests {
         let mut m = Merger::new(Some(Settings::default()), [0; AXES]);
         let mut out = Vec::new();
         m.take(chords(10), &mut out);
-        m.send_due(10, true, &mut out);
+        m.send_due((10, false, 0), true, &mut out);
         assert!(out.is_empty() && !m.is_empty());
-        m.send_due(LOW_QUEUE, true, &mut out);
+        // At rest with nothing queued, the sender still sending: held for more.
+        m.send_due((0, true, 0), true, &mut out);
+        assert!(out.is_empty() && !m.is_empty());
+        // Few blocks but much motion in them: held.
+        m.send_due((LOW_QUEUE, false, LOW_MS), true, &mut out);
+        assert!(out.is_empty() && !m.is_empty());
+        m.send_due((LOW_QUEUE, false, LOW_MS - 1), true, &mut out);
         assert!(!out.is_empty() && m.is_empty());
         assert_eq!(out.last().map(|b| b.target), Some(chords(10)[9].target));
         // A long run is merged at MOST_HELD moves; its last curve, which ends on a

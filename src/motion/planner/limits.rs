@@ -67,6 +67,7 @@ pub(super) fn limits_along(
     path: &Path,
     feed: f32,
     bend_speed: Option<f32>,
+    spline_bend_most: f32,
     machine: &MachineConfig,
     kin: &MachineKinematics,
 ) -> Result<Limits, Unreachable> {
@@ -83,14 +84,14 @@ pub(super) fn limits_along(
     // but on a spline the programmed feed (as at a blended corner, whose limit is
     // sized for the programmed speed: a curve that stands for chords keeps their
     // acceleration, and the override cannot take it faster than its bend allows);
-    // and on a spline the bend may take up to [`SPLINE_BEND_SHARE`].
+    // and on a spline the bend may take up to `spline_bend_most`.
     let bend_feed = match bend_speed {
         Some(v) => v,
         None if path.form == Form::Spline => feed / 2.0,
         None => feed,
     };
     let bend_most = if path.form == Form::Spline {
-        SPLINE_BEND_SHARE
+        spline_bend_most
     } else {
         0.5
     };
@@ -160,7 +161,14 @@ pub(super) fn limits_along(
         v = v.min(crate::math::sqrtf(a * r as f32));
     }
     if let crate::motion::geometry::Bend::Spline(c) = &path.bend {
-        (v, a) = spline_axes(path, c, bend_feed, machine, (v, a), &mut per_stretch);
+        (v, a) = spline_axes(
+            path,
+            c,
+            (bend_feed, bend_most),
+            machine,
+            (v, a),
+            &mut per_stretch,
+        );
     }
     let bend = if spline {
         bend_limits(a, &at_sample[..], n, &per_stretch)
@@ -178,12 +186,12 @@ pub(super) fn limits_along(
 /// A spline's limits `(v, a)` lowered for its pose axes, and their [`Term`]s over each
 /// stretch into `per_stretch`. An axis moves at x′·v and accelerates at x′·a + x″·v²,
 /// with x′ and x″ its exact largest first and second derivatives along the curve: the
-/// share of its acceleration its bend needs at `bend_feed`, at most
-/// [`SPLINE_BEND_SHARE`], is taken from the profile's, as for joints.
+/// share of its acceleration its bend needs at `bend_feed`, at most `most`, is taken
+/// from the profile's, as for joints.
 fn spline_axes(
     path: &Path,
     curve: &crate::motion::geometry::Curve,
-    bend_feed: f32,
+    (bend_feed, most): (f32, f32),
     machine: &MachineConfig,
     (mut v, mut a): (f32, f32),
     per_stretch: &mut [[Term; AXES]; STRETCHES],
@@ -197,15 +205,7 @@ fn spline_axes(
         if l.max_accel > 0 {
             let mut speed = v;
             let amax = per_tick2(l.max_accel);
-            shares[i] = split(
-                &mut speed,
-                &mut a,
-                bend_feed,
-                d1[i],
-                d2[i],
-                amax,
-                SPLINE_BEND_SHARE,
-            );
+            shares[i] = split(&mut speed, &mut a, bend_feed, d1[i], d2[i], amax, most);
         }
     }
     axis_terms(path, &d1, &shares, machine, per_stretch);

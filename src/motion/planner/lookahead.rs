@@ -3,6 +3,7 @@
 
 use super::limits::{
     bend_jump_limit, corner_need, corner_share, limits_along, per_tick, Limits, Side,
+    SPLINE_BEND_SHARE,
 };
 use super::splines::{refine_splines, restore, smoothed};
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
@@ -314,7 +315,15 @@ impl Lookahead {
         let requested = feed * 2.0;
         let limits = match kind {
             Kind::Rapid | Kind::Feed => {
-                match limits_along(&self.end, &path, requested, None, machine, kin) {
+                match limits_along(
+                    &self.end,
+                    &path,
+                    requested,
+                    None,
+                    SPLINE_BEND_SHARE,
+                    machine,
+                    kin,
+                ) {
                     Ok(l) => Some(smoothed(l, &path, self.smoothing)),
                     Err(e) => {
                         kind = Kind::Unreachable(e);

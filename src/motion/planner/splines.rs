@@ -3,7 +3,7 @@
 //! left at; and each pass sequence starts again from the blocks as they were planned
 //! ([`restore`]).
 
-use super::limits::{limits_along, ramp_time, Limits};
+use super::limits::{limits_along, ramp_time, Limits, SPLINE_BEND_SHARE};
 use super::lookahead::{Kind, PlanBlock};
 use crate::config::{MachineConfig, AXES};
 use crate::kinematics::MachineKinematics;
@@ -103,25 +103,54 @@ fn better_spline(
     kin: &MachineKinematics,
 ) -> Option<(f32, f32)> {
     let (entry, length) = (b.entry, b.length());
-    let limits = |bend_speed| {
-        limits_along(from_pose, &b.path, b.feed * 2.0, bend_speed, machine, kin)
-            .ok()
-            .map(|l| smoothed(l, &b.path, smoothing))
+    let limits = |bend_speed, most| {
+        limits_along(
+            from_pose,
+            &b.path,
+            b.feed * 2.0,
+            bend_speed,
+            most,
+            machine,
+            kin,
+        )
+        .ok()
+        .map(|l| smoothed(l, &b.path, smoothing))
     };
     // The share of the acceleration its corners take.
     let kept = b.accel / b.accel_full;
     let time = |v: f32, a: f32| ramp_time(entry, fmin(v, b.feed), exit, a, length);
-    let planned = limits(None)?;
+    let planned = limits(None, SPLINE_BEND_SHARE)?;
     let mut best = (planned.top(entry, exit, b.accel, length), b.accel_full);
     let top = fmin(b.feed, best.0);
     let peak = fmin(
         sqrtf((entry * entry + exit * exit) / 2.0 + b.accel * length),
         top,
     );
+    // Another split of the axes' acceleration between the bend and the profile: less
+    // for the bend where the profile's ramps bind, more where the bend does. Each is
+    // timed between the planned ends, which its profile must still join.
+    let mut others = [
+        (None, 0.2),
+        (None, 1.0 / 3.0),
+        (None, 0.5),
+        (None, 0.6),
+        (None, 0.75),
+        (None, 0.85),
+        (None, 0.95),
+        (None, 0.0),
+    ];
     if peak < 0.98 * top && peak > 0.0 {
-        if let Some(l) = limits(Some(peak * 1.01)) {
-            let v = l.top(entry, exit, l.a * kept, length);
-            if l.a > best.1 && time(v, l.a * kept) < time(best.0, b.accel) {
+        others[7] = (Some(peak * 1.01), SPLINE_BEND_SHARE);
+    }
+    for (bend_speed, most) in others {
+        if most <= 0.0 {
+            continue;
+        }
+        if let Some(l) = limits(bend_speed, most) {
+            let a = l.a * kept;
+            let joins = (entry * entry - exit * exit).abs() <= 2.0 * a * length;
+            let v = l.top(entry, exit, a, length);
+            if joins && time(v, a) < time(best.0, best.1 * kept) {
                 best = (v, l.a);
             }
         }

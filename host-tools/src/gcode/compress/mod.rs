@@ -246,11 +246,37 @@ pub fn compress(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compresse
 /// Compresses `blocks` (starting at `start`) with settings `s`: runs into curves,
 /// corners not blended.
 pub fn compress_runs(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compressed {
+    compress_runs_after(blocks, start, s, None).0
+}
+
+/// Where a merged piece of a polyline left off, for the next piece (the Grbl bridge
+/// merges a sender's moves piece by piece): the direction and the ratio of the tool's
+/// speed to the path speed its last block ends with, and its last chord's direction.
+#[derive(Clone, Copy, Debug)]
+pub struct Lead {
+    dir: V,
+    ratio: f64,
+    chord: V,
+}
+
+/// [`compress_runs`] of a piece that continues the one `lead` ended: a run that
+/// starts at `start` and turns there by less than a corner leaves along `lead` at its
+/// speed ratio, so that the pieces meet as one merge's curves do. Also returns where
+/// this piece leaves off, when it ends with a run.
+pub fn compress_runs_after(
+    blocks: &[Block],
+    start: [i64; AXES],
+    s: &Settings,
+    lead: Option<Lead>,
+) -> (Compressed, Option<Lead>) {
     let mut out = Compressed::default();
     let mut pose = start;
     let mut i = 0;
+    let mut last = None;
     while i < blocks.len() {
         let b = &blocks[i];
+        let carried = lead.filter(|_| i == 0);
+        last = None;
         let Some((j, pts)) = run_from(blocks, i, &pose, s) else {
             out.blocks.push(*b);
             out.source.push(i..i + 1);
@@ -270,11 +296,14 @@ pub fn compress_runs(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Comp
             speed,
             lead_ratio: 1.0,
         };
-        fit_run(&blocks[i..j], i, &pts, &goal, s, &mut out);
+        let first_chord = unit(&sub(&pts[1], &pts[0]));
+        let cos_corner = s.corner_deg.to_radians().cos();
+        let carried = carried.filter(|l| dot(&l.chord, &first_chord) >= cos_corner);
+        last = fit_run(&blocks[i..j], i, &pts, &goal, s, &mut out, carried);
         pose = blocks[j - 1].target;
         i = j;
     }
-    out
+    (out, last)
 }
 
 /// The run of mergeable blocks starting at `blocks[i]` (from `pose`): its end `j`
@@ -376,23 +405,39 @@ fn tangents(pts: &[V], reach: f64) -> Vec<V> {
 }
 
 /// Fits the run `run` (input blocks from index `first`, points `pts`) piece by piece
-/// (see the module doc).
-fn fit_run(run: &[Block], first: usize, pts: &[V], g: &Goal, s: &Settings, out: &mut Compressed) {
+/// (see the module doc), its first block leaving as `carried` ends; returns how its
+/// last block ends.
+fn fit_run(
+    run: &[Block],
+    first: usize,
+    pts: &[V],
+    g: &Goal,
+    s: &Settings,
+    out: &mut Compressed,
+    carried: Option<Lead>,
+) -> Option<Lead> {
     let m = pts.len() - 1;
     let t = tangents(pts, g.tol * s.tangent_reach);
-    let mut lead: Option<V> = None;
+    let mut lead: Option<V> = carried.map(|l| l.dir);
     // Each curve's lead ratio is the end of the one before it.
     let g = &mut { *g };
+    g.lead_ratio = carried.map_or(1.0, |l| l.ratio);
     let mut a = 0;
     while a < m {
+        // The chord into point a, for the turn the program makes there.
+        let into = if a > 0 {
+            Some(unit(&sub(&pts[a], &pts[a - 1])))
+        } else {
+            carried.map(|l| l.chord)
+        };
         // A curve whose start matches the block before it, unless one that does not
         // reaches much farther.
-        let strict = curve_from(pts, &t, a, lead, g, s);
+        let strict = curve_from(pts, &t, a, (lead, into), g, s);
         let loose = curve_from(
             pts,
             &t,
             a,
-            lead,
+            (lead, into),
             g,
             &Settings {
                 min_junction_share: 0.0,
@@ -432,27 +477,29 @@ fn fit_run(run: &[Block], first: usize, pts: &[V], g: &Goal, s: &Settings, out: 
             }
         }
     }
+    lead.map(|dir| Lead {
+        dir,
+        ratio: g.lead_ratio,
+        chord: unit(&sub(&pts[m], &pts[m - 1])),
+    })
 }
 
 /// The curve from point `a` ([`farthest`]), leaving along `lead` when there is one,
 /// or along its own direction when that reaches farther and turns no more than the
-/// program does at this point.
+/// program does at this point (from the chord `into` it).
 fn curve_from(
     pts: &[V],
     t: &[V],
     a: usize,
-    lead: Option<V>,
+    (lead, into): (Option<V>, Option<V>),
     g: &Goal,
     s: &Settings,
 ) -> Option<(usize, V, V)> {
     let mut found = farthest(pts, t, a, lead.as_ref(), g, s);
-    if let Some(l) = lead {
+    if let (Some(l), Some(into)) = (lead, into) {
         // Leaving along its own direction, turning no more than the program does
         // at this point.
-        let own = dot(
-            &unit(&sub(&pts[a], &pts[a - 1])),
-            &unit(&sub(&pts[a + 1], &pts[a])),
-        );
+        let own = dot(&into, &unit(&sub(&pts[a + 1], &pts[a])));
         if let Some(o) = farthest(pts, t, a, None, g, s) {
             let turn_ok = dot(&l, &unit(&sub(&o.1, &pts[a]))) >= own.min(1.0);
             if turn_ok && found.as_ref().is_none_or(|f| o.0 > f.0) {
