@@ -275,13 +275,11 @@ impl Profile {
                 break;
             }
             let over = i64_to_f32(rem) * (1.0 / Q16F);
-            let step = if v1_q > 0 {
-                to_q32(over / from_q32(v1_q))
-            } else {
-                i64::MIN / 2
-            };
-            if t3 > 0 && t3 + step > t3 / 2 {
-                t3 += step;
+            let shortened = (v1_q > 0 && t3 > 0)
+                .then(|| t3 + to_q32(over / from_q32(v1_q)))
+                .filter(|&t| t > t3 / 2);
+            if let Some(t) = shortened {
+                t3 = t;
             } else if let Some((a, t)) = stop_within(length_q16 - s1, vc, a) {
                 (a3, t3) = (a, t);
             } else if vc > 0 && t1 > 0 {

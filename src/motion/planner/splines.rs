@@ -129,23 +129,12 @@ fn better_spline(
     // Another split of the axes' acceleration between the bend and the profile: less
     // for the bend where the profile's ramps bind, more where the bend does. Each is
     // timed between the planned ends, which its profile must still join.
-    let mut others = [
-        (None, 0.2),
-        (None, 1.0 / 3.0),
-        (None, 0.5),
-        (None, 0.6),
-        (None, 0.75),
-        (None, 0.85),
-        (None, 0.95),
-        (None, 0.0),
-    ];
-    if peak < 0.98 * top && peak > 0.0 {
-        others[7] = (Some(peak * 1.01), SPLINE_BEND_SHARE);
-    }
-    for (bend_speed, most) in others {
-        if most <= 0.0 {
-            continue;
-        }
+    const CAPS: [f32; 7] = [0.2, 1.0 / 3.0, 0.5, 0.6, 0.75, 0.85, 0.95];
+    // And the planned cap with the bend sized for the speed the profile peaks at,
+    // where that is well below the top.
+    let at_peak =
+        (peak < 0.98 * top && peak > 0.0).then_some((Some(peak * 1.01), SPLINE_BEND_SHARE));
+    for (bend_speed, most) in CAPS.iter().map(|&most| (None, most)).chain(at_peak) {
         if let Some(l) = limits(bend_speed, most) {
             let a = l.a * kept;
             let joins = (entry * entry - exit * exit).abs() <= 2.0 * a * length;

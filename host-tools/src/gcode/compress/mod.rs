@@ -296,9 +296,11 @@ pub fn compress_runs_after(
             speed,
             lead_ratio: 1.0,
         };
-        let first_chord = unit(&sub(&pts[1], &pts[0]));
-        let cos_corner = s.corner_deg.to_radians().cos();
-        let carried = carried.filter(|l| dot(&l.chord, &first_chord) >= cos_corner);
+        // The last batch's curve goes on only where the polyline turns no corner.
+        let carried = carried.filter(|l| {
+            let first_chord = unit(&sub(&pts[1], &pts[0]));
+            dot(&l.chord, &first_chord) >= s.corner_deg.to_radians().cos()
+        });
         last = fit_run(&blocks[i..j], i, &pts, &goal, s, &mut out, carried);
         pose = blocks[j - 1].target;
         i = j;
