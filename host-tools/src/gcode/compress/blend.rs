@@ -27,7 +27,10 @@
 //! **Shape.** The inner control points lie along the tangents, at distances in the
 //! ratio of the trimmed blocks' |dP/ds| where they meet the blend, scaled so that the
 //! blend's |dP/ds| at its ends (its |dP/du| over the largest, as the controller runs
-//! it) is theirs: the speed does not jump at the joins.
+//! it) is theirs: the speed does not jump at the joins. The second block's |dP/ds| is
+//! that of its part as streamed, whose end the next corner may trim as well (taking
+//! its fastest point, and so raising its |dP/ds| at the start): a blend is shaped
+//! again for it and handed out with the block, once that block's end is known.
 //!
 //! **Blocks.** The blend carries the NC line of the programmed move that ends at the
 //! corner, the smaller feed of the two and the first's tolerance; it stands for the
@@ -210,6 +213,9 @@ struct Held {
     points: Vec<V>,
     /// NC line of the last programmed move (the one ending at the block's end).
     last_line: u32,
+    /// The blend of the corner before it, handed out with it: its speed at the join
+    /// depends on where the block's own end is trimmed.
+    before: Option<Corner>,
 }
 
 impl Held {
@@ -318,14 +324,15 @@ impl Blender {
             source,
             points,
             last_line: programmed.last().map_or(b.line, |p| p.line),
+            before: None,
         };
         if let Some(h) = self.held.take() {
             match corner(&h, &next, &self.s) {
                 Some(j) => {
                     self.emit(&h, j.ua, out);
-                    self.put(j.block, j.source, out);
                     next.u0 = j.ub;
                     next.start = j.block.target;
+                    next.before = Some(j);
                 }
                 None => self.emit(&h, 1.0, out),
             }
@@ -341,8 +348,24 @@ impl Blender {
         out.source.push(source);
     }
 
-    /// Hands out `h` up to parameter `u1`.
+    /// Hands out `h` up to parameter `u1`, after the blend before it.
     fn emit(&mut self, h: &Held, u1: f64, out: &mut Compressed) {
+        if let Some(j) = &h.before {
+            // The blend arrives at the block's |dP/ds| as the controller runs the
+            // block's part from u0 to u1: its end trim may have taken the block's
+            // fastest point, which the blend was first shaped against.
+            let rb = speed_ratio(&h.geo, h.u0, u1, h.u0);
+            let block = if (rb - j.shape.rb).abs() > 1e-6 {
+                let shape = Shape {
+                    rb,
+                    ..j.shape.clone()
+                };
+                shape.block(&self.s).unwrap_or(j.block)
+            } else {
+                j.block
+            };
+            self.put(block, j.source.clone(), out);
+        }
         if h.u0 == 0.0 && u1 == 1.0 {
             return self.put(h.block, h.source.clone(), out);
         }
@@ -364,11 +387,53 @@ impl Blender {
 }
 
 /// A corner's blend.
+#[derive(Clone, Debug)]
 struct Corner {
     ua: f64,
     ub: f64,
     block: Block,
     source: Range<usize>,
+    /// What shaped it.
+    shape: Shape,
+}
+
+/// A blend's shape: from `pa` leaving along `da` at |dP/ds| `ra`, to `pb` arriving
+/// along `db` at `rb`, checked against the programmed polyline `pts` within `tol`.
+#[derive(Clone, Debug)]
+struct Shape {
+    pa: V,
+    pb: V,
+    da: V,
+    db: V,
+    ra: f64,
+    rb: f64,
+    pts: Vec<V>,
+    tol: f64,
+    /// The block it is sent as (its line, feed and tolerance) and the A B C it keeps.
+    line: Block,
+    keep: [i64; AXES],
+}
+
+impl Shape {
+    /// The blend as it is sent, if every sample of it, with the cut of the ticks'
+    /// chords at its tightest bend (`fit::tick_sag`) on top of the farthest, lies
+    /// within the tolerance.
+    fn block(&self, s: &Settings) -> Option<Block> {
+        let chord = norm(&sub(&self.pb, &self.pa));
+        let g = blend_curve(
+            &self.pa, &self.pb, &self.da, &self.db, self.ra, self.rb, chord,
+        );
+        let block = block_of(&g, &self.line, &self.keep);
+        let sent = Geo::of(&block, &round(&self.pa, &self.keep)).expect("a cubic");
+        let (mut farthest, mut kappa) = (0.0f64, 0.0f64);
+        for k in 0..=SAMPLES {
+            let u = k as f64 / SAMPLES as f64;
+            farthest = farthest.max(to_polyline(&sent.at(u), &self.pts).0);
+            kappa = kappa.max(sent.bend(u));
+        }
+        let fits = farthest + super::fit::tick_sag(self.line.feed as f64, kappa, s) <= self.tol;
+        (fits && chord >= 1.0).then_some(block)
+    }
 }
 
 /// Distance from `q` to the polyline `pts`, and the index of its nearest chord's end.
@@ -467,33 +532,25 @@ fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
         let ub = b.geo.u_at(&b.table, d);
         let pa = to_fit(&round(&a.geo.at(ua), &keep));
         let pb = to_fit(&round(&b.geo.at(ub), &keep));
-        let (da, db) = (unit(&a.geo.deriv(ua)), unit(&b.geo.deriv(ub)));
-        let chord = norm(&sub(&pb, &pa));
         // |dP/ds| of the trimmed blocks where they meet the blend (the second's up to
-        // its end: its own end trim is not known yet).
-        let (ra, rb) = (
-            speed_ratio(&a.geo, a.u0, ua, ua),
-            speed_ratio(&b.geo, ub, 1.0, ub),
-        );
-        let g = blend_curve(&pa, &pb, &da, &db, ra, rb, chord);
-        let line = Block {
-            line: a.last_line,
-            feed: a.block.feed.min(b.block.feed),
-            ..a.block
+        // its end: its own end trim is not known yet, see `Blender::emit`).
+        let shape = Shape {
+            pa,
+            pb,
+            da: unit(&a.geo.deriv(ua)),
+            db: unit(&b.geo.deriv(ub)),
+            ra: speed_ratio(&a.geo, a.u0, ua, ua),
+            rb: speed_ratio(&b.geo, ub, 1.0, ub),
+            pts: pts.clone(),
+            tol,
+            line: Block {
+                line: a.last_line,
+                feed: a.block.feed.min(b.block.feed),
+                ..a.block
+            },
+            keep,
         };
-        let block = block_of(&g, &line, &keep);
-        // The blend as it is sent.
-        let sent = Geo::of(&block, &round(&pa, &keep)).expect("a cubic");
-        // Every sample within the tolerance, with the cut of the ticks' chords of the
-        // blend at its tightest bend (`fit::tick_sag`) on top of the farthest.
-        let (mut farthest, mut kappa) = (0.0f64, 0.0f64);
-        for k in 0..=SAMPLES {
-            let u = k as f64 / SAMPLES as f64;
-            farthest = farthest.max(to_polyline(&sent.at(u), &pts).0);
-            kappa = kappa.max(sent.bend(u));
-        }
-        let fits = farthest + super::fit::tick_sag(line.feed as f64, kappa, s) <= tol;
-        if fits && chord >= 1.0 {
+        if let Some(block) = shape.block(s) {
             let first = to_polyline(&pa, &pts).1 - 1;
             let last = to_polyline(&pb, &pts).1 - 1;
             let n = a.points.len() - 1;
@@ -509,6 +566,7 @@ fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
                 ub,
                 block,
                 source: at(first)..at(last.max(first)) + 1,
+                shape,
             });
         }
         d *= SHRINK;

@@ -215,3 +215,53 @@ fn blending_in_pieces_is_blending_at_once() {
         assert_eq!(out, whole, "cut at {cut}");
     }
 }
+
+/// |dP/du| over its largest along the block (as the controller runs it) at its start
+/// and its end, for each streamed block from `start`.
+fn end_ratios(c: &Compressed, start: [i64; AXES]) -> Vec<(f64, f64)> {
+    let mut from = start;
+    let mut out = vec![];
+    for b in &c.blocks {
+        let g = Geo::of(b, &from).unwrap();
+        let most = (0..=400)
+            .map(|k| norm(&g.deriv(k as f64 / 400.0)))
+            .fold(0.0, f64::max);
+        out.push((norm(&g.deriv(0.0)) / most, norm(&g.deriv(1.0)) / most));
+        from = b.target;
+    }
+    out
+}
+
+#[test]
+fn a_blend_meets_a_curve_at_the_speed_the_curve_starts_once_its_end_is_trimmed_too() {
+    // A line, a curve fastest at its end (turning 45° from the line), and a line
+    // turning 60° from the curve: both of the curve's ends are trimmed, the end taking
+    // its fastest part. The speed must not jump where the first blend meets it.
+    let tol = 1_000_000; // G64 P1
+    let mm = |x: f64| (x * 1e6).round() as i64;
+    let curve = Block {
+        line: 2,
+        motion: Motion::Cubic {
+            c1: [mm(0.3), mm(0.3), 0, 0, 0, 0],
+            c2: [mm(-6.0), mm(-1.5), 0, 0, 0, 0],
+        },
+        target: [mm(20.0), mm(5.0), 0, 0, 0, 0],
+        feed: 50_000_000,
+        tolerance_nm: tol,
+    };
+    let p = vec![g1(10.0, 0.0, 1, tol), curve, g1(20.0, 15.0, 3, tol)];
+    let c = compress(&p, [0; AXES], &Settings::default());
+    let kinds: Vec<_> = c.blocks.iter().map(|b| b.line).collect();
+    assert_eq!(kinds, [1, 1, 2, 2, 3], "line, blend, curve, blend, line");
+    let r = end_ratios(&c, [0; AXES]);
+    for k in 1..r.len() {
+        let jump = (r[k].0 - r[k - 1].1).abs();
+        assert!(
+            jump < 0.005,
+            "blocks {} and {k} meet at |dP/ds| {:.4} and {:.4}",
+            k - 1,
+            r[k - 1].1,
+            r[k].0
+        );
+    }
+}
