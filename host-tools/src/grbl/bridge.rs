@@ -19,6 +19,8 @@ use std::time::{Duration, Instant};
 /// A job's feed is closed after this long with nothing to feed and the controller
 /// idle with every block executed.
 const CLOSE_AFTER: Duration = Duration::from_millis(60);
+/// The longest a turn of a job's loop waits for the sender's next lines.
+const SENDER_TURN: Duration = Duration::from_millis(3);
 
 /// What a queued line is, for deciding where it may run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -380,8 +382,10 @@ impl<'o> Bridge<'o> {
         let ahead = self
             .job
             .map_or(0, |(total, done)| total.saturating_sub(done));
+        // Moves held for merging are in Grbl's planner buffer too: a sender that has
+        // had every line answered sees `Run` until they have run.
         let mode = Mode {
-            pending: ahead > 0,
+            pending: ahead > 0 || !self.merge.is_empty(),
             ..self.mode
         };
         let report = words::Report {
@@ -409,7 +413,7 @@ impl<'o> Bridge<'o> {
             .job
             .map_or(0, |(total, done)| total.saturating_sub(done));
         let mode = Mode {
-            pending: ahead > 0 || accepted,
+            pending: ahead > 0 || accepted || !self.merge.is_empty(),
             ..self.mode
         };
         match words::state_word(s, mode) {
@@ -516,7 +520,7 @@ impl<'o> Bridge<'o> {
     fn take_lines(&mut self, view: &LinkView, out: &mut Vec<Block>) -> bool {
         while let Some((item, _)) = self.lines.front() {
             let ahead = view.total + out.len() - view.executed.min(view.total);
-            if ahead >= BLOCK_BUFFER {
+            if ahead >= BLOCK_BUFFER || self.merge.full() {
                 return true;
             }
             if let Item::Line(text) = item {
@@ -656,8 +660,21 @@ impl JobHooks for Bridge<'_> {
         if self.reset || self.stopping || self.probe.is_some() {
             return false;
         }
-        if !self.take_lines(view, out) {
-            return false;
+        // A sender streams as fast as the answers come (character counting keeps its
+        // few lines in Grbl's 128-byte buffer): its next lines are awaited here for a
+        // moment, rather than a turn of the job's loop later.
+        let until = Instant::now() + SENDER_TURN;
+        loop {
+            if !self.take_lines(view, out) {
+                return false;
+            }
+            if Instant::now() >= until || self.reset || self.stopping || self.probe.is_some() {
+                break;
+            }
+            self.poll(Duration::from_micros(300));
+            if self.lines.is_empty() {
+                break;
+            }
         }
         let queued = view.total.saturating_sub(view.executed) + out.len();
         let (at_rest, buffered_ms) = self
@@ -666,6 +683,9 @@ impl JobHooks for Bridge<'_> {
             .map_or((true, 0), |s| (s.speed == 0, s.buffered_ms));
         self.merge
             .send_due((queued, at_rest, buffered_ms), !self.lines.is_empty(), out);
+        // The blocks handed out are the job's from now (a status asked before the next
+        // turn counts them).
+        self.job = Some((view.total + out.len(), view.executed));
         if !out.is_empty() || !self.lines.is_empty() {
             self.last_busy = Instant::now();
             return true;

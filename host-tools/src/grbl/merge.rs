@@ -4,17 +4,25 @@
 //!
 //! A sender streams line by line, so the bridge cannot see a whole run at once: it
 //! answers each line `ok` at once (Grbl's `ok` says the line is in the planner
-//! buffer) and holds the line's mergeable moves back, until one of these comes:
+//! buffer) and holds the line's mergeable moves back. While more lines may come, a
+//! merge is *open*: it hands out only the curves the moves to come cannot change
+//! ([`compress::Resume`]), and keeps the rest held, with the few moves before them
+//! that the next merge's tangents look back on. Open merges run on a thread of their
+//! own, so that lines are answered meanwhile; one follows another while lines come
+//! and the machine moves, and the first at rest waits [`LONGEST_HOLD`] for the
+//! sender. So the curves are the ones nc-send makes of the whole program.
+//!
+//! A *closed* merge cuts the runs at the last held move. It comes at:
 //! - a block that cannot join a run (a rapid, an arc, a dwell, an auxiliary function,
 //!   `G61`, `G64` without P): the held moves are merged and sent before it;
-//! - [`MOST_HELD`] moves held;
-//! - the controller is about to run out ([`LOW_QUEUE`] blocks or fewer left to run;
-//!   at rest with nothing queued it cannot, and the first merge waits for the others);
-//! - the oldest held move has waited [`LONGEST_HOLD`], or the sender has been quiet
-//!   for [`QUIET`] with nothing more waiting.
+//! - the controller about to run out ([`LOW_QUEUE`] blocks or fewer left to run;
+//!   at rest with nothing queued it cannot);
+//! - the sender quiet for [`QUIET`] with nothing more waiting (after an open merge
+//!   of what is held, when that is much);
+//! - an open merge at rest that could hand out nothing.
 //!
-//! A run cut by the last three ends at a vertex of the programmed polyline, as any run
-//! does at a corner: the curves on either side meet there. The next merge's first
+//! A run cut by a closed merge ends at a vertex of the programmed polyline, as any
+//! run does at a corner: the curves on either side meet there. The next merge's first
 //! curve leaves that vertex as the last one arrived (its direction, and the ratio of
 //! the tool's speed to the path speed: [`compress::Lead`]), unless the polyline turns
 //! a corner there, so that the junction passes at speed as within one merge. Corners
@@ -28,13 +36,16 @@
 //! buffer.
 
 use crate::gcode::compress::blend::Blender;
-use crate::gcode::compress::{self, Compressed, Lead, Settings};
+use crate::gcode::compress::{self, Compressed, Lead, Resume, Settings};
 use pkmc::config::AXES;
 use pkmc::motion::block::{Block, Motion};
+use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-/// Most moves held back for one merge.
-const MOST_HELD: usize = 256;
+/// Most moves held back for one merge: more than a curve may reach
+/// ([`Settings::max_chords`], 400), so that a merge of them hands out the curves the
+/// whole program gives up to that far before the last.
+const MOST_HELD: usize = 1024;
 /// The longest a move is held back.
 const LONGEST_HOLD: Duration = Duration::from_millis(150);
 /// Held moves go once the sender has been quiet this long.
@@ -49,6 +60,9 @@ pub(super) struct Merger {
     /// The compressor's settings for the machine; `None`: every block goes as it is.
     settings: Option<Settings>,
     held: Vec<Block>,
+    /// The first `done` of `held` were merged already: the points before the next
+    /// curve that its run's tangents look back on ([`compress::context_from`]).
+    done: usize,
     /// Where the held run starts: the end of the programmed moves before it.
     start: [i64; AXES],
     /// The corners' blender, across merges (with `settings`).
@@ -61,7 +75,18 @@ pub(super) struct Merger {
     last_line: Instant,
     /// Moves merged, and the blocks made of them (for the summary).
     pub(super) merged: (u64, u64),
+    /// An open merge under way on another thread (so that the sender's lines are
+    /// taken meanwhile): it merges the first `n` of `held`.
+    under_way: Option<(usize, JoinHandle<Merged>)>,
+    /// The last open merge merged nothing (its runs go on past what is held).
+    idle: bool,
+    /// Moves taken since the last open merge started.
+    fresh: usize,
 }
+
+/// What a merge of held moves gives: the blocks, where they leave off, and how many of
+/// the moves they stand for.
+type Merged = (Compressed, Option<Lead>, usize);
 
 /// May `b` be part of a run? A feed move the compressor merges within a tolerance
 /// (`compress::merge_tolerance`; it decides the rest: length, feed, corners).
@@ -77,17 +102,27 @@ impl Merger {
             lead: None,
             settings,
             held: Vec::new(),
+            done: 0,
             start,
             since: None,
             last_line: Instant::now(),
             merged: (0, 0),
+            under_way: None,
+            idle: false,
+            fresh: 0,
         }
     }
 
     /// Drops anything held; the next block starts at `pose` (a job's first line
     /// went straight to the controller, a reset, an alarm).
     pub(super) fn restart_at(&mut self, pose: [i64; AXES]) {
+        // A merge under way is of moves dropped: its result is too.
+        if let Some((_, h)) = self.under_way.take() {
+            let _ = h.join();
+        }
+        self.idle = false;
         self.held.clear();
+        self.done = 0;
         self.since = None;
         self.start = pose;
         self.lead = None;
@@ -96,7 +131,9 @@ impl Merger {
 
     /// Nothing is held.
     pub(super) fn is_empty(&self) -> bool {
-        self.held.is_empty() && !self.blender.as_ref().is_some_and(Blender::holds)
+        self.held.len() == self.done
+            && self.under_way.is_none()
+            && !self.blender.as_ref().is_some_and(Blender::holds)
     }
 
     /// Takes a line's blocks: mergeable moves are held, anything else sends what is
@@ -107,14 +144,18 @@ impl Merger {
             if self.settings.is_some_and(|s| candidate(&b, &s)) {
                 self.since.get_or_insert_with(Instant::now);
                 self.held.push(b);
-                if self.held.len() >= MOST_HELD {
-                    self.merge(out);
+                self.fresh += 1;
+                if self.held.len() - self.done >= MOST_HELD {
+                    self.collect(false, out);
+                    self.start_merge(true);
                 }
             } else {
                 self.flush(out);
                 if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
                     self.start = b.target;
                 }
+                self.held.clear();
+                self.done = 0;
                 out.push(b);
                 self.lead = None;
                 // The next blend starts after this block.
@@ -124,27 +165,84 @@ impl Merger {
     }
 
     /// Merges what is held and appends it to `out`, but for the last blendable block,
-    /// which the blender keeps for the corner after it.
+    /// which the blender keeps for the corner after it; a merge under way first. The
+    /// merge is closed: the runs are cut at the last held move.
     fn merge(&mut self, out: &mut Vec<Block>) {
-        let (Some(s), Some(last), Some(blender)) =
-            (&self.settings, self.held.last(), &mut self.blender)
+        self.collect(true, out);
+        let (Some(s), true) = (self.settings, self.held.len() > self.done) else {
+            return;
+        };
+        let result = compress::compress_runs_after(&self.held, self.start, &s, self.resume(false));
+        self.apply(result, out);
+    }
+
+    /// Starts a merge of what is held on another thread, unless one is under way.
+    /// `open`: a run that reaches the last held move goes only as far as its curves
+    /// are the whole program's (`compress::compress_runs_after`); the rest stays held.
+    /// Closed: the runs are cut at the last held move.
+    fn start_merge(&mut self, open: bool) {
+        let (Some(s), None, true) = (self.settings, &self.under_way, self.held.len() > self.done)
         else {
             return;
         };
-        let end = last.target;
-        // The merge continues the last one's curves where they ended (held moves
-        // are cut at any vertex of the polyline).
-        let (runs, lead) = compress::compress_runs_after(&self.held, self.start, s, self.lead);
+        let (held, start, resume) = (self.held.clone(), self.start, self.resume(open));
+        let n = held.len();
+        self.fresh = 0;
+        let job =
+            std::thread::spawn(move || compress::compress_runs_after(&held, start, &s, resume));
+        self.under_way = Some((n, job));
+    }
+
+    /// How a merge goes on from the last one's curves (after the moves kept for
+    /// context, or at a vertex where a merge was cut).
+    fn resume(&self, open: bool) -> Resume {
+        Resume {
+            done: self.done,
+            lead: self.lead,
+            open,
+        }
+    }
+
+    /// Hands out the merge under way once it is done (`wait`: waits for it).
+    fn collect(&mut self, wait: bool, out: &mut Vec<Block>) {
+        if !self
+            .under_way
+            .as_ref()
+            .is_some_and(|(_, h)| wait || h.is_finished())
+        {
+            return;
+        }
+        let Some((n, job)) = self.under_way.take() else {
+            return;
+        };
+        let result = job.join().expect("a merge of held moves");
+        debug_assert!(result.2 <= n);
+        self.idle = result.2 == self.done;
+        self.apply(result, out);
+    }
+
+    /// Blends the merged blocks and appends them to `out` (but for the last blendable
+    /// block, which the blender keeps for the corner after it); keeps the moves after
+    /// them, and those before them that the next merge's tangents look back on.
+    fn apply(&mut self, (runs, lead, merged): Merged, out: &mut Vec<Block>) {
+        let (Some(s), Some(blender)) = (&self.settings, &mut self.blender) else {
+            return;
+        };
         self.lead = lead;
         let mut c = Compressed::default();
         blender.push(&self.held, &runs, 0, &mut c);
-        self.merged.0 += self.held.len() as u64;
+        self.merged.0 += (merged - self.done) as u64;
         self.merged.1 += c.blocks.len() as u64;
         out.extend(c.blocks);
-        self.held.clear();
-        self.start = end;
-        // What the blender keeps goes within the longest hold from now.
-        self.since = blender.holds().then(Instant::now);
+        let keep = compress::context_from(&self.held, merged, s);
+        if keep > 0 {
+            self.start = self.held[keep - 1].target;
+        }
+        self.held.drain(..keep);
+        self.done = merged - keep;
+        // What the blender keeps, and moves still held, go within the longest hold
+        // from now.
+        self.since = (blender.holds() || self.held.len() > self.done).then(Instant::now);
     }
 
     /// Merges what is held and appends it to `out`, the blender's block too: nothing
@@ -175,19 +273,39 @@ impl Merger {
         lines_waiting: bool,
         out: &mut Vec<Block>,
     ) {
+        self.collect(false, out);
         let Some(since) = self.since else {
             return;
         };
         let low = queued <= LOW_QUEUE && buffered_ms < LOW_MS && !at_rest;
-        if low || (!lines_waiting && self.last_line.elapsed() >= QUIET) {
-            self.flush(out);
-        } else if since.elapsed() >= LONGEST_HOLD {
-            if self.held.is_empty() {
+        let quiet = !lines_waiting && self.last_line.elapsed() >= QUIET;
+        // Every merge runs on its thread, so that lines and status requests are still
+        // answered meanwhile; a merge under way hands out its blocks first.
+        if self.under_way.is_some() {
+        } else if self.held.len() == self.done {
+            // Only the blender's block is held.
+            if low || quiet || since.elapsed() >= LONGEST_HOLD {
                 self.flush(out);
-            } else {
-                self.merge(out);
             }
+        } else if low || quiet {
+            // The controller needs blocks now, or the sender has stopped: what is
+            // held goes, the runs cut.
+            self.start_merge(false);
+        } else if since.elapsed() >= LONGEST_HOLD {
+            // At rest, the first merge goes even where it must cut a run.
+            self.start_merge(!(self.idle && at_rest));
+        } else if !at_rest && self.fresh > 0 {
+            // While the machine moves, one open merge follows another as long as
+            // moves come: each hands out what the moves since allow.
+            self.start_merge(true);
         }
+    }
+
+    /// Are so many moves held that no more lines should be taken until a merge has
+    /// handed some out? (The sender then waits for its answers, as for a full
+    /// Grbl planner buffer.)
+    pub(super) fn full(&self) -> bool {
+        self.held.len() - self.done >= 2 * MOST_HELD
     }
 }
 
@@ -263,26 +381,68 @@ mod tests {
         // At rest with nothing queued, the sender still sending: held for more.
         m.send_due((0, true, 0), true, &mut out);
         assert!(out.is_empty() && !m.is_empty());
-        // Few blocks but much motion in them: held.
+        // Few blocks but much motion in them: held (an open merge, moving, hands out
+        // nothing of so short a run).
         m.send_due((LOW_QUEUE, false, LOW_MS), true, &mut out);
+        m.collect(true, &mut out);
         assert!(out.is_empty() && !m.is_empty());
-        m.send_due((LOW_QUEUE, false, LOW_MS - 1), true, &mut out);
+        // About to run out: a closed merge, on its thread; then the blender's block.
+        let low = (LOW_QUEUE, false, LOW_MS - 1);
+        m.send_due(low, true, &mut out);
+        assert!(m.under_way.is_some());
+        m.collect(true, &mut out);
+        m.send_due(low, true, &mut out);
         assert!(!out.is_empty() && m.is_empty());
         assert_eq!(out.last().map(|b| b.target), Some(chords(10)[9].target));
-        // A long run is merged at MOST_HELD moves; its last curve, which ends on a
-        // programmed vertex, stays with the blender for the corner after it.
-        let mut m = Merger::new(Some(Settings::default()), [0; AXES]);
+        // A long run is merged at MOST_HELD moves, but for the curves that could
+        // depend on what follows: the moves after the last curve handed out stay
+        // held, and what goes is what the whole program gives.
+        let s = Settings::default();
+        let mut m = Merger::new(Some(s), [0; AXES]);
         let mut out = Vec::new();
         let blocks = chords(MOST_HELD + 5);
         m.take(blocks.clone(), &mut out);
-        assert_eq!(m.held.len(), 5);
-        assert!(m.blender.as_ref().unwrap().holds() && !m.is_empty());
+        // The merge runs on another thread: the moves to come are taken meanwhile.
+        assert!(m.under_way.is_some() && !m.is_empty());
+        m.collect(true, &mut out);
+        assert!(!out.is_empty());
+        let rest = m.held.len() - m.done;
+        assert!(rest > 0 && rest <= s.max_chords + 1, "{rest} held");
+        assert!(!m.is_empty());
         m.flush(&mut out);
         assert!(m.is_empty());
-        assert_eq!(
-            out.last().map(|b| b.target),
-            blocks.last().map(|b| b.target)
-        );
+        assert_eq!(out, compress::compress(&blocks, [0; AXES], &s).blocks);
+    }
+
+    #[test]
+    fn merges_that_go_on_open_runs_give_the_curves_of_the_whole_program() {
+        // A sine of 0.05 mm chords over several runs (a rapid between them), taken
+        // line by line and merged open after every 97 lines: each merge hands out
+        // only curves whose fit the lines still to come cannot change, so the blocks
+        // are those of the whole program however it is cut.
+        let s = Settings::default();
+        let mut blocks = chords(3000);
+        blocks[1700].motion = Motion::Rapid;
+        let mut m = Merger::new(Some(s), [0; AXES]);
+        let mut out = Vec::new();
+        let mut sent = vec![];
+        for (k, b) in blocks.iter().enumerate() {
+            m.take(vec![*b], &mut out);
+            if k % 97 == 96 {
+                let before = out.len();
+                m.start_merge(true);
+                m.collect(true, &mut out);
+                sent.push(out.len() - before);
+            }
+        }
+        m.flush(&mut out);
+        let whole = compress::compress(&blocks[..1700], [0; AXES], &s);
+        let rest = compress::compress(&blocks[1701..], blocks[1700].target, &s);
+        let mut want = whole.blocks.clone();
+        want.push(blocks[1700]);
+        want.extend(rest.blocks);
+        assert!(sent.iter().filter(|&&n| n > 0).count() >= 5, "{sent:?}");
+        assert_eq!(out, want);
     }
 
     #[test]

@@ -15,13 +15,17 @@ const TICK_S: f64 = 1.0 / pkmc::units::TICK_HZ as f64;
 /// What one run's curves must meet: its tolerance (fit space) and the speed asked for
 /// (nm/s; 0: unknown).
 #[derive(Clone, Copy, Debug)]
-pub(super) struct Goal {
+pub(super) struct Goal<'a> {
     pub(super) tol: f64,
     pub(super) speed: f64,
     /// The tool's speed over the path speed where the curve starts: the end of the
     /// curve before it (|dP/du| there over its largest), 1 after a line or at a run's
     /// start.
     pub(super) lead_ratio: f64,
+    /// A run that more moves may follow: the first of its points whose tangent looks
+    /// past its last, and the flag a fit that tries to reach it sets (its result
+    /// could change with what follows).
+    pub(super) edge: Option<(usize, &'a core::cell::Cell<bool>)>,
 }
 
 fn bernstein(u: f64) -> [f64; 4] {

@@ -246,7 +246,7 @@ pub fn compress(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compresse
 /// Compresses `blocks` (starting at `start`) with settings `s`: runs into curves,
 /// corners not blended.
 pub fn compress_runs(blocks: &[Block], start: [i64; AXES], s: &Settings) -> Compressed {
-    compress_runs_after(blocks, start, s, None).0
+    compress_runs_after(blocks, start, s, Resume::default()).0
 }
 
 /// Where a merged piece of a polyline left off, for the next piece (the Grbl bridge
@@ -259,33 +259,65 @@ pub struct Lead {
     chord: V,
 }
 
-/// [`compress_runs`] of a piece that continues the one `lead` ended: a run that
-/// starts at `start` and turns there by less than a corner leaves along `lead` at its
-/// speed ratio, so that the pieces meet as one merge's curves do. Also returns where
-/// this piece leaves off, when it ends with a run.
+/// How a piece of a sender's moves goes on from the pieces merged before it (the Grbl
+/// bridge, [`compress_runs_after`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Resume {
+    /// The piece's first `done` blocks were merged before: they are there for the
+    /// points a run's tangents look back on, and the merge goes on after them.
+    pub done: usize,
+    /// How the last block merged before ended (`None`: it was no curve).
+    pub lead: Option<Lead>,
+    /// More moves may follow the piece: a run that reaches its end is merged only as
+    /// far as its curves cannot depend on what follows.
+    pub open: bool,
+}
+
+/// [`compress_runs`] of `blocks[resume.done..]`, which go on from the piece that
+/// `resume.lead` ended: a run that starts there and turns by less than a corner leaves
+/// along the lead at its speed ratio, so that the pieces meet as one merge's curves do.
+///
+/// With `resume.open`, a run that reaches the last block is merged up to the first
+/// curve whose fit could depend on moves not yet given: one whose reach of
+/// [`Settings::max_chords`] moves, or the tangents at their ends (`tangents`, which
+/// look [`Settings::tangent_reach`] tolerances ahead), run past the last block. Each
+/// curve before it is the one the whole program gives, since a curve's fit depends only
+/// on its start, its lead and those points.
+///
+/// Returns the blocks made, where they leave off (when the last is a run's) and the
+/// number of `blocks` merged (`blocks.len()` unless an open run stopped early).
 pub fn compress_runs_after(
     blocks: &[Block],
     start: [i64; AXES],
     s: &Settings,
-    lead: Option<Lead>,
-) -> (Compressed, Option<Lead>) {
+    resume: Resume,
+) -> (Compressed, Option<Lead>, usize) {
+    let done = resume.done.min(blocks.len());
     let mut out = Compressed::default();
     let mut pose = start;
     let mut i = 0;
     let mut last = None;
     while i < blocks.len() {
         let b = &blocks[i];
-        let carried = lead.filter(|_| i == 0);
         last = None;
         let Some((j, pts)) = run_from(blocks, i, &pose, s) else {
-            out.blocks.push(*b);
-            out.source.push(i..i + 1);
+            if i >= done {
+                out.blocks.push(*b);
+                out.source.push(i..i + 1);
+            }
             if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
                 pose = b.target;
             }
             i += 1;
             continue;
         };
+        if j <= done {
+            // A run merged before, which ended there.
+            pose = blocks[j - 1].target;
+            i = j;
+            continue;
+        }
+        let begin = done.saturating_sub(i);
         let speed = if s.max_speed > 0.0 {
             (b.feed as f64).min(s.max_speed)
         } else {
@@ -295,17 +327,54 @@ pub fn compress_runs_after(
             tol: merge_tolerance(b, s).unwrap_or(0.0) * s.fit_share,
             speed,
             lead_ratio: 1.0,
+            edge: None,
         };
-        // The last batch's curve goes on only where the polyline turns no corner.
-        let carried = carried.filter(|l| {
-            let first_chord = unit(&sub(&pts[1], &pts[0]));
-            dot(&l.chord, &first_chord) >= s.corner_deg.to_radians().cos()
-        });
-        last = fit_run(&blocks[i..j], i, &pts, &goal, s, &mut out, carried);
+        // A run merged in part before goes on as its last curve ended; one that starts
+        // where the last piece ended does where the polyline turns no corner.
+        let carried = if begin > 0 {
+            resume.lead
+        } else if i == 0 && done == 0 {
+            resume.lead.filter(|l| {
+                let first_chord = unit(&sub(&pts[1], &pts[0]));
+                dot(&l.chord, &first_chord) >= s.corner_deg.to_radians().cos()
+            })
+        } else {
+            None
+        };
+        let open = resume.open && j == blocks.len();
+        let (lead, stopped) = fit_run(
+            &blocks[i..j],
+            i,
+            &pts,
+            &goal,
+            s,
+            &mut out,
+            (carried, begin, open),
+        );
+        last = lead;
+        if let Some(a) = stopped {
+            return (out, last, i + a);
+        }
         pose = blocks[j - 1].target;
         i = j;
     }
-    (out, last)
+    (out, last, blocks.len())
+}
+
+/// The first of `blocks` to keep as context for merging on after `blocks[..upto]`
+/// ([`Resume::done`]): enough of the points before the last one merged that every
+/// tangent after it looks back as it would in the whole run (the kept blocks start at
+/// a point at least twice the tangents' reach from it; at 0 when none is).
+pub fn context_from(blocks: &[Block], upto: usize, s: &Settings) -> usize {
+    let Some(last) = upto.checked_sub(1).map(|k| &blocks[k]) else {
+        return 0;
+    };
+    let reach = 2.0 * merge_tolerance(last, s).unwrap_or(0.0) * s.fit_share * s.tangent_reach;
+    let end = to_fit(&last.target);
+    (1..upto)
+        .rev()
+        .find(|&k| norm(&sub(&to_fit(&blocks[k - 1].target), &end)) >= reach)
+        .unwrap_or(0)
 }
 
 /// The run of mergeable blocks starting at `blocks[i]` (from `pose`): its end `j`
@@ -416,15 +485,29 @@ fn fit_run(
     g: &Goal,
     s: &Settings,
     out: &mut Compressed,
-    carried: Option<Lead>,
-) -> Option<Lead> {
+    (carried, begin, open): (Option<Lead>, usize, bool),
+) -> (Option<Lead>, Option<usize>) {
     let m = pts.len() - 1;
-    let t = tangents(pts, g.tol * s.tangent_reach);
+    let reach_ahead = g.tol * s.tangent_reach;
+    let t = tangents(pts, reach_ahead);
+    // Open: the first point whose tangent would look past the last point; a fit that
+    // tries to reach it (or past it) is not final.
+    let unsure = core::cell::Cell::new(false);
+    let edge = open.then(|| {
+        let k = (0..=m)
+            .find(|&k| {
+                !pts[k + 1..]
+                    .iter()
+                    .any(|p| norm(&sub(p, &pts[k])) >= reach_ahead)
+            })
+            .unwrap_or(m);
+        (k, &unsure)
+    });
     let mut lead: Option<V> = carried.map(|l| l.dir);
     // Each curve's lead ratio is the end of the one before it.
-    let g = &mut { *g };
+    let g = &mut Goal { edge, ..*g };
     g.lead_ratio = carried.map_or(1.0, |l| l.ratio);
-    let mut a = 0;
+    let mut a = begin;
     while a < m {
         // The chord into point a, for the turn the program makes there.
         let into = if a > 0 {
@@ -447,6 +530,19 @@ fn fit_run(
             },
         );
         let reach = |f: &Option<(usize, V, V)>| f.as_ref().map_or(0.0, |f| (f.0 - a) as f64);
+        if unsure.get() {
+            // The fit from here could change with the moves to come.
+            if a == 0 {
+                return (carried, Some(0));
+            }
+            let chord = unit(&sub(&pts[a], &pts[a - 1]));
+            let ended = lead.map(|dir| Lead {
+                dir,
+                ratio: g.lead_ratio,
+                chord,
+            });
+            return (ended, Some(a));
+        }
         let found = if reach(&strict) >= s.matched_reach * reach(&loose) {
             strict
         } else {
@@ -479,11 +575,12 @@ fn fit_run(
             }
         }
     }
-    lead.map(|dir| Lead {
+    let ended = lead.map(|dir| Lead {
         dir,
         ratio: g.lead_ratio,
         chord: unit(&sub(&pts[m], &pts[m - 1])),
-    })
+    });
+    (ended, None)
 }
 
 /// The curve from point `a` ([`farthest`]), leaving along `lead` when there is one,
@@ -546,6 +643,9 @@ fn reach(
 ) -> Option<(usize, V, V)> {
     let top = (pts.len() - 1).min(a + s.max_chords);
     let try_to = |b: usize| {
+        if let Some((_, unsure)) = g.edge.filter(|e| b >= e.0) {
+            unsure.set(true);
+        }
         if free && b - a >= 4 {
             fit_free(&pts[a..=b], lead, g, s)
         } else {
