@@ -17,9 +17,11 @@
 //!   `G61`, `G64` without P): the held moves are merged and sent before it;
 //! - the controller about to run out ([`LOW_QUEUE`] blocks or fewer left to run;
 //!   at rest with nothing queued it cannot);
-//! - the sender quiet for [`QUIET`] with nothing more waiting (after an open merge
-//!   of what is held, when that is much);
+//! - the sender quiet for [`QUIET`] with nothing more waiting;
 //! - an open merge at rest that could hand out nothing.
+//!
+//! Closed merges run on the merge thread as well, but for the one before a block that
+//! cannot join a run, which must go after the merged moves.
 //!
 //! A run cut by a closed merge ends at a vertex of the programmed polyline, as any
 //! run does at a corner: the curves on either side meet there. The next merge's first
@@ -75,8 +77,8 @@ pub(super) struct Merger {
     last_line: Instant,
     /// Moves merged, and the blocks made of them (for the summary).
     pub(super) merged: (u64, u64),
-    /// An open merge under way on another thread (so that the sender's lines are
-    /// taken meanwhile): it merges the first `n` of `held`.
+    /// A merge under way on another thread (so that the sender's lines are taken
+    /// meanwhile): it merges the first `n` of `held`.
     under_way: Option<(usize, JoinHandle<Merged>)>,
     /// The last open merge merged nothing (its runs go on past what is held).
     idle: bool,
