@@ -505,12 +505,14 @@ async fn cartesian_page_steps_overrides_stops_e_stops_saves_and_loads_teach_behi
     .await;
     page.unlock().await;
 
-    // A program typed into the editor, run by step: one block per press.
+    // A program typed into the editor, run by step: one block per press. It streams
+    // 7 blocks when run (its three corners blended within G64's 1 µm), and steps
+    // through its 4 moves as programmed.
     let text = "G21 G90\nG1 X10 F3000\nG1 Y10\nG1 X0\nG1 Y0\nM2\n";
     page.type_into("#editor", text).await;
     page.click("#load-editor").await;
     page.wait(
-        "pkmc.program && pkmc.program.check && pkmc.program.blocks === 4",
+        "pkmc.program && pkmc.program.check && pkmc.program.blocks === 7",
         "the typed program loads",
         Timeout::S(20),
     )

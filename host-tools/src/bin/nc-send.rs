@@ -100,8 +100,8 @@ struct Args {
     /// rounded by blends within G64 P).
     #[arg(long)]
     no_blend: bool,
-    /// Merging: in G64 without P, merge runs of short G1 moves within this many mm
-    /// (the default 0.001; 0: stream them as programmed).
+    /// In G64 without P, merge short G1 moves and blend corners between feed moves
+    /// within this many mm (the default 0.001; 0: stream them as programmed).
     #[arg(long, value_name = "MM", default_value_t = 0.001)]
     g64_tolerance: f64,
     /// Restart the program from this NC line, its modal state rebuilt (docs/nc-send.md).

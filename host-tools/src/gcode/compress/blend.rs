@@ -8,17 +8,19 @@
 //! under 1 mm/s at 90° on a machine of 1000 mm/s²): every corner is nearly a stop. A
 //! blend of smallest radius r is passed at about √(a·r).
 //!
-//! **Which corners.** Both blocks are `G1` lines or cubics with a finite, non-zero
-//! tolerance (`G64 P`; never `G61`, nor `G64` without P), neither moves A B C (the
-//! blend is X Y Z only), and the path turns there by more than
-//! [`Settings::blend_min_deg`]. The tolerance is the smaller P of the two, and the
+//! **Which corners.** Both blocks are `G1` lines or cubics merged within a tolerance
+//! ([`super::merge_tolerance`]: `G64 P`, or in `G64` without P
+//! [`Settings::g64_tolerance_nm`], 1 µm by default; never `G61`), neither moves A B C
+//! (the blend is X Y Z only), and the path turns there by more than
+//! [`Settings::blend_min_deg`]. The tolerance is the smaller of the two, and the
 //! blend's samples, with the cut of the ticks' chords of it at its tightest bend on
 //! top (`fit::tick_sag`), must lie within it. A dwell, an auxiliary function or any
 //! other block between them leaves the corner as it is.
 //!
 //! **How far.** d is at most [`Settings::blend_share`] of either block's length (so the
 //! trims at both ends of a block never meet); it starts at the length where a
-//! symmetric blend of straight legs turning by θ strays d·sin θ/4 from them, and
+//! symmetric blend of straight legs turning by θ strays d·sin θ/4 from them (for
+//! turns of a few degrees too: a 4.5° corner in `G64` without P takes 48 µm a side), and
 //! shrinks until every sample of the blend (rounded to whole units, as it is sent)
 //! lies within [`Settings::fit_share`] of the smaller `P` of the two blocks from the
 //! *programmed* polyline (the chords the two blocks stand for), less
@@ -45,6 +47,7 @@ use super::{dot, norm, sub, unit, Compressed, Settings, V};
 use pkmc::config::AXES;
 use pkmc::motion::block::{Block, Motion};
 use std::ops::Range;
+use std::sync::Arc;
 
 #[cfg(test)]
 #[path = "blend_tests.rs"]
@@ -237,14 +240,13 @@ pub struct Blender {
 }
 
 /// Can `b`, from `from`, take part in a blend?
-fn blendable(b: &Block, from: &[i64; AXES]) -> bool {
+fn blendable(b: &Block, from: &[i64; AXES], s: &Settings) -> bool {
     let rotary_still = match b.motion {
         Motion::Linear => true,
         Motion::Cubic { c1, c2 } => c1[3..].iter().chain(&c2[3..]).all(|&x| x == 0),
         _ => return false,
     };
-    b.tolerance_nm != 0
-        && b.tolerance_nm != u32::MAX
+    super::merge_tolerance(b, s).is_some()
         && rotary_still
         && b.target[3..] == from[3..]
         && b.target[..3] != from[..3]
@@ -307,7 +309,7 @@ impl Blender {
         }
         let from = self.pose;
         self.pose = b.target;
-        if !self.s.blend || !blendable(b, &from) {
+        if !self.s.blend || !blendable(b, &from, &self.s) {
             self.finish(out);
             self.put(*b, source, out);
             return;
@@ -398,7 +400,8 @@ struct Corner {
 }
 
 /// A blend's shape: from `pa` leaving along `da` at |dP/ds| `ra`, to `pb` arriving
-/// along `db` at `rb`, checked against the programmed polyline `pts` within `tol`.
+/// along `db` at `rb`, checked within `tol` against the chords of the programmed
+/// polyline that may come that near it (`near`, [`near_chords`]).
 #[derive(Clone, Debug)]
 struct Shape {
     pa: V,
@@ -407,7 +410,7 @@ struct Shape {
     db: V,
     ra: f64,
     rb: f64,
-    pts: Vec<V>,
+    near: Arc<[[V; 2]]>,
     tol: f64,
     /// The block it is sent as (its line, feed and tolerance) and the A B C it keeps.
     line: Block,
@@ -428,7 +431,13 @@ impl Shape {
         let (mut farthest, mut kappa) = (0.0f64, 0.0f64);
         for k in 0..=SAMPLES {
             let u = k as f64 / SAMPLES as f64;
-            farthest = farthest.max(to_polyline(&sent.at(u), &self.pts).0);
+            let q = sent.at(u);
+            let d = self
+                .near
+                .iter()
+                .map(|[a, b]| to_segment(&q, a, b))
+                .fold(f64::INFINITY, f64::min);
+            farthest = farthest.max(d);
             kappa = kappa.max(sent.bend(u));
         }
         let fits = farthest + super::fit::tick_sag(self.line.feed as f64, kappa, s) <= self.tol;
@@ -436,24 +445,40 @@ impl Shape {
     }
 }
 
+/// Distance from `q` to the chord from `a` to `b`.
+fn to_segment(q: &V, a: &V, b: &V) -> f64 {
+    let ab = sub(b, a);
+    let l2 = dot(&ab, &ab);
+    let t = if l2 > 0.0 {
+        (dot(&ab, &sub(q, a)) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    norm(&sub(q, &lerp(a, b, t)))
+}
+
 /// Distance from `q` to the polyline `pts`, and the index of its nearest chord's end.
 fn to_polyline(q: &V, pts: &[V]) -> (f64, usize) {
     let mut best = (f64::INFINITY, 1);
     for e in 1..pts.len() {
-        let (a, b) = (&pts[e - 1], &pts[e]);
-        let ab = sub(b, a);
-        let l2 = dot(&ab, &ab);
-        let t = if l2 > 0.0 {
-            (dot(&ab, &sub(q, a)) / l2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let d = norm(&sub(q, &lerp(a, b, t)));
+        let d = to_segment(q, &pts[e - 1], &pts[e]);
         if d < best.0 {
             best = (d, e);
         }
     }
     best
+}
+
+/// The chords of `pts` within `reach` of the corner `c`. A blend whose points all lie
+/// within `reach` − `tol` of `c` is within `tol` of the polyline exactly where it is
+/// within `tol` of these: a chord farther from `c` is farther than `tol` from every
+/// point of the blend. (The check of a blend then costs its samples times a few
+/// chords, instead of times every chord the two blocks stand for.)
+fn near_chords(pts: &[V], c: &V, reach: f64) -> Arc<[[V; 2]]> {
+    pts.windows(2)
+        .filter(|w| to_segment(c, &w[0], &w[1]) <= reach)
+        .map(|w| [w[0], w[1]])
+        .collect()
 }
 
 /// |dP/du| of `g` at `at` over its largest between `lo` and `hi`: its |dP/ds| there
@@ -506,7 +531,13 @@ fn blend_curve(pa: &V, pb: &V, da: &V, db: &V, ra: f64, rb: f64, chord: f64) -> 
 
 /// The blend of the corner between `a` and `b`, if one fits (module doc).
 fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
-    let tol = a.block.tolerance_nm.min(b.block.tolerance_nm) as f64 * s.fit_share - ROUNDING_NM;
+    let (Some(ta), Some(tb)) = (
+        super::merge_tolerance(&a.block, s),
+        super::merge_tolerance(&b.block, s),
+    ) else {
+        return None;
+    };
+    let tol = ta.min(tb) * s.fit_share - ROUNDING_NM;
     let (ea, eb) = (a.geo.deriv(1.0), b.geo.deriv(0.0));
     if norm(&ea) < 1.0 || norm(&eb) < 1.0 {
         return None;
@@ -518,11 +549,17 @@ fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
         return None;
     }
     let most = s.blend_share * a.length().min(b.length());
-    let mut d = most.min(4.0 * tol / turn.sin().max(0.25));
+    let mut d = most.min(4.0 * tol / turn.sin().max(1e-3));
     // The programmed polyline around the corner: the first's chords, then the
     // second's (whose start is the first's last point).
     let mut pts = a.points.clone();
     pts.extend_from_slice(&b.points[1..]);
+    // Every point of a blend lies within 3d of the corner (plus the rounding of its
+    // control points): its ends are within d along the blocks, its inner control
+    // points within ra·k ≤ |pb − pa| ≤ 2d of them, and a cubic stays within its
+    // control points' hull. d only shrinks from here.
+    let c = to_fit(&a.block.target);
+    let near = near_chords(&pts, &c, 3.0 * d + 4.0 + tol + 1.0);
     let keep = a.block.target;
     for _ in 0..TRIES {
         if d < 1.0 {
@@ -541,7 +578,7 @@ fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
             db: unit(&b.geo.deriv(ub)),
             ra: speed_ratio(&a.geo, a.u0, ua, ua),
             rb: speed_ratio(&b.geo, ub, 1.0, ub),
-            pts: pts.clone(),
+            near: near.clone(),
             tol,
             line: Block {
                 line: a.last_line,

@@ -144,12 +144,34 @@ fn a_corner_between_curves_is_blended_tangentially_within_p() {
 }
 
 #[test]
-fn no_blend_in_g61_in_g64_without_p_nor_where_a_b_c_move() {
+fn in_g64_without_p_a_corner_is_blended_within_the_g64_tolerance() {
     let s = Settings::default();
-    for tol in [0, u32::MAX] {
-        let p = corner(90.0, tol);
-        assert_eq!(compress(&p, [0; AXES], &s).blocks, p, "tolerance {tol}");
+    let g64 = s.g64_tolerance_nm * s.fit_share;
+    for turn in [4.5, 90.0] {
+        let p = corner(turn, u32::MAX);
+        let c = compress(&p, [0; AXES], &s);
+        assert_eq!(c.blocks.len(), 3, "{turn}°: line, blend, line");
+        assert!(matches!(c.blocks[1].motion, Motion::Cubic { .. }));
+        assert_eq!(c.blocks[1].tolerance_nm, u32::MAX, "{turn}°: still G64");
+        assert!(largest_turn(&c, [0; AXES]) < 0.01, "{turn}°: tangent");
+        let dev = deviation(&p, &c, [0; AXES]);
+        assert!(dev <= g64, "{turn}°: {dev} nm");
+        assert!(dev > 0.5 * g64, "{turn}°: only {dev} nm");
     }
+    // `--g64-tolerance 0` merges nothing and blends nothing in G64 without P.
+    let exact = Settings {
+        g64_tolerance_nm: 0.0,
+        ..s
+    };
+    let p = corner(90.0, u32::MAX);
+    assert_eq!(compress(&p, [0; AXES], &exact).blocks, p);
+}
+
+#[test]
+fn no_blend_in_g61_nor_where_a_b_c_move() {
+    let s = Settings::default();
+    let p = corner(90.0, 0);
+    assert_eq!(compress(&p, [0; AXES], &s).blocks, p, "G61");
     let mut p = corner(90.0, P);
     p[1].target[3] = 5_000_000; // A moves in the second
     assert_eq!(compress(&p, [0; AXES], &s).blocks, p);

@@ -108,10 +108,9 @@ pub struct Settings {
     pub blend_min_deg: f64,
     /// A blend trims at most this share of either block's length.
     pub blend_share: f64,
-    /// The tolerance runs are merged within in `G64` without P, nm (the default 1 µm;
-    /// 0: not merged). Corners there are not blended: the controller passes them as it
-    /// passes any `G64` corner (a blend is a block of its own, and the station's run
-    /// by step would stop on it).
+    /// The tolerance runs are merged and corners blended within in `G64` without P,
+    /// nm (the default 1 µm; 0: neither). The station's run by step runs the program
+    /// as written, so a blend (a block of its own) never stops it.
     pub g64_tolerance_nm: f64,
 }
 

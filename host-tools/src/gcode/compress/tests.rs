@@ -131,7 +131,7 @@ fn a_run_that_turns_a_rotary_axis_is_merged_with_it_within_the_tolerance() {
 #[test]
 fn g64_without_p_merges_within_its_own_tolerance_and_g61_never() {
     // The same sine in G64 without P (tolerance u32::MAX): merged within 1 µm by
-    // default, corners not blended (nothing turns over 30° here anyway).
+    // default (nothing turns over 30° here: no corner to blend).
     let input = sine(0.05, 100.0, u32::MAX);
     let s = Settings::default();
     assert_eq!(s.g64_tolerance_nm, 1000.0);
