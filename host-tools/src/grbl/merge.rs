@@ -20,8 +20,10 @@
 //! - the sender quiet for [`QUIET`] with nothing more waiting;
 //! - an open merge at rest that could hand out nothing.
 //!
-//! Closed merges run on the merge thread as well, but for the one before a block that
-//! cannot join a run, which must go after the merged moves.
+//! Closed merges run on the merge thread as well. A block that cannot join a run
+//! waits behind the merge of the moves before it, with every block that comes after
+//! it, and all go in order once the merge is handed out: the sender's lines are
+//! answered meanwhile (a merge of 2 048 held moves takes about a second).
 //!
 //! A run cut by a closed merge ends at a vertex of the programmed polyline, as any
 //! run does at a corner: the curves on either side meet there. The next merge's first
@@ -78,17 +80,51 @@ pub(super) struct Merger {
     /// Moves merged, and the blocks made of them (for the summary).
     pub(super) merged: (u64, u64),
     /// A merge under way on another thread (so that the sender's lines are taken
-    /// meanwhile): it merges the first `n` of `held`.
-    under_way: Option<(usize, JoinHandle<Merged>)>,
+    /// meanwhile), of the moves held when it started; it has the blender meanwhile.
+    under_way: Option<JoinHandle<Merged>>,
     /// The last open merge merged nothing (its runs go on past what is held).
     idle: bool,
     /// Moves taken since the last open merge started.
     fresh: usize,
+    /// A block that cannot join a run came with moves held: they are being merged
+    /// (closed) on the thread, and it waits in `behind` with every block after it.
+    closing: bool,
+    /// The blocks taken while `closing`, in order, taken up again once the merge
+    /// before them is handed out.
+    behind: Vec<Block>,
 }
 
-/// What a merge of held moves gives: the blocks, where they leave off, and how many of
-/// the moves they stand for.
-type Merged = (Compressed, Option<Lead>, usize);
+/// What a merge of held moves gives: the blocks, blended; how the last curve ended;
+/// how many of the moves they stand for; and the blender, which the merge took along
+/// (it blends on the merge's thread too, with the corner it keeps for the next).
+struct Merged {
+    blocks: Compressed,
+    lead: Option<Lead>,
+    merged: usize,
+    blender: Option<Blender>,
+}
+
+/// Merges `held` (from `start`, going on as `resume` says) and blends the merged
+/// blocks with `blender` (but for the last blendable one, which it keeps).
+fn merge_and_blend(
+    held: &[Block],
+    start: [i64; AXES],
+    s: &Settings,
+    resume: Resume,
+    mut blender: Option<Blender>,
+) -> Merged {
+    let (runs, lead, merged) = compress::compress_runs_after(held, start, s, resume);
+    let mut blocks = Compressed::default();
+    if let Some(b) = &mut blender {
+        b.push(held, &runs, 0, &mut blocks);
+    }
+    Merged {
+        blocks,
+        lead,
+        merged,
+        blender,
+    }
+}
 
 /// May `b` be part of a run? A feed move the compressor merges within a tolerance
 /// (`compress::merge_tolerance`; it decides the rest: length, feed, corners).
@@ -112,17 +148,20 @@ impl Merger {
             under_way: None,
             idle: false,
             fresh: 0,
+            closing: false,
+            behind: Vec::new(),
         }
     }
 
     /// Drops anything held; the next block starts at `pose` (a job's first line
     /// went straight to the controller, a reset, an alarm).
     pub(super) fn restart_at(&mut self, pose: [i64; AXES]) {
-        // A merge under way is of moves dropped: its result is too.
-        if let Some((_, h)) = self.under_way.take() {
-            let _ = h.join();
-        }
+        // A merge under way is of moves dropped: its result is too. Its thread is
+        // left to end on its own (detached), so a reset does not wait for it.
+        self.under_way = None;
         self.idle = false;
+        self.closing = false;
+        self.behind.clear();
         self.held.clear();
         self.done = 0;
         self.since = None;
@@ -135,15 +174,23 @@ impl Merger {
     pub(super) fn is_empty(&self) -> bool {
         self.held.len() == self.done
             && self.under_way.is_none()
+            && !self.closing
             && !self.blender.as_ref().is_some_and(Blender::holds)
     }
 
-    /// Takes a line's blocks: mergeable moves are held, anything else sends what is
-    /// held (merged) and then itself.
+    /// Takes a line's blocks: mergeable moves are held; anything else goes after what
+    /// is held, merged on the thread (closed) meanwhile ([`Merger::settle`] hands
+    /// them out in order).
     pub(super) fn take(&mut self, blocks: Vec<Block>, out: &mut Vec<Block>) {
         self.last_line = Instant::now();
+        self.take_blocks(blocks, out);
+    }
+
+    fn take_blocks(&mut self, blocks: Vec<Block>, out: &mut Vec<Block>) {
         for b in blocks {
-            if self.settings.is_some_and(|s| candidate(&b, &s)) {
+            if self.closing {
+                self.behind.push(b);
+            } else if self.settings.is_some_and(|s| candidate(&b, &s)) {
                 self.since.get_or_insert_with(Instant::now);
                 self.held.push(b);
                 self.fresh += 1;
@@ -151,6 +198,13 @@ impl Merger {
                     self.collect(false, out);
                     self.start_merge(true);
                 }
+            } else if self.held.len() > self.done || self.under_way.is_some() {
+                // The held moves are merged first, on the thread, so that lines are
+                // still answered meanwhile (a merge of 2 048 moves takes about 1 s).
+                self.closing = true;
+                self.behind.push(b);
+                self.collect(false, out);
+                self.start_merge(false);
             } else {
                 self.flush(out);
                 if !matches!(b.motion, Motion::Dwell(_) | Motion::Aux(_)) {
@@ -170,11 +224,12 @@ impl Merger {
     /// which the blender keeps for the corner after it; a merge under way first. The
     /// merge is closed: the runs are cut at the last held move.
     fn merge(&mut self, out: &mut Vec<Block>) {
-        self.collect(true, out);
+        self.settle(true, out);
         let (Some(s), true) = (self.settings, self.held.len() > self.done) else {
             return;
         };
-        let result = compress::compress_runs_after(&self.held, self.start, &s, self.resume(false));
+        let blender = self.blender.take();
+        let result = merge_and_blend(&self.held, self.start, &s, self.resume(false), blender);
         self.apply(result, out);
     }
 
@@ -188,11 +243,10 @@ impl Merger {
             return;
         };
         let (held, start, resume) = (self.held.clone(), self.start, self.resume(open));
-        let n = held.len();
+        let blender = self.blender.take();
         self.fresh = 0;
-        let job =
-            std::thread::spawn(move || compress::compress_runs_after(&held, start, &s, resume));
-        self.under_way = Some((n, job));
+        let job = std::thread::spawn(move || merge_and_blend(&held, start, &s, resume, blender));
+        self.under_way = Some(job);
     }
 
     /// How a merge goes on from the last one's curves (after the moves kept for
@@ -205,37 +259,55 @@ impl Merger {
         }
     }
 
+    /// Hands out the merge under way once it is done (`wait`: waits for it); when it
+    /// was the closed merge before a block that cannot join a run (`closing`), merges
+    /// what is still held, then hands out the blender's block and takes up the blocks
+    /// behind. With `wait`, nothing is under way or closing after it.
+    fn settle(&mut self, wait: bool, out: &mut Vec<Block>) {
+        loop {
+            self.collect(wait, out);
+            if self.under_way.is_some() || !self.closing {
+                return;
+            }
+            if self.held.len() > self.done {
+                self.start_merge(false);
+                continue;
+            }
+            self.closing = false;
+            let behind = std::mem::take(&mut self.behind);
+            self.take_blocks(behind, out);
+        }
+    }
+
     /// Hands out the merge under way once it is done (`wait`: waits for it).
     fn collect(&mut self, wait: bool, out: &mut Vec<Block>) {
         if !self
             .under_way
             .as_ref()
-            .is_some_and(|(_, h)| wait || h.is_finished())
+            .is_some_and(|h| wait || h.is_finished())
         {
             return;
         }
-        let Some((n, job)) = self.under_way.take() else {
+        let Some(job) = self.under_way.take() else {
             return;
         };
         let result = job.join().expect("a merge of held moves");
-        debug_assert!(result.2 <= n);
-        self.idle = result.2 == self.done;
+        self.idle = result.merged == self.done;
         self.apply(result, out);
     }
 
-    /// Blends the merged blocks and appends them to `out` (but for the last blendable
-    /// block, which the blender keeps for the corner after it); keeps the moves after
-    /// them, and those before them that the next merge's tangents look back on.
-    fn apply(&mut self, (runs, lead, merged): Merged, out: &mut Vec<Block>) {
-        let (Some(s), Some(blender)) = (&self.settings, &mut self.blender) else {
+    /// Appends the merged and blended blocks to `out` (the blender, back from the
+    /// merge, keeps the last blendable one for the corner after it); keeps the moves
+    /// after them, and those before them that the next merge's tangents look back on.
+    fn apply(&mut self, m: Merged, out: &mut Vec<Block>) {
+        self.blender = m.blender;
+        let (Some(s), Some(blender), merged) = (&self.settings, &self.blender, m.merged) else {
             return;
         };
-        self.lead = lead;
-        let mut c = Compressed::default();
-        blender.push(&self.held, &runs, 0, &mut c);
+        self.lead = m.lead;
         self.merged.0 += (merged - self.done) as u64;
-        self.merged.1 += c.blocks.len() as u64;
-        out.extend(c.blocks);
+        self.merged.1 += m.blocks.blocks.len() as u64;
+        out.extend(m.blocks.blocks);
         let keep = compress::context_from(&self.held, merged, s);
         if keep > 0 {
             self.start = self.held[keep - 1].target;
@@ -275,7 +347,10 @@ impl Merger {
         lines_waiting: bool,
         out: &mut Vec<Block>,
     ) {
-        self.collect(false, out);
+        self.settle(false, out);
+        if self.closing {
+            return;
+        }
         let Some(since) = self.since else {
             return;
         };
@@ -284,7 +359,9 @@ impl Merger {
         // Every merge runs on its thread, so that lines and status requests are still
         // answered meanwhile; a merge under way hands out its blocks first.
         if self.under_way.is_some() {
-        } else if self.held.len() == self.done {
+            return;
+        }
+        if self.held.len() == self.done {
             // Only the blender's block is held.
             if low || quiet || since.elapsed() >= LONGEST_HOLD {
                 self.flush(out);
@@ -307,7 +384,7 @@ impl Merger {
     /// handed some out? (The sender then waits for its answers, as for a full
     /// Grbl planner buffer.)
     pub(super) fn full(&self) -> bool {
-        self.held.len() - self.done >= 2 * MOST_HELD
+        self.held.len() - self.done + self.behind.len() >= 2 * MOST_HELD
     }
 }
 
@@ -347,6 +424,8 @@ mod tests {
         }
         assert!(out.is_empty(), "all held: {}", out.len());
         // A rapid sends the run first, merged as compress merges the whole program.
+        // The merge runs on the thread: the rapid, and a move after it, wait behind
+        // it (lines are answered meanwhile) and go after its curves.
         let rapid = Block {
             motion: Motion::Rapid,
             target: [0; AXES],
@@ -354,15 +433,46 @@ mod tests {
             ..blocks[0]
         };
         m.take(vec![rapid], &mut out);
+        let after = g1(1_000_000, 0, 202);
+        m.take(vec![after], &mut out);
+        assert!(out.is_empty() && m.under_way.is_some() && !m.is_empty());
+        assert_eq!(m.behind, [rapid, after]);
+        while m.closing {
+            m.settle(false, &mut out);
+            std::thread::yield_now();
+        }
         let whole = compress::compress(&blocks, [0; AXES], &s);
         assert_eq!(out[..out.len() - 1], whole.blocks[..]);
         assert_eq!(out.last(), Some(&rapid));
         assert!(whole.blocks.len() < 20, "{} curves", whole.blocks.len());
         assert_eq!(m.merged, (200, whole.blocks.len() as u64));
+        // The move after the rapid is held for a run of its own.
+        assert_eq!(m.held, [after]);
+        m.flush(&mut out);
+        assert_eq!(out.last(), Some(&after));
         assert!(m.is_empty());
         let n = out.len();
         m.send_due((0, false, 0), false, &mut out);
         assert_eq!(out.len(), n, "nothing more to send");
+    }
+
+    #[test]
+    fn a_flush_hands_out_a_closing_merge_and_everything_behind_it_in_order() {
+        // Runs with rapids between them, taken at once: each rapid waits behind the
+        // run before it; a flush (as before a probing move) hands out all of it in
+        // the program's order, as nc-send merges it.
+        let s = Settings::default();
+        let mut blocks = chords(900);
+        for k in [300, 600] {
+            blocks[k].motion = Motion::Rapid;
+        }
+        let mut m = Merger::new(Some(s), [0; AXES]);
+        let mut out = Vec::new();
+        m.take(blocks.clone(), &mut out);
+        assert!(m.closing && !m.behind.is_empty());
+        m.flush(&mut out);
+        assert!(m.is_empty());
+        assert_eq!(out, compress::compress(&blocks, [0; AXES], &s).blocks);
     }
 
     #[test]
@@ -433,7 +543,7 @@ mod tests {
             if k % 97 == 96 {
                 let before = out.len();
                 m.start_merge(true);
-                m.collect(true, &mut out);
+                m.settle(true, &mut out);
                 sent.push(out.len() - before);
             }
         }
