@@ -12,7 +12,10 @@
 //! ([`super::merge_tolerance`]: `G64 P`, or in `G64` without P
 //! [`Settings::g64_tolerance_nm`], 1 µm by default; never `G61`), neither moves A B C
 //! (the blend is X Y Z only), and the path turns there by more than
-//! [`Settings::blend_min_deg`]. The tolerance is the smaller of the two, and the
+//! [`Settings::blend_min_deg`], or, turning less, the tool's speed over the path speed
+//! jumps there by more than the feed allows (a curve ending at another |dP/ds| than
+//! the next starts, [`speed_jumps`]: the planner would pass the junction at
+//! a·T/(2·jump)). The tolerance is the smaller of the two, and the
 //! blend's samples, with the cut of the ticks' chords of it at its tightest bend on
 //! top (`fit::tick_sag`), must lie within it. A dwell, an auxiliary function or any
 //! other block between them leaves the corner as it is.
@@ -529,6 +532,25 @@ fn blend_curve(pa: &V, pb: &V, da: &V, db: &V, ra: f64, rb: f64, chord: f64) -> 
     curve(hi)
 }
 
+/// Does the tool's speed over the path speed jump where `a` (as streamed, from its
+/// start trim) ends and `b` starts, by more than the feed allows? The planner passes
+/// such a junction at v·|jump| ≤ a·T/2 (half the acceleration in one tick, as a
+/// turn); a blend meets both at their own |dP/ds| (module doc, "Shape"). Without the
+/// machine's figures, a jump of 1 %.
+fn speed_jumps(a: &Held, b: &Held, s: &Settings) -> bool {
+    let jump = (speed_ratio(&a.geo, a.u0, 1.0, 1.0) - speed_ratio(&b.geo, 0.0, 1.0, 0.0)).abs();
+    let mut feed = a.block.feed.min(b.block.feed) as f64;
+    if s.max_speed > 0.0 {
+        feed = feed.min(s.max_speed);
+    }
+    let least = if s.accel > 0.0 && feed > 0.0 {
+        s.accel / pkmc::units::TICK_HZ as f64 / (2.0 * feed)
+    } else {
+        0.01
+    };
+    jump > least
+}
+
 /// The blend of the corner between `a` and `b`, if one fits (module doc).
 fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
     let (Some(ta), Some(tb)) = (
@@ -545,7 +567,10 @@ fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
     let (ta, tb) = (unit(&ea), unit(&eb));
     let cos = dot(&ta, &tb).clamp(-1.0, 1.0);
     let turn = cos.acos();
-    if tol <= 0.0 || turn < s.blend_min_deg.to_radians() || turn > 179f64.to_radians() {
+    // A junction that barely turns is blended too where the tool's speed over the path
+    // speed jumps there enough to hold the junction below the feed.
+    let small = turn < s.blend_min_deg.to_radians() && !speed_jumps(a, b, s);
+    if tol <= 0.0 || small || turn > 179f64.to_radians() {
         return None;
     }
     let most = s.blend_share * a.length().min(b.length());

@@ -287,3 +287,59 @@ fn a_blend_meets_a_curve_at_the_speed_the_curve_starts_once_its_end_is_trimmed_t
         );
     }
 }
+
+#[test]
+fn a_junction_that_does_not_turn_is_blended_where_the_speed_over_the_path_speed_jumps() {
+    // A straight curve along X whose |dP/du| falls from 10.2 at its start to 9.9 at
+    // its end, then a line on along X: no turn, but where they meet the tool's speed
+    // over the path speed would jump by 3 %, which holds the junction to 17 mm/s at
+    // 1000 mm/s² (v·jump ≤ a·T/2). At F3000 it is blended, and the speed is
+    // continuous; at F60, where the jump lets the junction pass at the feed, it is
+    // left as it is.
+    let tol = 10_000; // G64 P0.01
+    let mm = |x: f64| (x * 1e6).round() as i64;
+    let s = Settings {
+        accel: 1e9,
+        max_speed: 1e8,
+        ..Settings::default()
+    };
+    let program = |feed: i64| {
+        let curve = Block {
+            line: 1,
+            motion: Motion::Cubic {
+                c1: [mm(3.4), 0, 0, 0, 0, 0],
+                c2: [mm(-3.3), 0, 0, 0, 0, 0],
+            },
+            target: [mm(10.0), 0, 0, 0, 0, 0],
+            feed,
+            tolerance_nm: tol,
+        };
+        vec![
+            curve,
+            Block {
+                feed,
+                ..g1(20.0, 0.0, 2, tol)
+            },
+        ]
+    };
+    let p = program(50_000_000);
+    let before = end_ratios(
+        &Compressed {
+            blocks: p.clone(),
+            source: vec![0..1, 1..2],
+        },
+        [0; AXES],
+    );
+    assert!((before[0].1 - before[1].0).abs() > 0.025, "{before:?}");
+    let c = compress(&p, [0; AXES], &s);
+    let lines: Vec<_> = c.blocks.iter().map(|b| b.line).collect();
+    assert_eq!(lines, [1, 1, 2], "curve, blend, line");
+    assert!(largest_turn(&c, [0; AXES]) < 0.01);
+    let r = end_ratios(&c, [0; AXES]);
+    for k in 1..r.len() {
+        assert!((r[k].0 - r[k - 1].1).abs() < 0.005, "{r:?}");
+    }
+    assert!(deviation(&p, &c, [0; AXES]) <= tol as f64 * s.fit_share);
+    let slow = program(1_000_000);
+    assert_eq!(compress(&slow, [0; AXES], &s).blocks, slow);
+}

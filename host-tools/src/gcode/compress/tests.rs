@@ -71,9 +71,21 @@ fn a_fine_sine_becomes_few_curves_within_the_tolerance() {
     );
     let d = deviation(&input, &c);
     assert!(d <= 0.010, "deviation {d} mm");
-    // Every input block is covered once, in order.
-    let covered: Vec<usize> = c.source.iter().flat_map(|r| r.clone()).collect();
+    // Every input block is covered once, in order, by the merged curves; the blends
+    // between them (where the speed over the path speed would jump) span chords of
+    // the curves on both sides, so the streamed blocks cover every one, in order.
+    let runs = compress_runs(&input, [0; AXES], &Settings::default());
+    let covered: Vec<usize> = runs.source.iter().flat_map(|r| r.clone()).collect();
     assert_eq!(covered, (0..input.len()).collect::<Vec<_>>());
+    assert!(c
+        .source
+        .windows(2)
+        .all(|w| w[0].start <= w[1].start && w[0].end <= w[1].end));
+    assert!(c.source.windows(2).all(|w| w[1].start <= w[0].end));
+    assert_eq!(
+        (c.source[0].start, c.source.last().unwrap().end),
+        (0, input.len())
+    );
     assert_eq!(
         c.blocks.last().unwrap().target,
         input.last().unwrap().target
