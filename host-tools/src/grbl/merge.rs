@@ -301,7 +301,8 @@ impl Merger {
     /// after them, and those before them that the next merge's tangents look back on.
     fn apply(&mut self, m: Merged, out: &mut Vec<Block>) {
         self.blender = m.blender;
-        let (Some(s), Some(blender), merged) = (&self.settings, &self.blender, m.merged) else {
+        let merged = m.merged;
+        let (Some(s), Some(blender)) = (&self.settings, &self.blender) else {
             return;
         };
         self.lead = m.lead;

@@ -45,7 +45,7 @@
 //! compressor made them, so a program blended a piece at a time ([`Blender`] keeps
 //! the last block of a piece until the next comes) is the program blended at once.
 
-use super::space::{from_fit, to_fit};
+use super::space::{from_fit, on_segment, to_fit};
 use super::{dot, norm, sub, unit, Compressed, Settings, V};
 use pkmc::config::AXES;
 use pkmc::motion::block::{Block, Motion};
@@ -438,7 +438,7 @@ impl Shape {
             let d = self
                 .near
                 .iter()
-                .map(|[a, b]| to_segment(&q, a, b))
+                .map(|[a, b]| on_segment(&q, a, b).1)
                 .fold(f64::INFINITY, f64::min);
             farthest = farthest.max(d);
             kappa = kappa.max(sent.bend(u));
@@ -448,23 +448,11 @@ impl Shape {
     }
 }
 
-/// Distance from `q` to the chord from `a` to `b`.
-fn to_segment(q: &V, a: &V, b: &V) -> f64 {
-    let ab = sub(b, a);
-    let l2 = dot(&ab, &ab);
-    let t = if l2 > 0.0 {
-        (dot(&ab, &sub(q, a)) / l2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    norm(&sub(q, &lerp(a, b, t)))
-}
-
 /// Distance from `q` to the polyline `pts`, and the index of its nearest chord's end.
 fn to_polyline(q: &V, pts: &[V]) -> (f64, usize) {
     let mut best = (f64::INFINITY, 1);
     for e in 1..pts.len() {
-        let d = to_segment(q, &pts[e - 1], &pts[e]);
+        let d = on_segment(q, &pts[e - 1], &pts[e]).1;
         if d < best.0 {
             best = (d, e);
         }
@@ -479,7 +467,7 @@ fn to_polyline(q: &V, pts: &[V]) -> (f64, usize) {
 /// chords, instead of times every chord the two blocks stand for.)
 fn near_chords(pts: &[V], c: &V, reach: f64) -> Arc<[[V; 2]]> {
     pts.windows(2)
-        .filter(|w| to_segment(c, &w[0], &w[1]) <= reach)
+        .filter(|w| on_segment(c, &w[0], &w[1]).1 <= reach)
         .map(|w| [w[0], w[1]])
         .collect()
 }
