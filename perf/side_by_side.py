@@ -280,7 +280,9 @@ def arc_points(start, a, plane):
 def deviation(samples, path):
     """The largest distance of the samples (in time order) from the path's segments,
     over all samples and over those nearest a feed segment, mm. The search follows the
-    path forward from the segment of the previous sample."""
+    path forward from the segment of the previous sample, and of segments equally near
+    (within 1 nm: a path that comes back over itself, as a retract up the plunge's
+    line) takes the first, so that it does not skip ahead past the rest of the path."""
     import numpy as np
     if not path or len(path) < 2 or not samples:
         return None, None
@@ -295,16 +297,22 @@ def deviation(samples, path):
         lo, hi = max(0, at - 20), min(len(a), at + 2000)
         t = np.clip(((s - a[lo:hi]) * d[lo:hi]).sum(axis=1) / dd[lo:hi], 0, 1)
         dist = np.linalg.norm(a[lo:hi] + t[:, None] * d[lo:hi] - s, axis=1)
-        k = int(dist.argmin())
+        k = first_nearest(dist)
         if dist[k] > 0.5:  # lost: look along the whole path
             t = np.clip(((s - a) * d).sum(axis=1) / dd, 0, 1)
             dist = np.linalg.norm(a + t[:, None] * d - s, axis=1)
-            lo, k = 0, int(dist.argmin())
+            lo, k = 0, first_nearest(dist)
         at = lo + k
         worst = max(worst, float(dist[k]))
         if feed[at]:
             worst_feed = max(worst_feed, float(dist[k]))
     return worst, worst_feed
+
+
+def first_nearest(dist):
+    """The first index whose distance is within 1 nm of the smallest."""
+    import numpy as np
+    return int(np.argmax(dist <= dist.min() + 1e-6))
 
 
 # ---------------------------------------------------------------- pkmc's side
