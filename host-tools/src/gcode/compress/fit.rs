@@ -444,6 +444,32 @@ pub(super) fn end_ratio(c: &[V; 4]) -> f64 {
     }
 }
 
+/// How fast the controller runs `c` for its length, as a share of the speed asked for:
+/// its mean |dP/du| over its largest (it runs the parameter at one rate, the tool at
+/// |dP/du| over the largest times the path speed), times what its tightest bend allows
+/// with the most a bend may take ([`Settings::bend_accel`]) over the speed asked for
+/// (at most 1; the bend is not counted when the machine's figures are not known).
+pub(super) fn pace(c: &[V; 4], g: &Goal, s: &Settings) -> f64 {
+    let along: Vec<(f64, f64)> = (0..=64)
+        .map(|k| {
+            let u = k as f64 / 64.0;
+            curvature(&deriv(c, u), &deriv2(c, u))
+        })
+        .collect();
+    let top = along.iter().map(|a| a.0).fold(0.0, f64::max);
+    if top <= 0.0 {
+        return 1.0;
+    }
+    let mean = along.iter().map(|a| a.0).sum::<f64>() / along.len() as f64;
+    let tightest = along.iter().map(|a| a.1).fold(0.0, f64::max);
+    let bend = if g.speed > 0.0 && s.bend_accel > 0.0 && tightest > 0.0 {
+        ((s.bend_accel / tightest).sqrt() / g.speed).min(1.0)
+    } else {
+        1.0
+    };
+    mean / top * bend
+}
+
 /// |dP/du| and the bend |dP/du × d²P/du²| / |dP/du|³ (per nm) over X Y Z, from the
 /// first and second derivatives.
 pub(super) fn curvature(d1: &V, d2: &V) -> (f64, f64) {

@@ -48,11 +48,12 @@
 
 pub mod blend;
 mod fit;
+mod reach;
 pub mod space;
 #[cfg(test)]
 mod tests;
 
-use fit::{fit, fit_free, Goal};
+use fit::Goal;
 use pkmc::config::AXES;
 use pkmc::motion::block::{Block, Motion};
 use space::{from_fit, to_fit};
@@ -82,6 +83,12 @@ pub struct Settings {
     pub max_chords: usize,
     /// Smallest ratio of the slowest to the fastest |dP/du| along a curve.
     pub min_speed_ratio: f64,
+    /// A curve of this many moves or more is cut shorter where one of at least half as
+    /// many runs more evenly than [`Settings::even_ratio`] (its slowest |dP/du| over its
+    /// largest) and its own does not.
+    pub even_from_moves: usize,
+    /// The evenness asked of a long curve ([`Settings::even_from_moves`]).
+    pub even_ratio: f64,
 
     /// A curve turning more than this, degrees, is weighed for time (module doc).
     pub max_turn_deg: f64,
@@ -124,6 +131,8 @@ impl Default for Settings {
             fit_share: 0.95,
             max_chords: 400,
             min_speed_ratio: 0.5,
+            even_from_moves: 40,
+            even_ratio: 0.99,
             max_turn_deg: 8.0,
             tangent_reach: 3.0,
             reweights: 4,
@@ -514,21 +523,7 @@ fn fit_run(
         } else {
             carried.map(|l| l.chord)
         };
-        // A curve whose start matches the block before it, unless one that does not
-        // reaches much farther.
-        let strict = curve_from(pts, &t, a, (lead, into), g, s);
-        let loose = curve_from(
-            pts,
-            &t,
-            a,
-            (lead, into),
-            g,
-            &Settings {
-                min_junction_share: 0.0,
-                ..*s
-            },
-        );
-        let reach = |f: &Option<(usize, V, V)>| f.as_ref().map_or(0.0, |f| (f.0 - a) as f64);
+        let found = reach::next_curve(pts, &t, a, (lead, into), g, s);
         if unsure.get() {
             // The fit from here could change with the moves to come.
             if a == 0 {
@@ -542,11 +537,6 @@ fn fit_run(
             });
             return (ended, Some(a));
         }
-        let found = if reach(&strict) >= s.matched_reach * reach(&loose) {
-            strict
-        } else {
-            loose
-        };
         match found {
             Some((b, c1, c2)) => {
                 let end = &run[b - 1];
@@ -580,102 +570,4 @@ fn fit_run(
         chord: unit(&sub(&pts[m], &pts[m - 1])),
     });
     (ended, None)
-}
-
-/// The curve from point `a` ([`farthest`]), leaving along `lead` when there is one,
-/// or along its own direction when that reaches farther and turns no more than the
-/// program does at this point (from the chord `into` it).
-fn curve_from(
-    pts: &[V],
-    t: &[V],
-    a: usize,
-    (lead, into): (Option<V>, Option<V>),
-    g: &Goal,
-    s: &Settings,
-) -> Option<(usize, V, V)> {
-    let mut found = farthest(pts, t, a, lead.as_ref(), g, s);
-    if let (Some(l), Some(into)) = (lead, into) {
-        // Leaving along its own direction, turning no more than the program does
-        // at this point.
-        let own = dot(&into, &unit(&sub(&pts[a + 1], &pts[a])));
-        if let Some(o) = farthest(pts, t, a, None, g, s) {
-            let turn_ok = dot(&l, &unit(&sub(&o.1, &pts[a]))) >= own.min(1.0);
-            if turn_ok && found.as_ref().is_none_or(|f| o.0 > f.0) {
-                found = Some(o);
-            }
-        }
-    }
-    found
-}
-
-/// The farthest one curve from `a` leaving along `lead` (or the data's tangent)
-/// reaches, with either end tangent fixed to the data's or the far end's free
-/// (preferred when it reaches [`Settings::free_gain`] times as far).
-fn farthest(
-    pts: &[V],
-    t: &[V],
-    a: usize,
-    lead: Option<&V>,
-    g: &Goal,
-    s: &Settings,
-) -> Option<(usize, V, V)> {
-    let fixed = reach(pts, t, a, lead, g, s, false);
-    let free = reach(pts, t, a, lead, g, s, true);
-    match (fixed, free) {
-        (Some(f), Some(o)) if (o.0 - a) as f64 > s.free_gain * (f.0 - a) as f64 => Some(o),
-        (Some(f), _) => Some(f),
-        (None, o) => o,
-    }
-}
-
-/// The farthest point `b` (two chords or more from `a`) one curve from `a` reaches,
-/// leaving along `lead` (or its own best direction), with its inner control points:
-/// by doubling, then bisection.
-fn reach(
-    pts: &[V],
-    t: &[V],
-    a: usize,
-    lead: Option<&V>,
-    g: &Goal,
-    s: &Settings,
-    free: bool,
-) -> Option<(usize, V, V)> {
-    let top = (pts.len() - 1).min(a + s.max_chords);
-    let try_to = |b: usize| {
-        if let Some((_, unsure)) = g.edge.filter(|e| b >= e.0) {
-            unsure.set(true);
-        }
-        if free && b - a >= 4 {
-            fit_free(&pts[a..=b], lead, g, s)
-        } else {
-            fit(&pts[a..=b], lead.unwrap_or(&t[a]), &t[b], g, s)
-        }
-    };
-    let (mut good, mut best, mut bad) = (a + 1, None, None);
-    let mut step = 2;
-    while a + step <= top {
-        match try_to(a + step) {
-            Some(c) => (good, best, step) = (a + step, Some(c), step * 2),
-            None => {
-                bad = Some(a + step);
-                break;
-            }
-        }
-    }
-    if bad.is_none() && good < top {
-        match try_to(top) {
-            Some(c) => (good, best) = (top, Some(c)),
-            None => bad = Some(top),
-        }
-    }
-    if let Some(mut hi) = bad {
-        while hi - good > 1 {
-            let mid = (good + hi) / 2;
-            match try_to(mid) {
-                Some(c) => (good, best) = (mid, Some(c)),
-                None => hi = mid,
-            }
-        }
-    }
-    best.map(|(c1, c2)| (good, c1, c2))
 }

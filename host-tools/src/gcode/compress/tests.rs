@@ -311,3 +311,68 @@ fn where_two_curves_meet_on_unevenly_spaced_points_the_tool_speed_does_not_jump(
         "{slow} of {junctions} junctions slow"
     );
 }
+
+#[test]
+fn a_long_curve_is_cut_where_a_shorter_one_runs_evenly() {
+    // A circle of radius 20 mm in 0.1 mm chords within G64 P0.01, at 100 mm/s on
+    // cartesian-xyz's figures (`perf/dense_curves.py`'s). Without the rule one cubic
+    // spans about 80° of it, where its |dP/du| falls to 0.93 of its largest: the
+    // controller would run the tool 7 % under the feed there.
+    let n = 1256;
+    let input: Vec<Block> = (1..=n)
+        .map(|k| {
+            let th = std::f64::consts::TAU * k as f64 / n as f64;
+            // Written with four decimals, as a CAM system or `perf/dense_curves.py` does.
+            let mm = |v: f64| (v * 1e4).round() / 1e4;
+            line(mm(20.0 * th.cos()), mm(20.0 * th.sin()), k as u32, 10_000)
+        })
+        .collect();
+    let start = [20_000_000, 0, 0, 0, 0, 0];
+    let s = Settings {
+        accel: 1e9,
+        max_speed: 1e8,
+        bend_accel: 1e9 * 3f64.sqrt() * 2.0 / 3.0,
+        ..Settings::default()
+    };
+    // The slowest |dP/du| over the largest of any curve, and the number of curves.
+    let evenness = |s: &Settings| {
+        let c = compress(&input, start, s);
+        assert!(deviation_from(&input, start, &c) <= 0.010);
+        let mut from = start;
+        let mut worst = 1.0f64;
+        for b in &c.blocks {
+            if let Motion::Cubic { c1, c2 } = b.motion {
+                let p: [V; 4] = [
+                    to_fit(&from),
+                    to_fit(&core::array::from_fn(|i| from[i] + c1[i])),
+                    to_fit(&core::array::from_fn(|i| b.target[i] + c2[i])),
+                    to_fit(&b.target),
+                ];
+                let speeds: Vec<f64> = (0..=64)
+                    .map(|k| {
+                        let u = k as f64 / 64.0;
+                        norm(&core::array::from_fn(|i| {
+                            3.0 * (1.0 - u).powi(2) * (p[1][i] - p[0][i])
+                                + 6.0 * (1.0 - u) * u * (p[2][i] - p[1][i])
+                                + 3.0 * u * u * (p[3][i] - p[2][i])
+                        }))
+                    })
+                    .collect();
+                let top = speeds.iter().fold(0.0f64, |m, &v| m.max(v));
+                worst = worst.min(speeds.iter().fold(top, |m, &v| m.min(v)) / top);
+            }
+            from = b.target;
+        }
+        (worst, c.blocks.len())
+    };
+    let (even, blocks) = evenness(&s);
+    let (uneven, before) = evenness(&Settings {
+        even_from_moves: usize::MAX,
+        ..s
+    });
+    eprintln!("{blocks} curves, slowest |dP/du| {even:.4} of the largest ({before} curves, {uneven:.4} without the rule)");
+    assert!(uneven < 0.96, "{uneven}");
+    assert!(even >= 0.985, "{even}");
+    // Still merged at least twentyfold.
+    assert!(blocks * 20 <= n, "{blocks} curves");
+}
