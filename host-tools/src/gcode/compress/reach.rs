@@ -43,7 +43,11 @@ pub(super) fn next_curve(
             fit::pace(&[pts[a], c1, c2, pts[b]], g, s)
         })
     };
-    if reach(&found) < s.even_from_moves || pace(&found) >= s.even_ratio {
+    if reach(&found) < s.even_from_moves {
+        return found;
+    }
+    let paced = pace(&found);
+    if paced >= s.even_ratio {
         return found;
     }
     let even = &Settings {
@@ -52,7 +56,7 @@ pub(super) fn next_curve(
     };
     // Along the lead: a curve that leaves along its own direction would make a corner.
     let shorter = farthest(pts, t, a, lead.as_ref(), g, even);
-    if reach(&shorter) >= s.even_from_moves / 2 && pace(&shorter) > pace(&found) {
+    if reach(&shorter) >= s.even_from_moves / 2 && pace(&shorter) > paced {
         shorter
     } else {
         found

@@ -59,6 +59,38 @@ fn deviation_from(input: &[Block], start: [i64; AXES], c: &Compressed) -> f64 {
     worst / 1e6
 }
 
+/// |dP/du| (fit space) along the cubic `b` from `from`, as the controller runs it;
+/// `None` for other blocks.
+fn speed_along(from: &[i64; AXES], b: &Block) -> Option<impl Fn(f64) -> f64> {
+    let Motion::Cubic { c1, c2 } = b.motion else {
+        return None;
+    };
+    let p: [V; 4] = [
+        to_fit(from),
+        to_fit(&core::array::from_fn(|i| from[i] + c1[i])),
+        to_fit(&core::array::from_fn(|i| b.target[i] + c2[i])),
+        to_fit(&b.target),
+    ];
+    Some(move |u: f64| {
+        norm(&core::array::from_fn(|i| {
+            3.0 * (1.0 - u).powi(2) * (p[1][i] - p[0][i])
+                + 6.0 * (1.0 - u) * u * (p[2][i] - p[1][i])
+                + 3.0 * u * u * (p[3][i] - p[2][i])
+        }))
+    })
+}
+
+/// cartesian-xyz's figures, as `job::compress_for_machine` gives them: 1000 mm/s² and
+/// 100 mm/s on each axis, bends up to ⅔ of the X Y Z accelerations' norm.
+fn cartesian_figures() -> Settings {
+    Settings {
+        accel: 1e9,
+        max_speed: 1e8,
+        bend_accel: 1e9 * 3f64.sqrt() * 2.0 / 3.0,
+        ..Settings::default()
+    }
+}
+
 #[test]
 fn a_fine_sine_becomes_few_curves_within_the_tolerance() {
     let input = sine(0.05, 200.0, 10_000);
@@ -191,14 +223,7 @@ fn where_two_curves_of_a_spiral_meet_the_tool_speed_does_not_jump() {
         th += 0.1 / r.hypot(pitch);
     }
     let start = input[0].target;
-    // cartesian-xyz's figures, as `job::compress_for_machine` gives them: 1000 mm/s²
-    // and 100 mm/s on each axis, bends up to ⅔ of the X Y Z accelerations' norm.
-    let s = Settings {
-        accel: 1e9,
-        max_speed: 1e8,
-        bend_accel: 1e9 * 3f64.sqrt() * 2.0 / 3.0,
-        ..Settings::default()
-    };
+    let s = cartesian_figures();
     let c = compress(&input[1..], start, &s);
     assert!(
         c.blocks.len() * 50 <= input.len(),
@@ -256,33 +281,12 @@ fn where_two_curves_meet_on_unevenly_spaced_points_the_tool_speed_does_not_jump(
     }
     let start = [0, 0, 8_000_000, 0, 0, 0];
     // 100 mm/s and 1000 mm/s² on each axis, as on cartesian-large.
-    let s = Settings {
-        accel: 1e9,
-        max_speed: 1e8,
-        bend_accel: 1e9 * 3f64.sqrt() * 2.0 / 3.0,
-        ..Settings::default()
-    };
+    let s = cartesian_figures();
     let c = compress(&input, start, &s);
     assert!(deviation_from(&input, start, &c) <= 0.1);
     // |dP/du| at a curve's end over its largest, as the controller runs it.
     let ratio = |from: &[i64; AXES], b: &Block, u: f64| {
-        let Motion::Cubic { c1, c2 } = b.motion else {
-            return None;
-        };
-        let p: [V; 4] = [
-            to_fit(from),
-            to_fit(&core::array::from_fn(|i| from[i] + c1[i])),
-            to_fit(&core::array::from_fn(|i| b.target[i] + c2[i])),
-            to_fit(&b.target),
-        ];
-        let speed = |u: f64| {
-            let d: V = core::array::from_fn(|i| {
-                3.0 * (1.0 - u).powi(2) * (p[1][i] - p[0][i])
-                    + 6.0 * (1.0 - u) * u * (p[2][i] - p[1][i])
-                    + 3.0 * u * u * (p[3][i] - p[2][i])
-            });
-            norm(&d)
-        };
+        let speed = speed_along(from, b)?;
         let top = (0..=64).map(|k| speed(k as f64 / 64.0)).fold(0.0, f64::max);
         Some(speed(u) / top)
     };
@@ -328,12 +332,7 @@ fn a_long_curve_is_cut_where_a_shorter_one_runs_evenly() {
         })
         .collect();
     let start = [20_000_000, 0, 0, 0, 0, 0];
-    let s = Settings {
-        accel: 1e9,
-        max_speed: 1e8,
-        bend_accel: 1e9 * 3f64.sqrt() * 2.0 / 3.0,
-        ..Settings::default()
-    };
+    let s = cartesian_figures();
     // The slowest |dP/du| over the largest of any curve, and the number of curves.
     let evenness = |s: &Settings| {
         let c = compress(&input, start, s);
@@ -341,23 +340,8 @@ fn a_long_curve_is_cut_where_a_shorter_one_runs_evenly() {
         let mut from = start;
         let mut worst = 1.0f64;
         for b in &c.blocks {
-            if let Motion::Cubic { c1, c2 } = b.motion {
-                let p: [V; 4] = [
-                    to_fit(&from),
-                    to_fit(&core::array::from_fn(|i| from[i] + c1[i])),
-                    to_fit(&core::array::from_fn(|i| b.target[i] + c2[i])),
-                    to_fit(&b.target),
-                ];
-                let speeds: Vec<f64> = (0..=64)
-                    .map(|k| {
-                        let u = k as f64 / 64.0;
-                        norm(&core::array::from_fn(|i| {
-                            3.0 * (1.0 - u).powi(2) * (p[1][i] - p[0][i])
-                                + 6.0 * (1.0 - u) * u * (p[2][i] - p[1][i])
-                                + 3.0 * u * u * (p[3][i] - p[2][i])
-                        }))
-                    })
-                    .collect();
+            if let Some(speed) = speed_along(&from, b) {
+                let speeds: Vec<f64> = (0..=64).map(|k| speed(k as f64 / 64.0)).collect();
                 let top = speeds.iter().fold(0.0f64, |m, &v| m.max(v));
                 worst = worst.min(speeds.iter().fold(top, |m, &v| m.min(v)) / top);
             }
