@@ -12,10 +12,12 @@
 //! ([`super::merge_tolerance`]: `G64 P`, or in `G64` without P
 //! [`Settings::g64_tolerance_nm`], 1 µm by default; never `G61`), neither moves A B C
 //! (the blend is X Y Z only), and the path turns there by more than
-//! [`Settings::blend_min_deg`], or, turning less, the tool's speed over the path speed
-//! jumps there by more than the feed allows (a curve ending at another |dP/ds| than
-//! the next starts, [`speed_jumps`]: the planner would pass the junction at
-//! a·T/(2·jump)). The tolerance is the smaller of the two, and the
+//! [`Settings::blend_min_deg`], or, turning less, the tool's velocity over the path
+//! speed (dP/ds) jumps there by more than the feed allows (a curve ending at another
+//! |dP/ds| than the next starts, or a turn of a fraction of a degree at speed,
+//! [`jumps`]: the planner would take more than [`Settings::jump_share`] of the
+//! acceleration from both blocks to pass the junction at the feed). The tolerance is
+//! the smaller of the two, and the
 //! blend's samples, with the cut of the ticks' chords of it at its tightest bend on
 //! top (`fit::tick_sag`), must lie within it. A dwell, an auxiliary function or any
 //! other block between them leaves the corner as it is.
@@ -37,6 +39,14 @@
 //! its fastest point, and so raising its |dP/ds| at the start): a blend is shaped
 //! again for it and handed out with the block, once that block's end is known.
 //!
+//! **After the trim.** That end trim can also open a jump where there was none: at a
+//! junction that barely turns and was not blended, a block whose fastest point was at
+//! its end starts at a higher |dP/ds| once its end is trimmed. So the block before
+//! such a junction waits ([`Blender`]'s `waiting`) until the next corner is known, and
+//! the junction is looked at again with the block's part as streamed
+//! ([`after_trim`]); a blend found then is handed out between them, and the next
+//! corner's blend is shaped again for where it now leaves the block.
+//!
 //! **Blocks.** The blend carries the NC line of the programmed move that ends at the
 //! corner, the smaller feed of the two and the first's tolerance; it stands for the
 //! programmed chords it spans ([`Compressed::source`]). A trimmed curve is the
@@ -45,163 +55,29 @@
 //! compressor made them, so a program blended a piece at a time ([`Blender`] keeps
 //! the last block of a piece until the next comes) is the program blended at once.
 
-use super::space::{from_fit, on_segment, to_fit};
+use super::space::{on_segment, to_fit};
 use super::{dot, norm, sub, unit, Compressed, Settings, V};
 use pkmc::config::AXES;
 use pkmc::motion::block::{Block, Motion};
 use std::ops::Range;
 use std::sync::Arc;
 
+#[path = "blend_geo.rs"]
+mod geo;
 #[cfg(test)]
 #[path = "blend_tests.rs"]
 mod tests;
+
+use geo::{block_of, round, Geo, STEPS};
 
 /// Margin for the rounding of the blend's points to whole units, nm.
 pub const ROUNDING_NM: f64 = 3.0;
 /// Samples of a blend checked against the polyline.
 const SAMPLES: usize = 48;
-/// Steps of the arc-length table of a curve.
-const STEPS: usize = 64;
 /// Each try shrinks d by this.
 const SHRINK: f64 = 0.85;
 /// Tries before a corner stays a corner.
 const TRIES: usize = 40;
-
-/// A block's geometry in fit space: a line or a cubic Bézier.
-#[derive(Clone, Copy, Debug)]
-enum Geo {
-    Line([V; 2]),
-    Cubic([V; 4]),
-}
-
-fn lerp(a: &V, b: &V, t: f64) -> V {
-    core::array::from_fn(|i| a[i] + (b[i] - a[i]) * t)
-}
-
-impl Geo {
-    fn of(b: &Block, from: &[i64; AXES]) -> Option<Self> {
-        let (p0, p3) = (to_fit(from), to_fit(&b.target));
-        match b.motion {
-            Motion::Linear => Some(Geo::Line([p0, p3])),
-            Motion::Cubic { c1, c2 } => {
-                let c1: [i64; AXES] = core::array::from_fn(|i| from[i] + c1[i]);
-                let c2: [i64; AXES] = core::array::from_fn(|i| b.target[i] + c2[i]);
-                Some(Geo::Cubic([p0, to_fit(&c1), to_fit(&c2), p3]))
-            }
-            _ => None,
-        }
-    }
-
-    fn at(&self, u: f64) -> V {
-        match self {
-            Geo::Line([a, b]) => lerp(a, b, u),
-            Geo::Cubic(p) => {
-                let (a, b, c) = (
-                    lerp(&p[0], &p[1], u),
-                    lerp(&p[1], &p[2], u),
-                    lerp(&p[2], &p[3], u),
-                );
-                let (d, e) = (lerp(&a, &b, u), lerp(&b, &c, u));
-                lerp(&d, &e, u)
-            }
-        }
-    }
-
-    /// dP/du.
-    fn deriv(&self, u: f64) -> V {
-        match self {
-            Geo::Line([a, b]) => sub(b, a),
-            Geo::Cubic(p) => {
-                let (d0, d1, d2) = (sub(&p[1], &p[0]), sub(&p[2], &p[1]), sub(&p[3], &p[2]));
-                let (a, b) = (lerp(&d0, &d1, u), lerp(&d1, &d2, u));
-                lerp(&a, &b, u).map(|x| 3.0 * x)
-            }
-        }
-    }
-
-    /// Its bend (curvature over X Y Z) at u, per nm.
-    fn bend(&self, u: f64) -> f64 {
-        let Geo::Cubic(p) = self else {
-            return 0.0;
-        };
-        let d2: V = core::array::from_fn(|i| {
-            6.0 * ((1.0 - u) * (p[2][i] - 2.0 * p[1][i] + p[0][i])
-                + u * (p[3][i] - 2.0 * p[2][i] + p[1][i]))
-        });
-        super::fit::curvature(&self.deriv(u), &d2).1
-    }
-
-    /// Cumulative arc length at u = k/STEPS.
-    fn table(&self) -> Vec<f64> {
-        let mut t = vec![0.0];
-        let mut prev = self.at(0.0);
-        for k in 1..=STEPS {
-            let p = self.at(k as f64 / STEPS as f64);
-            t.push(t[k - 1] + norm(&sub(&p, &prev)));
-            prev = p;
-        }
-        t
-    }
-
-    /// The parameter where the arc length from the start is `s`.
-    fn u_at(&self, table: &[f64], s: f64) -> f64 {
-        if let Geo::Line(_) = self {
-            return (s / table[STEPS]).clamp(0.0, 1.0);
-        }
-        let k = table.partition_point(|&x| x < s).clamp(1, STEPS);
-        let (a, b) = (table[k - 1], table[k]);
-        let f = if b > a { (s - a) / (b - a) } else { 0.0 };
-        ((k - 1) as f64 + f.clamp(0.0, 1.0)) / STEPS as f64
-    }
-
-    /// The part between parameters `u0` and `u1`.
-    fn part(&self, u0: f64, u1: f64) -> Geo {
-        match self {
-            Geo::Line(_) => Geo::Line([self.at(u0), self.at(u1)]),
-            Geo::Cubic(_) => {
-                let h = (u1 - u0) / 3.0;
-                let (a, b) = (self.at(u0), self.at(u1));
-                let (da, db) = (self.deriv(u0), self.deriv(u1));
-                Geo::Cubic([
-                    a,
-                    core::array::from_fn(|i| a[i] + h * da[i]),
-                    core::array::from_fn(|i| b[i] - h * db[i]),
-                    b,
-                ])
-            }
-        }
-    }
-}
-
-/// A point of fit space in whole axis units; axes 3.. (A B C, which do not move in a
-/// blended block) are `keep`'s.
-fn round(p: &V, keep: &[i64; AXES]) -> [i64; AXES] {
-    core::array::from_fn(|i| if i < 3 { from_fit(i, p[i]) } else { keep[i] })
-}
-
-/// The block for `g` (whose ends are already whole units), with `b`'s line, feed and
-/// tolerance.
-fn block_of(g: &Geo, b: &Block, keep: &[i64; AXES]) -> Block {
-    match g {
-        Geo::Line([_, e]) => Block {
-            motion: Motion::Linear,
-            target: round(e, keep),
-            ..*b
-        },
-        Geo::Cubic(p) => {
-            let (s, e) = (round(&p[0], keep), round(&p[3], keep));
-            let (c1, c2) = (round(&p[1], keep), round(&p[2], keep));
-            Block {
-                motion: Motion::Cubic {
-                    c1: core::array::from_fn(|i| c1[i] - s[i]),
-                    c2: core::array::from_fn(|i| c2[i] - e[i]),
-                },
-                target: e,
-                ..*b
-            }
-        }
-    }
-}
 
 /// A block that may take part in a blend, held until the next comes.
 #[derive(Clone, Debug)]
@@ -236,6 +112,9 @@ impl Held {
 pub struct Blender {
     s: Settings,
     held: Option<Held>,
+    /// The block before `held` when their corner is not blended: it waits until
+    /// `held`'s end is known (module doc, "After the trim").
+    waiting: Option<Held>,
     /// The end of the last block pushed (as the run compressor made it).
     pose: [i64; AXES],
     /// The end of the last block handed out.
@@ -261,6 +140,7 @@ impl Blender {
         Self {
             s: *s,
             held: None,
+            waiting: None,
             pose: start,
             emitted: start,
         }
@@ -273,7 +153,7 @@ impl Blender {
 
     /// Is a block held for the corner after it?
     pub fn holds(&self) -> bool {
-        self.held.is_some()
+        self.held.is_some() || self.waiting.is_some()
     }
 
     /// Takes the blocks of `c`, compressed from `programmed` (whose first block is
@@ -293,6 +173,9 @@ impl Blender {
 
     /// Hands out the block held (at the end of the program).
     pub fn finish(&mut self, out: &mut Compressed) {
+        if let Some(w) = self.waiting.take() {
+            self.emit(&w, 1.0, out);
+        }
         if let Some(h) = self.held.take() {
             self.emit(&h, 1.0, out);
         }
@@ -331,15 +214,30 @@ impl Blender {
             last_line: programmed.last().map_or(b.line, |p| p.line),
             before: None,
         };
-        if let Some(h) = self.held.take() {
-            match corner(&h, &next, &self.s) {
+        if let Some(mut h) = self.held.take() {
+            let mut j = corner(&h, &next, &self.s);
+            if let Some(w) = self.waiting.take() {
+                let mut w1 = 1.0;
+                if let Some(j) = &mut j {
+                    if let Some(wj) = after_trim(&w, &h, j.ua, &self.s) {
+                        w1 = wj.ua;
+                        h.u0 = wj.ub;
+                        h.start = wj.block.target;
+                        h.before = Some(wj);
+                        // The blend after it leaves the block's part as now streamed.
+                        j.reshape_start(&h, &self.s);
+                    }
+                }
+                self.emit(&w, w1, out);
+            }
+            match j {
                 Some(j) => {
                     self.emit(&h, j.ua, out);
                     next.u0 = j.ub;
                     next.start = j.block.target;
                     next.before = Some(j);
                 }
-                None => self.emit(&h, 1.0, out),
+                None => self.waiting = Some(h),
             }
         }
         self.held = Some(next);
@@ -391,6 +289,25 @@ impl Blender {
     }
 }
 
+/// The blend of the corner between `w` and `h` once `h`'s end is trimmed at `u1`, where
+/// the corner barely turns and was not blended (module doc, "After the trim"): `ub` in
+/// `h`'s own parameter.
+fn after_trim(w: &Held, h: &Held, u1: f64, s: &Settings) -> Option<Corner> {
+    let cos = dot(&unit(&w.geo.deriv(1.0)), &unit(&h.geo.deriv(0.0)));
+    if u1 >= 1.0 || cos.clamp(-1.0, 1.0).acos() >= s.blend_min_deg.to_radians() {
+        return None;
+    }
+    let geo = h.geo.part(0.0, u1);
+    let part = Held {
+        table: geo.table(),
+        geo,
+        ..h.clone()
+    };
+    let mut j = corner(w, &part, s)?;
+    j.ub *= u1;
+    Some(j)
+}
+
 /// A corner's blend.
 #[derive(Clone, Debug)]
 struct Corner {
@@ -418,6 +335,24 @@ struct Shape {
     /// The block it is sent as (its line, feed and tolerance) and the A B C it keeps.
     line: Block,
     keep: [i64; AXES],
+}
+
+impl Corner {
+    /// Shapes the blend again for the |dP/ds| where it leaves `h` (its start trimmed
+    /// since), if that changed and the new shape fits.
+    fn reshape_start(&mut self, h: &Held, s: &Settings) {
+        let ra = speed_ratio(&h.geo, h.u0, self.ua, self.ua);
+        if (ra - self.shape.ra).abs() > 1e-6 {
+            let shape = Shape {
+                ra,
+                ..self.shape.clone()
+            };
+            if let Some(block) = shape.block(s) {
+                self.block = block;
+                self.shape = shape;
+            }
+        }
+    }
 }
 
 impl Shape {
@@ -520,19 +455,26 @@ fn blend_curve(pa: &V, pb: &V, da: &V, db: &V, ra: f64, rb: f64, chord: f64) -> 
     curve(hi)
 }
 
-/// Does the tool's speed over the path speed jump where `a` (as streamed, from its
-/// start trim) ends and `b` starts, by more than the feed allows? The planner passes
-/// such a junction at v·|jump| ≤ a·T/2 (half the acceleration in one tick, as a
-/// turn); a blend meets both at their own |dP/ds| (module doc, "Shape"). Without the
+/// Does the tool's velocity over the path speed (dP/ds, as streamed from `a`'s start
+/// trim) jump where `a` ends and `b` starts, in direction or size, by more than the
+/// feed allows? The planner passes a junction whose jump is n on an axis at
+/// v = ρ·a·T/n with ρ of the acceleration taken from the blocks on both sides (their
+/// profiles keep 1 − ρ, see the planner's module doc): at the feed F, ρ = n·F/(a·T).
+/// A junction is blended where that is over [`Settings::jump_share`]. Without the
 /// machine's figures, a jump of 1 %.
-fn speed_jumps(a: &Held, b: &Held, s: &Settings) -> bool {
-    let jump = (speed_ratio(&a.geo, a.u0, 1.0, 1.0) - speed_ratio(&b.geo, 0.0, 1.0, 0.0)).abs();
+fn jumps(a: &Held, b: &Held, s: &Settings) -> bool {
+    let ra = speed_ratio(&a.geo, a.u0, 1.0, 1.0);
+    let rb = speed_ratio(&b.geo, 0.0, 1.0, 0.0);
+    let (ta, tb) = (unit(&a.geo.deriv(1.0)), unit(&b.geo.deriv(0.0)));
+    let jump = (0..3)
+        .map(|i| (ra * ta[i] - rb * tb[i]).abs())
+        .fold(0.0, f64::max);
     let mut feed = a.block.feed.min(b.block.feed) as f64;
     if s.max_speed > 0.0 {
         feed = feed.min(s.max_speed);
     }
     let least = if s.accel > 0.0 && feed > 0.0 {
-        s.accel / pkmc::units::TICK_HZ as f64 / (2.0 * feed)
+        s.jump_share * s.accel / pkmc::units::TICK_HZ as f64 / feed
     } else {
         0.01
     };
@@ -557,7 +499,7 @@ fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
     let turn = cos.acos();
     // A junction that barely turns is blended too where the tool's speed over the path
     // speed jumps there enough to hold the junction below the feed.
-    let small = turn < s.blend_min_deg.to_radians() && !speed_jumps(a, b, s);
+    let small = turn < s.blend_min_deg.to_radians() && !jumps(a, b, s);
     if tol <= 0.0 || small || turn > 179f64.to_radians() {
         return None;
     }

@@ -115,6 +115,10 @@ pub struct Settings {
     pub blend_min_deg: f64,
     /// A blend trims at most this share of either block's length.
     pub blend_share: f64,
+    /// A junction that turns less than [`Self::blend_min_deg`] is blended where the
+    /// planner would give it more than this share of the acceleration at the feed
+    /// ([`blend`]'s "Which corners").
+    pub jump_share: f64,
     /// The tolerance runs are merged and corners blended within in `G64` without P,
     /// nm (the default 1 µm; 0: neither). The station's run by step runs the program
     /// as written, so a blend (a block of its own) never stops it.
@@ -143,6 +147,7 @@ impl Default for Settings {
             blend: true,
             blend_min_deg: 0.5,
             blend_share: 0.45,
+            jump_share: 0.05,
             g64_tolerance_nm: 1000.0,
         }
     }

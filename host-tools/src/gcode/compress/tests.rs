@@ -225,8 +225,10 @@ fn where_two_curves_of_a_spiral_meet_the_tool_speed_does_not_jump() {
     let start = input[0].target;
     let s = cartesian_figures();
     let c = compress(&input[1..], start, &s);
+    // Blends included: the junctions where a curve's |dP/ds| or direction jumps by more
+    // than the feed allows are blended (blocks of their own).
     assert!(
-        c.blocks.len() * 50 <= input.len(),
+        c.blocks.len() * 40 <= input.len(),
         "{} blocks",
         c.blocks.len()
     );
