@@ -72,8 +72,11 @@ use geo::{block_of, round, Geo, STEPS};
 
 /// Margin for the rounding of the blend's points to whole units, nm.
 pub const ROUNDING_NM: f64 = 3.0;
-/// Samples of a blend checked against the polyline.
-const SAMPLES: usize = 48;
+/// Samples of a blend checked against the polyline. The polyline of a program written
+/// with few decimals zigzags by its rounding, and a sample may pass between two of its
+/// peaks: with 48, a blend of 0.94 mm over a three-decimal spiral in `G64` (1 µm) was
+/// found within 0.947 µm and ran 1.009 µm from the chords.
+const SAMPLES: usize = 400;
 /// Each try shrinks d by this.
 const SHRINK: f64 = 0.85;
 /// Tries before a corner stays a corner.
