@@ -220,17 +220,9 @@ impl Blender {
         if let Some(mut h) = self.held.take() {
             let mut j = corner(&h, &next, &self.s);
             if let Some(w) = self.waiting.take() {
-                let mut w1 = 1.0;
-                if let Some(j) = &mut j {
-                    if let Some(wj) = after_trim(&w, &h, j.ua, &self.s) {
-                        w1 = wj.ua;
-                        h.u0 = wj.ub;
-                        h.start = wj.block.target;
-                        h.before = Some(wj);
-                        // The blend after it leaves the block's part as now streamed.
-                        j.reshape_start(&h, &self.s);
-                    }
-                }
+                let w1 = j
+                    .as_mut()
+                    .map_or(1.0, |j| look_again(&w, &mut h, j, &self.s));
                 self.emit(&w, w1, out);
             }
             match j {
@@ -261,15 +253,9 @@ impl Blender {
             // block's part from u0 to u1: its end trim may have taken the block's
             // fastest point, which the blend was first shaped against.
             let rb = speed_ratio(&h.geo, h.u0, u1, h.u0);
-            let block = if (rb - j.shape.rb).abs() > 1e-6 {
-                let shape = Shape {
-                    rb,
-                    ..j.shape.clone()
-                };
-                shape.block(&self.s).unwrap_or(j.block)
-            } else {
-                j.block
-            };
+            let block = j
+                .with_ratios(j.shape.ra, rb, &self.s)
+                .map_or(j.block, |(_, block)| block);
             self.put(block, j.source.clone(), out);
         }
         if h.u0 == 0.0 && u1 == 1.0 {
@@ -296,8 +282,7 @@ impl Blender {
 /// the corner barely turns and was not blended (module doc, "After the trim"): `ub` in
 /// `h`'s own parameter.
 fn after_trim(w: &Held, h: &Held, u1: f64, s: &Settings) -> Option<Corner> {
-    let cos = dot(&unit(&w.geo.deriv(1.0)), &unit(&h.geo.deriv(0.0)));
-    if u1 >= 1.0 || cos.clamp(-1.0, 1.0).acos() >= s.blend_min_deg.to_radians() {
+    if u1 >= 1.0 || turn(&w.geo, &h.geo) >= s.blend_min_deg.to_radians() {
         return None;
     }
     let geo = h.geo.part(0.0, u1);
@@ -309,6 +294,28 @@ fn after_trim(w: &Held, h: &Held, u1: f64, s: &Settings) -> Option<Corner> {
     let mut j = corner(w, &part, s)?;
     j.ub *= u1;
     Some(j)
+}
+
+/// The junction between `w` and `h` (left unblended) looked at again now that the
+/// corner after `h` is `j` ([`after_trim`]): a blend found is handed out with `h`, and
+/// `j` leaves `h`'s part as now streamed. Returns where `w` ends.
+fn look_again(w: &Held, h: &mut Held, j: &mut Corner, s: &Settings) -> f64 {
+    let Some(wj) = after_trim(w, h, j.ua, s) else {
+        return 1.0;
+    };
+    let w1 = wj.ua;
+    h.u0 = wj.ub;
+    h.start = wj.block.target;
+    h.before = Some(wj);
+    j.reshape_start(h, s);
+    w1
+}
+
+/// The angle between the direction `a` ends along and the one `b` starts along.
+fn turn(a: &Geo, b: &Geo) -> f64 {
+    dot(&unit(&a.deriv(1.0)), &unit(&b.deriv(0.0)))
+        .clamp(-1.0, 1.0)
+        .acos()
 }
 
 /// A corner's blend.
@@ -345,16 +352,25 @@ impl Corner {
     /// since), if that changed and the new shape fits.
     fn reshape_start(&mut self, h: &Held, s: &Settings) {
         let ra = speed_ratio(&h.geo, h.u0, self.ua, self.ua);
-        if (ra - self.shape.ra).abs() > 1e-6 {
-            let shape = Shape {
-                ra,
-                ..self.shape.clone()
-            };
-            if let Some(block) = shape.block(s) {
-                self.block = block;
-                self.shape = shape;
-            }
+        if let Some((shape, block)) = self.with_ratios(ra, self.shape.rb, s) {
+            self.shape = shape;
+            self.block = block;
         }
+    }
+
+    /// The blend shaped again for |dP/ds| `ra` and `rb` at its ends, where either
+    /// changed and the new shape fits.
+    fn with_ratios(&self, ra: f64, rb: f64, s: &Settings) -> Option<(Shape, Block)> {
+        if (ra - self.shape.ra).abs() <= 1e-6 && (rb - self.shape.rb).abs() <= 1e-6 {
+            return None;
+        }
+        let shape = Shape {
+            ra,
+            rb,
+            ..self.shape.clone()
+        };
+        let block = shape.block(s)?;
+        Some((shape, block))
     }
 }
 
@@ -497,9 +513,7 @@ fn corner(a: &Held, b: &Held, s: &Settings) -> Option<Corner> {
     if norm(&ea) < 1.0 || norm(&eb) < 1.0 {
         return None;
     }
-    let (ta, tb) = (unit(&ea), unit(&eb));
-    let cos = dot(&ta, &tb).clamp(-1.0, 1.0);
-    let turn = cos.acos();
+    let turn = turn(&a.geo, &b.geo);
     // A junction that barely turns is blended too where the tool's speed over the path
     // speed jumps there enough to hold the junction below the feed.
     let small = turn < s.blend_min_deg.to_radians() && !jumps(a, b, s);

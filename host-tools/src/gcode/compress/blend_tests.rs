@@ -288,6 +288,36 @@ fn a_blend_meets_a_curve_at_the_speed_the_curve_starts_once_its_end_is_trimmed_t
     }
 }
 
+/// Compressor settings with a machine's figures: 1000 mm/s², 100 mm/s.
+fn with_machine() -> Settings {
+    Settings {
+        accel: 1e9,
+        max_speed: 1e8,
+        ..Settings::default()
+    }
+}
+
+/// A straight cubic along X at F3000 from the previous block's end to `x` mm, with
+/// its inner control points `c1` after its start and `c2` before its end (mm).
+fn straight_x(line: u32, (c1, c2): (f64, f64), x: f64, tol: u32) -> Block {
+    let mm = |x: f64| (x * 1e6).round() as i64;
+    Block {
+        line,
+        motion: Motion::Cubic {
+            c1: [mm(c1), 0, 0, 0, 0, 0],
+            c2: [mm(c2), 0, 0, 0, 0, 0],
+        },
+        target: [mm(x), 0, 0, 0, 0, 0],
+        feed: 50_000_000,
+        tolerance_nm: tol,
+    }
+}
+
+/// The NC lines of the streamed blocks.
+fn lines_of(c: &Compressed) -> Vec<u32> {
+    c.blocks.iter().map(|b| b.line).collect()
+}
+
 #[test]
 fn a_junction_that_does_not_turn_is_blended_where_the_speed_over_the_path_speed_jumps() {
     // A straight curve along X whose |dP/du| falls from 10.2 at its start to 9.9 at
@@ -297,25 +327,13 @@ fn a_junction_that_does_not_turn_is_blended_where_the_speed_over_the_path_speed_
     // continuous; at F60, where the jump lets the junction pass at the feed, it is
     // left as it is.
     let tol = 10_000; // G64 P0.01
-    let mm = |x: f64| (x * 1e6).round() as i64;
-    let s = Settings {
-        accel: 1e9,
-        max_speed: 1e8,
-        ..Settings::default()
-    };
+    let s = with_machine();
     let program = |feed: i64| {
-        let curve = Block {
-            line: 1,
-            motion: Motion::Cubic {
-                c1: [mm(3.4), 0, 0, 0, 0, 0],
-                c2: [mm(-3.3), 0, 0, 0, 0, 0],
-            },
-            target: [mm(10.0), 0, 0, 0, 0, 0],
-            feed,
-            tolerance_nm: tol,
-        };
         vec![
-            curve,
+            Block {
+                feed,
+                ..straight_x(1, (3.4, -3.3), 10.0, tol)
+            },
             Block {
                 feed,
                 ..g1(20.0, 0.0, 2, tol)
@@ -332,7 +350,7 @@ fn a_junction_that_does_not_turn_is_blended_where_the_speed_over_the_path_speed_
     );
     assert!((before[0].1 - before[1].0).abs() > 0.025, "{before:?}");
     let c = compress(&p, [0; AXES], &s);
-    let lines: Vec<_> = c.blocks.iter().map(|b| b.line).collect();
+    let lines = lines_of(&c);
     assert_eq!(lines, [1, 1, 2], "curve, blend, line");
     assert!(largest_turn(&c, [0; AXES]) < 0.01);
     let r = end_ratios(&c, [0; AXES]);
@@ -354,25 +372,10 @@ fn a_junction_is_blended_once_the_next_corner_trims_away_the_fastest_part_after_
     // and the junction is blended once the trim is known; the speed is continuous at
     // every join. Without that second look this fails (the jump is over 1 %).
     let tol = 100_000; // G64 P0.1
-    let mm = |x: f64| (x * 1e6).round() as i64;
-    let s = Settings {
-        accel: 1e9,
-        max_speed: 1e8,
-        ..Settings::default()
-    };
-    let straight = |line, c1: f64, c2: f64, x: f64| Block {
-        line,
-        motion: Motion::Cubic {
-            c1: [mm(c1), 0, 0, 0, 0, 0],
-            c2: [mm(c2), 0, 0, 0, 0, 0],
-        },
-        target: [mm(x), 0, 0, 0, 0, 0],
-        feed: 50_000_000,
-        tolerance_nm: tol,
-    };
+    let s = with_machine();
     let p = vec![
-        straight(1, 4.0, -3.0, 10.0),
-        straight(2, 3.0, -4.0, 20.0),
+        straight_x(1, (4.0, -3.0), 10.0, tol),
+        straight_x(2, (3.0, -4.0), 20.0, tol),
         g1(20.0, 10.0, 3, tol),
     ];
     let written = end_ratios(
@@ -384,7 +387,7 @@ fn a_junction_is_blended_once_the_next_corner_trims_away_the_fastest_part_after_
     );
     assert!((written[0].1 - written[1].0).abs() < 1e-9, "{written:?}");
     let c = compress(&p, [0; AXES], &s);
-    let lines: Vec<_> = c.blocks.iter().map(|b| b.line).collect();
+    let lines = lines_of(&c);
     assert_eq!(lines, [1, 1, 2, 2, 3], "curve, blend, curve, blend, line");
     let r = end_ratios(&c, [0; AXES]);
     for k in 1..r.len() {
@@ -401,11 +404,7 @@ fn a_turn_under_the_least_angle_is_blended_where_it_would_take_the_acceleration_
     // it at the feed (ρ = θ·F/(a·T)); it is blended. At F60 it takes 0.5 %, and it is
     // left as it is.
     let tol = 10_000; // G64 P0.01
-    let s = Settings {
-        accel: 1e9,
-        max_speed: 1e8,
-        ..Settings::default()
-    };
+    let s = with_machine();
     assert!(s.blend_min_deg > 0.3);
     let th = 0.3f64.to_radians();
     let program = |feed| {
@@ -418,7 +417,7 @@ fn a_turn_under_the_least_angle_is_blended_where_it_would_take_the_acceleration_
     };
     let fast = program(50_000_000);
     let c = compress(&fast, [0; AXES], &s);
-    let lines: Vec<_> = c.blocks.iter().map(|b| b.line).collect();
+    let lines = lines_of(&c);
     assert_eq!(lines, [1, 1, 2], "line, blend, line");
     assert!(largest_turn(&c, [0; AXES]) < 0.01);
     assert!(deviation(&fast, &c, [0; AXES]) <= tol as f64 * s.fit_share);
