@@ -74,8 +74,9 @@ use geo::{block_of, round, Geo, STEPS};
 pub const ROUNDING_NM: f64 = 3.0;
 /// Samples of a blend checked against the polyline. The polyline of a program written
 /// with few decimals zigzags by its rounding, and a sample may pass between two of its
-/// peaks: with 48, a blend of 0.94 mm over a three-decimal spiral in `G64` (1 µm) was
-/// found within 0.947 µm and ran 1.009 µm from the chords.
+/// peaks: with 48, a blend over the three-decimal spiral of
+/// `compression::a_three_decimal_polyline_in_g64_without_p_runs_at_the_feed` passed
+/// between them and ran more than that test's 1 µm from the chords.
 const SAMPLES: usize = 400;
 /// Each try shrinks d by this.
 const SHRINK: f64 = 0.85;
