@@ -83,12 +83,17 @@ pub struct Settings {
     pub max_chords: usize,
     /// Smallest ratio of the slowest to the fastest |dP/du| along a curve.
     pub min_speed_ratio: f64,
-    /// A curve of this many moves or more is cut shorter where one of at least half as
-    /// many runs more evenly than [`Settings::even_ratio`] (its slowest |dP/du| over its
-    /// largest) and its own does not.
+    /// A curve of this many moves or more is cut shorter where one of at least a quarter
+    /// as many (half of this number is always enough) runs more evenly than
+    /// [`Settings::even_ratio`] (its slowest |dP/du| over its largest) and its own does
+    /// not.
     pub even_from_moves: usize,
     /// The evenness asked of a long curve ([`Settings::even_from_moves`]).
     pub even_ratio: f64,
+    /// A curve of four moves or more whose uneven pace ([`Settings::even_ratio`]) would
+    /// lose this much time at the speed asked for or more (its polyline's length over
+    /// the speed, times 1/pace − 1), s, is cut shorter as a long one is.
+    pub even_cost_s: f64,
 
     /// A curve turning more than this, degrees, is weighed for time (module doc).
     pub max_turn_deg: f64,
@@ -137,6 +142,7 @@ impl Default for Settings {
             min_speed_ratio: 0.5,
             even_from_moves: 40,
             even_ratio: 0.99,
+            even_cost_s: 0.1,
             max_turn_deg: 8.0,
             tangent_reach: 3.0,
             reweights: 4,

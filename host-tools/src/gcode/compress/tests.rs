@@ -362,3 +362,55 @@ fn a_long_curve_is_cut_where_a_shorter_one_runs_evenly() {
     // Still merged at least twentyfold.
     assert!(blocks * 20 <= n, "{blocks} curves");
 }
+
+#[test]
+fn a_slow_spiral_merged_within_a_wide_tolerance_runs_at_its_feed() {
+    // LinuxCNC's `spiral.ngc` in millimetres: 800 moves of 4.5° from a radius of
+    // 50.8 mm, each 0.0635 mm further in, at F24 in/min (10.16 mm/s), here within a
+    // tolerance of 0.1 mm. Without the rule its curves span 90° and more, at whose
+    // middle |dP/du| falls well under the ends': at the feed (which every bend of the
+    // spiral allows but its centre's) the controller would run it 2 % slower (38
+    // curves, 1.0216 of the feed's time; 57 curves and 1.0040 with the rule).
+    let input: Vec<Block> = (1..=800)
+        .map(|k| {
+            let th = (k as f64 * 4.5).to_radians();
+            let r = 50.8 - 0.0635 * k as f64;
+            let mut b = line(r * th.cos(), r * th.sin(), k as u32, 100_000);
+            b.feed = 10_160_000;
+            b
+        })
+        .collect();
+    let start = [50_800_000, 0, 0, 0, 0, 0];
+    let s = cartesian_figures();
+    // The controller's time at the feed (each curve's largest |dP/du| is its length)
+    // over the programmed polyline's, and the number of blocks.
+    let slowness = |s: &Settings| {
+        let c = compress(&input, start, s);
+        assert!(deviation_from(&input, start, &c) <= 0.1);
+        let (mut from, mut run, mut path) = (start, 0.0, 0.0);
+        for (b, src) in c.blocks.iter().zip(&c.source) {
+            let mut at = from;
+            for m in &input[src.clone()] {
+                path += norm(&sub(&to_fit(&m.target), &to_fit(&at)));
+                at = m.target;
+            }
+            run += match speed_along(&from, b) {
+                Some(speed) => (0..=256)
+                    .map(|k| speed(k as f64 / 256.0))
+                    .fold(0.0, f64::max),
+                None => norm(&sub(&to_fit(&b.target), &to_fit(&from))),
+            };
+            from = b.target;
+        }
+        (run / path, c.blocks.len())
+    };
+    let (even, blocks) = slowness(&s);
+    let (uneven, before) = slowness(&Settings {
+        even_cost_s: f64::INFINITY,
+        ..s
+    });
+    eprintln!("{blocks} blocks, {even:.4} of the feed's time ({before} blocks, {uneven:.4} without the rule)");
+    assert!(uneven > 1.015, "{uneven}");
+    assert!(even < 1.006, "{even}");
+    assert!(blocks * 10 <= input.len(), "{blocks} blocks");
+}
