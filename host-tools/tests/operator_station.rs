@@ -6,7 +6,8 @@
 //!
 //! Needs Debian's `chromium` and `chromium-driver` (`.ci/run` installs them); where
 //! they are missing each test says so and passes without running.
-//! Screenshots go to `docs/ui-h4.png` and `docs/ui-hexapod.png` (docs/ui.md).
+//! Screenshots: `docs/ui-h4.png` and `docs/ui-hexapod.png`, written there with
+//! `PKMC_UPDATE_SCREENSHOTS=1` (docs/ui.md).
 
 mod station;
 

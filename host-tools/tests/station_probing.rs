@@ -7,7 +7,8 @@
 //! #5063 + 2 follow from it; the run ends done. A G38.2 that touches nothing is
 //! refused at its line, on the panel. Stop during a stage ends the run as a stop.
 //! The panel stays inside the page at 800 × 1280, 1024 × 768 and 1920 × 1080.
-//! Screenshot: `docs/ui-probing.png` (docs/ui.md).
+//! Screenshot: `docs/ui-probing.png`, written there with `PKMC_UPDATE_SCREENSHOTS=1`
+//! (docs/ui.md).
 
 mod station;
 

@@ -8,7 +8,8 @@
 //! grow while a job runs and show a following error that is not zero. A second test
 //! presses Live and Arm (a line trigger) while a program already runs: the traces
 //! grow, and the capture comes while the program still runs.
-//! Screenshot: `docs/ui-scope.png` (docs/ui.md).
+//! Screenshot: `docs/ui-scope.png`, written there with `PKMC_UPDATE_SCREENSHOTS=1`
+//! (docs/ui.md).
 
 mod station;
 

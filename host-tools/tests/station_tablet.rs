@@ -6,8 +6,8 @@
 //! home, the keyboard jog, inches, an e-stop worded as one with Run and Jog refused,
 //! the alarm history, a quiet log, a teach file saved and loaded back exactly, and a
 //! program with a pre-flight error drawn with its error marked.
-//! Screenshots go to `docs/ui-800x1280.png`, `docs/ui-1024x768.png` and
-//! `docs/ui-1920x1080.png` (docs/ui.md).
+//! Screenshots: `docs/ui-800x1280.png`, `docs/ui-1024x768.png` and
+//! `docs/ui-1920x1080.png`, written there with `PKMC_UPDATE_SCREENSHOTS=1` (docs/ui.md).
 
 mod station;
 

@@ -502,9 +502,23 @@ impl Page {
         self.client.perform_actions(a).await.unwrap();
     }
 
+    /// Saves the page as a PNG. `to` is its place in the docs, written only when
+    /// `PKMC_UPDATE_SCREENSHOTS` is set; otherwise it goes under the same name to the
+    /// tests' temporary directory, so that a test run leaves the tree as it was.
     pub async fn screenshot(&self, to: &Path) {
         let png = self.client.screenshot().await.unwrap();
-        std::fs::write(to, png).unwrap();
+        assert!(
+            png.starts_with(b"\x89PNG"),
+            "the browser's screenshot is not a PNG"
+        );
+        let to = if std::env::var_os("PKMC_UPDATE_SCREENSHOTS").is_some() {
+            to.to_path_buf()
+        } else {
+            let dir = std::env::temp_dir().join(format!("pkmc-tests-{}", std::process::id()));
+            std::fs::create_dir_all(&dir).unwrap();
+            dir.join(to.file_name().expect("a file name"))
+        };
+        std::fs::write(&to, png).unwrap();
     }
 
     /// Closes the browser (its page goes with it, whatever is held down).
