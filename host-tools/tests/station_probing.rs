@@ -181,14 +181,14 @@ async fn a_program_that_probes_runs_from_the_page_and_the_panel_shows_each_touch
         "final Z {z}, probed {}",
         probed[2]
     );
-    let log = page.js("pkmc.log.map(l => l.text)").await;
-    assert!(
-        log.as_array()
-            .unwrap()
-            .iter()
-            .any(|l| l.as_str() == Some("program done")),
-        "{log}"
-    );
+    // The station logs the end once the job's stream returns, which may be after the
+    // controller's idle status has reached the page.
+    page.wait(
+        "pkmc.log.some(l => l.text === 'program done')",
+        "the end is logged",
+        Timeout::S(5),
+    )
+    .await;
     assert!(
         page.js("pkmc.lastStatus.alarm === null")
             .await
