@@ -3,17 +3,17 @@
 //! among those fits that [`super::fit_run`] takes (see the parent module).
 
 use super::fit::{self, fit, fit_free, Goal};
-use super::{dot, sub, unit, Settings, V};
+use super::{dot, norm, sub, unit, Settings, V};
 
 /// The curve from point `a` that the run takes: one whose start matches the block
 /// before it (along `lead`, at its |dP/du| ratio), unless one that does not reaches
 /// much farther ([`Settings::matched_reach`]); and where that is a long curve
 /// ([`Settings::even_from_moves`]) or one whose uneven pace costs much time
 /// ([`Settings::even_cost_s`]), and it runs unevenly, one of at least a quarter as
-/// many moves (two at least; half of `even_from_moves` is always enough) that runs more evenly
-/// ([`Settings::even_ratio`]) and faster for its length ([`fit::pace`]): the
-/// controller runs a curve's parameter at one rate, so the tool goes at its |dP/du|
-/// over the largest times the path speed.
+/// many moves (two at least; half of `even_from_moves` is always enough) that runs
+/// more evenly ([`Settings::even_ratio`]) and faster for its length ([`fit::pace`]):
+/// the controller runs a curve's parameter at one rate, so the tool goes at its
+/// |dP/du| over the largest times the path speed.
 pub(super) fn next_curve(
     pts: &[V],
     t: &[V],
@@ -45,10 +45,15 @@ pub(super) fn next_curve(
             fit::pace(&[pts[a], c1, c2, pts[b]], g, s)
         })
     };
+    // Only a long curve, or one of four moves or more whose uneven pace costs time,
+    // is looked at again.
+    let moves = reach(&found);
+    if moves < s.even_from_moves.min(4) {
+        return found;
+    }
     let paced = pace(&found);
-    let long = reach(&found) >= s.even_from_moves;
-    let costly = reach(&found) >= 4 && uneven_cost(pts, a, &found, paced, g) >= s.even_cost_s;
-    if !(long || costly) || paced >= s.even_ratio {
+    let costly = || uneven_cost(&pts[a..=a + moves], paced, g) >= s.even_cost_s;
+    if paced >= s.even_ratio || !(moves >= s.even_from_moves || costly()) {
         return found;
     }
     let even = &Settings {
@@ -57,7 +62,7 @@ pub(super) fn next_curve(
     };
     // Along the lead: a curve that leaves along its own direction would make a corner.
     let shorter = farthest(pts, t, a, lead.as_ref(), g, even);
-    let least = (s.even_from_moves / 2).min((reach(&found) / 4).max(2));
+    let least = (s.even_from_moves / 2).min((moves / 4).max(2));
     if reach(&shorter) >= least && pace(&shorter) > paced {
         shorter
     } else {
@@ -65,22 +70,14 @@ pub(super) fn next_curve(
     }
 }
 
-/// The time a curve from point `a` to `found`'s end loses at the speed asked for by
-/// running at `paced` of it, s: its polyline's length over the speed, times
-/// 1/pace − 1 (0 when the speed is not known).
-fn uneven_cost(pts: &[V], a: usize, found: &Option<(usize, V, V)>, paced: f64, g: &Goal) -> f64 {
-    let Some(&(b, _, _)) = found.as_ref() else {
-        return 0.0;
-    };
+/// The time a curve through the points `run` loses at the speed asked for by running
+/// at `paced` of it, s: their polyline's length over the speed, times 1/pace − 1 (0
+/// when the speed is not known).
+fn uneven_cost(run: &[V], paced: f64, g: &Goal) -> f64 {
     if g.speed <= 0.0 {
         return 0.0;
     }
-    let len: f64 = (a..b)
-        .map(|k| {
-            let d = sub(&pts[k + 1], &pts[k]);
-            dot(&d, &d).sqrt()
-        })
-        .sum();
+    let len: f64 = run.windows(2).map(|w| norm(&sub(&w[1], &w[0]))).sum();
     len / g.speed * (1.0 / paced.max(1e-3) - 1.0)
 }
 
