@@ -29,7 +29,11 @@
 //!   max at most the present one plus one count (the encoder's step: a single
 //!   period's extreme moves with the job's start, which the link's timing sets);
 //! - on both programs, the true contour and direction errors: max over the run and
-//!   RMS while the path moves;
+//!   RMS while the path moves; the direction's max at most the present one plus the
+//!   recorder's step of 1 µ°. The tuning does not repeat to the last digit (the
+//!   designed gains differ from run to run in their seventh digit), and the helix's
+//!   largest true direction error, a single tick, moves with them by most of a µ°
+//!   (tuned 2.85 µ° in one run, 3.6 in another, against 3.39 present);
 //! - on the helix, from the controller's own estimates: the contour error's RMS and
 //!   99.99th percentile while the path moves and the direction error's RMS while it
 //!   moves; the direction error's maximum at most the present one plus the
@@ -266,9 +270,17 @@ fn compare(machine: &str, program: &str, joints: &[&str], signal_sets: &[&str]) 
             a.rms_moving,
             a.p9999_moving
         );
-        if a.max > b.max {
+        // The tool direction's largest single tick moves with the tuning's own spread
+        // (see the module's comment): the recorder's step is allowed there, as on the
+        // controller's estimate.
+        let step = if b.name.contains("direction") {
+            DIRECTION_STEP
+        } else {
+            0.0
+        };
+        if a.max > b.max + step {
             worse.push(format!(
-                "{machine} {} max {:.1} > {:.1}",
+                "{machine} {} max {:.1} > {:.1} + {step}",
                 b.name, a.max, b.max
             ));
         }

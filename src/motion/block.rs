@@ -57,6 +57,11 @@ pub enum Shape {
         /// division per tick). Sent as 8 bytes.
         #[serde(with = "fixed_width::u64_le")]
         rate: u64,
+        /// Where the curve's bend allows least and how fast it may pass there (the
+        /// plan's, not the curve's: a path the host derives has none; its plan,
+        /// [`crate::motion::planner::PlanBlock::dip`], may). Only a curve has one, so
+        /// only a curve's block carries its byte.
+        dip: Option<Dip>,
     },
 }
 
@@ -219,6 +224,100 @@ pub struct Plan {
     pub entry: f32,
     /// The block must be entered at rest (exact stop, or a corner not blended).
     pub stop: bool,
+}
+
+/// A spline's dip (the host's plan, [`crate::motion::planner::refine_splines`]): a
+/// curve whose bend is tightest inside it slows for that stretch alone, and runs
+/// faster on either side, where a single speed limit for the whole block would hold
+/// it to the tightest stretch's. The controller profiles such a block in two pieces,
+/// to the dip and beyond it ([`crate::motion::interp`]).
+///
+/// Kept small, as the controller keeps it: beside its curve in the queue's ring of
+/// bends, in the bytes the curve's slot leaves free (five of them). Its speeds are
+/// rounded down to 11 bits of mantissa ([`Dip::new`]), so that host and controller
+/// plan with the same values; a limit rounded down is still a limit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Dip {
+    /// Where, in 256ths of the block's length from its start (1 to 255; 0: no dip).
+    pub at: u8,
+    /// The most the block may pass there at ([`Dip::speed`]).
+    pub speed: u16,
+    /// Hard speed limit beyond it ([`Dip::after`]; [`Plan::v_limit`] holds before
+    /// it). Carried in the curve's [`Shape::Spline`].
+    pub after: u16,
+}
+
+/// Speeds a [`Dip`] holds: from 2⁻⁸ nm/tick (4 µm/s) up, 2⁵ binades of 11 bits.
+const DIP_EXP_BIAS: u32 = 127 - 8;
+
+impl Dip {
+    /// No dip (a placeholder in the controller's ring of bends).
+    pub const NONE: Dip = Dip {
+        at: 0,
+        speed: 0,
+        after: 0,
+    };
+
+    /// A dip at `at` 256ths of the length passed at `speed` at most, `after` (nm/tick)
+    /// beyond it, its speeds rounded down.
+    pub fn new(at: u8, speed: f32, after: f32) -> Dip {
+        Dip {
+            at,
+            speed: Self::pack(speed),
+            after: Self::pack(after),
+        }
+    }
+
+    /// `v` (nm/tick) rounded down to what 16 bits hold: 5 bits of exponent, 11 of
+    /// mantissa (below 2⁻⁸ nm/tick: 0; above 2²⁴: the largest).
+    fn pack(v: f32) -> u16 {
+        // (NaN too.)
+        if v.is_nan() || v < 1.0 / 256.0 {
+            return 0;
+        }
+        let bits = v.to_bits();
+        let exp = (bits >> 23) - DIP_EXP_BIAS;
+        if exp > 31 {
+            return u16::MAX;
+        }
+        ((exp << 11) | ((bits >> 12) & 0x7FF)) as u16
+    }
+
+    /// The speed (nm/tick) `p` holds.
+    fn unpack(p: u16) -> f32 {
+        if p == 0 {
+            return 0.0;
+        }
+        let (exp, mantissa) = ((p >> 11) as u32, (p & 0x7FF) as u32);
+        f32::from_bits(((exp + DIP_EXP_BIAS) << 23) | (mantissa << 12))
+    }
+
+    /// The most the block may pass the dip at, nm/tick.
+    pub fn speed(&self) -> f32 {
+        Self::unpack(self.speed)
+    }
+
+    /// The block's speed limit beyond the dip, nm/tick.
+    pub fn after(&self) -> f32 {
+        Self::unpack(self.after)
+    }
+
+    /// Where the dip is on a block `length` nm long, nm Q16 (exactly).
+    pub fn at_q16(&self, length: i64) -> i64 {
+        (length << 8) * self.at as i64
+    }
+
+    /// The speed (nm/tick) to pass the dip at on a block `length` nm long profiled at
+    /// `accel` and left at `exit`: the dip's, and no faster than the rest of the block
+    /// can still slow down to `exit` from (so that a stop within what is buffered holds
+    /// across the dip).
+    pub fn through(&self, length: i64, accel: f32, exit: f32) -> f32 {
+        let beyond = crate::math::i64_to_f32((length << 16) - self.at_q16(length)) / 65_536.0;
+        crate::math::fmin(
+            self.speed(),
+            crate::math::sqrtf(exit * exit + 2.0 * accel * beyond),
+        )
+    }
 }
 
 /// A block with its plan: what the host streams.

@@ -31,9 +31,42 @@
 use crate::config::AXES;
 use crate::kinematics::Unreachable;
 use crate::motion::block::Aux;
-use crate::motion::geometry::Path;
+use crate::motion::geometry::{Bend, Form, Path};
 use crate::motion::planner::{Kind, Planner};
 use crate::motion::profile::{from_q32, Profile, HELD, TICK_Q32};
+
+/// Profiles the executing block from `from` (nm Q16 into it) at speed `v0` (nm/tick)
+/// into `out`, toward the exit speed `target`: up to its dip when `from` is before one
+/// (passed at the dip's speed at most, and no faster than the rest of the block can
+/// still slow down to `target` from, so that the stop within the buffer holds across
+/// the dip: see [`crate::motion::planner`]), else to its end, capped at the dip's
+/// `after` beyond a dip. Returns the speed the piece leaves at.
+fn plan_piece(planner: &Planner, from: i64, v0: f32, target: f32, out: &mut Profile) -> f32 {
+    let b = planner.executing().expect("a motion block is executing");
+    let length = b.course.length << 16;
+    // Only a curve has a dip (a line's start, the commonest, looks no further).
+    let dip = if b.course.form == Form::Spline {
+        match planner.bend() {
+            Bend::Spline(_, dip) if dip.at > 0 => Some(dip),
+            _ => None,
+        }
+    } else {
+        None
+    };
+    let (end, cap, target) = match dip {
+        Some(dip) => {
+            let at = dip.at_q16(b.course.length);
+            if from < at {
+                let through = dip.through(b.course.length, b.accel, target);
+                (at, planner.cap(b), through)
+            } else {
+                (length, planner.cap_after(b, dip), target)
+            }
+        }
+        None => (length, planner.cap(b), target),
+    };
+    out.plan_into(end - from, v0, cap, target, b.accel).exit
+}
 
 /// Something the controller must act on, found while executing.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -348,8 +381,7 @@ impl Executor {
                     target,
                 });
                 let p = a.profile.insert(Profile::IDLE);
-                let got = p.plan_into(b.course.length << 16, exit, planner.cap(b), target, b.accel);
-                self.exit = got.exit;
+                self.exit = plan_piece(planner, 0, exit, target, p);
                 None
             }
         }
@@ -368,14 +400,12 @@ impl Executor {
             return;
         };
         let (s, v) = p.at(a.t);
-        a.s_base += s;
-        let left = ((b.course.length << 16) - a.s_base).max(0);
+        a.s_base = (a.s_base + s).min(b.course.length << 16);
         let target = planner.exit_target();
-        let (np, got) = Profile::plan(left, from_q32(v), planner.cap(b), target, b.accel);
-        a.profile = Some(np);
+        let p = a.profile.insert(Profile::IDLE);
+        self.exit = plan_piece(planner, a.s_base, from_q32(v), target, p);
         a.t = 0;
         a.target = target;
-        self.exit = got.exit;
     }
 
     /// Blocks that arrived after the executing block started may let it leave faster
@@ -462,8 +492,18 @@ impl Executor {
                     }
                     let d = p.duration();
                     if p.t2 != HELD && a.t >= d {
-                        let v1 = p.v1;
+                        let (v1, reached) = (p.v1, a.s_base + p.length);
                         budget = a.t - d;
+                        if reached < b.course.length << 16 {
+                            // At the dip: the rest of the block is profiled from it, from
+                            // the speed the dip was passed at, toward the exit the queue
+                            // allows now.
+                            let target = planner.exit_target();
+                            let p = a.profile.insert(Profile::IDLE);
+                            self.exit = plan_piece(planner, reached, from_q32(v1), target, p);
+                            (a.s_base, a.t, a.target) = (reached, 0, target);
+                            continue;
+                        }
                         self.s_raw = self.block_start + (b.course.length << 16);
                         if self.smoothing.log2 == 0 {
                             self.pose = b.course.end;

@@ -2,7 +2,7 @@
 //! path: a planned block, read as `postcard::from_bytes` would read it.
 
 use super::frame::FrameError;
-use crate::motion::block::{Aux, Motion, Plane, PlannedBlock, Shape};
+use crate::motion::block::{Aux, Dip, Motion, Plane, PlannedBlock, Shape};
 
 /// Variant index of [`HostMsg::Block`] in the message encoding.
 const HOST_MSG_BLOCK: u32 = 2;
@@ -121,6 +121,9 @@ impl Cursor<'_> {
         self.fail()
     }
 
+    /// Inline: an arc's turns read it (and a dip's speeds), and called it cost more
+    /// than it does.
+    #[inline(always)]
     fn u16(&mut self) -> u16 {
         self.varint(3, 0x03) as u16
     }
@@ -174,6 +177,21 @@ impl Cursor<'_> {
         match self.byte() {
             0 => false,
             1 => true,
+            _ => self.fail(),
+        }
+    }
+
+    /// An `Option<Dip>`: postcard's tag byte (0 or 1), then the dip's byte and its
+    /// two `u16` varints. Inline: nearly every block has none, one byte.
+    #[inline(always)]
+    fn dip(&mut self) -> Option<Dip> {
+        match self.byte() {
+            0 => None,
+            1 => Some(Dip {
+                at: self.byte(),
+                speed: self.u16(),
+                after: self.u16(),
+            }),
             _ => self.fail(),
         }
     }
@@ -247,6 +265,7 @@ impl Cursor<'_> {
             2 => Shape::Point,
             3 => Shape::Spline {
                 rate: self.u64_le(),
+                dip: self.dip(),
             },
             _ => {
                 self.fail::<()>();

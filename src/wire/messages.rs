@@ -9,7 +9,7 @@ use crate::motion::block::PlannedBlock;
 use serde::{Deserialize, Serialize};
 
 /// Protocol version, exchanged in the handshake; both sides must agree.
-pub const PROTOCOL_VERSION: u16 = 13;
+pub const PROTOCOL_VERSION: u16 = 14;
 /// Largest unencoded frame body (sequence number, message and CRC), bytes: a planned
 /// helix with every field at its widest fits.
 pub const MAX_BODY: usize = 384;

@@ -208,7 +208,14 @@ fn random_block(k: usize, w: &mut dyn FnMut() -> i64) -> HostMsg {
         _ => Motion::Linear,
     };
     let shape = match k % 7 {
-        5 => Shape::Spline { rate: w() as u64 },
+        5 => Shape::Spline {
+            rate: w() as u64,
+            dip: k.is_multiple_of(3).then(|| Dip {
+                at: w() as u8,
+                speed: w() as u16,
+                after: w() as u16,
+            }),
+        },
         0 => Shape::Point,
         1 | 2 => Shape::Arc {
             plane: [Plane::Xy, Plane::Zx, Plane::Yz][k % 3],

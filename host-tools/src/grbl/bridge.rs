@@ -6,6 +6,7 @@
 use super::input::{Input, Item, RealTime};
 use super::ports::{write_all_patiently, End, Event, Ports};
 use super::words::{self, Mode, BLOCK_BUFFER, RX_BUFFER};
+use super::Counts;
 use crate::gcode::canon::Canon;
 use crate::job::{LineFault, LinePipeline};
 use crate::link::{JobHooks, LinkView};
@@ -111,19 +112,6 @@ const PTY_PRESENT: Duration = Duration::from_secs(5);
 /// Why G-code is refused during a jog (Grbl's `error:9`).
 const JOG_LOCK: &str =
     "G-code is locked out while jogging: wait for the jog to end or cancel it (0x85)";
-
-/// What the bridge did, printed when it stops.
-#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
-pub(super) struct Counts {
-    /// Lines answered `ok`.
-    pub(super) ok: u64,
-    /// Lines answered `error:N`.
-    pub(super) errors: u64,
-    /// Blocks fed to the controller.
-    pub(super) blocks: u64,
-    /// Blocks the controller reported executed.
-    pub(super) executed: u64,
-}
 
 impl<'o> Bridge<'o> {
     pub(super) fn new(
@@ -649,9 +637,15 @@ impl JobHooks for Bridge<'_> {
     /// Asked on every turn of a job's loop, and while homing or waiting: the ports
     /// are read here, so real-time bytes act in every state.
     fn control(&mut self, _link: &LinkView) -> Option<Control> {
+        self.meanwhile();
+        self.controls.pop_front()
+    }
+
+    /// While the link plans the lines fed: `?` is answered, and real-time commands
+    /// are queued, as in every other state.
+    fn meanwhile(&mut self) {
         self.poll(Duration::ZERO);
         self.check_stop();
-        self.controls.pop_front()
     }
 
     fn feed(&mut self, view: &LinkView, out: &mut Vec<Block>) -> bool {

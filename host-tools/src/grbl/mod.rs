@@ -29,6 +29,19 @@ use pkmc::wire::{Alarm, Control};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
+/// What the bridge did, printed when it stops.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub(super) struct Counts {
+    /// Lines answered `ok`.
+    pub(super) ok: u64,
+    /// Lines answered `error:N`.
+    pub(super) errors: u64,
+    /// Blocks fed to the controller.
+    pub(super) blocks: u64,
+    /// Blocks the controller reported executed.
+    pub(super) executed: u64,
+}
+
 /// Where the bridge listens.
 #[derive(Clone, Debug, Default)]
 pub struct BridgeOptions {

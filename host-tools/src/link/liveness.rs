@@ -25,10 +25,10 @@ impl<T: Transport> Link<T> {
         self.flush_some()
     }
 
-    /// The heartbeat while the client is busy elsewhere (planning a large program):
-    /// a status request every keep-alive period, and what has arrived read (statuses
-    /// kept, control acknowledgements absorbed). Errors are left for the next real
-    /// read to find.
+    /// The heartbeat while a job's blocks are planned: a status request every
+    /// keep-alive period, and what has arrived read and kept (acknowledgements of
+    /// blocks, statuses, recorder pieces) for the job's loop, which handles it before
+    /// it reads again. Errors are left for the next real read to find.
     pub(super) fn keep_alive(&mut self) {
         if self.last_request.elapsed() > self.opts.keepalive
             && self.queue(0, &HostMsg::StatusRequest).is_ok()
@@ -38,7 +38,7 @@ impl<T: Transport> Link<T> {
         }
         let _ = self.flush_some();
         if let Ok(msgs) = self.pump(Duration::ZERO) {
-            self.absorb(&msgs);
+            self.stashed.extend(msgs);
         }
     }
 

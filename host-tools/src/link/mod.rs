@@ -62,6 +62,7 @@
 mod arming;
 mod client;
 mod error;
+mod hooks;
 mod liveness;
 mod plans;
 mod record;
@@ -77,8 +78,8 @@ pub mod view;
 mod window;
 
 use client::PendingControl;
-pub use client::{JobEnd, JobHooks, LinkView, NoHooks, Rewound};
 pub use error::LinkError;
+pub use hooks::{JobEnd, JobHooks, LinkView, NoHooks, Rewound};
 pub use plans::Derived;
 pub use record::{Piece, Read, Readout, Recording};
 pub use stats::{Buffered, ClientStats, NakCounts};
@@ -192,6 +193,9 @@ pub struct Link<T: Transport> {
     streamed: Vec<record::Piece>,
     /// A recorder request armed beside a running job, on its way ([`arming`]).
     arming: Option<arming::Arming>,
+    /// Messages read while a job's blocks were planned ([`Link::keep_alive`]),
+    /// for the job's loop to handle before it reads again.
+    stashed: Vec<CtrlMsg>,
     /// Last status received.
     pub status: Option<Status>,
     /// Counters.

@@ -20,8 +20,6 @@ use pkmc::motion::block::{Block, Motion, PlannedBlock};
 use pkmc::motion::geometry::Path;
 use pkmc::motion::planner::{planned_ticks, replan_from, Lookahead, PlanBlock};
 
-/// Blocks planned between two calls of the keep-alive (some milliseconds).
-const ALIVE_EVERY: usize = 4096;
 /// Blocks sent and acknowledged that are kept before they are dropped together (a
 /// job shorter than this keeps every plan).
 pub(super) const DROP_EVERY: usize = 1 << 14;
@@ -84,7 +82,8 @@ impl Plans {
     /// Plans `blocks` after those already planned (on their paths in `derived` where
     /// those apply), then plans again every block from `frozen` (the first never sent)
     /// on, with the core's pass sequence ([`replan_from`]). Fails with the index of a
-    /// block whose geometry is malformed.
+    /// block whose geometry is malformed. `alive` is called before each block is
+    /// planned and between the passes (it keeps its own pace).
     pub(super) fn extend(
         &mut self,
         blocks: &[Block],
@@ -95,9 +94,7 @@ impl Plans {
         alive: &mut dyn FnMut(),
     ) -> Result<(), usize> {
         for (k, b) in blocks.iter().enumerate() {
-            if k % ALIVE_EVERY == ALIVE_EVERY - 1 {
-                alive();
-            }
+            alive();
             let i = self.work.len();
             // The block before, unless it is sent (its acceleration is final).
             let prev = match i.checked_sub(1) {

@@ -14,7 +14,7 @@
 //! block and acknowledges every copy or resend of one it has: nothing is lost, nothing
 //! runs twice.
 
-use super::client::JobHooks;
+use super::hooks::JobHooks;
 use super::rtt::Damage;
 use super::stream::Fed;
 use super::trail::Trail;

@@ -2,7 +2,8 @@
 //! runs, the stall guard, and the job's end (see the module documentation of
 //! [`crate::link`]).
 
-use super::client::{JobEnd, JobHooks, LinkView, PendingControl};
+use super::client::PendingControl;
+use super::hooks::{JobEnd, JobHooks, LinkView};
 use super::plans::{Derived, Plans, DROP_EVERY};
 use super::stall::dwell_ticks;
 use super::trail::Trail;
@@ -20,6 +21,9 @@ pub const TAIL_AFTER: Duration = Duration::from_millis(40);
 /// ... or once the controller holds less motion than this, ms (with the blocks in
 /// flight): better a stop at the next corner than running dry before it.
 const LOW_WATER_MS: f64 = 150.0;
+/// While blocks are planned, the link is kept alive and the job's hooks are called
+/// ([`JobHooks::meanwhile`]) at most this often.
+const ALIVE_EVERY: Duration = Duration::from_millis(2);
 
 /// Estimated duration of `b` starting from pose `from`, ms, at its feed (rapids at
 /// the slowest axis's `axis_vmax`, units/s), ignoring acceleration: a lower bound
@@ -201,6 +205,9 @@ impl<T: Transport> Link<T> {
             derived,
             pose,
         } = job;
+        // Nothing another job's planning read is left for this one's loop.
+        let left = std::mem::take(&mut self.stashed);
+        self.absorb(&left);
         let mut job = JobState::new(self.next_seq, self.capacity, start_status);
         job.done_before = done_before;
         job.planned_ms.push(0.0);
@@ -212,7 +219,7 @@ impl<T: Transport> Link<T> {
             open: true,
             last_fed: Instant::now(),
         };
-        self.append(&mut fed, &mut job, blocks, derived)?;
+        self.append(&mut fed, &mut job, blocks, derived, hooks)?;
         let result = self.job_loop(&mut fed, hooks, &mut job);
         self.stats.plan_time_s = fed.plans.time_s();
         self.stats.buffered = super::Buffered::of(&mut job.buffered_samples);
@@ -231,13 +238,20 @@ impl<T: Transport> Link<T> {
         job: &mut JobState,
         new: &[Block],
         derived: Option<Derived<'_>>,
+        hooks: &mut dyn JobHooks,
     ) -> Result<(), LinkError> {
         let first = fed.blocks.len();
         let machine = self.machine.clone();
-        // A large program takes seconds to plan: the link is kept alive meanwhile.
+        // A large program takes seconds to plan: the link is kept alive meanwhile, and
+        // the hooks answer their clients.
+        let mut last = Instant::now();
         fed.plans
             .extend(new, derived, job.high, &machine, &fed.kin, &mut || {
-                self.keep_alive()
+                if last.elapsed() >= ALIVE_EVERY {
+                    self.keep_alive();
+                    hooks.meanwhile();
+                    last = Instant::now();
+                }
             })
             .map_err(|i| LinkError::BadBlock {
                 port: self.port(),
@@ -306,7 +320,7 @@ impl<T: Transport> Link<T> {
                 new.clear();
                 fed.open = hooks.feed(&view, &mut new);
                 if !new.is_empty() {
-                    self.append(fed, job, &new, None)?;
+                    self.append(fed, job, &new, None, hooks)?;
                 }
             }
             let total = fed.blocks.len();
@@ -331,12 +345,15 @@ impl<T: Transport> Link<T> {
                 self.last_request = now;
             }
             self.flush_some()?;
-            let wait = if self.tx.is_empty() {
+            // What arrived while blocks were planned first, then what is here now.
+            let mut msgs = std::mem::take(&mut self.stashed);
+            let wait = if self.tx.is_empty() && msgs.is_empty() {
                 READ_WAIT
             } else {
                 Duration::ZERO
             };
-            for m in self.pump(wait)? {
+            msgs.extend(self.pump(wait)?);
+            for m in msgs {
                 if let Some(end) = self.handle(m, fed, hooks, job)? {
                     return Ok(end);
                 }

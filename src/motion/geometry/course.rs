@@ -103,15 +103,21 @@ impl Course {
                 self.form = Form::Arc;
                 self.unit = *unit;
                 // The plane and centre are the block's (they are not sent twice).
-                *bend = Bend::Arc(Circle {
-                    plane,
-                    center,
-                    r0,
-                    dr,
-                    phi0,
-                    phi_rate,
-                    r_rate,
-                });
+                // Written where it stays, field by field: a whole bend built aside and
+                // moved in cost a byte-wise copy of it.
+                if !matches!(bend, Bend::Arc(_)) {
+                    *bend = Bend::Arc(Circle::default());
+                }
+                let Bend::Arc(circle) = bend else {
+                    return bad;
+                };
+                circle.plane = plane;
+                circle.center = center;
+                circle.r0 = r0;
+                circle.dr = dr;
+                circle.phi0 = phi0;
+                circle.phi_rate = phi_rate;
+                circle.r_rate = r_rate;
                 let mut at = [0; AXES];
                 self.eval(bend, start, 0, &mut at);
                 if !near(&at, start) {
@@ -124,13 +130,19 @@ impl Course {
                     bad
                 }
             }
-            (Motion::Cubic { .. } | Motion::Quadratic { .. }, &Shape::Spline { rate }) => {
-                // Written where it stays (no curve built aside and moved in).
-                if !matches!(bend, Bend::Spline(_)) {
-                    *bend = Bend::Spline(Curve::default());
+            (Motion::Cubic { .. } | Motion::Quadratic { .. }, &Shape::Spline { rate, dip }) => {
+                // Written where it stays (no curve built aside and moved in), its dip
+                // beside it (inside the curve: not at its start).
+                if !matches!(bend, Bend::Spline(..)) {
+                    *bend = Bend::Spline(Curve::default(), Dip::NONE);
                 }
-                let Bend::Spline(curve) = bend else {
+                let Bend::Spline(curve, kept) = bend else {
                     return bad;
+                };
+                *kept = match dip {
+                    Some(d) if d.at == 0 => return bad,
+                    Some(d) => d,
+                    None => Dip::NONE,
                 };
                 self.set_spline(curve, &block.motion, start, length, rate)
             }
@@ -207,7 +219,7 @@ impl Course {
             Form::Point => *pose = self.end,
             Form::Line => linear(&self.unit, pose),
             Form::Spline => match bend {
-                Bend::Spline(c) => self.eval_spline(c, start, s, pose),
+                Bend::Spline(c, _) => self.eval_spline(c, start, s, pose),
                 Bend::Arc(_) => *pose = self.end,
             },
             Form::Arc => {
@@ -259,7 +271,7 @@ impl Path {
                 }
             }
             Form::Spline => {
-                if let Bend::Spline(c) = &self.bend {
+                if let Bend::Spline(c, _) = &self.bend {
                     t = self.course.spline_tangent(c, s);
                 }
             }
@@ -299,7 +311,7 @@ impl Path {
     /// and points (host).
     pub fn bend_at(&self, s: i64) -> [f32; AXES] {
         match &self.bend {
-            Bend::Spline(c) if self.form == Form::Spline => self.course.spline_bend(c, s),
+            Bend::Spline(c, _) if self.form == Form::Spline => self.course.spline_bend(c, s),
             Bend::Arc(c) if self.form == Form::Arc => {
                 let s = s.clamp(0, self.length << 16);
                 let f = (s as f64 / 65_536.0) / (self.length.max(1) as f64);

@@ -14,7 +14,7 @@
 //! rotary axes only is measured in n° instead.
 
 use crate::config::AXES;
-use crate::motion::block::{Block, Motion, Plane};
+use crate::motion::block::{Block, Dip, Motion, Plane};
 
 mod course;
 mod spline;
@@ -86,12 +86,16 @@ pub struct Circle {
 
 /// The curved part of a path, kept apart from its [`Course`]: an arc's [`Circle`] or a
 /// spline's [`Curve`] (ignored for lines and points).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Bend {
     /// An arc's in-plane part.
     Arc(Circle),
-    /// A spline's a₂, a₃ and rate.
-    Spline(Curve),
+    /// A spline's a₂, a₃ and rate, and the plan's [`Dip`] along it. The dip is the
+    /// controller's, written where its queue keeps the curve (a slot of the ring of
+    /// bends has room for it beside the curve, where a struct of both would take 8
+    /// bytes more); a path the host derives has [`Dip::NONE`] there, its plan's dip is
+    /// [`crate::motion::planner::PlanBlock::dip`].
+    Spline(Curve, Dip),
 }
 
 impl Default for Bend {
@@ -105,7 +109,7 @@ impl Bend {
     pub fn circle(&self) -> Circle {
         match self {
             Bend::Arc(c) => *c,
-            Bend::Spline(_) => Circle::default(),
+            Bend::Spline(..) => Circle::default(),
         }
     }
 }
@@ -113,7 +117,7 @@ impl Bend {
 /// A block's geometry: its [`Course`] and, for an arc or a spline, its [`Bend`]
 /// (ignored otherwise). Its start is not kept: it is the previous block's end, which every user
 /// has at hand. Reads of the course's fields go through (`path.end`, `path.length`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Path {
     /// End, length and direction.
     pub course: Course,
@@ -339,11 +343,14 @@ impl Path {
                         form: Form::Spline,
                         unit: a[0],
                     },
-                    bend: Bend::Spline(Curve {
-                        a2: a[1],
-                        a3: a[2],
-                        rate: spline::rate_of(length),
-                    }),
+                    bend: Bend::Spline(
+                        Curve {
+                            a2: a[1],
+                            a3: a[2],
+                            rate: spline::rate_of(length),
+                        },
+                        Dip::NONE,
+                    ),
                 })
             }
         }
@@ -405,7 +412,10 @@ impl Path {
                 unit: self.unit,
             },
             Form::Spline => match self.bend {
-                Bend::Spline(c) => Shape::Spline { rate: c.rate },
+                Bend::Spline(c, _) => Shape::Spline {
+                    rate: c.rate,
+                    dip: None,
+                },
                 Bend::Arc(_) => Shape::Point,
             },
         }

@@ -367,7 +367,7 @@ mod tests {
             let mut pose = [0; AXES];
             // The parameter's step moves an axis by at most |dP/du|·2⁻³² (X Y Z: at
             // most length·2⁻³²), Horner's roundings by 1.5.
-            let super::super::Bend::Spline(cv) = p.bend else { panic!("not a spline") };
+            let super::super::Bend::Spline(cv, _) = p.bend else { panic!("not a spline") };
             let step_of = |i: usize| {
                 (p.unit[i].abs() as f64 + 2.0 * cv.a2[i].abs() as f64 + 3.0 * cv.a3[i].abs() as f64)
                     / 4_294_967_296.0 + 1.5
@@ -414,7 +414,7 @@ mod tests {
             ..cubic([10_000_000, 0, 0, 0, 0, 0], [0; AXES], [0; AXES])
         };
         let p = Path::new(&b, &start).unwrap();
-        let super::super::Bend::Spline(c) = p.bend else {
+        let super::super::Bend::Spline(c, _) = p.bend else {
             panic!("not a spline")
         };
         assert_eq!(c.a3, [0; AXES]);
@@ -444,6 +444,7 @@ mod tests {
         assert_eq!(Path::from_plan(&b, &start, p.length * 4, p.shape()), bad);
         let wrong = crate::motion::block::Shape::Spline {
             rate: super::rate_of(p.length) + (1 << 20),
+            dip: None,
         };
         assert_eq!(Path::from_plan(&b, &start, p.length, wrong), bad);
         // A rotary-only curve, or one whose control points are out of range.

@@ -4,6 +4,7 @@
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
 use crate::kinematics::{Jacobian, Kinematics, MachineKinematics, Unreachable};
 use crate::math::{fmax, fmin, sqrtf};
+use crate::motion::block::Dip;
 use crate::motion::geometry::{Form, Path};
 use crate::units::TICK_HZ;
 
@@ -160,7 +161,7 @@ pub(super) fn limits_along(
         a /= 2.0;
         v = v.min(crate::math::sqrtf(a * r as f32));
     }
-    if let crate::motion::geometry::Bend::Spline(c) = &path.bend {
+    if let crate::motion::geometry::Bend::Spline(c, _) = &path.bend {
         (v, a) = spline_axes(
             path,
             c,
@@ -299,6 +300,9 @@ fn bend_limits(
 /// Stretches a spline is cut into for its bend's speed limits ([`Limits::bend`]).
 pub const STRETCHES: usize = SPLINE_SAMPLES - 1;
 
+// A dip is kept in 256ths of its block's length, where every stretch's middle falls.
+const _: () = assert!(STRETCHES.is_power_of_two() && STRETCHES <= 128);
+
 /// An end speed just under the one whose ramp meets a stretch's limit, so that
 /// [`Limits::top`] finds it under whatever the rounding.
 const JUST_UNDER: f32 = 1.0 - 4e-6;
@@ -327,19 +331,92 @@ impl Limits {
     /// does not bind; elsewhere it does. A profile so limited stays under every
     /// stretch's limit whatever speeds at or below `entry` and `exit` it runs between.
     pub fn top(&self, entry: f32, exit: f32, a: f32, length: f32) -> f32 {
+        self.top_within((entry, 0.0), (exit, length), 0..STRETCHES, a, length)
+    }
+
+    /// [`Limits::top`] of the piece of a spline from `start` to `end` (nm from its
+    /// start) entered at no more than `entry` and left at no more than `exit`, over its
+    /// `stretches`.
+    fn top_within(
+        &self,
+        (entry, start): (f32, f32),
+        (exit, end): (f32, f32),
+        stretches: core::ops::Range<usize>,
+        a: f32,
+        length: f32,
+    ) -> f32 {
         let (e2, x2) = (entry * entry, exit * exit);
         let mut top = self.v;
-        for (k, &b) in self.bend.iter().enumerate() {
+        for k in stretches {
+            let b = self.bend[k];
             let (s0, s1) = (
                 length * k as f32 / STRETCHES as f32,
                 length * (k + 1) as f32 / STRETCHES as f32,
             );
             let b2 = b * b;
-            if e2 + 2.0 * a * s1 > b2 && x2 + 2.0 * a * (length - s0) > b2 {
+            if e2 + 2.0 * a * (s1 - start) > b2 && x2 + 2.0 * a * (end - s0) > b2 {
                 top = top.min(b);
             }
         }
         top
+    }
+
+    /// A dip for a spline entered at `entry` and left at `exit` (nm/tick) at
+    /// acceleration `a` over `length` nm, asked for at `near`: when its profile through
+    /// the middle of one inner stretch at a lower speed, faster on either side, takes
+    /// less time than one speed limit for the whole block ([`Limits::top`]), that
+    /// stretch's dip, and the speed limit before it. The dip's speed is the one from
+    /// which ramps at `a` reach the stretch's limit at its ends, so that the stretch
+    /// stays under it; the ends must be within reach of the dip and under the limits on
+    /// either side. Returns (dip, limit before it, the profile's time in ticks).
+    pub fn dip(
+        &self,
+        entry: f32,
+        exit: f32,
+        a: f32,
+        length: f32,
+        near: f32,
+    ) -> Option<(Dip, f32, f32)> {
+        let whole = ramp_time(
+            entry,
+            self.top(entry, exit, a, length).min(near),
+            exit,
+            a,
+            length,
+        );
+        let stretch = length / STRETCHES as f32;
+        let mut best = None;
+        // Worth a dip only where it saves more than rounding (a tick in ten thousand).
+        let mut best_time = whole * (1.0 - 1e-4);
+        for k in 1..STRETCHES - 1 {
+            // The stretch's middle, in the 256ths of the length a dip is kept in.
+            let at_256 = ((2 * k + 1) * 128 / STRETCHES) as u8;
+            let at = length * at_256 as f32 / 256.0;
+            let b = self.bend[k].min(self.v);
+            let speed = sqrtf((b * b - a * stretch).max(0.0)) * JUST_UNDER;
+            let before = self.top_within((entry, 0.0), (speed, at), 0..k, a, length);
+            let after = self.top_within((speed, at), (exit, length), k + 1..STRETCHES, a, length);
+            // Passed no faster than either side may run (a lower dip leaves the limits
+            // on either side as they are or higher), its speeds as they are kept.
+            let dip = Dip::new(at_256, speed.min(before).min(after), after);
+            let (speed, after) = (dip.speed(), dip.after());
+            let v2 = speed * speed;
+            if speed <= 0.0
+                || entry > before
+                || exit > after
+                || entry * entry > v2 + 2.0 * a * at
+                || exit * exit > v2 + 2.0 * a * (length - at)
+            {
+                continue;
+            }
+            let t = ramp_time(entry, before.min(near), speed, a, at)
+                + ramp_time(speed, after.min(near), exit, a, length - at);
+            if t < best_time {
+                best_time = t;
+                best = Some((dip, before, t));
+            }
+        }
+        best
     }
 
     /// The entry and exit limits (nm/tick) to give a spline whose entry is at most

@@ -9,8 +9,8 @@ use super::splines::{refine_splines, restore, smoothed};
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
 use crate::kinematics::{MachineKinematics, Unreachable};
 use crate::math::{fmax, fmin, i64_to_f32, sqrtf};
-use crate::motion::block::{Aux, Block, Motion, Plan, PlannedBlock};
-use crate::motion::geometry::{Course, Form, GeometryError, Path};
+use crate::motion::block::{Aux, Block, Dip, Motion, Plan, PlannedBlock};
+use crate::motion::geometry::{Course, Form, GeometryError, Path, Shape};
 use crate::units::TICK_HZ;
 
 /// What a queued block does.
@@ -59,6 +59,10 @@ pub struct PlanBlock {
     /// The most the block may be entered at for its own limits: a spline's first
     /// stretch's limit ([`super::limits::Limits::bend`]), ∞ for other blocks.
     pub entry_most: f32,
+    /// A spline's dip ([`refine_splines`]): `v_limit` holds before it, and its own
+    /// limits at it and beyond it. `None` as planned; the second look at the splines
+    /// may give it one.
+    pub dip: Option<Dip>,
     /// `corner`, `v_limit`, `accel_full` and `exit_most` as the block was planned,
     /// before the second look at the splines ([`refine_splines`]) set them for the
     /// speeds the passes found; each pass sequence starts again from them.
@@ -73,9 +77,13 @@ impl PlanBlock {
 
     /// What the host streams for this block.
     pub fn plan(&self) -> Plan {
+        let mut shape = self.path.shape();
+        if let Shape::Spline { dip, .. } = &mut shape {
+            *dip = self.dip;
+        }
         Plan {
             length: self.path.length,
-            shape: self.path.shape(),
+            shape,
             v_limit: self.v_limit,
             accel: self.accel,
             entry: self.entry,
@@ -100,6 +108,7 @@ impl Default for PlanBlock {
             entry: 0.0,
             exit_most: f32::INFINITY,
             entry_most: f32::INFINITY,
+            dip: None,
             first: [0.0, 0.0, 1.0, f32::INFINITY],
         }
     }
@@ -396,6 +405,7 @@ impl Lookahead {
             entry: corner,
             exit_most: end_limit,
             entry_most,
+            dip: None,
             first: [corner, v_limit, accel, end_limit],
         }
     }
@@ -501,8 +511,8 @@ pub fn plan_into(
 /// (`start`: where `blocks[0]` starts). The blocks before `from` are final (sent):
 /// the first replanned block is entered no faster than the last final one reaches over
 /// its length from its own planned entry, and at rest when `from` is 0. `between` is
-/// called between the steps (the host keeps its link alive while a large program is
-/// planned).
+/// called between the steps and before each spline's second look (the host keeps its
+/// link alive, and the Grbl bridge answers its sender, while a program is planned).
 pub fn replan_from(
     blocks: &mut [PlanBlock],
     from: usize,
@@ -529,7 +539,7 @@ pub fn replan_from(
     between();
     passes(&mut blocks[from..]);
     between();
-    if refine_splines(blocks, from, start, smoothing, machine, kin) {
+    if refine_splines(blocks, from, start, smoothing, machine, kin, between) {
         between();
         passes(&mut blocks[from..]);
     }
@@ -549,14 +559,27 @@ pub fn planned_ticks(blocks: &[PlanBlock]) -> f64 {
                     .get(i + 1)
                     .filter(|n| matches!(n.kind, Kind::Rapid | Kind::Feed))
                     .map_or(0.0, |n| n.entry);
-                let (p, _) = crate::motion::profile::Profile::plan(
-                    b.path.length << 16,
-                    b.entry,
-                    cap(b, 100, false),
-                    exit,
-                    b.accel,
-                );
-                ticks += p.duration() as f64 / 4_294_967_296.0;
+                use crate::motion::profile::Profile;
+                let length = b.path.length << 16;
+                let p = match &b.dip {
+                    // Profiled in two pieces, as the controller does (`interp`).
+                    Some(d) => {
+                        let at = d.at_q16(b.path.length);
+                        let through = d.through(b.path.length, b.accel, exit);
+                        let (p1, got) =
+                            Profile::plan(at, b.entry, cap(b, 100, false), through, b.accel);
+                        let after = cap_of(b.kind, b.feed, d.after(), 100, false);
+                        let (p2, _) = Profile::plan(length - at, got.exit, after, exit, b.accel);
+                        p1.duration() + p2.duration()
+                    }
+                    None => {
+                        let cap = cap(b, 100, false);
+                        Profile::plan(length, b.entry, cap, exit, b.accel)
+                            .0
+                            .duration()
+                    }
+                };
+                ticks += p as f64 / 4_294_967_296.0;
             }
             _ => {}
         }

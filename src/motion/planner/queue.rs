@@ -7,7 +7,7 @@ use super::*;
 use crate::config::{MachineConfig, AXES, MAX_JOINTS};
 use crate::kinematics::MachineKinematics;
 use crate::math::{f32_to_i64, fmax, fmin, i64_to_f32, sqrtf, u64_to_f32};
-use crate::motion::block::PlannedBlock;
+use crate::motion::block::{Dip, PlannedBlock};
 use crate::motion::geometry::{Bend, Course, Form, GeometryError, Shape};
 
 /// Blocks the controller buffers: enough that the H-4's stopping distance at its top
@@ -254,6 +254,11 @@ impl Planner {
     pub fn bend(&self) -> &Bend {
         &self.queue.bends[self.queue.bend_head]
     }
+    /// The soft speed cap beyond the executing block's dip (as [`Planner::cap`]).
+    pub fn cap_after(&self, b: &Queued, dip: &Dip) -> f32 {
+        cap_of(b.kind, b.feed, dip.after(), self.feed_override, self.hold)
+    }
+
     /// The executing block, if one was started and not finished.
     pub fn executing(&self) -> Option<&Queued> {
         if self.running {

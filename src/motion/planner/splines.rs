@@ -8,6 +8,7 @@ use super::lookahead::{Kind, PlanBlock};
 use crate::config::{MachineConfig, AXES};
 use crate::kinematics::MachineKinematics;
 use crate::math::{fmax, fmin, sqrtf};
+use crate::motion::block::Dip;
 use crate::motion::geometry::{Form, Path};
 
 /// `blocks[from..]` as they were planned ([`PlanBlock::first`]), before an earlier
@@ -21,6 +22,7 @@ pub(super) fn restore(blocks: &mut [PlanBlock], from: usize) {
         b.corner = corner;
         b.v_limit = v_limit;
         b.exit_most = exit_most;
+        b.dip = None;
         if accel_full != b.accel_full {
             b.accel_full = accel_full;
             b.accel = accel_full * (1.0 - fmax(b.rho_in, rho_out));
@@ -47,7 +49,7 @@ pub(super) fn restore(blocks: &mut [PlanBlock], from: usize) {
 ///
 /// Its entry and exit are then held at most at the planned ones (its corner and the
 /// next block's), for which its limit holds. True when any spline changed (the passes
-/// are then run again).
+/// are then run again). `between` is called before each spline is looked at.
 pub fn refine_splines(
     blocks: &mut [PlanBlock],
     from: usize,
@@ -55,6 +57,7 @@ pub fn refine_splines(
     smoothing: u32,
     machine: &MachineConfig,
     kin: &MachineKinematics,
+    between: &mut dyn FnMut(),
 ) -> bool {
     let mut changed = false;
     for i in from..blocks.len() {
@@ -62,6 +65,7 @@ pub fn refine_splines(
         if b.path.form != Form::Spline || b.kind != Kind::Feed {
             continue;
         }
+        between();
         let next = blocks.get(i + 1);
         let exit = next
             .filter(|n| matches!(n.kind, Kind::Rapid | Kind::Feed))
@@ -73,7 +77,7 @@ pub fn refine_splines(
         };
         let rho_out = next.map_or(0.0, |n| n.rho_in);
         let entry = b.entry;
-        let Some((v_limit, accel_full)) =
+        let Some((v_limit, accel_full, dip)) =
             better_spline(b, &from_pose, exit, smoothing, machine, kin)
         else {
             continue;
@@ -82,6 +86,7 @@ pub fn refine_splines(
         b.v_limit = v_limit;
         b.accel_full = accel_full;
         b.accel = accel_full * (1.0 - fmax(b.rho_in, rho_out));
+        b.dip = dip;
         b.corner = fmin(b.corner, entry);
         b.exit_most = fmin(b.exit_most, exit);
         if let Some(n) = blocks.get_mut(i + 1) {
@@ -93,7 +98,8 @@ pub fn refine_splines(
 }
 
 /// [`refine_splines`]'s look at spline `b` (from `from_pose`) entered at its planned
-/// entry and left at `exit`: its new speed limit and acceleration, if better.
+/// entry and left at `exit`: its new speed limit (before its dip, when it has one),
+/// acceleration and dip ([`Limits::dip`]), if better.
 fn better_spline(
     b: &PlanBlock,
     from_pose: &[i64; AXES],
@@ -101,7 +107,7 @@ fn better_spline(
     smoothing: u32,
     machine: &MachineConfig,
     kin: &MachineKinematics,
-) -> Option<(f32, f32)> {
+) -> Option<(f32, f32, Option<Dip>)> {
     let (entry, length) = (b.entry, b.length());
     let limits = |bend_speed, most| {
         limits_along(
@@ -120,7 +126,11 @@ fn better_spline(
     let kept = b.accel / b.accel_full;
     let time = |v: f32, a: f32| ramp_time(entry, fmin(v, b.feed), exit, a, length);
     let planned = limits(None, SPLINE_BEND_SHARE)?;
-    let mut best = (planned.top(entry, exit, b.accel, length), b.accel_full);
+    let mut best = (
+        planned.top(entry, exit, b.accel, length),
+        b.accel_full,
+        planned,
+    );
     let top = fmin(b.feed, best.0);
     let peak = fmin(
         sqrtf((entry * entry + exit * exit) / 2.0 + b.accel * length),
@@ -140,11 +150,21 @@ fn better_spline(
             let joins = (entry * entry - exit * exit).abs() <= 2.0 * a * length;
             let v = l.top(entry, exit, a, length);
             if joins && time(v, a) < time(best.0, best.1 * kept) {
-                best = (v, l.a);
+                best = (v, l.a, l);
             }
         }
     }
-    (best.0 > b.v_limit || best.1 != b.accel_full).then_some(best)
+    // The split kept, with a dip where that is faster (looked for once: a dip's search
+    // costs some forty of `top`'s, and the host plans while a sender waits for its
+    // status reports).
+    let (mut v, a, l) = best;
+    let dip = l
+        .dip(entry, exit, a * kept, length, b.feed)
+        .map(|(dip, before, _)| {
+            v = before;
+            dip
+        });
+    (v > b.v_limit || a != b.accel_full || dip.is_some()).then_some((v, a, dip))
 }
 
 /// `limits` with a curve's or an arc's bend limit lowered for jerk limitation over

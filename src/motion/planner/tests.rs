@@ -359,3 +359,223 @@ fn a_curve_bent_hardest_at_one_end_runs_faster_away_from_it_within_every_axis_li
         "fastest {fastest} nm/tick; bend {bend_speed}; {b:?}; exit {exit}"
     );
 }
+
+/// A U-turn between a line out along X and a line back: a cubic whose bend is
+/// tightest in its middle, at the turn's tip, and gentle at both ends, where it joins
+/// the lines with their tangents.
+fn u_turn() -> Vec<Block> {
+    let mm = 1_000_000i64;
+    let mut out = line(40 * mm, 0, 100, 1000);
+    out.line = 1;
+    let cubic = Block {
+        line: 2,
+        motion: Motion::Cubic {
+            c1: [24 * mm, 0, 0, 0, 0, 0],
+            c2: [24 * mm, 0, 0, 0, 0, 0],
+        },
+        target: [40 * mm, 12 * mm, 0, 0, 0, 0],
+        feed: 100 * mm,
+        tolerance_nm: 1000,
+    };
+    let mut back = line(0, 12 * mm, 100, 1000);
+    back.line = 3;
+    vec![out, cubic, back]
+}
+
+/// Each tick's commanded pose, line and path speed (nm/tick) of the controller's queue
+/// and executor running `plan` from the origin; `hold` holds at that tick and resumes
+/// 200 ticks later.
+fn run_queued(
+    plan: &[PlannedBlock],
+    m: &MachineConfig,
+    k: &MachineKinematics,
+    hold: Option<usize>,
+) -> Vec<([i64; AXES], u32, f32)> {
+    use crate::motion::interp::Executor;
+    let mut p = Planner::new([0; AXES]);
+    for b in plan {
+        p.push_planned(b, m, k).unwrap();
+    }
+    let mut e = Executor::new([0; AXES]);
+    let mut out = vec![([0; AXES], 0, 0.0)];
+    for t in 0..100_000 {
+        if hold == Some(t) || hold.map(|h| h + 200) == Some(t) {
+            p.hold = hold == Some(t);
+            e.replan(&mut p);
+        }
+        assert_eq!(e.tick(&mut p), None);
+        out.push((e.pose, e.line, crate::motion::profile::from_q32(e.speed)));
+        if !e.busy() && p.is_empty() {
+            return out;
+        }
+    }
+    panic!("the run did not end");
+}
+
+#[test]
+fn a_spline_with_a_dip_slows_there_alone_within_every_axis_limit_and_holds_on_its_path() {
+    let m = MachineConfig::cartesian_xyz();
+    let k = MachineKinematics::new(&m);
+    let blocks = u_turn();
+    let mut plan = planned(&blocks);
+    let b = &mut plan[1].plan;
+    assert!(matches!(b.shape, Shape::Spline { .. }), "{b:?}");
+    // A dip half-way along, at half the curve's limit: a plan is free to ask for one
+    // wherever it likes (it is a limit, so a lower one is always safe).
+    let dip = Dip::new(128, 0.5 * b.v_limit, b.v_limit);
+    with_dip(b, Some(dip));
+    let accel = b.accel;
+    let amax = m.axes[0].max_accel as f32 / 1e6;
+    // Held before the dip (on the curve's first half) and beyond it.
+    for hold in [None, Some(560), Some(900)] {
+        let ticks = run_queued(&plan, &m, &k, hold);
+        let end = ticks.last().unwrap().0;
+        assert_eq!(end, blocks[2].target, "hold {hold:?}");
+        // No axis accelerates by more than its limit (and a few nanometres' rounding
+        // per tick), through the dip and the hold alike.
+        for w in ticks.windows(3) {
+            for i in 0..2 {
+                let a = (w[2].0[i] - 2 * w[1].0[i] + w[0].0[i]).abs() as f32;
+                assert!(
+                    a <= amax * 1.001 + 3.0,
+                    "axis {i}: {a} nm/tick², hold {hold:?}"
+                );
+            }
+        }
+        if hold.is_some() {
+            continue;
+        }
+        // On the curve: slowest along it (its path speed, which the dip limits) at the
+        // tip, at no more than the dip's speed, and faster on either side of it.
+        let speeds: Vec<(f32, f32)> = ticks
+            .iter()
+            .filter(|t| t.1 == 2)
+            .map(|t| (t.0[0] as f32, t.2))
+            .collect();
+        let (tip, slowest) =
+            speeds.iter().fold(
+                (0.0, f32::INFINITY),
+                |m, &(x, v)| if v < m.1 { (x, v) } else { m },
+            );
+        // (Ticks fall on either side of the dip: within a tick's change of speed.)
+        assert!(
+            slowest <= dip.speed() + accel,
+            "{slowest} at the dip {dip:?}"
+        );
+        assert!(
+            slowest >= dip.speed() - accel,
+            "{slowest} at the dip {dip:?}"
+        );
+        assert!(tip > 50e6, "slowest at x = {tip} nm");
+        let half = speeds.len() / 2;
+        let fastest = |s: &[(f32, f32)]| s.iter().fold(0.0f32, |m, &(_, v)| m.max(v));
+        for side in [&speeds[..half / 2], &speeds[speeds.len() - half / 2..]] {
+            assert!(
+                fastest(side) > 1.2 * slowest,
+                "{} vs {slowest}",
+                fastest(side)
+            );
+        }
+    }
+}
+
+/// `plan`, a curve's, with `dip`.
+fn with_dip(plan: &mut Plan, dip: Option<Dip>) {
+    let Shape::Spline { dip: d, .. } = &mut plan.shape else {
+        panic!("not a curve: {plan:?}");
+    };
+    *d = dip;
+}
+
+#[test]
+fn a_dip_at_its_curves_start_is_refused() {
+    let m = MachineConfig::cartesian_xyz();
+    let k = MachineKinematics::new(&m);
+    let plan = planned(&u_turn());
+    let dip = Dip::new(128, 1000.0, 2000.0);
+    let refused = |pb: &PlannedBlock, start: [i64; AXES]| {
+        let mut p = Planner::new(start);
+        assert_eq!(
+            p.push_planned(pb, &m, &k),
+            Err(PushError::Geometry(GeometryError::PlanMismatch)),
+            "{pb:?}"
+        );
+    };
+    let start = plan[0].block.target;
+    let mut pb = plan[1];
+    with_dip(&mut pb.plan, Some(Dip { at: 0, ..dip }));
+    refused(&pb, start);
+    let mut p = Planner::new(start);
+    with_dip(&mut pb.plan, Some(dip));
+    assert_eq!(p.push_planned(&pb, &m, &k), Ok(()));
+    assert_eq!(p.len(), 1);
+}
+
+#[test]
+fn a_spline_tightest_inside_gets_a_dip_there_that_its_ends_can_reach() {
+    // 50 mm whose bend allows 100 mm/s everywhere but over one stretch in its middle,
+    // 40 mm/s there; entered and left at 70 mm/s, 100 mm/s².
+    let k = STRETCHES / 2;
+    let mut bend = [100_000.0f32; STRETCHES];
+    bend[k] = 40_000.0;
+    let limits = super::limits::Limits {
+        v: 100_000.0,
+        a: 1000.0,
+        bend,
+    };
+    let (a, length) = (100.0, 50e6);
+    // One limit for the whole block would be the stretch's.
+    assert_eq!(limits.top(70_000.0, 70_000.0, a, length), 40_000.0);
+    let (dip, before, t) = limits
+        .dip(70_000.0, 70_000.0, a, length, 100_000.0)
+        .expect("a dip");
+    let stretch = length / STRETCHES as f32;
+    let at = length * dip.at as f32 / 256.0;
+    assert!((at - stretch * (k as f32 + 0.5)).abs() < 1.0, "{dip:?}");
+    // From the dip's speed, ramps at a reach the stretch's limit at its ends (the
+    // speed rounded down to 11 bits).
+    let reach = (dip.speed() * dip.speed() + a * stretch).sqrt();
+    assert!(reach <= 40_000.0 && reach > 39_970.0, "{dip:?}: {reach}");
+    assert_eq!(before, 100_000.0);
+    assert!(
+        dip.after() <= 100_000.0 && dip.after() > 99_950.0,
+        "{dip:?}"
+    );
+    let whole = ramp_time(70_000.0, 40_000.0, 70_000.0, a, length);
+    assert!(t < 0.75 * whole, "{t} ticks against {whole}");
+    // Ends it cannot slow down from in time get none: 10 mm/s² leaves the dip out of
+    // reach from 70 mm/s.
+    assert!(limits
+        .dip(70_000.0, 70_000.0, 10.0, length, 100_000.0)
+        .is_none());
+    // A block tightest over its first stretch gets a step there: held to that
+    // stretch's limit before it, free beyond.
+    let mut at_start = limits;
+    at_start.bend = [100_000.0; STRETCHES];
+    at_start.bend[0] = 40_000.0;
+    let (dip, before, _) = at_start
+        .dip(40_000.0, 70_000.0, a, length, 100_000.0)
+        .expect("a step");
+    assert_eq!(before, 40_000.0);
+    assert!(dip.speed() <= 40_000.0 && dip.after() > 99_950.0, "{dip:?}");
+}
+
+#[test]
+fn a_dips_speeds_are_kept_rounded_down_to_eleven_bits() {
+    let mut x = 0x2545_F491u32;
+    for _ in 0..100_000 {
+        x ^= x << 13;
+        x ^= x >> 17;
+        x ^= x << 5;
+        let v = f32::from_bits(x & 0x7FFF_FFFF);
+        let kept = Dip::new(1, v, v).speed();
+        if (1.0 / 256.0..16_000_000.0).contains(&v) {
+            assert!(kept <= v && kept >= v * (1.0 - 1.0 / 2048.0), "{v}: {kept}");
+        } else if v < 1.0 / 256.0 || v.is_nan() {
+            assert_eq!(kept, 0.0, "{v}");
+        } else {
+            assert!(kept <= v, "{v}: {kept}");
+        }
+    }
+    assert_eq!(Dip::new(1, f32::INFINITY, 0.0).speed(), 16_773_120.0);
+}

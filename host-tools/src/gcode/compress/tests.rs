@@ -236,7 +236,7 @@ fn where_two_curves_of_a_spiral_meet_the_tool_speed_does_not_jump() {
     let smoothing = pkmc::motion::interp::window_of(machine.motion.smoothing_ticks as u32);
     let mut plan = vec![PlanBlock::default(); c.blocks.len()];
     plan_into(&c.blocks, start, &machine, &kin, smoothing, &mut plan).unwrap();
-    let curve = |b: &PlanBlock| matches!(b.path.bend, pkmc::motion::geometry::Bend::Spline(_));
+    let curve = |b: &PlanBlock| matches!(b.path.bend, pkmc::motion::geometry::Bend::Spline(..));
     let mut junctions = 0;
     for w in plan.windows(2) {
         if !(curve(&w[0]) && curve(&w[1])) {
