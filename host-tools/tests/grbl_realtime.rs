@@ -609,6 +609,18 @@ fn overrides_and_reset(via: Via) {
         vec!["ok"]
     );
     poll_until(&mut c, "Jog", Duration::from_secs(1));
+    // The reset must find the jog moving: the state says Jog once the jog is taken,
+    // which on a loaded machine can be a tick or more before the tool leaves Y 0.
+    let moving = Instant::now() + Duration::from_secs(1);
+    loop {
+        let s = c.status_within(STATUS_LIMIT);
+        assert!(s.starts_with("<Jog|"), "{s}");
+        if field(&s, "MPos")[1] > 0.0 {
+            break;
+        }
+        assert!(Instant::now() < moving, "the jog does not move: {s}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
     c.send(&[0x90]);
     let s = poll_override(&mut c, 100.0, Duration::from_millis(300));
     assert!(s.starts_with("<Jog|"), "{s}");
