@@ -48,12 +48,14 @@
 
 pub mod blend;
 mod fit;
+mod meet;
 mod reach;
 pub mod space;
 #[cfg(test)]
 mod tests;
 
 use fit::Goal;
+use meet::Held;
 use pkmc::config::AXES;
 use pkmc::motion::block::{Block, Motion};
 use space::{from_fit, to_fit};
@@ -124,6 +126,9 @@ pub struct Settings {
     /// planner would give it more than this share of the acceleration at the feed
     /// ([`blend`]'s "Which corners").
     pub jump_share: f64,
+    /// Where two curves of a run meet, the tangent there is turned towards the data's
+    /// in this many steps at most, the data's first ([`meet`]; 0: never).
+    pub turn_steps: u32,
     /// The tolerance runs are merged and corners blended within in `G64` without P,
     /// nm (the default 1 µm; 0: neither). The station's run by step runs the program
     /// as written, so a blend (a block of its own) never stops it.
@@ -154,6 +159,7 @@ impl Default for Settings {
             blend_min_deg: 0.5,
             blend_share: 0.45,
             jump_share: 0.05,
+            turn_steps: 8,
             g64_tolerance_nm: 1000.0,
         }
     }
@@ -276,6 +282,21 @@ pub struct Lead {
     dir: V,
     ratio: f64,
     chord: V,
+    /// Where the last block is a curve whose end the next curve turned ([`meet`]): the
+    /// direction and ratio it had been found to end with, which the next curve is
+    /// looked for from.
+    found: Option<(V, f64)>,
+}
+
+impl Lead {
+    fn plain(dir: V, ratio: f64, chord: V) -> Self {
+        Lead {
+            dir,
+            ratio,
+            chord,
+            found: None,
+        }
+    }
 }
 
 /// How a piece of a sender's moves goes on from the pieces merged before it (the Grbl
@@ -496,7 +517,8 @@ fn tangents(pts: &[V], reach: f64) -> Vec<V> {
 
 /// Fits the run `run` (input blocks from index `first`, points `pts`) piece by piece
 /// (see the module doc), its first block leaving as `carried` ends; returns how its
-/// last block ends.
+/// last block ends, and where it stopped when `open` and the curves from there could
+/// still change with the moves to come.
 fn fit_run(
     run: &[Block],
     first: usize,
@@ -522,10 +544,18 @@ fn fit_run(
             .unwrap_or(m);
         (k, &unsure)
     });
-    let mut lead: Option<V> = carried.map(|l| l.dir);
-    // Each curve's lead ratio is the end of the one before it.
-    let g = &mut Goal { edge, ..*g };
-    g.lead_ratio = carried.map_or(1.0, |l| l.ratio);
+    // Each curve is looked for leaving along the block before it as that was found
+    // (before the two had their junction turned, [`meet`]), at its end's lead ratio.
+    let (mut lead, lead_ratio) = carried.map_or((None, 1.0), |l| {
+        let (dir, ratio) = l.found.unwrap_or((l.dir, l.ratio));
+        (Some(dir), ratio)
+    });
+    let g = &mut Goal {
+        edge,
+        lead_ratio,
+        ..*g
+    };
+    let mut held: Option<Held> = None;
     let mut a = begin;
     while a < m {
         // The chord into point a, for the turn the program makes there.
@@ -536,49 +566,74 @@ fn fit_run(
         };
         let found = reach::next_curve(pts, &t, a, (lead, into), g, s);
         if unsure.get() {
-            // The fit from here could change with the moves to come.
-            if a == 0 {
-                return (carried, Some(0));
+            // The fit from here could change with the moves to come, and with it the
+            // end of the curve before.
+            if let Some(h) = held {
+                return (h.before, Some(h.a));
             }
-            let chord = unit(&sub(&pts[a], &pts[a - 1]));
-            let ended = lead.map(|dir| Lead {
-                dir,
-                ratio: g.lead_ratio,
-                chord,
-            });
+            let ended = match into {
+                Some(chord) if a > begin => lead.map(|dir| Lead::plain(dir, g.lead_ratio, chord)),
+                _ => carried,
+            };
             return (ended, Some(a));
         }
-        match found {
-            Some((b, c1, c2)) => {
-                let end = &run[b - 1];
-                let start = &pts[a];
-                let target = to_fit(&end.target);
-                out.blocks.push(Block {
-                    line: run[a].line,
-                    motion: Motion::Cubic {
-                        c1: core::array::from_fn(|i| from_fit(i, c1[i] - start[i])),
-                        c2: core::array::from_fn(|i| from_fit(i, c2[i] - target[i])),
-                    },
-                    ..*end
-                });
-                out.source.push(first + a..first + b);
-                lead = Some(unit(&sub(&target, &c2)));
-                g.lead_ratio = fit::end_ratio(&[*start, c1, c2, target]);
-                a = b;
+        let Some((b, c1, c2)) = found else {
+            if let Some(h) = held.take() {
+                hand_out(run, first, pts, &h, out);
             }
-            None => {
-                out.blocks.push(run[a]);
-                out.source.push(first + a..first + a + 1);
-                lead = Some(unit(&sub(&pts[a + 1], &pts[a])));
-                g.lead_ratio = 1.0;
-                a += 1;
+            out.blocks.push(run[a]);
+            out.source.push(first + a..first + a + 1);
+            lead = Some(unit(&sub(&pts[a + 1], &pts[a])));
+            g.lead_ratio = 1.0;
+            a += 1;
+            continue;
+        };
+        let mut next = Held::found(pts, (a, b), (c1, c2), g.lead_ratio);
+        next.before = match held.take() {
+            Some(mut h) => {
+                let turned = meet::turn(pts, &t[a], (&mut h, &mut next), g, s)
+                    .then(|| (lead.unwrap_or(h.end), g.lead_ratio));
+                hand_out(run, first, pts, &h, out);
+                into.map(|chord| Lead {
+                    found: turned,
+                    ..Lead::plain(h.end, fit::end_ratio(&h.c), chord)
+                })
             }
-        }
+            None if a == begin => {
+                // Going on from a curve handed out before, as it ended.
+                if let Some(l) = carried.filter(|l| l.found.is_some()) {
+                    next.refit(pts, (l.dir, l.ratio), g, s);
+                }
+                carried
+            }
+            None => into.and_then(|chord| lead.map(|dir| Lead::plain(dir, g.lead_ratio, chord))),
+        };
+        lead = Some(next.end);
+        g.lead_ratio = fit::end_ratio(&next.c);
+        held = Some(next);
+        a = b;
     }
-    let ended = lead.map(|dir| Lead {
-        dir,
-        ratio: g.lead_ratio,
-        chord: unit(&sub(&pts[m], &pts[m - 1])),
-    });
+    if let Some(h) = held.take() {
+        hand_out(run, first, pts, &h, out);
+    }
+    let ended = lead.map(|dir| Lead::plain(dir, g.lead_ratio, unit(&sub(&pts[m], &pts[m - 1]))));
     (ended, None)
+}
+
+/// Hands out the curve `h` of the run `run` (input blocks from index `first`, points
+/// `pts`) as a block.
+fn hand_out(run: &[Block], first: usize, pts: &[V], h: &Held, out: &mut Compressed) {
+    let end = &run[h.b - 1];
+    let start = &pts[h.a];
+    let target = to_fit(&end.target);
+    let (c1, c2) = (h.c[1], h.c[2]);
+    out.blocks.push(Block {
+        line: run[h.a].line,
+        motion: Motion::Cubic {
+            c1: core::array::from_fn(|i| from_fit(i, c1[i] - start[i])),
+            c2: core::array::from_fn(|i| from_fit(i, c2[i] - target[i])),
+        },
+        ..*end
+    });
+    out.source.push(first + h.a..first + h.b);
 }

@@ -268,10 +268,10 @@ fn where_two_curves_of_a_spiral_meet_the_tool_speed_does_not_jump() {
     assert!(junctions >= 10, "{junctions} junctions");
 }
 
-#[test]
-fn where_two_curves_meet_on_unevenly_spaced_points_the_tool_speed_does_not_jump() {
-    // A smooth profile z = 8 cos(y / 6) + 3 sin(y / 17) mm sampled as CAM output often is: steps of
-    // 0.5, 1 and 2 mm in turn (3D_Chips' pattern), within G64 P0.1.
+/// A smooth profile z = 8 cos(y / 6) + 3 sin(y / 17) mm sampled as CAM output often
+/// is: steps of 0.5, 1 and 2 mm in turn (3D_Chips' pattern), within G64 P0.1; and
+/// where it starts.
+fn uneven_profile() -> (Vec<Block>, [i64; AXES]) {
     let steps = [1.0, 1.0, 0.5, 0.5, 1.0, 2.0, 1.0, 0.5];
     let mut input = Vec::new();
     let mut y = 0.0f64;
@@ -281,7 +281,12 @@ fn where_two_curves_meet_on_unevenly_spaced_points_the_tool_speed_does_not_jump(
         b.target[2] = (8e6 * (y / 6.0).cos() + 3e6 * (y / 17.0).sin()).round() as i64;
         input.push(b);
     }
-    let start = [0, 0, 8_000_000, 0, 0, 0];
+    (input, [0, 0, 8_000_000, 0, 0, 0])
+}
+
+#[test]
+fn where_two_curves_meet_on_unevenly_spaced_points_the_tool_speed_does_not_jump() {
+    let (input, start) = uneven_profile();
     // 100 mm/s and 1000 mm/s² on each axis, as on cartesian-large.
     let s = cartesian_figures();
     let c = compress(&input, start, &s);
@@ -413,4 +418,63 @@ fn a_slow_spiral_merged_within_a_wide_tolerance_runs_at_its_feed() {
     assert!(uneven > 1.015, "{uneven}");
     assert!(even < 1.006, "{even}");
     assert!(blocks * 10 <= input.len(), "{blocks} blocks");
+}
+
+#[test]
+fn where_two_curves_meet_their_tangent_turns_towards_the_data_where_both_run_faster() {
+    // The uneven profile: a curve's free end tangent leaves the next curve starting
+    // along a direction neither fits well; turned towards the data's tangent there,
+    // both are fitted again (`meet`). Weighed as the compressor weighs a curve: its
+    // polyline's length over its pace at the feed (`fit::pace`), a line at its length.
+    let (input, start) = uneven_profile();
+    let s = cartesian_figures();
+    let weigh = |s: &Settings| {
+        let c = compress_runs(&input, start, s);
+        assert!(deviation_from(&input, start, &c) <= 0.1);
+        let goal = Goal {
+            tol: 0.1e6 * s.fit_share,
+            speed: input[0].feed as f64,
+            lead_ratio: 1.0,
+            edge: None,
+        };
+        let (mut from, mut time, mut off_data) = (start, 0.0, 0.0);
+        let data = tangents(
+            &std::iter::once(to_fit(&start))
+                .chain(input.iter().map(|b| to_fit(&b.target)))
+                .collect::<Vec<_>>(),
+            goal.tol * s.tangent_reach,
+        );
+        for (b, src) in c.blocks.iter().zip(&c.source) {
+            let mut poly = vec![to_fit(&from)];
+            poly.extend(input[src.clone()].iter().map(|m| to_fit(&m.target)));
+            let len: f64 = poly.windows(2).map(|w| norm(&sub(&w[1], &w[0]))).sum();
+            time += match b.motion {
+                Motion::Cubic { c1, c2 } => {
+                    let cv: [V; 4] = [
+                        poly[0],
+                        to_fit(&core::array::from_fn(|i| from[i] + c1[i])),
+                        to_fit(&core::array::from_fn(|i| b.target[i] + c2[i])),
+                        to_fit(&b.target),
+                    ];
+                    // How far its end turns from the data's tangent, degrees.
+                    let end = unit(&sub(&cv[3], &cv[2]));
+                    off_data += dot(&end, &data[src.end]).min(1.0).acos().to_degrees();
+                    len / fit::pace(&cv, &goal, s)
+                }
+                _ => len,
+            };
+            from = b.target;
+        }
+        (time / 1e6, off_data, c.blocks.len())
+    };
+    let (turned, off_data, blocks) = weigh(&s);
+    let (found, off_data_before, before) = weigh(&Settings { turn_steps: 0, ..s });
+    eprintln!(
+        "{blocks} blocks, {turned:.3} mm at the feed's pace, curves' ends {off_data:.2}° in all \
+         from the data's tangent; without turning {before} blocks, {found:.3} mm, \
+         {off_data_before:.2}°"
+    );
+    assert!(turned < found, "{turned} {found}");
+    assert!(off_data < off_data_before, "{off_data} {off_data_before}");
+    assert_eq!(blocks, before);
 }
