@@ -255,6 +255,10 @@ def arc_points(start, a, plane):
     a0 = math.atan2(start[i2] - c2, start[i1] - c1)
     a1 = math.atan2(a[1] - c2, a[0] - c1)
     sweep = a1 - a0
+    # The canon prints 4 decimals: an arc that ends where it starts (a full circle, as
+    # rs274 ran it) may come out a hair apart, which is a full turn, not a sliver.
+    if math.hypot(a[0] - start[i1], a[1] - start[i2]) < 2e-4 < r:
+        sweep = 0.0
     if turns > 0:
         while sweep <= 1e-12:
             sweep += 2 * math.pi
