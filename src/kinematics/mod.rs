@@ -103,6 +103,13 @@ pub struct Cartesian {
     joints: usize,
 }
 
+impl Cartesian {
+    /// The pose axis joint `j` follows.
+    pub fn axis_of(&self, j: usize) -> usize {
+        self.axis_of_joint[j] as usize
+    }
+}
+
 impl Kinematics for Cartesian {
     fn inverse(&self, pose: &Pose, joints: &mut Joints) -> Result<(), Unreachable> {
         for (q, &a) in joints.iter_mut().zip(&self.axis_of_joint).take(self.joints) {

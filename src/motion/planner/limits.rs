@@ -172,7 +172,12 @@ pub(super) fn limits_along(
         );
     }
     let bend = if spline {
-        bend_limits(a, &at_sample[..], n, &per_stretch)
+        bend_limits(
+            a,
+            &at_sample[..],
+            joint_terms(machine, kin, n),
+            &per_stretch,
+        )
     } else {
         [f32::INFINITY; STRETCHES]
     };
@@ -285,9 +290,10 @@ fn bend_limits(
     per_stretch: &[[Term; AXES]; STRETCHES],
 ) -> [f32; STRETCHES] {
     core::array::from_fn(|k| {
-        let joint_terms = at_sample[k][..joints]
+        let j = k / PER_SAMPLE;
+        let joint_terms = at_sample[j][..joints]
             .iter()
-            .chain(&at_sample[k + 1][..joints]);
+            .chain(&at_sample[j + 1][..joints]);
         let v2 = joint_terms
             .chain(&per_stretch[k])
             .filter(|t| t.d2 > 0.0)
@@ -298,7 +304,30 @@ fn bend_limits(
 }
 
 /// Stretches a spline is cut into for its bend's speed limits ([`Limits::bend`]).
-pub const STRETCHES: usize = SPLINE_SAMPLES - 1;
+pub const STRETCHES: usize = 64;
+
+/// Stretches between two of a spline's joint samples.
+const PER_SAMPLE: usize = STRETCHES / (SPLINE_SAMPLES - 1);
+const _: () = assert!(PER_SAMPLE * (SPLINE_SAMPLES - 1) == STRETCHES);
+
+/// How many joints' sampled terms bound a spline's bend: none on a Cartesian machine
+/// whose every joint allows at least its axis's speed and acceleration (a joint there
+/// moves exactly as its axis, whose exact terms over each stretch bind it), else all
+/// `n`.
+fn joint_terms(machine: &MachineConfig, kin: &MachineKinematics, n: usize) -> usize {
+    let MachineKinematics::Cartesian(c) = kin else {
+        return n;
+    };
+    let covered = machine.joints.iter().enumerate().all(|(j, jc)| {
+        let l = &machine.axes[c.axis_of(j)];
+        jc.limits.max_accel >= l.max_accel && jc.limits.max_velocity >= l.max_velocity
+    });
+    if covered {
+        0
+    } else {
+        n
+    }
+}
 
 // A dip is kept in 256ths of its block's length, where every stretch's middle falls.
 const _: () = assert!(STRETCHES.is_power_of_two() && STRETCHES <= 128);
