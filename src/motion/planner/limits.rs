@@ -171,21 +171,13 @@ pub(super) fn limits_along(
             &mut per_stretch,
         );
     }
-    let bend = if spline {
-        bend_limits(
-            a,
-            &at_sample[..],
-            joint_terms(machine, kin, n),
-            &per_stretch,
-        )
-    } else {
-        [f32::INFINITY; STRETCHES]
-    };
+    let sampled = joint_terms(machine, kin, n);
+    let bend = spline.then(|| bend_limits(a, &at_sample[..], sampled, &per_stretch));
     // Single-precision planning rounds to about 10⁻⁷: stay that far inside.
     Ok(Limits {
         v: v * LIMIT_MARGIN,
         a: a * LIMIT_MARGIN,
-        bend: bend.map(|b| b * LIMIT_MARGIN),
+        bend: bend.map_or([f32::INFINITY; STRETCHES], |b| b.map(|b| b * LIMIT_MARGIN)),
     })
 }
 

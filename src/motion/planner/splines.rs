@@ -125,17 +125,24 @@ fn better_spline(
     // The share of the acceleration its corners take.
     let kept = b.accel / b.accel_full;
     let time = |v: f32, a: f32| ramp_time(entry, fmin(v, b.feed), exit, a, length);
+    // Each split's profile time between the planned ends: one speed limit for the
+    // whole curve, or a dip ([`Limits::dip`]) where that is faster.
+    let timed = |l: Limits, a_full: f32| {
+        let a = a_full * kept;
+        let v = l.top(entry, exit, a, length);
+        let plain = time(v, a);
+        match l.dip(entry, exit, a, length, b.feed) {
+            Some((dip, before, t)) if t < plain => (t, before, a_full, Some(dip)),
+            _ => (plain, v, a_full, None),
+        }
+    };
     let planned = limits(None, SPLINE_BEND_SHARE)?;
-    let mut best = (
-        planned.top(entry, exit, b.accel, length),
-        b.accel_full,
-        planned,
-    );
-    let top = fmin(b.feed, best.0);
+    let top = fmin(b.feed, planned.top(entry, exit, b.accel, length));
     let peak = fmin(
         sqrtf((entry * entry + exit * exit) / 2.0 + b.accel * length),
         top,
     );
+    let mut best = timed(planned, b.accel_full);
     // Another split of the axes' acceleration between the bend and the profile: less
     // for the bend where the profile's ramps bind, more where the bend does. Each is
     // timed between the planned ends, which its profile must still join.
@@ -146,24 +153,14 @@ fn better_spline(
         (peak < 0.98 * top && peak > 0.0).then_some((Some(peak * 1.01), SPLINE_BEND_SHARE));
     for (bend_speed, most) in CAPS.iter().map(|&most| (None, most)).chain(at_peak) {
         if let Some(l) = limits(bend_speed, most) {
-            let a = l.a * kept;
-            let joins = (entry * entry - exit * exit).abs() <= 2.0 * a * length;
-            let v = l.top(entry, exit, a, length);
-            if joins && time(v, a) < time(best.0, best.1 * kept) {
-                best = (v, l.a, l);
+            let joins = (entry * entry - exit * exit).abs() <= 2.0 * l.a * kept * length;
+            let t = timed(l, l.a);
+            if joins && t.0 < best.0 {
+                best = t;
             }
         }
     }
-    // The split kept, with a dip where that is faster (looked for once: a dip's search
-    // costs some forty of `top`'s, and the host plans while a sender waits for its
-    // status reports).
-    let (mut v, a, l) = best;
-    let dip = l
-        .dip(entry, exit, a * kept, length, b.feed)
-        .map(|(dip, before, _)| {
-            v = before;
-            dip
-        });
+    let (_, v, a, dip) = best;
     (v > b.v_limit || a != b.accel_full || dip.is_some()).then_some((v, a, dip))
 }
 
