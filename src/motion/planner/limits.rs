@@ -171,8 +171,10 @@ pub(super) fn limits_along(
             &mut per_stretch,
         );
     }
-    let sampled = joint_terms(machine, kin, n);
-    let bend = spline.then(|| bend_limits(a, &at_sample[..], sampled, &per_stretch));
+    let bend = spline.then(|| {
+        let sampled = joint_terms(machine, kin, n);
+        bend_limits(a, &at_sample[..], sampled, &per_stretch)
+    });
     // Single-precision planning rounds to about 10⁻⁷: stay that far inside.
     Ok(Limits {
         v: v * LIMIT_MARGIN,

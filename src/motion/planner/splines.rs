@@ -153,9 +153,12 @@ fn better_spline(
         (peak < 0.98 * top && peak > 0.0).then_some((Some(peak * 1.01), SPLINE_BEND_SHARE));
     for (bend_speed, most) in CAPS.iter().map(|&most| (None, most)).chain(at_peak) {
         if let Some(l) = limits(bend_speed, most) {
-            let joins = (entry * entry - exit * exit).abs() <= 2.0 * l.a * kept * length;
+            // A split whose profile cannot join the planned ends is not timed.
+            if (entry * entry - exit * exit).abs() > 2.0 * l.a * kept * length {
+                continue;
+            }
             let t = timed(l, l.a);
-            if joins && t.0 < best.0 {
+            if t.0 < best.0 {
                 best = t;
             }
         }
